@@ -1,0 +1,332 @@
+//! Stage 4, classification (METHOD.md section 6): an RBF-kernel SVM on standardised
+//! features, and its versioned model file.
+//!
+//! Input: a [`FeatureGrid`]. Output: one [`CellClass`] per cell. Prediction runs over
+//! a flat f32 support-vector matrix with precomputed squared norms and one reused
+//! buffer per grid, no allocation per cell. Training lives in [`training`], the
+//! solver in [`smo`].
+
+pub mod smo;
+pub mod training;
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::config::Config;
+use crate::error::{Error, Result};
+use crate::features::{FEATURE_NAMES, FeatureGrid};
+use crate::grid::CellClass;
+
+/// The format tag and version of model files this build reads and writes.
+pub const MODEL_FORMAT: &str = "travmap-svm";
+pub const MODEL_VERSION: u32 = 1;
+
+/// The default geometry-only model, trained on the shipped labelled SemanticKITTI
+/// frames (see README, "The embedded model").
+pub const DEFAULT_MODEL_JSON: &[u8] = include_bytes!("classifier/default_model.json");
+
+/// How a model was trained, kept in the model file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrainingSummary {
+    /// The inputs and frames the cells came from.
+    pub sources: Vec<String>,
+    pub samples: usize,
+    pub traversable_samples: usize,
+    /// Spatially-blocked cross-validated accuracy (cells, before filtering) of
+    /// every (C, gamma) tried.
+    pub search: Vec<SearchResult>,
+    pub solver_iterations: usize,
+    pub solver_converged: bool,
+    pub seconds: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SearchResult {
+    pub c: f64,
+    pub gamma: f64,
+    pub accuracy: f64,
+}
+
+/// The model file: a JSON document, versioned.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ModelFile {
+    format: String,
+    version: u32,
+    feature_names: Vec<String>,
+    feature_mean: Vec<f32>,
+    feature_std: Vec<f32>,
+    c: f64,
+    gamma: f64,
+    rho: f64,
+    /// `alpha_i * y_i` per support vector.
+    dual_coefficients: Vec<f32>,
+    /// Standardised support vectors, one row each.
+    support_vectors: Vec<Vec<f32>>,
+    /// The effective configuration the training cells were made with.
+    config: Config,
+    training: TrainingSummary,
+}
+
+/// A trained RBF SVM, ready to predict.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SvmModel {
+    pub feature_mean: Vec<f32>,
+    /// 1 / standard deviation per feature (1 for constant features).
+    pub feature_inverse_std: Vec<f32>,
+    pub c: f64,
+    pub gamma: f32,
+    pub rho: f32,
+    pub dual_coefficients: Vec<f32>,
+    /// Row-major `support_vector_count x dimension`.
+    pub support_vectors: Vec<f32>,
+    support_vector_squared_norms: Vec<f32>,
+    pub config: Config,
+    pub training: TrainingSummary,
+}
+
+impl SvmModel {
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        feature_mean: Vec<f32>,
+        feature_inverse_std: Vec<f32>,
+        c: f64,
+        gamma: f32,
+        rho: f32,
+        dual_coefficients: Vec<f32>,
+        support_vectors: Vec<f32>,
+        config: Config,
+        training: TrainingSummary,
+    ) -> Self {
+        let d = feature_mean.len();
+        let support_vector_squared_norms = support_vectors
+            .chunks_exact(d)
+            .map(|sv| sv.iter().map(|v| v * v).sum())
+            .collect();
+        Self {
+            feature_mean,
+            feature_inverse_std,
+            c,
+            gamma,
+            rho,
+            dual_coefficients,
+            support_vectors,
+            support_vector_squared_norms,
+            config,
+            training,
+        }
+    }
+
+    /// The model compiled into the binary.
+    pub fn embedded_default() -> Result<Self> {
+        Self::from_json(DEFAULT_MODEL_JSON, "embedded default model")
+    }
+
+    pub fn dimension(&self) -> usize {
+        self.feature_mean.len()
+    }
+
+    pub fn support_vector_count(&self) -> usize {
+        self.dual_coefficients.len()
+    }
+
+    /// Reads a model file, checking format, version, shapes and finiteness.
+    pub fn from_json(bytes: &[u8], source_name: &str) -> Result<Self> {
+        let fail = |message: String| Error::Model {
+            source_name: source_name.to_string(),
+            message,
+        };
+        let header: serde_json::Value = serde_json::from_slice(bytes)
+            .map_err(|e| fail(format!("not a JSON model file: {e}")))?;
+        let format = header.get("format").and_then(|f| f.as_str());
+        let version = header.get("version").and_then(|v| v.as_u64());
+        if format != Some(MODEL_FORMAT) || version != Some(MODEL_VERSION as u64) {
+            return Err(fail(format!(
+                "format {format:?} version {version:?}; this travmap reads \"{MODEL_FORMAT}\" version {MODEL_VERSION}"
+            )));
+        }
+        let file: ModelFile =
+            serde_json::from_value(header).map_err(|e| fail(format!("malformed model: {e}")))?;
+        let d = FEATURE_NAMES.len();
+        if file.feature_names != FEATURE_NAMES {
+            return Err(fail(format!(
+                "features {:?}; this travmap computes {:?}",
+                file.feature_names, FEATURE_NAMES
+            )));
+        }
+        if file.feature_mean.len() != d || file.feature_std.len() != d {
+            return Err(fail(format!("{d} means and deviations expected")));
+        }
+        if file.support_vectors.len() != file.dual_coefficients.len() {
+            return Err(fail(format!(
+                "{} support vectors but {} coefficients",
+                file.support_vectors.len(),
+                file.dual_coefficients.len()
+            )));
+        }
+        if let Some((i, sv)) = file.support_vectors.iter().enumerate().find(|(_, sv)| sv.len() != d) {
+            return Err(fail(format!("support vector {i} has {} values, expected {d}", sv.len())));
+        }
+        let numbers = file
+            .feature_mean
+            .iter()
+            .chain(&file.feature_std)
+            .chain(&file.dual_coefficients)
+            .chain(file.support_vectors.iter().flatten());
+        if numbers.clone().any(|v| !v.is_finite())
+            || !(file.gamma.is_finite() && file.gamma > 0.0 && file.rho.is_finite())
+            || file.feature_std.iter().any(|s| *s <= 0.0)
+        {
+            return Err(fail("non-finite or non-positive parameters".into()));
+        }
+        file.config.validate()?;
+        Ok(Self::new(
+            file.feature_mean,
+            file.feature_std.iter().map(|s| 1.0 / s).collect(),
+            file.c,
+            file.gamma as f32,
+            file.rho as f32,
+            file.dual_coefficients,
+            file.support_vectors.concat(),
+            file.config,
+            file.training,
+        ))
+    }
+
+    pub fn to_json(&self) -> Vec<u8> {
+        let d = self.dimension();
+        let file = ModelFile {
+            format: MODEL_FORMAT.into(),
+            version: MODEL_VERSION,
+            feature_names: FEATURE_NAMES.iter().map(|s| s.to_string()).collect(),
+            feature_mean: self.feature_mean.clone(),
+            feature_std: self.feature_inverse_std.iter().map(|s| 1.0 / s).collect(),
+            c: self.c,
+            gamma: self.gamma as f64,
+            rho: self.rho as f64,
+            dual_coefficients: self.dual_coefficients.clone(),
+            support_vectors: self.support_vectors.chunks_exact(d).map(<[f32]>::to_vec).collect(),
+            config: self.config.clone(),
+            training: self.training.clone(),
+        };
+        let mut bytes = serde_json::to_vec(&file).expect("model serialises");
+        bytes.push(b'\n');
+        bytes
+    }
+
+    /// SHA-256 of the model file, to name exactly which model produced a result.
+    pub fn sha256_hex(&self) -> String {
+        Sha256::digest(self.to_json())
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect()
+    }
+
+    /// Errors when `config` would compute features differently from the training cells.
+    pub fn check_compatible(&self, config: &Config) -> Result<()> {
+        let trained = &self.config;
+        let mismatch = if trained.grid.cell_size_m != config.grid.cell_size_m {
+            Some(format!(
+                "grid.cell_size_m = {} (model) vs {}",
+                trained.grid.cell_size_m, config.grid.cell_size_m
+            ))
+        } else if trained.features != config.features {
+            Some(format!(
+                "features = {:?} (model) vs {:?}",
+                trained.features, config.features
+            ))
+        } else {
+            None
+        };
+        match mismatch {
+            Some(m) => Err(Error::Model {
+                source_name: "model".into(),
+                message: format!("trained with different feature settings: {m}"),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Decision value of one raw (unstandardised) feature row; > 0 is traversable.
+    /// `scratch` must hold `dimension()` values.
+    pub fn decision_value(&self, features: &[f32], scratch: &mut [f32]) -> f32 {
+        let mut norm = 0.0f32;
+        for (((z, &x), &m), &s) in scratch
+            .iter_mut()
+            .zip(features)
+            .zip(&self.feature_mean)
+            .zip(&self.feature_inverse_std)
+        {
+            *z = (x - m) * s;
+            norm += *z * *z;
+        }
+        let d = self.dimension();
+        let mut sum = 0.0f32;
+        for ((sv, &sv_norm), &coef) in self
+            .support_vectors
+            .chunks_exact(d)
+            .zip(&self.support_vector_squared_norms)
+            .zip(&self.dual_coefficients)
+        {
+            let dot: f32 = sv.iter().zip(scratch.iter()).map(|(a, b)| a * b).sum();
+            sum += coef * (-self.gamma * (norm + sv_norm - 2.0 * dot).max(0.0)).exp();
+        }
+        sum - self.rho
+    }
+
+    /// Classifies every predictable cell of a grid; the others stay unknown.
+    pub fn classify(&self, grid: &FeatureGrid) -> Vec<CellClass> {
+        let mut scratch = vec![0f32; self.dimension()];
+        grid.predictable
+            .iter()
+            .enumerate()
+            .map(|(cell, &predictable)| {
+                if !predictable {
+                    CellClass::Unknown
+                } else if self.decision_value(grid.cell(cell), &mut scratch) > 0.0 {
+                    CellClass::Traversable
+                } else {
+                    CellClass::NonTraversable
+                }
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn embedded_model_loads_and_round_trips() {
+        let model = SvmModel::embedded_default().expect("the shipped model must load");
+        assert!(model.support_vector_count() > 0);
+        assert_eq!(model.dimension(), FEATURE_NAMES.len());
+        model.check_compatible(&Config::default()).unwrap();
+        let again = SvmModel::from_json(&model.to_json(), "round trip").unwrap();
+        assert_eq!(again.to_json(), model.to_json());
+    }
+
+    #[test]
+    fn wrong_version_and_shapes_are_clear_errors() {
+        let model = SvmModel::embedded_default().unwrap();
+        let mut json: serde_json::Value = serde_json::from_slice(&model.to_json()).unwrap();
+        json["version"] = 99.into();
+        let err = SvmModel::from_json(json.to_string().as_bytes(), "m.json").unwrap_err().to_string();
+        assert!(err.contains("m.json") && err.contains("version Some(99)"), "{err}");
+        json["version"] = MODEL_VERSION.into();
+        json["dual_coefficients"] = serde_json::json!([1.0]);
+        let err = SvmModel::from_json(json.to_string().as_bytes(), "m.json").unwrap_err().to_string();
+        assert!(err.contains("coefficients"), "{err}");
+        assert!(SvmModel::from_json(b"{", "m.json").is_err());
+    }
+
+    #[test]
+    fn a_model_for_other_cell_sizes_is_refused() {
+        let model = SvmModel::embedded_default().unwrap();
+        let mut config = Config::default();
+        config.grid.cell_size_m = 0.5;
+        config.features.subcell_size_m = 0.25;
+        assert!(model.check_compatible(&config).is_err());
+    }
+}

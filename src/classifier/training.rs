@@ -1,0 +1,306 @@
+//! Training (METHOD.md section 6): z-score standardisation, a grid search over C
+//! and gamma with cross-validation, and a final fit on every training cell.
+//!
+//! Folds are spatial (Decision of this project): the world plane is cut into square
+//! blocks and whole blocks go to one fold, so no cell, nor its copies seen in other
+//! frames, is in a training fold and its test fold at once. Random folds would let
+//! the search reward memorising cells (consecutive frames share most cells).
+
+use rayon::prelude::*;
+
+use super::smo::{self, Parameters, Problem};
+use super::{SearchResult, SvmModel, TrainingSummary};
+use crate::config::{Config, TrainingConfig};
+use crate::error::{Error, Result};
+use crate::random::SplitMix64;
+
+/// Labelled cells: raw features and where each cell lies in the world.
+#[derive(Clone, Debug, Default)]
+pub struct TrainingSet {
+    /// Row-major `len x dimension` raw features.
+    pub features: Vec<f32>,
+    pub dimension: usize,
+    pub traversable: Vec<bool>,
+    /// World x, y of each cell's centre, metres.
+    pub centre_in_world: Vec<[f64; 2]>,
+    /// Where the cells came from, for the model's record.
+    pub sources: Vec<String>,
+}
+
+impl TrainingSet {
+    pub fn len(&self) -> usize {
+        self.traversable.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.traversable.is_empty()
+    }
+
+    pub fn push(&mut self, features: &[f32], traversable: bool, centre_in_world: [f64; 2]) {
+        self.features.extend_from_slice(features);
+        self.traversable.push(traversable);
+        self.centre_in_world.push(centre_in_world);
+    }
+
+    /// The cells at `indices`, in that order.
+    pub fn subset(&self, indices: &[usize]) -> TrainingSet {
+        let d = self.dimension;
+        let mut out = TrainingSet {
+            dimension: d,
+            sources: self.sources.clone(),
+            ..Default::default()
+        };
+        for &i in indices {
+            out.push(&self.features[i * d..(i + 1) * d], self.traversable[i], self.centre_in_world[i]);
+        }
+        out
+    }
+}
+
+/// Assigns every cell to one of `folds` folds by its world block: blocks are
+/// shuffled with `seed` and dealt round-robin, so folds hold similar block counts.
+pub fn spatial_folds(centres: &[[f64; 2]], block_size_m: f64, folds: usize, seed: u64) -> Vec<usize> {
+    let block_of = |c: &[f64; 2]| {
+        [
+            (c[0] / block_size_m).floor() as i64,
+            (c[1] / block_size_m).floor() as i64,
+        ]
+    };
+    let mut blocks: Vec<[i64; 2]> = centres.iter().map(block_of).collect();
+    blocks.sort_unstable();
+    blocks.dedup();
+    SplitMix64(seed).shuffle(&mut blocks);
+    let fold_of_block: std::collections::HashMap<[i64; 2], usize> =
+        blocks.iter().enumerate().map(|(i, b)| (*b, i % folds)).collect();
+    centres.iter().map(|c| fold_of_block[&block_of(c)]).collect()
+}
+
+/// Mean and 1/deviation of each feature; constant features get 1.
+fn standardisation(set: &TrainingSet) -> (Vec<f32>, Vec<f32>) {
+    let d = set.dimension;
+    let n = set.len().max(1) as f64;
+    let mut mean = vec![0f64; d];
+    for row in set.features.chunks_exact(d) {
+        for (m, &v) in mean.iter_mut().zip(row) {
+            *m += v as f64;
+        }
+    }
+    mean.iter_mut().for_each(|m| *m /= n);
+    let mut variance = vec![0f64; d];
+    for row in set.features.chunks_exact(d) {
+        for ((s, &v), m) in variance.iter_mut().zip(row).zip(&mean) {
+            *s += (v as f64 - m).powi(2);
+        }
+    }
+    let inverse_std = variance
+        .iter()
+        .map(|s| {
+            let std = (s / n).sqrt();
+            if std > 1e-12 { (1.0 / std) as f32 } else { 1.0 }
+        })
+        .collect();
+    (mean.iter().map(|&m| m as f32).collect(), inverse_std)
+}
+
+/// Fits one SVM on `set` with the given C and gamma.
+fn fit(set: &TrainingSet, c: f64, gamma: f64, config: &Config) -> SvmModel {
+    let d = set.dimension;
+    let (mean, inverse_std) = standardisation(set);
+    let standardised: Vec<f32> = set
+        .features
+        .chunks_exact(d)
+        .flat_map(|row| {
+            row.iter()
+                .zip(&mean)
+                .zip(&inverse_std)
+                .map(|((&x, &m), &s)| (x - m) * s)
+                .collect::<Vec<f32>>()
+        })
+        .collect();
+    let labels: Vec<f32> = set.traversable.iter().map(|&t| if t { 1.0 } else { -1.0 }).collect();
+    let problem = Problem {
+        samples: &standardised,
+        dimension: d,
+        labels: &labels,
+    };
+    let parameters = Parameters {
+        c,
+        gamma,
+        tolerance: config.training.tolerance,
+        cache_bytes: config.training.cache_mib << 20,
+    };
+    let solution = smo::solve(&problem, &parameters);
+    let (mut coefficients, mut support_vectors) = (Vec::new(), Vec::new());
+    for (i, &a) in solution.alpha.iter().enumerate() {
+        if a > 0.0 {
+            coefficients.push((a * labels[i] as f64) as f32);
+            support_vectors.extend_from_slice(&standardised[i * d..(i + 1) * d]);
+        }
+    }
+    let summary = TrainingSummary {
+        sources: set.sources.clone(),
+        samples: set.len(),
+        traversable_samples: set.traversable.iter().filter(|t| **t).count(),
+        search: Vec::new(),
+        solver_iterations: solution.iterations,
+        solver_converged: solution.converged,
+        seconds: 0.0,
+    };
+    SvmModel::new(
+        mean,
+        inverse_std,
+        c,
+        gamma as f32,
+        solution.rho as f32,
+        coefficients,
+        support_vectors,
+        config.clone(),
+        summary,
+    )
+}
+
+/// Share of `set`'s cells that `model` classifies right.
+fn accuracy(model: &SvmModel, set: &TrainingSet) -> f64 {
+    let d = set.dimension;
+    let mut scratch = vec![0f32; d];
+    let right = set
+        .features
+        .chunks_exact(d)
+        .zip(&set.traversable)
+        .filter(|(row, t)| (model.decision_value(row, &mut scratch) > 0.0) == **t)
+        .count();
+    right as f64 / set.len().max(1) as f64
+}
+
+/// Grid search with spatially-blocked cross-validation, then a fit on all of `set`.
+/// `progress(done, total)` is called after each fit.
+pub fn train(set: &TrainingSet, config: &Config, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<SvmModel> {
+    let started = std::time::Instant::now();
+    let t: &TrainingConfig = &config.training;
+    let traversable = set.traversable.iter().filter(|t| **t).count();
+    if traversable == 0 || traversable == set.len() {
+        return Err(Error::Training(format!(
+            "{} cells, {traversable} traversable: both classes are needed",
+            set.len()
+        )));
+    }
+
+    // The search runs on a seeded random subset when the set is large.
+    let mut order: Vec<usize> = (0..set.len()).collect();
+    SplitMix64(t.seed).shuffle(&mut order);
+    order.truncate(t.max_search_samples.max(t.folds));
+    order.sort_unstable();
+    let search_set = set.subset(&order);
+    let folds = spatial_folds(&search_set.centre_in_world, t.block_size_m, t.folds, t.seed);
+    let used_folds: Vec<usize> = (0..t.folds).filter(|f| folds.contains(f)).collect();
+    if used_folds.len() < 2 {
+        return Err(Error::Training(format!(
+            "the cells span fewer than 2 blocks of {} m: lower training.block_size_m",
+            t.block_size_m
+        )));
+    }
+    let candidates: Vec<(f64, f64)> = t
+        .c_values
+        .iter()
+        .flat_map(|&c| t.gamma_values.iter().map(move |&g| (c, g)))
+        .collect();
+    let jobs: Vec<(usize, usize)> = (0..candidates.len())
+        .flat_map(|k| used_folds.iter().map(move |&f| (k, f)))
+        .collect();
+    let total = jobs.len() + 1;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let scores: Vec<(usize, usize, f64)> = jobs
+        .par_iter()
+        .map(|&(k, fold)| {
+            let (train_idx, test_idx): (Vec<usize>, Vec<usize>) =
+                (0..search_set.len()).partition(|&i| folds[i] != fold);
+            let (c, gamma) = candidates[k];
+            let model = fit(&search_set.subset(&train_idx), c, gamma, config);
+            let test = search_set.subset(&test_idx);
+            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            progress(n, total);
+            (k, test.len(), accuracy(&model, &test) * test.len() as f64)
+        })
+        .collect();
+    let search: Vec<SearchResult> = candidates
+        .iter()
+        .enumerate()
+        .map(|(k, &(c, gamma))| {
+            let (right, cells) = scores
+                .iter()
+                .filter(|s| s.0 == k)
+                .fold((0.0, 0usize), |(r, n), s| (r + s.2, n + s.1));
+            SearchResult {
+                c,
+                gamma,
+                accuracy: right / cells.max(1) as f64,
+            }
+        })
+        .collect();
+    // The first best in (C, gamma) order: ties go to the smaller, smoother model.
+    let best = search
+        .iter()
+        .fold(search[0], |best, r| if r.accuracy > best.accuracy { *r } else { best });
+    let mut model = fit(set, best.c, best.gamma, config);
+    progress(total, total);
+    model.training.search = search;
+    model.training.seconds = started.elapsed().as_secs_f64();
+    Ok(model)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spatial_folds_keep_blocks_whole_and_use_every_fold() {
+        let centres: Vec<[f64; 2]> = (0..400).map(|i| [(i % 20) as f64 * 0.4, (i / 20) as f64 * 0.4]).collect();
+        let folds = spatial_folds(&centres, 2.0, 5, 1);
+        for (a, fa) in centres.iter().zip(&folds) {
+            for (b, fb) in centres.iter().zip(&folds) {
+                if (a[0] / 2.0).floor() == (b[0] / 2.0).floor() && (a[1] / 2.0).floor() == (b[1] / 2.0).floor() {
+                    assert_eq!(fa, fb);
+                }
+            }
+        }
+        for f in 0..5 {
+            assert!(folds.contains(&f));
+        }
+    }
+
+    #[test]
+    fn training_learns_a_separable_feature_and_stores_the_search() {
+        let mut set = TrainingSet {
+            dimension: 2,
+            ..Default::default()
+        };
+        let mut rng = SplitMix64(9);
+        for i in 0..600 {
+            let traversable = i % 3 != 0;
+            let x = if traversable { 0.1 } else { 0.6 } + rng.uniform(-0.15, 0.15) as f32;
+            // The second feature is noise on a large scale: standardisation matters.
+            set.push(&[x, 1000.0 * rng.uniform(-1.0, 1.0) as f32], traversable, [(i % 30) as f64, (i / 30) as f64]);
+        }
+        let mut config = Config::default();
+        config.training.c_values = vec![1.0, 10.0];
+        config.training.gamma_values = vec![0.1, 1.0];
+        let model = train(&set, &config, &|_, _| {}).unwrap();
+        assert_eq!(model.training.search.len(), 4);
+        assert!(model.training.search.iter().all(|r| r.accuracy > 0.95), "{:?}", model.training.search);
+        assert!(accuracy(&model, &set) > 0.98);
+        let mut scratch = [0f32; 2];
+        assert!(model.decision_value(&[0.1, 0.0], &mut scratch) > 0.0);
+        assert!(model.decision_value(&[0.6, 0.0], &mut scratch) < 0.0);
+    }
+
+    #[test]
+    fn one_class_is_an_error() {
+        let mut set = TrainingSet {
+            dimension: 1,
+            ..Default::default()
+        };
+        set.push(&[1.0], true, [0.0, 0.0]);
+        set.push(&[2.0], true, [9.0, 0.0]);
+        assert!(train(&set, &Config::default(), &|_, _| {}).is_err());
+    }
+}

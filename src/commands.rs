@@ -1,0 +1,382 @@
+//! One function per subcommand of the `travmap` binary: each opens its inputs,
+//! calls the library and prints a table (or JSON with `--json`). Errors get their
+//! context here and are printed once by `main`.
+
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::json;
+
+use crate::classifier::SvmModel;
+use crate::classifier::training::train as train_model;
+use crate::config::Config;
+use crate::evaluation::{CrossValidationReport, Evaluation, EvaluationReport, Selection, collect_training_set, cross_validate};
+use crate::grid::CellClass;
+use crate::metrics::Scores;
+use crate::pipeline::run_sequence;
+use crate::reading::{KittiSequence, parse_frame_range};
+
+/// The sequences a command reads and the frames of each.
+pub struct Inputs {
+    pub sequences: Vec<PathBuf>,
+    /// `A..B`, `A..=B`, `A..` or `N`; all frames when None.
+    pub frames: Option<String>,
+}
+
+/// How a command reports.
+#[derive(Clone, Copy)]
+pub struct Output {
+    pub json: bool,
+    pub quiet: bool,
+}
+
+impl Output {
+    /// A progress bar on a terminal, hidden otherwise or with `--quiet` / `--json`.
+    fn progress(&self, length: u64, message: &str) -> ProgressBar {
+        if self.quiet || self.json || !std::io::stderr().is_terminal() {
+            return ProgressBar::hidden();
+        }
+        let bar = ProgressBar::new(length).with_message(message.to_string());
+        bar.set_style(
+            ProgressStyle::with_template("{msg:<24} [{bar:30}] {pos}/{len} {elapsed}")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        bar
+    }
+}
+
+/// The effective configuration: defaults, then the file, then each `--set`.
+pub fn load_config(file: Option<&Path>, assignments: &[String]) -> Result<Config> {
+    let mut config = match file {
+        Some(path) => Config::from_toml_file(path)?,
+        None => Config::default(),
+    };
+    for assignment in assignments {
+        config.set(assignment)?;
+    }
+    config.validate()?;
+    Ok(config)
+}
+
+/// A model file, or the embedded default model.
+pub fn load_model(path: Option<&Path>) -> Result<(SvmModel, String)> {
+    match path {
+        Some(path) => {
+            let bytes = std::fs::read(path).with_context(|| format!("cannot read model {}", path.display()))?;
+            let name = path.display().to_string();
+            Ok((SvmModel::from_json(&bytes, &name)?, name))
+        }
+        None => Ok((SvmModel::embedded_default()?, "embedded default model".into())),
+    }
+}
+
+fn open_inputs(inputs: &Inputs) -> Result<Vec<Selection>> {
+    let frames = match &inputs.frames {
+        Some(text) => parse_frame_range(text)?,
+        None => 0..usize::MAX,
+    };
+    if inputs.sequences.is_empty() {
+        bail!("no sequence directory given");
+    }
+    inputs
+        .sequences
+        .iter()
+        .map(|dir| {
+            let sequence = KittiSequence::open(dir)?;
+            if sequence.frames_in(&frames).is_empty() {
+                bail!(
+                    "{}: no scans in frames {}..{} (the sequence has frames {}..={})",
+                    dir.display(),
+                    frames.start,
+                    frames.end,
+                    sequence.frames()[0],
+                    sequence.frames()[sequence.frames().len() - 1]
+                );
+            }
+            Ok(Selection {
+                sequence,
+                frames: frames.clone(),
+            })
+        })
+        .collect()
+}
+
+fn frame_count(selections: &[Selection]) -> u64 {
+    selections.iter().map(|s| s.sequence.frames_in(&s.frames).len() as u64).sum()
+}
+
+/// Writes `bytes` to `path` through a temporary file renamed at the end, so a
+/// failure never leaves a half-written output.
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let name = path.file_name().context("output path has no file name")?.to_string_lossy();
+    let temporary = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    let result = std::fs::File::create(&temporary)
+        .and_then(|mut f| f.write_all(bytes).and_then(|_| f.sync_all()))
+        .and_then(|_| std::fs::rename(&temporary, path));
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&temporary);
+        return Err(e).with_context(|| format!("cannot write {}", path.display()));
+    }
+    Ok(())
+}
+
+fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {
+    json!({
+        "name": name,
+        "sha256": model.sha256_hex(),
+        "support_vectors": model.support_vector_count(),
+        "c": model.c,
+        "gamma": model.gamma,
+        "trained_on": model.training.sources,
+    })
+}
+
+/// `travmap run`: the filtered grid of every frame.
+pub fn run(inputs: &Inputs, config: &Config, model_path: Option<&Path>, ascii: bool, output: Output) -> Result<()> {
+    let (model, model_name) = load_model(model_path)?;
+    model.check_compatible(config)?;
+    let selections = open_inputs(inputs)?;
+    let bar = output.progress(frame_count(&selections), "predicting");
+    let mut stdout = std::io::stdout().lock();
+    if output.json {
+        writeln!(stdout, "{}", json!({"config": config, "model": model_json(&model, &model_name)}))?;
+    } else if !output.quiet {
+        writeln!(stdout, "model: {model_name} ({} support vectors)", model.support_vector_count())?;
+        writeln!(stdout, "{:>6} {:>10} {:>6} {:>11} {:>11} {:>9} {:>10}", "frame", "stamp_s", "cells", "predictable", "traversable", "non-trav", "latency_ms")?;
+    }
+    let mut evaluation = Evaluation::default();
+    for selection in &selections {
+        run_sequence::<anyhow::Error>(&selection.sequence, &selection.frames, config, Some(&model), |result| {
+            bar.inc(1);
+            evaluation.add(&result);
+            let grid = result.filtered.as_deref().unwrap_or(&[]);
+            let count = |class: CellClass| grid.iter().filter(|c| **c == class).count();
+            let (traversable, non_traversable) = (count(CellClass::Traversable), count(CellClass::NonTraversable));
+            if output.json {
+                let cells: Vec<i8> = grid
+                    .iter()
+                    .map(|c| match c {
+                        CellClass::Unknown => -1,
+                        CellClass::Traversable => 0,
+                        CellClass::NonTraversable => 100,
+                    })
+                    .collect();
+                let line = json!({
+                    "sequence": selection.sequence.dir(),
+                    "frame": result.index,
+                    "stamp_ns": result.stamp_ns,
+                    "cell_size_m": result.layout.cell_size_m,
+                    "cells_per_side": result.layout.cells_per_side,
+                    "min_corner_in_world": result.layout.min_corner_in_world(),
+                    "cells": cells,
+                    "timings_ms": result.timings,
+                });
+                writeln!(stdout, "{line}")?;
+            } else if !output.quiet {
+                writeln!(
+                    stdout,
+                    "{:>6} {:>10.3} {:>6} {:>11} {:>11} {:>9} {:>10.2}",
+                    result.index,
+                    result.stamp_ns as f64 * 1e-9,
+                    grid.len(),
+                    traversable + non_traversable,
+                    traversable,
+                    non_traversable,
+                    result.timings.latency_ms
+                )?;
+                if ascii {
+                    write_ascii_grid(&mut stdout, grid, result.layout.cells_per_side)?;
+                }
+            }
+            Ok(())
+        })?;
+    }
+    bar.finish_and_clear();
+    if !output.json && !output.quiet {
+        let latency = evaluation.report().timings_ms.latency;
+        writeln!(stdout, "median latency {:.2} ms per frame (p95 {:.2} ms)", latency.median, latency.p95)?;
+    }
+    Ok(())
+}
+
+/// Rows from north (max y) down, so the picture reads like a map with x to the right.
+fn write_ascii_grid(out: &mut impl Write, grid: &[CellClass], cells_per_side: usize) -> Result<()> {
+    for row in grid.chunks(cells_per_side).rev() {
+        let line: String = row.iter().map(|c| c.symbol()).collect();
+        writeln!(out, "  |{line}|")?;
+    }
+    Ok(())
+}
+
+/// The paper's geometry-only row (METHOD.md section 10), for reference.
+const PAPER_GEOMETRY_ONLY: [f64; 7] = [85.8, 79.5, 87.9, 11.8, 89.4, 10.6, 88.2];
+
+fn score_row(s: &Scores) -> [f64; 7] {
+    [s.accuracy, s.miou, s.f1, s.fpr, s.tpr, s.fnr, s.tnr].map(|v| 100.0 * v)
+}
+
+fn write_table(out: &mut impl Write, report: &EvaluationReport) -> Result<()> {
+    writeln!(out, "{:<22} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>11}", "", "Acc", "mIoU", "F1", "FPR", "TPR", "FNR", "TNR", "latency")?;
+    let row = |name: &str, values: [f64; 7], latency: &str| {
+        let cells: String = values.iter().map(|v| format!(" {v:>6.1}")).collect();
+        format!("{name:<22}{cells} {latency:>11}")
+    };
+    let latency = format!("{:.2} ms", report.timings_ms.latency.median);
+    writeln!(out, "{}", row("travmap (filtered)", score_row(&report.scores), &latency))?;
+    writeln!(out, "{}", row("travmap (SVM only)", score_row(&report.unfiltered_scores), ""))?;
+    writeln!(out, "{}", row("paper, geometry only", PAPER_GEOMETRY_ONLY, "13 ms SVM"))?;
+    let c = &report.confusion;
+    writeln!(out, "cells: TP {} TN {} FP {} FN {} unpredictable {} over {} frames", c.tp, c.tn, c.fp, c.r#fn, c.unknown, report.frames)?;
+    let t = &report.timings_ms;
+    writeln!(
+        out,
+        "median ms per frame: read {:.2}, integrate {:.2}, grid {:.2}, features {:.2}, classify {:.2}, filter {:.2}; latency p95 {:.2}",
+        t.read.median, t.integrate.median, t.grid.median, t.features.median, t.classify.median, t.filter.median, t.latency.p95
+    )?;
+    Ok(())
+}
+
+/// `travmap eval`: the paper's table for the selected frames.
+pub fn eval(inputs: &Inputs, config: &Config, model_path: Option<&Path>, output: Output) -> Result<()> {
+    let (model, model_name) = load_model(model_path)?;
+    model.check_compatible(config)?;
+    let selections = open_inputs(inputs)?;
+    let bar = output.progress(frame_count(&selections), "evaluating");
+    let mut evaluation = Evaluation::default();
+    for selection in &selections {
+        run_sequence::<anyhow::Error>(&selection.sequence, &selection.frames, config, Some(&model), |result| {
+            bar.inc(1);
+            evaluation.add(&result);
+            Ok(())
+        })?;
+    }
+    bar.finish_and_clear();
+    let report = evaluation.report();
+    let sources: Vec<String> = selections.iter().map(Selection::describe).collect();
+    if output.json {
+        let doc = json!({"config": config, "model": model_json(&model, &model_name), "inputs": sources, "report": report});
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+        return Ok(());
+    }
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "inputs: {}", sources.join("; "))?;
+    writeln!(
+        out,
+        "model: {model_name} (sha256 {}, {} support vectors, C {}, gamma {}), trained on {}",
+        &model.sha256_hex()[..12],
+        model.support_vector_count(),
+        model.c,
+        model.gamma,
+        model.training.sources.join("; ")
+    )?;
+    if report.frames == 0 {
+        writeln!(out, "no frame has ground truth (labels/ for every scan of its window): nothing to score")?;
+    }
+    write_table(&mut out, &report)?;
+    if model_path.is_none() {
+        writeln!(
+            out,
+            "note: the embedded model was trained on the shipped labelled frames; scores on those frames are \
+             training scores. `travmap crossval` gives the spatially held-out accuracy."
+        )?;
+    }
+    Ok(())
+}
+
+/// `travmap train`: grid search, final fit, model file.
+pub fn train(inputs: &Inputs, config: &Config, model_path: &Path, output: Output) -> Result<()> {
+    let selections = open_inputs(inputs)?;
+    let bar = output.progress(frame_count(&selections), "collecting cells");
+    let set = collect_training_set(&selections, config, &mut || bar.inc(1))?;
+    bar.finish_and_clear();
+    let searches = config.training.c_values.len() * config.training.gamma_values.len() * config.training.folds + 1;
+    let bar = output.progress(searches as u64, "grid search + final fit");
+    let model = train_model(&set, config, &|done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })?;
+    bar.finish_and_clear();
+    write_atomically(model_path, &model.to_json())?;
+    let best = model.training.search.iter().find(|r| r.c == model.c && r.gamma as f32 == model.gamma).copied();
+    if output.json {
+        let doc = json!({
+            "model": model_path,
+            "sha256": model.sha256_hex(),
+            "config": config,
+            "training": model.training,
+            "support_vectors": model.support_vector_count(),
+            "c": model.c,
+            "gamma": model.gamma,
+        });
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else if !output.quiet {
+        println!(
+            "trained on {} cells ({} traversable) from {}",
+            model.training.samples,
+            model.training.traversable_samples,
+            model.training.sources.join("; ")
+        );
+        println!("grid search (spatially-blocked {}-fold CV accuracy, cells before filtering):", config.training.folds);
+        for r in &model.training.search {
+            println!("  C {:>8} gamma {:>8}  {:.1} %", r.c, r.gamma, 100.0 * r.accuracy);
+        }
+        println!(
+            "chosen C {} gamma {} (CV accuracy {:.1} %): {} support vectors, {} solver iterations, {:.1} s",
+            model.c,
+            model.gamma,
+            100.0 * best.map_or(0.0, |b| b.accuracy),
+            model.support_vector_count(),
+            model.training.solver_iterations,
+            model.training.seconds
+        );
+        println!("wrote {}", model_path.display());
+    }
+    Ok(())
+}
+
+/// `travmap crossval`: the spatially-blocked held-out evaluation.
+pub fn crossval(inputs: &Inputs, config: &Config, output: Output) -> Result<()> {
+    let selections = open_inputs(inputs)?;
+    let bar = output.progress(config.training.folds as u64, "cross-validating");
+    let report: CrossValidationReport = cross_validate(&selections, config, &|message| {
+        bar.set_message(message.to_string());
+        bar.inc(1);
+    })?;
+    bar.finish_and_clear();
+    let sources: Vec<String> = selections.iter().map(Selection::describe).collect();
+    if output.json {
+        let doc = json!({"config": config, "inputs": sources, "report": report});
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+        return Ok(());
+    }
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "inputs: {}", sources.join("; "))?;
+    writeln!(
+        out,
+        "spatially-blocked {}-fold cross-validation, {} m world blocks; each fold's model has its own grid search",
+        config.training.folds, report.block_size_m
+    )?;
+    for f in &report.folds {
+        writeln!(
+            out,
+            "  fold {}: trained on {} cells (test blocks hold {}), C {} gamma {}, {} support vectors, {:.1} s",
+            f.fold, f.training_cells, f.test_cells, f.c, f.gamma, f.support_vectors, f.training_seconds
+        )?;
+    }
+    write_table(&mut out, &report.evaluation)?;
+    Ok(())
+}
+
+/// `travmap config`: the effective configuration as TOML (or JSON).
+pub fn print_config(config: &Config, output: Output) -> Result<()> {
+    if output.json {
+        println!("{}", serde_json::to_string_pretty(config)?);
+    } else {
+        print!("{}", toml::to_string(config)?);
+    }
+    Ok(())
+}

@@ -1,0 +1,328 @@
+//! The one configuration of travmap, nested per pipeline stage.
+//!
+//! Defaults are METHOD.md's and live only in the `Default` impls below. A TOML file
+//! overrides any subset (`--config`), `--set section.key=value` overrides single
+//! fields, and `validate` checks the result once. The effective configuration is
+//! printed with `--json` and stored in every model, so a result can be reproduced.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// Every tunable of the method, one section per stage.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    pub integration: IntegrationConfig,
+    pub grid: GridConfig,
+    pub features: FeatureConfig,
+    pub filter: FilterConfig,
+    pub ground_truth: GroundTruthConfig,
+    pub training: TrainingConfig,
+}
+
+/// METHOD.md section 2.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct IntegrationConfig {
+    /// Number of scans integrated per frame, the current one included (n, default 3).
+    pub scans: usize,
+}
+
+/// METHOD.md section 3.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GridConfig {
+    /// Side of the square grid around the sensor, metres (max_range, default 12).
+    pub size_m: f64,
+    /// Cell side, metres (r, default 0.4).
+    pub cell_size_m: f64,
+    /// Cells with fewer points are unpredictable (default 2).
+    pub min_points: usize,
+}
+
+/// METHOD.md section 4.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FeatureConfig {
+    /// Side of the internal sub-cells, metres (r_i, default 0.2); must divide the cell size.
+    pub subcell_size_m: f64,
+    /// Bins of the curvity range histogram (n_b, default 160).
+    pub curvity_bins: usize,
+    /// Sub-cells with fewer points contribute no normal to unevenness (default 3).
+    pub unevenness_min_points: usize,
+}
+
+/// METHOD.md section 7.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FilterConfig {
+    /// Apply the outlier filter (default true).
+    pub enabled: bool,
+    /// Vote weight of a cell's own label against its 8 neighbours' weight 1 (w, default 3).
+    pub self_weight: u32,
+}
+
+/// METHOD.md section 8.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GroundTruthConfig {
+    /// Cells with fewer voting points have no ground truth (m, default 2).
+    pub min_points: usize,
+    /// Non-traversable points that make a cell non-traversable (default 2).
+    pub min_non_traversable_points: usize,
+    /// SemanticKITTI classes that are traversable (default road, parking, sidewalk,
+    /// other-ground, lane-marking).
+    pub traversable_classes: Vec<u16>,
+    /// Classes that do not vote (default unlabeled 0 and outlier 1).
+    pub ignored_classes: Vec<u16>,
+}
+
+/// METHOD.md section 6, and the spatially-blocked validation of this project.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainingConfig {
+    /// Grid side used to collect training cells, metres (default 36). Features do not
+    /// depend on the grid size, so a larger grid only adds cells.
+    pub grid_size_m: f64,
+    /// Candidate SVM penalties C of the grid search.
+    pub c_values: Vec<f64>,
+    /// Candidate RBF widths gamma of the grid search (on standardised features).
+    pub gamma_values: Vec<f64>,
+    /// Folds of the cross-validation (default 5).
+    pub folds: usize,
+    /// Side of the square world blocks that make up the folds, metres (default 4):
+    /// a world cell and its copies in other frames are always in one fold.
+    pub block_size_m: f64,
+    /// The grid search uses a seeded random subset of at most this many cells
+    /// (default 6000); the final model is trained on all of them.
+    pub max_search_samples: usize,
+    /// Stopping tolerance of the SMO solver on the KKT gap (default 1e-3, libsvm's).
+    pub tolerance: f64,
+    /// Kernel row cache per solver, MiB (default 200).
+    pub cache_mib: usize,
+    /// Seed of the fold assignment and the search subset.
+    pub seed: u64,
+}
+
+impl Default for IntegrationConfig {
+    fn default() -> Self {
+        Self { scans: 3 }
+    }
+}
+
+impl Default for GridConfig {
+    fn default() -> Self {
+        Self {
+            size_m: 12.0,
+            cell_size_m: 0.4,
+            min_points: 2,
+        }
+    }
+}
+
+impl Default for FeatureConfig {
+    fn default() -> Self {
+        Self {
+            subcell_size_m: 0.2,
+            curvity_bins: 160,
+            unevenness_min_points: 3,
+        }
+    }
+}
+
+impl Default for FilterConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            self_weight: 3,
+        }
+    }
+}
+
+impl Default for GroundTruthConfig {
+    fn default() -> Self {
+        Self {
+            min_points: 2,
+            min_non_traversable_points: 2,
+            traversable_classes: vec![40, 44, 48, 49, 60],
+            ignored_classes: vec![0, 1],
+        }
+    }
+}
+
+impl Default for TrainingConfig {
+    fn default() -> Self {
+        Self {
+            grid_size_m: 36.0,
+            c_values: vec![1.0, 10.0, 100.0],
+            gamma_values: vec![0.01, 0.05, 0.2],
+            folds: 5,
+            block_size_m: 4.0,
+            max_search_samples: 6000,
+            tolerance: 1e-3,
+            cache_mib: 200,
+            seed: 0,
+        }
+    }
+}
+
+impl GridConfig {
+    /// Cells per side, `l = max_range / r` rounded to the nearest integer.
+    pub fn cells_per_side(&self) -> usize {
+        (self.size_m / self.cell_size_m).round() as usize
+    }
+}
+
+impl FeatureConfig {
+    /// Internal sub-cells per cell side, `r / r_i`.
+    pub fn subcells_per_side(&self, cell_size_m: f64) -> usize {
+        (cell_size_m / self.subcell_size_m).round() as usize
+    }
+}
+
+impl Config {
+    /// Reads a TOML file; fields it does not name keep their defaults.
+    pub fn from_toml_file(path: &std::path::Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        toml::from_str(&text).map_err(|e| Error::Config(format!("{}: {e}", path.display())))
+    }
+
+    /// Sets one field from `section.key=value`, the value in TOML syntax
+    /// (`grid.size_m=24`, `training.c_values=[1, 10]`).
+    pub fn set(&mut self, assignment: &str) -> Result<()> {
+        let (key, value) = assignment.split_once('=').ok_or_else(|| {
+            Error::Config(format!("`{assignment}`: expected section.key=value"))
+        })?;
+        let (section, field) = key.trim().split_once('.').ok_or_else(|| {
+            Error::Config(format!("`{key}`: expected section.key, e.g. grid.size_m"))
+        })?;
+        let parsed: toml::Table = toml::from_str(&format!("v = {}", value.trim()))
+            .map_err(|e| Error::Config(format!("`{assignment}`: value is not TOML: {e}")))?;
+        let mut table = toml::Table::try_from(&*self)
+            .map_err(|e| Error::Config(format!("cannot serialise configuration: {e}")))?;
+        let section_table = table
+            .get_mut(section)
+            .and_then(|s| s.as_table_mut())
+            .ok_or_else(|| Error::Config(format!("`{key}`: no section `{section}`")))?;
+        if !section_table.contains_key(field) {
+            let known: Vec<&str> = section_table.keys().map(String::as_str).collect();
+            return Err(Error::Config(format!(
+                "`{key}`: section `{section}` has no field `{field}` (fields: {})",
+                known.join(", ")
+            )));
+        }
+        section_table.insert(field.to_string(), parsed["v"].clone());
+        *self = table
+            .try_into()
+            .map_err(|e| Error::Config(format!("`{assignment}`: {e}")))?;
+        Ok(())
+    }
+
+    /// Checks every field once; the stages rely on these invariants.
+    pub fn validate(&self) -> Result<()> {
+        let fail = |m: String| Err(Error::Config(m));
+        let positive = |name: &str, v: f64| -> Result<()> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(Error::Config(format!("{name} must be > 0, got {v}")))
+            }
+        };
+        if self.integration.scans == 0 || self.integration.scans > 255 {
+            return fail(format!(
+                "integration.scans must be in 1..=255, got {}",
+                self.integration.scans
+            ));
+        }
+        positive("grid.size_m", self.grid.size_m)?;
+        positive("grid.cell_size_m", self.grid.cell_size_m)?;
+        positive("features.subcell_size_m", self.features.subcell_size_m)?;
+        positive("training.grid_size_m", self.training.grid_size_m)?;
+        positive("training.block_size_m", self.training.block_size_m)?;
+        positive("training.tolerance", self.training.tolerance)?;
+        let cells = self.grid.cells_per_side();
+        if !(1..=4096).contains(&cells) {
+            return fail(format!(
+                "grid.size_m / grid.cell_size_m gives {cells} cells per side; expected 1..=4096"
+            ));
+        }
+        let ratio = self.grid.cell_size_m / self.features.subcell_size_m;
+        if (ratio - ratio.round()).abs() > 1e-6 || !(1.0..=16.0).contains(&ratio.round()) {
+            return fail(format!(
+                "features.subcell_size_m ({}) must divide grid.cell_size_m ({}) into 1 to 16 parts",
+                self.features.subcell_size_m, self.grid.cell_size_m
+            ));
+        }
+        if self.grid.min_points == 0 {
+            return fail("grid.min_points must be >= 1".into());
+        }
+        if self.features.curvity_bins == 0 {
+            return fail("features.curvity_bins must be >= 1".into());
+        }
+        if self.training.folds < 2 {
+            return fail(format!(
+                "training.folds must be >= 2, got {}",
+                self.training.folds
+            ));
+        }
+        for (name, values) in [
+            ("training.c_values", &self.training.c_values),
+            ("training.gamma_values", &self.training.gamma_values),
+        ] {
+            if values.is_empty() {
+                return fail(format!("{name} must not be empty"));
+            }
+            for &v in values {
+                positive(name, v)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_methods_and_valid() {
+        let config = Config::default();
+        config.validate().unwrap();
+        assert_eq!(config.grid.cells_per_side(), 30);
+        assert_eq!(config.features.subcells_per_side(0.4), 2);
+        assert_eq!(config.integration.scans, 3);
+    }
+
+    #[test]
+    fn set_overrides_one_field_and_rejects_unknown_ones() {
+        let mut config = Config::default();
+        config.set("grid.size_m=24").unwrap();
+        config.set("training.c_values=[2.0, 20.0]").unwrap();
+        assert_eq!(config.grid.size_m, 24.0);
+        assert_eq!(config.training.c_values, vec![2.0, 20.0]);
+        let err = config.set("grid.sise_m=3").unwrap_err().to_string();
+        assert!(err.contains("no field `sise_m`") && err.contains("size_m"), "{err}");
+        assert!(config.set("nonsense").is_err());
+        assert!(config.set("grid.size_m=\"x\"").is_err());
+    }
+
+    #[test]
+    fn toml_file_overrides_a_subset() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.toml");
+        std::fs::write(&path, "[grid]\nsize_m = 20.0\n").unwrap();
+        let config = Config::from_toml_file(&path).unwrap();
+        assert_eq!(config.grid.size_m, 20.0);
+        assert_eq!(config.grid.cell_size_m, 0.4);
+        std::fs::write(&path, "[grid]\nbogus = 1\n").unwrap();
+        assert!(Config::from_toml_file(&path).is_err());
+    }
+
+    #[test]
+    fn validate_rejects_subcells_that_do_not_divide_the_cell() {
+        let mut config = Config::default();
+        config.features.subcell_size_m = 0.3;
+        assert!(config.validate().is_err());
+    }
+}

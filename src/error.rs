@@ -1,0 +1,100 @@
+//! The library's one error type. Every variant names the file (or model / config)
+//! and carries the numbers needed to see what went wrong: what was expected and
+//! what was found, and where.
+
+use std::path::PathBuf;
+
+/// Errors from reading inputs, validating configuration and loading models.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("cannot read {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+
+    #[error("{path}: size {size_bytes} bytes is not a multiple of {record_bytes} ({what})")]
+    RecordSize {
+        path: PathBuf,
+        size_bytes: u64,
+        record_bytes: u64,
+        what: &'static str,
+    },
+
+    #[error("{path}: point {point} has a non-finite coordinate ({x}, {y}, {z})")]
+    NonFinitePoint {
+        path: PathBuf,
+        point: usize,
+        x: f32,
+        y: f32,
+        z: f32,
+    },
+
+    #[error("{path}: {labels} labels for {points} points in {scan}; the counts must be equal")]
+    LabelCount {
+        path: PathBuf,
+        scan: PathBuf,
+        labels: usize,
+        points: usize,
+    },
+
+    #[error("{path}:{line}: {message}")]
+    Parse {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
+
+    #[error("{path}: no `{key}:` line; expected a 3x4 matrix of 12 numbers")]
+    MissingCalibration { path: PathBuf, key: &'static str },
+
+    #[error("{path}: no pose for frame {frame} (the file has {lines} pose lines; frame N is line N+1)")]
+    MissingPose {
+        path: PathBuf,
+        frame: usize,
+        lines: usize,
+    },
+
+    #[error("{path}: no timestamp for frame {frame} (the file has {lines} lines)")]
+    MissingTime {
+        path: PathBuf,
+        frame: usize,
+        lines: usize,
+    },
+
+    #[error("{path}: {message}")]
+    Sequence { path: PathBuf, message: String },
+
+    #[error("invalid configuration: {0}")]
+    Config(String),
+
+    #[error("model {source_name}: {message}")]
+    Model {
+        source_name: String,
+        message: String,
+    },
+
+    #[error("training set: {0}")]
+    Training(String),
+}
+
+/// Result with the library's error type.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl Error {
+    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    pub(crate) fn parse(path: impl Into<PathBuf>, line: usize, message: impl Into<String>) -> Self {
+        Error::Parse {
+            path: path.into(),
+            line,
+            message: message.into(),
+        }
+    }
+}

@@ -1,0 +1,130 @@
+//! The `travmap` binary: parses arguments and calls one command of the library.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+use travmap::commands::{self, Inputs, Output};
+
+#[derive(Parser)]
+#[command(name = "travmap", version, about = "Traversability maps from recorded drives (LiDAR + SVM, CPU only)")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Predict the filtered traversability grid of every frame.
+    Run {
+        #[command(flatten)]
+        common: Common,
+        /// Model file (default: the model compiled into travmap).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Draw each grid as text ('.' traversable, '#' not, ' ' unknown; x right, y up).
+        #[arg(long)]
+        ascii: bool,
+    },
+    /// Score predictions against SemanticKITTI ground truth (the paper's table).
+    Eval {
+        #[command(flatten)]
+        common: Common,
+        /// Model file (default: the model compiled into travmap).
+        #[arg(long)]
+        model: Option<PathBuf>,
+    },
+    /// Train the SVM (grid search over C and gamma, spatially-blocked CV).
+    Train {
+        #[command(flatten)]
+        common: Common,
+        /// Where to write the model (JSON).
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Held-out accuracy by spatially-blocked cross-validation over the frames.
+    Crossval {
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Print the effective configuration (TOML; JSON with --json).
+    Config {
+        #[command(flatten)]
+        settings: Settings,
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Args)]
+struct Settings {
+    /// TOML file overriding configuration defaults (see `travmap config`).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Override one setting, e.g. --set grid.size_m=24 (repeatable).
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    sets: Vec<String>,
+}
+
+#[derive(Args)]
+struct Common {
+    /// KITTI odometry / SemanticKITTI sequence directories (holding velodyne/, calib.txt, poses.txt, times.txt).
+    #[arg(required = true)]
+    sequences: Vec<PathBuf>,
+    /// Frames to use: A..B (B excluded), A..=B, A.. or N. Default: all.
+    #[arg(long)]
+    frames: Option<String>,
+    #[command(flatten)]
+    settings: Settings,
+    /// Machine-readable output.
+    #[arg(long)]
+    json: bool,
+    /// No progress bars, no tables.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+impl Common {
+    fn inputs(&self) -> Inputs {
+        Inputs {
+            sequences: self.sequences.clone(),
+            frames: self.frames.clone(),
+        }
+    }
+
+    fn output(&self) -> Output {
+        Output {
+            json: self.json,
+            quiet: self.quiet,
+        }
+    }
+
+    fn config(&self) -> anyhow::Result<travmap::Config> {
+        commands::load_config(self.settings.config.as_deref(), &self.settings.sets)
+    }
+}
+
+fn dispatch(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Run { common, model, ascii } => {
+            commands::run(&common.inputs(), &common.config()?, model.as_deref(), ascii, common.output())
+        }
+        Command::Eval { common, model } => commands::eval(&common.inputs(), &common.config()?, model.as_deref(), common.output()),
+        Command::Train { common, output } => commands::train(&common.inputs(), &common.config()?, &output, common.output()),
+        Command::Crossval { common } => commands::crossval(&common.inputs(), &common.config()?, common.output()),
+        Command::Config { settings, json } => {
+            let config = commands::load_config(settings.config.as_deref(), &settings.sets)?;
+            commands::print_config(&config, Output { json, quiet: false })
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    match dispatch(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

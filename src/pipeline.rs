@@ -1,0 +1,187 @@
+//! The method in order. [`Pipeline::process_frame`] calls every stage, one comment
+//! per step; the scan window is the only state carried from frame to frame.
+//! [`run_sequence`] feeds it the frames of a KITTI sequence.
+
+use std::collections::VecDeque;
+use std::ops::Range;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::classifier::SvmModel;
+use crate::config::Config;
+use crate::error::{Error, Result};
+use crate::features::{FeatureExtractor, FeatureGrid};
+use crate::filter::OutlierFilter;
+use crate::grid::{CellClass, GridLayout, grid_points};
+use crate::ground_truth::GroundTruth;
+use crate::integration::{WorldScan, ground_normal, scan_to_world};
+use crate::reading::{Frame, KittiSequence};
+
+/// Wall time of each stage for one frame, milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct StageTimings {
+    pub read_ms: f64,
+    pub integrate_ms: f64,
+    pub grid_ms: f64,
+    pub features_ms: f64,
+    pub classify_ms: f64,
+    pub filter_ms: f64,
+    /// Scan in to filtered grid out: integrate + grid + features + classify + filter.
+    pub latency_ms: f64,
+}
+
+/// Everything the method produced for one frame.
+#[derive(Clone, Debug)]
+pub struct FrameResult {
+    pub index: usize,
+    pub stamp_ns: u64,
+    pub layout: GridLayout,
+    /// Points per cell.
+    pub point_counts: Vec<u32>,
+    pub features: FeatureGrid,
+    /// The classifier's labels before filtering (None without a model).
+    pub predicted: Option<Vec<CellClass>>,
+    /// The labels after the outlier filter (None without a model).
+    pub filtered: Option<Vec<CellClass>>,
+    /// Ground truth, when every scan of the window has labels.
+    pub ground_truth: Option<Vec<CellClass>>,
+    pub timings: StageTimings,
+}
+
+impl FrameResult {
+    /// Cells with features and ground truth: (cell, traversable).
+    pub fn labelled_cells(&self) -> impl Iterator<Item = (usize, bool)> + '_ {
+        let truth = self.ground_truth.as_deref().unwrap_or(&[]);
+        truth.iter().enumerate().filter_map(|(cell, &t)| {
+            (self.features.predictable[cell] && t != CellClass::Unknown)
+                .then_some((cell, t == CellClass::Traversable))
+        })
+    }
+}
+
+fn elapsed_ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e3
+}
+
+/// The stages, built once from a validated configuration, and the scan window.
+pub struct Pipeline {
+    config: Config,
+    window: VecDeque<WorldScan>,
+    features: FeatureExtractor,
+    filter: OutlierFilter,
+    ground_truth: GroundTruth,
+}
+
+impl Pipeline {
+    pub fn new(config: &Config) -> Result<Self> {
+        config.validate()?;
+        Ok(Self {
+            config: config.clone(),
+            window: VecDeque::new(),
+            features: FeatureExtractor {
+                config: config.features.clone(),
+                min_points: config.grid.min_points,
+            },
+            filter: OutlierFilter {
+                config: config.filter.clone(),
+            },
+            ground_truth: GroundTruth {
+                config: config.ground_truth.clone(),
+            },
+        })
+    }
+
+    /// Stage 1 alone: moves a scan into the world and into the window of the last n.
+    /// Returns the time it took, ms.
+    pub fn integrate(&mut self, frame: Frame) -> f64 {
+        let started = Instant::now();
+        let index = frame.index;
+        let n = self.config.integration.scans;
+        // A frame from the past (a new pass over the sequence) starts a new window.
+        if self.window.back().is_some_and(|last| last.index >= index) {
+            self.window.clear();
+        }
+        self.window.push_back(scan_to_world(frame));
+        while self.window.front().is_some_and(|s| s.index + n <= index) {
+            self.window.pop_front();
+        }
+        elapsed_ms(started)
+    }
+
+    /// Runs the method on one frame; `model` None skips classification and filter.
+    pub fn process_frame(&mut self, frame: Frame, model: Option<&SvmModel>) -> FrameResult {
+        let (index, stamp_ns) = (frame.index, frame.stamp_ns);
+        let sensor_in_world = [frame.world_from_velodyne[(0, 3)], frame.world_from_velodyne[(1, 3)]];
+        let mut timings = StageTimings::default();
+
+        // 1. Integration: this scan into the world, joined with the previous n - 1.
+        timings.integrate_ms = self.integrate(frame);
+        let window = self.window.make_contiguous();
+
+        // 2. Grid: the in-grid points, sorted by cell, around the sensor.
+        let started = Instant::now();
+        let layout = GridLayout::centred_on(sensor_in_world, self.config.grid.cell_size_m, self.config.grid.cells_per_side());
+        let cells = grid_points(window, layout);
+        timings.grid_ms = elapsed_ms(started);
+
+        // 3. Geometric features of every cell with enough points.
+        let started = Instant::now();
+        let features = self.features.compute(&cells, ground_normal(window));
+        timings.features_ms = elapsed_ms(started);
+
+        // 4. Classification, 5. outlier filter.
+        let (mut predicted, mut filtered) = (None, None);
+        if let Some(model) = model {
+            let started = Instant::now();
+            let labels = model.classify(&features);
+            timings.classify_ms = elapsed_ms(started);
+            let started = Instant::now();
+            filtered = Some(self.filter.apply(&labels, layout.cells_per_side));
+            timings.filter_ms = elapsed_ms(started);
+            predicted = Some(labels);
+        }
+        timings.latency_ms = timings.integrate_ms + timings.grid_ms + timings.features_ms + timings.classify_ms + timings.filter_ms;
+
+        // Ground truth from the same cloud, outside the latency.
+        let ground_truth = self.ground_truth.label(&cells);
+        FrameResult {
+            index,
+            stamp_ns,
+            layout,
+            point_counts: (0..layout.cell_count()).map(|c| cells.point_count(c) as u32).collect(),
+            features,
+            predicted,
+            filtered,
+            ground_truth,
+            timings,
+        }
+    }
+}
+
+/// Runs the pipeline over the frames of `sequence` in `frames`, reading the n - 1
+/// frames before the first one to fill the window, and hands each result to `on_frame`.
+/// `on_frame` may return its own error type (the binary's, say).
+pub fn run_sequence<E: From<Error>>(
+    sequence: &KittiSequence,
+    frames: &Range<usize>,
+    config: &Config,
+    model: Option<&SvmModel>,
+    mut on_frame: impl FnMut(FrameResult) -> Result<(), E>,
+) -> Result<(), E> {
+    let mut pipeline = Pipeline::new(config)?;
+    let warm_up_start = frames.start.saturating_sub(config.integration.scans - 1);
+    for index in sequence.frames_in(&(warm_up_start..frames.end)) {
+        let started = Instant::now();
+        let frame = sequence.read_frame(index)?;
+        let read_ms = elapsed_ms(started);
+        if index < frames.start {
+            pipeline.integrate(frame);
+            continue;
+        }
+        let mut result = pipeline.process_frame(frame, model);
+        result.timings.read_ms = read_ms;
+        on_frame(result)?;
+    }
+    Ok(())
+}

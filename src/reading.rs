@@ -1,0 +1,469 @@
+//! Stage 0, reading: a KITTI odometry / SemanticKITTI sequence directory into
+//! [`Frame`]s (METHOD.md section 1).
+//!
+//! Inputs: `velodyne/NNNNNN.bin`, optional `labels/NNNNNN.label`, `calib.txt`,
+//! `poses.txt`, `times.txt`. Output: per frame the scan in the velodyne frame, its
+//! labels, its stamp and `world_from_velodyne`, where `world` is the first scan's
+//! z-up velodyne frame. Every malformed input is an [`Error`] naming the file.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use nalgebra::Matrix4;
+
+use crate::error::{Error, Result};
+
+/// One LiDAR scan with everything the method needs about it.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// Frame number in its sequence (the file stem).
+    pub index: usize,
+    /// Time since the start of the sequence, nanoseconds.
+    pub stamp_ns: u64,
+    /// Sensor pose: maps velodyne coordinates to the z-up world frame.
+    pub world_from_velodyne: Matrix4<f64>,
+    /// x, y, z (metres) and remission per point, in the velodyne frame.
+    pub points_in_velodyne: Vec<[f32; 4]>,
+    /// SemanticKITTI label per point (lower 16 bits class, upper 16 instance).
+    pub labels: Option<Vec<u32>>,
+}
+
+/// KITTI calibration: the camera projections and velodyne -> cam0.
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    /// `P0..P3` as 4x4 with a last row 0 0 0 1; `None` where calib.txt lacks them.
+    pub projections: [Option<Matrix4<f64>>; 4],
+    /// `Tr`: maps velodyne coordinates to cam0 coordinates.
+    pub cam0_from_velodyne: Matrix4<f64>,
+}
+
+/// An opened sequence: calibration, poses and times are read at once, scans on demand.
+#[derive(Clone, Debug)]
+pub struct KittiSequence {
+    dir: PathBuf,
+    calibration: Calibration,
+    /// `pose_i` of poses.txt: cam0 of frame i in the first cam0 frame.
+    first_cam0_from_cam0: Vec<Matrix4<f64>>,
+    stamps_ns: Vec<u64>,
+    /// Frame numbers that have a `velodyne/NNNNNN.bin`, ascending.
+    frames: Vec<usize>,
+}
+
+impl KittiSequence {
+    /// Opens `dir`, a directory holding `velodyne/`, `calib.txt`, `poses.txt`, `times.txt`.
+    pub fn open(dir: &Path) -> Result<Self> {
+        if !dir.is_dir() {
+            return Err(Error::Sequence {
+                path: dir.to_path_buf(),
+                message: "not a directory; expected a KITTI sequence directory holding \
+                          velodyne/, calib.txt, poses.txt and times.txt"
+                    .into(),
+            });
+        }
+        let calibration = read_calibration(&dir.join("calib.txt"))?;
+        let first_cam0_from_cam0 = read_poses(&dir.join("poses.txt"))?;
+        let stamps_ns = read_times(&dir.join("times.txt"))?;
+        let frames = list_scans(&dir.join("velodyne"))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            calibration,
+            first_cam0_from_cam0,
+            stamps_ns,
+            frames,
+        })
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    pub fn calibration(&self) -> &Calibration {
+        &self.calibration
+    }
+
+    /// Frame numbers with a scan, ascending.
+    pub fn frames(&self) -> &[usize] {
+        &self.frames
+    }
+
+    /// Frame numbers with a scan inside `range`.
+    pub fn frames_in(&self, range: &Range<usize>) -> Vec<usize> {
+        self.frames
+            .iter()
+            .copied()
+            .filter(|f| range.contains(f))
+            .collect()
+    }
+
+    /// True when frame `index` has a label file.
+    pub fn has_labels(&self, index: usize) -> bool {
+        self.label_path(index).is_file()
+    }
+
+    /// `T_world_velo(i) = inv(Tr) * pose_i * Tr` (METHOD.md section 1): the pose file
+    /// holds cam0 poses, and the world is the first scan's velodyne frame, so that the
+    /// ground is the world x-y plane.
+    pub fn world_from_velodyne(&self, index: usize) -> Result<Matrix4<f64>> {
+        let pose = self
+            .first_cam0_from_cam0
+            .get(index)
+            .ok_or_else(|| Error::MissingPose {
+                path: self.dir.join("poses.txt"),
+                frame: index,
+                lines: self.first_cam0_from_cam0.len(),
+            })?;
+        let tr = self.calibration.cam0_from_velodyne;
+        let velodyne_from_cam0 = tr.try_inverse().ok_or_else(|| Error::Parse {
+            path: self.dir.join("calib.txt"),
+            line: 0,
+            message: "Tr is not invertible".into(),
+        })?;
+        Ok(velodyne_from_cam0 * pose * tr)
+    }
+
+    pub fn stamp_ns(&self, index: usize) -> Result<u64> {
+        self.stamps_ns
+            .get(index)
+            .copied()
+            .ok_or_else(|| Error::MissingTime {
+                path: self.dir.join("times.txt"),
+                frame: index,
+                lines: self.stamps_ns.len(),
+            })
+    }
+
+    /// Reads frame `index`: scan, labels when present, pose and stamp.
+    pub fn read_frame(&self, index: usize) -> Result<Frame> {
+        let scan_path = self.scan_path(index);
+        let points_in_velodyne = read_scan(&scan_path)?;
+        let label_path = self.label_path(index);
+        let labels = if label_path.is_file() {
+            Some(read_labels(&label_path, &scan_path, points_in_velodyne.len())?)
+        } else {
+            None
+        };
+        Ok(Frame {
+            index,
+            stamp_ns: self.stamp_ns(index)?,
+            world_from_velodyne: self.world_from_velodyne(index)?,
+            points_in_velodyne,
+            labels,
+        })
+    }
+
+    fn scan_path(&self, index: usize) -> PathBuf {
+        self.dir.join("velodyne").join(format!("{index:06}.bin"))
+    }
+
+    fn label_path(&self, index: usize) -> PathBuf {
+        self.dir.join("labels").join(format!("{index:06}.label"))
+    }
+}
+
+/// Reads a KITTI `.bin` scan: little-endian float32 x, y, z, remission per point.
+pub fn read_scan(path: &Path) -> Result<Vec<[f32; 4]>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if bytes.len() % 16 != 0 {
+        return Err(Error::RecordSize {
+            path: path.to_path_buf(),
+            size_bytes: bytes.len() as u64,
+            record_bytes: 16,
+            what: "float32 x, y, z, remission per point",
+        });
+    }
+    let mut points = Vec::with_capacity(bytes.len() / 16);
+    for (i, record) in bytes.chunks_exact(16).enumerate() {
+        let value = |k: usize| {
+            f32::from_le_bytes([
+                record[4 * k],
+                record[4 * k + 1],
+                record[4 * k + 2],
+                record[4 * k + 3],
+            ])
+        };
+        let point = [value(0), value(1), value(2), value(3)];
+        if !(point[0].is_finite() && point[1].is_finite() && point[2].is_finite()) {
+            return Err(Error::NonFinitePoint {
+                path: path.to_path_buf(),
+                point: i,
+                x: point[0],
+                y: point[1],
+                z: point[2],
+            });
+        }
+        points.push(point);
+    }
+    Ok(points)
+}
+
+/// Reads a SemanticKITTI `.label` file (uint32 per point) and checks its count.
+pub fn read_labels(path: &Path, scan_path: &Path, points: usize) -> Result<Vec<u32>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if bytes.len() % 4 != 0 {
+        return Err(Error::RecordSize {
+            path: path.to_path_buf(),
+            size_bytes: bytes.len() as u64,
+            record_bytes: 4,
+            what: "uint32 label per point",
+        });
+    }
+    let labels: Vec<u32> = bytes
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    if labels.len() != points {
+        return Err(Error::LabelCount {
+            path: path.to_path_buf(),
+            scan: scan_path.to_path_buf(),
+            labels: labels.len(),
+            points,
+        });
+    }
+    Ok(labels)
+}
+
+fn read_text(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
+}
+
+/// Parses whitespace-separated numbers of one line, naming the file and line on failure.
+fn parse_numbers(path: &Path, line_no: usize, text: &str) -> Result<Vec<f64>> {
+    text.split_whitespace()
+        .map(|token| {
+            let value: f64 = token.parse().map_err(|_| {
+                Error::parse(path, line_no, format!("`{token}` is not a number"))
+            })?;
+            if value.is_finite() {
+                Ok(value)
+            } else {
+                Err(Error::parse(path, line_no, format!("`{token}` is not finite")))
+            }
+        })
+        .collect()
+}
+
+/// A 3x4 row-major matrix of 12 numbers as a 4x4 with last row 0 0 0 1.
+fn matrix_3x4(path: &Path, line_no: usize, values: &[f64]) -> Result<Matrix4<f64>> {
+    if values.len() != 12 {
+        return Err(Error::parse(
+            path,
+            line_no,
+            format!(
+                "expected 12 numbers (a 3x4 matrix), found {}",
+                values.len()
+            ),
+        ));
+    }
+    let mut m = Matrix4::identity();
+    for r in 0..3 {
+        for c in 0..4 {
+            m[(r, c)] = values[4 * r + c];
+        }
+    }
+    Ok(m)
+}
+
+/// Reads `calib.txt`: `KEY: 12 numbers` lines; `Tr` is required, `P0..P3` optional.
+pub fn read_calibration(path: &Path) -> Result<Calibration> {
+    let text = read_text(path)?;
+    let mut projections = [None; 4];
+    let mut cam0_from_velodyne = None;
+    for (i, line) in text.lines().enumerate() {
+        let line_no = i + 1;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let (key, rest) = line
+            .split_once(':')
+            .ok_or_else(|| Error::parse(path, line_no, "expected `KEY: 12 numbers`"))?;
+        let key = key.trim();
+        let slot = match key {
+            "P0" => &mut projections[0],
+            "P1" => &mut projections[1],
+            "P2" => &mut projections[2],
+            "P3" => &mut projections[3],
+            "Tr" => &mut cam0_from_velodyne,
+            // Other keys (e.g. Tr_imu_to_velo) are not used by the method.
+            _ => continue,
+        };
+        let values = parse_numbers(path, line_no, rest)?;
+        *slot = Some(matrix_3x4(path, line_no, &values)?);
+    }
+    let cam0_from_velodyne = cam0_from_velodyne.ok_or(Error::MissingCalibration {
+        path: path.to_path_buf(),
+        key: "Tr",
+    })?;
+    if cam0_from_velodyne.try_inverse().is_none() {
+        return Err(Error::parse(path, 0, "Tr is not invertible"));
+    }
+    Ok(Calibration {
+        projections,
+        cam0_from_velodyne,
+    })
+}
+
+/// Reads `poses.txt`: one 3x4 row-major cam0 pose per line, line N+1 for frame N.
+pub fn read_poses(path: &Path) -> Result<Vec<Matrix4<f64>>> {
+    let text = read_text(path)?;
+    text.lines()
+        .enumerate()
+        .filter(|(_, line)| !line.trim().is_empty())
+        .map(|(i, line)| {
+            let values = parse_numbers(path, i + 1, line)?;
+            matrix_3x4(path, i + 1, &values)
+        })
+        .collect()
+}
+
+/// Reads `times.txt`: seconds since the sequence start, one per line, increasing.
+pub fn read_times(path: &Path) -> Result<Vec<u64>> {
+    let text = read_text(path)?;
+    let mut stamps_ns: Vec<u64> = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let seconds: f64 = line
+            .parse()
+            .map_err(|_| Error::parse(path, i + 1, format!("`{line}` is not a number")))?;
+        if !(seconds.is_finite() && seconds >= 0.0) {
+            return Err(Error::parse(
+                path,
+                i + 1,
+                format!("`{line}`: expected finite seconds >= 0"),
+            ));
+        }
+        let stamp_ns = (seconds * 1e9).round() as u64;
+        if stamps_ns.last().is_some_and(|&last| stamp_ns <= last) {
+            return Err(Error::parse(
+                path,
+                i + 1,
+                "times must increase strictly from line to line",
+            ));
+        }
+        stamps_ns.push(stamp_ns);
+    }
+    Ok(stamps_ns)
+}
+
+/// Frame numbers of the `NNNNNN.bin` files in `velodyne_dir`, ascending.
+fn list_scans(velodyne_dir: &Path) -> Result<Vec<usize>> {
+    let entries = std::fs::read_dir(velodyne_dir).map_err(|e| Error::io(velodyne_dir, e))?;
+    let mut frames = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| Error::io(velodyne_dir, e))?;
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if let Some(stem) = name.strip_suffix(".bin")
+            && let Ok(index) = stem.parse::<usize>()
+        {
+            frames.push(index);
+        }
+    }
+    if frames.is_empty() {
+        return Err(Error::Sequence {
+            path: velodyne_dir.to_path_buf(),
+            message: "no NNNNNN.bin scans".into(),
+        });
+    }
+    frames.sort_unstable();
+    Ok(frames)
+}
+
+/// Parses a frame range: `A..B` (B excluded), `A..=B`, `A..`, `..B` or a single `N`.
+pub fn parse_frame_range(text: &str) -> Result<Range<usize>> {
+    let number = |s: &str, default: usize| -> Result<usize> {
+        let s = s.trim();
+        if s.is_empty() {
+            return Ok(default);
+        }
+        s.parse()
+            .map_err(|_| Error::Config(format!("frame range `{text}`: `{s}` is not a frame number")))
+    };
+    let range = if let Some((a, b)) = text.split_once("..=") {
+        number(a, 0)?..number(b, usize::MAX - 1)? + 1
+    } else if let Some((a, b)) = text.split_once("..") {
+        number(a, 0)?..number(b, usize::MAX)?
+    } else {
+        let n = number(text, 0)?;
+        n..n + 1
+    };
+    if range.is_empty() {
+        return Err(Error::Config(format!(
+            "frame range `{text}` is empty (A..B excludes B)"
+        )));
+    }
+    Ok(range)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        path
+    }
+
+    #[test]
+    fn scan_size_must_be_a_multiple_of_16() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "a.bin", &[0u8; 20]);
+        let err = read_scan(&path).unwrap_err().to_string();
+        assert!(err.contains("a.bin") && err.contains("20 bytes") && err.contains("16"), "{err}");
+    }
+
+    #[test]
+    fn nan_coordinates_are_rejected_with_the_point_index() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut bytes = Vec::new();
+        for v in [1.0f32, 2.0, 3.0, 0.5, 1.0, f32::NAN, 3.0, 0.5] {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        let path = write(dir.path(), "nan.bin", &bytes);
+        let err = read_scan(&path).unwrap_err().to_string();
+        assert!(err.contains("point 1") && err.contains("nan.bin"), "{err}");
+    }
+
+    #[test]
+    fn label_count_must_match_point_count() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "a.label", &[0u8; 12]);
+        let err = read_labels(&path, Path::new("a.bin"), 4).unwrap_err().to_string();
+        assert!(err.contains("3 labels for 4 points"), "{err}");
+    }
+
+    #[test]
+    fn calibration_without_tr_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = "P0: 1 0 0 0 0 1 0 0 0 0 1 0\n";
+        let path = write(dir.path(), "calib.txt", p.as_bytes());
+        let err = read_calibration(&path).unwrap_err().to_string();
+        assert!(err.contains("calib.txt") && err.contains("`Tr:`"), "{err}");
+        let path = write(dir.path(), "calib.txt", b"Tr: 1 0 0\n");
+        let err = read_calibration(&path).unwrap_err().to_string();
+        assert!(err.contains("calib.txt:1") && err.contains("found 3"), "{err}");
+    }
+
+    #[test]
+    fn times_must_increase() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "times.txt", b"0.0\n0.1\n0.1\n");
+        let err = read_times(&path).unwrap_err().to_string();
+        assert!(err.contains("times.txt:3"), "{err}");
+        let path = write(dir.path(), "times.txt", b"0.0\n1.037359e-01\n");
+        assert_eq!(read_times(&path).unwrap(), vec![0, 103_735_900]);
+    }
+
+    #[test]
+    fn frame_ranges() {
+        assert_eq!(parse_frame_range("0..3").unwrap(), 0..3);
+        assert_eq!(parse_frame_range("2..=4").unwrap(), 2..5);
+        assert_eq!(parse_frame_range("7").unwrap(), 7..8);
+        assert_eq!(parse_frame_range("5..").unwrap(), 5..usize::MAX);
+        assert!(parse_frame_range("3..3").is_err());
+        assert!(parse_frame_range("a..3").is_err());
+    }
+}
