@@ -75,7 +75,7 @@ pub struct SvmModel {
     /// 1 / standard deviation per feature (1 for constant features).
     pub feature_inverse_std: Vec<f32>,
     pub c: f64,
-    pub gamma: f32,
+    pub gamma: f64,
     pub rho: f32,
     pub dual_coefficients: Vec<f32>,
     /// Row-major `support_vector_count x dimension`.
@@ -91,7 +91,7 @@ impl SvmModel {
         feature_mean: Vec<f32>,
         feature_inverse_std: Vec<f32>,
         c: f64,
-        gamma: f32,
+        gamma: f64,
         rho: f32,
         dual_coefficients: Vec<f32>,
         support_vectors: Vec<f32>,
@@ -184,7 +184,7 @@ impl SvmModel {
             file.feature_mean,
             file.feature_std.iter().map(|s| 1.0 / s).collect(),
             file.c,
-            file.gamma as f32,
+            file.gamma,
             file.rho as f32,
             file.dual_coefficients,
             file.support_vectors.concat(),
@@ -202,7 +202,7 @@ impl SvmModel {
             feature_mean: self.feature_mean.clone(),
             feature_std: self.feature_inverse_std.iter().map(|s| 1.0 / s).collect(),
             c: self.c,
-            gamma: self.gamma as f64,
+            gamma: self.gamma,
             rho: self.rho as f64,
             dual_coefficients: self.dual_coefficients.clone(),
             support_vectors: self.support_vectors.chunks_exact(d).map(<[f32]>::to_vec).collect(),
@@ -261,6 +261,7 @@ impl SvmModel {
             norm += *z * *z;
         }
         let d = self.dimension();
+        let gamma = self.gamma as f32;
         let mut sum = 0.0f32;
         for ((sv, &sv_norm), &coef) in self
             .support_vectors
@@ -269,7 +270,7 @@ impl SvmModel {
             .zip(&self.dual_coefficients)
         {
             let dot: f32 = sv.iter().zip(scratch.iter()).map(|(a, b)| a * b).sum();
-            sum += coef * (-self.gamma * (norm + sv_norm - 2.0 * dot).max(0.0)).exp();
+            sum += coef * (-gamma * (norm + sv_norm - 2.0 * dot).max(0.0)).exp();
         }
         sum - self.rho
     }

@@ -219,19 +219,23 @@ fn score_row(s: &Scores) -> [f64; 7] {
     [s.accuracy, s.miou, s.f1, s.fpr, s.tpr, s.fnr, s.tnr].map(|v| 100.0 * v)
 }
 
-fn write_table(out: &mut impl Write, report: &EvaluationReport) -> Result<()> {
+/// `with_latency` false where the frames were not run one at a time (cross-validation).
+fn write_table(out: &mut impl Write, report: &EvaluationReport, with_latency: bool) -> Result<()> {
     writeln!(out, "{:<22} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>11}", "", "Acc", "mIoU", "F1", "FPR", "TPR", "FNR", "TNR", "latency")?;
     let row = |name: &str, values: [f64; 7], latency: &str| {
         let cells: String = values.iter().map(|v| format!(" {v:>6.1}")).collect();
         format!("{name:<22}{cells} {latency:>11}")
     };
-    let latency = format!("{:.2} ms", report.timings_ms.latency.median);
+    let latency = if with_latency { format!("{:.2} ms", report.timings_ms.latency.median) } else { "n/a".into() };
     writeln!(out, "{}", row("travmap (filtered)", score_row(&report.scores), &latency))?;
     writeln!(out, "{}", row("travmap (SVM only)", score_row(&report.unfiltered_scores), ""))?;
     writeln!(out, "{}", row("paper, geometry only", PAPER_GEOMETRY_ONLY, "13 ms SVM"))?;
     let c = &report.confusion;
     writeln!(out, "cells: TP {} TN {} FP {} FN {} unpredictable {} over {} frames", c.tp, c.tn, c.fp, c.r#fn, c.unknown, report.frames)?;
     let t = &report.timings_ms;
+    if !with_latency {
+        return Ok(());
+    }
     writeln!(
         out,
         "median ms per frame: read {:.2}, integrate {:.2}, grid {:.2}, features {:.2}, classify {:.2}, filter {:.2}; latency p95 {:.2}",
@@ -276,7 +280,7 @@ pub fn eval(inputs: &Inputs, config: &Config, model_path: Option<&Path>, output:
     if report.frames == 0 {
         writeln!(out, "no frame has ground truth (labels/ for every scan of its window): nothing to score")?;
     }
-    write_table(&mut out, &report)?;
+    write_table(&mut out, &report, true)?;
     if model_path.is_none() {
         writeln!(
             out,
@@ -301,7 +305,7 @@ pub fn train(inputs: &Inputs, config: &Config, model_path: &Path, output: Output
     })?;
     bar.finish_and_clear();
     write_atomically(model_path, &model.to_json())?;
-    let best = model.training.search.iter().find(|r| r.c == model.c && r.gamma as f32 == model.gamma).copied();
+    let best = model.training.search.iter().find(|r| r.c == model.c && r.gamma == model.gamma).copied();
     if output.json {
         let doc = json!({
             "model": model_path,
@@ -367,7 +371,7 @@ pub fn crossval(inputs: &Inputs, config: &Config, output: Output) -> Result<()> 
             f.fold, f.training_cells, f.test_cells, f.c, f.gamma, f.support_vectors, f.training_seconds
         )?;
     }
-    write_table(&mut out, &report.evaluation)?;
+    write_table(&mut out, &report.evaluation, false)?;
     Ok(())
 }
 

@@ -218,7 +218,7 @@ pub fn cross_validate(
             training_cells: training.len(),
             test_cells,
             c: model.c,
-            gamma: model.gamma as f64,
+            gamma: model.gamma,
             support_vectors: model.support_vector_count(),
             training_seconds: model.training.seconds,
         });

@@ -162,7 +162,7 @@ pub fn grid_points(scans: &[WorldScan], layout: GridLayout) -> CellPoints {
             points_in_grid[at] = [(x - min_x) as f32, (y - min_y) as f32, p[2]];
             range_m[at] =
                 ((x - o[0]).powi(2) + (y - o[1]).powi(2) + (z - o[2]).powi(2)).sqrt() as f32;
-            if let Some(scan_labels) = &scan.labels {
+            if with_labels && let Some(scan_labels) = &scan.labels {
                 labels[at] = scan_labels[i];
             }
         }
@@ -223,5 +223,14 @@ mod tests {
         // The second point of the cell came from scan b: its range is from b's origin.
         assert!((cells.range_m[r.start + 1] - (0.01f32 + 0.01 + 9.0).sqrt()).abs() < 1e-5);
         assert_eq!(cells.point_count(layout.cell_of_local(0.5, 0.5).unwrap()), 1);
+    }
+
+    #[test]
+    fn a_window_with_one_unlabelled_scan_has_no_labels() {
+        let layout = GridLayout::centred_on([0.0, 0.0], 1.0, 4);
+        let labelled = scan(vec![[0.5, 0.5, 1.0]], [0.0; 3]);
+        let mut unlabelled = scan(vec![[0.6, 0.4, 3.0]], [0.0; 3]);
+        unlabelled.labels = None;
+        assert!(grid_points(&[labelled, unlabelled], layout).labels.is_none());
     }
 }

@@ -150,7 +150,7 @@ fn fit(set: &TrainingSet, c: f64, gamma: f64, config: &Config) -> SvmModel {
         mean,
         inverse_std,
         c,
-        gamma as f32,
+        gamma,
         solution.rho as f32,
         coefficients,
         support_vectors,

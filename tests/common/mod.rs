@@ -1,0 +1,53 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)] // each test binary uses its own subset of these helpers
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+/// The shipped SemanticKITTI sample, or None (with the reason printed) when
+/// `../shared/data` is not beside the repository.
+pub fn semantickitti_00() -> Option<PathBuf> {
+    shared_data("semantickitti-00/sequences/00")
+}
+
+pub fn shared_data(relative: &str) -> Option<PathBuf> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(relative);
+    if path.exists() {
+        Some(path)
+    } else {
+        eprintln!("skipping: {} not found (../shared/data is not beside the repository)", path.display());
+        None
+    }
+}
+
+/// Runs the travmap binary with `args` from the repository root.
+pub fn travmap(args: &[&str]) -> Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_travmap"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("travmap runs")
+}
+
+pub fn stdout(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+pub fn stderr(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+/// Asserts success and returns stdout.
+pub fn success(output: Output) -> String {
+    assert!(output.status.success(), "travmap failed: {}\n{}", stderr(&output), stdout(&output));
+    stdout(&output)
+}
+
+/// Asserts a clean failure: exit code 1, an `error:` line, no panic. Returns stderr.
+pub fn clean_failure(output: Output) -> String {
+    let err = stderr(&output);
+    assert_eq!(output.status.code(), Some(1), "expected exit 1, stderr: {err}");
+    assert!(err.starts_with("error: "), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    err
+}
