@@ -164,8 +164,16 @@ impl SvmModel {
                 file.dual_coefficients.len()
             )));
         }
-        if let Some((i, sv)) = file.support_vectors.iter().enumerate().find(|(_, sv)| sv.len() != d) {
-            return Err(fail(format!("support vector {i} has {} values, expected {d}", sv.len())));
+        if let Some((i, sv)) = file
+            .support_vectors
+            .iter()
+            .enumerate()
+            .find(|(_, sv)| sv.len() != d)
+        {
+            return Err(fail(format!(
+                "support vector {i} has {} values, expected {d}",
+                sv.len()
+            )));
         }
         let numbers = file
             .feature_mean
@@ -205,7 +213,11 @@ impl SvmModel {
             gamma: self.gamma,
             rho: self.rho as f64,
             dual_coefficients: self.dual_coefficients.clone(),
-            support_vectors: self.support_vectors.chunks_exact(d).map(<[f32]>::to_vec).collect(),
+            support_vectors: self
+                .support_vectors
+                .chunks_exact(d)
+                .map(<[f32]>::to_vec)
+                .collect(),
             config: self.config.clone(),
             training: self.training.clone(),
         };
@@ -313,11 +325,18 @@ mod tests {
         let model = SvmModel::embedded_default().unwrap();
         let mut json: serde_json::Value = serde_json::from_slice(&model.to_json()).unwrap();
         json["version"] = 99.into();
-        let err = SvmModel::from_json(json.to_string().as_bytes(), "m.json").unwrap_err().to_string();
-        assert!(err.contains("m.json") && err.contains("version Some(99)"), "{err}");
+        let err = SvmModel::from_json(json.to_string().as_bytes(), "m.json")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("m.json") && err.contains("version Some(99)"),
+            "{err}"
+        );
         json["version"] = MODEL_VERSION.into();
         json["dual_coefficients"] = serde_json::json!([1.0]);
-        let err = SvmModel::from_json(json.to_string().as_bytes(), "m.json").unwrap_err().to_string();
+        let err = SvmModel::from_json(json.to_string().as_bytes(), "m.json")
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("coefficients"), "{err}");
         assert!(SvmModel::from_json(b"{", "m.json").is_err());
     }

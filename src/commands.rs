@@ -12,7 +12,10 @@ use serde_json::json;
 use crate::classifier::SvmModel;
 use crate::classifier::training::train as train_model;
 use crate::config::Config;
-use crate::evaluation::{CrossValidationReport, Evaluation, EvaluationReport, Selection, collect_training_set, cross_validate};
+use crate::evaluation::{
+    CrossValidationReport, Evaluation, EvaluationReport, Selection, collect_training_set,
+    cross_validate,
+};
 use crate::grid::CellClass;
 use crate::metrics::Scores;
 use crate::pipeline::run_sequence;
@@ -65,11 +68,15 @@ pub fn load_config(file: Option<&Path>, assignments: &[String]) -> Result<Config
 pub fn load_model(path: Option<&Path>) -> Result<(SvmModel, String)> {
     match path {
         Some(path) => {
-            let bytes = std::fs::read(path).with_context(|| format!("cannot read model {}", path.display()))?;
+            let bytes = std::fs::read(path)
+                .with_context(|| format!("cannot read model {}", path.display()))?;
             let name = path.display().to_string();
             Ok((SvmModel::from_json(&bytes, &name)?, name))
         }
-        None => Ok((SvmModel::embedded_default()?, "embedded default model".into())),
+        None => Ok((
+            SvmModel::embedded_default()?,
+            "embedded default model".into(),
+        )),
     }
 }
 
@@ -105,14 +112,23 @@ fn open_inputs(inputs: &Inputs) -> Result<Vec<Selection>> {
 }
 
 fn frame_count(selections: &[Selection]) -> u64 {
-    selections.iter().map(|s| s.sequence.frames_in(&s.frames).len() as u64).sum()
+    selections
+        .iter()
+        .map(|s| s.sequence.frames_in(&s.frames).len() as u64)
+        .sum()
 }
 
 /// Writes `bytes` to `path` through a temporary file renamed at the end, so a
 /// failure never leaves a half-written output.
 fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().context("output path has no file name")?.to_string_lossy();
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .context("output path has no file name")?
+        .to_string_lossy();
     let temporary = dir.join(format!(".{name}.tmp-{}", std::process::id()));
     let result = std::fs::File::create(&temporary)
         .and_then(|mut f| f.write_all(bytes).and_then(|_| f.sync_all()))
@@ -136,69 +152,100 @@ fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {
 }
 
 /// `travmap run`: the filtered grid of every frame.
-pub fn run(inputs: &Inputs, config: &Config, model_path: Option<&Path>, ascii: bool, output: Output) -> Result<()> {
+pub fn run(
+    inputs: &Inputs,
+    config: &Config,
+    model_path: Option<&Path>,
+    ascii: bool,
+    output: Output,
+) -> Result<()> {
     let (model, model_name) = load_model(model_path)?;
     model.check_compatible(config)?;
     let selections = open_inputs(inputs)?;
     let bar = output.progress(frame_count(&selections), "predicting");
     let mut stdout = std::io::stdout().lock();
     if output.json {
-        writeln!(stdout, "{}", json!({"config": config, "model": model_json(&model, &model_name)}))?;
+        writeln!(
+            stdout,
+            "{}",
+            json!({"config": config, "model": model_json(&model, &model_name)})
+        )?;
     } else if !output.quiet {
-        writeln!(stdout, "model: {model_name} ({} support vectors)", model.support_vector_count())?;
-        writeln!(stdout, "{:>6} {:>10} {:>6} {:>11} {:>11} {:>9} {:>10}", "frame", "stamp_s", "cells", "predictable", "traversable", "non-trav", "latency_ms")?;
+        writeln!(
+            stdout,
+            "model: {model_name} ({} support vectors)",
+            model.support_vector_count()
+        )?;
+        writeln!(
+            stdout,
+            "{:>6} {:>10} {:>6} {:>11} {:>11} {:>9} {:>10}",
+            "frame", "stamp_s", "cells", "predictable", "traversable", "non-trav", "latency_ms"
+        )?;
     }
     let mut evaluation = Evaluation::default();
     for selection in &selections {
-        run_sequence::<anyhow::Error>(&selection.sequence, &selection.frames, config, Some(&model), |result| {
-            bar.inc(1);
-            evaluation.add(&result);
-            let grid = result.filtered.as_deref().unwrap_or(&[]);
-            let count = |class: CellClass| grid.iter().filter(|c| **c == class).count();
-            let (traversable, non_traversable) = (count(CellClass::Traversable), count(CellClass::NonTraversable));
-            if output.json {
-                let cells: Vec<i8> = grid
-                    .iter()
-                    .map(|c| match c {
-                        CellClass::Unknown => -1,
-                        CellClass::Traversable => 0,
-                        CellClass::NonTraversable => 100,
-                    })
-                    .collect();
-                let line = json!({
-                    "sequence": selection.sequence.dir(),
-                    "frame": result.index,
-                    "stamp_ns": result.stamp_ns,
-                    "cell_size_m": result.layout.cell_size_m,
-                    "cells_per_side": result.layout.cells_per_side,
-                    "min_corner_in_world": result.layout.min_corner_in_world(),
-                    "cells": cells,
-                    "timings_ms": result.timings,
-                });
-                writeln!(stdout, "{line}")?;
-            } else if !output.quiet {
-                writeln!(
-                    stdout,
-                    "{:>6} {:>10.3} {:>6} {:>11} {:>11} {:>9} {:>10.2}",
-                    result.index,
-                    result.stamp_ns as f64 * 1e-9,
-                    grid.len(),
-                    traversable + non_traversable,
-                    traversable,
-                    non_traversable,
-                    result.timings.latency_ms
-                )?;
-                if ascii {
-                    write_ascii_grid(&mut stdout, grid, result.layout.cells_per_side)?;
+        run_sequence::<anyhow::Error>(
+            &selection.sequence,
+            &selection.frames,
+            config,
+            Some(&model),
+            |result| {
+                bar.inc(1);
+                evaluation.add(&result);
+                let grid = result.filtered.as_deref().unwrap_or(&[]);
+                let count = |class: CellClass| grid.iter().filter(|c| **c == class).count();
+                let (traversable, non_traversable) = (
+                    count(CellClass::Traversable),
+                    count(CellClass::NonTraversable),
+                );
+                if output.json {
+                    let cells: Vec<i8> = grid
+                        .iter()
+                        .map(|c| match c {
+                            CellClass::Unknown => -1,
+                            CellClass::Traversable => 0,
+                            CellClass::NonTraversable => 100,
+                        })
+                        .collect();
+                    let line = json!({
+                        "sequence": selection.sequence.dir(),
+                        "frame": result.index,
+                        "stamp_ns": result.stamp_ns,
+                        "cell_size_m": result.layout.cell_size_m,
+                        "cells_per_side": result.layout.cells_per_side,
+                        "min_corner_in_world": result.layout.min_corner_in_world(),
+                        "cells": cells,
+                        "timings_ms": result.timings,
+                    });
+                    writeln!(stdout, "{line}")?;
+                } else if !output.quiet {
+                    writeln!(
+                        stdout,
+                        "{:>6} {:>10.3} {:>6} {:>11} {:>11} {:>9} {:>10.2}",
+                        result.index,
+                        result.stamp_ns as f64 * 1e-9,
+                        grid.len(),
+                        traversable + non_traversable,
+                        traversable,
+                        non_traversable,
+                        result.timings.latency_ms
+                    )?;
+                    if ascii {
+                        write_ascii_grid(&mut stdout, grid, result.layout.cells_per_side)?;
+                    }
                 }
-            }
-            Ok(())
-        })?;
+                Ok(())
+            },
+        )?;
     }
     bar.finish_and_clear();
     if !output.json && !output.quiet {
         let latency = evaluation.report().timings_ms.latency;
-        writeln!(stdout, "median latency {:.2} ms per frame (p95 {:.2} ms)", latency.median, latency.p95)?;
+        writeln!(
+            stdout,
+            "median latency {:.2} ms per frame (p95 {:.2} ms)",
+            latency.median, latency.p95
+        )?;
     }
     Ok(())
 }
@@ -221,17 +268,45 @@ fn score_row(s: &Scores) -> [f64; 7] {
 
 /// `with_latency` false where the frames were not run one at a time (cross-validation).
 fn write_table(out: &mut impl Write, report: &EvaluationReport, with_latency: bool) -> Result<()> {
-    writeln!(out, "{:<22} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>11}", "", "Acc", "mIoU", "F1", "FPR", "TPR", "FNR", "TNR", "latency")?;
+    writeln!(
+        out,
+        "{:<22} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>11}",
+        "", "Acc", "mIoU", "F1", "FPR", "TPR", "FNR", "TNR", "latency"
+    )?;
     let row = |name: &str, values: [f64; 7], latency: &str| {
         let cells: String = values.iter().map(|v| format!(" {v:>6.1}")).collect();
         format!("{name:<22}{cells} {latency:>11}")
     };
-    let latency = if with_latency { format!("{:.2} ms", report.timings_ms.latency.median) } else { "n/a".into() };
-    writeln!(out, "{}", row("travmap (filtered)", score_row(&report.scores), &latency))?;
-    writeln!(out, "{}", row("travmap (SVM only)", score_row(&report.unfiltered_scores), ""))?;
-    writeln!(out, "{}", row("paper, geometry only", PAPER_GEOMETRY_ONLY, "13 ms SVM"))?;
+    let latency = if with_latency {
+        format!("{:.2} ms", report.timings_ms.latency.median)
+    } else {
+        "n/a".into()
+    };
+    writeln!(
+        out,
+        "{}",
+        row("travmap (filtered)", score_row(&report.scores), &latency)
+    )?;
+    writeln!(
+        out,
+        "{}",
+        row(
+            "travmap (SVM only)",
+            score_row(&report.unfiltered_scores),
+            ""
+        )
+    )?;
+    writeln!(
+        out,
+        "{}",
+        row("paper, geometry only", PAPER_GEOMETRY_ONLY, "13 ms SVM")
+    )?;
     let c = &report.confusion;
-    writeln!(out, "cells: TP {} TN {} FP {} FN {} unpredictable {} over {} frames", c.tp, c.tn, c.fp, c.r#fn, c.unknown, report.frames)?;
+    writeln!(
+        out,
+        "cells: TP {} TN {} FP {} FN {} unpredictable {} over {} frames",
+        c.tp, c.tn, c.fp, c.r#fn, c.unknown, report.frames
+    )?;
     let t = &report.timings_ms;
     if !with_latency {
         return Ok(());
@@ -239,24 +314,41 @@ fn write_table(out: &mut impl Write, report: &EvaluationReport, with_latency: bo
     writeln!(
         out,
         "median ms per frame: read {:.2}, integrate {:.2}, grid {:.2}, features {:.2}, classify {:.2}, filter {:.2}; latency p95 {:.2}",
-        t.read.median, t.integrate.median, t.grid.median, t.features.median, t.classify.median, t.filter.median, t.latency.p95
+        t.read.median,
+        t.integrate.median,
+        t.grid.median,
+        t.features.median,
+        t.classify.median,
+        t.filter.median,
+        t.latency.p95
     )?;
     Ok(())
 }
 
 /// `travmap eval`: the paper's table for the selected frames.
-pub fn eval(inputs: &Inputs, config: &Config, model_path: Option<&Path>, output: Output) -> Result<()> {
+pub fn eval(
+    inputs: &Inputs,
+    config: &Config,
+    model_path: Option<&Path>,
+    output: Output,
+) -> Result<()> {
     let (model, model_name) = load_model(model_path)?;
     model.check_compatible(config)?;
     let selections = open_inputs(inputs)?;
     let bar = output.progress(frame_count(&selections), "evaluating");
     let mut evaluation = Evaluation::default();
     for selection in &selections {
-        run_sequence::<anyhow::Error>(&selection.sequence, &selection.frames, config, Some(&model), |result| {
-            bar.inc(1);
-            evaluation.add(&result);
-            Ok(())
-        })?;
+        run_sequence::<anyhow::Error>(
+            &selection.sequence,
+            &selection.frames,
+            config,
+            Some(&model),
+            |result| {
+                bar.inc(1);
+                evaluation.add(&result);
+                Ok(())
+            },
+        )?;
     }
     bar.finish_and_clear();
     let report = evaluation.report();
@@ -278,7 +370,10 @@ pub fn eval(inputs: &Inputs, config: &Config, model_path: Option<&Path>, output:
         model.training.sources.join("; ")
     )?;
     if report.frames == 0 {
-        writeln!(out, "no frame has ground truth (labels/ for every scan of its window): nothing to score")?;
+        writeln!(
+            out,
+            "no frame has ground truth (labels/ for every scan of its window): nothing to score"
+        )?;
     }
     write_table(&mut out, &report, true)?;
     if model_path.is_none() {
@@ -297,7 +392,9 @@ pub fn train(inputs: &Inputs, config: &Config, model_path: &Path, output: Output
     let bar = output.progress(frame_count(&selections), "collecting cells");
     let set = collect_training_set(&selections, config, &mut || bar.inc(1))?;
     bar.finish_and_clear();
-    let searches = config.training.c_values.len() * config.training.gamma_values.len() * config.training.folds + 1;
+    let searches =
+        config.training.c_values.len() * config.training.gamma_values.len() * config.training.folds
+            + 1;
     let bar = output.progress(searches as u64, "grid search + final fit");
     let model = train_model(&set, config, &|done, total| {
         bar.set_length(total as u64);
@@ -305,7 +402,12 @@ pub fn train(inputs: &Inputs, config: &Config, model_path: &Path, output: Output
     })?;
     bar.finish_and_clear();
     write_atomically(model_path, &model.to_json())?;
-    let best = model.training.search.iter().find(|r| r.c == model.c && r.gamma == model.gamma).copied();
+    let best = model
+        .training
+        .search
+        .iter()
+        .find(|r| r.c == model.c && r.gamma == model.gamma)
+        .copied();
     if output.json {
         let doc = json!({
             "model": model_path,
@@ -324,9 +426,17 @@ pub fn train(inputs: &Inputs, config: &Config, model_path: &Path, output: Output
             model.training.traversable_samples,
             model.training.sources.join("; ")
         );
-        println!("grid search (spatially-blocked {}-fold CV accuracy, cells before filtering):", config.training.folds);
+        println!(
+            "grid search (spatially-blocked {}-fold CV accuracy, cells before filtering):",
+            config.training.folds
+        );
         for r in &model.training.search {
-            println!("  C {:>8} gamma {:>8}  {:.1} %", r.c, r.gamma, 100.0 * r.accuracy);
+            println!(
+                "  C {:>8} gamma {:>8}  {:.1} %",
+                r.c,
+                r.gamma,
+                100.0 * r.accuracy
+            );
         }
         println!(
             "chosen C {} gamma {} (CV accuracy {:.1} %): {} support vectors, {} solver iterations, {:.1} s",
@@ -368,7 +478,13 @@ pub fn crossval(inputs: &Inputs, config: &Config, output: Output) -> Result<()> 
         writeln!(
             out,
             "  fold {}: trained on {} cells (test blocks hold {}), C {} gamma {}, {} support vectors, {:.1} s",
-            f.fold, f.training_cells, f.test_cells, f.c, f.gamma, f.support_vectors, f.training_seconds
+            f.fold,
+            f.training_cells,
+            f.test_cells,
+            f.c,
+            f.gamma,
+            f.support_vectors,
+            f.training_seconds
         )?;
     }
     write_table(&mut out, &report.evaluation, false)?;

@@ -191,9 +191,9 @@ impl Config {
     /// Sets one field from `section.key=value`, the value in TOML syntax
     /// (`grid.size_m=24`, `training.c_values=[1, 10]`).
     pub fn set(&mut self, assignment: &str) -> Result<()> {
-        let (key, value) = assignment.split_once('=').ok_or_else(|| {
-            Error::Config(format!("`{assignment}`: expected section.key=value"))
-        })?;
+        let (key, value) = assignment
+            .split_once('=')
+            .ok_or_else(|| Error::Config(format!("`{assignment}`: expected section.key=value")))?;
         let (section, field) = key.trim().split_once('.').ok_or_else(|| {
             Error::Config(format!("`{key}`: expected section.key, e.g. grid.size_m"))
         })?;
@@ -302,7 +302,10 @@ mod tests {
         assert_eq!(config.grid.size_m, 24.0);
         assert_eq!(config.training.c_values, vec![2.0, 20.0]);
         let err = config.set("grid.sise_m=3").unwrap_err().to_string();
-        assert!(err.contains("no field `sise_m`") && err.contains("size_m"), "{err}");
+        assert!(
+            err.contains("no field `sise_m`") && err.contains("size_m"),
+            "{err}"
+        );
         assert!(config.set("nonsense").is_err());
         assert!(config.set("grid.size_m=\"x\"").is_err());
     }

@@ -49,7 +49,9 @@ pub enum Error {
     #[error("{path}: no `{key}:` line; expected a 3x4 matrix of 12 numbers")]
     MissingCalibration { path: PathBuf, key: &'static str },
 
-    #[error("{path}: no pose for frame {frame} (the file has {lines} pose lines; frame N is line N+1)")]
+    #[error(
+        "{path}: no pose for frame {frame} (the file has {lines} pose lines; frame N is line N+1)"
+    )]
     MissingPose {
         path: PathBuf,
         frame: usize,

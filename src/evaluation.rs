@@ -53,7 +53,8 @@ pub struct TimingReport {
 
 impl TimingReport {
     pub fn of(timings: &[StageTimings]) -> Self {
-        let spread = |f: fn(&StageTimings) -> f64| Spread::of(&timings.iter().map(f).collect::<Vec<_>>());
+        let spread =
+            |f: fn(&StageTimings) -> f64| Spread::of(&timings.iter().map(f).collect::<Vec<_>>());
         Self {
             read: spread(|t| t.read_ms),
             integrate: spread(|t| t.integrate_ms),
@@ -92,10 +93,13 @@ impl Evaluation {
     /// Adds a frame; frames without ground truth or predictions only add timings.
     pub fn add(&mut self, result: &FrameResult) {
         self.timings.push(result.timings);
-        if let (Some(truth), Some(filtered), Some(predicted)) = (&result.ground_truth, &result.filtered, &result.predicted) {
+        if let (Some(truth), Some(filtered), Some(predicted)) =
+            (&result.ground_truth, &result.filtered, &result.predicted)
+        {
             self.frames += 1;
             self.filtered.merge(&Confusion::of_grids(filtered, truth));
-            self.unfiltered.merge(&Confusion::of_grids(predicted, truth));
+            self.unfiltered
+                .merge(&Confusion::of_grids(predicted, truth));
         }
     }
 
@@ -120,7 +124,12 @@ impl Selection {
     pub fn describe(&self) -> String {
         let last = self.sequence.frames_in(&self.frames).last().copied();
         match last {
-            Some(last) => format!("{} frames {}..={}", self.sequence.dir().display(), self.frames.start, last),
+            Some(last) => format!(
+                "{} frames {}..={}",
+                self.sequence.dir().display(),
+                self.frames.start,
+                last
+            ),
             None => format!("{} (no frames in range)", self.sequence.dir().display()),
         }
     }
@@ -128,7 +137,11 @@ impl Selection {
 
 /// Collects the labelled cells of the selected frames on the training grid
 /// (`training.grid_size_m`).
-pub fn collect_training_set(selections: &[Selection], config: &Config, on_frame: &mut dyn FnMut()) -> Result<TrainingSet> {
+pub fn collect_training_set(
+    selections: &[Selection],
+    config: &Config,
+    on_frame: &mut dyn FnMut(),
+) -> Result<TrainingSet> {
     let mut training_config = config.clone();
     training_config.grid.size_m = config.training.grid_size_m;
     let mut set = TrainingSet {
@@ -137,13 +150,23 @@ pub fn collect_training_set(selections: &[Selection], config: &Config, on_frame:
     };
     for selection in selections {
         set.sources.push(selection.describe());
-        run_sequence::<Error>(&selection.sequence, &selection.frames, &training_config, None, |result| {
-            for (cell, traversable) in result.labelled_cells() {
-                set.push(result.features.cell(cell), traversable, result.layout.cell_centre_in_world(cell));
-            }
-            on_frame();
-            Ok(())
-        })?;
+        run_sequence::<Error>(
+            &selection.sequence,
+            &selection.frames,
+            &training_config,
+            None,
+            |result| {
+                for (cell, traversable) in result.labelled_cells() {
+                    set.push(
+                        result.features.cell(cell),
+                        traversable,
+                        result.layout.cell_centre_in_world(cell),
+                    );
+                }
+                on_frame();
+                Ok(())
+            },
+        )?;
     }
     if set.is_empty() {
         return Err(Error::Training(
@@ -186,17 +209,24 @@ pub fn cross_validate(
     let pool = collect_training_set(selections, config, &mut || {})?;
     let mut frames: Vec<FrameResult> = Vec::new();
     for selection in selections {
-        run_sequence::<Error>(&selection.sequence, &selection.frames, config, None, |result| {
-            if result.ground_truth.is_some() {
-                frames.push(result);
-            }
-            Ok(())
-        })?;
+        run_sequence::<Error>(
+            &selection.sequence,
+            &selection.frames,
+            config,
+            None,
+            |result| {
+                if result.ground_truth.is_some() {
+                    frames.push(result);
+                }
+                Ok(())
+            },
+        )?;
     }
     // One block -> fold map over the pool's and the evaluation cells' centres.
     let mut centres = pool.centre_in_world.clone();
     for result in &frames {
-        centres.extend((0..result.layout.cell_count()).map(|c| result.layout.cell_centre_in_world(c)));
+        centres
+            .extend((0..result.layout.cell_count()).map(|c| result.layout.cell_centre_in_world(c)));
     }
     let t = &config.training;
     let fold_of = spatial_folds(&centres, t.block_size_m, t.folds, t.seed);
@@ -211,7 +241,12 @@ pub fn cross_validate(
             models.push(None);
             continue;
         }
-        progress(&format!("fold {}/{}: training on {} cells", fold + 1, t.folds, training.len()));
+        progress(&format!(
+            "fold {}/{}: training on {} cells",
+            fold + 1,
+            t.folds,
+            training.len()
+        ));
         let model = train(&pool.subset(&training), config, &|_, _| {})?;
         fold_reports.push(FoldReport {
             fold,

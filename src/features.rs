@@ -122,7 +122,12 @@ impl FeatureExtractor {
         // Moments relative to the cell corner keep the f64 sums well conditioned.
         let mut moments = Moments::default();
         let mut zeta = (f64::INFINITY, f64::NEG_INFINITY);
-        let mut bbox = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
+        let mut bbox = [
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
         // The range extremes are taken here, not in the d_m loop below: as an f32
         // min/max reduction beside an f64 one there, rustc 1.95 (LLVM 22) at
         // opt-level 3 crashes in x86 instruction selection.
@@ -138,7 +143,12 @@ impl FeatureExtractor {
             moments.add(q);
             let along = q[0] * ground_normal[0] + q[1] * ground_normal[1] + q[2] * ground_normal[2];
             zeta = (zeta.0.min(along), zeta.1.max(along));
-            bbox = [bbox[0].min(q[0]), bbox[1].max(q[0]), bbox[2].min(q[1]), bbox[3].max(q[1])];
+            bbox = [
+                bbox[0].min(q[0]),
+                bbox[1].max(q[0]),
+                bbox[2].min(q[1]),
+                bbox[3].max(q[1]),
+            ];
             let sub = |v: f64| ((v / subcell_m).floor().max(0.0) as usize).min(per_side - 1);
             scratch.subcells[sub(q[1]) * per_side + sub(q[0])].add(q);
         }
@@ -175,9 +185,8 @@ impl FeatureExtractor {
                 }
             }
         }
-        let unevenness = (resultant[0].powi(2) + resultant[1].powi(2) + resultant[2].powi(2))
-            .sqrt()
-            / k as f64;
+        let unevenness =
+            (resultant[0].powi(2) + resultant[1].powi(2) + resultant[2].powi(2)).sqrt() / k as f64;
 
         let mut max_horizontal_sq = 0.0f64;
         for p in points {
@@ -252,7 +261,12 @@ mod tests {
     fn features_of(points: &[[f32; 3]], origin: [f32; 3]) -> [f32; FEATURE_COUNT] {
         let ranges: Vec<f32> = points
             .iter()
-            .map(|p| ((p[0] - origin[0]).powi(2) + (p[1] - origin[1]).powi(2) + (p[2] - origin[2]).powi(2)).sqrt())
+            .map(|p| {
+                ((p[0] - origin[0]).powi(2)
+                    + (p[1] - origin[1]).powi(2)
+                    + (p[2] - origin[2]).powi(2))
+                .sqrt()
+            })
             .collect();
         features_with_ranges(points, &ranges)
     }
@@ -263,12 +277,22 @@ mod tests {
             subcells: vec![Moments::default(); 4],
             occupied_bins: vec![false; e.config.curvity_bins],
         };
-        e.cell_features(points, ranges, [0.0, 0.0], 0.4, [0.0, 0.0, 1.0], &mut scratch)
+        e.cell_features(
+            points,
+            ranges,
+            [0.0, 0.0],
+            0.4,
+            [0.0, 0.0, 1.0],
+            &mut scratch,
+        )
     }
 
     fn assert_near(f: &[f32; FEATURE_COUNT], name: &str, expected: f64, tolerance: f64) {
         let v = f[index(name)] as f64;
-        assert!((v - expected).abs() <= tolerance, "{name} = {v}, expected {expected}");
+        assert!(
+            (v - expected).abs() <= tolerance,
+            "{name} = {v}, expected {expected}"
+        );
     }
 
     /// A 6 x 6 lattice filling the cell, at height z = a*y.
@@ -326,7 +350,9 @@ mod tests {
 
     #[test]
     fn line() {
-        let points: Vec<[f32; 3]> = (0..10).map(|i| [0.02 + 0.04 * i as f32, 0.1, 0.5]).collect();
+        let points: Vec<[f32; 3]> = (0..10)
+            .map(|i| [0.02 + 0.04 * i as f32, 0.1, 0.5])
+            .collect();
         let f = features_of(&points, [0.0, 0.0, 0.0]);
         assert_near(&f, "linearity", 1.0, 1e-6);
         assert_near(&f, "planarity", 0.0, 1e-6);
@@ -344,10 +370,17 @@ mod tests {
     fn isotropic_octahedron_and_sphere() {
         let a = 0.1f32;
         let c = [0.2f32, 0.2, 1.0];
-        let octahedron: Vec<[f32; 3]> = [[a, 0.0, 0.0], [-a, 0.0, 0.0], [0.0, a, 0.0], [0.0, -a, 0.0], [0.0, 0.0, a], [0.0, 0.0, -a]]
-            .iter()
-            .map(|d| [c[0] + d[0], c[1] + d[1], c[2] + d[2]])
-            .collect();
+        let octahedron: Vec<[f32; 3]> = [
+            [a, 0.0, 0.0],
+            [-a, 0.0, 0.0],
+            [0.0, a, 0.0],
+            [0.0, -a, 0.0],
+            [0.0, 0.0, a],
+            [0.0, 0.0, -a],
+        ]
+        .iter()
+        .map(|d| [c[0] + d[0], c[1] + d[1], c[2] + d[2]])
+        .collect();
         let f = features_of(&octahedron, [0.0; 3]);
         assert_near(&f, "sphericity", 1.0, 1e-5);
         assert_near(&f, "linearity", 0.0, 1e-5);
@@ -368,7 +401,11 @@ mod tests {
                 let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
                 let t = i as f64 * std::f64::consts::PI * (3.0 - 5f64.sqrt());
                 let r = (1.0 - z * z).sqrt();
-                [(0.2 + 0.15 * r * t.cos()) as f32, (0.2 + 0.15 * r * t.sin()) as f32, (1.0 + 0.15 * z) as f32]
+                [
+                    (0.2 + 0.15 * r * t.cos()) as f32,
+                    (0.2 + 0.15 * r * t.sin()) as f32,
+                    (1.0 + 0.15 * z) as f32,
+                ]
             })
             .collect();
         let f = features_of(&sphere, [0.0; 3]);
@@ -380,7 +417,13 @@ mod tests {
     fn random_blob_gives_finite_features() {
         let mut rng = SplitMix64(3);
         let blob: Vec<[f32; 3]> = (0..50)
-            .map(|_| [rng.uniform(0.0, 0.4) as f32, rng.uniform(0.0, 0.4) as f32, rng.uniform(0.0, 2.0) as f32])
+            .map(|_| {
+                [
+                    rng.uniform(0.0, 0.4) as f32,
+                    rng.uniform(0.0, 0.4) as f32,
+                    rng.uniform(0.0, 2.0) as f32,
+                ]
+            })
             .collect();
         let f = features_of(&blob, [0.0; 3]);
         assert!(f.iter().all(|v| v.is_finite()), "{f:?}");

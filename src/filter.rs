@@ -26,7 +26,10 @@ impl OutlierFilter {
             if own == CellClass::Unknown {
                 continue;
             }
-            let (col, row) = ((cell % cells_per_side) as isize, (cell / cells_per_side) as isize);
+            let (col, row) = (
+                (cell % cells_per_side) as isize,
+                (cell / cells_per_side) as isize,
+            );
             let (mut agree, mut disagree) = (self.config.self_weight, 0u32);
             for dr in -1..=1 {
                 for dc in -1..=1 {
@@ -89,14 +92,19 @@ mod tests {
         assert_eq!(filter().apply(&grid, 3)[0], N);
         // A 4x4 checkerboard: every interior cell has 4 agreeing and 4 opposing
         // neighbours, so nothing changes; a second pass would see the same labels.
-        let board: Vec<CellClass> = (0..16).map(|i| if (i / 4 + i % 4) % 2 == 0 { T } else { N }).collect();
+        let board: Vec<CellClass> = (0..16)
+            .map(|i| if (i / 4 + i % 4) % 2 == 0 { T } else { N })
+            .collect();
         assert_eq!(filter().apply(&board, 4), board);
     }
 
     #[test]
     fn disabled_filter_is_the_identity() {
         let f = OutlierFilter {
-            config: FilterConfig { enabled: false, self_weight: 3 },
+            config: FilterConfig {
+                enabled: false,
+                self_weight: 3,
+            },
         };
         let grid = vec![T, T, T, T, N, T, T, T, T];
         assert_eq!(f.apply(&grid, 3), grid);

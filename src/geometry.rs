@@ -179,7 +179,11 @@ mod tests {
         let mut rng = SplitMix64(7);
         for _ in 0..2000 {
             let mut m = Moments::default();
-            let scale = [rng.uniform(0.01, 3.0), rng.uniform(0.01, 3.0), rng.uniform(0.0, 3.0)];
+            let scale = [
+                rng.uniform(0.01, 3.0),
+                rng.uniform(0.01, 3.0),
+                rng.uniform(0.0, 3.0),
+            ];
             for _ in 0..20 {
                 m.add([
                     scale[0] * rng.uniform(-1.0, 1.0),
@@ -193,12 +197,18 @@ mod tests {
             let mut expected: Vec<f64> = reference.eigenvalues.iter().copied().collect();
             expected.sort_by(|a, b| b.total_cmp(a));
             for (a, b) in ours.values.iter().zip(&expected) {
-                assert!((a - b).abs() < 1e-9 * (1.0 + expected[0]), "{ours:?} vs {expected:?}");
+                assert!(
+                    (a - b).abs() < 1e-9 * (1.0 + expected[0]),
+                    "{ours:?} vs {expected:?}"
+                );
             }
             // The eigenvector must satisfy A v = l3 v.
             let v = nalgebra::Vector3::from(ours.normal);
             let residual = to_nalgebra(&cov) * v - v * ours.values[2];
-            assert!(residual.norm() < 1e-7 * (1.0 + expected[0]), "residual {residual}");
+            assert!(
+                residual.norm() < 1e-7 * (1.0 + expected[0]),
+                "residual {residual}"
+            );
             assert!((v.norm() - 1.0).abs() < 1e-12 && v.z >= 0.0);
         }
     }
@@ -206,16 +216,32 @@ mod tests {
     #[test]
     fn degenerate_spectra_give_defined_normals() {
         // A line along x: l2 = l3 = 0, any normal orthogonal to x is valid.
-        let line = SymmetricMatrix3 { xx: 2.0, ..Default::default() };
+        let line = SymmetricMatrix3 {
+            xx: 2.0,
+            ..Default::default()
+        };
         let e = line.smallest_eigen();
         assert_eq!(e.values, [2.0, 0.0, 0.0]);
         assert!(e.normal[0].abs() < 1e-12 && (norm_squared(e.normal) - 1.0).abs() < 1e-12);
         // Isotropic and zero matrices.
-        let iso = SymmetricMatrix3 { xx: 1.0, yy: 1.0, zz: 1.0, ..Default::default() };
+        let iso = SymmetricMatrix3 {
+            xx: 1.0,
+            yy: 1.0,
+            zz: 1.0,
+            ..Default::default()
+        };
         assert_eq!(iso.smallest_eigen().values, [1.0, 1.0, 1.0]);
-        assert_eq!(SymmetricMatrix3::default().smallest_eigen().normal, [0.0, 0.0, 1.0]);
+        assert_eq!(
+            SymmetricMatrix3::default().smallest_eigen().normal,
+            [0.0, 0.0, 1.0]
+        );
         // A plane z = 0: normal +z.
-        let plane = SymmetricMatrix3 { xx: 1.0, xy: 0.3, yy: 2.0, ..Default::default() };
+        let plane = SymmetricMatrix3 {
+            xx: 1.0,
+            xy: 0.3,
+            yy: 2.0,
+            ..Default::default()
+        };
         let n = plane.smallest_eigen().normal;
         assert!((n[2] - 1.0).abs() < 1e-12, "{n:?}");
     }

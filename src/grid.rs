@@ -146,7 +146,11 @@ pub fn grid_points(scans: &[WorldScan], layout: GridLayout) -> CellPoints {
     let with_labels = scans.iter().all(|s| s.labels.is_some());
     let mut points_in_grid = vec![[0f32; 3]; in_grid];
     let mut range_m = vec![0f32; in_grid];
-    let mut labels = if with_labels { vec![0u32; in_grid] } else { Vec::new() };
+    let mut labels = if with_labels {
+        vec![0u32; in_grid]
+    } else {
+        Vec::new()
+    };
     let mut next = cell_start.clone();
     let mut cells = cell_of_point.iter();
     for scan in scans {
@@ -211,7 +215,10 @@ mod tests {
     #[test]
     fn points_are_sorted_into_cells_and_outside_points_dropped() {
         let layout = GridLayout::centred_on([0.0, 0.0], 1.0, 4); // x, y in [-2, 2)
-        let a = scan(vec![[0.5, 0.5, 1.0], [5.0, 0.0, 0.0], [-1.5, -1.5, 2.0]], [0.0; 3]);
+        let a = scan(
+            vec![[0.5, 0.5, 1.0], [5.0, 0.0, 0.0], [-1.5, -1.5, 2.0]],
+            [0.0; 3],
+        );
         let b = scan(vec![[0.6, 0.4, 3.0]], [0.5, 0.5, 0.0]);
         let cells = grid_points(&[a, b], layout);
         assert_eq!(cells.points_in_grid.len(), 3);
@@ -222,7 +229,10 @@ mod tests {
         assert_eq!(cells.labels.as_ref().unwrap()[r.start..r.end], [0, 0]);
         // The second point of the cell came from scan b: its range is from b's origin.
         assert!((cells.range_m[r.start + 1] - (0.01f32 + 0.01 + 9.0).sqrt()).abs() < 1e-5);
-        assert_eq!(cells.point_count(layout.cell_of_local(0.5, 0.5).unwrap()), 1);
+        assert_eq!(
+            cells.point_count(layout.cell_of_local(0.5, 0.5).unwrap()),
+            1
+        );
     }
 
     #[test]
@@ -231,6 +241,10 @@ mod tests {
         let labelled = scan(vec![[0.5, 0.5, 1.0]], [0.0; 3]);
         let mut unlabelled = scan(vec![[0.6, 0.4, 3.0]], [0.0; 3]);
         unlabelled.labels = None;
-        assert!(grid_points(&[labelled, unlabelled], layout).labels.is_none());
+        assert!(
+            grid_points(&[labelled, unlabelled], layout)
+                .labels
+                .is_none()
+        );
     }
 }

@@ -68,7 +68,10 @@ mod tests {
         assert_eq!(g.cell_class(&[road, 48]), CellClass::Traversable);
         // One non-traversable point among traversable ones does not flip the cell.
         assert_eq!(g.cell_class(&[road, road, car]), CellClass::Traversable);
-        assert_eq!(g.cell_class(&[road, car, with_instance]), CellClass::NonTraversable);
+        assert_eq!(
+            g.cell_class(&[road, car, with_instance]),
+            CellClass::NonTraversable
+        );
         // Unlabeled (0) and outlier (1) do not vote.
         assert_eq!(g.cell_class(&[0, 1, road]), CellClass::Unknown);
         assert_eq!(g.cell_class(&[0, 0, 0, car, 70]), CellClass::NonTraversable);

@@ -81,7 +81,10 @@ mod tests {
             labels: None,
         };
         let scan = scan_to_world(frame);
-        assert_eq!(scan.points_in_world, vec![[10.0, 1.0, 2.0], [9.0, 0.0, 0.0]]);
+        assert_eq!(
+            scan.points_in_world,
+            vec![[10.0, 1.0, 2.0], [9.0, 0.0, 0.0]]
+        );
         assert_eq!(scan.origin_in_world, [10.0, 0.0, 0.0]);
         assert_eq!(scan.moments.count, 2);
     }

@@ -7,7 +7,11 @@ use clap::{Args, Parser, Subcommand};
 use travmap::commands::{self, Inputs, Output};
 
 #[derive(Parser)]
-#[command(name = "travmap", version, about = "Traversability maps from recorded drives (LiDAR + SVM, CPU only)")]
+#[command(
+    name = "travmap",
+    version,
+    about = "Traversability maps from recorded drives (LiDAR + SVM, CPU only)"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -106,12 +110,32 @@ impl Common {
 
 fn dispatch(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Run { common, model, ascii } => {
-            commands::run(&common.inputs(), &common.config()?, model.as_deref(), ascii, common.output())
+        Command::Run {
+            common,
+            model,
+            ascii,
+        } => commands::run(
+            &common.inputs(),
+            &common.config()?,
+            model.as_deref(),
+            ascii,
+            common.output(),
+        ),
+        Command::Eval { common, model } => commands::eval(
+            &common.inputs(),
+            &common.config()?,
+            model.as_deref(),
+            common.output(),
+        ),
+        Command::Train { common, output } => commands::train(
+            &common.inputs(),
+            &common.config()?,
+            &output,
+            common.output(),
+        ),
+        Command::Crossval { common } => {
+            commands::crossval(&common.inputs(), &common.config()?, common.output())
         }
-        Command::Eval { common, model } => commands::eval(&common.inputs(), &common.config()?, model.as_deref(), common.output()),
-        Command::Train { common, output } => commands::train(&common.inputs(), &common.config()?, &output, common.output()),
-        Command::Crossval { common } => commands::crossval(&common.inputs(), &common.config()?, common.output()),
         Command::Config { settings, json } => {
             let config = commands::load_config(settings.config.as_deref(), &settings.sets)?;
             commands::print_config(&config, Output { json, quiet: false })

@@ -68,7 +68,13 @@ impl Confusion {
     /// Rates are conditional (TPR = TP / (TP + FN)), as in the paper's table; an
     /// empty denominator gives 0.
     pub fn scores(&self) -> Scores {
-        let ratio = |num: u64, den: u64| if den == 0 { 0.0 } else { num as f64 / den as f64 };
+        let ratio = |num: u64, den: u64| {
+            if den == 0 {
+                0.0
+            } else {
+                num as f64 / den as f64
+            }
+        };
         let (tp, tn, fp, fn_) = (self.tp, self.tn, self.fp, self.r#fn);
         let iou_traversable = ratio(tp, tp + fp + fn_);
         let iou_non_traversable = ratio(tn, tn + fn_ + fp);
@@ -96,7 +102,16 @@ mod tests {
         let predicted = [T, T, T, N, N, U, T, U];
         let truth = [T, T, N, N, T, T, U, U];
         let c = Confusion::of_grids(&predicted, &truth);
-        assert_eq!(c, Confusion { tp: 2, tn: 1, fp: 1, r#fn: 1, unknown: 1 });
+        assert_eq!(
+            c,
+            Confusion {
+                tp: 2,
+                tn: 1,
+                fp: 1,
+                r#fn: 1,
+                unknown: 1
+            }
+        );
         let s = c.scores();
         assert_eq!(s.accuracy, 3.0 / 6.0);
         assert_eq!(s.iou_traversable, 2.0 / 4.0);

@@ -112,16 +112,25 @@ impl Pipeline {
     /// Runs the method on one frame; `model` None skips classification and filter.
     pub fn process_frame(&mut self, frame: Frame, model: Option<&SvmModel>) -> FrameResult {
         let (index, stamp_ns) = (frame.index, frame.stamp_ns);
-        let sensor_in_world = [frame.world_from_velodyne[(0, 3)], frame.world_from_velodyne[(1, 3)]];
-        let mut timings = StageTimings::default();
+        let sensor_in_world = [
+            frame.world_from_velodyne[(0, 3)],
+            frame.world_from_velodyne[(1, 3)],
+        ];
 
         // 1. Integration: this scan into the world, joined with the previous n - 1.
-        timings.integrate_ms = self.integrate(frame);
+        let mut timings = StageTimings {
+            integrate_ms: self.integrate(frame),
+            ..Default::default()
+        };
         let window = self.window.make_contiguous();
 
         // 2. Grid: the in-grid points, sorted by cell, around the sensor.
         let started = Instant::now();
-        let layout = GridLayout::centred_on(sensor_in_world, self.config.grid.cell_size_m, self.config.grid.cells_per_side());
+        let layout = GridLayout::centred_on(
+            sensor_in_world,
+            self.config.grid.cell_size_m,
+            self.config.grid.cells_per_side(),
+        );
         let cells = grid_points(window, layout);
         timings.grid_ms = elapsed_ms(started);
 
@@ -141,7 +150,11 @@ impl Pipeline {
             timings.filter_ms = elapsed_ms(started);
             predicted = Some(labels);
         }
-        timings.latency_ms = timings.integrate_ms + timings.grid_ms + timings.features_ms + timings.classify_ms + timings.filter_ms;
+        timings.latency_ms = timings.integrate_ms
+            + timings.grid_ms
+            + timings.features_ms
+            + timings.classify_ms
+            + timings.filter_ms;
 
         // Ground truth from the same cloud, outside the latency.
         let ground_truth = self.ground_truth.label(&cells);
@@ -149,7 +162,9 @@ impl Pipeline {
             index,
             stamp_ns,
             layout,
-            point_counts: (0..layout.cell_count()).map(|c| cells.point_count(c) as u32).collect(),
+            point_counts: (0..layout.cell_count())
+                .map(|c| cells.point_count(c) as u32)
+                .collect(),
             features,
             predicted,
             filtered,

@@ -138,7 +138,11 @@ impl KittiSequence {
         let points_in_velodyne = read_scan(&scan_path)?;
         let label_path = self.label_path(index);
         let labels = if label_path.is_file() {
-            Some(read_labels(&label_path, &scan_path, points_in_velodyne.len())?)
+            Some(read_labels(
+                &label_path,
+                &scan_path,
+                points_in_velodyne.len(),
+            )?)
         } else {
             None
         };
@@ -230,13 +234,17 @@ fn read_text(path: &Path) -> Result<String> {
 fn parse_numbers(path: &Path, line_no: usize, text: &str) -> Result<Vec<f64>> {
     text.split_whitespace()
         .map(|token| {
-            let value: f64 = token.parse().map_err(|_| {
-                Error::parse(path, line_no, format!("`{token}` is not a number"))
-            })?;
+            let value: f64 = token
+                .parse()
+                .map_err(|_| Error::parse(path, line_no, format!("`{token}` is not a number")))?;
             if value.is_finite() {
                 Ok(value)
             } else {
-                Err(Error::parse(path, line_no, format!("`{token}` is not finite")))
+                Err(Error::parse(
+                    path,
+                    line_no,
+                    format!("`{token}` is not finite"),
+                ))
             }
         })
         .collect()
@@ -248,10 +256,7 @@ fn matrix_3x4(path: &Path, line_no: usize, values: &[f64]) -> Result<Matrix4<f64
         return Err(Error::parse(
             path,
             line_no,
-            format!(
-                "expected 12 numbers (a 3x4 matrix), found {}",
-                values.len()
-            ),
+            format!("expected 12 numbers (a 3x4 matrix), found {}", values.len()),
         ));
     }
     let mut m = Matrix4::identity();
@@ -378,8 +383,9 @@ pub fn parse_frame_range(text: &str) -> Result<Range<usize>> {
         if s.is_empty() {
             return Ok(default);
         }
-        s.parse()
-            .map_err(|_| Error::Config(format!("frame range `{text}`: `{s}` is not a frame number")))
+        s.parse().map_err(|_| {
+            Error::Config(format!("frame range `{text}`: `{s}` is not a frame number"))
+        })
     };
     let range = if let Some((a, b)) = text.split_once("..=") {
         number(a, 0)?..number(b, usize::MAX - 1)? + 1
@@ -412,7 +418,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = write(dir.path(), "a.bin", &[0u8; 20]);
         let err = read_scan(&path).unwrap_err().to_string();
-        assert!(err.contains("a.bin") && err.contains("20 bytes") && err.contains("16"), "{err}");
+        assert!(
+            err.contains("a.bin") && err.contains("20 bytes") && err.contains("16"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -431,7 +440,9 @@ mod tests {
     fn label_count_must_match_point_count() {
         let dir = tempfile::tempdir().unwrap();
         let path = write(dir.path(), "a.label", &[0u8; 12]);
-        let err = read_labels(&path, Path::new("a.bin"), 4).unwrap_err().to_string();
+        let err = read_labels(&path, Path::new("a.bin"), 4)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("3 labels for 4 points"), "{err}");
     }
 
@@ -444,7 +455,10 @@ mod tests {
         assert!(err.contains("calib.txt") && err.contains("`Tr:`"), "{err}");
         let path = write(dir.path(), "calib.txt", b"Tr: 1 0 0\n");
         let err = read_calibration(&path).unwrap_err().to_string();
-        assert!(err.contains("calib.txt:1") && err.contains("found 3"), "{err}");
+        assert!(
+            err.contains("calib.txt:1") && err.contains("found 3"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -33,8 +33,14 @@ fn mean_nearest_distance(fixed: &[[f32; 3]], moving: &[[f32; 3]], sensor: [f32; 
         for dx in -2..=2 {
             for dy in -2..=2 {
                 for dz in -2..=2 {
-                    for q in voxels.get(&[v[0] + dx, v[1] + dy, v[2] + dz]).into_iter().flatten() {
-                        let d = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
+                    for q in voxels
+                        .get(&[v[0] + dx, v[1] + dy, v[2] + dz])
+                        .into_iter()
+                        .flatten()
+                    {
+                        let d =
+                            ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2))
+                                .sqrt();
                         best = best.min(d);
                     }
                 }
@@ -47,21 +53,33 @@ fn mean_nearest_distance(fixed: &[[f32; 3]], moving: &[[f32; 3]], sensor: [f32; 
 }
 
 fn world_scans(sequence: &KittiSequence, frames: std::ops::Range<usize>) -> Vec<WorldScan> {
-    frames.map(|i| scan_to_world(sequence.read_frame(i).unwrap())).collect()
+    frames
+        .map(|i| scan_to_world(sequence.read_frame(i).unwrap()))
+        .collect()
 }
 
 #[test]
 fn consecutive_scans_coincide_in_the_world_frame() {
-    let Some(dir) = common::semantickitti_00() else { return };
+    let Some(dir) = common::semantickitti_00() else {
+        return;
+    };
     let sequence = KittiSequence::open(&dir).unwrap();
     let scans = world_scans(&sequence, 0..6);
     for pair in scans.windows(2) {
         let sensor = pair[1].origin_in_world.map(|v| v as f32);
-        let aligned = mean_nearest_distance(&pair[0].points_in_world, &pair[1].points_in_world, sensor);
+        let aligned =
+            mean_nearest_distance(&pair[0].points_in_world, &pair[1].points_in_world, sensor);
         // The same scan left in its own velodyne frame: the car's motion shows.
         let raw = sequence.read_frame(pair[1].index).unwrap();
-        let unmoved: Vec<[f32; 3]> = raw.points_in_velodyne.iter().map(|p| [p[0], p[1], p[2]]).collect();
-        let first = &sequence.read_frame(pair[0].index).unwrap().points_in_velodyne;
+        let unmoved: Vec<[f32; 3]> = raw
+            .points_in_velodyne
+            .iter()
+            .map(|p| [p[0], p[1], p[2]])
+            .collect();
+        let first = &sequence
+            .read_frame(pair[0].index)
+            .unwrap()
+            .points_in_velodyne;
         let first: Vec<[f32; 3]> = first.iter().map(|p| [p[0], p[1], p[2]]).collect();
         let unaligned = mean_nearest_distance(&first, &unmoved, [0.0; 3]);
         // The cam0 pose applied to velodyne points as it is, without Tr: a frame mix-up.
@@ -69,7 +87,8 @@ fn consecutive_scans_coincide_in_the_world_frame() {
         let mixed_up: Vec<[f32; 3]> = unmoved
             .iter()
             .map(|p| {
-                let v = cam0_pose * nalgebra::Vector4::new(p[0] as f64, p[1] as f64, p[2] as f64, 1.0);
+                let v =
+                    cam0_pose * nalgebra::Vector4::new(p[0] as f64, p[1] as f64, p[2] as f64, 1.0);
                 [v.x as f32, v.y as f32, v.z as f32]
             })
             .collect();
@@ -78,31 +97,52 @@ fn consecutive_scans_coincide_in_the_world_frame() {
             "frames {}-{}: mean NN distance {aligned:.3} m with poses, {unaligned:.3} m without, {mixed_up:.3} m with the cam0 pose unconjugated",
             pair[0].index, pair[1].index
         );
-        assert!(aligned < 0.12, "scans {} and {} do not line up: {aligned} m", pair[0].index, pair[1].index);
-        assert!(unaligned > 1.5 * aligned, "the check cannot tell poses apart: {aligned} vs {unaligned}");
-        assert!(mixed_up > 1.5 * aligned, "a frame mix-up goes unnoticed: {aligned} vs {mixed_up}");
+        assert!(
+            aligned < 0.12,
+            "scans {} and {} do not line up: {aligned} m",
+            pair[0].index,
+            pair[1].index
+        );
+        assert!(
+            unaligned > 1.5 * aligned,
+            "the check cannot tell poses apart: {aligned} vs {unaligned}"
+        );
+        assert!(
+            mixed_up > 1.5 * aligned,
+            "a frame mix-up goes unnoticed: {aligned} vs {mixed_up}"
+        );
     }
     // The car drives forward (velodyne +x) about 0.7 m per frame, on the ground plane.
     let last = scans[5].origin_in_world;
-    assert!(last[0] > 3.0 && last[0] < 4.5 && last[1].abs() < 0.3 && last[2].abs() < 0.1, "{last:?}");
+    assert!(
+        last[0] > 3.0 && last[0] < 4.5 && last[1].abs() < 0.3 && last[2].abs() < 0.1,
+        "{last:?}"
+    );
 }
 
 #[test]
 fn the_road_lies_in_the_world_xy_plane() {
-    let Some(dir) = common::semantickitti_00() else { return };
+    let Some(dir) = common::semantickitti_00() else {
+        return;
+    };
     let sequence = KittiSequence::open(&dir).unwrap();
     for scan in world_scans(&sequence, 0..3) {
         let labels = scan.labels.as_ref().expect("frames 0-2 are labelled");
         let mut road = Moments::default();
         for (p, &label) in scan.points_in_world.iter().zip(labels) {
-            let horizontal = ((p[0] as f64 - scan.origin_in_world[0]).powi(2) + (p[1] as f64 - scan.origin_in_world[1]).powi(2)).sqrt();
+            let horizontal = ((p[0] as f64 - scan.origin_in_world[0]).powi(2)
+                + (p[1] as f64 - scan.origin_in_world[1]).powi(2))
+            .sqrt();
             if label & 0xFFFF == 40 && horizontal < 15.0 {
                 road.add(p.map(|v| v as f64));
             }
         }
         let normal = road.covariance().smallest_eigen().normal;
         let height = road.mean()[2];
-        eprintln!("frame {}: {} road points, normal {normal:.4?}, mean z {height:.3} m", scan.index, road.count);
+        eprintln!(
+            "frame {}: {} road points, normal {normal:.4?}, mean z {height:.3} m",
+            scan.index, road.count
+        );
         assert!(road.count > 5000);
         assert!(normal[2] > 0.995, "road normal {normal:?} is not +z");
         // The HDL-64E sits 1.73 m above the road on the KITTI car.
@@ -112,10 +152,14 @@ fn the_road_lies_in_the_world_xy_plane() {
 
 #[test]
 fn shipped_scans_and_labels_match_their_provenance() {
-    let Some(dir) = common::semantickitti_00() else { return };
+    let Some(dir) = common::semantickitti_00() else {
+        return;
+    };
     let sequence = KittiSequence::open(&dir).unwrap();
     assert_eq!(sequence.frames(), &[0, 1, 2, 3, 4, 5]);
-    let counts: Vec<usize> = (0..6).map(|i| sequence.read_frame(i).unwrap().points_in_velodyne.len()).collect();
+    let counts: Vec<usize> = (0..6)
+        .map(|i| sequence.read_frame(i).unwrap().points_in_velodyne.len())
+        .collect();
     assert_eq!(counts, [124668, 124605, 124478, 124167, 123969, 123924]);
     assert!((0..3).all(|i| sequence.has_labels(i)) && !sequence.has_labels(3));
     let stamps: Vec<u64> = (0..3).map(|i| sequence.stamp_ns(i).unwrap()).collect();
@@ -126,18 +170,28 @@ fn shipped_scans_and_labels_match_their_provenance() {
 fn labels_join_the_right_points() {
     // The mmdetection3d 50-point subset of frame 0 with its labels, at the indices
     // PROVENANCE.md lists: each point and label must equal the full frame's.
-    let (Some(full), Some(subset)) = (common::semantickitti_00(), common::shared_data("semantickitti-mmdet3d-50pt/sequences/00")) else {
+    let (Some(full), Some(subset)) = (
+        common::semantickitti_00(),
+        common::shared_data("semantickitti-mmdet3d-50pt/sequences/00"),
+    ) else {
         return;
     };
     let indices = [
-        5257, 3451, 5359, 2872, 6064, 383, 1077, 7600, 2837, 1835, 5325, 6848, 6742, 1189, 6368, 437, 4318, 1489, 2300, 5897, 4235, 9606, 2209, 4381, 1432, 1295, 274,
-        6737, 3424, 160, 8766, 65, 3829, 6474, 6590, 4106, 5927, 2873, 1495, 2210, 946, 9473, 4990, 7150, 7285, 1042, 7475, 6645, 6029, 5251,
+        5257, 3451, 5359, 2872, 6064, 383, 1077, 7600, 2837, 1835, 5325, 6848, 6742, 1189, 6368,
+        437, 4318, 1489, 2300, 5897, 4235, 9606, 2209, 4381, 1432, 1295, 274, 6737, 3424, 160,
+        8766, 65, 3829, 6474, 6590, 4106, 5927, 2873, 1495, 2210, 946, 9473, 4990, 7150, 7285,
+        1042, 7475, 6645, 6029, 5251,
     ];
     let frame = KittiSequence::open(&full).unwrap().read_frame(0).unwrap();
     let labels = frame.labels.unwrap();
     let scan_path = subset.join("velodyne/000000.bin");
     let points = read_scan(&scan_path).unwrap();
-    let subset_labels = read_labels(&subset.join("labels/000000.label"), &scan_path, points.len()).unwrap();
+    let subset_labels = read_labels(
+        &subset.join("labels/000000.label"),
+        &scan_path,
+        points.len(),
+    )
+    .unwrap();
     for ((p, l), &i) in points.iter().zip(&subset_labels).zip(&indices) {
         assert_eq!(*p, frame.points_in_velodyne[i]);
         assert_eq!(*l, labels[i]);

@@ -79,7 +79,8 @@ impl<'a> KernelRows<'a> {
             return row.clone();
         }
         if self.cached.len() >= self.capacity
-            && let Some(position) = (0..self.cached.len()).min_by_key(|&k| self.last_used[self.cached[k]])
+            && let Some(position) =
+                (0..self.cached.len()).min_by_key(|&k| self.last_used[self.cached[k]])
         {
             let evicted = self.cached.swap_remove(position);
             self.rows[evicted] = None;
@@ -117,7 +118,9 @@ pub fn solve(problem: &Problem, parameters: &Parameters) -> Solution {
     let mut converged = false;
 
     while iterations < max_iterations {
-        let Some((i, j)) = select_working_set(&y, &alpha, &gradient, c, parameters.tolerance, &mut kernel) else {
+        let Some((i, j)) =
+            select_working_set(&y, &alpha, &gradient, c, parameters.tolerance, &mut kernel)
+        else {
             converged = true;
             break;
         };
@@ -261,9 +264,17 @@ fn offset(y: &[f64], alpha: &[f64], gradient: &[f64], c: f64) -> f64 {
         let at_upper = alpha[t] >= c;
         let at_lower = alpha[t] <= 0.0;
         if at_upper {
-            if y[t] < 0.0 { upper = upper.min(yg) } else { lower = lower.max(yg) }
+            if y[t] < 0.0 {
+                upper = upper.min(yg)
+            } else {
+                lower = lower.max(yg)
+            }
         } else if at_lower {
-            if y[t] > 0.0 { upper = upper.min(yg) } else { lower = lower.max(yg) }
+            if y[t] > 0.0 {
+                upper = upper.min(yg)
+            } else {
+                lower = lower.max(yg)
+            }
         } else {
             free += 1;
             free_sum += yg;
@@ -301,11 +312,25 @@ mod tests {
             samples.push(rng.uniform(-1.0, 1.0) as f32);
             labels.push(class);
         }
-        let problem = Problem { samples: &samples, dimension: 2, labels: &labels };
-        let parameters = Parameters { c: 1.0, gamma: 0.5, tolerance: 1e-3, cache_bytes: 1 << 20 };
+        let problem = Problem {
+            samples: &samples,
+            dimension: 2,
+            labels: &labels,
+        };
+        let parameters = Parameters {
+            c: 1.0,
+            gamma: 0.5,
+            tolerance: 1e-3,
+            cache_bytes: 1 << 20,
+        };
         let s = solve(&problem, &parameters);
         assert!(s.converged);
-        let balance: f64 = s.alpha.iter().zip(&labels).map(|(a, &y)| a * y as f64).sum();
+        let balance: f64 = s
+            .alpha
+            .iter()
+            .zip(&labels)
+            .map(|(a, &y)| a * y as f64)
+            .sum();
         assert!(balance.abs() < 1e-9, "y'a = {balance}");
         assert!(s.alpha.iter().all(|&a| (0.0..=1.0).contains(&a)));
         assert!(decision(&problem, &s, 0.5, &[2.0, 0.0]) > 0.0);
@@ -323,15 +348,28 @@ mod tests {
         let points = [[1.0f32, 1.0], [-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0]];
         let labels = [1.0f32, 1.0, -1.0, -1.0];
         let samples: Vec<f32> = points.iter().flatten().copied().collect();
-        let problem = Problem { samples: &samples, dimension: 2, labels: &labels };
-        let parameters = Parameters { c: 10.0, gamma: 1.0, tolerance: 1e-6, cache_bytes: 16 };
+        let problem = Problem {
+            samples: &samples,
+            dimension: 2,
+            labels: &labels,
+        };
+        let parameters = Parameters {
+            c: 10.0,
+            gamma: 1.0,
+            tolerance: 1e-6,
+            cache_bytes: 16,
+        };
         let s = solve(&problem, &parameters);
         for (x, y) in points.iter().zip(labels) {
             assert_eq!(decision(&problem, &s, 1.0, x).signum() as f32, y);
         }
         // By symmetry every sample is a support vector with the same weight and rho = 0.
         assert!(s.rho.abs() < 1e-6, "rho {}", s.rho);
-        assert!(s.alpha.iter().all(|&a| (a - s.alpha[0]).abs() < 1e-6 && a > 0.0));
+        assert!(
+            s.alpha
+                .iter()
+                .all(|&a| (a - s.alpha[0]).abs() < 1e-6 && a > 0.0)
+        );
     }
 
     #[test]
@@ -340,11 +378,29 @@ mod tests {
         let samples: Vec<f32> = (0..300).map(|_| rng.uniform(-2.0, 2.0) as f32).collect();
         let labels: Vec<f32> = samples
             .chunks_exact(3)
-            .map(|x| if x[0] * x[1] + 0.3 * x[2] > 0.0 { 1.0 } else { -1.0 })
+            .map(|x| {
+                if x[0] * x[1] + 0.3 * x[2] > 0.0 {
+                    1.0
+                } else {
+                    -1.0
+                }
+            })
             .collect();
-        let problem = Problem { samples: &samples, dimension: 3, labels: &labels };
-        let big = Parameters { c: 5.0, gamma: 0.3, tolerance: 1e-3, cache_bytes: 1 << 20 };
-        let tiny = Parameters { cache_bytes: 0, ..big };
+        let problem = Problem {
+            samples: &samples,
+            dimension: 3,
+            labels: &labels,
+        };
+        let big = Parameters {
+            c: 5.0,
+            gamma: 0.3,
+            tolerance: 1e-3,
+            cache_bytes: 1 << 20,
+        };
+        let tiny = Parameters {
+            cache_bytes: 0,
+            ..big
+        };
         let (a, b) = (solve(&problem, &big), solve(&problem, &tiny));
         assert_eq!(a.alpha, b.alpha);
         assert_eq!(a.rho, b.rho);

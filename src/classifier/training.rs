@@ -51,7 +51,11 @@ impl TrainingSet {
             ..Default::default()
         };
         for &i in indices {
-            out.push(&self.features[i * d..(i + 1) * d], self.traversable[i], self.centre_in_world[i]);
+            out.push(
+                &self.features[i * d..(i + 1) * d],
+                self.traversable[i],
+                self.centre_in_world[i],
+            );
         }
         out
     }
@@ -59,7 +63,12 @@ impl TrainingSet {
 
 /// Assigns every cell to one of `folds` folds by its world block: blocks are
 /// shuffled with `seed` and dealt round-robin, so folds hold similar block counts.
-pub fn spatial_folds(centres: &[[f64; 2]], block_size_m: f64, folds: usize, seed: u64) -> Vec<usize> {
+pub fn spatial_folds(
+    centres: &[[f64; 2]],
+    block_size_m: f64,
+    folds: usize,
+    seed: u64,
+) -> Vec<usize> {
     let block_of = |c: &[f64; 2]| {
         [
             (c[0] / block_size_m).floor() as i64,
@@ -70,9 +79,15 @@ pub fn spatial_folds(centres: &[[f64; 2]], block_size_m: f64, folds: usize, seed
     blocks.sort_unstable();
     blocks.dedup();
     SplitMix64(seed).shuffle(&mut blocks);
-    let fold_of_block: std::collections::HashMap<[i64; 2], usize> =
-        blocks.iter().enumerate().map(|(i, b)| (*b, i % folds)).collect();
-    centres.iter().map(|c| fold_of_block[&block_of(c)]).collect()
+    let fold_of_block: std::collections::HashMap<[i64; 2], usize> = blocks
+        .iter()
+        .enumerate()
+        .map(|(i, b)| (*b, i % folds))
+        .collect();
+    centres
+        .iter()
+        .map(|c| fold_of_block[&block_of(c)])
+        .collect()
 }
 
 /// Mean and 1/deviation of each feature; constant features get 1.
@@ -117,7 +132,11 @@ fn fit(set: &TrainingSet, c: f64, gamma: f64, config: &Config) -> SvmModel {
                 .collect::<Vec<f32>>()
         })
         .collect();
-    let labels: Vec<f32> = set.traversable.iter().map(|&t| if t { 1.0 } else { -1.0 }).collect();
+    let labels: Vec<f32> = set
+        .traversable
+        .iter()
+        .map(|&t| if t { 1.0 } else { -1.0 })
+        .collect();
     let problem = Problem {
         samples: &standardised,
         dimension: d,
@@ -174,7 +193,11 @@ fn accuracy(model: &SvmModel, set: &TrainingSet) -> f64 {
 
 /// Grid search with spatially-blocked cross-validation, then a fit on all of `set`.
 /// `progress(done, total)` is called after each fit.
-pub fn train(set: &TrainingSet, config: &Config, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<SvmModel> {
+pub fn train(
+    set: &TrainingSet,
+    config: &Config,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<SvmModel> {
     let started = std::time::Instant::now();
     let t: &TrainingConfig = &config.training;
     let traversable = set.traversable.iter().filter(|t| **t).count();
@@ -238,9 +261,9 @@ pub fn train(set: &TrainingSet, config: &Config, progress: &(dyn Fn(usize, usize
         })
         .collect();
     // The first best in (C, gamma) order: ties go to the smaller, smoother model.
-    let best = search
-        .iter()
-        .fold(search[0], |best, r| if r.accuracy > best.accuracy { *r } else { best });
+    let best = search.iter().fold(search[0], |best, r| {
+        if r.accuracy > best.accuracy { *r } else { best }
+    });
     let mut model = fit(set, best.c, best.gamma, config);
     progress(total, total);
     model.training.search = search;
@@ -254,11 +277,15 @@ mod tests {
 
     #[test]
     fn spatial_folds_keep_blocks_whole_and_use_every_fold() {
-        let centres: Vec<[f64; 2]> = (0..400).map(|i| [(i % 20) as f64 * 0.4, (i / 20) as f64 * 0.4]).collect();
+        let centres: Vec<[f64; 2]> = (0..400)
+            .map(|i| [(i % 20) as f64 * 0.4, (i / 20) as f64 * 0.4])
+            .collect();
         let folds = spatial_folds(&centres, 2.0, 5, 1);
         for (a, fa) in centres.iter().zip(&folds) {
             for (b, fb) in centres.iter().zip(&folds) {
-                if (a[0] / 2.0).floor() == (b[0] / 2.0).floor() && (a[1] / 2.0).floor() == (b[1] / 2.0).floor() {
+                if (a[0] / 2.0).floor() == (b[0] / 2.0).floor()
+                    && (a[1] / 2.0).floor() == (b[1] / 2.0).floor()
+                {
                     assert_eq!(fa, fb);
                 }
             }
@@ -279,14 +306,22 @@ mod tests {
             let traversable = i % 3 != 0;
             let x = if traversable { 0.1 } else { 0.6 } + rng.uniform(-0.15, 0.15) as f32;
             // The second feature is noise on a large scale: standardisation matters.
-            set.push(&[x, 1000.0 * rng.uniform(-1.0, 1.0) as f32], traversable, [(i % 30) as f64, (i / 30) as f64]);
+            set.push(
+                &[x, 1000.0 * rng.uniform(-1.0, 1.0) as f32],
+                traversable,
+                [(i % 30) as f64, (i / 30) as f64],
+            );
         }
         let mut config = Config::default();
         config.training.c_values = vec![1.0, 10.0];
         config.training.gamma_values = vec![0.1, 1.0];
         let model = train(&set, &config, &|_, _| {}).unwrap();
         assert_eq!(model.training.search.len(), 4);
-        assert!(model.training.search.iter().all(|r| r.accuracy > 0.95), "{:?}", model.training.search);
+        assert!(
+            model.training.search.iter().all(|r| r.accuracy > 0.95),
+            "{:?}",
+            model.training.search
+        );
         assert!(accuracy(&model, &set) > 0.98);
         let mut scratch = [0f32; 2];
         assert!(model.decision_value(&[0.1, 0.0], &mut scratch) > 0.0);

@@ -11,11 +11,16 @@ pub fn semantickitti_00() -> Option<PathBuf> {
 }
 
 pub fn shared_data(relative: &str) -> Option<PathBuf> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(relative);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(relative);
     if path.exists() {
         Some(path)
     } else {
-        eprintln!("skipping: {} not found (../shared/data is not beside the repository)", path.display());
+        eprintln!(
+            "skipping: {} not found (../shared/data is not beside the repository)",
+            path.display()
+        );
         None
     }
 }
@@ -39,14 +44,23 @@ pub fn stderr(output: &Output) -> String {
 
 /// Asserts success and returns stdout.
 pub fn success(output: Output) -> String {
-    assert!(output.status.success(), "travmap failed: {}\n{}", stderr(&output), stdout(&output));
+    assert!(
+        output.status.success(),
+        "travmap failed: {}\n{}",
+        stderr(&output),
+        stdout(&output)
+    );
     stdout(&output)
 }
 
 /// Asserts a clean failure: exit code 1, an `error:` line, no panic. Returns stderr.
 pub fn clean_failure(output: Output) -> String {
     let err = stderr(&output);
-    assert_eq!(output.status.code(), Some(1), "expected exit 1, stderr: {err}");
+    assert_eq!(
+        output.status.code(),
+        Some(1),
+        "expected exit 1, stderr: {err}"
+    );
     assert!(err.starts_with("error: "), "{err}");
     assert!(!err.contains("panicked"), "{err}");
     err

@@ -1,0 +1,215 @@
+//! Malformed inputs give a clear error naming the file and what was expected, with
+//! exit code 1 and never a panic. The sequences are synthetic, written here, so
+//! these tests need no shared data.
+
+mod common;
+
+use std::path::Path;
+
+use common::{clean_failure, success, travmap};
+
+const IDENTITY_3X4: &str = "1 0 0 0 0 1 0 0 0 0 1 0";
+/// Sequence 00's velodyne -> cam0.
+const TR: &str = "4.276802385584e-04 -9.999672484946e-01 -8.084491683471e-03 -1.198459927713e-02 -7.210626507497e-03 8.081198471645e-03 -9.999413164504e-01 -5.403984729748e-02 9.999738645903e-01 4.859485810390e-04 -7.206933692422e-03 -2.921968648686e-01";
+
+/// A flat ground at z = -1.73 with a 1 m wall, as a scan of `n` points per frame.
+fn scene_points() -> Vec<[f32; 4]> {
+    let mut points = Vec::new();
+    for i in 0..60 {
+        for j in 0..60 {
+            let (x, y) = (-6.0 + 0.2 * i as f32, -6.0 + 0.2 * j as f32);
+            points.push([x, y, -1.73, 0.3]);
+            if (3.0..3.2).contains(&x) {
+                for k in 0..5 {
+                    points.push([x, y, -1.73 + 0.2 * k as f32, 0.5]);
+                }
+            }
+        }
+    }
+    points
+}
+
+fn write_scan(path: &Path, points: &[[f32; 4]]) {
+    let bytes: Vec<u8> = points
+        .iter()
+        .flatten()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// A valid two-frame sequence with labels (road, and building on the wall).
+fn write_sequence(dir: &Path) {
+    std::fs::create_dir_all(dir.join("velodyne")).unwrap();
+    std::fs::create_dir_all(dir.join("labels")).unwrap();
+    std::fs::write(
+        dir.join("calib.txt"),
+        format!("P0: {IDENTITY_3X4}\nP2: {IDENTITY_3X4}\nTr: {TR}\n"),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("poses.txt"),
+        format!("{IDENTITY_3X4}\n{IDENTITY_3X4}\n"),
+    )
+    .unwrap();
+    std::fs::write(dir.join("times.txt"), "0.0\n0.1\n").unwrap();
+    let points = scene_points();
+    let labels: Vec<u8> = points
+        .iter()
+        .flat_map(|p| (if p[2] > -1.7 { 50u32 } else { 40 }).to_le_bytes())
+        .collect();
+    for frame in 0..2 {
+        write_scan(&dir.join(format!("velodyne/{frame:06}.bin")), &points);
+        std::fs::write(dir.join(format!("labels/{frame:06}.label")), &labels).unwrap();
+    }
+}
+
+fn eval(dir: &Path) -> std::process::Output {
+    travmap(&["eval", dir.to_str().unwrap()])
+}
+
+#[test]
+fn the_synthetic_sequence_itself_is_fine() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    let out = success(eval(dir.path()));
+    assert!(out.contains("over 2 frames"), "{out}");
+}
+
+#[test]
+fn scan_size_not_a_multiple_of_16() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    let scan = dir.path().join("velodyne/000001.bin");
+    let mut bytes = std::fs::read(&scan).unwrap();
+    bytes.truncate(bytes.len() - 5);
+    std::fs::write(&scan, bytes).unwrap();
+    let err = clean_failure(eval(dir.path()));
+    assert!(
+        err.contains("000001.bin") && err.contains("not a multiple of 16"),
+        "{err}"
+    );
+}
+
+#[test]
+fn label_count_differs_from_point_count() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    let labels = dir.path().join("labels/000000.label");
+    let mut bytes = std::fs::read(&labels).unwrap();
+    bytes.extend_from_slice(&40u32.to_le_bytes());
+    std::fs::write(&labels, bytes).unwrap();
+    let err = clean_failure(eval(dir.path()));
+    let points = scene_points().len();
+    assert!(
+        err.contains("000000.label")
+            && err.contains(&format!("{} labels for {points} points", points + 1)),
+        "{err}"
+    );
+}
+
+#[test]
+fn missing_pose_line() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    std::fs::write(dir.path().join("poses.txt"), format!("{IDENTITY_3X4}\n")).unwrap();
+    let err = clean_failure(eval(dir.path()));
+    assert!(
+        err.contains("poses.txt") && err.contains("no pose for frame 1"),
+        "{err}"
+    );
+}
+
+#[test]
+fn malformed_pose_line() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    std::fs::write(
+        dir.path().join("poses.txt"),
+        format!("{IDENTITY_3X4}\n1 0 0 x 0 1 0 0 0 0 1 0\n"),
+    )
+    .unwrap();
+    let err = clean_failure(eval(dir.path()));
+    assert!(
+        err.contains("poses.txt:2") && err.contains("`x` is not a number"),
+        "{err}"
+    );
+}
+
+#[test]
+fn nan_coordinates() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    let mut points = scene_points();
+    points[17][1] = f32::NAN;
+    write_scan(&dir.path().join("velodyne/000001.bin"), &points);
+    let err = clean_failure(eval(dir.path()));
+    assert!(
+        err.contains("000001.bin") && err.contains("point 17 has a non-finite coordinate"),
+        "{err}"
+    );
+}
+
+#[test]
+fn calibration_without_tr() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    std::fs::write(
+        dir.path().join("calib.txt"),
+        format!("P0: {IDENTITY_3X4}\n"),
+    )
+    .unwrap();
+    let err = clean_failure(eval(dir.path()));
+    assert!(
+        err.contains("calib.txt") && err.contains("no `Tr:` line"),
+        "{err}"
+    );
+}
+
+#[test]
+fn missing_files_and_directories() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    std::fs::remove_file(dir.path().join("times.txt")).unwrap();
+    let err = clean_failure(eval(dir.path()));
+    assert!(err.contains("times.txt"), "{err}");
+    let err = clean_failure(eval(&dir.path().join("nowhere")));
+    assert!(err.contains("not a directory"), "{err}");
+}
+
+#[test]
+fn bad_frame_range_and_model_file() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    let seq = dir.path().to_str().unwrap();
+    let err = clean_failure(travmap(&["eval", seq, "--frames", "5..9"]));
+    assert!(
+        err.contains("no scans in frames 5..9") && err.contains("0..=1"),
+        "{err}"
+    );
+    let err = clean_failure(travmap(&["eval", seq, "--frames", "3..1"]));
+    assert!(err.contains("is empty"), "{err}");
+    let model = dir.path().join("broken.json");
+    std::fs::write(&model, b"{\"format\": \"travmap-svm\", \"version\": 1, ").unwrap();
+    let err = clean_failure(travmap(&["eval", seq, "--model", model.to_str().unwrap()]));
+    assert!(err.contains("broken.json"), "{err}");
+}
+
+#[test]
+fn training_without_labels_is_an_error_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    std::fs::remove_dir_all(dir.path().join("labels")).unwrap();
+    let model = dir.path().join("m.json");
+    let err = clean_failure(travmap(&[
+        "train",
+        dir.path().to_str().unwrap(),
+        "-o",
+        model.to_str().unwrap(),
+    ]));
+    assert!(err.contains("no labelled cells"), "{err}");
+    assert!(!model.exists());
+    // Evaluation without labels runs and says there is nothing to score.
+    let out = success(eval(dir.path()));
+    assert!(out.contains("no frame has ground truth"), "{out}");
+}

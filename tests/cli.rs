@@ -1,0 +1,224 @@
+//! The binary on the real SemanticKITTI sample: the first-run commands, training,
+//! evaluation, cross-validation and configuration.
+
+mod common;
+
+use common::{clean_failure, success, travmap};
+use serde_json::Value;
+
+fn sample() -> Option<String> {
+    common::semantickitti_00().map(|p| p.display().to_string())
+}
+
+/// The search grid of the quick training runs of these tests.
+const QUICK: [&str; 4] = [
+    "--set",
+    "training.c_values=[10.0]",
+    "--set",
+    "training.gamma_values=[0.05]",
+];
+
+#[test]
+fn eval_with_no_flags_prints_the_papers_table() {
+    let Some(seq) = sample() else { return };
+    let out = success(travmap(&["eval", &seq]));
+    for column in [
+        "Acc",
+        "mIoU",
+        "F1",
+        "FPR",
+        "TPR",
+        "FNR",
+        "TNR",
+        "latency",
+        "travmap (filtered)",
+        "paper, geometry only",
+    ] {
+        assert!(out.contains(column), "missing {column}:\n{out}");
+    }
+    assert!(out.contains("over 3 frames"), "{out}");
+    assert!(out.contains("embedded default model"), "{out}");
+}
+
+#[test]
+fn eval_json_reports_config_model_and_scores() {
+    let Some(seq) = sample() else { return };
+    let out = success(travmap(&[
+        "eval",
+        &seq,
+        "--frames",
+        "0..3",
+        "--json",
+        "--set",
+        "grid.size_m=16",
+    ]));
+    let doc: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(doc["config"]["grid"]["size_m"], 16.0);
+    assert_eq!(doc["config"]["integration"]["scans"], 3);
+    assert_eq!(doc["report"]["frames"], 3);
+    assert_eq!(doc["model"]["sha256"].as_str().unwrap().len(), 64);
+    let accuracy = doc["report"]["scores"]["accuracy"].as_f64().unwrap();
+    assert!((0.5..=1.0).contains(&accuracy), "{accuracy}");
+    let c = &doc["report"]["confusion"];
+    let cells: u64 = ["tp", "tn", "fp", "fn", "unknown"]
+        .iter()
+        .map(|k| c[k].as_u64().unwrap())
+        .sum();
+    // A 16 m grid holds 40 x 40 cells per frame; most have points and ground truth.
+    assert!(cells > 3000 && cells <= 3 * 1600, "{cells}");
+}
+
+#[test]
+fn run_emits_one_grid_per_frame() {
+    let Some(seq) = sample() else { return };
+    let out = success(travmap(&["run", &seq, "--frames", "3..6", "--json"]));
+    let lines: Vec<Value> = out
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 4, "a header and three frames");
+    assert!(lines[0]["config"].is_object() && lines[0]["model"].is_object());
+    for (line, frame) in lines[1..].iter().zip(3..) {
+        assert_eq!(line["frame"], frame);
+        let cells = line["cells"].as_array().unwrap();
+        assert_eq!(cells.len(), 900);
+        assert!(
+            cells
+                .iter()
+                .all(|c| [-1, 0, 100].contains(&c.as_i64().unwrap()))
+        );
+        let traversable = cells.iter().filter(|c| c.as_i64() == Some(0)).count();
+        assert!(
+            traversable > 200,
+            "frame {frame}: {traversable} traversable cells on a street"
+        );
+        // The LiDAR sees nothing within ~2.5 m of itself; the road 4.8 m ahead is free.
+        assert_eq!(cells[15 * 30 + 15], -1, "frame {frame}");
+        assert_eq!(cells[15 * 30 + 27], 0, "frame {frame}");
+    }
+    let text = success(travmap(&["run", &seq, "--frames", "2", "--ascii"]));
+    assert_eq!(
+        text.lines().filter(|l| l.starts_with("  |")).count(),
+        30,
+        "{text}"
+    );
+}
+
+#[test]
+fn train_writes_a_model_that_eval_uses() {
+    let Some(seq) = sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("m.json");
+    let model = model.to_str().unwrap();
+    let mut args = vec!["train", &seq, "--frames", "0..2", "-o", model, "--json"];
+    args.extend(QUICK);
+    let doc: Value = serde_json::from_str(&success(travmap(&args))).unwrap();
+    assert_eq!(doc["c"], 10.0);
+    assert!(doc["support_vectors"].as_u64().unwrap() > 10);
+    assert!(doc["training"]["samples"].as_u64().unwrap() > 5000);
+    let file: Value = serde_json::from_slice(&std::fs::read(model).unwrap()).unwrap();
+    assert_eq!(file["format"], "travmap-svm");
+    assert_eq!(file["version"], 1);
+    let out = success(travmap(&["eval", &seq, "--model", model, "--frames", "2"]));
+    assert!(
+        out.contains("over 1 frames") && out.contains("m.json"),
+        "{out}"
+    );
+    // No temporary file is left beside the model.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}
+
+#[test]
+fn embedded_model_is_what_the_documented_command_trains() {
+    let Some(seq) = sample() else { return };
+    if seq != "../shared/data/semantickitti-00/sequences/00"
+        && !seq.ends_with("/../shared/data/semantickitti-00/sequences/00")
+    {
+        eprintln!("skipping: unexpected sample path {seq}");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("default.json");
+    // The README's retraining command, with the path as the README gives it.
+    success(travmap(&[
+        "train",
+        "../shared/data/semantickitti-00/sequences/00",
+        "--frames",
+        "0..3",
+        "-o",
+        model.to_str().unwrap(),
+        "-q",
+    ]));
+    let strip_time = |bytes: &[u8]| {
+        let mut v: Value = serde_json::from_slice(bytes).unwrap();
+        v["training"]["seconds"] = Value::Null;
+        v
+    };
+    let shipped = std::fs::read("src/classifier/default_model.json").unwrap();
+    assert!(
+        strip_time(&std::fs::read(&model).unwrap()) == strip_time(&shipped),
+        "src/classifier/default_model.json is stale: retrain it with the README's command"
+    );
+}
+
+#[test]
+fn crossval_reports_held_out_scores() {
+    let Some(seq) = sample() else { return };
+    let mut args = vec!["crossval", &seq, "--json", "--set", "training.folds=3"];
+    args.extend(QUICK);
+    let doc: Value = serde_json::from_str(&success(travmap(&args))).unwrap();
+    let report = &doc["report"];
+    assert_eq!(report["evaluation"]["frames"], 3);
+    assert_eq!(report["folds"].as_array().unwrap().len(), 3);
+    let accuracy = report["evaluation"]["scores"]["accuracy"].as_f64().unwrap();
+    assert!(accuracy > 0.85, "{accuracy}");
+}
+
+#[test]
+fn config_prints_the_effective_settings_and_rejects_unknown_keys() {
+    let doc: Value = serde_json::from_str(&success(travmap(&[
+        "config",
+        "--json",
+        "--set",
+        "grid.size_m=24",
+    ])))
+    .unwrap();
+    assert_eq!(doc["grid"]["size_m"], 24.0);
+    assert_eq!(doc["features"]["curvity_bins"], 160);
+    let toml = success(travmap(&["config"]));
+    assert!(
+        toml.contains("[grid]") && toml.contains("cell_size_m = 0.4"),
+        "{toml}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("c.toml");
+    std::fs::write(
+        &file,
+        toml.replace("curvity_bins = 160", "curvity_bins = 80"),
+    )
+    .unwrap();
+    let doc: Value = serde_json::from_str(&success(travmap(&[
+        "config",
+        "--json",
+        "--config",
+        file.to_str().unwrap(),
+    ])))
+    .unwrap();
+    assert_eq!(doc["features"]["curvity_bins"], 80);
+    let err = clean_failure(travmap(&["config", "--set", "grid.bogus=1"]));
+    assert!(err.contains("no field `bogus`"), "{err}");
+    let err = clean_failure(travmap(&["config", "--set", "grid.size_m=-3"]));
+    assert!(err.contains("grid.size_m must be > 0"), "{err}");
+}
+
+#[test]
+fn a_model_trained_for_other_features_is_refused() {
+    let Some(seq) = sample() else { return };
+    let err = clean_failure(travmap(&[
+        "eval",
+        &seq,
+        "--set",
+        "features.curvity_bins=80",
+    ]));
+    assert!(err.contains("different feature settings"), "{err}");
+}
