@@ -9,6 +9,7 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
+use crate::benchmark::benchmark;
 use crate::classifier::SvmModel;
 use crate::classifier::training::train as train_model;
 use crate::config::Config;
@@ -498,5 +499,84 @@ pub fn print_config(config: &Config, output: Output) -> Result<()> {
     } else {
         print!("{}", toml::to_string(config)?);
     }
+    Ok(())
+}
+
+/// `travmap bench`: the per-stage table and throughput.
+pub fn bench(
+    inputs: &Inputs,
+    config: &Config,
+    model_path: Option<&Path>,
+    repeats: usize,
+    output: Output,
+) -> Result<()> {
+    let (model, model_name) = load_model(model_path)?;
+    model.check_compatible(config)?;
+    let selections = open_inputs(inputs)?;
+    let [selection] = selections.as_slice() else {
+        bail!(
+            "bench takes one sequence directory, got {}",
+            selections.len()
+        );
+    };
+    let report = benchmark(
+        &selection.sequence,
+        &selection.frames,
+        config,
+        &model,
+        repeats,
+    )?;
+    if output.json {
+        let doc = json!({"config": config, "model": model_json(&model, &model_name), "input": selection.describe(), "report": report});
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+        return Ok(());
+    }
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "input: {}", selection.describe())?;
+    writeln!(
+        out,
+        "{} timed frames x {} repeats; n = {} scans of {:.0} points, {} x {} grid of {} m ({:.0} predictable cells, {:.0} points in grid); {model_name}, {} support vectors",
+        report.timed_frames,
+        report.repeats,
+        config.integration.scans,
+        report.mean_points_per_scan,
+        config.grid.cells_per_side(),
+        config.grid.cells_per_side(),
+        config.grid.cell_size_m,
+        report.predictable_cells,
+        report.points_in_grid,
+        report.support_vectors
+    )?;
+    writeln!(
+        out,
+        "{:<34} {:>9} {:>9}",
+        "stage (1 thread, frame by frame)", "median ms", "p95 ms"
+    )?;
+    let t = &report.stages_ms;
+    for (name, spread) in [
+        ("read (disk, not in latency)", t.read),
+        ("integrate", t.integrate),
+        ("grid", t.grid),
+        ("geometric features", t.features),
+        ("classify", t.classify),
+        ("filter", t.filter),
+        ("latency: scan in to filtered grid", t.latency),
+    ] {
+        writeln!(out, "{name:<34} {:>9.3} {:>9.3}", spread.median, spread.p95)?;
+    }
+    writeln!(
+        out,
+        "{:<34} {:>9}",
+        "appearance", "n/a (not implemented yet)"
+    )?;
+    writeln!(out, "{:<34} {:>9}", "write", "n/a (no output writer yet)")?;
+    writeln!(
+        out,
+        "throughput (whole selection, rayon across frames): {:.1} frames/s on 1 thread, {:.1} frames/s on {} threads ({:.2}x)",
+        report.one_thread.frames_per_second,
+        report.all_cores.frames_per_second,
+        report.all_cores.threads,
+        report.speedup
+    )?;
     Ok(())
 }

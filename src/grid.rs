@@ -120,7 +120,7 @@ impl CellPoints {
 }
 
 /// Sorts the points of `scans` that fall inside `layout` into cells.
-pub fn grid_points(scans: &[WorldScan], layout: GridLayout) -> CellPoints {
+pub fn grid_points(scans: &[&WorldScan], layout: GridLayout) -> CellPoints {
     let [min_x, min_y] = layout.min_corner_in_world();
     let cell_count = layout.cell_count();
     let total: usize = scans.iter().map(|s| s.points_in_world.len()).sum();
@@ -220,7 +220,7 @@ mod tests {
             [0.0; 3],
         );
         let b = scan(vec![[0.6, 0.4, 3.0]], [0.5, 0.5, 0.0]);
-        let cells = grid_points(&[a, b], layout);
+        let cells = grid_points(&[&a, &b], layout);
         assert_eq!(cells.points_in_grid.len(), 3);
         let c = layout.cell_of_local(2.5, 2.5).unwrap();
         assert_eq!(cells.point_count(c), 2);

@@ -51,7 +51,7 @@ pub fn scan_to_world(frame: Frame) -> WorldScan {
 
 /// Unit normal (z >= 0) of the plane fitted by least squares to all points of
 /// `scans`: the ground-plane normal that zeta difference projects on (section 4).
-pub fn ground_normal(scans: &[WorldScan]) -> [f64; 3] {
+pub fn ground_normal(scans: &[&WorldScan]) -> [f64; 3] {
     let mut all = Moments::default();
     for scan in scans {
         all.merge(&scan.moments);

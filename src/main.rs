@@ -51,6 +51,17 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
+    Bench {
+        #[command(flatten)]
+        common: Common,
+        /// Model file (default: the model compiled into travmap).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Times each measurement is repeated.
+        #[arg(long, default_value_t = 20)]
+        repeats: usize,
+    },
     /// Print the effective configuration (TOML; JSON with --json).
     Config {
         #[command(flatten)]
@@ -136,6 +147,17 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
         Command::Crossval { common } => {
             commands::crossval(&common.inputs(), &common.config()?, common.output())
         }
+        Command::Bench {
+            common,
+            model,
+            repeats,
+        } => commands::bench(
+            &common.inputs(),
+            &common.config()?,
+            model.as_deref(),
+            repeats,
+            common.output(),
+        ),
         Command::Config { settings, json } => {
             let config = commands::load_config(settings.config.as_deref(), &settings.sets)?;
             commands::print_config(&config, Output { json, quiet: false })

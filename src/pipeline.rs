@@ -6,6 +6,7 @@ use std::collections::VecDeque;
 use std::ops::Range;
 use std::time::Instant;
 
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::classifier::SvmModel;
@@ -111,23 +112,25 @@ impl Pipeline {
 
     /// Runs the method on one frame; `model` None skips classification and filter.
     pub fn process_frame(&mut self, frame: Frame, model: Option<&SvmModel>) -> FrameResult {
-        let (index, stamp_ns) = (frame.index, frame.stamp_ns);
-        let sensor_in_world = [
-            frame.world_from_velodyne[(0, 3)],
-            frame.world_from_velodyne[(1, 3)],
-        ];
-
         // 1. Integration: this scan into the world, joined with the previous n - 1.
-        let mut timings = StageTimings {
-            integrate_ms: self.integrate(frame),
-            ..Default::default()
-        };
-        let window = self.window.make_contiguous();
+        let integrate_ms = self.integrate(frame);
+        let window: Vec<&WorldScan> = self.window.iter().collect();
+        let mut result = self.process_window(&window, model);
+        result.timings.integrate_ms = integrate_ms;
+        result.timings.latency_ms += integrate_ms;
+        result
+    }
+
+    /// Stages 2 to 5 on an integrated window whose last scan is the current frame.
+    /// Needs no state, so frames can run in parallel (see [`process_in_parallel`]).
+    pub fn process_window(&self, window: &[&WorldScan], model: Option<&SvmModel>) -> FrameResult {
+        let current = window[window.len() - 1];
+        let mut timings = StageTimings::default();
 
         // 2. Grid: the in-grid points, sorted by cell, around the sensor.
         let started = Instant::now();
         let layout = GridLayout::centred_on(
-            sensor_in_world,
+            [current.origin_in_world[0], current.origin_in_world[1]],
             self.config.grid.cell_size_m,
             self.config.grid.cells_per_side(),
         );
@@ -150,17 +153,14 @@ impl Pipeline {
             timings.filter_ms = elapsed_ms(started);
             predicted = Some(labels);
         }
-        timings.latency_ms = timings.integrate_ms
-            + timings.grid_ms
-            + timings.features_ms
-            + timings.classify_ms
-            + timings.filter_ms;
+        timings.latency_ms =
+            timings.grid_ms + timings.features_ms + timings.classify_ms + timings.filter_ms;
 
         // Ground truth from the same cloud, outside the latency.
         let ground_truth = self.ground_truth.label(&cells);
         FrameResult {
-            index,
-            stamp_ns,
+            index: current.index,
+            stamp_ns: current.stamp_ns,
             layout,
             point_counts: (0..layout.cell_count())
                 .map(|c| cells.point_count(c) as u32)
@@ -172,6 +172,33 @@ impl Pipeline {
             timings,
         }
     }
+}
+
+/// Runs consecutive `frames` (ascending indices) with rayon: every scan is moved to
+/// the world once, then each frame from `first_scored` on is processed on its own
+/// window. Gives the same results as [`Pipeline::process_frame`] frame by frame.
+pub fn process_in_parallel(
+    pipeline: &Pipeline,
+    frames: Vec<Frame>,
+    first_scored: usize,
+    model: Option<&SvmModel>,
+) -> Vec<FrameResult> {
+    let n = pipeline.config.integration.scans;
+    let scans: Vec<WorldScan> = frames.into_par_iter().map(scan_to_world).collect();
+    (0..scans.len())
+        .into_par_iter()
+        .filter(|&i| scans[i].index >= first_scored)
+        .map(|i| {
+            // Indices ascend, so the window is the suffix of scans[..=i] within n frames.
+            let current = scans[i].index;
+            let start = scans[..=i]
+                .iter()
+                .rposition(|s| s.index + n <= current)
+                .map_or(0, |p| p + 1);
+            let window: Vec<&WorldScan> = scans[start..=i].iter().collect();
+            pipeline.process_window(&window, model)
+        })
+        .collect()
 }
 
 /// Runs the pipeline over the frames of `sequence` in `frames`, reading the n - 1
