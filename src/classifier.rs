@@ -6,6 +6,7 @@
 //! buffer per grid, no allocation per cell. Training lives in [`training`], the
 //! solver in [`smo`].
 
+pub mod kernel;
 pub mod smo;
 pub mod training;
 
@@ -66,6 +67,60 @@ struct ModelFile {
     /// The effective configuration the training cells were made with.
     config: Config,
     training: TrainingSummary,
+    #[serde(default)]
+    reduced_set: Option<ReducedSetFile>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ReducedSetFile {
+    /// Standardised kernel centres, one row each.
+    centres: Vec<Vec<f32>>,
+    weights: Vec<f32>,
+    bias: f32,
+    training_agreement: f64,
+}
+
+/// A smaller expansion `sum_j w_j K(c_j, x) + b` fitted by least squares to the exact
+/// decision function on training cells: prediction costs the centres' count instead
+/// of the support vectors'.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReducedSet {
+    /// Row-major `centres x dimension`, standardised.
+    pub centres: Vec<f32>,
+    pub weights: Vec<f32>,
+    pub bias: f32,
+    /// Share of the fitting cells on which its sign equals the exact model's.
+    pub training_agreement: f64,
+    blocks: kernel::SupportVectorBlocks,
+}
+
+impl ReducedSet {
+    pub fn new(centres: Vec<f32>, weights: Vec<f32>, bias: f32, training_agreement: f64) -> Self {
+        let d = if weights.is_empty() { 1 } else { centres.len() / weights.len() };
+        let blocks = kernel::SupportVectorBlocks::new(&centres, &weights, d);
+        Self {
+            centres,
+            weights,
+            bias,
+            training_agreement,
+            blocks,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.weights.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.weights.is_empty()
+    }
+}
+
+/// Reusable buffers of prediction, one per thread.
+#[derive(Default)]
+pub struct PredictionScratch {
+    standardised: Vec<f32>,
 }
 
 /// A trained RBF SVM, ready to predict.
@@ -80,9 +135,12 @@ pub struct SvmModel {
     pub dual_coefficients: Vec<f32>,
     /// Row-major `support_vector_count x dimension`.
     pub support_vectors: Vec<f32>,
-    support_vector_squared_norms: Vec<f32>,
+    /// The support vectors again, laid out for fast prediction.
+    blocks: kernel::SupportVectorBlocks,
     pub config: Config,
     pub training: TrainingSummary,
+    /// Used by [`SvmModel::decision_value`] when present.
+    pub reduced_set: Option<ReducedSet>,
 }
 
 impl SvmModel {
@@ -99,10 +157,7 @@ impl SvmModel {
         training: TrainingSummary,
     ) -> Self {
         let d = feature_mean.len();
-        let support_vector_squared_norms = support_vectors
-            .chunks_exact(d)
-            .map(|sv| sv.iter().map(|v| v * v).sum())
-            .collect();
+        let blocks = kernel::SupportVectorBlocks::new(&support_vectors, &dual_coefficients, d);
         Self {
             feature_mean,
             feature_inverse_std,
@@ -111,9 +166,10 @@ impl SvmModel {
             rho,
             dual_coefficients,
             support_vectors,
-            support_vector_squared_norms,
+            blocks,
             config,
             training,
+            reduced_set: None,
         }
     }
 
@@ -188,7 +244,23 @@ impl SvmModel {
             return Err(fail("non-finite or non-positive parameters".into()));
         }
         file.config.validate()?;
-        Ok(Self::new(
+        let reduced_set = match file.reduced_set {
+            None => None,
+            Some(r) => {
+                if r.centres.len() != r.weights.len() || r.centres.iter().any(|c| c.len() != d) {
+                    return Err(fail(format!(
+                        "reduced set: {} centres, {} weights, {d} values per centre expected",
+                        r.centres.len(),
+                        r.weights.len()
+                    )));
+                }
+                if r.centres.iter().flatten().chain(&r.weights).any(|v| !v.is_finite()) || !r.bias.is_finite() {
+                    return Err(fail("reduced set: non-finite parameters".into()));
+                }
+                Some(ReducedSet::new(r.centres.concat(), r.weights, r.bias, r.training_agreement))
+            }
+        };
+        let mut model = Self::new(
             file.feature_mean,
             file.feature_std.iter().map(|s| 1.0 / s).collect(),
             file.c,
@@ -198,7 +270,9 @@ impl SvmModel {
             file.support_vectors.concat(),
             file.config,
             file.training,
-        ))
+        );
+        model.reduced_set = reduced_set;
+        Ok(model)
     }
 
     pub fn to_json(&self) -> Vec<u8> {
@@ -220,6 +294,12 @@ impl SvmModel {
                 .collect(),
             config: self.config.clone(),
             training: self.training.clone(),
+            reduced_set: self.reduced_set.as_ref().map(|r| ReducedSetFile {
+                centres: r.centres.chunks_exact(d).map(<[f32]>::to_vec).collect(),
+                weights: r.weights.clone(),
+                bias: r.bias,
+                training_agreement: r.training_agreement,
+            }),
         };
         let mut bytes = serde_json::to_vec(&file).expect("model serialises");
         bytes.push(b'\n');
@@ -259,37 +339,44 @@ impl SvmModel {
         }
     }
 
-    /// Decision value of one raw (unstandardised) feature row; > 0 is traversable.
-    /// `scratch` must hold `dimension()` values.
-    pub fn decision_value(&self, features: &[f32], scratch: &mut [f32]) -> f32 {
-        let mut norm = 0.0f32;
+    pub fn scratch(&self) -> PredictionScratch {
+        PredictionScratch::default()
+    }
+
+    pub(crate) fn standardise<'s>(&self, features: &[f32], scratch: &'s mut PredictionScratch) -> &'s [f32] {
+        scratch.standardised.resize(self.dimension(), 0.0);
         for (((z, &x), &m), &s) in scratch
+            .standardised
             .iter_mut()
             .zip(features)
             .zip(&self.feature_mean)
             .zip(&self.feature_inverse_std)
         {
             *z = (x - m) * s;
-            norm += *z * *z;
         }
-        let d = self.dimension();
+        &scratch.standardised
+    }
+
+    /// Decision value of one raw (unstandardised) feature row; > 0 is traversable.
+    /// Uses the reduced set when the model has one.
+    pub fn decision_value(&self, features: &[f32], scratch: &mut PredictionScratch) -> f32 {
         let gamma = self.gamma as f32;
-        let mut sum = 0.0f32;
-        for ((sv, &sv_norm), &coef) in self
-            .support_vectors
-            .chunks_exact(d)
-            .zip(&self.support_vector_squared_norms)
-            .zip(&self.dual_coefficients)
-        {
-            let dot: f32 = sv.iter().zip(scratch.iter()).map(|(a, b)| a * b).sum();
-            sum += coef * (-gamma * (norm + sv_norm - 2.0 * dot).max(0.0)).exp();
+        let z = self.standardise(features, scratch);
+        match &self.reduced_set {
+            Some(reduced) => reduced.blocks.rbf_sum(z, gamma) + reduced.bias,
+            None => self.blocks.rbf_sum(z, gamma) - self.rho,
         }
-        sum - self.rho
+    }
+
+    /// The decision value over every support vector, reduced set or not.
+    pub fn exact_decision_value(&self, features: &[f32], scratch: &mut PredictionScratch) -> f32 {
+        let z = self.standardise(features, scratch);
+        self.blocks.rbf_sum(z, self.gamma as f32) - self.rho
     }
 
     /// Classifies every predictable cell of a grid; the others stay unknown.
     pub fn classify(&self, grid: &FeatureGrid) -> Vec<CellClass> {
-        let mut scratch = vec![0f32; self.dimension()];
+        let mut scratch = self.scratch();
         grid.predictable
             .iter()
             .enumerate()

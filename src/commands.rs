@@ -65,20 +65,22 @@ pub fn load_config(file: Option<&Path>, assignments: &[String]) -> Result<Config
     Ok(config)
 }
 
-/// A model file, or the embedded default model.
-pub fn load_model(path: Option<&Path>) -> Result<(SvmModel, String)> {
-    match path {
+/// A model file, or the embedded default model, checked against `config`.
+pub fn load_model(path: Option<&Path>, config: &Config) -> Result<(SvmModel, String)> {
+    let (mut model, name) = match path {
         Some(path) => {
             let bytes = std::fs::read(path)
                 .with_context(|| format!("cannot read model {}", path.display()))?;
             let name = path.display().to_string();
-            Ok((SvmModel::from_json(&bytes, &name)?, name))
+            (SvmModel::from_json(&bytes, &name)?, name)
         }
-        None => Ok((
-            SvmModel::embedded_default()?,
-            "embedded default model".into(),
-        )),
+        None => (SvmModel::embedded_default()?, "embedded default model".into()),
+    };
+    model.check_compatible(config)?;
+    if !config.classifier.use_reduced_set {
+        model.reduced_set = None;
     }
+    Ok((model, name))
 }
 
 fn open_inputs(inputs: &Inputs) -> Result<Vec<Selection>> {
@@ -160,8 +162,7 @@ pub fn run(
     ascii: bool,
     output: Output,
 ) -> Result<()> {
-    let (model, model_name) = load_model(model_path)?;
-    model.check_compatible(config)?;
+    let (model, model_name) = load_model(model_path, config)?;
     let selections = open_inputs(inputs)?;
     let bar = output.progress(frame_count(&selections), "predicting");
     let mut stdout = std::io::stdout().lock();
@@ -333,8 +334,7 @@ pub fn eval(
     model_path: Option<&Path>,
     output: Output,
 ) -> Result<()> {
-    let (model, model_name) = load_model(model_path)?;
-    model.check_compatible(config)?;
+    let (model, model_name) = load_model(model_path, config)?;
     let selections = open_inputs(inputs)?;
     let bar = output.progress(frame_count(&selections), "evaluating");
     let mut evaluation = Evaluation::default();
@@ -510,8 +510,7 @@ pub fn bench(
     repeats: usize,
     output: Output,
 ) -> Result<()> {
-    let (model, model_name) = load_model(model_path)?;
-    model.check_compatible(config)?;
+    let (model, model_name) = load_model(model_path, config)?;
     let selections = open_inputs(inputs)?;
     let [selection] = selections.as_slice() else {
         bail!(

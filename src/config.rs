@@ -16,9 +16,20 @@ pub struct Config {
     pub integration: IntegrationConfig,
     pub grid: GridConfig,
     pub features: FeatureConfig,
+    pub classifier: ClassifierConfig,
     pub filter: FilterConfig,
     pub ground_truth: GroundTruthConfig,
     pub training: TrainingConfig,
+}
+
+/// METHOD.md section 6, prediction.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ClassifierConfig {
+    /// Predict with the model's reduced set (a few hundred kernel centres fitted to
+    /// the exact decision function) when it has one; false: all support vectors
+    /// (default true).
+    pub use_reduced_set: bool,
 }
 
 /// METHOD.md section 2.
@@ -101,8 +112,12 @@ pub struct TrainingConfig {
     pub tolerance: f64,
     /// Kernel row cache per solver, MiB (default 200).
     pub cache_mib: usize,
-    /// Seed of the fold assignment and the search subset.
+    /// Seed of the fold assignment, the search subset and the reduced set.
     pub seed: u64,
+    /// Kernel centres of the reduced set fitted after training (default 384); 0: none.
+    pub reduced_set_size: usize,
+    /// Training cells the reduced set is fitted on, at most (default 6000).
+    pub reduced_set_samples: usize,
 }
 
 impl Default for IntegrationConfig {
@@ -127,6 +142,14 @@ impl Default for FeatureConfig {
             subcell_size_m: 0.2,
             curvity_bins: 160,
             unevenness_min_points: 3,
+        }
+    }
+}
+
+impl Default for ClassifierConfig {
+    fn default() -> Self {
+        Self {
+            use_reduced_set: true,
         }
     }
 }
@@ -163,6 +186,8 @@ impl Default for TrainingConfig {
             tolerance: 1e-3,
             cache_mib: 200,
             seed: 0,
+            reduced_set_size: 384,
+            reduced_set_samples: 6000,
         }
     }
 }

@@ -6,7 +6,7 @@ use std::ops::Range;
 
 use serde::Serialize;
 
-use crate::classifier::SvmModel;
+use crate::classifier::{PredictionScratch, SvmModel};
 use crate::classifier::training::{TrainingSet, spatial_folds, train};
 use crate::config::Config;
 use crate::error::{Error, Result};
@@ -247,7 +247,10 @@ pub fn cross_validate(
             t.folds,
             training.len()
         ));
-        let model = train(&pool.subset(&training), config, &|_, _| {})?;
+        let mut model = train(&pool.subset(&training), config, &|_, _| {})?;
+        if !config.classifier.use_reduced_set {
+            model.reduced_set = None;
+        }
         fold_reports.push(FoldReport {
             fold,
             training_cells: training.len(),
@@ -264,7 +267,7 @@ pub fn cross_validate(
         config: config.filter.clone(),
     };
     let mut evaluation = Evaluation::default();
-    let mut scratch = vec![0f32; FEATURE_COUNT];
+    let mut scratch = PredictionScratch::default();
     for mut result in frames {
         let (folds_here, rest) = frame_folds.split_at(result.layout.cell_count());
         frame_folds = rest;

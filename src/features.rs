@@ -119,8 +119,6 @@ impl FeatureExtractor {
         let subcell_m = cell_size_m / per_side as f64;
         scratch.subcells.fill(Moments::default());
 
-        // Moments relative to the cell corner keep the f64 sums well conditioned.
-        let mut moments = Moments::default();
         let mut zeta = (f64::INFINITY, f64::NEG_INFINITY);
         let mut bbox = [
             f64::INFINITY,
@@ -140,7 +138,6 @@ impl FeatureExtractor {
                 p[1] as f64 - cell_min[1],
                 p[2] as f64,
             ];
-            moments.add(q);
             let along = q[0] * ground_normal[0] + q[1] * ground_normal[1] + q[2] * ground_normal[2];
             zeta = (zeta.0.min(along), zeta.1.max(along));
             bbox = [
@@ -149,8 +146,15 @@ impl FeatureExtractor {
                 bbox[2].min(q[1]),
                 bbox[3].max(q[1]),
             ];
-            let sub = |v: f64| ((v / subcell_m).floor().max(0.0) as usize).min(per_side - 1);
+            // `as usize` saturates negatives to 0 and truncates (floor for v >= 0).
+            let sub = |v: f64| ((v / subcell_m) as usize).min(per_side - 1);
             scratch.subcells[sub(q[1]) * per_side + sub(q[0])].add(q);
+        }
+        // The cell's moments are the sum of its sub-cells'. Coordinates relative to
+        // the cell corner keep the f64 sums well conditioned.
+        let mut moments = Moments::default();
+        for sub in &scratch.subcells {
+            moments.merge(sub);
         }
         let centroid = moments.mean();
         let covariance = moments.covariance();
