@@ -97,7 +97,11 @@ pub struct ReducedSet {
 
 impl ReducedSet {
     pub fn new(centres: Vec<f32>, weights: Vec<f32>, bias: f32, training_agreement: f64) -> Self {
-        let d = if weights.is_empty() { 1 } else { centres.len() / weights.len() };
+        let d = if weights.is_empty() {
+            1
+        } else {
+            centres.len() / weights.len()
+        };
         let blocks = kernel::SupportVectorBlocks::new(&centres, &weights, d);
         Self {
             centres,
@@ -254,10 +258,21 @@ impl SvmModel {
                         r.weights.len()
                     )));
                 }
-                if r.centres.iter().flatten().chain(&r.weights).any(|v| !v.is_finite()) || !r.bias.is_finite() {
+                if r.centres
+                    .iter()
+                    .flatten()
+                    .chain(&r.weights)
+                    .any(|v| !v.is_finite())
+                    || !r.bias.is_finite()
+                {
                     return Err(fail("reduced set: non-finite parameters".into()));
                 }
-                Some(ReducedSet::new(r.centres.concat(), r.weights, r.bias, r.training_agreement))
+                Some(ReducedSet::new(
+                    r.centres.concat(),
+                    r.weights,
+                    r.bias,
+                    r.training_agreement,
+                ))
             }
         };
         let mut model = Self::new(
@@ -343,7 +358,11 @@ impl SvmModel {
         PredictionScratch::default()
     }
 
-    pub(crate) fn standardise<'s>(&self, features: &[f32], scratch: &'s mut PredictionScratch) -> &'s [f32] {
+    pub(crate) fn standardise<'s>(
+        &self,
+        features: &[f32],
+        scratch: &'s mut PredictionScratch,
+    ) -> &'s [f32] {
         scratch.standardised.resize(self.dimension(), 0.0);
         for (((z, &x), &m), &s) in scratch
             .standardised

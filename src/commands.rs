@@ -74,7 +74,10 @@ pub fn load_model(path: Option<&Path>, config: &Config) -> Result<(SvmModel, Str
             let name = path.display().to_string();
             (SvmModel::from_json(&bytes, &name)?, name)
         }
-        None => (SvmModel::embedded_default()?, "embedded default model".into()),
+        None => (
+            SvmModel::embedded_default()?,
+            "embedded default model".into(),
+        ),
     };
     model.check_compatible(config)?;
     if !config.classifier.use_reduced_set {

@@ -6,8 +6,8 @@ use std::ops::Range;
 
 use serde::Serialize;
 
-use crate::classifier::{PredictionScratch, SvmModel};
 use crate::classifier::training::{TrainingSet, spatial_folds, train};
+use crate::classifier::{PredictionScratch, SvmModel};
 use crate::config::Config;
 use crate::error::{Error, Result};
 use crate::features::FEATURE_COUNT;

@@ -236,7 +236,7 @@ mod tests {
         let mut unlabelled = scan(vec![[0.6, 0.4, 3.0]], [0.0; 3]);
         unlabelled.labels = None;
         assert!(
-            grid_points(&[labelled, unlabelled], layout)
+            grid_points(&[&labelled, &unlabelled], layout)
                 .labels
                 .is_none()
         );

@@ -222,3 +222,35 @@ fn a_model_trained_for_other_features_is_refused() {
     ]));
     assert!(err.contains("different feature settings"), "{err}");
 }
+
+#[test]
+fn bench_prints_every_stage_and_throughput() {
+    let Some(seq) = sample() else { return };
+    let out = success(travmap(&["bench", &seq, "--repeats", "2"]));
+    for stage in [
+        "read",
+        "integrate",
+        "grid",
+        "geometric features",
+        "classify",
+        "filter",
+        "latency",
+        "appearance",
+        "write",
+        "frames/s",
+    ] {
+        assert!(out.contains(stage), "missing {stage}:\n{out}");
+    }
+    let doc: Value = serde_json::from_str(&success(travmap(&[
+        "bench",
+        &seq,
+        "--repeats",
+        "2",
+        "--json",
+    ])))
+    .unwrap();
+    let report = &doc["report"];
+    assert_eq!(report["timed_frames"], 4);
+    assert!(report["stages_ms"]["latency"]["median"].as_f64().unwrap() > 0.0);
+    assert!(report["one_thread"]["frames_per_second"].as_f64().unwrap() > 0.0);
+}

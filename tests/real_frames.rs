@@ -197,3 +197,30 @@ fn labels_join_the_right_points() {
         assert_eq!(*l, labels[i]);
     }
 }
+
+#[test]
+fn frames_in_parallel_equal_frames_one_by_one() {
+    use travmap::classifier::SvmModel;
+    use travmap::pipeline::{Pipeline, process_in_parallel};
+    let Some(dir) = common::semantickitti_00() else {
+        return;
+    };
+    let sequence = KittiSequence::open(&dir).unwrap();
+    let model = SvmModel::embedded_default().unwrap();
+    let config = travmap::Config::default();
+    let frames: Vec<_> = (0..6).map(|i| sequence.read_frame(i).unwrap()).collect();
+    let mut pipeline = Pipeline::new(&config).unwrap();
+    let one_by_one: Vec<_> = frames
+        .iter()
+        .map(|f| pipeline.process_frame(f.clone(), Some(&model)))
+        .collect();
+    let parallel = process_in_parallel(&Pipeline::new(&config).unwrap(), frames, 0, Some(&model));
+    assert_eq!(parallel.len(), 6);
+    for (a, b) in one_by_one.iter().zip(&parallel) {
+        assert_eq!(a.index, b.index);
+        assert_eq!(a.layout, b.layout);
+        assert_eq!(a.features, b.features);
+        assert_eq!(a.filtered, b.filtered);
+        assert_eq!(a.ground_truth, b.ground_truth);
+    }
+}

@@ -31,7 +31,11 @@ impl SupportVectorBlocks {
             squared_norms: vec![[0.0; LANES]; blocks],
             coefficients: vec![[0.0; LANES]; blocks],
         };
-        for (i, (sv, &c)) in support_vectors.chunks_exact(dimension).zip(coefficients).enumerate() {
+        for (i, (sv, &c)) in support_vectors
+            .chunks_exact(dimension)
+            .zip(coefficients)
+            .enumerate()
+        {
             let (block, lane) = (i / LANES, i % LANES);
             for (k, &v) in sv.iter().enumerate() {
                 out.values[block * dimension + k][lane] = v;
@@ -45,7 +49,8 @@ impl SupportVectorBlocks {
     /// `sum_i c_i exp(-gamma |z - sv_i|^2)` for a standardised row `z`.
     pub fn rbf_sum(&self, z: &[f32], gamma: f32) -> f32 {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
             // SAFETY: the CPU has just been checked to support AVX2 and FMA.
             return unsafe { rbf_sum_avx2_fma(self, z, gamma) };
         }
@@ -89,7 +94,11 @@ fn rbf_sum<const FUSED: bool>(blocks: &SupportVectorBlocks, z: &[f32], gamma: f3
         }
         for l in 0..LANES {
             let distance = (z_norm + norms[l] - 2.0 * dot[l]).max(0.0);
-            total[l] = multiply_add::<FUSED>(coefficients[l], exp_non_positive::<FUSED>(-gamma * distance), total[l]);
+            total[l] = multiply_add::<FUSED>(
+                coefficients[l],
+                exp_non_positive::<FUSED>(-gamma * distance),
+                total[l],
+            );
         }
     }
     total.iter().sum()
@@ -103,10 +112,20 @@ fn exp_non_positive<const FUSED: bool>(x: f32) -> f32 {
     let x = x.max(-87.0);
     let shifted = x * std::f32::consts::LOG2_E + ROUND;
     let n = shifted - ROUND;
-    // ln 2 in two parts, so that r is exact to f32 precision.
-    let r = multiply_add::<FUSED>(n, 2.121_944_4e-4, multiply_add::<FUSED>(n, -0.693_359_375, x));
+    // ln 2 = 355/512 - 2.121944e-4 (Cephes): the first part is exact in f32, so r is too.
+    let r = multiply_add::<FUSED>(
+        n,
+        2.121_944_4e-4,
+        multiply_add::<FUSED>(n, -355.0 / 512.0, x),
+    );
     let mut p = 1.987_569_1e-4;
-    for c in [1.398_199_9e-3, 8.333_452e-3, 4.166_579_6e-2, 0.166_666_65, 0.5] {
+    for c in [
+        1.398_199_9e-3,
+        8.333_452e-3,
+        4.166_579_6e-2,
+        0.166_666_65,
+        0.5,
+    ] {
         p = multiply_add::<FUSED>(p, r, c);
     }
     let e = multiply_add::<FUSED>(p, r * r, r + 1.0);
@@ -148,12 +167,22 @@ mod tests {
             let mut reference = 0.0f64;
             let mut scale = 0.0f64;
             for (sv, &c) in svs.chunks_exact(d).zip(&coefficients) {
-                let dist: f64 = sv.iter().zip(&z).map(|(a, b)| (*a as f64 - *b as f64).powi(2)).sum();
+                let dist: f64 = sv
+                    .iter()
+                    .zip(&z)
+                    .map(|(a, b)| (*a as f64 - *b as f64).powi(2))
+                    .sum();
                 reference += c as f64 * (-gamma * dist).exp();
                 scale += (c as f64).abs();
             }
-            for fast in [blocks.rbf_sum(&z, gamma as f32), blocks.rbf_sum_portable(&z, gamma as f32)] {
-                assert!((fast as f64 - reference).abs() < 1e-5 * scale, "{fast} vs {reference}");
+            for fast in [
+                blocks.rbf_sum(&z, gamma as f32),
+                blocks.rbf_sum_portable(&z, gamma as f32),
+            ] {
+                assert!(
+                    (fast as f64 - reference).abs() < 1e-5 * scale,
+                    "{fast} vs {reference}"
+                );
             }
         }
     }

@@ -274,11 +274,20 @@ pub fn train(
 
 /// Lloyd's k-means on row-major `points`, started from a seeded random subset;
 /// an emptied cluster keeps its previous centre.
-fn k_means(points: &[f32], d: usize, k: usize, iterations: usize, rng: &mut SplitMix64) -> Vec<f32> {
+fn k_means(
+    points: &[f32],
+    d: usize,
+    k: usize,
+    iterations: usize,
+    rng: &mut SplitMix64,
+) -> Vec<f32> {
     let n = points.len() / d;
     let mut start: Vec<usize> = (0..n).collect();
     rng.shuffle(&mut start);
-    let mut centres: Vec<f32> = start[..k].iter().flat_map(|&i| points[i * d..(i + 1) * d].iter().copied()).collect();
+    let mut centres: Vec<f32> = start[..k]
+        .iter()
+        .flat_map(|&i| points[i * d..(i + 1) * d].iter().copied())
+        .collect();
     for _ in 0..iterations {
         let mut sums = vec![0f64; k * d];
         let mut counts = vec![0usize; k];
@@ -287,7 +296,9 @@ fn k_means(points: &[f32], d: usize, k: usize, iterations: usize, rng: &mut Spli
                 .chunks_exact(d)
                 .map(|c| c.iter().zip(p).map(|(a, b)| (a - b) * (a - b)).sum::<f32>())
                 .enumerate()
-                .fold((0, f32::INFINITY), |best, (j, dist)| if dist < best.1 { (j, dist) } else { best })
+                .fold((0, f32::INFINITY), |best, (j, dist)| {
+                    if dist < best.1 { (j, dist) } else { best }
+                })
                 .0;
             counts[nearest] += 1;
             for (s, &v) in sums[nearest * d..(nearest + 1) * d].iter_mut().zip(p) {
@@ -295,7 +306,10 @@ fn k_means(points: &[f32], d: usize, k: usize, iterations: usize, rng: &mut Spli
             }
         }
         for j in (0..k).filter(|&j| counts[j] > 0) {
-            for (c, s) in centres[j * d..(j + 1) * d].iter_mut().zip(&sums[j * d..(j + 1) * d]) {
+            for (c, s) in centres[j * d..(j + 1) * d]
+                .iter_mut()
+                .zip(&sums[j * d..(j + 1) * d])
+            {
                 *c = (s / counts[j] as f64) as f32;
             }
         }
@@ -353,7 +367,11 @@ fn fit_reduced_set(model: &SvmModel, set: &TrainingSet, config: &Config) -> Opti
     }
     let solution = normal.cholesky()?.solve(&right);
     let fitted = &design * &solution;
-    let agreeing = fitted.iter().zip(target.iter()).filter(|(f, e)| (**f > 0.0) == (**e > 0.0)).count();
+    let agreeing = fitted
+        .iter()
+        .zip(target.iter())
+        .filter(|(f, e)| (**f > 0.0) == (**e > 0.0))
+        .count();
     Some(ReducedSet::new(
         centres,
         solution.iter().take(m).map(|&w| w as f32).collect(),
@@ -417,6 +435,79 @@ mod tests {
         let mut scratch = model.scratch();
         assert!(model.decision_value(&[0.1, 0.0], &mut scratch) > 0.0);
         assert!(model.decision_value(&[0.6, 0.0], &mut scratch) < 0.0);
+    }
+
+    #[test]
+    fn reduced_set_follows_the_exact_decision_function() {
+        // A curved boundary that needs many support vectors: x^2 + y^2 < 1.
+        let mut set = TrainingSet {
+            dimension: 2,
+            ..Default::default()
+        };
+        let mut rng = SplitMix64(21);
+        for i in 0..1500 {
+            let (x, y) = (rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0));
+            set.push(
+                &[x as f32, y as f32],
+                x * x + y * y < 1.0,
+                [(i % 40) as f64, (i / 40) as f64],
+            );
+        }
+        let mut config = Config::default();
+        config.training.c_values = vec![10.0];
+        config.training.gamma_values = vec![1.0];
+        config.training.reduced_set_size = 24;
+        let model = train(&set, &config, &|_, _| {}).unwrap();
+        assert!(
+            model.support_vector_count() > 24,
+            "{} support vectors",
+            model.support_vector_count()
+        );
+        let reduced = model.reduced_set.as_ref().expect("a reduced set");
+        assert_eq!(reduced.len(), 24);
+        assert!(
+            reduced.training_agreement > 0.98,
+            "{}",
+            reduced.training_agreement
+        );
+        let mut scratch = model.scratch();
+        let agreeing = set
+            .features
+            .chunks_exact(2)
+            .filter(|row| {
+                (model.decision_value(row, &mut scratch) > 0.0)
+                    == (model.exact_decision_value(row, &mut scratch) > 0.0)
+            })
+            .count();
+        assert!(
+            agreeing as f64 / set.len() as f64 > 0.98,
+            "{agreeing} of {}",
+            set.len()
+        );
+        // The file keeps it.
+        let mut exact = model.clone();
+        exact.reduced_set = None;
+        assert_ne!(exact.to_json(), model.to_json());
+    }
+
+    #[test]
+    fn k_means_finds_separated_clusters() {
+        let points: Vec<f32> = (0..60)
+            .flat_map(|i| {
+                if i % 2 == 0 {
+                    [0.0 + 0.01 * i as f32, 0.0]
+                } else {
+                    [10.0, 10.0 + 0.01 * i as f32]
+                }
+            })
+            .collect();
+        let centres = k_means(&points, 2, 2, 5, &mut SplitMix64(1));
+        let mut xs: Vec<f32> = centres.chunks_exact(2).map(|c| c[0]).collect();
+        xs.sort_by(f32::total_cmp);
+        assert!(
+            (xs[0] - 0.29).abs() < 0.01 && (xs[1] - 10.0).abs() < 1e-4,
+            "{centres:?}"
+        );
     }
 
     #[test]
