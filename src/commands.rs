@@ -19,7 +19,6 @@ use crate::evaluation::{
 };
 use crate::grid::CellClass;
 use crate::metrics::Scores;
-use crate::pipeline::run_sequence;
 use crate::reading::{KittiSequence, parse_frame_range};
 
 /// The sequences a command reads and the frames of each.
@@ -189,59 +188,53 @@ pub fn run(
     }
     let mut evaluation = Evaluation::default();
     for selection in &selections {
-        run_sequence::<anyhow::Error>(
-            &selection.sequence,
-            &selection.frames,
-            config,
-            Some(&model),
-            |result| {
-                bar.inc(1);
-                evaluation.add(&result);
-                let grid = result.filtered.as_deref().unwrap_or(&[]);
-                let count = |class: CellClass| grid.iter().filter(|c| **c == class).count();
-                let (traversable, non_traversable) = (
-                    count(CellClass::Traversable),
-                    count(CellClass::NonTraversable),
-                );
-                if output.json {
-                    let cells: Vec<i8> = grid
-                        .iter()
-                        .map(|c| match c {
-                            CellClass::Unknown => -1,
-                            CellClass::Traversable => 0,
-                            CellClass::NonTraversable => 100,
-                        })
-                        .collect();
-                    let line = json!({
-                        "sequence": selection.sequence.dir(),
-                        "frame": result.index,
-                        "stamp_ns": result.stamp_ns,
-                        "cell_size_m": result.layout.cell_size_m,
-                        "cells_per_side": result.layout.cells_per_side,
-                        "min_corner_in_world": result.layout.min_corner_in_world(),
-                        "cells": cells,
-                        "timings_ms": result.timings,
-                    });
-                    writeln!(stdout, "{line}")?;
-                } else if !output.quiet {
-                    writeln!(
-                        stdout,
-                        "{:>6} {:>10.3} {:>6} {:>11} {:>11} {:>9} {:>10.2}",
-                        result.index,
-                        result.stamp_ns as f64 * 1e-9,
-                        grid.len(),
-                        traversable + non_traversable,
-                        traversable,
-                        non_traversable,
-                        result.timings.latency_ms
-                    )?;
-                    if ascii {
-                        write_ascii_grid(&mut stdout, grid, result.layout.cells_per_side)?;
-                    }
+        selection.run::<anyhow::Error>(config, Some(&model), |result| {
+            bar.inc(1);
+            evaluation.add(&result);
+            let grid = result.filtered.as_deref().unwrap_or(&[]);
+            let count = |class: CellClass| grid.iter().filter(|c| **c == class).count();
+            let (traversable, non_traversable) = (
+                count(CellClass::Traversable),
+                count(CellClass::NonTraversable),
+            );
+            if output.json {
+                let cells: Vec<i8> = grid
+                    .iter()
+                    .map(|c| match c {
+                        CellClass::Unknown => -1,
+                        CellClass::Traversable => 0,
+                        CellClass::NonTraversable => 100,
+                    })
+                    .collect();
+                let line = json!({
+                    "sequence": selection.sequence.dir(),
+                    "frame": result.index,
+                    "stamp_ns": result.stamp_ns,
+                    "cell_size_m": result.layout.cell_size_m,
+                    "cells_per_side": result.layout.cells_per_side,
+                    "min_corner_in_world": result.layout.min_corner_in_world(),
+                    "cells": cells,
+                    "timings_ms": result.timings,
+                });
+                writeln!(stdout, "{line}")?;
+            } else if !output.quiet {
+                writeln!(
+                    stdout,
+                    "{:>6} {:>10.3} {:>6} {:>11} {:>11} {:>9} {:>10.2}",
+                    result.index,
+                    result.stamp_ns as f64 * 1e-9,
+                    grid.len(),
+                    traversable + non_traversable,
+                    traversable,
+                    non_traversable,
+                    result.timings.latency_ms
+                )?;
+                if ascii {
+                    write_ascii_grid(&mut stdout, grid, result.layout.cells_per_side)?;
                 }
-                Ok(())
-            },
-        )?;
+            }
+            Ok(())
+        })?;
     }
     bar.finish_and_clear();
     if !output.json && !output.quiet {
@@ -342,17 +335,11 @@ pub fn eval(
     let bar = output.progress(frame_count(&selections), "evaluating");
     let mut evaluation = Evaluation::default();
     for selection in &selections {
-        run_sequence::<anyhow::Error>(
-            &selection.sequence,
-            &selection.frames,
-            config,
-            Some(&model),
-            |result| {
-                bar.inc(1);
-                evaluation.add(&result);
-                Ok(())
-            },
-        )?;
+        selection.run::<anyhow::Error>(config, Some(&model), |result| {
+            bar.inc(1);
+            evaluation.add(&result);
+            Ok(())
+        })?;
     }
     bar.finish_and_clear();
     let report = evaluation.report();

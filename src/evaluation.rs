@@ -121,6 +121,16 @@ pub struct Selection {
 }
 
 impl Selection {
+    /// Runs the pipeline over the selected frames (see [`run_sequence`]).
+    pub fn run<E: From<Error>>(
+        &self,
+        config: &Config,
+        model: Option<&SvmModel>,
+        on_frame: impl FnMut(FrameResult) -> Result<(), E>,
+    ) -> Result<(), E> {
+        run_sequence(&self.sequence, &self.frames, config, model, on_frame)
+    }
+
     pub fn describe(&self) -> String {
         let last = self.sequence.frames_in(&self.frames).last().copied();
         match last {
@@ -150,23 +160,17 @@ pub fn collect_training_set(
     };
     for selection in selections {
         set.sources.push(selection.describe());
-        run_sequence::<Error>(
-            &selection.sequence,
-            &selection.frames,
-            &training_config,
-            None,
-            |result| {
-                for (cell, traversable) in result.labelled_cells() {
-                    set.push(
-                        result.features.cell(cell),
-                        traversable,
-                        result.layout.cell_centre_in_world(cell),
-                    );
-                }
-                on_frame();
-                Ok(())
-            },
-        )?;
+        selection.run::<Error>(&training_config, None, |result| {
+            for (cell, traversable) in result.labelled_cells() {
+                set.push(
+                    result.features.cell(cell),
+                    traversable,
+                    result.layout.cell_centre_in_world(cell),
+                );
+            }
+            on_frame();
+            Ok(())
+        })?;
     }
     if set.is_empty() {
         return Err(Error::Training(
@@ -209,18 +213,12 @@ pub fn cross_validate(
     let pool = collect_training_set(selections, config, &mut || {})?;
     let mut frames: Vec<FrameResult> = Vec::new();
     for selection in selections {
-        run_sequence::<Error>(
-            &selection.sequence,
-            &selection.frames,
-            config,
-            None,
-            |result| {
-                if result.ground_truth.is_some() {
-                    frames.push(result);
-                }
-                Ok(())
-            },
-        )?;
+        selection.run::<Error>(config, None, |result| {
+            if result.ground_truth.is_some() {
+                frames.push(result);
+            }
+            Ok(())
+        })?;
     }
     // One block -> fold map over the pool's and the evaluation cells' centres.
     let mut centres = pool.centre_in_world.clone();
