@@ -13,6 +13,7 @@ use crate::benchmark::benchmark;
 use crate::classifier::SvmModel;
 use crate::classifier::training::train as train_model;
 use crate::config::Config;
+use crate::conversion::convert_kitti;
 use crate::evaluation::{
     CrossValidationReport, Evaluation, EvaluationReport, Selection, collect_training_set,
     cross_validate,
@@ -20,6 +21,7 @@ use crate::evaluation::{
 use crate::grid::CellClass;
 use crate::metrics::Scores;
 use crate::reading::{KittiSequence, parse_frame_range};
+use crate::writing::Compression;
 
 /// The sequences a command reads and the frames of each.
 pub struct Inputs {
@@ -567,5 +569,53 @@ pub fn bench(
         report.all_cores.threads,
         report.speedup
     )?;
+    Ok(())
+}
+
+/// `travmap convert`: a KITTI sequence to a ROS 2 MCAP.
+pub fn convert(
+    inputs: &Inputs,
+    output_path: &Path,
+    compression: Compression,
+    start_time_s: f64,
+    output: Output,
+) -> Result<()> {
+    if !(start_time_s.is_finite() && start_time_s >= 0.0) {
+        bail!("--start-time must be seconds >= 0, got {start_time_s}");
+    }
+    let selections = open_inputs(inputs)?;
+    let [selection] = selections.as_slice() else {
+        bail!(
+            "convert takes one sequence directory, got {}",
+            selections.len()
+        );
+    };
+    let bar = output.progress(frame_count(&selections), "converting");
+    let started = std::time::Instant::now();
+    let start_ns = (start_time_s * 1e9).round() as u64;
+    let summary = convert_kitti(
+        &selection.sequence,
+        &selection.frames,
+        output_path,
+        compression,
+        start_ns,
+        &|| bar.inc(1),
+    )?;
+    bar.finish_and_clear();
+    let seconds = started.elapsed().as_secs_f64();
+    if output.json {
+        let doc = json!({"output": output_path, "compression": compression, "summary": summary, "seconds": seconds});
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else if !output.quiet {
+        println!(
+            "wrote {} ({} frames, {} with labels, {} images, {:.1} MB, {:.1} frames/s)",
+            output_path.display(),
+            summary.frames,
+            summary.labelled_frames,
+            summary.images,
+            summary.output_bytes as f64 / 1e6,
+            summary.frames as f64 / seconds
+        );
+    }
     Ok(())
 }

@@ -68,6 +68,9 @@ pub enum Error {
     #[error("{path}: {message}")]
     Sequence { path: PathBuf, message: String },
 
+    #[error("{path}: {message}")]
+    Mcap { path: PathBuf, message: String },
+
     #[error("invalid configuration: {0}")]
     Config(String),
 

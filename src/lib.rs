@@ -11,6 +11,7 @@ pub mod benchmark;
 pub mod classifier;
 pub mod commands;
 pub mod config;
+pub mod conversion;
 pub mod error;
 pub mod evaluation;
 pub mod features;
@@ -23,6 +24,8 @@ pub mod metrics;
 pub mod pipeline;
 pub mod random;
 pub mod reading;
+pub mod ros;
+pub mod writing;
 
 pub use config::Config;
 pub use error::{Error, Result};

@@ -3,8 +3,9 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, Parser, Subcommand, ValueEnum};
 use travmap::commands::{self, Inputs, Output};
+use travmap::writing::Compression;
 
 #[derive(Parser)]
 #[command(
@@ -51,6 +52,29 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// Convert a KITTI / SemanticKITTI sequence to a ROS 2 MCAP (clouds, poses on /tf, images).
+    Convert {
+        /// The sequence directory.
+        sequence: PathBuf,
+        /// Where to write the MCAP.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Frames to convert: A..B (B excluded), A..=B, A.. or N. Default: all.
+        #[arg(long)]
+        frames: Option<String>,
+        /// Chunk compression.
+        #[arg(long, value_enum, default_value_t = CompressionArg::Zstd)]
+        compression: CompressionArg,
+        /// Seconds since the Unix epoch added to times.txt for every stamp.
+        #[arg(long, default_value_t = 0.0)]
+        start_time: f64,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+        /// No progress bar, no summary.
+        #[arg(short, long)]
+        quiet: bool,
+    },
     /// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
     Bench {
         #[command(flatten)]
@@ -69,6 +93,13 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum CompressionArg {
+    Zstd,
+    Lz4,
+    None,
 }
 
 #[derive(Args)]
@@ -146,6 +177,32 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
         ),
         Command::Crossval { common } => {
             commands::crossval(&common.inputs(), &common.config()?, common.output())
+        }
+        Command::Convert {
+            sequence,
+            output,
+            frames,
+            compression,
+            start_time,
+            json,
+            quiet,
+        } => {
+            let compression = match compression {
+                CompressionArg::Zstd => Compression::Zstd,
+                CompressionArg::Lz4 => Compression::Lz4,
+                CompressionArg::None => Compression::None,
+            };
+            let inputs = Inputs {
+                sequences: vec![sequence],
+                frames,
+            };
+            commands::convert(
+                &inputs,
+                &output,
+                compression,
+                start_time,
+                Output { json, quiet },
+            )
         }
         Command::Bench {
             common,

@@ -155,6 +155,12 @@ impl KittiSequence {
         })
     }
 
+    /// `image_2/NNNNNN.png` of frame `index`, when it exists.
+    pub fn image_path(&self, index: usize) -> Option<PathBuf> {
+        let path = self.dir.join("image_2").join(format!("{index:06}.png"));
+        path.is_file().then_some(path)
+    }
+
     fn scan_path(&self, index: usize) -> PathBuf {
         self.dir.join("velodyne").join(format!("{index:06}.bin"))
     }

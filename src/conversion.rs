@@ -1,0 +1,334 @@
+//! KITTI / SemanticKITTI sequence -> ROS 2 MCAP (`travmap convert`).
+//!
+//! Per scan: a `sensor_msgs/msg/PointCloud2` (x, y, z, intensity float32, plus a
+//! `label` uint32 when SemanticKITTI labels exist) in frame `velodyne`, and `/tf` with
+//! the scan's pose in the z-up `map` frame (the first scan's velodyne frame,
+//! `inv(Tr) * pose_i * Tr`). Per image: the PNG passed through unchanged as a
+//! `sensor_msgs/msg/CompressedImage` and a `sensor_msgs/msg/CameraInfo` from P2. Once:
+//! `/tf_static` with velodyne -> camera_0 (from Tr) and camera_0 -> camera_2 (the
+//! baseline in P2). Log time = header stamp = start time + times.txt. Frames are read
+//! and encoded in parallel batches, written in order.
+
+use std::ops::Range;
+use std::path::Path;
+
+use nalgebra::{Matrix3, Matrix4, UnitQuaternion};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::reading::{Frame, KittiSequence};
+use crate::ros::{
+    CameraInfo, CompressedImage, Header, PointCloud2, PointField, Quaternion, RegionOfInterest,
+    TfMessage, Time, Transform, TransformStamped, Vector3, datatype, encode,
+};
+use crate::writing::{Compression, McapSink};
+
+pub const CLOUD_TOPIC: &str = "/velodyne_points";
+pub const IMAGE_TOPIC: &str = "/camera_2/image/compressed";
+pub const CAMERA_INFO_TOPIC: &str = "/camera_2/camera_info";
+pub const MAP_FRAME: &str = "map";
+pub const VELODYNE_FRAME: &str = "velodyne";
+pub const CAMERA_0_FRAME: &str = "camera_0";
+pub const CAMERA_2_FRAME: &str = "camera_2";
+
+/// Frames encoded in parallel before they are written in order.
+const BATCH: usize = 16;
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ConversionSummary {
+    pub frames: usize,
+    pub images: usize,
+    pub labelled_frames: usize,
+    pub output_bytes: u64,
+}
+
+/// A rigid transform from a 4x4 matrix (the rotation re-orthonormalised: KITTI poses
+/// carry 6 digits).
+pub fn transform_from_matrix(m: &Matrix4<f64>) -> Transform {
+    let rotation: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let q = UnitQuaternion::from_matrix(&rotation);
+    Transform {
+        translation: Vector3 {
+            x: m[(0, 3)],
+            y: m[(1, 3)],
+            z: m[(2, 3)],
+        },
+        rotation: Quaternion {
+            x: q.i,
+            y: q.j,
+            z: q.k,
+            w: q.w,
+        },
+    }
+}
+
+fn header(stamp_ns: u64, frame_id: &str) -> Header {
+    Header {
+        stamp: Time::from_ns(stamp_ns),
+        frame_id: frame_id.to_string(),
+    }
+}
+
+/// The PointCloud2 of a scan: x, y, z, intensity (float32) and label (uint32).
+pub fn scan_to_cloud(frame: &Frame, stamp_ns: u64) -> PointCloud2 {
+    let field = |name: &str, offset: u32, datatype: u8| PointField {
+        name: name.into(),
+        offset,
+        datatype,
+        count: 1,
+    };
+    let mut fields = vec![
+        field("x", 0, datatype::FLOAT32),
+        field("y", 4, datatype::FLOAT32),
+        field("z", 8, datatype::FLOAT32),
+        field("intensity", 12, datatype::FLOAT32),
+    ];
+    if frame.labels.is_some() {
+        fields.push(field("label", 16, datatype::UINT32));
+    }
+    let point_step = if frame.labels.is_some() { 20 } else { 16 };
+    let n = frame.points_in_velodyne.len();
+    let mut data = Vec::with_capacity(n * point_step);
+    for (i, p) in frame.points_in_velodyne.iter().enumerate() {
+        for v in p {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+        if let Some(labels) = &frame.labels {
+            data.extend_from_slice(&labels[i].to_le_bytes());
+        }
+    }
+    PointCloud2 {
+        header: header(stamp_ns, VELODYNE_FRAME),
+        height: 1,
+        width: n as u32,
+        fields,
+        is_bigendian: false,
+        point_step: point_step as u32,
+        row_step: (n * point_step) as u32,
+        data,
+        is_dense: true,
+    }
+}
+
+/// Width and height from a PNG's IHDR chunk.
+pub fn png_size(bytes: &[u8]) -> Option<(u32, u32)> {
+    const SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', b'\r', b'\n', 0x1a, b'\n'];
+    if bytes.len() < 24 || bytes[..8] != SIGNATURE || &bytes[12..16] != b"IHDR" {
+        return None;
+    }
+    let be =
+        |at: usize| u32::from_be_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]]);
+    Some((be(16), be(20)))
+}
+
+/// CameraInfo of a rectified KITTI camera: K is P's left 3x3, R identity, no distortion.
+pub fn camera_info(
+    projection: &Matrix4<f64>,
+    width: u32,
+    height: u32,
+    stamp_ns: u64,
+) -> CameraInfo {
+    let p = |r: usize, c: usize| projection[(r, c)];
+    CameraInfo {
+        header: header(stamp_ns, CAMERA_2_FRAME),
+        height,
+        width,
+        distortion_model: "plumb_bob".into(),
+        d: vec![0.0; 5],
+        k: [
+            p(0, 0),
+            p(0, 1),
+            p(0, 2),
+            p(1, 0),
+            p(1, 1),
+            p(1, 2),
+            p(2, 0),
+            p(2, 1),
+            p(2, 2),
+        ],
+        r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        p: [
+            p(0, 0),
+            p(0, 1),
+            p(0, 2),
+            p(0, 3),
+            p(1, 0),
+            p(1, 1),
+            p(1, 2),
+            p(1, 3),
+            p(2, 0),
+            p(2, 1),
+            p(2, 2),
+            p(2, 3),
+        ],
+        binning_x: 0,
+        binning_y: 0,
+        roi: RegionOfInterest::default(),
+    }
+}
+
+/// `/tf_static`: velodyne -> camera_0 from Tr, camera_0 -> camera_2 from P2's baseline.
+fn static_transforms(sequence: &KittiSequence, stamp_ns: u64) -> Result<TfMessage> {
+    let calibration = sequence.calibration();
+    let velodyne_from_cam0 = calibration
+        .cam0_from_velodyne
+        .try_inverse()
+        .ok_or_else(|| Error::Parse {
+            path: sequence.dir().join("calib.txt"),
+            line: 0,
+            message: "Tr is not invertible".into(),
+        })?;
+    let mut transforms = vec![TransformStamped {
+        header: header(stamp_ns, VELODYNE_FRAME),
+        child_frame_id: CAMERA_0_FRAME.into(),
+        transform: transform_from_matrix(&velodyne_from_cam0),
+    }];
+    if let Some(p2) = calibration.projections[2] {
+        // P2 = K [I | t]: camera_2 coordinates are camera_0's plus t.
+        let t = [p2[(0, 3)] / p2[(0, 0)], p2[(1, 3)] / p2[(1, 1)], p2[(2, 3)]];
+        transforms.push(TransformStamped {
+            header: header(stamp_ns, CAMERA_0_FRAME),
+            child_frame_id: CAMERA_2_FRAME.into(),
+            transform: Transform {
+                translation: Vector3 {
+                    x: -t[0],
+                    y: -t[1],
+                    z: -t[2],
+                },
+                rotation: Quaternion::default(),
+            },
+        });
+    }
+    Ok(TfMessage { transforms })
+}
+
+/// One frame's messages, CDR-encoded.
+struct EncodedFrame {
+    stamp_ns: u64,
+    cloud: Vec<u8>,
+    tf: Vec<u8>,
+    image: Option<(Vec<u8>, Vec<u8>)>,
+    labelled: bool,
+}
+
+fn encode_frame(sequence: &KittiSequence, index: usize, start_ns: u64) -> Result<EncodedFrame> {
+    let frame = sequence.read_frame(index)?;
+    let stamp_ns = start_ns + frame.stamp_ns;
+    let cloud = scan_to_cloud(&frame, stamp_ns);
+    let tf = TfMessage {
+        transforms: vec![TransformStamped {
+            header: header(stamp_ns, MAP_FRAME),
+            child_frame_id: VELODYNE_FRAME.into(),
+            transform: transform_from_matrix(&frame.world_from_velodyne),
+        }],
+    };
+    let image = match (
+        sequence.image_path(index),
+        sequence.calibration().projections[2],
+    ) {
+        (Some(path), Some(p2)) => {
+            let png = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+            let (width, height) = png_size(&png).ok_or_else(|| Error::Sequence {
+                path: path.clone(),
+                message: "not a PNG image (no PNG signature and IHDR header)".into(),
+            })?;
+            let info = camera_info(&p2, width, height, stamp_ns);
+            let image = CompressedImage {
+                header: header(stamp_ns, CAMERA_2_FRAME),
+                format: "png".into(),
+                data: png,
+            };
+            Some((encode(&image, image.data.len() + 64), encode(&info, 512)))
+        }
+        _ => None,
+    };
+    Ok(EncodedFrame {
+        stamp_ns,
+        cloud: encode(&cloud, cloud.data.len() + 256),
+        tf: encode(&tf, 128),
+        image,
+        labelled: frame.labels.is_some(),
+    })
+}
+
+/// Converts the frames of `sequence` in `frames` into `output`. `on_frame` is called
+/// after each written frame.
+pub fn convert_kitti(
+    sequence: &KittiSequence,
+    frames: &Range<usize>,
+    output: &Path,
+    compression: Compression,
+    start_ns: u64,
+    on_frame: &(dyn Fn() + Sync),
+) -> Result<ConversionSummary> {
+    let indices = sequence.frames_in(frames);
+    let mut sink = McapSink::create(output, compression)?;
+    let mut summary = ConversionSummary {
+        frames: 0,
+        images: 0,
+        labelled_frames: 0,
+        output_bytes: 0,
+    };
+    for (batch_number, batch) in indices.chunks(BATCH).enumerate() {
+        let encoded: Vec<EncodedFrame> = batch
+            .par_iter()
+            .map(|&index| encode_frame(sequence, index, start_ns))
+            .collect::<Result<_>>()?;
+        for frame in encoded {
+            if batch_number == 0 && summary.frames == 0 {
+                sink.write(
+                    "/tf_static",
+                    frame.stamp_ns,
+                    &static_transforms(sequence, frame.stamp_ns)?,
+                )?;
+            }
+            sink.write_encoded::<PointCloud2>(CLOUD_TOPIC, frame.stamp_ns, &frame.cloud)?;
+            sink.write_encoded::<TfMessage>("/tf", frame.stamp_ns, &frame.tf)?;
+            if let Some((image, info)) = &frame.image {
+                sink.write_encoded::<CompressedImage>(IMAGE_TOPIC, frame.stamp_ns, image)?;
+                sink.write_encoded::<CameraInfo>(CAMERA_INFO_TOPIC, frame.stamp_ns, info)?;
+                summary.images += 1;
+            }
+            summary.frames += 1;
+            summary.labelled_frames += frame.labelled as usize;
+            on_frame();
+        }
+    }
+    sink.finish()?;
+    summary.output_bytes = std::fs::metadata(output)
+        .map_err(|e| Error::io(output, e))?
+        .len();
+    Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transform_of_a_rotation_about_z() {
+        let mut m = Matrix4::identity();
+        m[(0, 0)] = 0.0;
+        m[(0, 1)] = -1.0;
+        m[(1, 0)] = 1.0;
+        m[(1, 1)] = 0.0;
+        m[(0, 3)] = 2.0;
+        let t = transform_from_matrix(&m);
+        let half = std::f64::consts::FRAC_1_SQRT_2;
+        assert!((t.rotation.z - half).abs() < 1e-12 && (t.rotation.w - half).abs() < 1e-12);
+        assert_eq!(t.translation.x, 2.0);
+    }
+
+    #[test]
+    fn png_size_reads_ihdr() {
+        let mut png = vec![
+            0x89, b'P', b'N', b'G', b'\r', b'\n', 0x1a, b'\n', 0, 0, 0, 13,
+        ];
+        png.extend_from_slice(b"IHDR");
+        png.extend_from_slice(&1242u32.to_be_bytes());
+        png.extend_from_slice(&375u32.to_be_bytes());
+        assert_eq!(png_size(&png), Some((1242, 375)));
+        assert_eq!(png_size(b"GIF89a.................."), None);
+    }
+}

@@ -1,0 +1,88 @@
+"""Decodes every message of an MCAP written by travmap with two independent Python
+clients, mcap-ros2-support and rosbags, and prints a JSON summary per topic that the
+Rust tests compare with travmap's own values.
+
+Usage: decode_mcap.py FILE.mcap
+"""
+
+import json
+import struct
+import sys
+from pathlib import Path
+
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+
+def cloud_summary(msg):
+    step = msg.point_step
+    data = bytes(msg.data)
+    names = [f.name for f in msg.fields]
+    first = struct.unpack_from("<fff", data, 0) if data else None
+    last = struct.unpack_from("<fff", data, len(data) - step) if data else None
+    return {"points": msg.width * msg.height, "fields": names, "first": first, "last": last}
+
+
+def grid_summary(msg):
+    cells = list(msg.data)
+    return {
+        "width": msg.info.width,
+        "height": msg.info.height,
+        "resolution": msg.info.resolution,
+        "origin": [msg.info.origin.position.x, msg.info.origin.position.y],
+        "cells": cells,
+    }
+
+
+def summarise(topic, schema, msg, stamp_ns):
+    entry = {"topic": topic, "schema": schema, "log_time": stamp_ns,
+             "stamp": msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+             if hasattr(msg, "header") else None}
+    if schema == "sensor_msgs/msg/PointCloud2":
+        entry.update(cloud_summary(msg))
+    elif schema == "nav_msgs/msg/OccupancyGrid":
+        entry.update(grid_summary(msg))
+    elif schema == "tf2_msgs/msg/TFMessage":
+        entry["transforms"] = [[t.header.frame_id, t.child_frame_id, t.transform.translation.x,
+                                t.transform.translation.y, t.transform.translation.z] for t in msg.transforms]
+    elif schema == "travmap_msgs/msg/FrameMetrics":
+        entry["frame_index"] = msg.frame_index
+        entry["accuracy"] = msg.accuracy
+    return entry
+
+
+def with_mcap(path):
+    out = []
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            out.append(summarise(channel.topic, schema.name, decoded, message.log_time))
+    return out
+
+
+def with_rosbags(path):
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    out = []
+    with AnyReader([Path(path)], default_typestore=store) as reader:
+        # travmap's own message type comes with its definition in the file.
+        extra = {}
+        for conn in reader.connections:
+            if conn.msgtype.startswith("travmap_msgs/"):
+                extra.update(get_types_from_msg(conn.msgdef.data, conn.msgtype))
+        if extra:
+            store.register(extra)
+        for conn, timestamp, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            out.append(summarise(conn.topic, conn.msgtype, msg, timestamp))
+    return out
+
+
+def main():
+    path = sys.argv[1]
+    print(json.dumps({"mcap": with_mcap(path), "rosbags": with_rosbags(path)}))
+
+
+if __name__ == "__main__":
+    main()
