@@ -13,7 +13,7 @@ use crate::config::Config;
 use crate::error::{Error, Result};
 use crate::evaluation::{Spread, TimingReport};
 use crate::pipeline::{Pipeline, StageTimings, process_in_parallel};
-use crate::reading::{Frame, KittiSequence};
+use crate::reading::{Frame, Source};
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Throughput {
@@ -50,22 +50,24 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool> {
 
 /// Benchmarks `frames` of `sequence`, each measurement repeated `repeats` times.
 pub fn benchmark(
-    sequence: &KittiSequence,
+    source: &Source,
     frames: &Range<usize>,
     config: &Config,
     model: &SvmModel,
     repeats: usize,
 ) -> Result<BenchmarkReport> {
     let pipeline = Pipeline::new(config)?;
-    let indices = sequence.frames_in(frames);
+    let indices = source.frames_in(frames);
     let first_timed = indices.first().copied().unwrap_or(0) + config.integration.scans - 1;
     let mut read_ms = Vec::new();
     let mut loaded: Vec<Frame> = Vec::new();
-    for &index in &indices {
-        let started = Instant::now();
-        loaded.push(sequence.read_frame(index)?);
+    let mut started = Instant::now();
+    source.for_each_frame::<Error>(frames, |frame| {
         read_ms.push(started.elapsed().as_secs_f64() * 1e3);
-    }
+        loaded.push(frame);
+        started = Instant::now();
+        Ok(())
+    })?;
     let timed_frames = indices.iter().filter(|&&i| i >= first_timed).count();
     if timed_frames == 0 {
         return Err(Error::Config(format!(

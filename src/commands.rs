@@ -20,12 +20,16 @@ use crate::evaluation::{
 };
 use crate::grid::CellClass;
 use crate::metrics::Scores;
-use crate::reading::{KittiSequence, parse_frame_range};
+use crate::reading::mcap_drive::DriveOptions;
+use crate::reading::{Source, parse_frame_range};
 use crate::writing::Compression;
 
-/// The sequences a command reads and the frames of each.
+/// The drives a command reads and the frames of each.
 pub struct Inputs {
+    /// KITTI sequence directories or MCAP files.
     pub sequences: Vec<PathBuf>,
+    /// How to read MCAP drives.
+    pub drive: DriveOptions,
     /// `A..B`, `A..=B`, `A..` or `N`; all frames when None.
     pub frames: Option<String>,
 }
@@ -98,20 +102,23 @@ fn open_inputs(inputs: &Inputs) -> Result<Vec<Selection>> {
     inputs
         .sequences
         .iter()
-        .map(|dir| {
-            let sequence = KittiSequence::open(dir)?;
-            if sequence.frames_in(&frames).is_empty() {
+        .map(|path| {
+            let source = Source::open(path, &inputs.drive)?;
+            if source.frames_in(&frames).is_empty() {
+                let all = source.frames();
+                let has = match (all.first(), all.last()) {
+                    (Some(first), Some(last)) => format!("frames {first}..={last}"),
+                    _ => "no frames".into(),
+                };
                 bail!(
-                    "{}: no scans in frames {}..{} (the sequence has frames {}..={})",
-                    dir.display(),
+                    "{}: no scans in frames {}..{} (the input has {has})",
+                    path.display(),
                     frames.start,
                     frames.end,
-                    sequence.frames()[0],
-                    sequence.frames()[sequence.frames().len() - 1]
                 );
             }
             Ok(Selection {
-                sequence,
+                source,
                 frames: frames.clone(),
             })
         })
@@ -121,7 +128,7 @@ fn open_inputs(inputs: &Inputs) -> Result<Vec<Selection>> {
 fn frame_count(selections: &[Selection]) -> u64 {
     selections
         .iter()
-        .map(|s| s.sequence.frames_in(&s.frames).len() as u64)
+        .map(|s| s.source.frames_in(&s.frames).len() as u64)
         .sum()
 }
 
@@ -209,7 +216,7 @@ pub fn run(
                     })
                     .collect();
                 let line = json!({
-                    "sequence": selection.sequence.dir(),
+                    "input": selection.source.path(),
                     "frame": result.index,
                     "stamp_ns": result.stamp_ns,
                     "cell_size_m": result.layout.cell_size_m,
@@ -511,7 +518,7 @@ pub fn bench(
         );
     };
     let report = benchmark(
-        &selection.sequence,
+        &selection.source,
         &selection.frames,
         config,
         &model,
@@ -584,18 +591,21 @@ pub fn convert(
         bail!("--start-time must be seconds >= 0, got {start_time_s}");
     }
     let selections = open_inputs(inputs)?;
-    let [selection] = selections.as_slice() else {
-        bail!(
-            "convert takes one sequence directory, got {}",
-            selections.len()
-        );
+    let [
+        Selection {
+            source: Source::Kitti(sequence),
+            frames,
+        },
+    ] = selections.as_slice()
+    else {
+        bail!("convert takes one KITTI sequence directory");
     };
     let bar = output.progress(frame_count(&selections), "converting");
     let started = std::time::Instant::now();
     let start_ns = (start_time_s * 1e9).round() as u64;
     let summary = convert_kitti(
-        &selection.sequence,
-        &selection.frames,
+        sequence,
+        frames,
         output_path,
         compression,
         start_ns,

@@ -12,11 +12,12 @@
 use std::ops::Range;
 use std::path::Path;
 
-use nalgebra::{Matrix3, Matrix4, UnitQuaternion};
+use nalgebra::Matrix4;
 use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
+use crate::geometry::rigid;
 use crate::reading::{Frame, KittiSequence};
 use crate::ros::{
     CameraInfo, CompressedImage, Header, PointCloud2, PointField, Quaternion, RegionOfInterest,
@@ -43,16 +44,15 @@ pub struct ConversionSummary {
     pub output_bytes: u64,
 }
 
-/// A rigid transform from a 4x4 matrix (the rotation re-orthonormalised: KITTI poses
-/// carry 6 digits).
+/// A rigid transform from a 4x4 matrix (see [`rigid`]).
 pub fn transform_from_matrix(m: &Matrix4<f64>) -> Transform {
-    let rotation: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
-    let q = UnitQuaternion::from_matrix(&rotation);
+    let pose = rigid(m);
+    let (t, q) = (pose.translation.vector, pose.rotation);
     Transform {
         translation: Vector3 {
-            x: m[(0, 3)],
-            y: m[(1, 3)],
-            z: m[(2, 3)],
+            x: t.x,
+            y: t.y,
+            z: t.z,
         },
         rotation: Quaternion {
             x: q.i,

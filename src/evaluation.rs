@@ -15,7 +15,7 @@ use crate::filter::OutlierFilter;
 use crate::grid::CellClass;
 use crate::metrics::{Confusion, Scores};
 use crate::pipeline::{FrameResult, StageTimings, run_sequence};
-use crate::reading::KittiSequence;
+use crate::reading::Source;
 
 /// Median and 95th percentile of a sample.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
@@ -116,7 +116,7 @@ impl Evaluation {
 
 /// A sequence and the frames of it to use.
 pub struct Selection {
-    pub sequence: KittiSequence,
+    pub source: Source,
     pub frames: Range<usize>,
 }
 
@@ -128,19 +128,19 @@ impl Selection {
         model: Option<&SvmModel>,
         on_frame: impl FnMut(FrameResult) -> Result<(), E>,
     ) -> Result<(), E> {
-        run_sequence(&self.sequence, &self.frames, config, model, on_frame)
+        run_sequence(&self.source, &self.frames, config, model, on_frame)
     }
 
     pub fn describe(&self) -> String {
-        let last = self.sequence.frames_in(&self.frames).last().copied();
+        let last = self.source.frames_in(&self.frames).last().copied();
         match last {
             Some(last) => format!(
                 "{} frames {}..={}",
-                self.sequence.dir().display(),
+                self.source.path().display(),
                 self.frames.start,
                 last
             ),
-            None => format!("{} (no frames in range)", self.sequence.dir().display()),
+            None => format!("{} (no frames in range)", self.source.path().display()),
         }
     }
 }

@@ -5,6 +5,17 @@
 //! general iterative solver on the per-cell hot path; it is checked against
 //! nalgebra's `symmetric_eigen` on seeded random matrices below.
 
+/// The rigid part of a 4x4 pose: its rotation re-orthonormalised (KITTI poses carry
+/// six digits) and its translation. Every pose travmap uses goes through this, from
+/// KITTI files and from MCAP `/tf` alike, so both give bit-identical matrices.
+pub fn rigid(m: &nalgebra::Matrix4<f64>) -> nalgebra::Isometry3<f64> {
+    let rotation: nalgebra::Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
+    nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]),
+        nalgebra::UnitQuaternion::from_matrix(&rotation),
+    )
+}
+
 /// Zeroth, first and second moments of a point set, accumulated in f64.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Moments {

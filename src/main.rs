@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use travmap::commands::{self, Inputs, Output};
+use travmap::reading::mcap_drive::DriveOptions;
 use travmap::writing::Compression;
 
 #[derive(Parser)]
@@ -114,9 +115,17 @@ struct Settings {
 
 #[derive(Args)]
 struct Common {
-    /// KITTI odometry / SemanticKITTI sequence directories (holding velodyne/, calib.txt, poses.txt, times.txt).
+    /// KITTI odometry / SemanticKITTI sequence directories (holding velodyne/, calib.txt,
+    /// poses.txt, times.txt) or ROS 2 MCAP drives.
     #[arg(required = true)]
     sequences: Vec<PathBuf>,
+    /// MCAP input: the PointCloud2 topic (needed when there are several).
+    #[arg(long)]
+    cloud_topic: Option<String>,
+    /// MCAP input: the world frame poses are taken in (default: the root of the
+    /// transform tree above the clouds' frame).
+    #[arg(long)]
+    world_frame: Option<String>,
     /// Frames to use: A..B (B excluded), A..=B, A.. or N. Default: all.
     #[arg(long)]
     frames: Option<String>,
@@ -134,6 +143,10 @@ impl Common {
     fn inputs(&self) -> Inputs {
         Inputs {
             sequences: self.sequences.clone(),
+            drive: DriveOptions {
+                cloud_topic: self.cloud_topic.clone(),
+                world_frame: self.world_frame.clone(),
+            },
             frames: self.frames.clone(),
         }
     }
@@ -194,6 +207,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
             };
             let inputs = Inputs {
                 sequences: vec![sequence],
+                drive: DriveOptions::default(),
                 frames,
             };
             commands::convert(

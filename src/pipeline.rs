@@ -17,7 +17,7 @@ use crate::filter::OutlierFilter;
 use crate::grid::{CellClass, GridLayout, grid_points};
 use crate::ground_truth::GroundTruth;
 use crate::integration::{WorldScan, ground_normal, scan_to_world};
-use crate::reading::{Frame, KittiSequence};
+use crate::reading::{Frame, Source};
 
 /// Wall time of each stage for one frame, milliseconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
@@ -201,11 +201,11 @@ pub fn process_in_parallel(
         .collect()
 }
 
-/// Runs the pipeline over the frames of `sequence` in `frames`, reading the n - 1
+/// Runs the pipeline over the frames of `source` in `frames`, reading the n - 1
 /// frames before the first one to fill the window, and hands each result to `on_frame`.
 /// `on_frame` may return its own error type (the binary's, say).
 pub fn run_sequence<E: From<Error>>(
-    sequence: &KittiSequence,
+    source: &Source,
     frames: &Range<usize>,
     config: &Config,
     model: Option<&SvmModel>,
@@ -213,17 +213,18 @@ pub fn run_sequence<E: From<Error>>(
 ) -> Result<(), E> {
     let mut pipeline = Pipeline::new(config)?;
     let warm_up_start = frames.start.saturating_sub(config.integration.scans - 1);
-    for index in sequence.frames_in(&(warm_up_start..frames.end)) {
-        let started = Instant::now();
-        let frame = sequence.read_frame(index)?;
-        let read_ms = elapsed_ms(started);
-        if index < frames.start {
+    // Reading time: from the end of one frame's work to the arrival of the next frame.
+    let mut read_started = Instant::now();
+    source.for_each_frame(&(warm_up_start..frames.end), |frame| {
+        let read_ms = elapsed_ms(read_started);
+        if frame.index < frames.start {
             pipeline.integrate(frame);
-            continue;
+        } else {
+            let mut result = pipeline.process_frame(frame, model);
+            result.timings.read_ms = read_ms;
+            on_frame(result)?;
         }
-        let mut result = pipeline.process_frame(frame, model);
-        result.timings.read_ms = read_ms;
-        on_frame(result)?;
-    }
-    Ok(())
+        read_started = Instant::now();
+        Ok(())
+    })
 }

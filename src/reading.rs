@@ -6,12 +6,15 @@
 //! labels, its stamp and `world_from_velodyne`, where `world` is the first scan's
 //! z-up velodyne frame. Every malformed input is an [`Error`] naming the file.
 
+pub mod mcap_drive;
+
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Matrix4;
 
 use crate::error::{Error, Result};
+use crate::geometry::rigid;
 
 /// One LiDAR scan with everything the method needs about it.
 #[derive(Clone, Debug)]
@@ -118,7 +121,7 @@ impl KittiSequence {
             line: 0,
             message: "Tr is not invertible".into(),
         })?;
-        Ok(velodyne_from_cam0 * pose * tr)
+        Ok(rigid(&(velodyne_from_cam0 * pose * tr)).to_homogeneous())
     }
 
     pub fn stamp_ns(&self, index: usize) -> Result<u64> {
@@ -167,6 +170,62 @@ impl KittiSequence {
 
     fn label_path(&self, index: usize) -> PathBuf {
         self.dir.join("labels").join(format!("{index:06}.label"))
+    }
+}
+
+/// A drive to read: a KITTI sequence directory or an MCAP file.
+pub enum Source {
+    Kitti(Box<KittiSequence>),
+    Mcap(mcap_drive::McapDrive),
+}
+
+impl Source {
+    /// A directory is a KITTI sequence, a file an MCAP drive.
+    pub fn open(path: &Path, options: &mcap_drive::DriveOptions) -> Result<Self> {
+        if path.is_file() {
+            Ok(Source::Mcap(mcap_drive::McapDrive::open(path, options)?))
+        } else {
+            Ok(Source::Kitti(Box::new(KittiSequence::open(path)?)))
+        }
+    }
+
+    pub fn path(&self) -> &Path {
+        match self {
+            Source::Kitti(s) => s.dir(),
+            Source::Mcap(d) => d.path(),
+        }
+    }
+
+    /// Frame numbers in `range`, ascending.
+    pub fn frames_in(&self, range: &Range<usize>) -> Vec<usize> {
+        match self {
+            Source::Kitti(s) => s.frames_in(range),
+            Source::Mcap(d) => {
+                (range.start.min(d.frame_count())..range.end.min(d.frame_count())).collect()
+            }
+        }
+    }
+
+    /// All frame numbers, ascending.
+    pub fn frames(&self) -> Vec<usize> {
+        self.frames_in(&(0..usize::MAX))
+    }
+
+    /// Calls `on_frame` with every frame in `range`, in order.
+    pub fn for_each_frame<E: From<Error>>(
+        &self,
+        range: &Range<usize>,
+        mut on_frame: impl FnMut(Frame) -> Result<(), E>,
+    ) -> Result<(), E> {
+        match self {
+            Source::Kitti(sequence) => {
+                for index in sequence.frames_in(range) {
+                    on_frame(sequence.read_frame(index)?)?;
+                }
+                Ok(())
+            }
+            Source::Mcap(drive) => drive.for_each_frame(range, on_frame),
+        }
     }
 }
 

@@ -1,0 +1,442 @@
+//! Reading a recorded ROS 2 drive from MCAP: the clouds of one PointCloud2 topic,
+//! each with its pose in the world frame from `/tf` + `/tf_static` (interpolated at
+//! the cloud's stamp) or from a `nav_msgs/msg/Odometry` topic.
+//!
+//! The file is memory-mapped and streamed: one pass at open collects the topics, the
+//! cloud stamps and every transform; [`McapDrive::for_each_frame`] streams again and
+//! decodes only the clouds asked for. Any PointCloud2 layout is accepted: fields at any
+//! offset and order, float32 or float64 coordinates, extra fields, big-endian data,
+//! organised clouds; points with a non-finite coordinate are dropped.
+
+use std::collections::{BTreeMap, HashMap};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Isometry3, Matrix4, Quaternion as NQuaternion, Translation3, UnitQuaternion};
+use serde::Deserialize;
+
+use super::Frame;
+use crate::error::{Error, Result};
+use crate::ros::{Header, Odometry, PointCloud2, TfMessage, Transform, datatype, decode};
+
+const POINT_CLOUD: &str = "sensor_msgs/msg/PointCloud2";
+const TF_MESSAGE: &str = "tf2_msgs/msg/TFMessage";
+const ODOMETRY: &str = "nav_msgs/msg/Odometry";
+
+/// A transform sample is used up to this far past either end of its edge's record.
+const TF_EXTRAPOLATION_NS: u64 = 100_000_000;
+
+/// What to read from the drive; everything found by itself when None.
+#[derive(Clone, Debug, Default)]
+pub struct DriveOptions {
+    pub cloud_topic: Option<String>,
+    pub world_frame: Option<String>,
+}
+
+/// Parent and transform samples of one frame in the transform tree.
+#[derive(Clone, Debug, Default)]
+struct Edge {
+    parent: String,
+    /// (stamp, parent_from_child), sorted by stamp; one sample for static edges.
+    samples: Vec<(u64, Isometry3<f64>)>,
+    is_static: bool,
+}
+
+/// An opened MCAP drive.
+pub struct McapDrive {
+    path: PathBuf,
+    map: memmap2::Mmap,
+    cloud_topic: String,
+    cloud_frame: String,
+    world_frame: String,
+    stamps_ns: Vec<u64>,
+    edges: HashMap<String, Edge>,
+}
+
+fn isometry(t: &Transform) -> Isometry3<f64> {
+    let q = NQuaternion::new(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z);
+    // Unit quaternions as written (travmap's own) are used as they are, so that a
+    // converted KITTI pose comes back bit-identical.
+    let rotation = if (q.norm() - 1.0).abs() < 1e-12 {
+        UnitQuaternion::new_unchecked(q)
+    } else {
+        UnitQuaternion::new_normalize(q)
+    };
+    Isometry3::from_parts(
+        Translation3::new(t.translation.x, t.translation.y, t.translation.z),
+        rotation,
+    )
+}
+
+/// Only the header of a message, decoded without the rest.
+#[derive(Deserialize)]
+struct HeaderOnly {
+    header: Header,
+}
+
+impl McapDrive {
+    pub fn open(path: &Path, options: &DriveOptions) -> Result<Self> {
+        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        // SAFETY: the file is opened read-only and not modified while mapped by travmap;
+        // another process truncating it under us is outside what any reader can guard.
+        let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
+        let fail = |message: String| Error::Mcap {
+            path: path.to_path_buf(),
+            message,
+        };
+        let mut topics: BTreeMap<String, String> = BTreeMap::new();
+        let mut cloud_stamps: HashMap<String, (String, Vec<u64>)> = HashMap::new();
+        let mut edges: HashMap<String, Edge> = HashMap::new();
+        let stream = mcap::MessageStream::new(&map)
+            .map_err(|e| fail(format!("not a readable MCAP file: {e}")))?;
+        for (ordinal, message) in stream.enumerate() {
+            let message = message.map_err(|e| fail(format!("message {ordinal}: {e}")))?;
+            let channel = &message.channel;
+            let schema = channel
+                .schema
+                .as_ref()
+                .map(|s| s.name.clone())
+                .unwrap_or_default();
+            topics
+                .entry(channel.topic.clone())
+                .or_insert_with(|| schema.clone());
+            let decode_failure = |e: String| {
+                fail(format!(
+                    "channel {} ({schema}), message at log time {} ns: {e}",
+                    channel.topic, message.log_time
+                ))
+            };
+            let known = matches!(schema.as_str(), POINT_CLOUD | TF_MESSAGE | ODOMETRY);
+            if known && channel.message_encoding != "cdr" {
+                return Err(fail(format!(
+                    "channel {} ({schema}) has message encoding `{}`; travmap reads `cdr` (ROS 2)",
+                    channel.topic, channel.message_encoding
+                )));
+            }
+            match schema.as_str() {
+                POINT_CLOUD => {
+                    let header: HeaderOnly = decode(&message.data).map_err(decode_failure)?;
+                    let stamp = match header.header.stamp.to_ns() {
+                        0 => message.log_time,
+                        ns => ns,
+                    };
+                    let entry = cloud_stamps
+                        .entry(channel.topic.clone())
+                        .or_insert_with(|| (header.header.frame_id.clone(), Vec::new()));
+                    entry.1.push(stamp);
+                }
+                TF_MESSAGE => {
+                    let tf: TfMessage = decode(&message.data).map_err(decode_failure)?;
+                    let is_static = channel.topic == "/tf_static";
+                    for t in tf.transforms {
+                        let edge = edges.entry(t.child_frame_id.clone()).or_default();
+                        edge.parent = t.header.frame_id.clone();
+                        edge.is_static = is_static;
+                        edge.samples
+                            .push((t.header.stamp.to_ns(), isometry(&t.transform)));
+                    }
+                }
+                ODOMETRY => {
+                    let odometry: Odometry = decode(&message.data).map_err(decode_failure)?;
+                    let edge = edges.entry(odometry.child_frame_id.clone()).or_default();
+                    edge.parent = odometry.header.frame_id.clone();
+                    let pose = odometry.pose.pose;
+                    let transform = Transform {
+                        translation: pose.position,
+                        rotation: pose.orientation,
+                    };
+                    edge.samples
+                        .push((odometry.header.stamp.to_ns(), isometry(&transform)));
+                }
+                // Other channels are not the method's input.
+                _ => {}
+            }
+        }
+        for edge in edges.values_mut() {
+            edge.samples.sort_by_key(|s| s.0);
+        }
+        let list_clouds = || {
+            let clouds: Vec<&str> = topics
+                .iter()
+                .filter(|(_, s)| *s == POINT_CLOUD)
+                .map(|(t, _)| t.as_str())
+                .collect();
+            let all: Vec<String> = topics.iter().map(|(t, s)| format!("{t} ({s})")).collect();
+            format!(
+                "PointCloud2 topics: [{}]; all topics: [{}]",
+                clouds.join(", "),
+                all.join(", ")
+            )
+        };
+        let cloud_topic = match &options.cloud_topic {
+            Some(topic) if cloud_stamps.contains_key(topic) => topic.clone(),
+            Some(topic) => {
+                return Err(fail(format!(
+                    "no PointCloud2 messages on topic {topic}; {}",
+                    list_clouds()
+                )));
+            }
+            None => match cloud_stamps.keys().collect::<Vec<_>>().as_slice() {
+                [only] => (*only).clone(),
+                [] => return Err(fail(format!("no PointCloud2 topic; {}", list_clouds()))),
+                _ => {
+                    return Err(fail(format!(
+                        "several PointCloud2 topics, choose one with --cloud-topic; {}",
+                        list_clouds()
+                    )));
+                }
+            },
+        };
+        let (cloud_frame, stamps_ns) = cloud_stamps.remove(&cloud_topic).unwrap_or_default();
+        // The world is the root of the tree above the cloud's frame, unless named.
+        let world_frame = match &options.world_frame {
+            Some(frame) => frame.clone(),
+            None => {
+                let mut frame = cloud_frame.clone();
+                let mut hops = 0;
+                while let Some(edge) = edges.get(&frame) {
+                    frame = edge.parent.clone();
+                    hops += 1;
+                    if hops > 64 {
+                        return Err(fail(format!(
+                            "the transform tree above {cloud_frame} has a cycle"
+                        )));
+                    }
+                }
+                if frame == cloud_frame {
+                    return Err(fail(format!(
+                        "no pose for the clouds' frame `{cloud_frame}`: travmap needs /tf (and /tf_static) or an Odometry topic linking it to a world frame"
+                    )));
+                }
+                frame
+            }
+        };
+        Ok(Self {
+            path: path.to_path_buf(),
+            map,
+            cloud_topic,
+            cloud_frame,
+            world_frame,
+            stamps_ns,
+            edges,
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn cloud_topic(&self) -> &str {
+        &self.cloud_topic
+    }
+
+    pub fn world_frame(&self) -> &str {
+        &self.world_frame
+    }
+
+    /// Frame numbers: the clouds' order on their topic.
+    pub fn frame_count(&self) -> usize {
+        self.stamps_ns.len()
+    }
+
+    /// `parent_from_child` of one edge at `stamp_ns`: the sample at that stamp, or
+    /// interpolated between the two around it (linear, slerp).
+    fn edge_at(&self, child: &str, edge: &Edge, stamp_ns: u64) -> Result<Isometry3<f64>> {
+        let samples = &edge.samples;
+        if (edge.is_static || samples.len() == 1)
+            && let Some((t, pose)) = samples.first()
+            && (edge.is_static || t.abs_diff(stamp_ns) <= TF_EXTRAPOLATION_NS)
+        {
+            return Ok(*pose);
+        }
+        let after = samples.partition_point(|s| s.0 < stamp_ns);
+        if let Some(&(t, pose)) = samples.get(after)
+            && t == stamp_ns
+        {
+            return Ok(pose);
+        }
+        match (after.checked_sub(1).map(|i| samples[i]), samples.get(after)) {
+            (Some((t0, p0)), Some(&(t1, p1))) => {
+                let s = (stamp_ns - t0) as f64 / (t1 - t0) as f64;
+                Ok(p0.lerp_slerp(&p1, s))
+            }
+            (Some((t0, p0)), None) if stamp_ns - t0 <= TF_EXTRAPOLATION_NS => Ok(p0),
+            (None, Some(&(t1, p1))) if t1 - stamp_ns <= TF_EXTRAPOLATION_NS => Ok(p1),
+            _ => Err(Error::Mcap {
+                path: self.path.clone(),
+                message: format!(
+                    "no transform {} -> {child} near {stamp_ns} ns (recorded {}..{} ns)",
+                    edge.parent,
+                    samples.first().map_or(0, |s| s.0),
+                    samples.last().map_or(0, |s| s.0)
+                ),
+            }),
+        }
+    }
+
+    /// `world_from_cloud` at `stamp_ns`, composed up the transform tree.
+    pub fn world_from_cloud(&self, stamp_ns: u64) -> Result<Matrix4<f64>> {
+        let mut frame = self.cloud_frame.as_str();
+        let mut pose = Isometry3::identity();
+        while frame != self.world_frame {
+            let edge = self.edges.get(frame).ok_or_else(|| Error::Mcap {
+                path: self.path.clone(),
+                message: format!(
+                    "no transform from `{}` up to the world frame `{}`",
+                    self.cloud_frame, self.world_frame
+                ),
+            })?;
+            pose = self.edge_at(frame, edge, stamp_ns)? * pose;
+            frame = &edge.parent;
+        }
+        Ok(pose.to_homogeneous())
+    }
+
+    /// Streams the file once and calls `on_frame` with every cloud whose frame number
+    /// is in `frames`, in order.
+    pub fn for_each_frame<E: From<Error>>(
+        &self,
+        frames: &Range<usize>,
+        mut on_frame: impl FnMut(Frame) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let fail = |message: String| Error::Mcap {
+            path: self.path.clone(),
+            message,
+        };
+        let stream = mcap::MessageStream::new(&self.map).map_err(|e| fail(e.to_string()))?;
+        let mut index = 0usize;
+        for message in stream {
+            let message = message.map_err(|e| fail(e.to_string()))?;
+            if message.channel.topic != self.cloud_topic {
+                continue;
+            }
+            let current = index;
+            index += 1;
+            if current < frames.start {
+                continue;
+            }
+            if current >= frames.end {
+                break;
+            }
+            let cloud: PointCloud2 = decode(&message.data)
+                .map_err(|e| fail(format!("{} cloud {current}: {e}", self.cloud_topic)))?;
+            let stamp_ns = self.stamps_ns[current];
+            let cloud = cloud_points(&cloud)
+                .map_err(|e| fail(format!("{} cloud {current}: {e}", self.cloud_topic)))?;
+            on_frame(Frame {
+                index: current,
+                stamp_ns,
+                world_from_velodyne: self.world_from_cloud(stamp_ns)?,
+                points_in_velodyne: cloud.points,
+                labels: cloud.labels,
+            })?;
+        }
+        Ok(())
+    }
+}
+
+/// Reads one numeric value of a field as f64.
+fn read_value(bytes: &[u8], datatype_id: u8, big_endian: bool) -> f64 {
+    macro_rules! get {
+        ($t:ty, $n:literal) => {{
+            let mut raw = [0u8; $n];
+            raw.copy_from_slice(&bytes[..$n]);
+            if big_endian {
+                <$t>::from_be_bytes(raw) as f64
+            } else {
+                <$t>::from_le_bytes(raw) as f64
+            }
+        }};
+    }
+    match datatype_id {
+        datatype::INT8 => bytes[0] as i8 as f64,
+        datatype::UINT8 => bytes[0] as f64,
+        datatype::INT16 => get!(i16, 2),
+        datatype::UINT16 => get!(u16, 2),
+        datatype::INT32 => get!(i32, 4),
+        datatype::UINT32 => get!(u32, 4),
+        datatype::FLOAT32 => get!(f32, 4),
+        _ => get!(f64, 8),
+    }
+}
+
+/// The points of a cloud as the method reads them.
+pub struct CloudPoints {
+    /// x, y, z, intensity (0 without an intensity field).
+    pub points: Vec<[f32; 4]>,
+    /// The `label` field, when present.
+    pub labels: Option<Vec<u32>>,
+}
+
+/// Reads x, y, z, intensity and label; points with a non-finite coordinate are dropped.
+pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
+    let field = |names: &[&str]| {
+        cloud
+            .fields
+            .iter()
+            .find(|f| names.contains(&f.name.as_str()))
+    };
+    let checked = |name: &str, f: &crate::ros::PointField| -> Result<(usize, u8), String> {
+        let size = datatype::size(f.datatype)
+            .ok_or_else(|| format!("field `{name}` has unknown datatype {}", f.datatype))?;
+        if f.offset as usize + size > cloud.point_step as usize {
+            return Err(format!(
+                "field `{name}` (offset {}, {size} bytes) lies outside point_step {}",
+                f.offset, cloud.point_step
+            ));
+        }
+        Ok((f.offset as usize, f.datatype))
+    };
+    let mut xyz = Vec::new();
+    for name in ["x", "y", "z"] {
+        let f = field(&[name]).ok_or_else(|| {
+            format!(
+                "no `{name}` field (fields: {:?})",
+                cloud.fields.iter().map(|f| &f.name).collect::<Vec<_>>()
+            )
+        })?;
+        xyz.push(checked(name, f)?);
+    }
+    let intensity = field(&["intensity", "remission", "i"])
+        .map(|f| checked("intensity", f))
+        .transpose()?;
+    let label = field(&["label"]).map(|f| checked("label", f)).transpose()?;
+    let (width, height) = (cloud.width as usize, cloud.height as usize);
+    let (step, row_step) = (cloud.point_step as usize, cloud.row_step as usize);
+    let needed = if height == 0 || width == 0 {
+        0
+    } else {
+        (height - 1) * row_step + width * step
+    };
+    if row_step < width * step || cloud.data.len() < needed {
+        return Err(format!(
+            "data holds {} bytes; width {width} x height {height} with point_step {step} and row_step {row_step} need {needed}",
+            cloud.data.len()
+        ));
+    }
+    let mut points = Vec::with_capacity(width * height);
+    let mut labels = label.map(|_| Vec::with_capacity(width * height));
+    let big = cloud.is_bigendian;
+    for row in 0..height {
+        for col in 0..width {
+            let at = row * row_step + col * step;
+            let point = &cloud.data[at..at + step];
+            let value =
+                |(offset, datatype_id): (usize, u8)| read_value(&point[offset..], datatype_id, big);
+            let (x, y, z) = (value(xyz[0]), value(xyz[1]), value(xyz[2]));
+            if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                continue;
+            }
+            points.push([
+                x as f32,
+                y as f32,
+                z as f32,
+                intensity.map_or(0.0, value) as f32,
+            ]);
+            if let (Some(labels), Some(field)) = (labels.as_mut(), label) {
+                labels.push(value(field) as u32);
+            }
+        }
+    }
+    Ok(CloudPoints { points, labels })
+}
