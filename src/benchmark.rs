@@ -90,7 +90,7 @@ pub fn benchmark(
                         ..result.timings
                     });
                     cells.push(result.features.predictable.iter().filter(|p| **p).count() as f64);
-                    points.push(result.point_counts.iter().map(|&c| c as f64).sum::<f64>());
+                    points.push(result.cells.points_in_grid.len() as f64);
                 }
             }
         }

@@ -9,6 +9,9 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
+use std::collections::BTreeMap;
+
+use crate::annotation::{self, AnnotationOptions};
 use crate::benchmark::benchmark;
 use crate::classifier::SvmModel;
 use crate::classifier::training::train as train_model;
@@ -626,6 +629,51 @@ pub fn convert(
             summary.output_bytes as f64 / 1e6,
             summary.frames as f64 / seconds
         );
+    }
+    Ok(())
+}
+
+/// `travmap annotate`: the annotated MCAP.
+pub fn annotate(inputs: &Inputs, config: &Config, model_path: Option<&Path>, output_path: &Path, options: &AnnotationOptions, output: Output) -> Result<()> {
+    let (model, model_name) = load_model(model_path, config)?;
+    let selections = open_inputs(inputs)?;
+    let [selection] = selections.as_slice() else {
+        bail!("annotate takes one input (a KITTI sequence directory or an MCAP file), got {}", selections.len());
+    };
+    let metadata = BTreeMap::from([
+        ("travmap_version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+        ("config".to_string(), serde_json::to_string(config)?),
+        ("model".to_string(), model_name.clone()),
+        ("model_sha256".to_string(), model.sha256_hex()),
+        ("input".to_string(), selection.describe()),
+    ]);
+    let bar = output.progress(frame_count(&selections), "annotating");
+    let started = std::time::Instant::now();
+    let summary = annotation::annotate(selection, config, &model, metadata, output_path, options, &|| bar.inc(1))?;
+    bar.finish_and_clear();
+    let seconds = started.elapsed().as_secs_f64();
+    if output.json {
+        let doc = json!({"output": output_path, "config": config, "model": model_json(&model, &model_name), "summary": summary, "seconds": seconds});
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else if !output.quiet {
+        println!(
+            "wrote {} ({} frames, {} messages copied through, {:.1} MB, {:.1} frames/s)",
+            output_path.display(),
+            summary.frames,
+            summary.passthrough_messages,
+            summary.output_bytes as f64 / 1e6,
+            summary.frames as f64 / seconds
+        );
+        if summary.evaluation.frames > 0 {
+            let s = summary.evaluation.scores;
+            println!(
+                "{} frames with ground truth: Acc {:.1} mIoU {:.1} F1 {:.1} (filtered)",
+                summary.evaluation.frames,
+                100.0 * s.accuracy,
+                100.0 * s.miou,
+                100.0 * s.f1
+            );
+        }
     }
     Ok(())
 }

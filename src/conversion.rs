@@ -252,36 +252,30 @@ fn encode_frame(sequence: &KittiSequence, index: usize, start_ns: u64) -> Result
     })
 }
 
-/// Converts the frames of `sequence` in `frames` into `output`. `on_frame` is called
-/// after each written frame.
-pub fn convert_kitti(
+/// Writes the frames of `sequence` in `frames` into `sink` as `convert` does, and
+/// returns the counts (output_bytes 0: the sink is not finished here).
+pub fn write_kitti_frames(
+    sink: &mut McapSink,
     sequence: &KittiSequence,
     frames: &Range<usize>,
-    output: &Path,
-    compression: Compression,
     start_ns: u64,
     on_frame: &(dyn Fn() + Sync),
 ) -> Result<ConversionSummary> {
     let indices = sequence.frames_in(frames);
-    let mut sink = McapSink::create(output, compression)?;
     let mut summary = ConversionSummary {
         frames: 0,
         images: 0,
         labelled_frames: 0,
         output_bytes: 0,
     };
-    for (batch_number, batch) in indices.chunks(BATCH).enumerate() {
+    for batch in indices.chunks(BATCH) {
         let encoded: Vec<EncodedFrame> = batch
             .par_iter()
             .map(|&index| encode_frame(sequence, index, start_ns))
             .collect::<Result<_>>()?;
         for frame in encoded {
-            if batch_number == 0 && summary.frames == 0 {
-                sink.write(
-                    "/tf_static",
-                    frame.stamp_ns,
-                    &static_transforms(sequence, frame.stamp_ns)?,
-                )?;
+            if summary.frames == 0 {
+                sink.write("/tf_static", frame.stamp_ns, &static_transforms(sequence, frame.stamp_ns)?)?;
             }
             sink.write_encoded::<PointCloud2>(CLOUD_TOPIC, frame.stamp_ns, &frame.cloud)?;
             sink.write_encoded::<TfMessage>("/tf", frame.stamp_ns, &frame.tf)?;
@@ -295,10 +289,23 @@ pub fn convert_kitti(
             on_frame();
         }
     }
+    Ok(summary)
+}
+
+/// Converts the frames of `sequence` in `frames` into `output`. `on_frame` is called
+/// after each written frame.
+pub fn convert_kitti(
+    sequence: &KittiSequence,
+    frames: &Range<usize>,
+    output: &Path,
+    compression: Compression,
+    start_ns: u64,
+    on_frame: &(dyn Fn() + Sync),
+) -> Result<ConversionSummary> {
+    let mut sink = McapSink::create(output, compression)?;
+    let mut summary = write_kitti_frames(&mut sink, sequence, frames, start_ns, on_frame)?;
     sink.finish()?;
-    summary.output_bytes = std::fs::metadata(output)
-        .map_err(|e| Error::io(output, e))?
-        .len();
+    summary.output_bytes = std::fs::metadata(output).map_err(|e| Error::io(output, e))?.len();
     Ok(summary)
 }
 

@@ -7,6 +7,7 @@
 //! [`classifier`] (4), [`filter`] (5); beside them [`ground_truth`], [`metrics`] and
 //! [`evaluation`]. [`commands`] holds one function per subcommand of the binary.
 
+pub mod annotation;
 pub mod benchmark;
 pub mod classifier;
 pub mod commands;

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use travmap::annotation::AnnotationOptions;
 use travmap::commands::{self, Inputs, Output};
 use travmap::reading::mcap_drive::DriveOptions;
 use travmap::writing::Compression;
@@ -76,6 +77,26 @@ enum Command {
         #[arg(short, long)]
         quiet: bool,
     },
+    /// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
+    Annotate {
+        #[command(flatten)]
+        common: Common,
+        /// Where to write the MCAP.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Model file (default: the model compiled into travmap).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Chunk compression.
+        #[arg(long, value_enum, default_value_t = CompressionArg::Zstd)]
+        compression: CompressionArg,
+        /// Do not copy the input's messages into the output.
+        #[arg(long)]
+        no_passthrough: bool,
+        /// Height of the drawn grids relative to the sensor, metres.
+        #[arg(long, default_value_t = -1.73, allow_negative_numbers = true)]
+        grid_height: f64,
+    },
     /// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
     Bench {
         #[command(flatten)]
@@ -101,6 +122,16 @@ enum CompressionArg {
     Zstd,
     Lz4,
     None,
+}
+
+impl From<CompressionArg> for Compression {
+    fn from(arg: CompressionArg) -> Self {
+        match arg {
+            CompressionArg::Zstd => Compression::Zstd,
+            CompressionArg::Lz4 => Compression::Lz4,
+            CompressionArg::None => Compression::None,
+        }
+    }
 }
 
 #[derive(Args)]
@@ -200,11 +231,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
             json,
             quiet,
         } => {
-            let compression = match compression {
-                CompressionArg::Zstd => Compression::Zstd,
-                CompressionArg::Lz4 => Compression::Lz4,
-                CompressionArg::None => Compression::None,
-            };
+            let compression = compression.into();
             let inputs = Inputs {
                 sequences: vec![sequence],
                 drive: DriveOptions::default(),
@@ -217,6 +244,21 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
                 start_time,
                 Output { json, quiet },
             )
+        }
+        Command::Annotate {
+            common,
+            output,
+            model,
+            compression,
+            no_passthrough,
+            grid_height,
+        } => {
+            let options = AnnotationOptions {
+                compression: compression.into(),
+                passthrough: !no_passthrough,
+                grid_height_m: grid_height,
+            };
+            commands::annotate(&common.inputs(), &common.config()?, model.as_deref(), &output, &options, common.output())
         }
         Command::Bench {
             common,

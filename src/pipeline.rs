@@ -14,7 +14,7 @@ use crate::config::Config;
 use crate::error::{Error, Result};
 use crate::features::{FeatureExtractor, FeatureGrid};
 use crate::filter::OutlierFilter;
-use crate::grid::{CellClass, GridLayout, grid_points};
+use crate::grid::{CellClass, CellPoints, GridLayout, grid_points};
 use crate::ground_truth::GroundTruth;
 use crate::integration::{WorldScan, ground_normal, scan_to_world};
 use crate::reading::{Frame, Source};
@@ -38,8 +38,10 @@ pub struct FrameResult {
     pub index: usize,
     pub stamp_ns: u64,
     pub layout: GridLayout,
-    /// Points per cell.
-    pub point_counts: Vec<u32>,
+    /// The sensor's position in the world.
+    pub sensor_in_world: [f64; 3],
+    /// The integrated points inside the grid, by cell.
+    pub cells: CellPoints,
     pub features: FeatureGrid,
     /// The classifier's labels before filtering (None without a model).
     pub predicted: Option<Vec<CellClass>>,
@@ -162,9 +164,8 @@ impl Pipeline {
             index: current.index,
             stamp_ns: current.stamp_ns,
             layout,
-            point_counts: (0..layout.cell_count())
-                .map(|c| cells.point_count(c) as u32)
-                .collect(),
+            sensor_in_world: current.origin_in_world,
+            cells,
             features,
             predicted,
             filtered,

@@ -121,14 +121,14 @@ impl McapSink {
         Ok(id)
     }
 
-    /// Writes already-encoded bytes on a channel; log and publish time are `stamp_ns`.
-    pub fn write_raw(&mut self, channel_id: u16, stamp_ns: u64, data: &[u8]) -> Result<()> {
+    /// Writes already-encoded bytes on a channel.
+    pub fn write_raw(&mut self, channel_id: u16, log_time_ns: u64, publish_time_ns: u64, data: &[u8]) -> Result<()> {
         self.sequence += 1;
         let header = mcap::records::MessageHeader {
             channel_id,
             sequence: self.sequence,
-            log_time: stamp_ns,
-            publish_time: stamp_ns,
+            log_time: log_time_ns,
+            publish_time: publish_time_ns,
         };
         self.writer()
             .write_to_known_channel(&header, data)
@@ -149,7 +149,8 @@ impl McapSink {
         bytes: &[u8],
     ) -> Result<()> {
         let channel = self.channel(topic, T::NAME, "ros2msg", T::SCHEMA.as_bytes(), "cdr")?;
-        self.write_raw(channel, stamp_ns, bytes)
+        // Log time = header stamp: tools that order by log time then show sensor time.
+        self.write_raw(channel, stamp_ns, stamp_ns, bytes)
     }
 
     pub fn write_metadata(&mut self, name: &str, entries: BTreeMap<String, String>) -> Result<()> {

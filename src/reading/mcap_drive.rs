@@ -292,6 +292,18 @@ impl McapDrive {
         Ok(pose.to_homogeneous())
     }
 
+    /// Every message of the file in file order, undecoded (for passthrough).
+    pub fn for_each_message(&self, mut on_message: impl FnMut(&mcap::Message) -> Result<()>) -> Result<()> {
+        let fail = |e: mcap::McapError| Error::Mcap {
+            path: self.path.clone(),
+            message: e.to_string(),
+        };
+        for message in mcap::MessageStream::new(&self.map).map_err(fail)? {
+            on_message(&message.map_err(fail)?)?;
+        }
+        Ok(())
+    }
+
     /// Streams the file once and calls `on_frame` with every cloud whose frame number
     /// is in `frames`, in order.
     pub fn for_each_frame<E: From<Error>>(

@@ -6,6 +6,7 @@ Usage: decode_mcap.py FILE.mcap
 """
 
 import json
+import math
 import struct
 import sys
 from pathlib import Path
@@ -22,34 +23,36 @@ def cloud_summary(msg):
     names = [f.name for f in msg.fields]
     first = struct.unpack_from("<fff", data, 0) if data else None
     last = struct.unpack_from("<fff", data, len(data) - step) if data else None
-    return {"points": msg.width * msg.height, "fields": names, "first": first, "last": last}
+    return {"points": int(msg.width * msg.height), "fields": names, "first": first, "last": last}
 
 
 def grid_summary(msg):
-    cells = list(msg.data)
+    cells = [int(c) for c in msg.data]
     return {
         "width": msg.info.width,
         "height": msg.info.height,
-        "resolution": msg.info.resolution,
-        "origin": [msg.info.origin.position.x, msg.info.origin.position.y],
+        "resolution": float(msg.info.resolution),
+        "origin": [float(msg.info.origin.position.x), float(msg.info.origin.position.y)],
         "cells": cells,
     }
 
 
 def summarise(topic, schema, msg, stamp_ns):
-    entry = {"topic": topic, "schema": schema, "log_time": stamp_ns,
-             "stamp": msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+    entry = {"topic": topic, "schema": schema, "log_time": int(stamp_ns),
+             "stamp": int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
              if hasattr(msg, "header") else None}
     if schema == "sensor_msgs/msg/PointCloud2":
         entry.update(cloud_summary(msg))
     elif schema == "nav_msgs/msg/OccupancyGrid":
         entry.update(grid_summary(msg))
     elif schema == "tf2_msgs/msg/TFMessage":
-        entry["transforms"] = [[t.header.frame_id, t.child_frame_id, t.transform.translation.x,
-                                t.transform.translation.y, t.transform.translation.z] for t in msg.transforms]
+        entry["transforms"] = [[t.header.frame_id, t.child_frame_id, float(t.transform.translation.x),
+                                float(t.transform.translation.y), float(t.transform.translation.z)]
+                               for t in msg.transforms]
     elif schema == "travmap_msgs/msg/FrameMetrics":
-        entry["frame_index"] = msg.frame_index
-        entry["accuracy"] = msg.accuracy
+        entry["frame_index"] = int(msg.frame_index)
+        accuracy = float(msg.accuracy)
+        entry["accuracy"] = None if math.isnan(accuracy) else accuracy
     return entry
 
 
@@ -81,7 +84,7 @@ def with_rosbags(path):
 
 def main():
     path = sys.argv[1]
-    print(json.dumps({"mcap": with_mcap(path), "rosbags": with_rosbags(path)}))
+    print(json.dumps({"mcap": with_mcap(path), "rosbags": with_rosbags(path)}, allow_nan=False))
 
 
 if __name__ == "__main__":
