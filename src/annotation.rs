@@ -23,7 +23,10 @@ use crate::grid::CellClass;
 use crate::metrics::Confusion;
 use crate::pipeline::FrameResult;
 use crate::reading::Source;
-use crate::ros::{FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion, Time, Vector3, datatype};
+use crate::ros::{
+    FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion,
+    Time, Vector3, datatype,
+};
 use crate::writing::{Compression, McapSink};
 
 pub const PREDICTION_TOPIC: &str = "/travmap/prediction";
@@ -58,7 +61,12 @@ pub fn occupancy(class: CellClass) -> i8 {
     }
 }
 
-fn grid_message(result: &FrameResult, classes: &[CellClass], world_frame: &str, height_m: f64) -> OccupancyGrid {
+fn grid_message(
+    result: &FrameResult,
+    classes: &[CellClass],
+    world_frame: &str,
+    height_m: f64,
+) -> OccupancyGrid {
     let [x, y] = result.layout.min_corner_in_world();
     let stamp = Time::from_ns(result.stamp_ns);
     OccupancyGrid {
@@ -107,7 +115,10 @@ fn cloud_message(result: &FrameResult, classes: &[CellClass], world_frame: &str)
     let mut data = Vec::with_capacity(16 * n);
     for cell in 0..result.layout.cell_count() {
         let class = occupancy(classes[cell]);
-        let truth = result.ground_truth.as_ref().map_or(-1, |t| occupancy(t[cell]));
+        let truth = result
+            .ground_truth
+            .as_ref()
+            .map_or(-1, |t| occupancy(t[cell]));
         for p in &cells.points_in_grid[cells.cell_range(cell)] {
             data.extend_from_slice(&((p[0] as f64 + min_x) as f32).to_le_bytes());
             data.extend_from_slice(&((p[1] as f64 + min_y) as f32).to_le_bytes());
@@ -133,7 +144,10 @@ fn cloud_message(result: &FrameResult, classes: &[CellClass], world_frame: &str)
 
 fn metrics_message(result: &FrameResult, classes: &[CellClass], world_frame: &str) -> FrameMetrics {
     let count = |class: CellClass| classes.iter().filter(|&&c| c == class).count() as u32;
-    let confusion = result.ground_truth.as_ref().map(|truth| Confusion::of_grids(classes, truth));
+    let confusion = result
+        .ground_truth
+        .as_ref()
+        .map(|truth| Confusion::of_grids(classes, truth));
     let c = confusion.unwrap_or_default();
     let scores = confusion.map(|c| c.scores());
     FrameMetrics {
@@ -173,7 +187,8 @@ pub fn annotate(
     let world_frame = match &selection.source {
         Source::Kitti(sequence) => {
             if options.passthrough {
-                let written = write_kitti_frames(&mut sink, sequence, &selection.frames, 0, &|| {})?;
+                let written =
+                    write_kitti_frames(&mut sink, sequence, &selection.frames, 0, &|| {})?;
                 passthrough_messages = written.frames * 2 + written.images * 2 + 1;
             }
             MAP_FRAME.to_string()
@@ -183,10 +198,20 @@ pub fn annotate(
                 drive.for_each_message(|message| {
                     let channel = &message.channel;
                     let (name, encoding, data) = match &channel.schema {
-                        Some(schema) => (schema.name.as_str(), schema.encoding.as_str(), &schema.data[..]),
+                        Some(schema) => (
+                            schema.name.as_str(),
+                            schema.encoding.as_str(),
+                            &schema.data[..],
+                        ),
                         None => ("", "", &[][..]),
                     };
-                    let id = sink.channel(&channel.topic, name, encoding, data, &channel.message_encoding)?;
+                    let id = sink.channel(
+                        &channel.topic,
+                        name,
+                        encoding,
+                        data,
+                        &channel.message_encoding,
+                    )?;
                     sink.write_raw(id, message.log_time, message.publish_time, &message.data)?;
                     passthrough_messages += 1;
                     Ok(())
@@ -200,12 +225,28 @@ pub fn annotate(
     selection.run::<Error>(config, Some(model), |result| {
         let classes = result.filtered.as_deref().unwrap_or(&[]);
         let stamp = result.stamp_ns;
-        sink.write(PREDICTION_TOPIC, stamp, &grid_message(&result, classes, &world_frame, options.grid_height_m))?;
+        sink.write(
+            PREDICTION_TOPIC,
+            stamp,
+            &grid_message(&result, classes, &world_frame, options.grid_height_m),
+        )?;
         if let Some(truth) = &result.ground_truth {
-            sink.write(GROUND_TRUTH_TOPIC, stamp, &grid_message(&result, truth, &world_frame, options.grid_height_m))?;
+            sink.write(
+                GROUND_TRUTH_TOPIC,
+                stamp,
+                &grid_message(&result, truth, &world_frame, options.grid_height_m),
+            )?;
         }
-        sink.write(CLOUD_TOPIC, stamp, &cloud_message(&result, classes, &world_frame))?;
-        sink.write(METRICS_TOPIC, stamp, &metrics_message(&result, classes, &world_frame))?;
+        sink.write(
+            CLOUD_TOPIC,
+            stamp,
+            &cloud_message(&result, classes, &world_frame),
+        )?;
+        sink.write(
+            METRICS_TOPIC,
+            stamp,
+            &metrics_message(&result, classes, &world_frame),
+        )?;
         evaluation.add(&result);
         frames += 1;
         on_frame();
@@ -216,7 +257,9 @@ pub fn annotate(
     Ok(AnnotationSummary {
         frames,
         passthrough_messages,
-        output_bytes: std::fs::metadata(output).map_err(|e| Error::io(output, e))?.len(),
+        output_bytes: std::fs::metadata(output)
+            .map_err(|e| Error::io(output, e))?
+            .len(),
         evaluation: evaluation.report(),
     })
 }

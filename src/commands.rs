@@ -634,14 +634,27 @@ pub fn convert(
 }
 
 /// `travmap annotate`: the annotated MCAP.
-pub fn annotate(inputs: &Inputs, config: &Config, model_path: Option<&Path>, output_path: &Path, options: &AnnotationOptions, output: Output) -> Result<()> {
+pub fn annotate(
+    inputs: &Inputs,
+    config: &Config,
+    model_path: Option<&Path>,
+    output_path: &Path,
+    options: &AnnotationOptions,
+    output: Output,
+) -> Result<()> {
     let (model, model_name) = load_model(model_path, config)?;
     let selections = open_inputs(inputs)?;
     let [selection] = selections.as_slice() else {
-        bail!("annotate takes one input (a KITTI sequence directory or an MCAP file), got {}", selections.len());
+        bail!(
+            "annotate takes one input (a KITTI sequence directory or an MCAP file), got {}",
+            selections.len()
+        );
     };
     let metadata = BTreeMap::from([
-        ("travmap_version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+        (
+            "travmap_version".to_string(),
+            env!("CARGO_PKG_VERSION").to_string(),
+        ),
         ("config".to_string(), serde_json::to_string(config)?),
         ("model".to_string(), model_name.clone()),
         ("model_sha256".to_string(), model.sha256_hex()),
@@ -649,7 +662,15 @@ pub fn annotate(inputs: &Inputs, config: &Config, model_path: Option<&Path>, out
     ]);
     let bar = output.progress(frame_count(&selections), "annotating");
     let started = std::time::Instant::now();
-    let summary = annotation::annotate(selection, config, &model, metadata, output_path, options, &|| bar.inc(1))?;
+    let summary = annotation::annotate(
+        selection,
+        config,
+        &model,
+        metadata,
+        output_path,
+        options,
+        &|| bar.inc(1),
+    )?;
     bar.finish_and_clear();
     let seconds = started.elapsed().as_secs_f64();
     if output.json {

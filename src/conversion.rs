@@ -12,7 +12,7 @@
 use std::ops::Range;
 use std::path::Path;
 
-use nalgebra::Matrix4;
+use nalgebra::{Isometry3, Matrix4};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -44,9 +44,8 @@ pub struct ConversionSummary {
     pub output_bytes: u64,
 }
 
-/// A rigid transform from a 4x4 matrix (see [`rigid`]).
-pub fn transform_from_matrix(m: &Matrix4<f64>) -> Transform {
-    let pose = rigid(m);
+/// A ROS transform from a rigid pose, its quaternion as it is.
+pub fn transform_from_pose(pose: &Isometry3<f64>) -> Transform {
     let (t, q) = (pose.translation.vector, pose.rotation);
     Transform {
         translation: Vector3 {
@@ -182,7 +181,7 @@ fn static_transforms(sequence: &KittiSequence, stamp_ns: u64) -> Result<TfMessag
     let mut transforms = vec![TransformStamped {
         header: header(stamp_ns, VELODYNE_FRAME),
         child_frame_id: CAMERA_0_FRAME.into(),
-        transform: transform_from_matrix(&velodyne_from_cam0),
+        transform: transform_from_pose(&rigid(&velodyne_from_cam0)),
     }];
     if let Some(p2) = calibration.projections[2] {
         // P2 = K [I | t]: camera_2 coordinates are camera_0's plus t.
@@ -220,7 +219,7 @@ fn encode_frame(sequence: &KittiSequence, index: usize, start_ns: u64) -> Result
         transforms: vec![TransformStamped {
             header: header(stamp_ns, MAP_FRAME),
             child_frame_id: VELODYNE_FRAME.into(),
-            transform: transform_from_matrix(&frame.world_from_velodyne),
+            transform: transform_from_pose(&frame.world_from_velodyne),
         }],
     };
     let image = match (
@@ -275,7 +274,11 @@ pub fn write_kitti_frames(
             .collect::<Result<_>>()?;
         for frame in encoded {
             if summary.frames == 0 {
-                sink.write("/tf_static", frame.stamp_ns, &static_transforms(sequence, frame.stamp_ns)?)?;
+                sink.write(
+                    "/tf_static",
+                    frame.stamp_ns,
+                    &static_transforms(sequence, frame.stamp_ns)?,
+                )?;
             }
             sink.write_encoded::<PointCloud2>(CLOUD_TOPIC, frame.stamp_ns, &frame.cloud)?;
             sink.write_encoded::<TfMessage>("/tf", frame.stamp_ns, &frame.tf)?;
@@ -305,7 +308,9 @@ pub fn convert_kitti(
     let mut sink = McapSink::create(output, compression)?;
     let mut summary = write_kitti_frames(&mut sink, sequence, frames, start_ns, on_frame)?;
     sink.finish()?;
-    summary.output_bytes = std::fs::metadata(output).map_err(|e| Error::io(output, e))?.len();
+    summary.output_bytes = std::fs::metadata(output)
+        .map_err(|e| Error::io(output, e))?
+        .len();
     Ok(summary)
 }
 
@@ -321,7 +326,7 @@ mod tests {
         m[(1, 0)] = 1.0;
         m[(1, 1)] = 0.0;
         m[(0, 3)] = 2.0;
-        let t = transform_from_matrix(&m);
+        let t = transform_from_pose(&rigid(&m));
         let half = std::f64::consts::FRAC_1_SQRT_2;
         assert!((t.rotation.z - half).abs() < 1e-12 && (t.rotation.w - half).abs() < 1e-12);
         assert_eq!(t.translation.x, 2.0);

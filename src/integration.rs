@@ -23,7 +23,7 @@ pub struct WorldScan {
 
 /// Moves every point of `frame` into the world frame (the pose is applied in f64).
 pub fn scan_to_world(frame: Frame) -> WorldScan {
-    let m = frame.world_from_velodyne;
+    let m = frame.world_from_velodyne.to_homogeneous();
     let mut moments = Moments::default();
     let points_in_world = frame
         .points_in_velodyne
@@ -62,17 +62,14 @@ pub fn ground_normal(scans: &[&WorldScan]) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Matrix4;
 
     #[test]
     fn pose_moves_points_and_origin() {
-        let mut world_from_velodyne = Matrix4::identity();
-        world_from_velodyne[(0, 3)] = 10.0;
-        // 90 degrees about z: velodyne x becomes world y.
-        world_from_velodyne[(0, 0)] = 0.0;
-        world_from_velodyne[(0, 1)] = -1.0;
-        world_from_velodyne[(1, 0)] = 1.0;
-        world_from_velodyne[(1, 1)] = 0.0;
+        // 90 degrees about z (velodyne x becomes world y), 10 m along x.
+        let world_from_velodyne = nalgebra::Isometry3::new(
+            nalgebra::Vector3::new(10.0, 0.0, 0.0),
+            nalgebra::Vector3::new(0.0, 0.0, std::f64::consts::FRAC_PI_2),
+        );
         let frame = Frame {
             index: 4,
             stamp_ns: 7,
@@ -81,10 +78,10 @@ mod tests {
             labels: None,
         };
         let scan = scan_to_world(frame);
-        assert_eq!(
-            scan.points_in_world,
-            vec![[10.0, 1.0, 2.0], [9.0, 0.0, 0.0]]
-        );
+        let expected = [[10.0, 1.0, 2.0], [9.0, 0.0, 0.0]];
+        for (p, e) in scan.points_in_world.iter().zip(expected) {
+            assert!(p.iter().zip(e).all(|(a, b)| (a - b).abs() < 1e-6), "{p:?}");
+        }
         assert_eq!(scan.origin_in_world, [10.0, 0.0, 0.0]);
         assert_eq!(scan.moments.count, 2);
     }

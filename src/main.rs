@@ -258,7 +258,14 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
                 passthrough: !no_passthrough,
                 grid_height_m: grid_height,
             };
-            commands::annotate(&common.inputs(), &common.config()?, model.as_deref(), &output, &options, common.output())
+            commands::annotate(
+                &common.inputs(),
+                &common.config()?,
+                model.as_deref(),
+                &output,
+                &options,
+                common.output(),
+            )
         }
         Command::Bench {
             common,

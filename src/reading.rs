@@ -11,7 +11,7 @@ pub mod mcap_drive;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use nalgebra::Matrix4;
+use nalgebra::{Isometry3, Matrix4};
 
 use crate::error::{Error, Result};
 use crate::geometry::rigid;
@@ -24,7 +24,7 @@ pub struct Frame {
     /// Time since the start of the sequence, nanoseconds.
     pub stamp_ns: u64,
     /// Sensor pose: maps velodyne coordinates to the z-up world frame.
-    pub world_from_velodyne: Matrix4<f64>,
+    pub world_from_velodyne: Isometry3<f64>,
     /// x, y, z (metres) and remission per point, in the velodyne frame.
     pub points_in_velodyne: Vec<[f32; 4]>,
     /// SemanticKITTI label per point (lower 16 bits class, upper 16 instance).
@@ -106,7 +106,7 @@ impl KittiSequence {
     /// `T_world_velo(i) = inv(Tr) * pose_i * Tr` (METHOD.md section 1): the pose file
     /// holds cam0 poses, and the world is the first scan's velodyne frame, so that the
     /// ground is the world x-y plane.
-    pub fn world_from_velodyne(&self, index: usize) -> Result<Matrix4<f64>> {
+    pub fn world_from_velodyne(&self, index: usize) -> Result<Isometry3<f64>> {
         let pose = self
             .first_cam0_from_cam0
             .get(index)
@@ -121,7 +121,7 @@ impl KittiSequence {
             line: 0,
             message: "Tr is not invertible".into(),
         })?;
-        Ok(rigid(&(velodyne_from_cam0 * pose * tr)).to_homogeneous())
+        Ok(rigid(&(velodyne_from_cam0 * pose * tr)))
     }
 
     pub fn stamp_ns(&self, index: usize) -> Result<u64> {

@@ -122,7 +122,13 @@ impl McapSink {
     }
 
     /// Writes already-encoded bytes on a channel.
-    pub fn write_raw(&mut self, channel_id: u16, log_time_ns: u64, publish_time_ns: u64, data: &[u8]) -> Result<()> {
+    pub fn write_raw(
+        &mut self,
+        channel_id: u16,
+        log_time_ns: u64,
+        publish_time_ns: u64,
+        data: &[u8],
+    ) -> Result<()> {
         self.sequence += 1;
         let header = mcap::records::MessageHeader {
             channel_id,

@@ -12,7 +12,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use nalgebra::{Isometry3, Matrix4, Quaternion as NQuaternion, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Quaternion as NQuaternion, Translation3, UnitQuaternion};
 use serde::Deserialize;
 
 use super::Frame;
@@ -275,7 +275,7 @@ impl McapDrive {
     }
 
     /// `world_from_cloud` at `stamp_ns`, composed up the transform tree.
-    pub fn world_from_cloud(&self, stamp_ns: u64) -> Result<Matrix4<f64>> {
+    pub fn world_from_cloud(&self, stamp_ns: u64) -> Result<Isometry3<f64>> {
         let mut frame = self.cloud_frame.as_str();
         let mut pose = Isometry3::identity();
         while frame != self.world_frame {
@@ -289,11 +289,14 @@ impl McapDrive {
             pose = self.edge_at(frame, edge, stamp_ns)? * pose;
             frame = &edge.parent;
         }
-        Ok(pose.to_homogeneous())
+        Ok(pose)
     }
 
     /// Every message of the file in file order, undecoded (for passthrough).
-    pub fn for_each_message(&self, mut on_message: impl FnMut(&mcap::Message) -> Result<()>) -> Result<()> {
+    pub fn for_each_message(
+        &self,
+        mut on_message: impl FnMut(&mcap::Message) -> Result<()>,
+    ) -> Result<()> {
         let fail = |e: mcap::McapError| Error::Mcap {
             path: self.path.clone(),
             message: e.to_string(),

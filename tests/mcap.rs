@@ -1,0 +1,479 @@
+//! MCAP in and out: convert, read back, annotate, round trip, and real clients
+//! (Python mcap + mcap-ros2-support, rosbags) decoding what travmap writes.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use common::{clean_failure, success, travmap};
+use serde_json::Value;
+use travmap::reading::KittiSequence;
+use travmap::reading::mcap_drive::{DriveOptions, McapDrive};
+use travmap::ros::{OccupancyGrid, decode};
+use travmap::writing::{Compression, McapSink};
+
+fn sample() -> Option<String> {
+    common::semantickitti_00().map(|p| p.display().to_string())
+}
+
+/// Every message of `topic` in an MCAP, decoded by travmap's own reader.
+fn messages<T: serde::de::DeserializeOwned>(path: &Path, topic: &str) -> Vec<(u64, T)> {
+    let bytes = std::fs::read(path).unwrap();
+    mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| m.unwrap())
+        .filter(|m| m.channel.topic == topic)
+        .map(|m| (m.log_time, decode(&m.data).unwrap()))
+        .collect()
+}
+
+#[test]
+fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
+    let Some(seq) = sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let drive = dir.path().join("drive.mcap");
+    success(travmap(&[
+        "convert",
+        &seq,
+        "-o",
+        drive.to_str().unwrap(),
+        "-q",
+    ]));
+
+    // The frames read back: same points, labels, stamps and poses, bit for bit.
+    let kitti = KittiSequence::open(Path::new(&seq)).unwrap();
+    let mcap_drive = McapDrive::open(&drive, &DriveOptions::default()).unwrap();
+    assert_eq!(mcap_drive.frame_count(), 6);
+    assert_eq!(mcap_drive.world_frame(), "map");
+    let mut index = 0;
+    mcap_drive
+        .for_each_frame::<travmap::Error>(&(0..6), |frame| {
+            let expected = kitti.read_frame(index).unwrap();
+            assert_eq!(frame.index, expected.index);
+            assert_eq!(frame.stamp_ns, expected.stamp_ns);
+            assert_eq!(frame.points_in_velodyne, expected.points_in_velodyne);
+            assert_eq!(frame.labels, expected.labels);
+            assert_eq!(
+                frame.world_from_velodyne, expected.world_from_velodyne,
+                "frame {index}"
+            );
+            index += 1;
+            Ok(())
+        })
+        .unwrap();
+    assert_eq!(index, 6);
+
+    // Annotating either input gives the same grids, to the last cell, and the same metrics.
+    let from_kitti = dir.path().join("a.mcap");
+    let from_mcap = dir.path().join("b.mcap");
+    let a: Value = serde_json::from_str(&success(travmap(&[
+        "annotate",
+        &seq,
+        "-o",
+        from_kitti.to_str().unwrap(),
+        "--json",
+    ])))
+    .unwrap();
+    let b: Value = serde_json::from_str(&success(travmap(&[
+        "annotate",
+        drive.to_str().unwrap(),
+        "-o",
+        from_mcap.to_str().unwrap(),
+        "--json",
+    ])))
+    .unwrap();
+    assert_eq!(
+        a["summary"]["evaluation"]["confusion"],
+        b["summary"]["evaluation"]["confusion"]
+    );
+    for topic in ["/travmap/prediction", "/travmap/ground_truth"] {
+        let (x, y) = (
+            messages::<OccupancyGrid>(&from_kitti, topic),
+            messages::<OccupancyGrid>(&from_mcap, topic),
+        );
+        assert!(!x.is_empty());
+        assert_eq!(x, y, "{topic}");
+    }
+    assert_eq!(
+        messages::<OccupancyGrid>(&from_kitti, "/travmap/prediction").len(),
+        6
+    );
+    assert_eq!(
+        messages::<OccupancyGrid>(&from_kitti, "/travmap/ground_truth").len(),
+        3
+    );
+}
+
+#[test]
+fn annotated_grid_matches_run_and_carries_metadata() {
+    let Some(seq) = sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("a.mcap");
+    success(travmap(&[
+        "annotate",
+        &seq,
+        "-o",
+        out.to_str().unwrap(),
+        "--frames",
+        "1..4",
+        "--no-passthrough",
+        "-q",
+    ]));
+    let run = success(travmap(&["run", &seq, "--frames", "1..4", "--json"]));
+    let runs: Vec<Value> = run
+        .lines()
+        .skip(1)
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let grids = messages::<OccupancyGrid>(&out, "/travmap/prediction");
+    assert_eq!(grids.len(), 3);
+    for ((log_time, grid), run) in grids.iter().zip(&runs) {
+        let cells: Vec<i8> = run["cells"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_i64().unwrap() as i8)
+            .collect();
+        assert_eq!(grid.data, cells);
+        assert_eq!(*log_time, run["stamp_ns"].as_u64().unwrap());
+        assert_eq!(grid.info.width, 30);
+        assert_eq!(grid.header.frame_id, "map");
+        let corner = run["min_corner_in_world"].as_array().unwrap();
+        assert_eq!(grid.info.origin.position.x, corner[0].as_f64().unwrap());
+    }
+    // No passthrough: only travmap's own topics.
+    let bytes = std::fs::read(&out).unwrap();
+    let topics: std::collections::BTreeSet<String> = mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| m.unwrap().channel.topic.clone())
+        .collect();
+    assert!(
+        topics.iter().all(|t| t.starts_with("/travmap/")),
+        "{topics:?}"
+    );
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    let index = summary
+        .metadata_indexes
+        .iter()
+        .find(|m| m.name == "travmap")
+        .expect("a travmap metadata record");
+    let metadata = mcap::read::metadata(&bytes, index).unwrap();
+    assert_eq!(
+        metadata.metadata["travmap_version"],
+        env!("CARGO_PKG_VERSION")
+    );
+    assert_eq!(metadata.metadata["model_sha256"].len(), 64);
+    let config: Value = serde_json::from_str(&metadata.metadata["config"]).unwrap();
+    assert_eq!(config["grid"]["size_m"], 12.0);
+}
+
+#[test]
+fn real_python_clients_decode_what_travmap_writes() {
+    let Some(seq) = sample() else { return };
+    let Ok(python) = std::env::var("TRAVMAP_CLIENT_PYTHON") else {
+        eprintln!(
+            "skipping: TRAVMAP_CLIENT_PYTHON is not set (.ci/run sets it to a venv with mcap, mcap-ros2-support and rosbags)"
+        );
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("a.mcap");
+    success(travmap(&[
+        "annotate",
+        &seq,
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+    ]));
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/decode_mcap.py");
+    let decoded = std::process::Command::new(python)
+        .arg(script)
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        decoded.status.success(),
+        "{}",
+        String::from_utf8_lossy(&decoded.stderr)
+    );
+    let doc: Value = serde_json::from_slice(&decoded.stdout).unwrap();
+    // Both clients see the same thing.
+    assert_eq!(doc["mcap"], doc["rosbags"]);
+    let entries = doc["mcap"].as_array().unwrap();
+    let on = |topic: &str| {
+        entries
+            .iter()
+            .filter(|e| e["topic"] == topic)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(on("/tf_static").len(), 1);
+    assert_eq!(on("/tf").len(), 6);
+    assert_eq!(on("/travmap/metrics").len(), 6);
+    assert_eq!(on("/travmap/ground_truth").len(), 3);
+    // Clouds: point counts and first / last points as in the KITTI files.
+    let sequence = KittiSequence::open(Path::new(&seq)).unwrap();
+    for (cloud, index) in on("/velodyne_points").iter().zip(0..) {
+        let frame = sequence.read_frame(index).unwrap();
+        assert_eq!(cloud["points"], frame.points_in_velodyne.len());
+        let first = &frame.points_in_velodyne[0];
+        let last = frame.points_in_velodyne.last().unwrap();
+        // Python prints each float32 as its shortest double; compare as float32.
+        let as_f32 = |v: &Value| -> Vec<f32> {
+            v.as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap() as f32)
+                .collect()
+        };
+        assert_eq!(as_f32(&cloud["first"]), first[..3]);
+        assert_eq!(as_f32(&cloud["last"]), last[..3]);
+        assert_eq!(cloud["stamp"], frame.stamp_ns);
+        let fields: Vec<&str> = cloud["fields"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|f| f.as_str().unwrap())
+            .collect();
+        assert_eq!(
+            fields,
+            if frame.labels.is_some() {
+                vec!["x", "y", "z", "intensity", "label"]
+            } else {
+                vec!["x", "y", "z", "intensity"]
+            }
+        );
+    }
+    // Grids: the cells travmap's own `run` prints.
+    let run = success(travmap(&["run", &seq, "--json"]));
+    let runs: Vec<Value> = run
+        .lines()
+        .skip(1)
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    for (grid, run) in on("/travmap/prediction").iter().zip(&runs) {
+        assert_eq!(grid["cells"], run["cells"]);
+        assert_eq!(grid["stamp"], run["stamp_ns"]);
+        assert_eq!(grid["width"], 30);
+    }
+    let with_truth: Vec<bool> = on("/travmap/metrics")
+        .iter()
+        .map(|m| m["accuracy"].is_number())
+        .collect();
+    assert_eq!(with_truth, [true, true, true, false, false, false]);
+}
+
+#[test]
+fn compression_options_all_round_trip() {
+    let Some(seq) = sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let mut sizes = BTreeMap::new();
+    for compression in ["zstd", "lz4", "none"] {
+        let out = dir.path().join(format!("{compression}.mcap"));
+        let doc: Value = serde_json::from_str(&success(travmap(&[
+            "convert",
+            &seq,
+            "-o",
+            out.to_str().unwrap(),
+            "--frames",
+            "0..2",
+            "--compression",
+            compression,
+            "--json",
+        ])))
+        .unwrap();
+        assert_eq!(doc["summary"]["frames"], 2);
+        sizes.insert(
+            compression,
+            doc["summary"]["output_bytes"].as_u64().unwrap(),
+        );
+        let eval = success(travmap(&["eval", out.to_str().unwrap()]));
+        assert!(eval.contains("over 2 frames"), "{eval}");
+    }
+    assert!(
+        sizes["zstd"] < sizes["lz4"] && sizes["lz4"] < sizes["none"],
+        "{sizes:?}"
+    );
+    // No temporary files are left beside the outputs.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 3);
+}
+
+/// A drive of two synthetic clouds in frame `lidar`, posed by Odometry of `base`
+/// in `odom` and a static `base -> lidar`, with a second cloud topic.
+fn write_odometry_drive(path: &Path) {
+    use travmap::ros::*;
+    let mut sink = McapSink::create(path, Compression::None).unwrap();
+    let covariance = Covariance6([0.0; 36]);
+    for (i, x) in [(0u64, 0.0), (1, 2.0)] {
+        let stamp = 1_000_000_000 + i * 100_000_000;
+        let odometry = Odometry {
+            header: Header {
+                stamp: Time::from_ns(stamp),
+                frame_id: "odom".into(),
+            },
+            child_frame_id: "base".into(),
+            pose: PoseWithCovariance {
+                pose: Pose {
+                    position: Vector3 { x, y: 0.0, z: 0.0 },
+                    orientation: Quaternion::default(),
+                },
+                covariance: covariance.clone(),
+            },
+            twist: TwistWithCovariance {
+                twist: Twist {
+                    linear: Vector3::default(),
+                    angular: Vector3::default(),
+                },
+                covariance: covariance.clone(),
+            },
+        };
+        let bytes = encode(&odometry, 0);
+        let channel = sink
+            .channel("/odom", "nav_msgs/msg/Odometry", "ros2msg", b"", "cdr")
+            .unwrap();
+        sink.write_raw(channel, stamp, stamp, &bytes).unwrap();
+    }
+    let lidar = TfMessage {
+        transforms: vec![TransformStamped {
+            header: Header {
+                stamp: Time::from_ns(0),
+                frame_id: "base".into(),
+            },
+            child_frame_id: "lidar".into(),
+            transform: Transform {
+                translation: Vector3 {
+                    x: 0.0,
+                    y: 0.0,
+                    z: 1.5,
+                },
+                rotation: Quaternion::default(),
+            },
+        }],
+    };
+    sink.write("/tf_static", 1_000_000_000, &lidar).unwrap();
+    // The cloud at 1.05 s: float64 coordinates, big-endian, with an extra field
+    // between them, and a NaN point.
+    let mut data = Vec::new();
+    for p in [[1.0f64, 2.0, 3.0], [f64::NAN, 0.0, 0.0], [4.0, 5.0, 6.0]] {
+        data.extend_from_slice(&p[0].to_be_bytes());
+        data.extend_from_slice(&7u16.to_be_bytes()); // ring
+        data.extend_from_slice(&p[1].to_be_bytes());
+        data.extend_from_slice(&p[2].to_be_bytes());
+    }
+    let field = |name: &str, offset: u32, datatype: u8| PointField {
+        name: name.into(),
+        offset,
+        datatype,
+        count: 1,
+    };
+    let cloud = PointCloud2 {
+        header: Header {
+            stamp: Time::from_ns(1_050_000_000),
+            frame_id: "lidar".into(),
+        },
+        height: 1,
+        width: 3,
+        fields: vec![
+            field("ring", 8, datatype::UINT16),
+            field("z", 18, datatype::FLOAT64),
+            field("x", 0, datatype::FLOAT64),
+            field("y", 10, datatype::FLOAT64),
+        ],
+        is_bigendian: true,
+        point_step: 26,
+        row_step: 78,
+        data,
+        is_dense: false,
+    };
+    sink.write("/points", 1_050_000_000, &cloud).unwrap();
+    sink.write("/other_points", 1_050_000_000, &cloud).unwrap();
+    sink.finish().unwrap();
+}
+
+#[test]
+fn any_cloud_layout_posed_by_odometry_and_static_tf() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("odom.mcap");
+    write_odometry_drive(&path);
+    // Two cloud topics: ambiguous, and the error lists them.
+    let err = match McapDrive::open(&path, &DriveOptions::default()) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("two cloud topics must be ambiguous"),
+    };
+    assert!(
+        err.contains("several PointCloud2 topics")
+            && err.contains("/other_points")
+            && err.contains("/points"),
+        "{err}"
+    );
+    let err = clean_failure(travmap(&[
+        "run",
+        path.to_str().unwrap(),
+        "--cloud-topic",
+        "/nope",
+    ]));
+    assert!(
+        err.contains("no PointCloud2 messages on topic /nope")
+            && err.contains("/odom (nav_msgs/msg/Odometry)"),
+        "{err}"
+    );
+
+    let options = DriveOptions {
+        cloud_topic: Some("/points".into()),
+        world_frame: None,
+    };
+    let drive = McapDrive::open(&path, &options).unwrap();
+    assert_eq!(drive.world_frame(), "odom");
+    let mut frames = Vec::new();
+    drive
+        .for_each_frame::<travmap::Error>(&(0..1), |f| {
+            frames.push(f);
+            Ok(())
+        })
+        .unwrap();
+    let frame = &frames[0];
+    // The NaN point is dropped; the others read through float64 big-endian fields.
+    assert_eq!(
+        frame.points_in_velodyne,
+        vec![[1.0, 2.0, 3.0, 0.0], [4.0, 5.0, 6.0, 0.0]]
+    );
+    // Halfway between odometry x = 0 and x = 2, plus the static 1.5 m up.
+    let t = frame.world_from_velodyne.translation;
+    assert!(
+        (t.x - 1.0).abs() < 1e-12 && (t.z - 1.5).abs() < 1e-12,
+        "{t}"
+    );
+    assert_eq!(frame.stamp_ns, 1_050_000_000);
+}
+
+#[test]
+fn shared_mcap_files_give_clear_errors() {
+    let Some(dir) = common::shared_data("mcap") else {
+        return;
+    };
+    let err = clean_failure(travmap(&[
+        "eval",
+        dir.join("rosbag2_cdr_test.mcap").to_str().unwrap(),
+    ]));
+    assert!(
+        err.contains("no PointCloud2 topic")
+            && err.contains("/test_topic (test_msgs/msg/BasicTypes)"),
+        "{err}"
+    );
+    // Every TF and Odometry message of the all-types file decodes; its cloud has no pose.
+    let err = clean_failure(travmap(&[
+        "eval",
+        dir.join("rosbags_rs_all_std_types.mcap").to_str().unwrap(),
+    ]));
+    assert!(
+        err.contains("no pose for the clouds' frame `test_frame`"),
+        "{err}"
+    );
+    // A truncated copy is a clear error, not a panic.
+    let bytes = std::fs::read(dir.join("rosbags_rs_all_std_types.mcap")).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let cut = tmp.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let err = clean_failure(travmap(&["eval", cut.to_str().unwrap()]));
+    assert!(err.contains("cut.mcap"), "{err}");
+}
