@@ -168,15 +168,99 @@ fn annotated_grid_matches_run_and_carries_metadata() {
     assert_eq!(config["grid"]["size_m"], 12.0);
 }
 
+/// Checks one client's summary of an annotated file of the whole sample against
+/// travmap's own values: message counts, point counts, first and last points,
+/// stamps, and grid cells as `travmap run` prints them.
+fn check_client_summary(client: &str, entries: &[Value], seq: &str, runs: &[Value]) {
+    let on = |topic: &str| {
+        entries
+            .iter()
+            .filter(|e| e["topic"] == topic)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(on("/tf_static").len(), 1, "{client}");
+    assert_eq!(on("/tf").len(), 6, "{client}");
+    assert_eq!(on("/travmap/metrics").len(), 6, "{client}");
+    assert_eq!(on("/travmap/ground_truth").len(), 3, "{client}");
+    let sequence = KittiSequence::open(Path::new(seq)).unwrap();
+    for (cloud, index) in on("/velodyne_points").iter().zip(0..) {
+        let frame = sequence.read_frame(index).unwrap();
+        assert_eq!(cloud["points"], frame.points_in_velodyne.len(), "{client}");
+        // Clients print each float32 as its shortest double; compare as float32.
+        let as_f32 = |v: &Value| -> Vec<f32> {
+            v.as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap() as f32)
+                .collect()
+        };
+        assert_eq!(
+            as_f32(&cloud["first"]),
+            frame.points_in_velodyne[0][..3],
+            "{client}"
+        );
+        assert_eq!(
+            as_f32(&cloud["last"]),
+            frame.points_in_velodyne.last().unwrap()[..3],
+            "{client}"
+        );
+        assert_eq!(cloud["stamp"], frame.stamp_ns, "{client}");
+        assert_eq!(cloud["log_time"], frame.stamp_ns, "{client}");
+        let fields: Vec<&str> = cloud["fields"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|f| f.as_str().unwrap())
+            .collect();
+        let expected = if frame.labels.is_some() {
+            vec!["x", "y", "z", "intensity", "label"]
+        } else {
+            vec!["x", "y", "z", "intensity"]
+        };
+        assert_eq!(fields, expected, "{client}");
+    }
+    let grids = on("/travmap/prediction");
+    assert_eq!(grids.len(), runs.len(), "{client}");
+    for (grid, run) in grids.iter().zip(runs) {
+        assert_eq!(grid["cells"], run["cells"], "{client}");
+        assert_eq!(grid["stamp"], run["stamp_ns"], "{client}");
+        assert_eq!(grid["width"], 30, "{client}");
+    }
+    let with_truth: Vec<bool> = on("/travmap/metrics")
+        .iter()
+        .map(|m| m["accuracy"].is_number())
+        .collect();
+    assert_eq!(
+        with_truth,
+        [true, true, true, false, false, false],
+        "{client}"
+    );
+}
+
+/// Each client's entries, sorted by topic and time (clients differ in reading order).
+fn sorted(entries: &Value) -> Vec<Value> {
+    let mut v = entries.as_array().unwrap().clone();
+    v.sort_by_key(|e| {
+        (
+            e["topic"].as_str().unwrap().to_string(),
+            e["log_time"].as_u64().unwrap(),
+        )
+    });
+    v
+}
+
 #[test]
-fn real_python_clients_decode_what_travmap_writes() {
+fn real_clients_decode_what_travmap_writes() {
     let Some(seq) = sample() else { return };
-    let Ok(python) = std::env::var("TRAVMAP_CLIENT_PYTHON") else {
+    let python = std::env::var("TRAVMAP_CLIENT_PYTHON").ok();
+    let node_modules = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/node_modules");
+    if python.is_none() && !node_modules.is_dir() {
         eprintln!(
-            "skipping: TRAVMAP_CLIENT_PYTHON is not set (.ci/run sets it to a venv with mcap, mcap-ros2-support and rosbags)"
+            "skipping: no client installed (.ci/run sets TRAVMAP_CLIENT_PYTHON to a venv with mcap, \
+             mcap-ros2-support and rosbags, and runs npm ci in tests/clients)"
         );
         return;
-    };
+    }
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("a.mcap");
     success(travmap(&[
@@ -186,81 +270,46 @@ fn real_python_clients_decode_what_travmap_writes() {
         out.to_str().unwrap(),
         "-q",
     ]));
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/decode_mcap.py");
-    let decoded = std::process::Command::new(python)
-        .arg(script)
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        decoded.status.success(),
-        "{}",
-        String::from_utf8_lossy(&decoded.stderr)
-    );
-    let doc: Value = serde_json::from_slice(&decoded.stdout).unwrap();
-    // Both clients see the same thing.
-    assert_eq!(doc["mcap"], doc["rosbags"]);
-    let entries = doc["mcap"].as_array().unwrap();
-    let on = |topic: &str| {
-        entries
-            .iter()
-            .filter(|e| e["topic"] == topic)
-            .collect::<Vec<_>>()
-    };
-    assert_eq!(on("/tf_static").len(), 1);
-    assert_eq!(on("/tf").len(), 6);
-    assert_eq!(on("/travmap/metrics").len(), 6);
-    assert_eq!(on("/travmap/ground_truth").len(), 3);
-    // Clouds: point counts and first / last points as in the KITTI files.
-    let sequence = KittiSequence::open(Path::new(&seq)).unwrap();
-    for (cloud, index) in on("/velodyne_points").iter().zip(0..) {
-        let frame = sequence.read_frame(index).unwrap();
-        assert_eq!(cloud["points"], frame.points_in_velodyne.len());
-        let first = &frame.points_in_velodyne[0];
-        let last = frame.points_in_velodyne.last().unwrap();
-        // Python prints each float32 as its shortest double; compare as float32.
-        let as_f32 = |v: &Value| -> Vec<f32> {
-            v.as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_f64().unwrap() as f32)
-                .collect()
-        };
-        assert_eq!(as_f32(&cloud["first"]), first[..3]);
-        assert_eq!(as_f32(&cloud["last"]), last[..3]);
-        assert_eq!(cloud["stamp"], frame.stamp_ns);
-        let fields: Vec<&str> = cloud["fields"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|f| f.as_str().unwrap())
-            .collect();
-        assert_eq!(
-            fields,
-            if frame.labels.is_some() {
-                vec!["x", "y", "z", "intensity", "label"]
-            } else {
-                vec!["x", "y", "z", "intensity"]
-            }
-        );
-    }
-    // Grids: the cells travmap's own `run` prints.
     let run = success(travmap(&["run", &seq, "--json"]));
     let runs: Vec<Value> = run
         .lines()
         .skip(1)
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
-    for (grid, run) in on("/travmap/prediction").iter().zip(&runs) {
-        assert_eq!(grid["cells"], run["cells"]);
-        assert_eq!(grid["stamp"], run["stamp_ns"]);
-        assert_eq!(grid["width"], 30);
+    let clients = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients");
+    let decode = |program: &str, script: &str| -> Value {
+        let decoded = std::process::Command::new(program)
+            .arg(clients.join(script))
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(
+            decoded.status.success(),
+            "{program} {script}: {}",
+            String::from_utf8_lossy(&decoded.stderr)
+        );
+        serde_json::from_slice(&decoded.stdout).unwrap()
+    };
+    let mut summaries = Vec::new();
+    if let Some(python) = &python {
+        let doc = decode(python, "decode_mcap.py");
+        summaries.push(("python mcap-ros2-support", sorted(&doc["mcap"])));
+        summaries.push(("python rosbags", sorted(&doc["rosbags"])));
+    } else {
+        eprintln!("skipping the Python clients: TRAVMAP_CLIENT_PYTHON is not set");
     }
-    let with_truth: Vec<bool> = on("/travmap/metrics")
-        .iter()
-        .map(|m| m["accuracy"].is_number())
-        .collect();
-    assert_eq!(with_truth, [true, true, true, false, false, false]);
+    if node_modules.is_dir() {
+        summaries.push((
+            "node @mcap/core + rosmsg2-serialization",
+            sorted(&decode("node", "decode_mcap.mjs")),
+        ));
+    } else {
+        eprintln!("skipping the Node client: run npm ci in tests/clients");
+    }
+    for (client, entries) in &summaries {
+        check_client_summary(client, entries, &seq, &runs);
+        assert_eq!(entries.len(), 34, "{client}: every message decoded");
+    }
 }
 
 #[test]
@@ -476,4 +525,90 @@ fn shared_mcap_files_give_clear_errors() {
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
     let err = clean_failure(travmap(&["eval", cut.to_str().unwrap()]));
     assert!(err.contains("cut.mcap"), "{err}");
+}
+
+#[test]
+fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
+    let Some(seq) = sample() else { return };
+    let Ok(rerun) = std::env::var("TRAVMAP_RERUN") else {
+        eprintln!("skipping: TRAVMAP_RERUN is not set (.ci/run points it at rerun-sdk's `rerun`)");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mcap_path = dir.path().join("a.mcap");
+    let rrd = dir.path().join("a.rrd");
+    success(travmap(&[
+        "annotate",
+        &seq,
+        "-o",
+        mcap_path.to_str().unwrap(),
+        "-q",
+    ]));
+    let converted = std::process::Command::new(&rerun)
+        .args(["mcap", "convert"])
+        .arg(&mcap_path)
+        .arg("-o")
+        .arg(&rrd)
+        .output()
+        .unwrap();
+    assert!(
+        converted.status.success(),
+        "{}",
+        String::from_utf8_lossy(&converted.stderr)
+    );
+    // `rerun mcap convert` exits 0 even on bad input: check what the .rrd holds.
+    let printed = std::process::Command::new(&rerun)
+        .args(["rrd", "print", "-v"])
+        .arg(&rrd)
+        .output()
+        .unwrap();
+    assert!(
+        printed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&printed.stderr)
+    );
+    let text = String::from_utf8_lossy(&printed.stdout);
+    // Chunk headers read "... with N rows (size) - /entity - data columns: [...]".
+    let rows = |entity: &str, column: &str| -> usize {
+        text.lines()
+            .filter(|l| {
+                l.contains(&format!(" - {entity} - ")) && l.contains(&format!("{entity}@{column}"))
+            })
+            .filter_map(|l| {
+                l.split(" with ")
+                    .nth(1)?
+                    .split(' ')
+                    .next()?
+                    .parse::<usize>()
+                    .ok()
+            })
+            .sum()
+    };
+    assert_eq!(rows("/travmap/prediction", "GridMap:data"), 6, "{text}");
+    assert_eq!(rows("/travmap/ground_truth", "GridMap:data"), 3);
+    assert_eq!(rows("/travmap/cloud", "Points3D:positions"), 6);
+    assert_eq!(rows("/velodyne_points", "Points3D:positions"), 6);
+    // The grids' size and the first grid's corner, in the data itself.
+    let data = std::process::Command::new(&rerun)
+        .args(["rrd", "print", "-vvv"])
+        .arg(&rrd)
+        .output()
+        .unwrap();
+    let data = String::from_utf8_lossy(&data.stdout);
+    assert!(
+        data.contains("width: 30, height: 30"),
+        "no 30 x 30 GridMap in the .rrd"
+    );
+    let run = success(travmap(&["run", &seq, "--frames", "0", "--json"]));
+    let first: Value = serde_json::from_str(run.lines().nth(1).unwrap()).unwrap();
+    let corner = first["min_corner_in_world"].as_array().unwrap();
+    let expected = format!(
+        "[[{:?}, {:?}, ",
+        corner[0].as_f64().unwrap() as f32,
+        corner[1].as_f64().unwrap() as f32
+    );
+    assert!(
+        data.contains(&expected),
+        "no GridMap translation starting {expected}"
+    );
 }
