@@ -212,7 +212,12 @@ pub fn annotate(
                         data,
                         &channel.message_encoding,
                     )?;
-                    sink.write_raw(id, message.log_time, message.publish_time, &message.data)?;
+                    sink.write_raw(
+                        id,
+                        message.log_time,
+                        message.publish_time,
+                        message.data.to_vec(),
+                    )?;
                     passthrough_messages += 1;
                     Ok(())
                 })?;

@@ -273,22 +273,29 @@ pub fn write_kitti_frames(
             .map(|&index| encode_frame(sequence, index, start_ns))
             .collect::<Result<_>>()?;
         for frame in encoded {
+            let EncodedFrame {
+                stamp_ns,
+                cloud,
+                tf,
+                image,
+                labelled,
+            } = frame;
             if summary.frames == 0 {
                 sink.write(
                     "/tf_static",
-                    frame.stamp_ns,
-                    &static_transforms(sequence, frame.stamp_ns)?,
+                    stamp_ns,
+                    &static_transforms(sequence, stamp_ns)?,
                 )?;
             }
-            sink.write_encoded::<PointCloud2>(CLOUD_TOPIC, frame.stamp_ns, &frame.cloud)?;
-            sink.write_encoded::<TfMessage>("/tf", frame.stamp_ns, &frame.tf)?;
-            if let Some((image, info)) = &frame.image {
-                sink.write_encoded::<CompressedImage>(IMAGE_TOPIC, frame.stamp_ns, image)?;
-                sink.write_encoded::<CameraInfo>(CAMERA_INFO_TOPIC, frame.stamp_ns, info)?;
+            sink.write_encoded::<PointCloud2>(CLOUD_TOPIC, stamp_ns, cloud)?;
+            sink.write_encoded::<TfMessage>("/tf", stamp_ns, tf)?;
+            if let Some((image, info)) = image {
+                sink.write_encoded::<CompressedImage>(IMAGE_TOPIC, stamp_ns, image)?;
+                sink.write_encoded::<CameraInfo>(CAMERA_INFO_TOPIC, stamp_ns, info)?;
                 summary.images += 1;
             }
             summary.frames += 1;
-            summary.labelled_frames += frame.labelled as usize;
+            summary.labelled_frames += labelled as usize;
             on_frame();
         }
     }

@@ -1,14 +1,19 @@
-//! Writing: ROS 2 (CDR) MCAP files, atomically.
+//! Writing: ROS 2 (CDR) MCAP files, atomically, with compression off the caller's
+//! thread.
 //!
-//! An [`McapSink`] writes to a temporary file beside the output and renames it over
-//! the output only in [`McapSink::finish`]; dropped unfinished (an error, a panic),
-//! it deletes the temporary file, so a failed run never leaves a file that looks
-//! complete. zstd chunks are compressed on worker threads by the mcap crate.
+//! An [`McapSink`] hands every record to a writer thread that owns the mcap
+//! `Writer`, so chunk compression (zstd by default, itself multi-threaded by the
+//! mcap crate) overlaps with the caller reading, running the method and encoding the
+//! next frames. It writes to a temporary file beside the output and renames it over
+//! the output only in [`McapSink::finish`]; dropped unfinished (an error, a panic), it
+//! deletes the temporary file, so a failed run never leaves a file that looks complete.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::thread::JoinHandle;
 
 use crate::error::{Error, Result};
 use crate::ros::{RosMessage, encode};
@@ -26,14 +31,98 @@ pub enum Compression {
 /// Chunks of about this many bytes (uncompressed): a few frames each.
 const CHUNK_BYTES: u64 = 8 << 20;
 
+/// Records queued for the writer thread before the caller waits (a few frames).
+const QUEUE: usize = 64;
+
+enum Record {
+    Schema {
+        id: u16,
+        name: String,
+        encoding: String,
+        data: Vec<u8>,
+    },
+    Channel {
+        id: u16,
+        schema_id: u16,
+        topic: String,
+        message_encoding: String,
+    },
+    Message {
+        channel_id: u16,
+        sequence: u32,
+        log_time_ns: u64,
+        publish_time_ns: u64,
+        data: Vec<u8>,
+    },
+    Metadata(mcap::records::Metadata),
+}
+
 /// An MCAP being written; see the module documentation.
 pub struct McapSink {
-    writer: Option<mcap::Writer<BufWriter<File>>>,
+    sender: Option<SyncSender<Record>>,
+    thread: Option<JoinHandle<std::result::Result<(), String>>>,
     temporary_path: PathBuf,
     path: PathBuf,
     channels: HashMap<String, u16>,
     schemas: HashMap<String, u16>,
     sequence: u32,
+    finished: bool,
+}
+
+/// The writer thread: writes records until the queue closes, then the summary.
+fn write_records(
+    mut writer: mcap::Writer<BufWriter<File>>,
+    records: Receiver<Record>,
+) -> std::result::Result<(), String> {
+    let fail = |e: mcap::McapError| e.to_string();
+    for record in records {
+        match record {
+            Record::Schema {
+                id,
+                name,
+                encoding,
+                data,
+            } => {
+                writer
+                    .add_schema_with_id(id, &name, &encoding, &data)
+                    .map_err(fail)?;
+            }
+            Record::Channel {
+                id,
+                schema_id,
+                topic,
+                message_encoding,
+            } => {
+                writer
+                    .add_channel_with_id(id, schema_id, &topic, &message_encoding, &BTreeMap::new())
+                    .map_err(fail)?;
+            }
+            Record::Message {
+                channel_id,
+                sequence,
+                log_time_ns,
+                publish_time_ns,
+                data,
+            } => {
+                let header = mcap::records::MessageHeader {
+                    channel_id,
+                    sequence,
+                    log_time: log_time_ns,
+                    publish_time: publish_time_ns,
+                };
+                writer
+                    .write_to_known_channel(&header, &data)
+                    .map_err(fail)?;
+            }
+            Record::Metadata(metadata) => writer.write_metadata(&metadata).map_err(fail)?,
+        }
+    }
+    writer.finish().map_err(fail)?;
+    let file = writer
+        .into_inner()
+        .into_inner()
+        .map_err(|e| e.error().to_string())?;
+    file.sync_all().map_err(|e| e.to_string())
 }
 
 impl McapSink {
@@ -52,7 +141,8 @@ impl McapSink {
             std::process::id()
         ));
         let file = File::create(&temporary_path).map_err(|e| Error::io(&temporary_path, e))?;
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
+        // As many compression threads as rayon workers (RAYON_NUM_THREADS caps both).
+        let threads = rayon::current_num_threads() as u32;
         let options = mcap::WriteOptions::new()
             .profile("ros2")
             .library(concat!("travmap ", env!("CARGO_PKG_VERSION")))
@@ -63,31 +153,54 @@ impl McapSink {
                 Compression::None => None,
             })
             .compression_threads(threads);
-        let writer = options
-            .create(BufWriter::with_capacity(1 << 20, file))
-            .map_err(|e| Error::Mcap {
-                path: temporary_path.clone(),
-                message: e.to_string(),
-            })?;
+        let writer = match options.create(BufWriter::with_capacity(1 << 20, file)) {
+            Ok(writer) => writer,
+            Err(e) => {
+                let _ = std::fs::remove_file(&temporary_path);
+                return Err(Error::Mcap {
+                    path: path.to_path_buf(),
+                    message: e.to_string(),
+                });
+            }
+        };
+        let (sender, receiver) = sync_channel(QUEUE);
+        let thread = std::thread::Builder::new()
+            .name("mcap-writer".into())
+            .spawn(move || write_records(writer, receiver))
+            .map_err(|e| Error::io(path, e))?;
         Ok(Self {
-            writer: Some(writer),
+            sender: Some(sender),
+            thread: Some(thread),
             temporary_path,
             path: path.to_path_buf(),
             channels: HashMap::new(),
             schemas: HashMap::new(),
             sequence: 0,
+            finished: false,
         })
     }
 
-    fn fail(&self, e: impl std::fmt::Display) -> Error {
-        Error::Mcap {
-            path: self.path.clone(),
-            message: format!("writing failed: {e}"),
+    /// Queues a record; if the writer thread has stopped, its error.
+    fn send(&mut self, record: Record) -> Result<()> {
+        let sent = self.sender.as_ref().is_some_and(|s| s.send(record).is_ok());
+        if sent {
+            return Ok(());
         }
+        Err(self.writer_error())
     }
 
-    fn writer(&mut self) -> &mut mcap::Writer<BufWriter<File>> {
-        self.writer.as_mut().expect("the writer lives until finish")
+    /// The writer thread's error, after it stopped.
+    fn writer_error(&mut self) -> Error {
+        self.sender = None;
+        let message = match self.thread.take().map(JoinHandle::join) {
+            Some(Ok(Err(message))) => message,
+            Some(Err(_)) => "the writer thread panicked".into(),
+            _ => "the writer stopped".into(),
+        };
+        Error::Mcap {
+            path: self.path.clone(),
+            message: format!("writing failed: {message}"),
+        }
     }
 
     /// The channel of `topic`, created with its schema on first use.
@@ -105,18 +218,24 @@ impl McapSink {
         let schema_id = match self.schemas.get(schema_name) {
             Some(&id) => id,
             None => {
-                let id = self
-                    .writer()
-                    .add_schema(schema_name, schema_encoding, schema)
-                    .map_err(|e| self.fail(e))?;
+                let id = self.schemas.len() as u16 + 1;
+                self.send(Record::Schema {
+                    id,
+                    name: schema_name.into(),
+                    encoding: schema_encoding.into(),
+                    data: schema.to_vec(),
+                })?;
                 self.schemas.insert(schema_name.to_string(), id);
                 id
             }
         };
-        let id = self
-            .writer()
-            .add_channel(schema_id, topic, message_encoding, &BTreeMap::new())
-            .map_err(|e| self.fail(e))?;
+        let id = self.channels.len() as u16;
+        self.send(Record::Channel {
+            id,
+            schema_id,
+            topic: topic.into(),
+            message_encoding: message_encoding.into(),
+        })?;
         self.channels.insert(topic.to_string(), id);
         Ok(id)
     }
@@ -127,24 +246,21 @@ impl McapSink {
         channel_id: u16,
         log_time_ns: u64,
         publish_time_ns: u64,
-        data: &[u8],
+        data: Vec<u8>,
     ) -> Result<()> {
         self.sequence += 1;
-        let header = mcap::records::MessageHeader {
+        self.send(Record::Message {
             channel_id,
             sequence: self.sequence,
-            log_time: log_time_ns,
-            publish_time: publish_time_ns,
-        };
-        self.writer()
-            .write_to_known_channel(&header, data)
-            .map_err(|e| self.fail(e))
+            log_time_ns,
+            publish_time_ns,
+            data,
+        })
     }
 
     /// Encodes and writes a ROS 2 message on `topic`.
     pub fn write<T: RosMessage>(&mut self, topic: &str, stamp_ns: u64, message: &T) -> Result<()> {
-        let bytes = encode(message, 0);
-        self.write_encoded::<T>(topic, stamp_ns, &bytes)
+        self.write_encoded::<T>(topic, stamp_ns, encode(message, 0))
     }
 
     /// Writes a message of type `T` that is already CDR-encoded (see [`encode`]).
@@ -152,7 +268,7 @@ impl McapSink {
         &mut self,
         topic: &str,
         stamp_ns: u64,
-        bytes: &[u8],
+        bytes: Vec<u8>,
     ) -> Result<()> {
         let channel = self.channel(topic, T::NAME, "ros2msg", T::SCHEMA.as_bytes(), "cdr")?;
         // Log time = header stamp: tools that order by log time then show sensor time.
@@ -160,33 +276,44 @@ impl McapSink {
     }
 
     pub fn write_metadata(&mut self, name: &str, entries: BTreeMap<String, String>) -> Result<()> {
-        let metadata = mcap::records::Metadata {
+        self.send(Record::Metadata(mcap::records::Metadata {
             name: name.to_string(),
             metadata: entries,
-        };
-        self.writer()
-            .write_metadata(&metadata)
-            .map_err(|e| self.fail(e))
+        }))
     }
 
-    /// Writes the summary, syncs, and renames the temporary file over the output.
+    /// Waits for the writer, then renames the temporary file over the output.
     pub fn finish(mut self) -> Result<()> {
-        let mut writer = self.writer.take().expect("finish runs once");
-        writer.finish().map_err(|e| self.fail(e))?;
-        let file = writer
-            .into_inner()
-            .into_inner()
-            .map_err(|e| self.fail(e.error()))?;
-        file.sync_all().map_err(|e| self.fail(e))?;
-        std::fs::rename(&self.temporary_path, &self.path).map_err(|e| self.fail(e))?;
+        self.sender = None;
+        match self.thread.take().map(JoinHandle::join) {
+            Some(Ok(Ok(()))) => {}
+            Some(Ok(Err(message))) => {
+                return Err(Error::Mcap {
+                    path: self.path.clone(),
+                    message: format!("writing failed: {message}"),
+                });
+            }
+            _ => {
+                return Err(Error::Mcap {
+                    path: self.path.clone(),
+                    message: "the writer thread failed".into(),
+                });
+            }
+        }
+        std::fs::rename(&self.temporary_path, &self.path).map_err(|e| Error::io(&self.path, e))?;
+        self.finished = true;
         Ok(())
     }
 }
 
 impl Drop for McapSink {
     fn drop(&mut self) {
-        if self.writer.is_some() {
-            // Unfinished: leave nothing behind.
+        if !self.finished {
+            // Unfinished: let the writer thread end, then leave nothing behind.
+            self.sender = None;
+            if let Some(thread) = self.thread.take() {
+                let _ = thread.join();
+            }
             let _ = std::fs::remove_file(&self.temporary_path);
         }
     }

@@ -380,7 +380,7 @@ fn write_odometry_drive(path: &Path) {
         let channel = sink
             .channel("/odom", "nav_msgs/msg/Odometry", "ros2msg", b"", "cdr")
             .unwrap();
-        sink.write_raw(channel, stamp, stamp, &bytes).unwrap();
+        sink.write_raw(channel, stamp, stamp, bytes).unwrap();
     }
     let lidar = TfMessage {
         transforms: vec![TransformStamped {
@@ -611,4 +611,78 @@ fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
         data.contains(&expected),
         "no GridMap translation starting {expected}"
     );
+}
+
+#[test]
+fn convert_passes_png_images_through_with_camera_info() {
+    // A one-frame sequence with the real KITTI image of kitti-object-000008 and
+    // sequence 03's calibration (the same 2011_09_26 cameras).
+    let (Some(object), Some(meta)) = (
+        common::shared_data("kitti-object-000008/training"),
+        common::shared_data("kitti-odometry-meta/sequences/03"),
+    ) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
+    std::fs::create_dir_all(seq.join("velodyne")).unwrap();
+    std::fs::create_dir_all(seq.join("image_2")).unwrap();
+    std::fs::copy(
+        object.join("velodyne_reduced/000008.bin"),
+        seq.join("velodyne/000000.bin"),
+    )
+    .unwrap();
+    std::fs::copy(
+        object.join("image_2/000008.png"),
+        seq.join("image_2/000000.png"),
+    )
+    .unwrap();
+    std::fs::copy(meta.join("calib.txt"), seq.join("calib.txt")).unwrap();
+    let first_line = |name: &str| {
+        std::fs::read_to_string(meta.join(name))
+            .unwrap()
+            .lines()
+            .next()
+            .unwrap()
+            .to_string()
+            + "\n"
+    };
+    std::fs::write(seq.join("poses.txt"), first_line("poses.txt")).unwrap();
+    std::fs::write(seq.join("times.txt"), first_line("times.txt")).unwrap();
+    let out = dir.path().join("d.mcap");
+    let doc: Value = serde_json::from_str(&success(travmap(&[
+        "convert",
+        seq.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--start-time",
+        "1317000000",
+        "--json",
+    ])))
+    .unwrap();
+    assert_eq!(doc["summary"]["images"], 1);
+    let png = std::fs::read(seq.join("image_2/000000.png")).unwrap();
+    let images = messages::<travmap::ros::CompressedImage>(&out, "/camera_2/image/compressed");
+    assert_eq!(images.len(), 1);
+    let (log_time, image) = &images[0];
+    assert_eq!(image.data, png, "the PNG bytes pass through unchanged");
+    assert_eq!(image.format, "png");
+    assert_eq!(image.header.frame_id, "camera_2");
+    assert_eq!(*log_time, 1_317_000_000_000_000_000);
+    let infos = messages::<travmap::ros::CameraInfo>(&out, "/camera_2/camera_info");
+    let info = &infos[0].1;
+    assert_eq!((info.width, info.height), (1242, 375));
+    assert_eq!(info.k[0], 721.5377);
+    assert_eq!(info.p[3], 44.85728);
+    let statics = messages::<travmap::ros::TfMessage>(&out, "/tf_static");
+    let frames: Vec<(&str, &str)> = statics[0]
+        .1
+        .transforms
+        .iter()
+        .map(|t| (t.header.frame_id.as_str(), t.child_frame_id.as_str()))
+        .collect();
+    assert_eq!(frames, [("velodyne", "camera_0"), ("camera_0", "camera_2")]);
+    // camera_2 sits 6 cm left of camera_0 (P2 = K [I | t], t_x = 44.857 / 721.54).
+    let baseline = statics[0].1.transforms[1].transform.translation.x;
+    assert!((baseline + 44.85728 / 721.5377).abs() < 1e-12, "{baseline}");
 }
