@@ -69,6 +69,9 @@ struct ModelFile {
     training: TrainingSummary,
     #[serde(default)]
     reduced_set: Option<ReducedSetFile>,
+    /// The hybrid model (geometric + appearance features) for cells a camera has seen.
+    #[serde(default)]
+    hybrid: Option<Box<ModelFile>>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -125,6 +128,8 @@ impl ReducedSet {
 #[derive(Default)]
 pub struct PredictionScratch {
     standardised: Vec<f32>,
+    /// Geometric and appearance values side by side, for the hybrid model.
+    row: Vec<f32>,
 }
 
 /// A trained RBF SVM, ready to predict.
@@ -145,6 +150,9 @@ pub struct SvmModel {
     pub training: TrainingSummary,
     /// Used by [`SvmModel::decision_value`] when present.
     pub reduced_set: Option<ReducedSet>,
+    /// Classifies the cells that have appearance features (METHOD.md section 5's
+    /// Decision); this model classifies the others.
+    pub hybrid: Option<Box<SvmModel>>,
 }
 
 impl SvmModel {
@@ -174,6 +182,7 @@ impl SvmModel {
             config,
             training,
             reduced_set: None,
+            hybrid: None,
         }
     }
 
@@ -207,11 +216,21 @@ impl SvmModel {
         }
         let file: ModelFile =
             serde_json::from_value(header).map_err(|e| fail(format!("malformed model: {e}")))?;
-        let d = FEATURE_NAMES.len();
-        if file.feature_names != FEATURE_NAMES {
+        let names: Vec<String> = FEATURE_NAMES.iter().map(|n| n.to_string()).collect();
+        Self::from_file(file, source_name, &names)
+    }
+
+    /// Checks and loads one model of a file; `expected_names` are its features.
+    fn from_file(file: ModelFile, source_name: &str, expected_names: &[String]) -> Result<Self> {
+        let fail = |message: String| Error::Model {
+            source_name: source_name.to_string(),
+            message,
+        };
+        let d = expected_names.len();
+        if file.feature_names != expected_names {
             return Err(fail(format!(
                 "features {:?}; this travmap computes {:?}",
-                file.feature_names, FEATURE_NAMES
+                file.feature_names, expected_names
             )));
         }
         if file.feature_mean.len() != d || file.feature_std.len() != d {
@@ -248,6 +267,18 @@ impl SvmModel {
             return Err(fail("non-finite or non-positive parameters".into()));
         }
         file.config.validate()?;
+        let hybrid = match file.hybrid {
+            Some(hybrid) => {
+                let mut names = expected_names.to_vec();
+                names.extend(appearance_feature_names(&file.config.appearance));
+                Some(Box::new(Self::from_file(
+                    *hybrid,
+                    &format!("{source_name} (hybrid model)"),
+                    &names,
+                )?))
+            }
+            None => None,
+        };
         let reduced_set = match file.reduced_set {
             None => None,
             Some(r) => {
@@ -287,15 +318,25 @@ impl SvmModel {
             file.training,
         );
         model.reduced_set = reduced_set;
+        model.hybrid = hybrid;
         Ok(model)
     }
 
-    pub fn to_json(&self) -> Vec<u8> {
+    /// Feature names: the geometric ones, plus the appearance ones for a hybrid model.
+    pub fn feature_names(&self) -> Vec<String> {
+        let mut names: Vec<String> = FEATURE_NAMES.iter().map(|n| n.to_string()).collect();
+        if self.dimension() > FEATURE_NAMES.len() {
+            names.extend(appearance_feature_names(&self.config.appearance));
+        }
+        names
+    }
+
+    fn to_file(&self) -> ModelFile {
         let d = self.dimension();
-        let file = ModelFile {
+        ModelFile {
             format: MODEL_FORMAT.into(),
             version: MODEL_VERSION,
-            feature_names: FEATURE_NAMES.iter().map(|s| s.to_string()).collect(),
+            feature_names: self.feature_names(),
             feature_mean: self.feature_mean.clone(),
             feature_std: self.feature_inverse_std.iter().map(|s| 1.0 / s).collect(),
             c: self.c,
@@ -315,8 +356,12 @@ impl SvmModel {
                 bias: r.bias,
                 training_agreement: r.training_agreement,
             }),
-        };
-        let mut bytes = serde_json::to_vec(&file).expect("model serialises");
+            hybrid: self.hybrid.as_ref().map(|h| Box::new(h.to_file())),
+        }
+    }
+
+    pub fn to_json(&self) -> Vec<u8> {
+        let mut bytes = serde_json::to_vec(&self.to_file()).expect("model serialises");
         bytes.push(b'\n');
         bytes
     }
@@ -336,6 +381,14 @@ impl SvmModel {
             Some(format!(
                 "grid.cell_size_m = {} (model) vs {}",
                 trained.grid.cell_size_m, config.grid.cell_size_m
+            ))
+        } else if self.hybrid.is_some()
+            && trained.appearance != config.appearance
+            && config.appearance.enabled
+        {
+            Some(format!(
+                "appearance = {:?} (model) vs {:?}",
+                trained.appearance, config.appearance
             ))
         } else if trained.features != config.features {
             Some(format!(
@@ -393,23 +446,58 @@ impl SvmModel {
         self.blocks.rbf_sum(z, self.gamma as f32) - self.rho
     }
 
+    /// The class of one predictable cell: by the hybrid model when the cell has
+    /// appearance values and the model has one, else by the geometric model.
+    pub fn classify_cell(
+        &self,
+        geometric: &[f32],
+        appearance: Option<&[f32]>,
+        scratch: &mut PredictionScratch,
+    ) -> CellClass {
+        let value = match (&self.hybrid, appearance) {
+            (Some(hybrid), Some(appearance)) => {
+                let mut row = std::mem::take(&mut scratch.row);
+                row.clear();
+                row.extend_from_slice(geometric);
+                row.extend_from_slice(appearance);
+                let value = hybrid.decision_value(&row, scratch);
+                scratch.row = row;
+                value
+            }
+            _ => self.decision_value(geometric, scratch),
+        };
+        if value > 0.0 {
+            CellClass::Traversable
+        } else {
+            CellClass::NonTraversable
+        }
+    }
+
     /// Classifies every predictable cell of a grid; the others stay unknown.
     pub fn classify(&self, grid: &FeatureGrid) -> Vec<CellClass> {
         let mut scratch = self.scratch();
-        grid.predictable
-            .iter()
-            .enumerate()
-            .map(|(cell, &predictable)| {
-                if !predictable {
-                    CellClass::Unknown
-                } else if self.decision_value(grid.cell(cell), &mut scratch) > 0.0 {
-                    CellClass::Traversable
+        (0..grid.predictable.len())
+            .map(|cell| {
+                if grid.predictable[cell] {
+                    self.classify_cell(grid.cell(cell), grid.appearance(cell), &mut scratch)
                 } else {
-                    CellClass::NonTraversable
+                    CellClass::Unknown
                 }
             })
             .collect()
     }
+}
+
+/// Names of the appearance values: hue, saturation and value buckets.
+pub fn appearance_feature_names(config: &crate::config::AppearanceConfig) -> Vec<String> {
+    [
+        ("hue", config.hue_bins),
+        ("saturation", config.saturation_bins),
+        ("value", config.value_bins),
+    ]
+    .iter()
+    .flat_map(|&(prefix, n)| (0..n).map(move |i| format!("{prefix}_{i:02}")))
+    .collect()
 }
 
 #[cfg(test)]

@@ -16,10 +16,25 @@ pub struct Config {
     pub integration: IntegrationConfig,
     pub grid: GridConfig,
     pub features: FeatureConfig,
+    pub appearance: AppearanceConfig,
     pub classifier: ClassifierConfig,
     pub filter: FilterConfig,
     pub ground_truth: GroundTruthConfig,
     pub training: TrainingConfig,
+}
+
+/// METHOD.md section 5.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AppearanceConfig {
+    /// Use camera images when the input has them (default true).
+    pub enabled: bool,
+    /// Hue buckets over [0, 360) degrees (#H, default 32).
+    pub hue_bins: u32,
+    /// Saturation buckets over [0, 1] (#S, default 8).
+    pub saturation_bins: u32,
+    /// Value buckets over [0, 256) (#V, default 48).
+    pub value_bins: u32,
 }
 
 /// METHOD.md section 6, prediction.
@@ -142,6 +157,17 @@ impl Default for FeatureConfig {
             subcell_size_m: 0.2,
             curvity_bins: 160,
             unevenness_min_points: 3,
+        }
+    }
+}
+
+impl Default for AppearanceConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            hue_bins: 32,
+            saturation_bins: 8,
+            value_bins: 48,
         }
     }
 }
@@ -284,6 +310,16 @@ impl Config {
         }
         if self.features.curvity_bins == 0 {
             return fail("features.curvity_bins must be >= 1".into());
+        }
+        let a = &self.appearance;
+        if [a.hue_bins, a.saturation_bins, a.value_bins]
+            .iter()
+            .any(|&b| !(1..=256).contains(&b))
+        {
+            return fail(format!(
+                "appearance bins must be in 1..=256, got {} / {} / {}",
+                a.hue_bins, a.saturation_bins, a.value_bins
+            ));
         }
         if self.training.folds < 2 {
             return fail(format!(

@@ -46,7 +46,9 @@ pub enum Error {
         message: String,
     },
 
-    #[error("{path}: no `{key}:` line; expected a 3x4 matrix of 12 numbers")]
+    #[error(
+        "{path}: no `{key}:` line; expected a 3x4 matrix of 12 numbers (or, in the object format, R0_rect and Tr_velo_to_cam)"
+    )]
     MissingCalibration { path: PathBuf, key: &'static str },
 
     #[error(

@@ -164,6 +164,7 @@ pub fn collect_training_set(
             for (cell, traversable) in result.labelled_cells() {
                 set.push(
                     result.features.cell(cell),
+                    result.features.appearance(cell),
                     traversable,
                     result.layout.cell_centre_in_world(cell),
                 );
@@ -271,13 +272,11 @@ pub fn cross_validate(
         frame_folds = rest;
         let predicted: Vec<CellClass> = (0..result.layout.cell_count())
             .map(|cell| match &models[folds_here[cell]] {
-                Some(model) if result.features.predictable[cell] => {
-                    if model.decision_value(result.features.cell(cell), &mut scratch) > 0.0 {
-                        CellClass::Traversable
-                    } else {
-                        CellClass::NonTraversable
-                    }
-                }
+                Some(model) if result.features.predictable[cell] => model.classify_cell(
+                    result.features.cell(cell),
+                    result.features.appearance(cell),
+                    &mut scratch,
+                ),
                 _ => CellClass::Unknown,
             })
             .collect();

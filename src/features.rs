@@ -44,11 +44,33 @@ pub struct FeatureGrid {
     pub values: Vec<f32>,
     /// Cells with at least `min_points` points.
     pub predictable: Vec<bool>,
+    /// Appearance values (METHOD.md section 5), row-major `cells x appearance_len`;
+    /// empty when no image was ever seen.
+    pub appearance: Vec<f32>,
+    pub appearance_len: usize,
+    /// Cells that some image has covered.
+    pub seen: Vec<bool>,
 }
 
 impl FeatureGrid {
     pub fn cell(&self, cell: usize) -> &[f32] {
         &self.values[cell * FEATURE_COUNT..(cell + 1) * FEATURE_COUNT]
+    }
+
+    /// The appearance values of a cell that an image has covered.
+    pub fn appearance(&self, cell: usize) -> Option<&[f32]> {
+        let n = self.appearance_len;
+        (self.seen.get(cell) == Some(&true)).then(|| &self.appearance[cell * n..(cell + 1) * n])
+    }
+
+    pub fn set_appearance(&mut self, values: Vec<f32>, seen: Vec<bool>) {
+        self.appearance_len = if seen.is_empty() {
+            0
+        } else {
+            values.len() / seen.len()
+        };
+        self.appearance = values;
+        self.seen = seen;
     }
 }
 
@@ -100,6 +122,9 @@ impl FeatureExtractor {
         FeatureGrid {
             values,
             predictable,
+            appearance: Vec::new(),
+            appearance_len: 0,
+            seen: Vec::new(),
         }
     }
 

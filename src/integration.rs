@@ -76,6 +76,7 @@ mod tests {
             world_from_velodyne,
             points_in_velodyne: vec![[1.0, 0.0, 2.0, 0.5], [0.0, 1.0, 0.0, 0.1]],
             labels: None,
+            camera: None,
         };
         let scan = scan_to_world(frame);
         let expected = [[10.0, 1.0, 2.0], [9.0, 0.0, 0.0]];

@@ -8,6 +8,7 @@
 //! [`evaluation`]. [`commands`] holds one function per subcommand of the binary.
 
 pub mod annotation;
+pub mod appearance;
 pub mod benchmark;
 pub mod classifier;
 pub mod commands;

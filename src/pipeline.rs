@@ -1,14 +1,21 @@
 //! The method in order. [`Pipeline::process_frame`] calls every stage, one comment
-//! per step; the scan window is the only state carried from frame to frame.
-//! [`run_sequence`] feeds it the frames of a KITTI sequence.
+//! per step; the scan window and the colour memory are the only state carried from
+//! frame to frame. [`run_sequence`] feeds it the frames of an input.
+//!
+//! A frame's work splits in two: [`Pipeline::observe`] (grid, geometric features,
+//! the image's votes) needs no state, so frames can run in parallel
+//! ([`process_in_parallel`]); [`Pipeline::decide`] (classification, filter) takes the
+//! appearance features that the colour memory has accumulated up to that frame.
 
 use std::collections::VecDeque;
 use std::ops::Range;
 use std::time::Instant;
 
+use nalgebra::Isometry3;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::appearance::{AppearanceVoter, CameraImage, ColourMemory, FrameVotes};
 use crate::classifier::SvmModel;
 use crate::config::Config;
 use crate::error::{Error, Result};
@@ -26,9 +33,12 @@ pub struct StageTimings {
     pub integrate_ms: f64,
     pub grid_ms: f64,
     pub features_ms: f64,
+    /// Projection and pixel voting, plus the colour memory's update (0 without images).
+    pub appearance_ms: f64,
     pub classify_ms: f64,
     pub filter_ms: f64,
-    /// Scan in to filtered grid out: integrate + grid + features + classify + filter.
+    /// Scan in to filtered grid out: integrate + grid + features + appearance +
+    /// classify + filter.
     pub latency_ms: f64,
 }
 
@@ -63,15 +73,24 @@ impl FrameResult {
     }
 }
 
+/// What one frame shows before any cross-frame state is used.
+pub struct Observation {
+    result: FrameResult,
+    votes: FrameVotes,
+}
+
 fn elapsed_ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
 
-/// The stages, built once from a validated configuration, and the scan window.
+/// The stages, built once from a validated configuration, and the state carried
+/// from frame to frame: the scan window and the colour memory.
 pub struct Pipeline {
     config: Config,
     window: VecDeque<WorldScan>,
+    colours: ColourMemory,
     features: FeatureExtractor,
+    appearance: Option<AppearanceVoter>,
     filter: OutlierFilter,
     ground_truth: GroundTruth,
 }
@@ -82,10 +101,15 @@ impl Pipeline {
         Ok(Self {
             config: config.clone(),
             window: VecDeque::new(),
+            colours: ColourMemory::default(),
             features: FeatureExtractor {
                 config: config.features.clone(),
                 min_points: config.grid.min_points,
             },
+            appearance: config.appearance.enabled.then(|| AppearanceVoter {
+                config: config.appearance.clone(),
+                min_points: config.grid.min_points,
+            }),
             filter: OutlierFilter {
                 config: config.filter.clone(),
             },
@@ -101,9 +125,10 @@ impl Pipeline {
         let started = Instant::now();
         let index = frame.index;
         let n = self.config.integration.scans;
-        // A frame from the past (a new pass over the sequence) starts a new window.
+        // A frame from the past (a new pass over the sequence) starts afresh.
         if self.window.back().is_some_and(|last| last.index >= index) {
             self.window.clear();
+            self.colours = ColourMemory::default();
         }
         self.window.push_back(scan_to_world(frame));
         while self.window.front().is_some_and(|s| s.index + n <= index) {
@@ -113,19 +138,39 @@ impl Pipeline {
     }
 
     /// Runs the method on one frame; `model` None skips classification and filter.
-    pub fn process_frame(&mut self, frame: Frame, model: Option<&SvmModel>) -> FrameResult {
+    pub fn process_frame(&mut self, mut frame: Frame, model: Option<&SvmModel>) -> FrameResult {
+        let camera = frame.camera.take();
+        let world_from_velodyne = frame.world_from_velodyne;
+
         // 1. Integration: this scan into the world, joined with the previous n - 1.
         let integrate_ms = self.integrate(frame);
         let window: Vec<&WorldScan> = self.window.iter().collect();
-        let mut result = self.process_window(&window, model);
+
+        // 2. Grid, 3. geometric features, and this frame's pixel votes.
+        let observation = self.observe(&window, &world_from_velodyne, camera.as_ref());
+
+        // 3b. Appearance: the votes join the colour memory, which gives the features.
+        let started = Instant::now();
+        let appearance =
+            remember_colours(&mut self.colours, self.appearance.as_ref(), &observation);
+        let remember_ms = elapsed_ms(started);
+
+        // 4. Classification, 5. outlier filter.
+        let mut result = self.decide(observation, appearance, model);
         result.timings.integrate_ms = integrate_ms;
-        result.timings.latency_ms += integrate_ms;
+        result.timings.appearance_ms += remember_ms;
+        result.timings.latency_ms += integrate_ms + remember_ms;
         result
     }
 
-    /// Stages 2 to 5 on an integrated window whose last scan is the current frame.
-    /// Needs no state, so frames can run in parallel (see [`process_in_parallel`]).
-    pub fn process_window(&self, window: &[&WorldScan], model: Option<&SvmModel>) -> FrameResult {
+    /// Stages 2, 3 and the voting of 3b on an integrated window whose last scan is the
+    /// current frame; needs no state.
+    pub fn observe(
+        &self,
+        window: &[&WorldScan],
+        world_from_velodyne: &Isometry3<f64>,
+        camera: Option<&CameraImage>,
+    ) -> Observation {
         let current = window[window.len() - 1];
         let mut timings = StageTimings::default();
 
@@ -144,49 +189,98 @@ impl Pipeline {
         let features = self.features.compute(&cells, ground_normal(window));
         timings.features_ms = elapsed_ms(started);
 
-        // 4. Classification, 5. outlier filter.
-        let (mut predicted, mut filtered) = (None, None);
-        if let Some(model) = model {
-            let started = Instant::now();
-            let labels = model.classify(&features);
-            timings.classify_ms = elapsed_ms(started);
-            let started = Instant::now();
-            filtered = Some(self.filter.apply(&labels, layout.cells_per_side));
-            timings.filter_ms = elapsed_ms(started);
-            predicted = Some(labels);
-        }
-        timings.latency_ms =
-            timings.grid_ms + timings.features_ms + timings.classify_ms + timings.filter_ms;
+        // 3b. Appearance, first half: the image's pixels vote for the cells they show.
+        let started = Instant::now();
+        let votes = match (&self.appearance, camera) {
+            (Some(voter), Some(camera)) => voter.vote(&cells, world_from_velodyne, camera),
+            _ => FrameVotes::default(),
+        };
+        timings.appearance_ms = elapsed_ms(started);
 
         // Ground truth from the same cloud, outside the latency.
         let ground_truth = self.ground_truth.label(&cells);
-        FrameResult {
-            index: current.index,
-            stamp_ns: current.stamp_ns,
-            layout,
-            sensor_in_world: current.origin_in_world,
-            cells,
-            features,
-            predicted,
-            filtered,
-            ground_truth,
-            timings,
+        Observation {
+            result: FrameResult {
+                index: current.index,
+                stamp_ns: current.stamp_ns,
+                layout,
+                sensor_in_world: current.origin_in_world,
+                cells,
+                features,
+                predicted: None,
+                filtered: None,
+                ground_truth,
+                timings,
+            },
+            votes,
         }
+    }
+
+    /// Stages 4 and 5 on an observation with its appearance features.
+    pub fn decide(
+        &self,
+        observation: Observation,
+        appearance: Option<(Vec<f32>, Vec<bool>)>,
+        model: Option<&SvmModel>,
+    ) -> FrameResult {
+        let mut result = observation.result;
+        if let Some((values, seen)) = appearance {
+            result.features.set_appearance(values, seen);
+        }
+        let timings = &mut result.timings;
+        if let Some(model) = model {
+            let started = Instant::now();
+            let labels = model.classify(&result.features);
+            timings.classify_ms = elapsed_ms(started);
+            let started = Instant::now();
+            result.filtered = Some(self.filter.apply(&labels, result.layout.cells_per_side));
+            timings.filter_ms = elapsed_ms(started);
+            result.predicted = Some(labels);
+        }
+        timings.latency_ms = timings.grid_ms
+            + timings.features_ms
+            + timings.appearance_ms
+            + timings.classify_ms
+            + timings.filter_ms;
+        result
     }
 }
 
+/// Adds an observation's votes to the colour memory and returns the appearance
+/// features of its grid (None without appearance, or while no image has been seen).
+fn remember_colours(
+    colours: &mut ColourMemory,
+    voter: Option<&AppearanceVoter>,
+    observation: &Observation,
+) -> Option<(Vec<f32>, Vec<bool>)> {
+    let voter = voter?;
+    colours.add(&observation.votes);
+    let layout = &observation.result.layout;
+    // A cell more than a grid side away is not coming back soon.
+    colours.forget_outside(layout, layout.cells_per_side as i64);
+    if colours.is_empty() {
+        return None;
+    }
+    Some(colours.features(layout, voter.histogram_len()))
+}
+
 /// Runs consecutive `frames` (ascending indices) with rayon: every scan is moved to
-/// the world once, then each frame from `first_scored` on is processed on its own
-/// window. Gives the same results as [`Pipeline::process_frame`] frame by frame.
+/// the world once, each frame from `first_scored` on is observed on its own window in
+/// parallel, the colour memory is updated in frame order, and the frames are decided
+/// in parallel. Gives the same results as [`Pipeline::process_frame`] frame by frame.
 pub fn process_in_parallel(
     pipeline: &Pipeline,
-    frames: Vec<Frame>,
+    mut frames: Vec<Frame>,
     first_scored: usize,
     model: Option<&SvmModel>,
 ) -> Vec<FrameResult> {
     let n = pipeline.config.integration.scans;
+    let cameras: Vec<(Isometry3<f64>, Option<CameraImage>)> = frames
+        .iter_mut()
+        .map(|f| (f.world_from_velodyne, f.camera.take()))
+        .collect();
     let scans: Vec<WorldScan> = frames.into_par_iter().map(scan_to_world).collect();
-    (0..scans.len())
+    let observations: Vec<Observation> = (0..scans.len())
         .into_par_iter()
         .filter(|&i| scans[i].index >= first_scored)
         .map(|i| {
@@ -197,8 +291,19 @@ pub fn process_in_parallel(
                 .rposition(|s| s.index + n <= current)
                 .map_or(0, |p| p + 1);
             let window: Vec<&WorldScan> = scans[start..=i].iter().collect();
-            pipeline.process_window(&window, model)
+            let (pose, camera) = &cameras[i];
+            pipeline.observe(&window, pose, camera.as_ref())
         })
+        .collect();
+    let mut colours = ColourMemory::default();
+    let appearance: Vec<_> = observations
+        .iter()
+        .map(|o| remember_colours(&mut colours, pipeline.appearance.as_ref(), o))
+        .collect();
+    observations
+        .into_par_iter()
+        .zip(appearance)
+        .map(|(observation, appearance)| pipeline.decide(observation, appearance, model))
         .collect()
 }
 

@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Matrix4};
 
+use crate::appearance::{CameraImage, decode_png};
 use crate::error::{Error, Result};
 use crate::geometry::rigid;
 
@@ -29,6 +30,8 @@ pub struct Frame {
     pub points_in_velodyne: Vec<[f32; 4]>,
     /// SemanticKITTI label per point (lower 16 bits class, upper 16 instance).
     pub labels: Option<Vec<u32>>,
+    /// The colour camera's image of this frame, when the input has one.
+    pub camera: Option<CameraImage>,
 }
 
 /// KITTI calibration: the camera projections and velodyne -> cam0.
@@ -50,6 +53,8 @@ pub struct KittiSequence {
     stamps_ns: Vec<u64>,
     /// Frame numbers that have a `velodyne/NNNNNN.bin`, ascending.
     frames: Vec<usize>,
+    /// Decode `image_2` PNGs into frames (when P2 is known).
+    read_images: bool,
 }
 
 impl KittiSequence {
@@ -73,7 +78,14 @@ impl KittiSequence {
             first_cam0_from_cam0,
             stamps_ns,
             frames,
+            read_images: true,
         })
+    }
+
+    /// Whether [`Self::read_frame`] decodes `image_2` (default true); decoding costs
+    /// more than the rest of the method, so it is skipped when appearance is off.
+    pub fn set_read_images(&mut self, read_images: bool) {
+        self.read_images = read_images;
     }
 
     pub fn dir(&self) -> &Path {
@@ -149,12 +161,29 @@ impl KittiSequence {
         } else {
             None
         };
+        let camera = match (
+            self.read_images,
+            self.image_path(index),
+            &self.calibration.projections[2],
+        ) {
+            (true, Some(path), Some(p2)) => {
+                let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+                let image = decode_png(&bytes, &path)?;
+                Some(CameraImage::new(
+                    p2,
+                    &self.calibration.cam0_from_velodyne,
+                    image,
+                ))
+            }
+            _ => None,
+        };
         Ok(Frame {
             index,
             stamp_ns: self.stamp_ns(index)?,
             world_from_velodyne: self.world_from_velodyne(index)?,
             points_in_velodyne,
             labels,
+            camera,
         })
     }
 
@@ -186,6 +215,13 @@ impl Source {
             Ok(Source::Mcap(mcap_drive::McapDrive::open(path, options)?))
         } else {
             Ok(Source::Kitti(Box::new(KittiSequence::open(path)?)))
+        }
+    }
+
+    /// See [`KittiSequence::set_read_images`].
+    pub fn set_read_images(&mut self, read_images: bool) {
+        if let Source::Kitti(sequence) = self {
+            sequence.set_read_images(read_images);
         }
     }
 
@@ -333,11 +369,13 @@ fn matrix_3x4(path: &Path, line_no: usize, values: &[f64]) -> Result<Matrix4<f64
     Ok(m)
 }
 
-/// Reads `calib.txt`: `KEY: 12 numbers` lines; `Tr` is required, `P0..P3` optional.
+/// Reads `calib.txt`: `KEY: numbers` lines. The odometry format has `Tr` (velodyne
+/// -> rectified cam0); the object format has `R0_rect` (9 numbers) and
+/// `Tr_velo_to_cam`, and then `Tr = R0_rect * Tr_velo_to_cam`. `P0..P3` are optional.
 pub fn read_calibration(path: &Path) -> Result<Calibration> {
     let text = read_text(path)?;
     let mut projections = [None; 4];
-    let mut cam0_from_velodyne = None;
+    let (mut tr, mut rectification, mut velo_to_cam) = (None, None, None);
     for (i, line) in text.lines().enumerate() {
         let line_no = i + 1;
         if line.trim().is_empty() {
@@ -345,24 +383,46 @@ pub fn read_calibration(path: &Path) -> Result<Calibration> {
         }
         let (key, rest) = line
             .split_once(':')
-            .ok_or_else(|| Error::parse(path, line_no, "expected `KEY: 12 numbers`"))?;
-        let key = key.trim();
-        let slot = match key {
+            .ok_or_else(|| Error::parse(path, line_no, "expected `KEY: numbers`"))?;
+        let slot = match key.trim() {
             "P0" => &mut projections[0],
             "P1" => &mut projections[1],
             "P2" => &mut projections[2],
             "P3" => &mut projections[3],
-            "Tr" => &mut cam0_from_velodyne,
+            "Tr" => &mut tr,
+            "Tr_velo_to_cam" => &mut velo_to_cam,
+            "R0_rect" => {
+                let values = parse_numbers(path, line_no, rest)?;
+                if values.len() != 9 {
+                    return Err(Error::parse(
+                        path,
+                        line_no,
+                        format!("expected 9 numbers (a 3x3 matrix), found {}", values.len()),
+                    ));
+                }
+                let mut r = Matrix4::identity();
+                for (k, v) in values.iter().enumerate() {
+                    r[(k / 3, k % 3)] = *v;
+                }
+                rectification = Some(r);
+                continue;
+            }
             // Other keys (e.g. Tr_imu_to_velo) are not used by the method.
             _ => continue,
         };
         let values = parse_numbers(path, line_no, rest)?;
         *slot = Some(matrix_3x4(path, line_no, &values)?);
     }
-    let cam0_from_velodyne = cam0_from_velodyne.ok_or(Error::MissingCalibration {
-        path: path.to_path_buf(),
-        key: "Tr",
-    })?;
+    let cam0_from_velodyne = match (tr, rectification, velo_to_cam) {
+        (Some(tr), _, _) => tr,
+        (None, Some(r), Some(v)) => r * v,
+        _ => {
+            return Err(Error::MissingCalibration {
+                path: path.to_path_buf(),
+                key: "Tr",
+            });
+        }
+    };
     if cam0_from_velodyne.try_inverse().is_none() {
         return Err(Error::parse(path, 0, "Tr is not invertible"));
     }

@@ -25,6 +25,11 @@ pub struct TrainingSet {
     pub centre_in_world: Vec<[f64; 2]>,
     /// Where the cells came from, for the model's record.
     pub sources: Vec<String>,
+    /// Appearance values per cell (`appearance_len` each, zeros where unseen).
+    pub appearance: Vec<f32>,
+    pub appearance_len: usize,
+    /// Cells a camera has seen: the hybrid model's training cells.
+    pub seen: Vec<bool>,
 }
 
 impl TrainingSet {
@@ -36,10 +41,50 @@ impl TrainingSet {
         self.traversable.is_empty()
     }
 
-    pub fn push(&mut self, features: &[f32], traversable: bool, centre_in_world: [f64; 2]) {
+    pub fn push(
+        &mut self,
+        features: &[f32],
+        appearance: Option<&[f32]>,
+        traversable: bool,
+        centre_in_world: [f64; 2],
+    ) {
         self.features.extend_from_slice(features);
         self.traversable.push(traversable);
         self.centre_in_world.push(centre_in_world);
+        match appearance {
+            Some(values) => {
+                self.appearance_len = values.len();
+                self.appearance.extend_from_slice(values);
+            }
+            None => self
+                .appearance
+                .resize(self.appearance.len() + self.appearance_len, 0.0),
+        }
+        self.seen.push(appearance.is_some());
+    }
+
+    fn appearance_of(&self, i: usize) -> Option<&[f32]> {
+        let n = self.appearance_len;
+        (self.seen[i] && n > 0).then(|| &self.appearance[i * n..(i + 1) * n])
+    }
+
+    /// The seen cells with geometric and appearance values side by side, for the
+    /// hybrid model; None when no cell was seen.
+    pub fn hybrid(&self) -> Option<TrainingSet> {
+        let d = self.dimension;
+        let mut out = TrainingSet {
+            dimension: d + self.appearance_len,
+            sources: self.sources.clone(),
+            ..Default::default()
+        };
+        for i in 0..self.len() {
+            if let Some(appearance) = self.appearance_of(i) {
+                let mut row = self.features[i * d..(i + 1) * d].to_vec();
+                row.extend_from_slice(appearance);
+                out.push(&row, None, self.traversable[i], self.centre_in_world[i]);
+            }
+        }
+        (!out.is_empty()).then_some(out)
     }
 
     /// The cells at `indices`, in that order.
@@ -48,11 +93,13 @@ impl TrainingSet {
         let mut out = TrainingSet {
             dimension: d,
             sources: self.sources.clone(),
+            appearance_len: self.appearance_len,
             ..Default::default()
         };
         for &i in indices {
             out.push(
                 &self.features[i * d..(i + 1) * d],
+                self.appearance_of(i),
                 self.traversable[i],
                 self.centre_in_world[i],
             );
@@ -417,6 +464,7 @@ mod tests {
             // The second feature is noise on a large scale: standardisation matters.
             set.push(
                 &[x, 1000.0 * rng.uniform(-1.0, 1.0) as f32],
+                None,
                 traversable,
                 [(i % 30) as f64, (i / 30) as f64],
             );
@@ -449,6 +497,7 @@ mod tests {
             let (x, y) = (rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0));
             set.push(
                 &[x as f32, y as f32],
+                None,
                 x * x + y * y < 1.0,
                 [(i % 40) as f64, (i / 40) as f64],
             );
@@ -516,8 +565,8 @@ mod tests {
             dimension: 1,
             ..Default::default()
         };
-        set.push(&[1.0], true, [0.0, 0.0]);
-        set.push(&[2.0], true, [9.0, 0.0]);
+        set.push(&[1.0], None, true, [0.0, 0.0]);
+        set.push(&[2.0], None, true, [9.0, 0.0]);
         assert!(train(&set, &Config::default(), &|_, _| {}).is_err());
     }
 }

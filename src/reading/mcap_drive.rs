@@ -344,6 +344,7 @@ impl McapDrive {
                 world_from_velodyne: self.world_from_cloud(stamp_ns)?,
                 points_in_velodyne: cloud.points,
                 labels: cloud.labels,
+                camera: None,
             })?;
         }
         Ok(())
