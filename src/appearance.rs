@@ -129,7 +129,9 @@ pub fn hsv_buckets(r: u8, g: u8, b: u8, bins: [u32; 3]) -> [u32; 3] {
     } else {
         (hue * bins[0] / (6 * delta)).min(bins[0] - 1)
     };
-    let s = (delta * bins[1]).checked_div(max).map_or(0, |s| s.min(bins[1] - 1));
+    let s = (delta * bins[1])
+        .checked_div(max)
+        .map_or(0, |s| s.min(bins[1] - 1));
     let v = max * bins[2] / 256;
     [h, s, v]
 }

@@ -94,7 +94,8 @@ pub fn load_model(path: Option<&Path>, config: &Config) -> Result<(SvmModel, Str
     Ok((model, name))
 }
 
-fn open_inputs(inputs: &Inputs) -> Result<Vec<Selection>> {
+/// Opens every input; `read_images` decodes camera images into the frames.
+fn open_inputs(inputs: &Inputs, read_images: bool) -> Result<Vec<Selection>> {
     let frames = match &inputs.frames {
         Some(text) => parse_frame_range(text)?,
         None => 0..usize::MAX,
@@ -106,7 +107,8 @@ fn open_inputs(inputs: &Inputs) -> Result<Vec<Selection>> {
         .sequences
         .iter()
         .map(|path| {
-            let source = Source::open(path, &inputs.drive)?;
+            let mut source = Source::open(path, &inputs.drive)?;
+            source.set_read_images(read_images);
             if source.frames_in(&frames).is_empty() {
                 let all = source.frames();
                 let has = match (all.first(), all.last()) {
@@ -177,7 +179,7 @@ pub fn run(
     output: Output,
 ) -> Result<()> {
     let (model, model_name) = load_model(model_path, config)?;
-    let selections = open_inputs(inputs)?;
+    let selections = open_inputs(inputs, config.appearance.enabled)?;
     let bar = output.progress(frame_count(&selections), "predicting");
     let mut stdout = std::io::stdout().lock();
     if output.json {
@@ -323,11 +325,12 @@ fn write_table(out: &mut impl Write, report: &EvaluationReport, with_latency: bo
     }
     writeln!(
         out,
-        "median ms per frame: read {:.2}, integrate {:.2}, grid {:.2}, features {:.2}, classify {:.2}, filter {:.2}; latency p95 {:.2}",
+        "median ms per frame: read {:.2}, integrate {:.2}, grid {:.2}, features {:.2}, appearance {:.2}, classify {:.2}, filter {:.2}; latency p95 {:.2}",
         t.read.median,
         t.integrate.median,
         t.grid.median,
         t.features.median,
+        t.appearance.median,
         t.classify.median,
         t.filter.median,
         t.latency.p95
@@ -343,29 +346,54 @@ pub fn eval(
     output: Output,
 ) -> Result<()> {
     let (model, model_name) = load_model(model_path, config)?;
-    let selections = open_inputs(inputs)?;
-    let bar = output.progress(frame_count(&selections), "evaluating");
-    let mut evaluation = Evaluation::default();
-    for selection in &selections {
-        selection.run::<anyhow::Error>(config, Some(&model), |result| {
-            bar.inc(1);
-            evaluation.add(&result);
-            Ok(())
-        })?;
-    }
-    bar.finish_and_clear();
-    let report = evaluation.report();
+    let selections = open_inputs(inputs, config.appearance.enabled)?;
+    let evaluate = |model: &SvmModel, message: &str| -> Result<EvaluationReport> {
+        let bar = output.progress(frame_count(&selections), message);
+        let mut evaluation = Evaluation::default();
+        for selection in &selections {
+            selection.run::<anyhow::Error>(config, Some(model), |result| {
+                bar.inc(1);
+                evaluation.add(&result);
+                Ok(())
+            })?;
+        }
+        bar.finish_and_clear();
+        Ok(evaluation.report())
+    };
+    let report = evaluate(&model, "evaluating")?;
+    // The ablation of the paper: the same frames without appearance features.
+    let geometry_only = match &model.hybrid {
+        Some(_) if report.frames_with_images > 0 => {
+            let mut geometric = model.clone();
+            geometric.hybrid = None;
+            Some(evaluate(&geometric, "geometry only")?)
+        }
+        _ => None,
+    };
     let sources: Vec<String> = selections.iter().map(Selection::describe).collect();
     if output.json {
-        let doc = json!({"config": config, "model": model_json(&model, &model_name), "inputs": sources, "report": report});
+        let doc = json!({
+            "config": config,
+            "model": model_json(&model, &model_name),
+            "inputs": sources,
+            "report": report,
+            "geometry_only_report": geometry_only,
+        });
         println!("{}", serde_json::to_string_pretty(&doc)?);
         return Ok(());
     }
     let mut out = std::io::stdout().lock();
     writeln!(out, "inputs: {}", sources.join("; "))?;
+    let hybrid = match &model.hybrid {
+        Some(h) => format!(
+            "a hybrid model with {} support vectors for cells a camera saw",
+            h.support_vector_count()
+        ),
+        None => "no hybrid model".into(),
+    };
     writeln!(
         out,
-        "model: {model_name} (sha256 {}, {} support vectors, C {}, gamma {}), trained on {}",
+        "model: {model_name} (sha256 {}, {} support vectors, C {}, gamma {}; {hybrid}), trained on {}",
         &model.sha256_hex()[..12],
         model.support_vector_count(),
         model.c,
@@ -379,6 +407,20 @@ pub fn eval(
         )?;
     }
     write_table(&mut out, &report, true)?;
+    match &geometry_only {
+        Some(geometric) => {
+            writeln!(
+                out,
+                "ablation: the rows above use appearance for the {} cells of {} frames that a camera saw; without it:",
+                report.cells_with_appearance, report.frames_with_images
+            )?;
+            write_table(&mut out, geometric, true)?;
+        }
+        None if report.frames_with_images == 0 => {
+            writeln!(out, "no camera images in these frames: geometry only")?;
+        }
+        None => writeln!(out, "the model has no hybrid part: geometry only")?,
+    }
     if model_path.is_none() {
         writeln!(
             out,
@@ -391,7 +433,7 @@ pub fn eval(
 
 /// `travmap train`: grid search, final fit, model file.
 pub fn train(inputs: &Inputs, config: &Config, model_path: &Path, output: Output) -> Result<()> {
-    let selections = open_inputs(inputs)?;
+    let selections = open_inputs(inputs, config.appearance.enabled)?;
     let bar = output.progress(frame_count(&selections), "collecting cells");
     let set = collect_training_set(&selections, config, &mut || bar.inc(1))?;
     bar.finish_and_clear();
@@ -420,6 +462,13 @@ pub fn train(inputs: &Inputs, config: &Config, model_path: &Path, output: Output
             "support_vectors": model.support_vector_count(),
             "c": model.c,
             "gamma": model.gamma,
+            "hybrid": model.hybrid.as_ref().map(|h| json!({
+                "samples": h.training.samples,
+                "support_vectors": h.support_vector_count(),
+                "c": h.c,
+                "gamma": h.gamma,
+                "search": h.training.search,
+            })),
         });
         println!("{}", serde_json::to_string_pretty(&doc)?);
     } else if !output.quiet {
@@ -450,6 +499,16 @@ pub fn train(inputs: &Inputs, config: &Config, model_path: &Path, output: Output
             model.training.solver_iterations,
             model.training.seconds
         );
+        match &model.hybrid {
+            Some(h) => println!(
+                "hybrid model (geometry + appearance) on the {} cells a camera saw: C {} gamma {}, {} support vectors",
+                h.training.samples,
+                h.c,
+                h.gamma,
+                h.support_vector_count()
+            ),
+            None => println!("no hybrid model: no labelled cell was seen by a camera"),
+        }
         println!("wrote {}", model_path.display());
     }
     Ok(())
@@ -457,7 +516,7 @@ pub fn train(inputs: &Inputs, config: &Config, model_path: &Path, output: Output
 
 /// `travmap crossval`: the spatially-blocked held-out evaluation.
 pub fn crossval(inputs: &Inputs, config: &Config, output: Output) -> Result<()> {
-    let selections = open_inputs(inputs)?;
+    let selections = open_inputs(inputs, config.appearance.enabled)?;
     let bar = output.progress(config.training.folds as u64, "cross-validating");
     let report: CrossValidationReport = cross_validate(&selections, config, &|message| {
         bar.set_message(message.to_string());
@@ -513,7 +572,7 @@ pub fn bench(
     output: Output,
 ) -> Result<()> {
     let (model, model_name) = load_model(model_path, config)?;
-    let selections = open_inputs(inputs)?;
+    let selections = open_inputs(inputs, config.appearance.enabled)?;
     let [selection] = selections.as_slice() else {
         bail!(
             "bench takes one sequence directory, got {}",
@@ -555,10 +614,11 @@ pub fn bench(
     )?;
     let t = &report.stages_ms;
     for (name, spread) in [
-        ("read (disk, not in latency)", t.read),
+        ("read + image decode (not in latency)", t.read),
         ("integrate", t.integrate),
         ("grid", t.grid),
         ("geometric features", t.features),
+        ("appearance: projection + voting", t.appearance),
         ("classify", t.classify),
         ("filter", t.filter),
         ("latency: scan in to filtered grid", t.latency),
@@ -568,9 +628,8 @@ pub fn bench(
     writeln!(
         out,
         "{:<34} {:>9}",
-        "appearance", "n/a (not implemented yet)"
+        "write", "not in this table: see `annotate` frames/s"
     )?;
-    writeln!(out, "{:<34} {:>9}", "write", "n/a (no output writer yet)")?;
     writeln!(
         out,
         "throughput (whole selection, rayon across frames): {:.1} frames/s on 1 thread, {:.1} frames/s on {} threads ({:.2}x)",
@@ -593,7 +652,7 @@ pub fn convert(
     if !(start_time_s.is_finite() && start_time_s >= 0.0) {
         bail!("--start-time must be seconds >= 0, got {start_time_s}");
     }
-    let selections = open_inputs(inputs)?;
+    let selections = open_inputs(inputs, false)?;
     let [
         Selection {
             source: Source::Kitti(sequence),
@@ -643,7 +702,7 @@ pub fn annotate(
     output: Output,
 ) -> Result<()> {
     let (model, model_name) = load_model(model_path, config)?;
-    let selections = open_inputs(inputs)?;
+    let selections = open_inputs(inputs, config.appearance.enabled)?;
     let [selection] = selections.as_slice() else {
         bail!(
             "annotate takes one input (a KITTI sequence directory or an MCAP file), got {}",

@@ -46,6 +46,7 @@ pub struct TimingReport {
     pub integrate: Spread,
     pub grid: Spread,
     pub features: Spread,
+    pub appearance: Spread,
     pub classify: Spread,
     pub filter: Spread,
     pub latency: Spread,
@@ -60,6 +61,7 @@ impl TimingReport {
             integrate: spread(|t| t.integrate_ms),
             grid: spread(|t| t.grid_ms),
             features: spread(|t| t.features_ms),
+            appearance: spread(|t| t.appearance_ms),
             classify: spread(|t| t.classify_ms),
             filter: spread(|t| t.filter_ms),
             latency: spread(|t| t.latency_ms),
@@ -77,6 +79,9 @@ pub struct EvaluationReport {
     pub scores: Scores,
     /// The classifier alone, before the filter.
     pub unfiltered_scores: Scores,
+    /// Frames with a camera image, and their predictable cells that some image covered.
+    pub frames_with_images: usize,
+    pub cells_with_appearance: u64,
     pub timings_ms: TimingReport,
 }
 
@@ -84,6 +89,8 @@ pub struct EvaluationReport {
 #[derive(Clone, Debug, Default)]
 pub struct Evaluation {
     frames: usize,
+    frames_with_images: usize,
+    cells_with_appearance: u64,
     filtered: Confusion,
     unfiltered: Confusion,
     timings: Vec<StageTimings>,
@@ -93,6 +100,14 @@ impl Evaluation {
     /// Adds a frame; frames without ground truth or predictions only add timings.
     pub fn add(&mut self, result: &FrameResult) {
         self.timings.push(result.timings);
+        let features = &result.features;
+        let seen = (0..features.predictable.len())
+            .filter(|&c| features.predictable[c] && features.appearance(c).is_some())
+            .count();
+        if seen > 0 {
+            self.frames_with_images += 1;
+            self.cells_with_appearance += seen as u64;
+        }
         if let (Some(truth), Some(filtered), Some(predicted)) =
             (&result.ground_truth, &result.filtered, &result.predicted)
         {
@@ -109,6 +124,8 @@ impl Evaluation {
             confusion: self.filtered,
             scores: self.filtered.scores(),
             unfiltered_scores: self.unfiltered.scores(),
+            frames_with_images: self.frames_with_images,
+            cells_with_appearance: self.cells_with_appearance,
             timings_ms: TimingReport::of(&self.timings),
         }
     }

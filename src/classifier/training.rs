@@ -25,11 +25,11 @@ pub struct TrainingSet {
     pub centre_in_world: Vec<[f64; 2]>,
     /// Where the cells came from, for the model's record.
     pub sources: Vec<String>,
-    /// Appearance values per cell (`appearance_len` each, zeros where unseen).
+    /// Appearance values of the cells a camera has seen, `appearance_len` each.
     pub appearance: Vec<f32>,
     pub appearance_len: usize,
-    /// Cells a camera has seen: the hybrid model's training cells.
-    pub seen: Vec<bool>,
+    /// Per cell, its row in `appearance` (seen cells: the hybrid model's cells).
+    pub appearance_row: Vec<Option<usize>>,
 }
 
 impl TrainingSet {
@@ -51,21 +51,17 @@ impl TrainingSet {
         self.features.extend_from_slice(features);
         self.traversable.push(traversable);
         self.centre_in_world.push(centre_in_world);
-        match appearance {
-            Some(values) => {
-                self.appearance_len = values.len();
-                self.appearance.extend_from_slice(values);
-            }
-            None => self
-                .appearance
-                .resize(self.appearance.len() + self.appearance_len, 0.0),
-        }
-        self.seen.push(appearance.is_some());
+        let row = appearance.map(|values| {
+            self.appearance_len = values.len();
+            self.appearance.extend_from_slice(values);
+            self.appearance.len() / values.len().max(1) - 1
+        });
+        self.appearance_row.push(row);
     }
 
     fn appearance_of(&self, i: usize) -> Option<&[f32]> {
         let n = self.appearance_len;
-        (self.seen[i] && n > 0).then(|| &self.appearance[i * n..(i + 1) * n])
+        self.appearance_row[i].map(|row| &self.appearance[row * n..(row + 1) * n])
     }
 
     /// The seen cells with geometric and appearance values side by side, for the
@@ -238,9 +234,28 @@ fn accuracy(model: &SvmModel, set: &TrainingSet) -> f64 {
     right as f64 / set.len().max(1) as f64
 }
 
+/// Trains the geometric model on every cell and, when cameras saw some, the hybrid
+/// model on those (METHOD.md section 5's Decision). A hybrid set that cannot be
+/// trained (one class, too few blocks) leaves the model geometric-only.
+pub fn train(
+    set: &TrainingSet,
+    config: &Config,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<SvmModel> {
+    let mut model = train_one(set, config, progress)?;
+    if let Some(hybrid) = set.hybrid() {
+        match train_one(&hybrid, config, progress) {
+            Ok(hybrid) => model.hybrid = Some(Box::new(hybrid)),
+            Err(Error::Training(_)) => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(model)
+}
+
 /// Grid search with spatially-blocked cross-validation, then a fit on all of `set`.
 /// `progress(done, total)` is called after each fit.
-pub fn train(
+fn train_one(
     set: &TrainingSet,
     config: &Config,
     progress: &(dyn Fn(usize, usize) + Sync),
