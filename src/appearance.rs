@@ -12,7 +12,7 @@
 
 use std::collections::HashMap;
 
-use nalgebra::{Isometry3, Matrix3x4, Matrix4, Point3};
+use nalgebra::{Isometry3, Matrix3, Matrix3x4, Matrix4, Point3};
 
 use crate::config::AppearanceConfig;
 use crate::error::{Error, Result};
@@ -43,6 +43,23 @@ impl CameraImage {
         let p = projection * cam0_from_velodyne;
         Self {
             image_from_velodyne: p.fixed_view::<3, 4>(0, 0).into_owned(),
+            image,
+        }
+    }
+
+    /// From intrinsics K and the camera's pose: `K [R | t]` with `[R | t]` =
+    /// `camera_from_velodyne`.
+    pub fn from_intrinsics(
+        k: &Matrix3<f64>,
+        camera_from_velodyne: &Isometry3<f64>,
+        image: RgbImage,
+    ) -> Self {
+        let extrinsics: Matrix3x4<f64> = camera_from_velodyne
+            .to_homogeneous()
+            .fixed_view::<3, 4>(0, 0)
+            .into_owned();
+        Self {
+            image_from_velodyne: k * extrinsics,
             image,
         }
     }

@@ -12,12 +12,11 @@
 use std::ops::Range;
 use std::path::Path;
 
-use nalgebra::{Isometry3, Matrix4};
+use nalgebra::{Isometry3, Matrix3};
 use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::geometry::rigid;
 use crate::reading::{Frame, KittiSequence};
 use crate::ros::{
     CameraInfo, CompressedImage, Header, PointCloud2, PointField, Quaternion, RegionOfInterest,
@@ -121,45 +120,31 @@ pub fn png_size(bytes: &[u8]) -> Option<(u32, u32)> {
     Some((be(16), be(20)))
 }
 
-/// CameraInfo of a rectified KITTI camera: K is P's left 3x3, R identity, no distortion.
-pub fn camera_info(
-    projection: &Matrix4<f64>,
-    width: u32,
-    height: u32,
-    stamp_ns: u64,
-) -> CameraInfo {
-    let p = |r: usize, c: usize| projection[(r, c)];
+/// CameraInfo of a rectified KITTI camera in its own frame: K, R identity, no
+/// distortion, P = [K | 0] (the baseline is in `/tf_static`, so that P projects
+/// points given in this camera's frame, as ROS defines it).
+pub fn camera_info(k: &Matrix3<f64>, width: u32, height: u32, stamp_ns: u64) -> CameraInfo {
+    let k9 = [
+        k[(0, 0)],
+        k[(0, 1)],
+        k[(0, 2)],
+        k[(1, 0)],
+        k[(1, 1)],
+        k[(1, 2)],
+        k[(2, 0)],
+        k[(2, 1)],
+        k[(2, 2)],
+    ];
     CameraInfo {
         header: header(stamp_ns, CAMERA_2_FRAME),
         height,
         width,
         distortion_model: "plumb_bob".into(),
         d: vec![0.0; 5],
-        k: [
-            p(0, 0),
-            p(0, 1),
-            p(0, 2),
-            p(1, 0),
-            p(1, 1),
-            p(1, 2),
-            p(2, 0),
-            p(2, 1),
-            p(2, 2),
-        ],
+        k: k9,
         r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
         p: [
-            p(0, 0),
-            p(0, 1),
-            p(0, 2),
-            p(0, 3),
-            p(1, 0),
-            p(1, 1),
-            p(1, 2),
-            p(1, 3),
-            p(2, 0),
-            p(2, 1),
-            p(2, 2),
-            p(2, 3),
+            k9[0], k9[1], k9[2], 0.0, k9[3], k9[4], k9[5], 0.0, k9[6], k9[7], k9[8], 0.0,
         ],
         binning_x: 0,
         binning_y: 0,
@@ -168,38 +153,21 @@ pub fn camera_info(
 }
 
 /// `/tf_static`: velodyne -> camera_0 from Tr, camera_0 -> camera_2 from P2's baseline.
-fn static_transforms(sequence: &KittiSequence, stamp_ns: u64) -> Result<TfMessage> {
+fn static_transforms(sequence: &KittiSequence, stamp_ns: u64) -> TfMessage {
     let calibration = sequence.calibration();
-    let velodyne_from_cam0 = calibration
-        .cam0_from_velodyne
-        .try_inverse()
-        .ok_or_else(|| Error::Parse {
-            path: sequence.dir().join("calib.txt"),
-            line: 0,
-            message: "Tr is not invertible".into(),
-        })?;
     let mut transforms = vec![TransformStamped {
         header: header(stamp_ns, VELODYNE_FRAME),
         child_frame_id: CAMERA_0_FRAME.into(),
-        transform: transform_from_pose(&rigid(&velodyne_from_cam0)),
+        transform: transform_from_pose(&calibration.velodyne_from_camera_0()),
     }];
-    if let Some(p2) = calibration.projections[2] {
-        // P2 = K [I | t]: camera_2 coordinates are camera_0's plus t.
-        let t = [p2[(0, 3)] / p2[(0, 0)], p2[(1, 3)] / p2[(1, 1)], p2[(2, 3)]];
+    if let Some((_, camera_0_from_camera_2)) = calibration.camera_2() {
         transforms.push(TransformStamped {
             header: header(stamp_ns, CAMERA_0_FRAME),
             child_frame_id: CAMERA_2_FRAME.into(),
-            transform: Transform {
-                translation: Vector3 {
-                    x: -t[0],
-                    y: -t[1],
-                    z: -t[2],
-                },
-                rotation: Quaternion::default(),
-            },
+            transform: transform_from_pose(&camera_0_from_camera_2),
         });
     }
-    Ok(TfMessage { transforms })
+    TfMessage { transforms }
 }
 
 /// One frame's messages, CDR-encoded.
@@ -224,15 +192,15 @@ fn encode_frame(sequence: &KittiSequence, index: usize, start_ns: u64) -> Result
     };
     let image = match (
         sequence.image_path(index),
-        sequence.calibration().projections[2],
+        sequence.calibration().camera_2(),
     ) {
-        (Some(path), Some(p2)) => {
+        (Some(path), Some((k, _))) => {
             let png = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
             let (width, height) = png_size(&png).ok_or_else(|| Error::Sequence {
                 path: path.clone(),
                 message: "not a PNG image (no PNG signature and IHDR header)".into(),
             })?;
-            let info = camera_info(&p2, width, height, stamp_ns);
+            let info = camera_info(&k, width, height, stamp_ns);
             let image = CompressedImage {
                 header: header(stamp_ns, CAMERA_2_FRAME),
                 format: "png".into(),
@@ -284,7 +252,7 @@ pub fn write_kitti_frames(
                 sink.write(
                     "/tf_static",
                     stamp_ns,
-                    &static_transforms(sequence, stamp_ns)?,
+                    &static_transforms(sequence, stamp_ns),
                 )?;
             }
             sink.write_encoded::<PointCloud2>(CLOUD_TOPIC, stamp_ns, cloud)?;
@@ -327,13 +295,13 @@ mod tests {
 
     #[test]
     fn transform_of_a_rotation_about_z() {
-        let mut m = Matrix4::identity();
+        let mut m = nalgebra::Matrix4::identity();
         m[(0, 0)] = 0.0;
         m[(0, 1)] = -1.0;
         m[(1, 0)] = 1.0;
         m[(1, 1)] = 0.0;
         m[(0, 3)] = 2.0;
-        let t = transform_from_pose(&rigid(&m));
+        let t = transform_from_pose(&crate::geometry::rigid(&m));
         let half = std::f64::consts::FRAC_1_SQRT_2;
         assert!((t.rotation.z - half).abs() < 1e-12 && (t.rotation.w - half).abs() < 1e-12);
         assert_eq!(t.translation.x, 2.0);

@@ -157,6 +157,10 @@ struct Common {
     /// transform tree above the clouds' frame).
     #[arg(long)]
     world_frame: Option<String>,
+    /// MCAP input: the camera's Image or CompressedImage topic (needed when there are
+    /// several with a CameraInfo).
+    #[arg(long)]
+    camera_topic: Option<String>,
     /// Frames to use: A..B (B excluded), A..=B, A.. or N. Default: all.
     #[arg(long)]
     frames: Option<String>,
@@ -177,6 +181,7 @@ impl Common {
             drive: DriveOptions {
                 cloud_topic: self.cloud_topic.clone(),
                 world_frame: self.world_frame.clone(),
+                camera_topic: self.camera_topic.clone(),
             },
             frames: self.frames.clone(),
         }

@@ -11,9 +11,9 @@ pub mod mcap_drive;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use nalgebra::{Isometry3, Matrix4};
+use nalgebra::{Isometry3, Matrix3, Matrix4};
 
-use crate::appearance::{CameraImage, decode_png};
+use crate::appearance::{CameraImage, RgbImage, decode_png};
 use crate::error::{Error, Result};
 use crate::geometry::rigid;
 
@@ -41,6 +41,42 @@ pub struct Calibration {
     pub projections: [Option<Matrix4<f64>>; 4],
     /// `Tr`: maps velodyne coordinates to cam0 coordinates.
     pub cam0_from_velodyne: Matrix4<f64>,
+}
+
+impl Calibration {
+    /// The rigid velodyne -> camera_0 pose (`inv(Tr)`), as `/tf_static` carries it.
+    pub fn velodyne_from_camera_0(&self) -> Isometry3<f64> {
+        // Tr is checked invertible when the file is read.
+        rigid(
+            &self
+                .cam0_from_velodyne
+                .try_inverse()
+                .unwrap_or_else(Matrix4::identity),
+        )
+    }
+
+    /// The colour camera: its intrinsics K (P2's left 3x3) and camera_0 -> camera_2,
+    /// the baseline `t` of `P2 = K [I | t]`. None without P2.
+    pub fn camera_2(&self) -> Option<(Matrix3<f64>, Isometry3<f64>)> {
+        let p2 = self.projections[2]?;
+        let k: Matrix3<f64> = p2.fixed_view::<3, 3>(0, 0).into_owned();
+        // camera_2 coordinates are camera_0's plus t.
+        let t = [p2[(0, 3)] / p2[(0, 0)], p2[(1, 3)] / p2[(1, 1)], p2[(2, 3)]];
+        let camera_0_from_camera_2 = Isometry3::translation(-t[0], -t[1], -t[2]);
+        Some((k, camera_0_from_camera_2))
+    }
+
+    /// The colour camera as the appearance stage uses it, composed from the same
+    /// rigid transforms that `convert` writes to `/tf_static`.
+    pub fn camera_2_image(&self, image: RgbImage) -> Option<CameraImage> {
+        let (k, camera_0_from_camera_2) = self.camera_2()?;
+        let velodyne_from_camera_2 = self.velodyne_from_camera_0() * camera_0_from_camera_2;
+        Some(CameraImage::from_intrinsics(
+            &k,
+            &velodyne_from_camera_2.inverse(),
+            image,
+        ))
+    }
 }
 
 /// An opened sequence: calibration, poses and times are read at once, scans on demand.
@@ -161,19 +197,10 @@ impl KittiSequence {
         } else {
             None
         };
-        let camera = match (
-            self.read_images,
-            self.image_path(index),
-            &self.calibration.projections[2],
-        ) {
-            (true, Some(path), Some(p2)) => {
+        let camera = match (self.read_images, self.image_path(index)) {
+            (true, Some(path)) if self.calibration.projections[2].is_some() => {
                 let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-                let image = decode_png(&bytes, &path)?;
-                Some(CameraImage::new(
-                    p2,
-                    &self.calibration.cam0_from_velodyne,
-                    image,
-                ))
+                self.calibration.camera_2_image(decode_png(&bytes, &path)?)
             }
             _ => None,
         };
@@ -205,14 +232,14 @@ impl KittiSequence {
 /// A drive to read: a KITTI sequence directory or an MCAP file.
 pub enum Source {
     Kitti(Box<KittiSequence>),
-    Mcap(mcap_drive::McapDrive),
+    Mcap(Box<mcap_drive::McapDrive>),
 }
 
 impl Source {
     /// A directory is a KITTI sequence, a file an MCAP drive.
     pub fn open(path: &Path, options: &mcap_drive::DriveOptions) -> Result<Self> {
         if path.is_file() {
-            Ok(Source::Mcap(mcap_drive::McapDrive::open(path, options)?))
+            Ok(Source::Mcap(Box::new(mcap_drive::McapDrive::open(path, options)?)))
         } else {
             Ok(Source::Kitti(Box::new(KittiSequence::open(path)?)))
         }

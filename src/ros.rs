@@ -98,6 +98,19 @@ pub struct CompressedImage {
     pub data: Vec<u8>,
 }
 
+/// `sensor_msgs/msg/Image` (read only).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Image {
+    pub header: Header,
+    pub height: u32,
+    pub width: u32,
+    pub encoding: String,
+    pub is_bigendian: u8,
+    pub step: u32,
+    #[serde(with = "serde_bytes")]
+    pub data: Vec<u8>,
+}
+
 /// `sensor_msgs/msg/RegionOfInterest`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct RegionOfInterest {

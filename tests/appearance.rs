@@ -218,6 +218,34 @@ fn colour_separates_what_geometry_cannot() {
         geometric < 0.8,
         "geometry only {geometric}: the halves are the same plane"
     );
+    // The same scene as MCAP (PNG images, CameraInfo, /tf_static) gives the same result.
+    let drive = dir.path().join("scene.mcap");
+
+    success(travmap(&[
+        "convert",
+        seq,
+        "-o",
+        drive.to_str().unwrap(),
+        "-q",
+    ]));
+    let mut args = vec![
+        "eval",
+        drive.to_str().unwrap(),
+        "--model",
+        model.to_str().unwrap(),
+        "--json",
+    ];
+    args.extend(quick);
+    let from_mcap: Value = serde_json::from_str(&success(travmap(&args))).unwrap();
+    assert_eq!(
+        from_mcap["report"]["cells_with_appearance"],
+        doc["report"]["cells_with_appearance"]
+    );
+    assert_eq!(from_mcap["report"]["confusion"], doc["report"]["confusion"]);
+    assert_eq!(
+        from_mcap["geometry_only_report"]["confusion"],
+        doc["geometry_only_report"]["confusion"]
+    );
     // The text output shows both rows.
     let mut args = vec!["eval", seq, "--model", model.to_str().unwrap()];
     args.extend(quick);

@@ -469,7 +469,7 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
 
     let options = DriveOptions {
         cloud_topic: Some("/points".into()),
-        world_frame: None,
+        ..Default::default()
     };
     let drive = McapDrive::open(&path, &options).unwrap();
     assert_eq!(drive.world_frame(), "odom");
@@ -673,7 +673,8 @@ fn convert_passes_png_images_through_with_camera_info() {
     let info = &infos[0].1;
     assert_eq!((info.width, info.height), (1242, 375));
     assert_eq!(info.k[0], 721.5377);
-    assert_eq!(info.p[3], 44.85728);
+    // P = [K | 0] in camera_2's own frame; the baseline is in /tf_static.
+    assert_eq!((info.p[0], info.p[3]), (721.5377, 0.0));
     let statics = messages::<travmap::ros::TfMessage>(&out, "/tf_static");
     let frames: Vec<(&str, &str)> = statics[0]
         .1

@@ -16,12 +16,19 @@ use nalgebra::{Isometry3, Quaternion as NQuaternion, Translation3, UnitQuaternio
 use serde::Deserialize;
 
 use super::Frame;
+use crate::appearance::{CameraImage, RgbImage, decode_png};
 use crate::error::{Error, Result};
 use crate::ros::{Header, Odometry, PointCloud2, TfMessage, Transform, datatype, decode};
 
 const POINT_CLOUD: &str = "sensor_msgs/msg/PointCloud2";
 const TF_MESSAGE: &str = "tf2_msgs/msg/TFMessage";
 const ODOMETRY: &str = "nav_msgs/msg/Odometry";
+const CAMERA_INFO: &str = "sensor_msgs/msg/CameraInfo";
+const COMPRESSED_IMAGE: &str = "sensor_msgs/msg/CompressedImage";
+const RAW_IMAGE: &str = "sensor_msgs/msg/Image";
+
+/// An image is paired with a cloud when their stamps are at most this far apart.
+const IMAGE_PAIRING_NS: u64 = 50_000_000;
 
 /// A transform sample is used up to this far past either end of its edge's record.
 const TF_EXTRAPOLATION_NS: u64 = 100_000_000;
@@ -31,6 +38,18 @@ const TF_EXTRAPOLATION_NS: u64 = 100_000_000;
 pub struct DriveOptions {
     pub cloud_topic: Option<String>,
     pub world_frame: Option<String>,
+    /// The image topic (Image or CompressedImage) whose frame has a CameraInfo; found
+    /// by itself when there is exactly one.
+    pub camera_topic: Option<String>,
+}
+
+/// The camera the appearance features come from.
+#[derive(Clone, Debug)]
+struct CameraSource {
+    topic: String,
+    compressed: bool,
+    frame: String,
+    intrinsics: nalgebra::Matrix3<f64>,
 }
 
 /// Parent and transform samples of one frame in the transform tree.
@@ -51,6 +70,7 @@ pub struct McapDrive {
     world_frame: String,
     stamps_ns: Vec<u64>,
     edges: HashMap<String, Edge>,
+    camera: Option<CameraSource>,
 }
 
 fn isometry(t: &Transform) -> Isometry3<f64> {
@@ -87,6 +107,8 @@ impl McapDrive {
         let mut topics: BTreeMap<String, String> = BTreeMap::new();
         let mut cloud_stamps: HashMap<String, (String, Vec<u64>)> = HashMap::new();
         let mut edges: HashMap<String, Edge> = HashMap::new();
+        let mut intrinsics: HashMap<String, nalgebra::Matrix3<f64>> = HashMap::new();
+        let mut image_topics: BTreeMap<String, (bool, String)> = BTreeMap::new();
         let stream = mcap::MessageStream::new(&map)
             .map_err(|e| fail(format!("not a readable MCAP file: {e}")))?;
         for (ordinal, message) in stream.enumerate() {
@@ -106,7 +128,10 @@ impl McapDrive {
                     channel.topic, message.log_time
                 ))
             };
-            let known = matches!(schema.as_str(), POINT_CLOUD | TF_MESSAGE | ODOMETRY);
+            let known = matches!(
+                schema.as_str(),
+                POINT_CLOUD | TF_MESSAGE | ODOMETRY | CAMERA_INFO | COMPRESSED_IMAGE | RAW_IMAGE
+            );
             if known && channel.message_encoding != "cdr" {
                 return Err(fail(format!(
                     "channel {} ({schema}) has message encoding `{}`; travmap reads `cdr` (ROS 2)",
@@ -147,6 +172,20 @@ impl McapDrive {
                     };
                     edge.samples
                         .push((odometry.header.stamp.to_ns(), isometry(&transform)));
+                }
+                CAMERA_INFO => {
+                    let info: crate::ros::CameraInfo =
+                        decode(&message.data).map_err(decode_failure)?;
+                    intrinsics
+                        .entry(info.header.frame_id.clone())
+                        .or_insert_with(|| nalgebra::Matrix3::from_row_slice(&info.k));
+                }
+                COMPRESSED_IMAGE | RAW_IMAGE if !image_topics.contains_key(&channel.topic) => {
+                    let header: HeaderOnly = decode(&message.data).map_err(decode_failure)?;
+                    image_topics.insert(
+                        channel.topic.clone(),
+                        (schema == COMPRESSED_IMAGE, header.header.frame_id),
+                    );
                 }
                 // Other channels are not the method's input.
                 _ => {}
@@ -211,6 +250,37 @@ impl McapDrive {
                 frame
             }
         };
+        // The camera: an image topic whose frame has intrinsics.
+        let usable: Vec<(&String, &(bool, String))> = image_topics
+            .iter()
+            .filter(|(_, (_, frame))| intrinsics.contains_key(frame))
+            .collect();
+        let camera = match (&options.camera_topic, usable.as_slice()) {
+            (Some(topic), _) => {
+                let (compressed, frame) = image_topics.get(topic).ok_or_else(|| {
+                    fail(format!(
+                        "no Image or CompressedImage messages on {topic}; image topics: [{}]",
+                        image_topics.keys().cloned().collect::<Vec<_>>().join(", ")
+                    ))
+                })?;
+                let k = intrinsics
+                    .get(frame)
+                    .ok_or_else(|| fail(format!("no CameraInfo for frame `{frame}` of {topic}")))?;
+                Some(CameraSource {
+                    topic: topic.clone(),
+                    compressed: *compressed,
+                    frame: frame.clone(),
+                    intrinsics: *k,
+                })
+            }
+            (None, [(topic, (compressed, frame))]) => Some(CameraSource {
+                topic: (*topic).clone(),
+                compressed: *compressed,
+                frame: frame.clone(),
+                intrinsics: intrinsics[frame],
+            }),
+            _ => None,
+        };
         Ok(Self {
             path: path.to_path_buf(),
             map,
@@ -219,6 +289,7 @@ impl McapDrive {
             world_frame,
             stamps_ns,
             edges,
+            camera,
         })
     }
 
@@ -276,20 +347,85 @@ impl McapDrive {
 
     /// `world_from_cloud` at `stamp_ns`, composed up the transform tree.
     pub fn world_from_cloud(&self, stamp_ns: u64) -> Result<Isometry3<f64>> {
-        let mut frame = self.cloud_frame.as_str();
-        let mut pose = Isometry3::identity();
-        while frame != self.world_frame {
-            let edge = self.edges.get(frame).ok_or_else(|| Error::Mcap {
+        self.ancestor_from(&self.world_frame, &self.cloud_frame, stamp_ns)?
+            .ok_or_else(|| Error::Mcap {
                 path: self.path.clone(),
                 message: format!(
                     "no transform from `{}` up to the world frame `{}`",
                     self.cloud_frame, self.world_frame
                 ),
-            })?;
-            pose = self.edge_at(frame, edge, stamp_ns)? * pose;
-            frame = &edge.parent;
+            })
+    }
+
+    /// `ancestor_from_frame` at `stamp_ns`, composed up the tree; None when
+    /// `ancestor` is not above `frame`.
+    fn ancestor_from(
+        &self,
+        ancestor: &str,
+        frame: &str,
+        stamp_ns: u64,
+    ) -> Result<Option<Isometry3<f64>>> {
+        let mut current = frame;
+        let mut pose = Isometry3::identity();
+        while current != ancestor {
+            let Some(edge) = self.edges.get(current) else {
+                return Ok(None);
+            };
+            pose = self.edge_at(current, edge, stamp_ns)? * pose;
+            current = &edge.parent;
         }
-        Ok(pose)
+        Ok(Some(pose))
+    }
+
+    /// The topic the camera images come from, if any.
+    pub fn camera_topic(&self) -> Option<&str> {
+        self.camera.as_ref().map(|c| c.topic.as_str())
+    }
+
+    /// The camera image of a cloud from a raw message, posed for the cloud's frame:
+    /// through the static chain when the camera hangs below the cloud's frame, else
+    /// through the world at each one's stamp.
+    fn camera_image(
+        &self,
+        camera: &CameraSource,
+        data: &[u8],
+        image_stamp_ns: u64,
+        cloud_stamp_ns: u64,
+    ) -> Result<CameraImage> {
+        let fail = |message: String| Error::Mcap {
+            path: self.path.clone(),
+            message: format!("{} at {image_stamp_ns} ns: {message}", camera.topic),
+        };
+        let image = if camera.compressed {
+            let message: crate::ros::CompressedImage = decode(data).map_err(fail)?;
+            if !message.format.to_ascii_lowercase().contains("png") {
+                return Err(fail(format!(
+                    "image format `{}`: travmap decodes png",
+                    message.format
+                )));
+            }
+            decode_png(&message.data, &self.path)?
+        } else {
+            let message: crate::ros::Image = decode(data).map_err(fail)?;
+            raw_image(&message).map_err(fail)?
+        };
+        let velodyne_from_camera =
+            match self.ancestor_from(&self.cloud_frame, &camera.frame, image_stamp_ns)? {
+                Some(pose) => pose,
+                None => {
+                    let world_from_camera = self
+                        .ancestor_from(&self.world_frame, &camera.frame, image_stamp_ns)?
+                        .ok_or_else(|| {
+                            fail(format!("no transform from `{}` to the world", camera.frame))
+                        })?;
+                    self.world_from_cloud(cloud_stamp_ns)?.inverse() * world_from_camera
+                }
+            };
+        Ok(CameraImage::from_intrinsics(
+            &camera.intrinsics,
+            &velodyne_from_camera.inverse(),
+            image,
+        ))
     }
 
     /// Every message of the file in file order, undecoded (for passthrough).
@@ -308,7 +444,9 @@ impl McapDrive {
     }
 
     /// Streams the file once and calls `on_frame` with every cloud whose frame number
-    /// is in `frames`, in order.
+    /// is in `frames`, in order, with the camera image nearest in time (within 50 ms)
+    /// when the drive has a camera. A cloud is handed on when the next one arrives, so
+    /// that an image written just after its cloud is found too.
     pub fn for_each_frame<E: From<Error>>(
         &self,
         frames: &Range<usize>,
@@ -319,36 +457,112 @@ impl McapDrive {
             message,
         };
         let stream = mcap::MessageStream::new(&self.map).map_err(|e| fail(e.to_string()))?;
+        let camera_topic = self.camera.as_ref().map(|c| c.topic.as_str());
+        let mut pending: Option<(usize, Vec<u8>)> = None;
+        // Images since the cloud before the pending one: (stamp, raw message).
+        let mut images: Vec<(u64, Vec<u8>)> = Vec::new();
         let mut index = 0usize;
         for message in stream {
             let message = message.map_err(|e| fail(e.to_string()))?;
+            if Some(message.channel.topic.as_str()) == camera_topic {
+                let header: HeaderOnly = decode(&message.data)
+                    .map_err(|e| fail(format!("{}: {e}", message.channel.topic)))?;
+                images.push((header.header.stamp.to_ns(), message.data.to_vec()));
+                continue;
+            }
             if message.channel.topic != self.cloud_topic {
                 continue;
             }
+            if let Some((current, data)) = pending.take() {
+                on_frame(self.frame(current, &data, &images)?)?;
+                let keep_after = self.stamps_ns[current].saturating_sub(IMAGE_PAIRING_NS);
+                images.retain(|(stamp, _)| *stamp >= keep_after);
+            }
             let current = index;
             index += 1;
-            if current < frames.start {
-                continue;
-            }
             if current >= frames.end {
-                break;
+                return Ok(());
             }
-            let cloud: PointCloud2 = decode(&message.data)
-                .map_err(|e| fail(format!("{} cloud {current}: {e}", self.cloud_topic)))?;
-            let stamp_ns = self.stamps_ns[current];
-            let cloud = cloud_points(&cloud)
-                .map_err(|e| fail(format!("{} cloud {current}: {e}", self.cloud_topic)))?;
-            on_frame(Frame {
-                index: current,
-                stamp_ns,
-                world_from_velodyne: self.world_from_cloud(stamp_ns)?,
-                points_in_velodyne: cloud.points,
-                labels: cloud.labels,
-                camera: None,
-            })?;
+            if current >= frames.start {
+                pending = Some((current, message.data.to_vec()));
+            }
+        }
+        if let Some((current, data)) = pending {
+            on_frame(self.frame(current, &data, &images)?)?;
         }
         Ok(())
     }
+
+    /// Frame `current` from its cloud message and the candidate images.
+    fn frame(&self, current: usize, data: &[u8], images: &[(u64, Vec<u8>)]) -> Result<Frame> {
+        let fail = |message: String| Error::Mcap {
+            path: self.path.clone(),
+            message: format!("{} cloud {current}: {message}", self.cloud_topic),
+        };
+        let cloud: PointCloud2 = decode(data).map_err(fail)?;
+        let stamp_ns = self.stamps_ns[current];
+        let points = cloud_points(&cloud).map_err(fail)?;
+        let nearest = images
+            .iter()
+            .min_by_key(|(stamp, _)| stamp.abs_diff(stamp_ns))
+            .filter(|(stamp, _)| stamp.abs_diff(stamp_ns) <= IMAGE_PAIRING_NS);
+        let camera = match (&self.camera, nearest) {
+            (Some(camera), Some((image_stamp, image))) => {
+                Some(self.camera_image(camera, image, *image_stamp, stamp_ns)?)
+            }
+            _ => None,
+        };
+        Ok(Frame {
+            index: current,
+            stamp_ns,
+            world_from_velodyne: self.world_from_cloud(stamp_ns)?,
+            points_in_velodyne: points.points,
+            labels: points.labels,
+            camera,
+        })
+    }
+}
+
+/// An RGB image from a raw `sensor_msgs/msg/Image` (rgb8, bgr8, rgba8, bgra8, mono8).
+fn raw_image(message: &crate::ros::Image) -> Result<RgbImage, String> {
+    let (width, height, step) = (
+        message.width as usize,
+        message.height as usize,
+        message.step as usize,
+    );
+    let channels = match message.encoding.as_str() {
+        "rgb8" | "bgr8" => 3,
+        "rgba8" | "bgra8" => 4,
+        "mono8" => 1,
+        other => {
+            return Err(format!(
+                "image encoding `{other}`: travmap reads rgb8, bgr8, rgba8, bgra8 and mono8"
+            ));
+        }
+    };
+    if step < width * channels || message.data.len() < step * height {
+        return Err(format!(
+            "{} bytes for {width}x{height} {} with step {step}",
+            message.data.len(),
+            message.encoding
+        ));
+    }
+    let bgr = message.encoding.starts_with("bgr");
+    let mut rgb = Vec::with_capacity(width * height * 3);
+    for row in message.data.chunks_exact(step).take(height) {
+        for px in row[..width * channels].chunks_exact(channels) {
+            match (channels, bgr) {
+                (1, _) => rgb.extend_from_slice(&[px[0], px[0], px[0]]),
+                (_, true) => rgb.extend_from_slice(&[px[2], px[1], px[0]]),
+                _ => rgb.extend_from_slice(&px[..3]),
+            }
+        }
+    }
+    Ok(RgbImage {
+        width: message.width,
+        height: message.height,
+        rgb,
+    })
 }
 
 /// Reads one numeric value of a field as f64.
