@@ -122,35 +122,56 @@ pub fn decode_png(bytes: &[u8], source: &std::path::Path) -> Result<RgbImage> {
     })
 }
 
-/// The hue, saturation and value buckets of an RGB pixel: `floor(p * n / range)`
+/// The hue, saturation and value buckets of RGB pixels: `floor(p * n / range)`
 /// (METHOD.md's Decision), hue over [0, 360) degrees wrapping red, saturation over
 /// [0, 1] and value over [0, 256). Grey pixels have hue 0 and saturation 0.
-#[inline]
-pub fn hsv_buckets(r: u8, g: u8, b: u8, bins: [u32; 3]) -> [u32; 3] {
-    let (r, g, b) = (r as u32, g as u32, b as u32);
-    let max = r.max(g).max(b);
-    let min = r.min(g).min(b);
-    let delta = max - min;
-    // Hue in units of delta: [0, 6 delta), 60 degrees per unit.
-    let hue = if delta == 0 {
-        0
-    } else if max == r {
-        (g + 6 * delta - b) % (6 * delta)
-    } else if max == g {
-        b + 2 * delta - r
-    } else {
-        r + 4 * delta - g
-    };
-    let h = if delta == 0 {
-        0
-    } else {
-        (hue * bins[0] / (6 * delta)).min(bins[0] - 1)
-    };
-    let s = (delta * bins[1])
-        .checked_div(max)
-        .map_or(0, |s| s.min(bins[1] - 1));
-    let v = max * bins[2] / 256;
-    [h, s, v]
+///
+/// The two divisions per pixel are multiplications by precomputed reciprocals
+/// `ceil(2^32 / d)`, exact here because numerator times divisor stays below 2^32
+/// (checked against plain division on every RGB value in the tests).
+#[derive(Clone, Debug)]
+pub struct HsvBuckets {
+    bins: [u32; 3],
+    /// Reciprocal of `6 delta` per delta = max - min.
+    hue_reciprocal: [u64; 256],
+    /// Reciprocal of `max` per max.
+    saturation_reciprocal: [u64; 256],
+}
+
+impl HsvBuckets {
+    /// `bins` (hue, saturation, value) must each be in 1..=256.
+    pub fn new(bins: [u32; 3]) -> Self {
+        let reciprocal = |d: u64| if d == 0 { 0 } else { (1u64 << 32).div_ceil(d) };
+        Self {
+            bins,
+            hue_reciprocal: std::array::from_fn(|delta| reciprocal(6 * delta as u64)),
+            saturation_reciprocal: std::array::from_fn(|max| reciprocal(max as u64)),
+        }
+    }
+
+    #[inline]
+    pub fn of(&self, r: u8, g: u8, b: u8) -> [u32; 3] {
+        let (r, g, b) = (r as u32, g as u32, b as u32);
+        let max = r.max(g).max(b);
+        let min = r.min(g).min(b);
+        let delta = max - min;
+        // Hue in units of delta: [0, 6 delta), 60 degrees per unit; red wraps.
+        let hue = if max == r {
+            let h = g + 6 * delta - b;
+            if h >= 6 * delta { h - 6 * delta } else { h }
+        } else if max == g {
+            b + 2 * delta - r
+        } else {
+            r + 4 * delta - g
+        };
+        let divide = |n: u32, reciprocal: u64| ((n as u64 * reciprocal) >> 32) as u32;
+        let [hue_bins, saturation_bins, value_bins] = self.bins;
+        // A zero reciprocal (grey, black) gives bucket 0.
+        let h = divide(hue * hue_bins, self.hue_reciprocal[delta as usize]).min(hue_bins - 1);
+        let s = divide(delta * saturation_bins, self.saturation_reciprocal[max as usize]).min(saturation_bins - 1);
+        let v = max * value_bins / 256;
+        [h, s, v]
+    }
 }
 
 /// Convex hull (counter-clockwise, no repeated end) of up to a few points.
@@ -258,6 +279,7 @@ impl AppearanceVoter {
             self.config.saturation_bins,
             self.config.value_bins,
         ];
+        let buckets = HsvBuckets::new(bins);
         let n = self.histogram_len();
         let mut votes = FrameVotes::default();
         let mut histogram = vec![0u32; n + 1];
@@ -304,7 +326,7 @@ impl AppearanceVoter {
             rasterise(&hull, image.width, image.height, |y, x0, x1| {
                 let row = (y * image.width) as usize * 3;
                 for px in image.rgb[row + 3 * x0 as usize..row + 3 * x1 as usize].chunks_exact(3) {
-                    let [h, s, v] = hsv_buckets(px[0], px[1], px[2], bins);
+                    let [h, s, v] = buckets.of(px[0], px[1], px[2]);
                     histogram[h as usize] += 1;
                     histogram[(bins[0] + s) as usize] += 1;
                     histogram[(bins[0] + bins[1] + v) as usize] += 1;
@@ -389,6 +411,43 @@ mod tests {
     use crate::random::SplitMix64;
 
     const BINS: [u32; 3] = [32, 8, 48];
+
+    /// The buckets by plain division, as METHOD.md writes them.
+    fn reference(r: u8, g: u8, b: u8, bins: [u32; 3]) -> [u32; 3] {
+        let (r, g, b) = (r as f64, g as f64, b as f64);
+        let max = r.max(g).max(b);
+        let delta = max - r.min(g).min(b);
+        let hue_degrees = if delta == 0.0 {
+            0.0
+        } else if max == r {
+            (60.0 * (g - b) / delta).rem_euclid(360.0)
+        } else if max == g {
+            60.0 * (b - r) / delta + 120.0
+        } else {
+            60.0 * (r - g) / delta + 240.0
+        };
+        let saturation = if max == 0.0 { 0.0 } else { delta / max };
+        let bucket = |p: f64, n: u32, range: f64| ((p * n as f64 / range + 1e-9).floor() as u32).min(n - 1);
+        [bucket(hue_degrees, bins[0], 360.0), bucket(saturation, bins[1], 1.0), bucket(max, bins[2], 256.0)]
+    }
+
+    fn hsv_buckets(r: u8, g: u8, b: u8, bins: [u32; 3]) -> [u32; 3] {
+        HsvBuckets::new(bins).of(r, g, b)
+    }
+
+    #[test]
+    fn fast_buckets_equal_plain_division_on_every_colour() {
+        for bins in [BINS, [256, 256, 256], [7, 3, 5], [1, 1, 1]] {
+            let fast = HsvBuckets::new(bins);
+            for r in 0..=255u8 {
+                for g in 0..=255u8 {
+                    for b in (0..=255u8).step_by(if bins == BINS { 1 } else { 17 }) {
+                        assert_eq!(fast.of(r, g, b), reference(r, g, b, bins), "rgb ({r}, {g}, {b}), bins {bins:?}");
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn hsv_bucket_edges() {
