@@ -168,7 +168,11 @@ impl HsvBuckets {
         let [hue_bins, saturation_bins, value_bins] = self.bins;
         // A zero reciprocal (grey, black) gives bucket 0.
         let h = divide(hue * hue_bins, self.hue_reciprocal[delta as usize]).min(hue_bins - 1);
-        let s = divide(delta * saturation_bins, self.saturation_reciprocal[max as usize]).min(saturation_bins - 1);
+        let s = divide(
+            delta * saturation_bins,
+            self.saturation_reciprocal[max as usize],
+        )
+        .min(saturation_bins - 1);
         let v = max * value_bins / 256;
         [h, s, v]
     }
@@ -427,8 +431,13 @@ mod tests {
             60.0 * (r - g) / delta + 240.0
         };
         let saturation = if max == 0.0 { 0.0 } else { delta / max };
-        let bucket = |p: f64, n: u32, range: f64| ((p * n as f64 / range + 1e-9).floor() as u32).min(n - 1);
-        [bucket(hue_degrees, bins[0], 360.0), bucket(saturation, bins[1], 1.0), bucket(max, bins[2], 256.0)]
+        let bucket =
+            |p: f64, n: u32, range: f64| ((p * n as f64 / range + 1e-9).floor() as u32).min(n - 1);
+        [
+            bucket(hue_degrees, bins[0], 360.0),
+            bucket(saturation, bins[1], 1.0),
+            bucket(max, bins[2], 256.0),
+        ]
     }
 
     fn hsv_buckets(r: u8, g: u8, b: u8, bins: [u32; 3]) -> [u32; 3] {
@@ -442,7 +451,11 @@ mod tests {
             for r in 0..=255u8 {
                 for g in 0..=255u8 {
                     for b in (0..=255u8).step_by(if bins == BINS { 1 } else { 17 }) {
-                        assert_eq!(fast.of(r, g, b), reference(r, g, b, bins), "rgb ({r}, {g}, {b}), bins {bins:?}");
+                        assert_eq!(
+                            fast.of(r, g, b),
+                            reference(r, g, b, bins),
+                            "rgb ({r}, {g}, {b}), bins {bins:?}"
+                        );
                     }
                 }
             }

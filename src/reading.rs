@@ -239,7 +239,9 @@ impl Source {
     /// A directory is a KITTI sequence, a file an MCAP drive.
     pub fn open(path: &Path, options: &mcap_drive::DriveOptions) -> Result<Self> {
         if path.is_file() {
-            Ok(Source::Mcap(Box::new(mcap_drive::McapDrive::open(path, options)?)))
+            Ok(Source::Mcap(Box::new(mcap_drive::McapDrive::open(
+                path, options,
+            )?)))
         } else {
             Ok(Source::Kitti(Box::new(KittiSequence::open(path)?)))
         }

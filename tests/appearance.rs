@@ -92,9 +92,8 @@ fn every_point_of_the_camera_cropped_kitti_scan_lands_in_its_image() {
 /// A flat road whose left half (y > 0) is green vegetation and right half grey road,
 /// seen by the real KITTI sequence-03 cameras while driving straight ahead: the
 /// geometry of both halves is the same plane, only the colour differs.
-fn write_colour_scene(dir: &Path, meta: &Path) {
+fn write_colour_scene(dir: &Path, meta: &Path, frames: usize) {
     const HEIGHT_M: f64 = 1.73;
-    let frames = 4;
     std::fs::create_dir_all(dir.join("velodyne")).unwrap();
     std::fs::create_dir_all(dir.join("labels")).unwrap();
     std::fs::create_dir_all(dir.join("image_2")).unwrap();
@@ -181,7 +180,7 @@ fn colour_separates_what_geometry_cannot() {
     };
     let dir = tempfile::tempdir().unwrap();
     let seq = dir.path().join("seq");
-    write_colour_scene(&seq, &meta);
+    write_colour_scene(&seq, &meta, 4);
     let seq = seq.to_str().unwrap();
     let model = dir.path().join("m.json");
     // KITTI's camera sees the road from ~6 m ahead: a 24 m grid (12 m ahead) overlaps it.
@@ -253,5 +252,51 @@ fn colour_separates_what_geometry_cannot() {
     assert!(
         text.contains("ablation") && text.matches("travmap (filtered)").count() == 2,
         "{text}"
+    );
+}
+
+#[test]
+fn a_cell_keeps_its_colour_five_frames_later_after_the_grid_moved() {
+    use travmap::pipeline::Pipeline;
+    let Some(meta) = common::shared_data("kitti-odometry-meta/sequences/03") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
+    write_colour_scene(&seq, &meta, 6);
+    // Only frame 0 has an image.
+    for i in 1..6 {
+        std::fs::remove_file(seq.join(format!("image_2/{i:06}.png"))).unwrap();
+    }
+    let mut config = travmap::Config::default();
+    config.grid.size_m = 24.0;
+    let sequence = travmap::reading::KittiSequence::open(&seq).unwrap();
+    let mut pipeline = Pipeline::new(&config).unwrap();
+    let results: Vec<_> = (0..6)
+        .map(|i| pipeline.process_frame(sequence.read_frame(i).unwrap(), None))
+        .collect();
+    let (first, last) = (&results[0], &results[5]);
+    assert_ne!(first.layout, last.layout, "the grid moved (2 m, 5 cells)");
+    let seen: Vec<usize> = (0..first.layout.cell_count())
+        .filter(|&c| first.features.appearance(c).is_some())
+        .collect();
+    assert!(seen.len() > 100, "{} cells seen in frame 0", seen.len());
+    let mut kept = 0;
+    for &cell in &seen {
+        let key = first.layout.world_key(cell);
+        if let Some(later) =
+            (0..last.layout.cell_count()).find(|&c| last.layout.world_key(c) == key)
+        {
+            assert_eq!(
+                last.features.appearance(later),
+                first.features.appearance(cell),
+                "cell {key:?}"
+            );
+            kept += 1;
+        }
+    }
+    assert!(
+        kept > 100,
+        "{kept} seen cells still in the grid five frames later"
     );
 }
