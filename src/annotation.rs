@@ -96,20 +96,10 @@ fn grid_message(
 fn cloud_message(result: &FrameResult, classes: &[CellClass], world_frame: &str) -> PointCloud2 {
     let cells = &result.cells;
     let [min_x, min_y] = result.layout.min_corner_in_world();
-    let field = |name: &str, offset: u32, datatype: u8| PointField {
-        name: name.into(),
-        offset,
-        datatype,
-        count: 1,
-    };
-    let mut fields = vec![
-        field("x", 0, datatype::FLOAT32),
-        field("y", 4, datatype::FLOAT32),
-        field("z", 8, datatype::FLOAT32),
-        field("class", 12, datatype::INT8),
-    ];
+    let mut fields = PointField::xyz_float32();
+    fields.push(PointField::scalar("class", 12, datatype::INT8));
     if result.ground_truth.is_some() {
-        fields.push(field("ground_truth", 13, datatype::INT8));
+        fields.push(PointField::scalar("ground_truth", 13, datatype::INT8));
     }
     let n = cells.points_in_grid.len();
     let mut data = Vec::with_capacity(16 * n);

@@ -70,20 +70,10 @@ fn header(stamp_ns: u64, frame_id: &str) -> Header {
 
 /// The PointCloud2 of a scan: x, y, z, intensity (float32) and label (uint32).
 pub fn scan_to_cloud(frame: &Frame, stamp_ns: u64) -> PointCloud2 {
-    let field = |name: &str, offset: u32, datatype: u8| PointField {
-        name: name.into(),
-        offset,
-        datatype,
-        count: 1,
-    };
-    let mut fields = vec![
-        field("x", 0, datatype::FLOAT32),
-        field("y", 4, datatype::FLOAT32),
-        field("z", 8, datatype::FLOAT32),
-        field("intensity", 12, datatype::FLOAT32),
-    ];
+    let mut fields = PointField::xyz_float32();
+    fields.push(PointField::scalar("intensity", 12, datatype::FLOAT32));
     if frame.labels.is_some() {
-        fields.push(field("label", 16, datatype::UINT32));
+        fields.push(PointField::scalar("label", 16, datatype::UINT32));
     }
     let point_step = if frame.labels.is_some() { 20 } else { 16 };
     let n = frame.points_in_velodyne.len();

@@ -51,6 +51,27 @@ pub struct PointField {
     pub count: u32,
 }
 
+impl PointField {
+    /// A single-valued field.
+    pub fn scalar(name: &str, offset: u32, datatype: u8) -> Self {
+        Self {
+            name: name.into(),
+            offset,
+            datatype,
+            count: 1,
+        }
+    }
+
+    /// x, y, z as float32 at offsets 0, 4, 8: how travmap writes every cloud.
+    pub fn xyz_float32() -> Vec<Self> {
+        ["x", "y", "z"]
+            .iter()
+            .zip([0, 4, 8])
+            .map(|(n, o)| Self::scalar(n, o, datatype::FLOAT32))
+            .collect()
+    }
+}
+
 /// PointField datatypes.
 pub mod datatype {
     pub const INT8: u8 = 1;

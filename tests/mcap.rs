@@ -409,12 +409,7 @@ fn write_odometry_drive(path: &Path) {
         data.extend_from_slice(&p[1].to_be_bytes());
         data.extend_from_slice(&p[2].to_be_bytes());
     }
-    let field = |name: &str, offset: u32, datatype: u8| PointField {
-        name: name.into(),
-        offset,
-        datatype,
-        count: 1,
-    };
+    let field = PointField::scalar;
     let cloud = PointCloud2 {
         header: Header {
             stamp: Time::from_ns(1_050_000_000),
