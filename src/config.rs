@@ -131,7 +131,7 @@ pub struct TrainingConfig {
     pub seed: u64,
     /// Kernel centres of the reduced set fitted after training (default 384); 0: none.
     pub reduced_set_size: usize,
-    /// Training cells the reduced set is fitted on, at most (default 6000).
+    /// Training cells the reduced set is fitted on, at most (default 20,000).
     pub reduced_set_samples: usize,
 }
 
@@ -213,7 +213,7 @@ impl Default for TrainingConfig {
             cache_mib: 200,
             seed: 0,
             reduced_set_size: 384,
-            reduced_set_samples: 6000,
+            reduced_set_samples: 20_000,
         }
     }
 }
