@@ -140,7 +140,10 @@ impl McapSink {
             name.to_string_lossy(),
             std::process::id()
         ));
-        let file = File::create(&temporary_path).map_err(|e| Error::io(&temporary_path, e))?;
+        let file = File::create(&temporary_path).map_err(|source| Error::Write {
+            path: path.to_path_buf(),
+            source,
+        })?;
         // As many compression threads as rayon workers (RAYON_NUM_THREADS caps both).
         let threads = rayon::current_num_threads() as u32;
         let options = mcap::WriteOptions::new()
@@ -167,7 +170,10 @@ impl McapSink {
         let thread = std::thread::Builder::new()
             .name("mcap-writer".into())
             .spawn(move || write_records(writer, receiver))
-            .map_err(|e| Error::io(path, e))?;
+            .map_err(|source| Error::Write {
+                path: path.to_path_buf(),
+                source,
+            })?;
         Ok(Self {
             sender: Some(sender),
             thread: Some(thread),
@@ -300,7 +306,10 @@ impl McapSink {
                 });
             }
         }
-        std::fs::rename(&self.temporary_path, &self.path).map_err(|e| Error::io(&self.path, e))?;
+        std::fs::rename(&self.temporary_path, &self.path).map_err(|source| Error::Write {
+            path: self.path.clone(),
+            source,
+        })?;
         self.finished = true;
         Ok(())
     }

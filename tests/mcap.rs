@@ -682,3 +682,32 @@ fn convert_passes_png_images_through_with_camera_info() {
     let baseline = statics[0].1.transforms[1].transform.translation.x;
     assert!((baseline + 44.85728 / 721.5377).abs() < 1e-12, "{baseline}");
 }
+
+#[test]
+fn an_output_in_a_missing_directory_is_a_clear_error() {
+    let Some(seq) = sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("missing/drive.mcap");
+    let err = clean_failure(travmap(&[
+        "convert",
+        &seq,
+        "-o",
+        out.to_str().unwrap(),
+        "--frames",
+        "0",
+    ]));
+    assert!(
+        err.contains("cannot write") && err.contains("missing/drive.mcap"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    let err = clean_failure(travmap(&[
+        "annotate",
+        &seq,
+        "-o",
+        out.to_str().unwrap(),
+        "--frames",
+        "0",
+    ]));
+    assert!(err.contains("cannot write"), "{err}");
+}
