@@ -247,6 +247,15 @@ pub fn annotate(
         on_frame();
         Ok(())
     })?;
+    let mut metadata = metadata;
+    let skipped = selection.source.skipped();
+    if !skipped.is_empty() {
+        // serde_json cannot fail on a list of plain structs.
+        metadata.insert(
+            "skipped_frames".into(),
+            serde_json::to_string(&skipped).unwrap_or_default(),
+        );
+    }
     sink.write_metadata("travmap", metadata)?;
     sink.finish()?;
     Ok(AnnotationSummary {

@@ -33,8 +33,39 @@ pub struct Inputs {
     pub sequences: Vec<PathBuf>,
     /// How to read MCAP drives.
     pub drive: DriveOptions,
+    /// Skip frames whose input is unreadable instead of stopping.
+    pub keep_going: bool,
     /// `A..B`, `A..=B`, `A..` or `N`; all frames when None.
     pub frames: Option<String>,
+}
+
+/// How a command ended: exit code 0, or 3 when it completed but skipped frames
+/// (`--keep-going`), as the mcap CLI reports data loss.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    Complete,
+    Skipped(usize),
+}
+
+/// Prints every skipped frame to stderr, once, and says how the command ended.
+fn outcome(selections: &[Selection]) -> Outcome {
+    let mut skipped = 0;
+    for selection in selections {
+        for skip in selection.source.skipped() {
+            eprintln!(
+                "skipped frame {} of {}: {}",
+                skip.frame,
+                selection.source.path().display(),
+                skip.reason
+            );
+            skipped += 1;
+        }
+    }
+    if skipped == 0 {
+        Outcome::Complete
+    } else {
+        Outcome::Skipped(skipped)
+    }
 }
 
 /// How a command reports.
@@ -109,6 +140,7 @@ fn open_inputs(inputs: &Inputs, read_images: bool) -> Result<Vec<Selection>> {
         .map(|path| {
             let mut source = Source::open(path, &inputs.drive)?;
             source.set_read_images(read_images);
+            source.set_keep_going(inputs.keep_going);
             if source.frames_in(&frames).is_empty() {
                 let all = source.frames();
                 let has = match (all.first(), all.last()) {
@@ -177,7 +209,7 @@ pub fn run(
     model_path: Option<&Path>,
     ascii: bool,
     output: Output,
-) -> Result<()> {
+) -> Result<Outcome> {
     let (model, model_name) = load_model(model_path, config)?;
     let selections = open_inputs(inputs, config.appearance.enabled)?;
     let bar = output.progress(frame_count(&selections), "predicting");
@@ -259,7 +291,7 @@ pub fn run(
             latency.median, latency.p95
         )?;
     }
-    Ok(())
+    Ok(outcome(&selections))
 }
 
 /// Rows from north (max y) down, so the picture reads like a map with x to the right.
@@ -344,7 +376,7 @@ pub fn eval(
     config: &Config,
     model_path: Option<&Path>,
     output: Output,
-) -> Result<()> {
+) -> Result<Outcome> {
     let (model, model_name) = load_model(model_path, config)?;
     let selections = open_inputs(inputs, config.appearance.enabled)?;
     let evaluate = |model: &SvmModel, message: &str| -> Result<EvaluationReport> {
@@ -380,7 +412,7 @@ pub fn eval(
             "geometry_only_report": geometry_only,
         });
         println!("{}", serde_json::to_string_pretty(&doc)?);
-        return Ok(());
+        return Ok(outcome(&selections));
     }
     let mut out = std::io::stdout().lock();
     writeln!(out, "inputs: {}", sources.join("; "))?;
@@ -428,11 +460,16 @@ pub fn eval(
              training scores. `travmap crossval` gives the spatially held-out accuracy."
         )?;
     }
-    Ok(())
+    Ok(outcome(&selections))
 }
 
 /// `travmap train`: grid search, final fit, model file.
-pub fn train(inputs: &Inputs, config: &Config, model_path: &Path, output: Output) -> Result<()> {
+pub fn train(
+    inputs: &Inputs,
+    config: &Config,
+    model_path: &Path,
+    output: Output,
+) -> Result<Outcome> {
     let selections = open_inputs(inputs, config.appearance.enabled)?;
     let bar = output.progress(frame_count(&selections), "collecting cells");
     let set = collect_training_set(&selections, config, &mut || bar.inc(1))?;
@@ -511,11 +548,11 @@ pub fn train(inputs: &Inputs, config: &Config, model_path: &Path, output: Output
         }
         println!("wrote {}", model_path.display());
     }
-    Ok(())
+    Ok(outcome(&selections))
 }
 
 /// `travmap crossval`: the spatially-blocked held-out evaluation.
-pub fn crossval(inputs: &Inputs, config: &Config, output: Output) -> Result<()> {
+pub fn crossval(inputs: &Inputs, config: &Config, output: Output) -> Result<Outcome> {
     let selections = open_inputs(inputs, config.appearance.enabled)?;
     let bar = output.progress(config.training.folds as u64, "cross-validating");
     let report: CrossValidationReport = cross_validate(&selections, config, &|message| {
@@ -527,7 +564,7 @@ pub fn crossval(inputs: &Inputs, config: &Config, output: Output) -> Result<()> 
     if output.json {
         let doc = json!({"config": config, "inputs": sources, "report": report});
         println!("{}", serde_json::to_string_pretty(&doc)?);
-        return Ok(());
+        return Ok(outcome(&selections));
     }
     let mut out = std::io::stdout().lock();
     writeln!(out, "inputs: {}", sources.join("; "))?;
@@ -550,7 +587,7 @@ pub fn crossval(inputs: &Inputs, config: &Config, output: Output) -> Result<()> 
         )?;
     }
     write_table(&mut out, &report.evaluation, false)?;
-    Ok(())
+    Ok(outcome(&selections))
 }
 
 /// `travmap config`: the effective configuration as TOML (or JSON).
@@ -570,7 +607,7 @@ pub fn bench(
     model_path: Option<&Path>,
     repeats: usize,
     output: Output,
-) -> Result<()> {
+) -> Result<Outcome> {
     let (model, model_name) = load_model(model_path, config)?;
     let selections = open_inputs(inputs, config.appearance.enabled)?;
     let [selection] = selections.as_slice() else {
@@ -589,7 +626,7 @@ pub fn bench(
     if output.json {
         let doc = json!({"config": config, "model": model_json(&model, &model_name), "input": selection.describe(), "report": report});
         println!("{}", serde_json::to_string_pretty(&doc)?);
-        return Ok(());
+        return Ok(outcome(&selections));
     }
     let mut out = std::io::stdout().lock();
     writeln!(out, "input: {}", selection.describe())?;
@@ -638,7 +675,7 @@ pub fn bench(
         report.all_cores.threads,
         report.speedup
     )?;
-    Ok(())
+    Ok(outcome(&selections))
 }
 
 /// `travmap convert`: a KITTI sequence to a ROS 2 MCAP.
@@ -648,7 +685,7 @@ pub fn convert(
     compression: Compression,
     start_time_s: f64,
     output: Output,
-) -> Result<()> {
+) -> Result<Outcome> {
     if !(start_time_s.is_finite() && start_time_s >= 0.0) {
         bail!("--start-time must be seconds >= 0, got {start_time_s}");
     }
@@ -689,7 +726,7 @@ pub fn convert(
             summary.frames as f64 / seconds
         );
     }
-    Ok(())
+    Ok(outcome(&selections))
 }
 
 /// `travmap annotate`: the annotated MCAP.
@@ -700,7 +737,7 @@ pub fn annotate(
     output_path: &Path,
     options: &AnnotationOptions,
     output: Output,
-) -> Result<()> {
+) -> Result<Outcome> {
     let (model, model_name) = load_model(model_path, config)?;
     let selections = open_inputs(inputs, config.appearance.enabled)?;
     let [selection] = selections.as_slice() else {
@@ -755,5 +792,5 @@ pub fn annotate(
             );
         }
     }
-    Ok(())
+    Ok(outcome(&selections))
 }

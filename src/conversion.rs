@@ -226,11 +226,16 @@ pub fn write_kitti_frames(
         output_bytes: 0,
     };
     for batch in indices.chunks(BATCH) {
-        let encoded: Vec<EncodedFrame> = batch
+        // A frame whose files are unreadable stops the conversion, unless the
+        // sequence keeps going (annotate --keep-going), which skips and records it.
+        let encoded: Vec<Option<EncodedFrame>> = batch
             .par_iter()
-            .map(|&index| encode_frame(sequence, index, start_ns))
+            .map(|&index| match encode_frame(sequence, index, start_ns) {
+                Ok(frame) => Ok(Some(frame)),
+                Err(error) => sequence.skip_log().handle(index, error).map(|()| None),
+            })
             .collect::<Result<_>>()?;
-        for frame in encoded {
+        for frame in encoded.into_iter().flatten() {
             let EncodedFrame {
                 stamp_ns,
                 cloud,

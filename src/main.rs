@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use travmap::annotation::AnnotationOptions;
-use travmap::commands::{self, Inputs, Output};
+use travmap::commands::{self, Inputs, Outcome, Output};
 use travmap::reading::mcap_drive::DriveOptions;
 use travmap::writing::Compression;
 
@@ -172,6 +172,10 @@ struct Common {
     /// No progress bars, no tables.
     #[arg(short, long)]
     quiet: bool,
+    /// Skip frames whose input is unreadable, report them, and exit with code 3
+    /// (instead of stopping at the first one with code 1).
+    #[arg(long)]
+    keep_going: bool,
 }
 
 impl Common {
@@ -184,6 +188,7 @@ impl Common {
                 camera_topic: self.camera_topic.clone(),
             },
             frames: self.frames.clone(),
+            keep_going: self.keep_going,
         }
     }
 
@@ -199,7 +204,7 @@ impl Common {
     }
 }
 
-fn dispatch(cli: Cli) -> anyhow::Result<()> {
+fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
     match cli.command {
         Command::Run {
             common,
@@ -241,6 +246,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
                 sequences: vec![sequence],
                 drive: DriveOptions::default(),
                 frames,
+                keep_going: false,
             };
             commands::convert(
                 &inputs,
@@ -285,14 +291,21 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
         ),
         Command::Config { settings, json } => {
             let config = commands::load_config(settings.config.as_deref(), &settings.sets)?;
-            commands::print_config(&config, Output { json, quiet: false })
+            commands::print_config(&config, Output { json, quiet: false })?;
+            Ok(Outcome::Complete)
         }
     }
 }
 
+/// Exit codes: 0 complete, 1 error (no output written), 3 completed
+/// with skipped frames (`--keep-going`).
 fn main() -> ExitCode {
     match dispatch(Cli::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(Outcome::Complete) => ExitCode::SUCCESS,
+        Ok(Outcome::Skipped(frames)) => {
+            eprintln!("completed with {frames} skipped frame(s)");
+            ExitCode::from(3)
+        }
         Err(error) => {
             eprintln!("error: {error:#}");
             ExitCode::FAILURE

@@ -34,6 +34,44 @@ pub struct Frame {
     pub camera: Option<CameraImage>,
 }
 
+/// A frame left out because its input was unreadable (`--keep-going`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Skip {
+    pub frame: usize,
+    pub reason: String,
+}
+
+/// Whether a frame whose input is unreadable stops the run (the default) or is
+/// skipped and recorded, and the record.
+#[derive(Clone, Debug, Default)]
+pub struct SkipLog {
+    keep_going: bool,
+    skipped: std::sync::Arc<std::sync::Mutex<Vec<Skip>>>,
+}
+
+impl SkipLog {
+    /// Records `error` for `frame` when keeping going, else returns it.
+    pub fn handle(&self, frame: usize, error: Error) -> Result<()> {
+        if !self.keep_going {
+            return Err(error);
+        }
+        let reason = error.to_string();
+        if let Ok(mut skipped) = self.skipped.lock()
+            && !skipped
+                .iter()
+                .any(|s| s.frame == frame && s.reason == reason)
+        {
+            // Passes over the same input (passthrough, then the method) report a frame once.
+            skipped.push(Skip { frame, reason });
+        }
+        Ok(())
+    }
+
+    pub fn skipped(&self) -> Vec<Skip> {
+        self.skipped.lock().map(|s| s.clone()).unwrap_or_default()
+    }
+}
+
 /// KITTI calibration: the camera projections and velodyne -> cam0.
 #[derive(Clone, Debug)]
 pub struct Calibration {
@@ -91,6 +129,7 @@ pub struct KittiSequence {
     frames: Vec<usize>,
     /// Decode `image_2` PNGs into frames (when P2 is known).
     read_images: bool,
+    skips: SkipLog,
 }
 
 impl KittiSequence {
@@ -115,7 +154,13 @@ impl KittiSequence {
             stamps_ns,
             frames,
             read_images: true,
+            skips: SkipLog::default(),
         })
+    }
+
+    /// What happens to frames whose files are unreadable.
+    pub fn skip_log(&self) -> &SkipLog {
+        &self.skips
     }
 
     /// Whether [`Self::read_frame`] decodes `image_2` (default true); decoding costs
@@ -254,6 +299,26 @@ impl Source {
         }
     }
 
+    /// Skip (and record) frames whose input is unreadable instead of stopping.
+    pub fn set_keep_going(&mut self, keep_going: bool) {
+        let log = SkipLog {
+            keep_going,
+            skipped: Default::default(),
+        };
+        match self {
+            Source::Kitti(sequence) => sequence.skips = log,
+            Source::Mcap(drive) => drive.skips = log,
+        }
+    }
+
+    /// The frames skipped so far.
+    pub fn skipped(&self) -> Vec<Skip> {
+        match self {
+            Source::Kitti(sequence) => sequence.skips.skipped(),
+            Source::Mcap(drive) => drive.skips.skipped(),
+        }
+    }
+
     pub fn path(&self) -> &Path {
         match self {
             Source::Kitti(s) => s.dir(),
@@ -285,7 +350,10 @@ impl Source {
         match self {
             Source::Kitti(sequence) => {
                 for index in sequence.frames_in(range) {
-                    on_frame(sequence.read_frame(index)?)?;
+                    match sequence.read_frame(index) {
+                        Ok(frame) => on_frame(frame)?,
+                        Err(error) => sequence.skips.handle(index, error)?,
+                    }
                 }
                 Ok(())
             }

@@ -213,3 +213,54 @@ fn training_without_labels_is_an_error_and_writes_nothing() {
     let out = success(eval(dir.path()));
     assert!(out.contains("no frame has ground truth"), "{out}");
 }
+
+#[test]
+fn keep_going_skips_a_corrupt_frame_and_exits_3() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    let scan = dir.path().join("velodyne/000001.bin");
+    let mut bytes = std::fs::read(&scan).unwrap();
+    bytes.truncate(bytes.len() - 3);
+    std::fs::write(&scan, bytes).unwrap();
+    let seq = dir.path().to_str().unwrap();
+    // Without --keep-going the first bad frame stops the run.
+    clean_failure(travmap(&["eval", seq]));
+    let out = travmap(&["eval", seq, "--keep-going"]);
+    assert_eq!(out.status.code(), Some(3), "{}", common::stderr(&out));
+    let err = common::stderr(&out);
+    assert!(
+        err.contains("skipped frame 1")
+            && err.contains("000001.bin")
+            && err.contains("completed with 1 skipped frame"),
+        "{err}"
+    );
+    assert!(
+        common::stdout(&out).contains("over 1 frames"),
+        "{}",
+        common::stdout(&out)
+    );
+    // The annotated output is complete and records the skip.
+    let mcap_path = dir.path().join("a.mcap");
+    let out = travmap(&[
+        "annotate",
+        seq,
+        "-o",
+        mcap_path.to_str().unwrap(),
+        "--keep-going",
+        "-q",
+    ]);
+    assert_eq!(out.status.code(), Some(3));
+    let bytes = std::fs::read(&mcap_path).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    let index = summary
+        .metadata_indexes
+        .iter()
+        .find(|m| m.name == "travmap")
+        .unwrap();
+    let metadata = mcap::read::metadata(&bytes, index).unwrap();
+    assert!(
+        metadata.metadata["skipped_frames"].contains("\"frame\":1"),
+        "{:?}",
+        metadata.metadata
+    );
+}

@@ -71,6 +71,7 @@ pub struct McapDrive {
     stamps_ns: Vec<u64>,
     edges: HashMap<String, Edge>,
     camera: Option<CameraSource>,
+    pub(super) skips: super::SkipLog,
 }
 
 fn isometry(t: &Transform) -> Isometry3<f64> {
@@ -290,6 +291,7 @@ impl McapDrive {
             stamps_ns,
             edges,
             camera,
+            skips: super::SkipLog::default(),
         })
     }
 
@@ -463,7 +465,17 @@ impl McapDrive {
         let mut images: Vec<(u64, Vec<u8>)> = Vec::new();
         let mut index = 0usize;
         for message in stream {
-            let message = message.map_err(|e| fail(e.to_string()))?;
+            let message = match message {
+                Ok(message) => message,
+                // A corrupt stretch of the file: with --keep-going, what came before counts.
+                Err(e) => {
+                    self.skips.handle(
+                        index,
+                        fail(format!("unreadable from cloud {index} on: {e}")),
+                    )?;
+                    break;
+                }
+            };
             if Some(message.channel.topic.as_str()) == camera_topic {
                 let header: HeaderOnly = decode(&message.data)
                     .map_err(|e| fail(format!("{}: {e}", message.channel.topic)))?;
@@ -474,7 +486,10 @@ impl McapDrive {
                 continue;
             }
             if let Some((current, data)) = pending.take() {
-                on_frame(self.frame(current, &data, &images)?)?;
+                match self.frame(current, &data, &images) {
+                    Ok(frame) => on_frame(frame)?,
+                    Err(error) => self.skips.handle(current, error)?,
+                }
                 let keep_after = self.stamps_ns[current].saturating_sub(IMAGE_PAIRING_NS);
                 images.retain(|(stamp, _)| *stamp >= keep_after);
             }
@@ -488,7 +503,10 @@ impl McapDrive {
             }
         }
         if let Some((current, data)) = pending {
-            on_frame(self.frame(current, &data, &images)?)?;
+            match self.frame(current, &data, &images) {
+                Ok(frame) => on_frame(frame)?,
+                Err(error) => self.skips.handle(current, error)?,
+            }
         }
         Ok(())
     }
