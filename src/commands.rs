@@ -25,7 +25,7 @@ use crate::grid::CellClass;
 use crate::metrics::Scores;
 use crate::reading::mcap_drive::DriveOptions;
 use crate::reading::{Source, parse_frame_range};
-use crate::writing::Compression;
+use crate::writing::{self, Compression};
 
 /// The drives a command reads and the frames of each.
 pub struct Inputs {
@@ -181,9 +181,11 @@ fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
         .context("output path has no file name")?
         .to_string_lossy();
     let temporary = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    writing::track_temporary(&temporary);
     let result = std::fs::File::create(&temporary)
         .and_then(|mut f| f.write_all(bytes).and_then(|_| f.sync_all()))
         .and_then(|_| std::fs::rename(&temporary, path));
+    writing::forget_temporary(&temporary);
     if let Err(e) = result {
         let _ = std::fs::remove_file(&temporary);
         return Err(e).with_context(|| format!("cannot write {}", path.display()));

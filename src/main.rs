@@ -298,8 +298,13 @@ fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
 }
 
 /// Exit codes: 0 complete, 1 error (no output written), 3 completed
-/// with skipped frames (`--keep-going`).
+/// with skipped frames (`--keep-going`), 130 interrupted (no output written).
 fn main() -> ExitCode {
+    // Interrupted: remove partial outputs, exit as shells expect after SIGINT.
+    let _ = ctrlc::set_handler(|| {
+        travmap::writing::remove_temporary_files();
+        std::process::exit(130);
+    });
     match dispatch(Cli::parse()) {
         Ok(Outcome::Complete) => ExitCode::SUCCESS,
         Ok(Outcome::Skipped(frames)) => {

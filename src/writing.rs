@@ -18,6 +18,32 @@ use std::thread::JoinHandle;
 use crate::error::{Error, Result};
 use crate::ros::{RosMessage, encode};
 
+/// Temporary files being written, so that an interrupted run (SIGINT) can remove
+/// them: it leaves nothing at or beside the output.
+static TEMPORARY_FILES: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+/// Records a temporary file until [`forget_temporary`].
+pub fn track_temporary(path: &Path) {
+    if let Ok(mut files) = TEMPORARY_FILES.lock() {
+        files.push(path.to_path_buf());
+    }
+}
+
+pub fn forget_temporary(path: &Path) {
+    if let Ok(mut files) = TEMPORARY_FILES.lock() {
+        files.retain(|p| p != path);
+    }
+}
+
+/// Deletes every tracked temporary file (from the SIGINT handler).
+pub fn remove_temporary_files() {
+    if let Ok(files) = TEMPORARY_FILES.lock() {
+        for path in files.iter() {
+            let _ = std::fs::remove_file(path);
+        }
+    }
+}
+
 /// Chunk compression of the written MCAP.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -144,6 +170,7 @@ impl McapSink {
             path: path.to_path_buf(),
             source,
         })?;
+        track_temporary(&temporary_path);
         // As many compression threads as rayon workers (RAYON_NUM_THREADS caps both).
         let threads = rayon::current_num_threads() as u32;
         let options = mcap::WriteOptions::new()
@@ -311,6 +338,7 @@ impl McapSink {
             source,
         })?;
         self.finished = true;
+        forget_temporary(&self.temporary_path);
         Ok(())
     }
 }
@@ -324,6 +352,7 @@ impl Drop for McapSink {
                 let _ = thread.join();
             }
             let _ = std::fs::remove_file(&self.temporary_path);
+            forget_temporary(&self.temporary_path);
         }
     }
 }

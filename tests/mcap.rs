@@ -711,3 +711,72 @@ fn an_output_in_a_missing_directory_is_a_clear_error() {
     ]));
     assert!(err.contains("cannot write"), "{err}");
 }
+
+#[test]
+fn an_interrupted_run_leaves_no_file_behind() {
+    let Some(seq) = common::semantickitti_00() else {
+        return;
+    };
+    // 120 frames: the six shipped scans over and over, long enough to interrupt.
+    let dir = tempfile::tempdir().unwrap();
+    let long = dir.path().join("long");
+    std::fs::create_dir_all(long.join("velodyne")).unwrap();
+    std::fs::copy(seq.join("calib.txt"), long.join("calib.txt")).unwrap();
+    let head = |name: &str| -> String {
+        std::fs::read_to_string(seq.join(name))
+            .unwrap()
+            .lines()
+            .take(120)
+            .map(|l| format!("{l}\n"))
+            .collect()
+    };
+    std::fs::write(long.join("poses.txt"), head("poses.txt")).unwrap();
+    std::fs::write(long.join("times.txt"), head("times.txt")).unwrap();
+    for i in 0..120 {
+        std::os::unix::fs::symlink(
+            seq.join(format!("velodyne/{:06}.bin", i % 6)),
+            long.join(format!("velodyne/{i:06}.bin")),
+        )
+        .unwrap();
+    }
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let output = out_dir.join("drive.mcap");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_travmap"))
+        .args([
+            "convert",
+            long.to_str().unwrap(),
+            "-o",
+            output.to_str().unwrap(),
+            "-q",
+        ])
+        .spawn()
+        .unwrap();
+    // Wait until the temporary file exists, then interrupt.
+    let started = std::time::Instant::now();
+    while std::fs::read_dir(&out_dir).unwrap().count() == 0 && started.elapsed().as_secs() < 10 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(100));
+    let killed = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let status = child.wait().unwrap();
+    if status.success() {
+        eprintln!("skipping: the conversion finished before the interrupt");
+        return;
+    }
+    assert_eq!(status.code(), Some(130));
+    let left: Vec<_> = std::fs::read_dir(&out_dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+    // The inputs are untouched.
+    assert_eq!(
+        std::fs::read(long.join("velodyne/000000.bin")).unwrap(),
+        std::fs::read(seq.join("velodyne/000000.bin")).unwrap()
+    );
+}
