@@ -9,7 +9,7 @@ use std::path::Path;
 use common::{clean_failure, success, travmap};
 use serde_json::Value;
 use travmap::reading::KittiSequence;
-use travmap::reading::mcap_drive::{DriveOptions, McapDrive};
+use travmap::reading::mcap_drive::{DriveOptions, McapDrive, cloud_points};
 use travmap::ros::{OccupancyGrid, decode};
 use travmap::writing::{Compression, McapSink};
 
@@ -778,5 +778,96 @@ fn an_interrupted_run_leaves_no_file_behind() {
     assert_eq!(
         std::fs::read(long.join("velodyne/000000.bin")).unwrap(),
         std::fs::read(seq.join("velodyne/000000.bin")).unwrap()
+    );
+}
+
+#[test]
+fn corrupt_mcap_files_are_clear_errors() {
+    let Some(seq) = sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("good.mcap");
+    success(travmap(&[
+        "convert",
+        &seq,
+        "-o",
+        good.to_str().unwrap(),
+        "--frames",
+        "0..2",
+        "--compression",
+        "none",
+        "-q",
+    ]));
+    let bytes = std::fs::read(&good).unwrap();
+    let write = |name: &str, data: &[u8]| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, data).unwrap();
+        path.to_str().unwrap().to_string()
+    };
+    // Bad magic.
+    let mut bad_magic = bytes.clone();
+    bad_magic[1] = b'X';
+    let err = clean_failure(travmap(&["eval", &write("magic.mcap", &bad_magic)]));
+    assert!(
+        err.contains("magic.mcap") && err.to_lowercase().contains("magic"),
+        "{err}"
+    );
+    // A flipped byte inside a chunk's records: the chunk CRC no longer matches.
+    let mut flipped = bytes.clone();
+    let middle = bytes.len() / 3;
+    flipped[middle] ^= 0x55;
+    let err = clean_failure(travmap(&["eval", &write("crc.mcap", &flipped)]));
+    assert!(
+        err.contains("crc.mcap") && err.contains("Chunk CRC failed"),
+        "{err}"
+    );
+    // Cut mid-record, a few bytes into the data section.
+    let err = clean_failure(travmap(&["eval", &write("cut.mcap", &bytes[..100])]));
+    assert!(
+        err.contains("cut.mcap") && err.contains("ended in the middle of a record"),
+        "{err}"
+    );
+}
+
+#[test]
+fn clouds_whose_data_disagree_with_their_layout_are_errors() {
+    use travmap::ros::{Header, PointCloud2, PointField, datatype};
+    let cloud = |data_len: usize, fields: Vec<PointField>| PointCloud2 {
+        header: Header::default(),
+        height: 2,
+        width: 3,
+        fields,
+        is_bigendian: false,
+        point_step: 12,
+        row_step: 36,
+        data: vec![0; data_len],
+        is_dense: true,
+    };
+    let err = cloud_points(&cloud(60, PointField::xyz_float32()))
+        .err()
+        .unwrap();
+    assert!(
+        err.contains("data holds 60 bytes") && err.contains("need 72"),
+        "{err}"
+    );
+    let err = cloud_points(&cloud(
+        72,
+        vec![PointField::scalar("y", 4, datatype::FLOAT32)],
+    ))
+    .err()
+    .unwrap();
+    assert!(err.contains("no `x` field"), "{err}");
+    let err = cloud_points(&cloud(
+        72,
+        vec![PointField::scalar("x", 10, datatype::FLOAT32)],
+    ))
+    .err()
+    .unwrap();
+    assert!(err.contains("outside point_step"), "{err}");
+    assert_eq!(
+        cloud_points(&cloud(72, PointField::xyz_float32()))
+            .unwrap()
+            .points
+            .len(),
+        6
     );
 }

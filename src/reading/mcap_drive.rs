@@ -89,6 +89,12 @@ fn isometry(t: &Transform) -> Isometry3<f64> {
     )
 }
 
+/// The messages of a mapped file, chunk CRCs checked: a corrupt chunk is an error,
+/// not silently wrong points.
+fn messages(map: &[u8]) -> mcap::McapResult<mcap::MessageStream<'_>> {
+    mcap::MessageStream::new_with_options(map, mcap::read::Options::ValidateChunkCrcs.into())
+}
+
 /// Only the header of a message, decoded without the rest.
 #[derive(Deserialize)]
 struct HeaderOnly {
@@ -110,8 +116,7 @@ impl McapDrive {
         let mut edges: HashMap<String, Edge> = HashMap::new();
         let mut intrinsics: HashMap<String, nalgebra::Matrix3<f64>> = HashMap::new();
         let mut image_topics: BTreeMap<String, (bool, String)> = BTreeMap::new();
-        let stream = mcap::MessageStream::new(&map)
-            .map_err(|e| fail(format!("not a readable MCAP file: {e}")))?;
+        let stream = messages(&map).map_err(|e| fail(format!("not a readable MCAP file: {e}")))?;
         for (ordinal, message) in stream.enumerate() {
             let message = message.map_err(|e| fail(format!("message {ordinal}: {e}")))?;
             let channel = &message.channel;
@@ -439,7 +444,7 @@ impl McapDrive {
             path: self.path.clone(),
             message: e.to_string(),
         };
-        for message in mcap::MessageStream::new(&self.map).map_err(fail)? {
+        for message in messages(&self.map).map_err(fail)? {
             on_message(&message.map_err(fail)?)?;
         }
         Ok(())
@@ -458,7 +463,7 @@ impl McapDrive {
             path: self.path.clone(),
             message,
         };
-        let stream = mcap::MessageStream::new(&self.map).map_err(|e| fail(e.to_string()))?;
+        let stream = messages(&self.map).map_err(|e| fail(e.to_string()))?;
         let camera_topic = self.camera.as_ref().map(|c| c.topic.as_str());
         let mut pending: Option<(usize, Vec<u8>)> = None;
         // Images since the cloud before the pending one: (stamp, raw message).
