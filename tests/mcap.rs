@@ -870,4 +870,100 @@ fn clouds_whose_data_disagree_with_their_layout_are_errors() {
             .len(),
         6
     );
+    // A header that claims 4 billion points over 72 bytes: refused before any
+    // allocation, which is bounded by the bytes present.
+    let mut huge = cloud(72, PointField::xyz_float32());
+    (huge.width, huge.height, huge.row_step) = (1 << 31, 1 << 31, 12 << 31);
+    let err = cloud_points(&huge).err().unwrap();
+    assert!(err.contains("data holds 72 bytes"), "{err}");
+}
+
+#[test]
+fn an_image_that_disagrees_with_its_camera_info_and_a_non_cdr_cloud_are_errors() {
+    use travmap::ros::{CameraInfo, PointCloud2, RosMessage, encode};
+    let (Some(object), Some(meta)) = (
+        common::shared_data("kitti-object-000008/training"),
+        common::shared_data("kitti-odometry-meta/sequences/03"),
+    ) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
+    for sub in ["velodyne", "image_2"] {
+        std::fs::create_dir_all(seq.join(sub)).unwrap();
+    }
+    std::fs::copy(
+        object.join("velodyne_reduced/000008.bin"),
+        seq.join("velodyne/000000.bin"),
+    )
+    .unwrap();
+    std::fs::copy(
+        object.join("image_2/000008.png"),
+        seq.join("image_2/000000.png"),
+    )
+    .unwrap();
+    std::fs::copy(meta.join("calib.txt"), seq.join("calib.txt")).unwrap();
+    std::fs::write(seq.join("poses.txt"), "1 0 0 0 0 1 0 0 0 0 1 0\n").unwrap();
+    std::fs::write(seq.join("times.txt"), "0.0\n").unwrap();
+    let good = dir.path().join("good.mcap");
+    success(travmap(&[
+        "convert",
+        seq.to_str().unwrap(),
+        "-o",
+        good.to_str().unwrap(),
+        "-q",
+    ]));
+    success(travmap(&["run", good.to_str().unwrap(), "-q"]));
+
+    // The same file with a CameraInfo that claims another width.
+    let bytes = std::fs::read(&good).unwrap();
+    let bad = dir.path().join("bad.mcap");
+    let mut sink = McapSink::create(&bad, Compression::None).unwrap();
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        let message = message.unwrap();
+        let schema = message.channel.schema.as_ref().unwrap();
+        let id = sink
+            .channel(
+                &message.channel.topic,
+                &schema.name,
+                &schema.encoding,
+                &schema.data,
+                "cdr",
+            )
+            .unwrap();
+        let mut data = message.data.to_vec();
+        if schema.name == CameraInfo::NAME {
+            let mut info: CameraInfo = decode(&data).unwrap();
+            info.width = 1000;
+            data = encode(&info, 0);
+        }
+        sink.write_raw(id, message.log_time, message.publish_time, data)
+            .unwrap();
+    }
+    sink.finish().unwrap();
+    let err = clean_failure(travmap(&["run", bad.to_str().unwrap()]));
+    assert!(
+        err.contains("the image is 1242x375 but its CameraInfo says 1000x375"),
+        "{err}"
+    );
+
+    // A PointCloud2 channel whose messages are not CDR.
+    let json = dir.path().join("json.mcap");
+    let mut sink = McapSink::create(&json, Compression::None).unwrap();
+    let id = sink
+        .channel(
+            "/points",
+            PointCloud2::NAME,
+            "ros2msg",
+            PointCloud2::SCHEMA.as_bytes(),
+            "json",
+        )
+        .unwrap();
+    sink.write_raw(id, 1, 1, b"{}".to_vec()).unwrap();
+    sink.finish().unwrap();
+    let err = clean_failure(travmap(&["eval", json.to_str().unwrap()]));
+    assert!(
+        err.contains("channel /points (sensor_msgs/msg/PointCloud2) has message encoding `json`"),
+        "{err}"
+    );
 }

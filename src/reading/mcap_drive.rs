@@ -50,6 +50,8 @@ struct CameraSource {
     compressed: bool,
     frame: String,
     intrinsics: nalgebra::Matrix3<f64>,
+    /// Width and height the CameraInfo gives; images must match.
+    size: (u32, u32),
 }
 
 /// Parent and transform samples of one frame in the transform tree.
@@ -114,7 +116,8 @@ impl McapDrive {
         let mut topics: BTreeMap<String, String> = BTreeMap::new();
         let mut cloud_stamps: HashMap<String, (String, Vec<u64>)> = HashMap::new();
         let mut edges: HashMap<String, Edge> = HashMap::new();
-        let mut intrinsics: HashMap<String, nalgebra::Matrix3<f64>> = HashMap::new();
+        // Per camera frame: K and the image size (width, height).
+        let mut intrinsics: HashMap<String, (nalgebra::Matrix3<f64>, (u32, u32))> = HashMap::new();
         let mut image_topics: BTreeMap<String, (bool, String)> = BTreeMap::new();
         let stream = messages(&map).map_err(|e| fail(format!("not a readable MCAP file: {e}")))?;
         for (ordinal, message) in stream.enumerate() {
@@ -184,7 +187,12 @@ impl McapDrive {
                         decode(&message.data).map_err(decode_failure)?;
                     intrinsics
                         .entry(info.header.frame_id.clone())
-                        .or_insert_with(|| nalgebra::Matrix3::from_row_slice(&info.k));
+                        .or_insert_with(|| {
+                            (
+                                nalgebra::Matrix3::from_row_slice(&info.k),
+                                (info.width, info.height),
+                            )
+                        });
                 }
                 COMPRESSED_IMAGE | RAW_IMAGE if !image_topics.contains_key(&channel.topic) => {
                     let header: HeaderOnly = decode(&message.data).map_err(decode_failure)?;
@@ -269,7 +277,7 @@ impl McapDrive {
                         image_topics.keys().cloned().collect::<Vec<_>>().join(", ")
                     ))
                 })?;
-                let k = intrinsics
+                let (k, size) = intrinsics
                     .get(frame)
                     .ok_or_else(|| fail(format!("no CameraInfo for frame `{frame}` of {topic}")))?;
                 Some(CameraSource {
@@ -277,13 +285,15 @@ impl McapDrive {
                     compressed: *compressed,
                     frame: frame.clone(),
                     intrinsics: *k,
+                    size: *size,
                 })
             }
             (None, [(topic, (compressed, frame))]) => Some(CameraSource {
                 topic: (*topic).clone(),
                 compressed: *compressed,
                 frame: frame.clone(),
-                intrinsics: intrinsics[frame],
+                intrinsics: intrinsics[frame].0,
+                size: intrinsics[frame].1,
             }),
             _ => None,
         };
@@ -416,6 +426,12 @@ impl McapDrive {
             let message: crate::ros::Image = decode(data).map_err(fail)?;
             raw_image(&message).map_err(fail)?
         };
+        if (image.width, image.height) != camera.size {
+            return Err(fail(format!(
+                "the image is {}x{} but its CameraInfo says {}x{}",
+                image.width, image.height, camera.size.0, camera.size.1
+            )));
+        }
         let velodyne_from_camera =
             match self.ancestor_from(&self.cloud_frame, &camera.frame, image_stamp_ns)? {
                 Some(pose) => pose,
