@@ -25,6 +25,7 @@ use crate::grid::CellClass;
 use crate::metrics::Scores;
 use crate::reading::mcap_drive::DriveOptions;
 use crate::reading::{Source, parse_frame_range};
+use crate::rendering;
 use crate::writing::{self, Compression};
 
 /// The drives a command reads and the frames of each.
@@ -792,6 +793,66 @@ pub fn annotate(
                 100.0 * s.miou,
                 100.0 * s.f1
             );
+        }
+    }
+    Ok(outcome(&selections))
+}
+
+/// `travmap render`: ground truth, prediction and errors of frames as PNG pictures,
+/// one file (`all` false: the selected frame) or one per frame into a directory.
+pub fn render(
+    inputs: &Inputs,
+    config: &Config,
+    model_path: Option<&Path>,
+    output_path: &Path,
+    all: bool,
+    cell_px: u32,
+    output: Output,
+) -> Result<Outcome> {
+    if !(1..=64).contains(&cell_px) {
+        bail!("--cell-pixels must be in 1..=64, got {cell_px}");
+    }
+    let (model, _) = load_model(model_path, config)?;
+    let selections = open_inputs(inputs, config.appearance.enabled)?;
+    let [selection] = selections.as_slice() else {
+        bail!("render takes one input, got {}", selections.len());
+    };
+    if all {
+        std::fs::create_dir_all(output_path)
+            .with_context(|| format!("cannot create {}", output_path.display()))?;
+    }
+    let bar = output.progress(frame_count(&selections), "rendering");
+    let mut written = Vec::new();
+    selection.run::<anyhow::Error>(config, Some(&model), |result| {
+        let path = if all {
+            output_path.join(format!("{:06}.png", result.index))
+        } else {
+            output_path.to_path_buf()
+        };
+        write_atomically(
+            &path,
+            &rendering::encode_png(&rendering::render(&result, cell_px)),
+        )?;
+        written.push(path);
+        bar.inc(1);
+        Ok(())
+    })?;
+    bar.finish_and_clear();
+    if written.is_empty() {
+        bail!("no frame was rendered");
+    }
+    if output.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&json!({"pictures": written}))?
+        );
+    } else if !output.quiet {
+        println!(
+            "wrote {} picture(s): ground truth | prediction | errors (orange false positive, blue false negative)",
+            written.len()
+        );
+        for path in &written {
+            println!("  {}", path.display());
         }
     }
     Ok(outcome(&selections))

@@ -26,6 +26,7 @@ pub mod metrics;
 pub mod pipeline;
 pub mod random;
 pub mod reading;
+pub mod rendering;
 pub mod ros;
 pub mod writing;
 

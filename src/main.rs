@@ -97,6 +97,26 @@ enum Command {
         #[arg(long, default_value_t = -1.73, allow_negative_numbers = true)]
         grid_height: f64,
     },
+    /// Draw ground truth, prediction and errors of a frame side by side as PNG.
+    Render {
+        #[command(flatten)]
+        common: Common,
+        /// The PNG to write (with --frame) or the directory for one PNG per frame (--all).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// The frame to draw.
+        #[arg(long, conflicts_with = "all")]
+        frame: Option<usize>,
+        /// Draw every selected frame (see --frames) into the output directory.
+        #[arg(long)]
+        all: bool,
+        /// Model file (default: the model compiled into travmap).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Pixels per cell side.
+        #[arg(long, default_value_t = 8)]
+        cell_pixels: u32,
+    },
     /// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
     Bench {
         #[command(flatten)]
@@ -275,6 +295,30 @@ fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
                 model.as_deref(),
                 &output,
                 &options,
+                common.output(),
+            )
+        }
+        Command::Render {
+            common,
+            output,
+            frame,
+            all,
+            model,
+            cell_pixels,
+        } => {
+            let mut inputs = common.inputs();
+            match (frame, all) {
+                (Some(frame), _) => inputs.frames = Some(frame.to_string()),
+                (None, true) => {}
+                (None, false) => anyhow::bail!("render needs --frame N or --all"),
+            }
+            commands::render(
+                &inputs,
+                &common.config()?,
+                model.as_deref(),
+                &output,
+                all,
+                cell_pixels,
                 common.output(),
             )
         }

@@ -254,3 +254,95 @@ fn bench_prints_every_stage_and_throughput() {
     assert!(report["stages_ms"]["latency"]["median"].as_f64().unwrap() > 0.0);
     assert!(report["one_thread"]["frames_per_second"].as_f64().unwrap() > 0.0);
 }
+
+#[test]
+fn render_draws_truth_prediction_and_errors_cell_by_cell() {
+    use travmap::grid::CellClass;
+    use travmap::rendering::{GAP_PX, cell_origin_px, colour};
+    let Some(seq) = sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let picture = dir.path().join("frame.png");
+    success(travmap(&[
+        "render",
+        &seq,
+        "--frame",
+        "2",
+        "-o",
+        picture.to_str().unwrap(),
+        "-q",
+    ]));
+    let bytes = std::fs::read(&picture).unwrap();
+    let image = travmap::appearance::decode_png(&bytes, &picture).unwrap();
+    assert_eq!((image.width, image.height), (3 * 240 + 2 * GAP_PX, 240));
+
+    // The same frame through the library: every cell's colour in every panel.
+    let config = travmap::Config::default();
+    let model = travmap::classifier::SvmModel::embedded_default().unwrap();
+    let source =
+        travmap::reading::Source::open(std::path::Path::new(&seq), &Default::default()).unwrap();
+    let mut result = None;
+    travmap::pipeline::run_sequence::<travmap::Error>(
+        &source,
+        &(2..3),
+        &config,
+        Some(&model),
+        |r| {
+            result = Some(r);
+            Ok(())
+        },
+    )
+    .unwrap();
+    let result = result.unwrap();
+    let (truth, predicted) = (result.ground_truth.unwrap(), result.filtered.unwrap());
+    let class = |c: CellClass| match c {
+        CellClass::Unknown => colour::UNKNOWN,
+        CellClass::Traversable => colour::TRAVERSABLE,
+        CellClass::NonTraversable => colour::NON_TRAVERSABLE,
+    };
+    let pixel = |x: u32, y: u32| {
+        let at = 3 * (y * image.width + x) as usize;
+        [image.rgb[at], image.rgb[at + 1], image.rgb[at + 2]]
+    };
+    let (mut false_positives, mut false_negatives) = (0, 0);
+    for cell in 0..900 {
+        let (col, row) = result.layout.col_row(cell);
+        let (x, y) = cell_origin_px(col, row, 30, 8);
+        let (cx, cy) = (x + 4, y + 4);
+        assert_eq!(pixel(cx, cy), class(truth[cell]), "truth, cell {cell}");
+        assert_eq!(
+            pixel(cx + 240 + GAP_PX, cy),
+            class(predicted[cell]),
+            "prediction, cell {cell}"
+        );
+        let error = pixel(cx + 2 * (240 + GAP_PX), cy);
+        match (predicted[cell], truth[cell]) {
+            (CellClass::Traversable, CellClass::NonTraversable) => {
+                assert_eq!(error, colour::FALSE_POSITIVE);
+                false_positives += 1;
+            }
+            (CellClass::NonTraversable, CellClass::Traversable) => {
+                assert_eq!(error, colour::FALSE_NEGATIVE);
+                false_negatives += 1;
+            }
+            _ => {}
+        }
+    }
+    assert!(
+        false_positives + false_negatives > 0,
+        "the picture shows some errors"
+    );
+    // --all writes one picture per frame.
+    let all = dir.path().join("all");
+    success(travmap(&[
+        "render",
+        &seq,
+        "--all",
+        "--frames",
+        "0..3",
+        "-o",
+        all.to_str().unwrap(),
+        "-q",
+    ]));
+    assert_eq!(std::fs::read_dir(&all).unwrap().count(), 3);
+    clean_failure(travmap(&["render", &seq, "-o", all.to_str().unwrap()]));
+}
