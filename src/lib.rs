@@ -4,8 +4,11 @@
 //!
 //! The stages, in the order [`pipeline::Pipeline::process_frame`] calls them:
 //! [`reading`] (0), [`integration`] (1), [`grid`] (2), [`features`] (3),
-//! [`classifier`] (4), [`filter`] (5); beside them [`ground_truth`], [`metrics`] and
-//! [`evaluation`]. [`commands`] holds one function per subcommand of the binary.
+//! [`appearance`] (3b), [`classifier`] (4), [`filter`] (5); beside them
+//! [`ground_truth`], [`metrics`] and [`evaluation`]. Around the method: [`writing`]
+//! (MCAP output, with [`ros`] messages), [`conversion`] (KITTI -> MCAP),
+//! [`annotation`] (the annotated MCAP), [`rendering`] (pictures) and [`benchmark`].
+//! [`commands`] holds one function per subcommand of the binary.
 
 pub mod annotation;
 pub mod appearance;

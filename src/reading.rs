@@ -1,10 +1,12 @@
-//! Stage 0, reading: a KITTI odometry / SemanticKITTI sequence directory into
-//! [`Frame`]s (METHOD.md section 1).
+//! Stage 0, reading: a drive into [`Frame`]s (METHOD.md section 1). A [`Source`] is
+//! a KITTI odometry / SemanticKITTI sequence directory (here) or a ROS 2 MCAP file
+//! ([`mcap_drive`]).
 //!
-//! Inputs: `velodyne/NNNNNN.bin`, optional `labels/NNNNNN.label`, `calib.txt`,
-//! `poses.txt`, `times.txt`. Output: per frame the scan in the velodyne frame, its
-//! labels, its stamp and `world_from_velodyne`, where `world` is the first scan's
-//! z-up velodyne frame. Every malformed input is an [`Error`] naming the file.
+//! KITTI inputs: `velodyne/NNNNNN.bin`, optional `labels/NNNNNN.label` and
+//! `image_2/NNNNNN.png`, `calib.txt`, `poses.txt`, `times.txt`. Output: per frame the
+//! scan in the velodyne frame, its labels, its camera image, its stamp and
+//! `world_from_velodyne`, where `world` is the first scan's z-up velodyne frame. Every
+//! malformed input is an [`Error`] naming the file.
 
 pub mod mcap_drive;
 
