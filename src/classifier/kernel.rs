@@ -11,7 +11,7 @@
 /// Support vectors per block: one AVX register of f32.
 pub const LANES: usize = 8;
 
-/// Support vectors laid out for [`rbf_sum`], padded with zero-weight vectors.
+/// Support vectors laid out for [`SupportVectorBlocks::rbf_sum`], padded with zero-weight vectors.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SupportVectorBlocks {
     dimension: usize,
