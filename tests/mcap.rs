@@ -608,20 +608,16 @@ fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
     );
 }
 
-#[test]
-fn convert_passes_png_images_through_with_camera_info() {
-    // A one-frame sequence with the real KITTI image of kitti-object-000008 and
-    // sequence 03's calibration (the same 2011_09_26 cameras).
-    let (Some(object), Some(meta)) = (
-        common::shared_data("kitti-object-000008/training"),
-        common::shared_data("kitti-odometry-meta/sequences/03"),
-    ) else {
-        return;
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let seq = dir.path().join("seq");
-    std::fs::create_dir_all(seq.join("velodyne")).unwrap();
-    std::fs::create_dir_all(seq.join("image_2")).unwrap();
+/// A one-frame KITTI sequence in `dir/seq` with the real image and camera-cropped scan
+/// of kitti-object-000008 and sequence 03's calibration (the same 2011_09_26
+/// cameras); None without the shared data.
+fn one_frame_with_image(dir: &Path) -> Option<std::path::PathBuf> {
+    let object = common::shared_data("kitti-object-000008/training")?;
+    let meta = common::shared_data("kitti-odometry-meta/sequences/03")?;
+    let seq = dir.join("seq");
+    for sub in ["velodyne", "image_2"] {
+        std::fs::create_dir_all(seq.join(sub)).unwrap();
+    }
     std::fs::copy(
         object.join("velodyne_reduced/000008.bin"),
         seq.join("velodyne/000000.bin"),
@@ -644,6 +640,15 @@ fn convert_passes_png_images_through_with_camera_info() {
     };
     std::fs::write(seq.join("poses.txt"), first_line("poses.txt")).unwrap();
     std::fs::write(seq.join("times.txt"), first_line("times.txt")).unwrap();
+    Some(seq)
+}
+
+#[test]
+fn convert_passes_png_images_through_with_camera_info() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(seq) = one_frame_with_image(dir.path()) else {
+        return;
+    };
     let out = dir.path().join("d.mcap");
     let doc: Value = serde_json::from_str(&success(travmap(&[
         "convert",
@@ -881,30 +886,10 @@ fn clouds_whose_data_disagree_with_their_layout_are_errors() {
 #[test]
 fn an_image_that_disagrees_with_its_camera_info_and_a_non_cdr_cloud_are_errors() {
     use travmap::ros::{CameraInfo, PointCloud2, RosMessage, encode};
-    let (Some(object), Some(meta)) = (
-        common::shared_data("kitti-object-000008/training"),
-        common::shared_data("kitti-odometry-meta/sequences/03"),
-    ) else {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(seq) = one_frame_with_image(dir.path()) else {
         return;
     };
-    let dir = tempfile::tempdir().unwrap();
-    let seq = dir.path().join("seq");
-    for sub in ["velodyne", "image_2"] {
-        std::fs::create_dir_all(seq.join(sub)).unwrap();
-    }
-    std::fs::copy(
-        object.join("velodyne_reduced/000008.bin"),
-        seq.join("velodyne/000000.bin"),
-    )
-    .unwrap();
-    std::fs::copy(
-        object.join("image_2/000008.png"),
-        seq.join("image_2/000000.png"),
-    )
-    .unwrap();
-    std::fs::copy(meta.join("calib.txt"), seq.join("calib.txt")).unwrap();
-    std::fs::write(seq.join("poses.txt"), "1 0 0 0 0 1 0 0 0 0 1 0\n").unwrap();
-    std::fs::write(seq.join("times.txt"), "0.0\n").unwrap();
     let good = dir.path().join("good.mcap");
     success(travmap(&[
         "convert",
