@@ -159,6 +159,7 @@ fn metrics_message(result: &FrameResult, classes: &[CellClass], world_frame: &st
         miou: scores.map_or(f32::NAN, |s| s.miou as f32),
         f1: scores.map_or(f32::NAN, |s| s.f1 as f32),
         latency_ms: result.timings.latency_ms as f32,
+        dropped_points: result.dropped_points as u32,
     }
 }
 

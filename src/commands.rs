@@ -264,6 +264,7 @@ pub fn run(
                     "min_corner_in_world": result.layout.min_corner_in_world(),
                     "cells": cells,
                     "timings_ms": result.timings,
+                    "dropped_points": result.dropped_points,
                 });
                 writeln!(stdout, "{line}")?;
             } else if !output.quiet {
@@ -442,6 +443,13 @@ pub fn eval(
         )?;
     }
     write_table(&mut out, &report, true)?;
+    if report.dropped_points > 0 {
+        writeln!(
+            out,
+            "{} points with a non-finite coordinate were dropped",
+            report.dropped_points
+        )?;
+    }
     match &geometry_only {
         Some(geometric) => {
             writeln!(

@@ -53,10 +53,12 @@ pub enum Error {
         message: String,
     },
 
-    #[error(
-        "{path}: no `{key}:` line; expected a 3x4 matrix of 12 numbers (or, in the object format, R0_rect and Tr_velo_to_cam)"
-    )]
-    MissingCalibration { path: PathBuf, key: &'static str },
+    #[error("{path}: no `{key}:` line; expected a 3x4 matrix of 12 numbers{hint}")]
+    MissingCalibration {
+        path: PathBuf,
+        key: &'static str,
+        hint: &'static str,
+    },
 
     #[error(
         "{path}: no pose for frame {frame} (the file has {lines} pose lines; frame N is line N+1)"

@@ -82,6 +82,8 @@ pub struct EvaluationReport {
     /// Frames with a camera image, and their predictable cells that some image covered.
     pub frames_with_images: usize,
     pub cells_with_appearance: u64,
+    /// Points the readers dropped for a non-finite coordinate, over all frames.
+    pub dropped_points: u64,
     pub timings_ms: TimingReport,
 }
 
@@ -91,6 +93,7 @@ pub struct Evaluation {
     frames: usize,
     frames_with_images: usize,
     cells_with_appearance: u64,
+    dropped_points: u64,
     filtered: Confusion,
     unfiltered: Confusion,
     timings: Vec<StageTimings>,
@@ -100,6 +103,7 @@ impl Evaluation {
     /// Adds a frame; frames without ground truth or predictions only add timings.
     pub fn add(&mut self, result: &FrameResult) {
         self.timings.push(result.timings);
+        self.dropped_points += result.dropped_points as u64;
         let features = &result.features;
         let seen = (0..features.predictable.len())
             .filter(|&c| features.predictable[c] && features.appearance(c).is_some())
@@ -126,6 +130,7 @@ impl Evaluation {
             unfiltered_scores: self.unfiltered.scores(),
             frames_with_images: self.frames_with_images,
             cells_with_appearance: self.cells_with_appearance,
+            dropped_points: self.dropped_points,
             timings_ms: TimingReport::of(&self.timings),
         }
     }

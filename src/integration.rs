@@ -77,6 +77,7 @@ mod tests {
             points_in_velodyne: vec![[1.0, 0.0, 2.0, 0.5], [0.0, 1.0, 0.0, 0.1]],
             labels: None,
             camera: None,
+            dropped_points: 0,
         };
         let scan = scan_to_world(frame);
         let expected = [[10.0, 1.0, 2.0], [9.0, 0.0, 0.0]];

@@ -52,6 +52,8 @@ pub struct FrameResult {
     pub sensor_in_world: [f64; 3],
     /// The integrated points inside the grid, by cell.
     pub cells: CellPoints,
+    /// Points of this frame's scan that the reader dropped (non-finite coordinates).
+    pub dropped_points: usize,
     pub features: FeatureGrid,
     /// The classifier's labels before filtering (None without a model).
     pub predicted: Option<Vec<CellClass>>,
@@ -141,6 +143,7 @@ impl Pipeline {
     pub fn process_frame(&mut self, mut frame: Frame, model: Option<&SvmModel>) -> FrameResult {
         let camera = frame.camera.take();
         let world_from_velodyne = frame.world_from_velodyne;
+        let dropped_points = frame.dropped_points;
 
         // 1. Integration: this scan into the world, joined with the previous n - 1.
         let integrate_ms = self.integrate(frame);
@@ -157,6 +160,7 @@ impl Pipeline {
 
         // 4. Classification, 5. outlier filter.
         let mut result = self.decide(observation, appearance, model);
+        result.dropped_points = dropped_points;
         result.timings.integrate_ms = integrate_ms;
         result.timings.appearance_ms += remember_ms;
         result.timings.latency_ms += integrate_ms + remember_ms;
@@ -206,6 +210,7 @@ impl Pipeline {
                 layout,
                 sensor_in_world: current.origin_in_world,
                 cells,
+                dropped_points: 0,
                 features,
                 predicted: None,
                 filtered: None,
@@ -275,9 +280,9 @@ pub fn process_in_parallel(
     model: Option<&SvmModel>,
 ) -> Vec<FrameResult> {
     let n = pipeline.config.integration.scans;
-    let cameras: Vec<(Isometry3<f64>, Option<CameraImage>)> = frames
+    let cameras: Vec<(Isometry3<f64>, Option<CameraImage>, usize)> = frames
         .iter_mut()
-        .map(|f| (f.world_from_velodyne, f.camera.take()))
+        .map(|f| (f.world_from_velodyne, f.camera.take(), f.dropped_points))
         .collect();
     let scans: Vec<WorldScan> = frames.into_par_iter().map(scan_to_world).collect();
     let observations: Vec<Observation> = (0..scans.len())
@@ -291,8 +296,10 @@ pub fn process_in_parallel(
                 .rposition(|s| s.index + n <= current)
                 .map_or(0, |p| p + 1);
             let window: Vec<&WorldScan> = scans[start..=i].iter().collect();
-            let (pose, camera) = &cameras[i];
-            pipeline.observe(&window, pose, camera.as_ref())
+            let (pose, camera, dropped_points) = &cameras[i];
+            let mut observation = pipeline.observe(&window, pose, camera.as_ref());
+            observation.result.dropped_points = *dropped_points;
+            observation
         })
         .collect();
     let mut colours = ColourMemory::default();

@@ -34,6 +34,9 @@ pub struct Frame {
     pub labels: Option<Vec<u32>>,
     /// The colour camera's image of this frame, when the input has one.
     pub camera: Option<CameraImage>,
+    /// Points the reader dropped for a non-finite coordinate (MCAP clouds with
+    /// `is_dense` false; a KITTI scan with one is an error instead).
+    pub dropped_points: usize,
 }
 
 /// A frame left out because its input was unreadable (`--keep-going`).
@@ -245,7 +248,14 @@ impl KittiSequence {
             None
         };
         let camera = match (self.read_images, self.image_path(index)) {
-            (true, Some(path)) if self.calibration.projections[2].is_some() => {
+            (true, Some(_)) if self.calibration.projections[2].is_none() => {
+                return Err(Error::MissingCalibration {
+                    path: self.dir.join("calib.txt"),
+                    key: "P2",
+                    hint: " for the images in image_2/ (--set appearance.enabled=false ignores them)",
+                });
+            }
+            (true, Some(path)) => {
                 let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
                 self.calibration.camera_2_image(decode_png(&bytes, &path)?)
             }
@@ -258,6 +268,7 @@ impl KittiSequence {
             points_in_velodyne,
             labels,
             camera,
+            dropped_points: 0,
         })
     }
 
@@ -519,6 +530,7 @@ pub fn read_calibration(path: &Path) -> Result<Calibration> {
             return Err(Error::MissingCalibration {
                 path: path.to_path_buf(),
                 key: "Tr",
+                hint: " (or, in the object format, R0_rect and Tr_velo_to_cam)",
             });
         }
     };

@@ -322,6 +322,8 @@ pub struct FrameMetrics {
     pub miou: f32,
     pub f1: f32,
     pub latency_ms: f32,
+    /// Points of the scan dropped for a non-finite coordinate.
+    pub dropped_points: u32,
 }
 
 macro_rules! ros_message {

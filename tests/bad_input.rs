@@ -264,3 +264,37 @@ fn keep_going_skips_a_corrupt_frame_and_exits_3() {
         metadata.metadata
     );
 }
+
+#[test]
+fn images_without_p2_in_the_calibration() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    std::fs::write(
+        dir.path().join("calib.txt"),
+        format!("P0: {IDENTITY_3X4}\nTr: {TR}\n"),
+    )
+    .unwrap();
+    std::fs::create_dir_all(dir.path().join("image_2")).unwrap();
+    let mut png_bytes = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut png_bytes, 4, 2);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder
+            .write_header()
+            .unwrap()
+            .write_image_data(&[90u8; 24])
+            .unwrap();
+    }
+    std::fs::write(dir.path().join("image_2/000000.png"), png_bytes).unwrap();
+    let err = clean_failure(eval(dir.path()));
+    assert!(
+        err.contains("calib.txt") && err.contains("no `P2:` line") && err.contains("image_2"),
+        "{err}"
+    );
+    success(travmap(&[
+        "eval",
+        dir.path().to_str().unwrap(),
+        "--set",
+        "appearance.enabled=false",
+    ]));
+}

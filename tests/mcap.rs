@@ -488,6 +488,16 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
         "{t}"
     );
     assert_eq!(frame.stamp_ns, 1_050_000_000);
+    assert_eq!(frame.dropped_points, 1, "the NaN point is counted");
+    let run = success(travmap(&[
+        "run",
+        path.to_str().unwrap(),
+        "--cloud-topic",
+        "/points",
+        "--json",
+    ]));
+    let line: Value = serde_json::from_str(run.lines().nth(1).unwrap()).unwrap();
+    assert_eq!(line["dropped_points"], 1);
 }
 
 #[test]

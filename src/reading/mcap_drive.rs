@@ -557,6 +557,7 @@ impl McapDrive {
             world_from_velodyne: self.world_from_cloud(stamp_ns)?,
             points_in_velodyne: points.points,
             labels: points.labels,
+            dropped_points: points.dropped,
             camera,
         })
     }
@@ -635,6 +636,8 @@ pub struct CloudPoints {
     pub points: Vec<[f32; 4]>,
     /// The `label` field, when present.
     pub labels: Option<Vec<u32>>,
+    /// Points dropped for a non-finite coordinate.
+    pub dropped: usize,
 }
 
 /// Reads x, y, z, intensity and label; points with a non-finite coordinate are dropped.
@@ -685,6 +688,7 @@ pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
     }
     let mut points = Vec::with_capacity(width * height);
     let mut labels = label.map(|_| Vec::with_capacity(width * height));
+    let mut dropped = 0;
     let big = cloud.is_bigendian;
     for row in 0..height {
         for col in 0..width {
@@ -694,6 +698,7 @@ pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
                 |(offset, datatype_id): (usize, u8)| read_value(&point[offset..], datatype_id, big);
             let (x, y, z) = (value(xyz[0]), value(xyz[1]), value(xyz[2]));
             if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                dropped += 1;
                 continue;
             }
             points.push([
@@ -707,5 +712,9 @@ pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
             }
         }
     }
-    Ok(CloudPoints { points, labels })
+    Ok(CloudPoints {
+        points,
+        labels,
+        dropped,
+    })
 }
