@@ -54,8 +54,7 @@ fn mutate(input: &[u8], rng: &mut SplitMix64) -> Vec<u8> {
     out
 }
 
-/// Runs `check` on `iterations()` mutations of `seed`, each in a fresh file when
-/// `file_name` is given.
+/// Runs `check` on `iterations()` mutations of `seed`.
 fn fuzz(seed: &[u8], salt: u64, mut check: impl FnMut(&[u8])) {
     let mut rng = SplitMix64(salt);
     for _ in 0..iterations() {
@@ -117,25 +116,31 @@ fn kitti_parsers_survive_corrupt_files() {
     });
 }
 
-#[test]
-fn message_decoders_survive_corrupt_cdr() {
-    let Some(seq) = common::semantickitti_00() else {
-        return;
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let drive = dir.path().join("d.mcap");
+/// The shipped frames in `frames` as an uncompressed MCAP in `dir`.
+fn converted(seq: &Path, dir: &Path, frames: &str) -> std::path::PathBuf {
+    let drive = dir.join("d.mcap");
     let out = common::travmap(&[
         "convert",
         seq.to_str().unwrap(),
         "-o",
         drive.to_str().unwrap(),
         "--frames",
-        "0",
+        frames,
         "--compression",
         "none",
         "-q",
     ]);
-    assert!(out.status.success());
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    drive
+}
+
+#[test]
+fn message_decoders_survive_corrupt_cdr() {
+    let Some(seq) = common::semantickitti_00() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let drive = converted(&seq, dir.path(), "0");
     let bytes = std::fs::read(&drive).unwrap();
     let messages: Vec<(String, Vec<u8>)> = mcap::MessageStream::new(&bytes)
         .unwrap()
@@ -165,20 +170,7 @@ fn mcap_reader_survives_corrupt_files() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let drive = dir.path().join("d.mcap");
-    let out = common::travmap(&[
-        "convert",
-        seq.to_str().unwrap(),
-        "-o",
-        drive.to_str().unwrap(),
-        "--frames",
-        "0..2",
-        "--compression",
-        "none",
-        "-q",
-    ]);
-    assert!(out.status.success());
-    // Shrink the clouds' share: mutate the first 64 KiB and keep the file's tail.
+    let drive = converted(&seq, dir.path(), "0..2");
     let bytes = std::fs::read(&drive).unwrap();
     let mut rng = SplitMix64(7);
     for _ in 0..iterations() / 3 {

@@ -394,11 +394,6 @@ impl McapDrive {
         Ok(Some(pose))
     }
 
-    /// The topic the camera images come from, if any.
-    pub fn camera_topic(&self) -> Option<&str> {
-        self.camera.as_ref().map(|c| c.topic.as_str())
-    }
-
     /// The camera image of a cloud from a raw message, posed for the cloud's frame:
     /// through the static chain when the camera hangs below the cloud's frame, else
     /// through the world at each one's stamp.
