@@ -736,6 +736,12 @@ pub fn convert(
             summary.output_bytes as f64 / 1e6,
             summary.frames as f64 / seconds
         );
+        if summary.dropped_points > 0 {
+            eprintln!(
+                "{} points with a non-finite coordinate were left out",
+                summary.dropped_points
+            );
+        }
     }
     Ok(outcome(&selections))
 }

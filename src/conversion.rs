@@ -40,6 +40,8 @@ pub struct ConversionSummary {
     pub frames: usize,
     pub images: usize,
     pub labelled_frames: usize,
+    /// Scan points left out for a non-finite coordinate.
+    pub dropped_points: u64,
     pub output_bytes: u64,
 }
 
@@ -167,6 +169,7 @@ struct EncodedFrame {
     tf: Vec<u8>,
     image: Option<(Vec<u8>, Vec<u8>)>,
     labelled: bool,
+    dropped_points: usize,
 }
 
 fn encode_frame(sequence: &KittiSequence, index: usize, start_ns: u64) -> Result<EncodedFrame> {
@@ -206,6 +209,7 @@ fn encode_frame(sequence: &KittiSequence, index: usize, start_ns: u64) -> Result
         tf: encode(&tf, 128),
         image,
         labelled: frame.labels.is_some(),
+        dropped_points: frame.dropped_points,
     })
 }
 
@@ -223,6 +227,7 @@ pub fn write_kitti_frames(
         frames: 0,
         images: 0,
         labelled_frames: 0,
+        dropped_points: 0,
         output_bytes: 0,
     };
     for batch in indices.chunks(BATCH) {
@@ -242,6 +247,7 @@ pub fn write_kitti_frames(
                 tf,
                 image,
                 labelled,
+                dropped_points,
             } = frame;
             if summary.frames == 0 {
                 sink.write(
@@ -259,6 +265,7 @@ pub fn write_kitti_frames(
             }
             summary.frames += 1;
             summary.labelled_frames += labelled as usize;
+            summary.dropped_points += dropped_points as u64;
             on_frame();
         }
     }

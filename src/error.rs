@@ -29,15 +29,6 @@ pub enum Error {
         what: &'static str,
     },
 
-    #[error("{path}: point {point} has a non-finite coordinate ({x}, {y}, {z})")]
-    NonFinitePoint {
-        path: PathBuf,
-        point: usize,
-        x: f32,
-        y: f32,
-        z: f32,
-    },
-
     #[error("{path}: {labels} labels for {points} points in {scan}; the counts must be equal")]
     LabelCount {
         path: PathBuf,

@@ -236,9 +236,9 @@ impl KittiSequence {
     /// Reads frame `index`: scan, labels when present, pose and stamp.
     pub fn read_frame(&self, index: usize) -> Result<Frame> {
         let scan_path = self.scan_path(index);
-        let points_in_velodyne = read_scan(&scan_path)?;
+        let mut points_in_velodyne = read_scan(&scan_path)?;
         let label_path = self.label_path(index);
-        let labels = if label_path.is_file() {
+        let mut labels = if label_path.is_file() {
             Some(read_labels(
                 &label_path,
                 &scan_path,
@@ -247,6 +247,7 @@ impl KittiSequence {
         } else {
             None
         };
+        let dropped_points = drop_non_finite(&mut points_in_velodyne, labels.as_mut());
         let camera = match (self.read_images, self.image_path(index)) {
             (true, Some(_)) if self.calibration.projections[2].is_none() => {
                 return Err(Error::MissingCalibration {
@@ -268,7 +269,7 @@ impl KittiSequence {
             points_in_velodyne,
             labels,
             camera,
-            dropped_points: 0,
+            dropped_points,
         })
     }
 
@@ -376,8 +377,13 @@ impl Source {
 }
 
 /// Reads a KITTI `.bin` scan: little-endian float32 x, y, z, remission per point.
+/// Every point is kept, non-finite ones too, so that labels still line up.
 pub fn read_scan(path: &Path) -> Result<Vec<[f32; 4]>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_scan(&std::fs::read(path).map_err(|e| Error::io(path, e))?, path)
+}
+
+/// [`read_scan`] on the file's bytes; `path` names it in errors.
+pub fn parse_scan(bytes: &[u8], path: &Path) -> Result<Vec<[f32; 4]>> {
     if bytes.len() % 16 != 0 {
         return Err(Error::RecordSize {
             path: path.to_path_buf(),
@@ -386,34 +392,51 @@ pub fn read_scan(path: &Path) -> Result<Vec<[f32; 4]>> {
             what: "float32 x, y, z, remission per point",
         });
     }
-    let mut points = Vec::with_capacity(bytes.len() / 16);
-    for (i, record) in bytes.chunks_exact(16).enumerate() {
-        let value = |k: usize| {
-            f32::from_le_bytes([
-                record[4 * k],
-                record[4 * k + 1],
-                record[4 * k + 2],
-                record[4 * k + 3],
-            ])
-        };
-        let point = [value(0), value(1), value(2), value(3)];
-        if !(point[0].is_finite() && point[1].is_finite() && point[2].is_finite()) {
-            return Err(Error::NonFinitePoint {
-                path: path.to_path_buf(),
-                point: i,
-                x: point[0],
-                y: point[1],
-                z: point[2],
-            });
-        }
-        points.push(point);
+    Ok(bytes
+        .chunks_exact(16)
+        .map(|record| {
+            let value = |k: usize| {
+                f32::from_le_bytes([
+                    record[4 * k],
+                    record[4 * k + 1],
+                    record[4 * k + 2],
+                    record[4 * k + 3],
+                ])
+            };
+            [value(0), value(1), value(2), value(3)]
+        })
+        .collect())
+}
+
+/// Removes the points with a NaN or infinite coordinate, and their labels, so that
+/// one bad return costs one point, not the frame. Returns how many were removed.
+pub fn drop_non_finite(points: &mut Vec<[f32; 4]>, labels: Option<&mut Vec<u32>>) -> usize {
+    let finite = |p: &[f32; 4]| p[0].is_finite() && p[1].is_finite() && p[2].is_finite();
+    if let Some(labels) = labels {
+        let mut index = 0;
+        labels.retain(|_| {
+            index += 1;
+            finite(&points[index - 1])
+        });
     }
-    Ok(points)
+    let before = points.len();
+    points.retain(finite);
+    before - points.len()
 }
 
 /// Reads a SemanticKITTI `.label` file (uint32 per point) and checks its count.
 pub fn read_labels(path: &Path, scan_path: &Path, points: usize) -> Result<Vec<u32>> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_labels(&bytes, path, scan_path, points)
+}
+
+/// [`read_labels`] on the file's bytes; `path` names it in errors.
+pub fn parse_labels(
+    bytes: &[u8],
+    path: &Path,
+    scan_path: &Path,
+    points: usize,
+) -> Result<Vec<u32>> {
     if bytes.len() % 4 != 0 {
         return Err(Error::RecordSize {
             path: path.to_path_buf(),
@@ -483,7 +506,11 @@ fn matrix_3x4(path: &Path, line_no: usize, values: &[f64]) -> Result<Matrix4<f64
 /// -> rectified cam0); the object format has `R0_rect` (9 numbers) and
 /// `Tr_velo_to_cam`, and then `Tr = R0_rect * Tr_velo_to_cam`. `P0..P3` are optional.
 pub fn read_calibration(path: &Path) -> Result<Calibration> {
-    let text = read_text(path)?;
+    parse_calibration(&read_text(path)?, path)
+}
+
+/// [`read_calibration`] on the file's text; `path` names it in errors.
+pub fn parse_calibration(text: &str, path: &Path) -> Result<Calibration> {
     let mut projections = [None; 4];
     let (mut tr, mut rectification, mut velo_to_cam) = (None, None, None);
     for (i, line) in text.lines().enumerate() {
@@ -545,7 +572,11 @@ pub fn read_calibration(path: &Path) -> Result<Calibration> {
 
 /// Reads `poses.txt`: one 3x4 row-major cam0 pose per line, line N+1 for frame N.
 pub fn read_poses(path: &Path) -> Result<Vec<Matrix4<f64>>> {
-    let text = read_text(path)?;
+    parse_poses(&read_text(path)?, path)
+}
+
+/// [`read_poses`] on the file's text; `path` names it in errors.
+pub fn parse_poses(text: &str, path: &Path) -> Result<Vec<Matrix4<f64>>> {
     text.lines()
         .enumerate()
         .filter(|(_, line)| !line.trim().is_empty())
@@ -558,7 +589,11 @@ pub fn read_poses(path: &Path) -> Result<Vec<Matrix4<f64>>> {
 
 /// Reads `times.txt`: seconds since the sequence start, one per line, increasing.
 pub fn read_times(path: &Path) -> Result<Vec<u64>> {
-    let text = read_text(path)?;
+    parse_times(&read_text(path)?, path)
+}
+
+/// [`read_times`] on the file's text; `path` names it in errors.
+pub fn parse_times(text: &str, path: &Path) -> Result<Vec<u64>> {
     let mut stamps_ns: Vec<u64> = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let line = line.trim();
@@ -661,15 +696,20 @@ mod tests {
     }
 
     #[test]
-    fn nan_coordinates_are_rejected_with_the_point_index() {
-        let dir = tempfile::tempdir().unwrap();
-        let mut bytes = Vec::new();
-        for v in [1.0f32, 2.0, 3.0, 0.5, 1.0, f32::NAN, 3.0, 0.5] {
-            bytes.extend_from_slice(&v.to_le_bytes());
-        }
-        let path = write(dir.path(), "nan.bin", &bytes);
-        let err = read_scan(&path).unwrap_err().to_string();
-        assert!(err.contains("point 1") && err.contains("nan.bin"), "{err}");
+    fn non_finite_points_are_dropped_with_their_labels() {
+        let mut points = vec![
+            [1.0, 2.0, 3.0, 0.5],
+            [1.0, f32::NAN, 3.0, 0.5],
+            [4.0, 5.0, 6.0, 0.5],
+            [f32::INFINITY, 0.0, 0.0, 0.5],
+            // A NaN remission is harmless: the method never reads it.
+            [7.0, 8.0, 9.0, f32::NAN],
+        ];
+        let mut labels = vec![10, 11, 12, 13, 14];
+        assert_eq!(drop_non_finite(&mut points, Some(&mut labels)), 2);
+        assert_eq!(labels, [10, 12, 14]);
+        assert_eq!(points[1], [4.0, 5.0, 6.0, 0.5]);
+        assert_eq!(points.len(), 3);
     }
 
     #[test]

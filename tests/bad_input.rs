@@ -136,18 +136,58 @@ fn malformed_pose_line() {
     );
 }
 
+/// The frame lines of `run --json` on `dir`, without the input's name and the
+/// timings, which vary from run to run.
+fn run_json(dir: &Path) -> Vec<serde_json::Value> {
+    success(travmap(&["run", dir.to_str().unwrap(), "--json"]))
+        .lines()
+        .skip(1)
+        .map(|line| {
+            let mut value: serde_json::Value = serde_json::from_str(line).unwrap();
+            if let Some(object) = value.as_object_mut() {
+                object.retain(|key, _| key != "input" && key != "timings_ms");
+            }
+            value
+        })
+        .collect()
+}
+
 #[test]
-fn nan_coordinates() {
+fn non_finite_points_are_dropped_and_counted() {
     let dir = tempfile::tempdir().unwrap();
     write_sequence(dir.path());
     let mut points = scene_points();
     points[17][1] = f32::NAN;
+    points[30][2] = f32::INFINITY;
     write_scan(&dir.path().join("velodyne/000001.bin"), &points);
-    let err = clean_failure(eval(dir.path()));
+    let out = success(eval(dir.path()));
     assert!(
-        err.contains("000001.bin") && err.contains("point 17 has a non-finite coordinate"),
-        "{err}"
+        out.contains("2 points with a non-finite coordinate were dropped"),
+        "{out}"
     );
+    let with_bad_points = run_json(dir.path());
+    assert_eq!(with_bad_points[0]["dropped_points"], 0);
+    assert_eq!(with_bad_points[1]["dropped_points"], 2);
+
+    // The same as a sequence without those points: the labels stay aligned.
+    let clean = tempfile::tempdir().unwrap();
+    write_sequence(clean.path());
+    let kept: Vec<[f32; 4]> = (0..points.len())
+        .filter(|i| ![17, 30].contains(i))
+        .map(|i| points[i])
+        .collect();
+    write_scan(&clean.path().join("velodyne/000001.bin"), &kept);
+    let labels = std::fs::read(clean.path().join("labels/000001.label")).unwrap();
+    let kept_labels: Vec<u8> = labels
+        .chunks(4)
+        .enumerate()
+        .filter(|(i, _)| ![17, 30].contains(i))
+        .flat_map(|(_, b)| b.to_vec())
+        .collect();
+    std::fs::write(clean.path().join("labels/000001.label"), kept_labels).unwrap();
+    let mut without = run_json(clean.path());
+    without[1]["dropped_points"] = 2.into();
+    assert_eq!(with_bad_points, without);
 }
 
 #[test]
