@@ -384,7 +384,7 @@ pub fn read_scan(path: &Path) -> Result<Vec<[f32; 4]>> {
 
 /// [`read_scan`] on the file's bytes; `path` names it in errors.
 pub fn parse_scan(bytes: &[u8], path: &Path) -> Result<Vec<[f32; 4]>> {
-    if bytes.len() % 16 != 0 {
+    if !bytes.len().is_multiple_of(16) {
         return Err(Error::RecordSize {
             path: path.to_path_buf(),
             size_bytes: bytes.len() as u64,
@@ -437,7 +437,7 @@ pub fn parse_labels(
     scan_path: &Path,
     points: usize,
 ) -> Result<Vec<u32>> {
-    if bytes.len() % 4 != 0 {
+    if !bytes.len().is_multiple_of(4) {
         return Err(Error::RecordSize {
             path: path.to_path_buf(),
             size_bytes: bytes.len() as u64,
