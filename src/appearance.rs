@@ -74,26 +74,44 @@ impl CameraImage {
     }
 }
 
+/// The largest decoded image, 8192 x 8192 RGBA: above any camera's.
+const MAX_IMAGE_BYTES: usize = 8192 * 8192 * 4;
+
 /// Decodes a PNG into 8-bit RGB (grey and RGBA are converted; 16-bit is reduced).
 pub fn decode_png(bytes: &[u8], source: &std::path::Path) -> Result<RgbImage> {
-    let fail = |message: String| Error::Sequence {
+    png_pixels(bytes).map_err(|message| Error::Sequence {
         path: source.to_path_buf(),
         message,
-    };
+    })
+}
+
+/// [`decode_png`] with errors that leave naming the source to the caller.
+pub fn png_pixels(bytes: &[u8]) -> std::result::Result<RgbImage, String> {
     let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     decoder.set_transformations(png::Transformations::normalize_to_color8());
     let mut reader = decoder
         .read_info()
-        .map_err(|e| fail(format!("not a readable PNG: {e}")))?;
+        .map_err(|e| format!("not a readable PNG: {e}"))?;
+    // The header's size alone decides the buffer, and a few hundred bytes of zlib
+    // can claim gigabytes: refuse what no camera produces.
     let size = reader
         .output_buffer_size()
-        .ok_or_else(|| fail("PNG too large".into()))?;
+        .filter(|&size| size <= MAX_IMAGE_BYTES)
+        .ok_or_else(|| {
+            let info = reader.info();
+            format!(
+                "PNG of {}x{} pixels: larger than the {} MiB travmap decodes",
+                info.width,
+                info.height,
+                MAX_IMAGE_BYTES >> 20
+            )
+        })?;
     let mut buffer = vec![0u8; size];
     let info = reader
         .next_frame(&mut buffer)
-        .map_err(|e| fail(format!("PNG data: {e}")))?;
+        .map_err(|e| format!("PNG data: {e}"))?;
     buffer.truncate(info.buffer_size());
-    let pixels = (info.width * info.height) as usize;
+    let pixels = info.width as usize * info.height as usize;
     let rgb = match info.color_type {
         png::ColorType::Rgb => buffer,
         png::ColorType::Rgba => buffer
@@ -105,15 +123,15 @@ pub fn decode_png(bytes: &[u8], source: &std::path::Path) -> Result<RgbImage> {
             .chunks_exact(2)
             .flat_map(|p| [p[0], p[0], p[0]])
             .collect(),
-        png::ColorType::Indexed => return Err(fail("indexed PNG left unexpanded".into())),
+        png::ColorType::Indexed => return Err("indexed PNG left unexpanded".into()),
     };
     if rgb.len() != 3 * pixels {
-        return Err(fail(format!(
+        return Err(format!(
             "{} bytes of RGB for {}x{} pixels",
             rgb.len(),
             info.width,
             info.height
-        )));
+        ));
     }
     Ok(RgbImage {
         width: info.width,

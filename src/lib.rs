@@ -8,7 +8,8 @@
 //! [`ground_truth`], [`metrics`] and [`evaluation`]. Around the method: [`writing`]
 //! (MCAP output, with [`ros`] messages), [`conversion`] (KITTI -> MCAP),
 //! [`annotation`] (the annotated MCAP), [`rendering`] (pictures) and [`benchmark`].
-//! [`commands`] holds one function per subcommand of the binary.
+//! [`commands`] holds one function per subcommand of the binary; [`fuzzing`] the
+//! entry points of the fuzz targets.
 
 pub mod annotation;
 pub mod appearance;
@@ -21,6 +22,7 @@ pub mod error;
 pub mod evaluation;
 pub mod features;
 pub mod filter;
+pub mod fuzzing;
 pub mod geometry;
 pub mod grid;
 pub mod ground_truth;

@@ -835,10 +835,26 @@ fn corrupt_mcap_files_are_clear_errors() {
         err.contains("crc.mcap") && err.contains("Chunk CRC failed"),
         "{err}"
     );
-    // Cut mid-record, a few bytes into the data section.
+    // Cut a few bytes into the first chunk.
     let err = clean_failure(travmap(&["eval", &write("cut.mcap", &bytes[..100])]));
     assert!(
-        err.contains("cut.mcap") && err.contains("ended in the middle of a record"),
+        err.contains("cut.mcap: truncated: the record at byte 42 (opcode 0x06) is")
+            && err.contains("the file ends 58 bytes after its start"),
+        "{err}"
+    );
+    // A chunk claiming a terabyte uncompressed: refused before anything is reserved.
+    let mut chunk = 8;
+    while bytes[chunk] != 0x06 {
+        chunk += 9 + u64::from_le_bytes(bytes[chunk + 1..chunk + 9].try_into().unwrap()) as usize;
+    }
+    let mut huge = bytes.clone();
+    huge[chunk + 25..chunk + 33].copy_from_slice(&(1u64 << 40).to_le_bytes());
+    let err = clean_failure(travmap(&["eval", &write("huge.mcap", &huge)]));
+    assert!(
+        err.contains("huge.mcap")
+            && err.contains(&format!(
+                "chunk at byte {chunk} declares 1099511627776 bytes"
+            )),
         "{err}"
     );
 }

@@ -16,7 +16,7 @@ use nalgebra::{Isometry3, Quaternion as NQuaternion, Translation3, UnitQuaternio
 use serde::Deserialize;
 
 use super::Frame;
-use crate::appearance::{CameraImage, RgbImage, decode_png};
+use crate::appearance::{CameraImage, RgbImage, png_pixels};
 use crate::error::{Error, Result};
 use crate::ros::{Header, Odometry, PointCloud2, TfMessage, Transform, datatype, decode};
 
@@ -67,6 +67,8 @@ struct Edge {
 pub struct McapDrive {
     path: PathBuf,
     map: memmap2::Mmap,
+    /// See [`check_chunk_sizes`].
+    longest_record: usize,
     cloud_topic: String,
     cloud_frame: String,
     world_frame: String,
@@ -76,8 +78,20 @@ pub struct McapDrive {
     pub(super) skips: super::SkipLog,
 }
 
-fn isometry(t: &Transform) -> Isometry3<f64> {
-    let q = NQuaternion::new(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z);
+/// The rigid pose of a ROS transform; an error for non-finite values or a
+/// quaternion too short to normalise, which would turn every point into NaN.
+pub fn isometry(t: &Transform) -> Result<Isometry3<f64>, String> {
+    let (p, r) = (&t.translation, &t.rotation);
+    let q = NQuaternion::new(r.w, r.x, r.y, r.z);
+    let finite = [p.x, p.y, p.z, r.w, r.x, r.y, r.z]
+        .iter()
+        .all(|v| v.is_finite());
+    if !finite || q.norm() < 1e-6 {
+        return Err(format!(
+            "transform ({}, {}, {}), rotation (w {}, x {}, y {}, z {}): expected finite values and a unit quaternion",
+            p.x, p.y, p.z, r.w, r.x, r.y, r.z
+        ));
+    }
     // Unit quaternions as written (travmap's own) are used as they are, so that a
     // converted KITTI pose comes back bit-identical.
     let rotation = if (q.norm() - 1.0).abs() < 1e-12 {
@@ -85,16 +99,122 @@ fn isometry(t: &Transform) -> Isometry3<f64> {
     } else {
         UnitQuaternion::new_normalize(q)
     };
-    Isometry3::from_parts(
-        Translation3::new(t.translation.x, t.translation.y, t.translation.z),
+    Ok(Isometry3::from_parts(
+        Translation3::new(p.x, p.y, p.z),
         rotation,
-    )
+    ))
 }
 
-/// The messages of a mapped file, chunk CRCs checked: a corrupt chunk is an error,
-/// not silently wrong points.
-fn messages(map: &[u8]) -> mcap::McapResult<mcap::MessageStream<'_>> {
-    mcap::MessageStream::new_with_options(map, mcap::read::Options::ValidateChunkCrcs.into())
+/// A compressed chunk may claim up to this many times its compressed size, or up
+/// to `TRUSTED_CHUNK_BYTES`, before its claim is checked by decompressing it.
+const TRUSTED_CHUNK_RATIO: u64 = 64;
+const TRUSTED_CHUNK_BYTES: u64 = 64 << 20;
+
+/// Checks every chunk's declared uncompressed size before the mcap crate, which
+/// reserves that size up front, sees it: an uncompressed chunk must declare its own
+/// length, and a compressed one claiming more than `TRUSTED_CHUNK_RATIO` times its
+/// bytes is decompressed into a counter (no buffer) to confirm the claim. So
+/// allocation follows the data a file holds, not what its header says. Returns the
+/// longest record the file can hold: its own length or its largest chunk's.
+fn check_chunk_sizes(map: &[u8]) -> Result<usize, String> {
+    const CHUNK: u8 = 0x06;
+    const DATA_END: u8 = 0x0f;
+    let u64_at = |at: usize| -> Option<u64> {
+        Some(u64::from_le_bytes(map.get(at..at + 8)?.try_into().ok()?))
+    };
+    let u32_at = |at: usize| -> Option<u32> {
+        Some(u32::from_le_bytes(map.get(at..at + 4)?.try_into().ok()?))
+    };
+    // Records after the 8-byte magic: opcode u8, length u64, content. A malformed
+    // chunk ends the walk; the mcap crate then reports it with its own message.
+    let mut longest = map.len();
+    let mut offset = 8usize;
+    while let (Some(&opcode), Some(length)) = (map.get(offset), u64_at(offset + 1)) {
+        let content = offset + 9;
+        let Some(end) = usize::try_from(length)
+            .ok()
+            .and_then(|length| content.checked_add(length))
+            .filter(|&end| end <= map.len())
+        else {
+            return Err(format!(
+                "truncated: the record at byte {offset} (opcode {opcode:#04x}) is {length} bytes long, but the file ends {} bytes after its start",
+                map.len() - offset
+            ));
+        };
+        if opcode == DATA_END {
+            return Ok(longest);
+        }
+        if opcode == CHUNK {
+            // start time, end time, uncompressed size, uncompressed CRC, compression.
+            let parsed = (|| {
+                let declared = u64_at(content + 16)?;
+                let name_len = u32_at(content + 28)? as usize;
+                let name_end = (content + 32).checked_add(name_len)?;
+                let compression = std::str::from_utf8(map.get(content + 32..name_end)?).ok()?;
+                let records_len = usize::try_from(u64_at(name_end)?).ok()?;
+                let records = map.get(name_end + 8..(name_end + 8).checked_add(records_len)?)?;
+                Some((declared, compression, records))
+            })();
+            let Some((declared, compression, records)) = parsed else {
+                return Ok(longest);
+            };
+            let present = records.len() as u64;
+            let plausible = declared <= TRUSTED_CHUNK_BYTES.max(present * TRUSTED_CHUNK_RATIO);
+            let actual = match compression {
+                "" if declared != present => Some(present),
+                "zstd" | "lz4" if !plausible => Some(
+                    decompressed_len(compression, records, declared).map_err(|e| {
+                        format!(
+                            "chunk at byte {offset}: its {compression} data do not decompress: {e}"
+                        )
+                    })?,
+                ),
+                _ => None,
+            };
+            if let Some(actual) = actual.filter(|&actual| actual != declared) {
+                return Err(format!(
+                    "chunk at byte {offset} declares {declared} bytes uncompressed, but its {} bytes of {} data hold {actual}",
+                    present,
+                    if compression.is_empty() {
+                        "uncompressed"
+                    } else {
+                        compression
+                    }
+                ));
+            }
+            longest = longest.max(usize::try_from(declared).unwrap_or(usize::MAX));
+        }
+        offset = end;
+    }
+    Ok(longest)
+}
+
+/// How many bytes `records` decompress to, counting at most `limit + 1`.
+fn decompressed_len(compression: &str, records: &[u8], limit: u64) -> std::io::Result<u64> {
+    use std::io::Read;
+    let mut sink = std::io::sink();
+    match compression {
+        "zstd" => zstd::stream::read::Decoder::new(records)
+            .and_then(|decoder| std::io::copy(&mut decoder.take(limit + 1), &mut sink)),
+        _ => lz4::Decoder::new(records)
+            .and_then(|decoder| std::io::copy(&mut decoder.take(limit + 1), &mut sink)),
+    }
+}
+
+/// The messages of a mapped file, chunk CRCs checked (a corrupt chunk is an error,
+/// not silently wrong points) and no record longer than `longest_record` bytes,
+/// which `mcap::MessageStream` does not check: a record header inside a chunk
+/// claiming exabytes would be reserved as it stands.
+fn messages(
+    map: &[u8],
+    longest_record: usize,
+) -> impl Iterator<Item = mcap::McapResult<mcap::Message<'static>>> {
+    mcap::io::MessageReader::new_with_options(
+        map,
+        mcap::sans_io::LinearReaderOptions::default()
+            .with_validate_chunk_crcs(true)
+            .with_record_length_limit(longest_record),
+    )
 }
 
 /// Only the header of a message, decoded without the rest.
@@ -119,7 +239,8 @@ impl McapDrive {
         // Per camera frame: K and the image size (width, height).
         let mut intrinsics: HashMap<String, (nalgebra::Matrix3<f64>, (u32, u32))> = HashMap::new();
         let mut image_topics: BTreeMap<String, (bool, String)> = BTreeMap::new();
-        let stream = messages(&map).map_err(|e| fail(format!("not a readable MCAP file: {e}")))?;
+        let longest_record = check_chunk_sizes(&map).map_err(fail)?;
+        let stream = messages(&map, longest_record);
         for (ordinal, message) in stream.enumerate() {
             let message = message.map_err(|e| fail(format!("message {ordinal}: {e}")))?;
             let channel = &message.channel;
@@ -166,8 +287,10 @@ impl McapDrive {
                         let edge = edges.entry(t.child_frame_id.clone()).or_default();
                         edge.parent = t.header.frame_id.clone();
                         edge.is_static = is_static;
-                        edge.samples
-                            .push((t.header.stamp.to_ns(), isometry(&t.transform)));
+                        let pose = isometry(&t.transform).map_err(|e| {
+                            decode_failure(format!("{} -> {}: {e}", edge.parent, t.child_frame_id))
+                        })?;
+                        edge.samples.push((t.header.stamp.to_ns(), pose));
                     }
                 }
                 ODOMETRY => {
@@ -179,8 +302,10 @@ impl McapDrive {
                         translation: pose.position,
                         rotation: pose.orientation,
                     };
-                    edge.samples
-                        .push((odometry.header.stamp.to_ns(), isometry(&transform)));
+                    edge.samples.push((
+                        odometry.header.stamp.to_ns(),
+                        isometry(&transform).map_err(decode_failure)?,
+                    ));
                 }
                 CAMERA_INFO => {
                     let info: crate::ros::CameraInfo =
@@ -300,6 +425,7 @@ impl McapDrive {
         Ok(Self {
             path: path.to_path_buf(),
             map,
+            longest_record,
             cloud_topic,
             cloud_frame,
             world_frame,
@@ -408,19 +534,7 @@ impl McapDrive {
             path: self.path.clone(),
             message: format!("{} at {image_stamp_ns} ns: {message}", camera.topic),
         };
-        let image = if camera.compressed {
-            let message: crate::ros::CompressedImage = decode(data).map_err(fail)?;
-            if !message.format.to_ascii_lowercase().contains("png") {
-                return Err(fail(format!(
-                    "image format `{}`: travmap decodes png",
-                    message.format
-                )));
-            }
-            decode_png(&message.data, &self.path)?
-        } else {
-            let message: crate::ros::Image = decode(data).map_err(fail)?;
-            raw_image(&message).map_err(fail)?
-        };
+        let image = image_pixels(data, camera.compressed).map_err(fail)?;
         if (image.width, image.height) != camera.size {
             return Err(fail(format!(
                 "the image is {}x{} but its CameraInfo says {}x{}",
@@ -455,7 +569,7 @@ impl McapDrive {
             path: self.path.clone(),
             message: e.to_string(),
         };
-        for message in messages(&self.map).map_err(fail)? {
+        for message in messages(&self.map, self.longest_record) {
             on_message(&message.map_err(fail)?)?;
         }
         Ok(())
@@ -474,7 +588,7 @@ impl McapDrive {
             path: self.path.clone(),
             message,
         };
-        let stream = messages(&self.map).map_err(|e| fail(e.to_string()))?;
+        let stream = messages(&self.map, self.longest_record);
         let camera_topic = self.camera.as_ref().map(|c| c.topic.as_str());
         let mut pending: Option<(usize, Vec<u8>)> = None;
         // Images since the cloud before the pending one: (stamp, raw message).
@@ -555,6 +669,23 @@ impl McapDrive {
             dropped_points: points.dropped,
             camera,
         })
+    }
+}
+
+/// The RGB pixels of a CDR-encoded `CompressedImage` (png) or, when not
+/// `compressed`, a raw `Image`.
+pub fn image_pixels(data: &[u8], compressed: bool) -> Result<RgbImage, String> {
+    if compressed {
+        let message: crate::ros::CompressedImage = decode(data)?;
+        if !message.format.to_ascii_lowercase().contains("png") {
+            return Err(format!(
+                "image format `{}`: travmap decodes png",
+                message.format
+            ));
+        }
+        png_pixels(&message.data)
+    } else {
+        raw_image(&decode(data)?)
     }
 }
 
@@ -712,4 +843,76 @@ pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
         labels,
         dropped,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An MCAP in memory holding one message of `payload`.
+    fn one_message_file(payload: &[u8], compression: Option<mcap::Compression>) -> Vec<u8> {
+        let mut writer = mcap::WriteOptions::new()
+            .compression(compression)
+            .create(std::io::Cursor::new(Vec::new()))
+            .unwrap();
+        let schema = writer.add_schema("blob", "", b"").unwrap();
+        let channel = writer
+            .add_channel(schema, "/blob", "cdr", &Default::default())
+            .unwrap();
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: 0,
+            log_time: 1,
+            publish_time: 1,
+        };
+        writer.write_to_known_channel(&header, payload).unwrap();
+        writer.finish().unwrap();
+        writer.into_inner().into_inner()
+    }
+
+    /// The byte offset of the first chunk's declared uncompressed size.
+    fn declared_size_offset(file: &[u8]) -> usize {
+        let mut offset = 8;
+        while file[offset] != 0x06 {
+            let length = u64::from_le_bytes(file[offset + 1..offset + 9].try_into().unwrap());
+            offset += 9 + length as usize;
+        }
+        offset + 9 + 16
+    }
+
+    #[test]
+    fn a_chunk_that_really_decompresses_a_thousandfold_is_accepted() {
+        // 80 MiB of zeros compress to a few kB, past both trust limits, so the
+        // claim is checked by decompressing, and holds.
+        let zeros = vec![0u8; 80 << 20];
+        for compression in [mcap::Compression::Zstd, mcap::Compression::Lz4] {
+            let file = one_message_file(&zeros, Some(compression));
+            assert!(file.len() < 1 << 20, "{}", file.len());
+            // The records may be as long as the chunk, and the message is read whole.
+            let longest_record = check_chunk_sizes(&file).unwrap();
+            assert!(longest_record > 80 << 20, "{longest_record}");
+            let message = messages(&file, longest_record).next().unwrap().unwrap();
+            assert_eq!(message.data.len(), 80 << 20);
+        }
+    }
+
+    #[test]
+    fn chunks_that_claim_more_than_they_hold_are_refused() {
+        let payload: Vec<u8> = (0..4096u32).map(|i| (i * 7 % 251) as u8).collect();
+        for compression in [
+            Some(mcap::Compression::Zstd),
+            Some(mcap::Compression::Lz4),
+            None,
+        ] {
+            let mut file = one_message_file(&payload, compression);
+            assert!(check_chunk_sizes(&file).is_ok());
+            let at = declared_size_offset(&file);
+            file[at..at + 8].copy_from_slice(&(1u64 << 40).to_le_bytes());
+            let err = check_chunk_sizes(&file).unwrap_err();
+            assert!(
+                err.contains("declares 1099511627776 bytes uncompressed") && err.contains("hold"),
+                "{err}"
+            );
+        }
+    }
 }

@@ -1,0 +1,125 @@
+#!/usr/bin/env python3
+"""Writes the seed corpus in fuzz/seeds/ from the shared data: small, real inputs
+for every target of travmap::fuzzing. Run from the repository root after
+`cargo build --release`; needs `../shared/data` and the Python `mcap` package.
+
+    python3 fuzz/make_seeds.py [--travmap target/release/travmap] [--data ../shared/data]
+"""
+
+import argparse
+import json
+import pathlib
+import shutil
+import struct
+import subprocess
+import tempfile
+import zlib
+
+from mcap.reader import make_reader
+
+POINTS = 64  # points per scan in the seeds: real layout, cheap to mutate
+
+
+def png(width: int, height: int) -> bytes:
+    """A small RGB gradient PNG (filter 0 on every row)."""
+    rows = b"".join(
+        b"\0" + bytes(v for x in range(width) for v in (8 * x, 16 * y, 128))
+        for y in range(height)
+    )
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(rows)) + chunk(b"IEND", b"")
+
+
+def tiny_sequence(source: pathlib.Path, out: pathlib.Path) -> None:
+    """Frames 0..2 of `source`, each scan cut to its first POINTS points, with a small image."""
+    for sub in ("velodyne", "labels", "image_2"):
+        (out / sub).mkdir(parents=True)
+    shutil.copy(source / "calib.txt", out / "calib.txt")
+    for name in ("poses.txt", "times.txt"):
+        lines = (source / name).read_text().splitlines()[:3]
+        (out / name).write_text("\n".join(lines) + "\n")
+    for frame in range(3):
+        stem = f"{frame:06}"
+        scan = (source / "velodyne" / f"{stem}.bin").read_bytes()[: 16 * POINTS]
+        (out / "velodyne" / f"{stem}.bin").write_bytes(scan)
+        labels = (source / "labels" / f"{stem}.label").read_bytes()[: 4 * POINTS]
+        (out / "labels" / f"{stem}.label").write_bytes(labels)
+        (out / "image_2" / f"{stem}.png").write_bytes(png(32, 16))
+
+
+def first_message_per_topic(path: pathlib.Path) -> dict:
+    with path.open("rb") as f:
+        found = {}
+        for _, channel, message in make_reader(f).iter_messages():
+            found.setdefault(channel.topic, message.data)
+        return found
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--travmap", default="target/release/travmap")
+    parser.add_argument("--data", default="../shared/data")
+    args = parser.parse_args()
+    data = pathlib.Path(args.data)
+    seq = data / "semantickitti-00" / "sequences" / "00"
+    seeds = pathlib.Path(__file__).parent / "seeds"
+    shutil.rmtree(seeds, ignore_errors=True)
+
+    def seed(target: str, name: str, body: bytes) -> None:
+        (seeds / target).mkdir(parents=True, exist_ok=True)
+        (seeds / target / name).write_bytes(body)
+
+    seed("kitti_calib", "odometry-calib.txt", (seq / "calib.txt").read_bytes())
+    seed("kitti_calib", "object-calib.txt", (data / "kitti-object-000008" / "training" / "calib" / "000008.txt").read_bytes())
+    seed("kitti_poses", "poses.txt", b"\n".join((seq / "poses.txt").read_bytes().splitlines()[:3]) + b"\n")
+    seed("kitti_poses", "times.txt", b"\n".join((seq / "times.txt").read_bytes().splitlines()[:5]) + b"\n")
+    seed("kitti_scan", "000000.bin", (seq / "velodyne" / "000000.bin").read_bytes()[: 16 * POINTS])
+    seed("kitti_labels", "000000.label", (seq / "labels" / "000000.label").read_bytes()[: 4 * POINTS])
+
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = pathlib.Path(tmp)
+        tiny_sequence(seq, tmp / "seq")
+        for compression in ("none", "zstd", "lz4"):
+            drive = tmp / f"drive-{compression}.mcap"
+            subprocess.run(
+                [args.travmap, "convert", str(tmp / "seq"), "-o", str(drive), "--compression", compression, "-q"],
+                check=True,
+            )
+            seed("mcap_file", drive.name, drive.read_bytes())
+        messages = first_message_per_topic(tmp / "drive-none.mcap")
+    seed("ros_point_cloud", "velodyne_points.cdr", messages["/velodyne_points"])
+    seed("ros_tf", "tf.cdr", messages["/tf"])
+    seed("ros_tf", "tf_static.cdr", messages["/tf_static"])
+    seed("ros_camera_info", "camera_info.cdr", messages["/camera_2/camera_info"])
+    seed("ros_image", "compressed_png.cdr", messages["/camera_2/image/compressed"])
+
+    # Messages of other writers (rosbags-rs), in layouts travmap does not write itself.
+    others = first_message_per_topic(data / "mcap" / "rosbags_rs_all_std_types.mcap")
+    seed("ros_point_cloud", "rosbags_point_cloud2.cdr", others["/test/sensor_msgs/point_cloud2"])
+    seed("ros_image", "rosbags_image.cdr", others["/test/sensor_msgs/image"])
+    seed("ros_image", "rosbags_compressed_image.cdr", others["/test/sensor_msgs/compressed_image"])
+    seed("ros_camera_info", "rosbags_camera_info.cdr", others["/test/sensor_msgs/camera_info"])
+    seed("ros_tf", "rosbags_tf.cdr", others["/test/tf2_msgs/tf_message"])
+    seed("ros_tf", "rosbags_odometry.cdr", others["/test/nav_msgs/odometry"])
+
+    # The embedded model cut to three support vectors and three reduced-set centres:
+    # the whole structure, small enough to mutate quickly.
+    model = json.loads(pathlib.Path("src/classifier/default_model.json").read_text())
+    model["dual_coefficients"] = model["dual_coefficients"][:3]
+    model["support_vectors"] = model["support_vectors"][:3]
+    model["training"]["search"] = model["training"]["search"][:1]
+    model["reduced_set"]["centres"] = model["reduced_set"]["centres"][:3]
+    model["reduced_set"]["weights"] = model["reduced_set"]["weights"][:3]
+    seed("model", "small_model.json", json.dumps(model, indent=1).encode())
+
+    for target in sorted(p.name for p in seeds.iterdir()):
+        files = list((seeds / target).iterdir())
+        print(f"{target}: {len(files)} seeds, {sum(f.stat().st_size for f in files)} bytes")
+
+
+if __name__ == "__main__":
+    main()

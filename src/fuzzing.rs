@@ -1,0 +1,129 @@
+//! Entry points shared by the cargo fuzz targets in `fuzz/` and by the corpus
+//! replay and mutation tests in `tests/robustness.rs`: each feeds arbitrary bytes to
+//! one parser of untrusted input. Any result is fine, an error or a value; a panic,
+//! an abort or an allocation out of proportion to the input is a bug.
+
+use std::path::Path;
+
+use crate::classifier::SvmModel;
+use crate::reading::mcap_drive::{DriveOptions, McapDrive, cloud_points, image_pixels, isometry};
+use crate::reading::{
+    drop_non_finite, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
+};
+use crate::ros::{CameraInfo, Odometry, PointCloud2, TfMessage, Transform, decode};
+
+/// A fuzz target: arbitrary bytes in, nothing out.
+pub type Target = fn(&[u8]);
+
+/// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
+/// corpus is `fuzz/seeds/NAME/`.
+pub const TARGETS: [(&str, Target); 10] = [
+    ("kitti_calib", kitti_calib),
+    ("kitti_poses", kitti_poses),
+    ("kitti_scan", kitti_scan),
+    ("kitti_labels", kitti_labels),
+    ("ros_point_cloud", ros_point_cloud),
+    ("ros_image", ros_image),
+    ("ros_camera_info", ros_camera_info),
+    ("ros_tf", ros_tf),
+    ("mcap_file", mcap_file),
+    ("model", model),
+];
+
+const NAMED: &str = "fuzzed";
+
+/// `calib.txt`, and the cameras it gives.
+pub fn kitti_calib(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data)
+        && let Ok(calibration) = parse_calibration(text, Path::new(NAMED))
+    {
+        let _ = calibration.camera_2();
+        let _ = calibration.velodyne_from_camera_0();
+    }
+}
+
+/// `poses.txt` and `times.txt`, which share the line-of-numbers format.
+pub fn kitti_poses(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = parse_poses(text, Path::new(NAMED));
+        let _ = parse_times(text, Path::new(NAMED));
+    }
+}
+
+/// A `.bin` scan, then the dropping of its non-finite points beside labels.
+pub fn kitti_scan(data: &[u8]) {
+    if let Ok(mut points) = parse_scan(data, Path::new(NAMED)) {
+        let mut labels: Vec<u32> = (0..points.len() as u32).collect();
+        drop_non_finite(&mut points, Some(&mut labels));
+        assert_eq!(points.len(), labels.len());
+    }
+}
+
+/// A `.label` file, against the right point count and a wrong one.
+pub fn kitti_labels(data: &[u8]) {
+    for points in [data.len() / 4, data.len() / 4 + 1] {
+        let _ = parse_labels(data, Path::new(NAMED), Path::new(NAMED), points);
+    }
+}
+
+/// A `sensor_msgs/msg/PointCloud2` message, decoded and read into points.
+pub fn ros_point_cloud(data: &[u8]) {
+    if let Ok(cloud) = decode::<PointCloud2>(data) {
+        let _ = cloud_points(&cloud);
+    }
+}
+
+/// A `CompressedImage` (png) and a raw `Image` message, decoded to pixels.
+pub fn ros_image(data: &[u8]) {
+    let _ = image_pixels(data, true);
+    let _ = image_pixels(data, false);
+}
+
+/// A `sensor_msgs/msg/CameraInfo` message and the projection it gives.
+pub fn ros_camera_info(data: &[u8]) {
+    if let Ok(info) = decode::<CameraInfo>(data) {
+        let k = nalgebra::Matrix3::from_row_slice(&info.k);
+        let _ = k.try_inverse();
+    }
+}
+
+/// A `tf2_msgs/msg/TFMessage` and a `nav_msgs/msg/Odometry`, made into poses.
+pub fn ros_tf(data: &[u8]) {
+    if let Ok(tf) = decode::<TfMessage>(data) {
+        for t in &tf.transforms {
+            let _ = isometry(&t.transform);
+        }
+    }
+    if let Ok(odometry) = decode::<Odometry>(data) {
+        let pose = odometry.pose.pose;
+        let _ = isometry(&Transform {
+            translation: pose.position,
+            rotation: pose.orientation,
+        });
+    }
+}
+
+/// A whole MCAP file: opened as a drive, then every frame read, images included.
+pub fn mcap_file(data: &[u8]) {
+    // The drive maps a file; one per thread, because tests run targets in parallel.
+    let path = std::env::temp_dir().join(format!(
+        "travmap-fuzz-{}-{:?}.mcap",
+        std::process::id(),
+        std::thread::current().id()
+    ));
+    if std::fs::write(&path, data).is_err() {
+        return;
+    }
+    if let Ok(drive) = McapDrive::open(&path, &DriveOptions::default()) {
+        let _ = drive.for_each_frame::<crate::Error>(&(0..usize::MAX), |_| Ok(()));
+    }
+    let _ = std::fs::remove_file(&path);
+}
+
+/// A model file, and one prediction with what it loaded.
+pub fn model(data: &[u8]) {
+    if let Ok(model) = SvmModel::from_json(data, NAMED) {
+        let mut scratch = model.scratch();
+        let _ = model.decision_value(&vec![0.5; model.dimension()], &mut scratch);
+    }
+}
