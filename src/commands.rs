@@ -26,7 +26,7 @@ use crate::metrics::Scores;
 use crate::reading::mcap_drive::DriveOptions;
 use crate::reading::{Source, parse_frame_range};
 use crate::rendering;
-use crate::writing::{self, Compression};
+use crate::writing::{Compression, write_atomically};
 
 /// The drives a command reads and the frames of each.
 pub struct Inputs {
@@ -168,30 +168,6 @@ fn frame_count(selections: &[Selection]) -> u64 {
         .iter()
         .map(|s| s.source.frames_in(&s.frames).len() as u64)
         .sum()
-}
-
-/// Writes `bytes` to `path` through a temporary file renamed at the end, so a
-/// failure never leaves a half-written output.
-fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .context("output path has no file name")?
-        .to_string_lossy();
-    let temporary = dir.join(format!(".{name}.tmp-{}", std::process::id()));
-    writing::track_temporary(&temporary);
-    let result = std::fs::File::create(&temporary)
-        .and_then(|mut f| f.write_all(bytes).and_then(|_| f.sync_all()))
-        .and_then(|_| std::fs::rename(&temporary, path));
-    writing::forget_temporary(&temporary);
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&temporary);
-        return Err(e).with_context(|| format!("cannot write {}", path.display()));
-    }
-    Ok(())
 }
 
 fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {

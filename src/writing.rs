@@ -44,6 +44,80 @@ pub fn remove_temporary_files() {
     }
 }
 
+/// An output being written under a temporary name beside it: [`AtomicFile::commit`]
+/// renames it over the output; dropped uncommitted, it deletes the temporary file.
+pub struct AtomicFile {
+    path: PathBuf,
+    temporary_path: PathBuf,
+    committed: bool,
+}
+
+impl AtomicFile {
+    /// The guard and the temporary file to write.
+    pub fn create(path: &Path) -> Result<(Self, File)> {
+        let dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let write_error = |source| Error::Write {
+            path: path.to_path_buf(),
+            source,
+        };
+        let name = path.file_name().ok_or_else(|| {
+            write_error(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "the output path has no file name",
+            ))
+        })?;
+        let temporary_path = dir.join(format!(
+            ".{}.tmp-{}",
+            name.to_string_lossy(),
+            std::process::id()
+        ));
+        let file = File::create(&temporary_path).map_err(write_error)?;
+        track_temporary(&temporary_path);
+        let guard = Self {
+            path: path.to_path_buf(),
+            temporary_path,
+            committed: false,
+        };
+        Ok((guard, file))
+    }
+
+    /// Renames the written file over the output (the caller has flushed and synced it).
+    pub fn commit(mut self) -> Result<()> {
+        std::fs::rename(&self.temporary_path, &self.path).map_err(|source| Error::Write {
+            path: self.path.clone(),
+            source,
+        })?;
+        self.committed = true;
+        forget_temporary(&self.temporary_path);
+        Ok(())
+    }
+}
+
+impl Drop for AtomicFile {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_file(&self.temporary_path);
+            forget_temporary(&self.temporary_path);
+        }
+    }
+}
+
+/// Writes `bytes` to `path` atomically.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    let (guard, mut file) = AtomicFile::create(path)?;
+    file.write_all(bytes)
+        .and_then(|_| file.sync_all())
+        .map_err(|source| Error::Write {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    guard.commit()
+}
+
 /// Chunk compression of the written MCAP.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -87,12 +161,12 @@ enum Record {
 pub struct McapSink {
     sender: Option<SyncSender<Record>>,
     thread: Option<JoinHandle<std::result::Result<(), String>>>,
-    temporary_path: PathBuf,
+    /// None once finished.
+    output: Option<AtomicFile>,
     path: PathBuf,
     channels: HashMap<String, u16>,
     schemas: HashMap<String, u16>,
     sequence: u32,
-    finished: bool,
 }
 
 /// The writer thread: writes records until the queue closes, then the summary.
@@ -153,24 +227,7 @@ fn write_records(
 
 impl McapSink {
     pub fn create(path: &Path, compression: Compression) -> Result<Self> {
-        let dir = path
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        let name = path.file_name().ok_or_else(|| Error::Mcap {
-            path: path.to_path_buf(),
-            message: "output path has no file name".into(),
-        })?;
-        let temporary_path = dir.join(format!(
-            ".{}.tmp-{}",
-            name.to_string_lossy(),
-            std::process::id()
-        ));
-        let file = File::create(&temporary_path).map_err(|source| Error::Write {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        track_temporary(&temporary_path);
+        let (output, file) = AtomicFile::create(path)?;
         // As many compression threads as rayon workers (RAYON_NUM_THREADS caps both).
         let threads = rayon::current_num_threads() as u32;
         let options = mcap::WriteOptions::new()
@@ -186,7 +243,6 @@ impl McapSink {
         let writer = match options.create(BufWriter::with_capacity(1 << 20, file)) {
             Ok(writer) => writer,
             Err(e) => {
-                let _ = std::fs::remove_file(&temporary_path);
                 return Err(Error::Mcap {
                     path: path.to_path_buf(),
                     message: e.to_string(),
@@ -204,12 +260,11 @@ impl McapSink {
         Ok(Self {
             sender: Some(sender),
             thread: Some(thread),
-            temporary_path,
+            output: Some(output),
             path: path.to_path_buf(),
             channels: HashMap::new(),
             schemas: HashMap::new(),
             sequence: 0,
-            finished: false,
         })
     }
 
@@ -333,26 +388,20 @@ impl McapSink {
                 });
             }
         }
-        std::fs::rename(&self.temporary_path, &self.path).map_err(|source| Error::Write {
-            path: self.path.clone(),
-            source,
-        })?;
-        self.finished = true;
-        forget_temporary(&self.temporary_path);
-        Ok(())
+        match self.output.take() {
+            Some(output) => output.commit(),
+            None => Ok(()),
+        }
     }
 }
 
 impl Drop for McapSink {
     fn drop(&mut self) {
-        if !self.finished {
-            // Unfinished: let the writer thread end, then leave nothing behind.
-            self.sender = None;
-            if let Some(thread) = self.thread.take() {
-                let _ = thread.join();
-            }
-            let _ = std::fs::remove_file(&self.temporary_path);
-            forget_temporary(&self.temporary_path);
+        // Unfinished: let the writer thread end before the output guard deletes
+        // the temporary file.
+        self.sender = None;
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
         }
     }
 }
