@@ -12,8 +12,26 @@ pub fn rigid(m: &nalgebra::Matrix4<f64>) -> nalgebra::Isometry3<f64> {
     let rotation: nalgebra::Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
     nalgebra::Isometry3::from_parts(
         nalgebra::Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]),
-        nalgebra::UnitQuaternion::from_matrix(&rotation),
+        rotation_from_matrix(&rotation),
     )
+}
+
+/// The rotation nearest `m`. nalgebra's `from_matrix` iterates until it converges,
+/// which for a matrix far from any rotation is never; a real one converges in a
+/// handful of steps, so a bound changes nothing for it.
+fn rotation_from_matrix(m: &nalgebra::Matrix3<f64>) -> nalgebra::UnitQuaternion<f64> {
+    let rotation =
+        nalgebra::Rotation3::from_matrix_eps(m, f64::EPSILON, 100, nalgebra::Rotation3::identity());
+    nalgebra::UnitQuaternion::from_rotation_matrix(&rotation)
+}
+
+/// How far the 3x3 block of `m` is from a rotation: the largest entry of
+/// `R^T R - I`.
+pub fn orthonormality_error(m: &nalgebra::Matrix4<f64>) -> f64 {
+    let r: nalgebra::Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
+    (r.transpose() * r - nalgebra::Matrix3::identity())
+        .abs()
+        .max()
 }
 
 /// Zeroth, first and second moments of a point set, accumulated in f64.
@@ -179,6 +197,21 @@ impl SymmetricMatrix3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn matrices_far_from_a_rotation_still_give_a_rotation() {
+        // nalgebra's unbounded iteration can run forever on such inputs (the
+        // kitti_calib fuzz target found one).
+        for rows in [
+            [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0],
+            [1e300, 0.0, 0.0, 0.0, 1e-300, 0.0, 0.0, 0.0, -1.0],
+            [0.0; 9],
+        ] {
+            let m = nalgebra::Matrix3::from_row_slice(&rows).to_homogeneous();
+            let pose = rigid(&m);
+            assert!((pose.rotation.norm() - 1.0).abs() < 1e-9, "{rows:?}");
+        }
+    }
     use crate::random::SplitMix64;
 
     fn to_nalgebra(a: &SymmetricMatrix3) -> nalgebra::Matrix3<f64> {

@@ -484,6 +484,26 @@ fn parse_numbers(path: &Path, line_no: usize, text: &str) -> Result<Vec<f64>> {
         .collect()
 }
 
+/// KITTI's matrices carry about seven digits; a rotation block further than this
+/// from orthonormal is not a rotation written out, but a corrupt file.
+const ORTHONORMALITY_TOLERANCE: f64 = 1e-3;
+
+/// Errors unless `m` is a rotation and a translation.
+fn check_rigid(path: &Path, line_no: usize, what: &str, m: &Matrix4<f64>) -> Result<()> {
+    let error = crate::geometry::orthonormality_error(m);
+    if error <= ORTHONORMALITY_TOLERANCE {
+        Ok(())
+    } else {
+        Err(Error::parse(
+            path,
+            line_no,
+            format!(
+                "{what} is not a rigid transform: its 3x3 block R is {error:.3e} from R^T R = I (tolerance {ORTHONORMALITY_TOLERANCE:e})"
+            ),
+        ))
+    }
+}
+
 /// A 3x4 row-major matrix of 12 numbers as a 4x4 with last row 0 0 0 1.
 fn matrix_3x4(path: &Path, line_no: usize, values: &[f64]) -> Result<Matrix4<f64>> {
     if values.len() != 12 {
@@ -561,9 +581,7 @@ pub fn parse_calibration(text: &str, path: &Path) -> Result<Calibration> {
             });
         }
     };
-    if cam0_from_velodyne.try_inverse().is_none() {
-        return Err(Error::parse(path, 0, "Tr is not invertible"));
-    }
+    check_rigid(path, 0, "Tr", &cam0_from_velodyne)?;
     Ok(Calibration {
         projections,
         cam0_from_velodyne,
@@ -582,7 +600,9 @@ pub fn parse_poses(text: &str, path: &Path) -> Result<Vec<Matrix4<f64>>> {
         .filter(|(_, line)| !line.trim().is_empty())
         .map(|(i, line)| {
             let values = parse_numbers(path, i + 1, line)?;
-            matrix_3x4(path, i + 1, &values)
+            let pose = matrix_3x4(path, i + 1, &values)?;
+            check_rigid(path, i + 1, "the pose", &pose)?;
+            Ok(pose)
         })
         .collect()
 }

@@ -191,6 +191,33 @@ fn non_finite_points_are_dropped_and_counted() {
 }
 
 #[test]
+fn a_tr_or_pose_that_is_not_rigid() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    std::fs::write(
+        dir.path().join("calib.txt"),
+        "Tr: 1 2 3 0 4 5 6 0 7 8 10 0\n",
+    )
+    .unwrap();
+    let err = clean_failure(eval(dir.path()));
+    assert!(
+        err.contains("calib.txt") && err.contains("Tr is not a rigid transform"),
+        "{err}"
+    );
+    write_sequence(dir.path());
+    std::fs::write(
+        dir.path().join("poses.txt"),
+        format!("{IDENTITY_3X4}\n2 0 0 0 0 2 0 0 0 0 2 0\n"),
+    )
+    .unwrap();
+    let err = clean_failure(eval(dir.path()));
+    assert!(
+        err.contains("poses.txt:2") && err.contains("the pose is not a rigid transform"),
+        "{err}"
+    );
+}
+
+#[test]
 fn calibration_without_tr() {
     let dir = tempfile::tempdir().unwrap();
     write_sequence(dir.path());
