@@ -14,13 +14,16 @@ use std::collections::BTreeMap;
 use crate::annotation::{self, AnnotationOptions};
 use crate::benchmark::benchmark;
 use crate::classifier::SvmModel;
+use crate::classifier::training::TrainingSet;
 use crate::classifier::training::train as train_model;
 use crate::config::Config;
 use crate::conversion::convert_kitti;
+use crate::dataset;
 use crate::evaluation::{
     CrossValidationReport, Evaluation, EvaluationReport, Selection, collect_training_set,
     cross_validate,
 };
+use crate::features::FEATURE_COUNT;
 use crate::grid::CellClass;
 use crate::metrics::Scores;
 use crate::reading::mcap_drive::DriveOptions;
@@ -29,6 +32,7 @@ use crate::rendering;
 use crate::writing::{Compression, write_atomically};
 
 /// The drives a command reads and the frames of each.
+#[derive(Clone)]
 pub struct Inputs {
     /// KITTI sequence directories or MCAP files.
     pub sequences: Vec<PathBuf>,
@@ -450,6 +454,53 @@ pub fn eval(
     Ok(outcome(&selections))
 }
 
+/// `travmap dataset`: one Parquet row per predictable cell per frame, on the
+/// training grid (`training.grid_size_m`), the cells `train` learns from.
+pub fn dataset(
+    inputs: &Inputs,
+    config: &Config,
+    model_path: Option<&Path>,
+    output_path: &Path,
+    output: Output,
+) -> Result<Outcome> {
+    let selections = open_inputs(inputs, config.appearance.enabled)?;
+    let model = match model_path {
+        Some(path) => Some(load_model(Some(path), config)?.0),
+        None => None,
+    };
+    let mut grid_config = config.clone();
+    grid_config.grid.size_m = config.training.grid_size_m;
+    let started = std::time::Instant::now();
+    let bar = output.progress(frame_count(&selections), "extracting cells");
+    let mut writer = dataset::DatasetWriter::create(output_path, config)?;
+    for selection in &selections {
+        let source = selection.source.path().display().to_string();
+        selection.run::<anyhow::Error>(&grid_config, model.as_ref(), |result| {
+            writer.push_frame(&source, &result)?;
+            bar.inc(1);
+            Ok(())
+        })?;
+    }
+    let summary = writer.finish()?;
+    bar.finish_and_clear();
+    let seconds = started.elapsed().as_secs_f64();
+    if output.json {
+        let doc = json!({"output": output_path, "summary": summary, "seconds": seconds, "cells_per_s": summary.rows as f64 / seconds});
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else if !output.quiet {
+        println!(
+            "wrote {}: {} cells from {} frames ({} labelled, {} with appearance), {:.0} cells/s",
+            output_path.display(),
+            summary.rows,
+            summary.frames,
+            summary.labelled_rows,
+            summary.rows_with_appearance,
+            summary.rows as f64 / seconds
+        );
+    }
+    Ok(outcome(&selections))
+}
+
 /// `travmap train`: grid search, final fit, model file.
 pub fn train(
     inputs: &Inputs,
@@ -457,10 +508,47 @@ pub fn train(
     model_path: &Path,
     output: Output,
 ) -> Result<Outcome> {
-    let selections = open_inputs(inputs, config.appearance.enabled)?;
-    let bar = output.progress(frame_count(&selections), "collecting cells");
-    let set = collect_training_set(&selections, config, &mut || bar.inc(1))?;
-    bar.finish_and_clear();
+    // Cell datasets (`travmap dataset`) join the cells of the drives given.
+    let (datasets, drives): (Vec<PathBuf>, Vec<PathBuf>) = inputs
+        .sequences
+        .iter()
+        .cloned()
+        .partition(|path| path.extension().is_some_and(|e| e == "parquet"));
+    let selections = if drives.is_empty() {
+        Vec::new()
+    } else {
+        let drives = Inputs {
+            sequences: drives,
+            ..inputs.clone()
+        };
+        open_inputs(&drives, config.appearance.enabled)?
+    };
+    let mut set = if selections.is_empty() {
+        TrainingSet {
+            dimension: FEATURE_COUNT,
+            ..Default::default()
+        }
+    } else {
+        let bar = output.progress(frame_count(&selections), "collecting cells");
+        let set = collect_training_set(&selections, config, &mut || bar.inc(1))?;
+        bar.finish_and_clear();
+        set
+    };
+    for path in &datasets {
+        let rows = dataset::read_training_rows(path, config, &mut set)?;
+        set.sources
+            .push(format!("{} ({rows} labelled cells)", path.display()));
+    }
+    if set.is_empty() {
+        bail!(
+            "no labelled cells in {}",
+            datasets
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     let searches =
         config.training.c_values.len() * config.training.gamma_values.len() * config.training.folds
             + 1;

@@ -29,6 +29,9 @@ pub enum Error {
         what: &'static str,
     },
 
+    #[error("{path}: {message}")]
+    Dataset { path: PathBuf, message: String },
+
     #[error("{path}: {labels} labels for {points} points in {scan}; the counts must be equal")]
     LabelCount {
         path: PathBuf,

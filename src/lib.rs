@@ -7,7 +7,8 @@
 //! [`appearance`] (3b), [`classifier`] (4), [`filter`] (5); beside them
 //! [`ground_truth`], [`metrics`] and [`evaluation`]. Around the method: [`writing`]
 //! (MCAP output, with [`ros`] messages), [`conversion`] (KITTI -> MCAP),
-//! [`annotation`] (the annotated MCAP), [`rendering`] (pictures) and [`benchmark`].
+//! [`annotation`] (the annotated MCAP), [`dataset`] (Parquet cell tables),
+//! [`rendering`] (pictures) and [`benchmark`].
 //! [`commands`] holds one function per subcommand of the binary; [`fuzzing`] the
 //! entry points of the fuzz targets.
 
@@ -18,6 +19,7 @@ pub mod classifier;
 pub mod commands;
 pub mod config;
 pub mod conversion;
+pub mod dataset;
 pub mod error;
 pub mod evaluation;
 pub mod features;

@@ -49,6 +49,18 @@ enum Command {
         #[arg(short, long)]
         output: PathBuf,
     },
+    /// One Parquet row per predictable cell per frame: features, appearance, ground
+    /// truth and (with --model) the prediction, on the training grid.
+    Dataset {
+        #[command(flatten)]
+        common: Common,
+        /// Where to write the Parquet file.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Add the prediction of this model file (by default no prediction column values).
+        #[arg(long)]
+        model: Option<PathBuf>,
+    },
     /// Held-out accuracy by spatially-blocked cross-validation over the frames.
     Crossval {
         #[command(flatten)]
@@ -246,6 +258,17 @@ fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Train { common, output } => commands::train(
             &common.inputs(),
             &common.config()?,
+            &output,
+            common.output(),
+        ),
+        Command::Dataset {
+            common,
+            output,
+            model,
+        } => commands::dataset(
+            &common.inputs(),
+            &common.config()?,
+            model.as_deref(),
             &output,
             common.output(),
         ),

@@ -84,6 +84,11 @@ impl AtomicFile {
         Ok((guard, file))
     }
 
+    /// The output path (not the temporary one).
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
     /// Renames the written file over the output (the caller has flushed and synced it).
     pub fn commit(mut self) -> Result<()> {
         std::fs::rename(&self.temporary_path, &self.path).map_err(|source| Error::Write {

@@ -1,0 +1,197 @@
+//! `travmap dataset`: the Parquet rows match the pipeline's own values cell by cell
+//! (read back with pyarrow, the reader most users will have), and `train` learns
+//! the same model from the Parquet file as from the sequence itself.
+
+mod common;
+
+use std::path::Path;
+
+use serde_json::Value;
+use travmap::classifier::SvmModel;
+use travmap::evaluation::Selection;
+use travmap::grid::CellClass;
+use travmap::reading::Source;
+use travmap::reading::mcap_drive::DriveOptions;
+
+use common::{clean_failure, success, travmap};
+
+/// A grid search small enough for a test: the point is the comparison.
+const QUICK_TRAINING: [&str; 6] = [
+    "--set",
+    "training.c_values=[10.0]",
+    "--set",
+    "training.gamma_values=[0.05]",
+    "--set",
+    "training.folds=2",
+];
+
+fn dataset(seq: &Path, out: &Path, extra: &[&str]) -> Value {
+    let mut args = vec![
+        "dataset",
+        seq.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--json",
+    ];
+    args.extend_from_slice(extra);
+    serde_json::from_str(&success(travmap(&args))).unwrap()
+}
+
+#[test]
+fn rows_match_the_pipeline_cell_by_cell_in_pyarrow() {
+    let Some(seq) = common::semantickitti_00() else {
+        return;
+    };
+    let Ok(python) = std::env::var("TRAVMAP_CLIENT_PYTHON") else {
+        eprintln!("skipping: TRAVMAP_CLIENT_PYTHON (a Python with pyarrow) is not set");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let model_path = dir.path().join("model.json");
+    let model = SvmModel::embedded_default().unwrap();
+    std::fs::write(&model_path, model.to_json()).unwrap();
+    let cells = dir.path().join("cells.parquet");
+    let summary = dataset(&seq, &cells, &["--model", model_path.to_str().unwrap()]);
+    assert_eq!(summary["summary"]["frames"], 6);
+
+    let frame = 1;
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/read_parquet.py");
+    let out = std::process::Command::new(&python)
+        .arg(&script)
+        .arg(&cells)
+        .arg(frame.to_string())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let read: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(read["rows"], summary["summary"]["rows"]);
+    assert_eq!(
+        read["metadata_keys"],
+        serde_json::json!(["travmap.config", "travmap.format"])
+    );
+    let columns = read["columns"].as_array().unwrap();
+    assert_eq!(columns.len(), 8 + 20 + 88 + 2);
+    assert_eq!(columns[8], serde_json::json!(["linearity", "float"]));
+    assert_eq!(columns[2], serde_json::json!(["stamp_ns", "int64"]));
+
+    // The same frame through the library, on the training grid the command uses.
+    let mut config = travmap::Config::default();
+    config.grid.size_m = config.training.grid_size_m;
+    let selection = Selection {
+        source: Source::open(&seq, &DriveOptions::default()).unwrap(),
+        frames: frame..frame + 1,
+    };
+    let mut results = Vec::new();
+    selection
+        .run::<travmap::Error>(&config, Some(&model), |r| {
+            results.push(r);
+            Ok(())
+        })
+        .unwrap();
+    let result = &results[0];
+    let rows = read["frame_rows"].as_array().unwrap();
+    let predictable: Vec<usize> = (0..result.layout.cell_count())
+        .filter(|&c| result.features.predictable[c])
+        .collect();
+    assert_eq!(rows.len(), predictable.len());
+    let as_bool = |class: CellClass| match class {
+        CellClass::Traversable => Value::Bool(true),
+        CellClass::NonTraversable => Value::Bool(false),
+        CellClass::Unknown => Value::Null,
+    };
+    for (row, &cell) in rows.iter().zip(&predictable) {
+        let (col, grid_row) = result.layout.col_row(cell);
+        let [x, y] = result.layout.cell_centre_in_world(cell);
+        assert_eq!(row["row"], grid_row);
+        assert_eq!(row["col"], col);
+        assert_eq!(row["x_m"].as_f64().unwrap(), x);
+        assert_eq!(row["y_m"].as_f64().unwrap(), y);
+        assert_eq!(row["stamp_ns"], result.stamp_ns);
+        assert_eq!(row["points"], result.cells.point_count(cell));
+        for (name, &value) in travmap::features::FEATURE_NAMES
+            .iter()
+            .zip(result.features.cell(cell))
+        {
+            // float32 -> Python float -> JSON -> f64 -> f32 is exact.
+            assert_eq!(row[*name].as_f64().unwrap() as f32, value, "{name}");
+        }
+        assert_eq!(row["hue_0"], Value::Null, "no camera in this sequence");
+        let truth = result.ground_truth.as_ref().unwrap()[cell];
+        assert_eq!(row["ground_truth_traversable"], as_bool(truth));
+        let predicted = result.filtered.as_ref().unwrap()[cell];
+        assert_eq!(row["predicted_traversable"], as_bool(predicted));
+    }
+}
+
+#[test]
+fn training_on_the_parquet_file_gives_the_model_training_on_the_sequence_gives() {
+    let Some(seq) = common::semantickitti_00() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let cells = dir.path().join("cells.parquet");
+    dataset(&seq, &cells, &[]);
+    let train = |input: &Path, name: &str| -> Value {
+        let model = dir.path().join(name);
+        let mut args = vec![
+            "train",
+            input.to_str().unwrap(),
+            "-o",
+            model.to_str().unwrap(),
+            "-q",
+        ];
+        args.extend_from_slice(&QUICK_TRAINING);
+        success(travmap(&args));
+        let mut doc: Value = serde_json::from_slice(&std::fs::read(&model).unwrap()).unwrap();
+        let training = doc["training"].as_object_mut().unwrap();
+        training.remove("sources");
+        training.remove("seconds");
+        doc
+    };
+    let from_parquet = train(&cells, "parquet.json");
+    let from_sequence = train(&seq, "sequence.json");
+    assert_eq!(from_parquet["training"]["samples"], 13135);
+    assert!(
+        from_parquet == from_sequence,
+        "the models differ beyond their sources and timings"
+    );
+}
+
+#[test]
+fn datasets_from_other_settings_or_other_writers_are_refused() {
+    let Some(seq) = common::semantickitti_00() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let cells = dir.path().join("coarse.parquet");
+    dataset(
+        &seq,
+        &cells,
+        &["--frames", "0..1", "--set", "features.curvity_bins=80"],
+    );
+    let model = dir.path().join("m.json");
+    let err = clean_failure(travmap(&[
+        "train",
+        cells.to_str().unwrap(),
+        "-o",
+        model.to_str().unwrap(),
+    ]));
+    assert!(
+        err.contains("coarse.parquet") && err.contains("extracted with other feature settings"),
+        "{err}"
+    );
+    let not_parquet = dir.path().join("junk.parquet");
+    std::fs::write(&not_parquet, b"not a parquet file at all").unwrap();
+    let err = clean_failure(travmap(&[
+        "train",
+        not_parquet.to_str().unwrap(),
+        "-o",
+        model.to_str().unwrap(),
+    ]));
+    assert!(err.contains("junk.parquet"), "{err}");
+    assert!(!model.exists(), "no model is written on failure");
+}
