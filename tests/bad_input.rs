@@ -218,6 +218,27 @@ fn a_tr_or_pose_that_is_not_rigid() {
 }
 
 #[test]
+fn a_model_file_of_another_version() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    let model = travmap::classifier::SvmModel::embedded_default().unwrap();
+    let mut json: serde_json::Value = serde_json::from_slice(&model.to_json()).unwrap();
+    json["version"] = 99.into();
+    let path = dir.path().join("old-model.json");
+    std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
+    let err = clean_failure(travmap(&[
+        "eval",
+        dir.path().to_str().unwrap(),
+        "--model",
+        path.to_str().unwrap(),
+    ]));
+    assert!(
+        err.contains("old-model.json") && err.contains("version Some(99)"),
+        "{err}"
+    );
+}
+
+#[test]
 fn calibration_without_tr() {
     let dir = tempfile::tempdir().unwrap();
     write_sequence(dir.path());

@@ -96,20 +96,29 @@ fn the_layout_names_topics_fields_and_frames_of_an_annotated_file() {
 
     let layout = layout();
     let scene = &layout["configById"]["3D!travmap"];
-    assert!(frames.contains(scene["followTf"].as_str().unwrap()), "{frames:?}");
+    assert!(
+        frames.contains(scene["followTf"].as_str().unwrap()),
+        "{frames:?}"
+    );
     for (topic, settings) in scene["topics"].as_object().unwrap() {
         assert!(topics.contains(topic), "3D topic {topic} not in {topics:?}");
         if let Some(field) = settings.get("colorField").and_then(Value::as_str)
             && topic == "/travmap/cloud"
         {
-            assert!(cloud_fields.contains(field), "{field} not in {cloud_fields:?}");
+            assert!(
+                cloud_fields.contains(field),
+                "{field} not in {cloud_fields:?}"
+            );
         }
     }
     for plot in ["Plot!accuracy", "Plot!latency"] {
         for path in layout["configById"][plot]["paths"].as_array().unwrap() {
             let (topic, field) = path["value"].as_str().unwrap().split_once('.').unwrap();
             assert!(topics.contains(topic), "{topic}");
-            assert!(metrics_fields.contains(field), "{field} not in {metrics_fields:?}");
+            assert!(
+                metrics_fields.contains(field),
+                "{field} not in {metrics_fields:?}"
+            );
         }
     }
     // The camera topic is the one `convert` writes for image_2 (no images here).

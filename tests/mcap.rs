@@ -842,6 +842,14 @@ fn corrupt_mcap_files_are_clear_errors() {
             && err.contains("the file ends 58 bytes after its start"),
         "{err}"
     );
+    // Cut inside a record's opcode and length, at the start and in the summary.
+    for (name, end) in [("head.mcap", 12), ("tail.mcap", bytes.len() - 30)] {
+        let err = clean_failure(travmap(&["eval", &write(name, &bytes[..end])]));
+        assert!(
+            err.contains(name) && err.contains("ended in the middle of a record"),
+            "{err}"
+        );
+    }
     // A chunk claiming a terabyte uncompressed: refused before anything is reserved.
     let mut chunk = 8;
     while bytes[chunk] != 0x06 {
