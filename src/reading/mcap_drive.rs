@@ -801,12 +801,14 @@ pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
     let label = field(&["label"]).map(|f| checked("label", f)).transpose()?;
     let (width, height) = (cloud.width as usize, cloud.height as usize);
     let (step, row_step) = (cloud.point_step as usize, cloud.row_step as usize);
+    // In u128: four u32 header fields multiplied and added can pass 2^64.
+    let row_bytes = width as u128 * step as u128;
     let needed = if height == 0 || width == 0 {
         0
     } else {
-        (height - 1) * row_step + width * step
+        (height as u128 - 1) * row_step as u128 + row_bytes
     };
-    if row_step < width * step || cloud.data.len() < needed {
+    if (row_step as u128) < row_bytes || (cloud.data.len() as u128) < needed {
         return Err(format!(
             "data holds {} bytes; width {width} x height {height} with point_step {step} and row_step {row_step} need {needed}",
             cloud.data.len()
