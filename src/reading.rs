@@ -9,6 +9,7 @@
 //! malformed input is an [`Error`] naming the file.
 
 pub mod mcap_drive;
+mod mcap_records;
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};

@@ -201,20 +201,11 @@ fn decompressed_len(compression: &str, records: &[u8], limit: u64) -> std::io::R
     }
 }
 
-/// The messages of a mapped file, chunk CRCs checked (a corrupt chunk is an error,
-/// not silently wrong points) and no record longer than `longest_record` bytes,
-/// which `mcap::MessageStream` does not check: a record header inside a chunk
-/// claiming exabytes would be reserved as it stands.
-fn messages(
-    map: &[u8],
-    longest_record: usize,
-) -> impl Iterator<Item = mcap::McapResult<mcap::Message<'static>>> {
-    mcap::io::MessageReader::new_with_options(
-        map,
-        mcap::sans_io::LinearReaderOptions::default()
-            .with_validate_chunk_crcs(true)
-            .with_record_length_limit(longest_record),
-    )
+/// The messages of a mapped file: chunk CRCs checked (a corrupt chunk is an error,
+/// not silently wrong points), no record longer than `longest_record` and no length
+/// field beyond its record (see [`super::mcap_records`]).
+fn messages(map: &[u8], longest_record: usize) -> super::mcap_records::Messages<'_> {
+    super::mcap_records::Messages::new(map, longest_record)
 }
 
 /// Only the header of a message, decoded without the rest.
@@ -565,9 +556,9 @@ impl McapDrive {
         &self,
         mut on_message: impl FnMut(&mcap::Message) -> Result<()>,
     ) -> Result<()> {
-        let fail = |e: mcap::McapError| Error::Mcap {
+        let fail = |message: String| Error::Mcap {
             path: self.path.clone(),
-            message: e.to_string(),
+            message,
         };
         for message in messages(&self.map, self.longest_record) {
             on_message(&message.map_err(fail)?)?;
