@@ -105,6 +105,9 @@ pub fn isometry(t: &Transform) -> Result<Isometry3<f64>, String> {
     ))
 }
 
+/// More frames than any real transform tree stacks: a longer chain is a cycle.
+const MAX_TF_DEPTH: usize = 64;
+
 /// A compressed chunk may claim up to this many times its compressed size, or up
 /// to `TRUSTED_CHUNK_BYTES`, before its claim is checked by decompressing it.
 const TRUSTED_CHUNK_RATIO: u64 = 64;
@@ -182,11 +185,36 @@ fn check_chunk_sizes(map: &[u8]) -> Result<usize, String> {
                     }
                 ));
             }
+            if compression.is_empty() {
+                check_chunk_records(records).map_err(|e| format!("chunk at byte {offset}: {e}"))?;
+            }
             longest = longest.max(usize::try_from(declared).unwrap_or(usize::MAX));
         }
         offset = end;
     }
     Ok(longest)
+}
+
+/// Checks that the records of an uncompressed chunk tile it exactly: the mcap
+/// crate subtracts each record's declared length from what the chunk has left, and
+/// one longer than the rest would wrap that count around.
+fn check_chunk_records(records: &[u8]) -> Result<(), String> {
+    let mut at = 0usize;
+    while at < records.len() {
+        let length = records
+            .get(at + 1..at + 9)
+            .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
+            .ok_or_else(|| format!("its records end inside the header of the one at {at}"))?;
+        let left = (records.len() - at - 9) as u64;
+        if length > left {
+            return Err(format!(
+                "its record at {at} (opcode {:#04x}) claims {length} bytes, but {left} are left in the chunk",
+                records[at]
+            ));
+        }
+        at += 9 + length as usize;
+    }
+    Ok(())
 }
 
 /// How many bytes `records` decompress to, counting at most `limit + 1`.
@@ -366,7 +394,7 @@ impl McapDrive {
                 while let Some(edge) = edges.get(&frame) {
                     frame = edge.parent.clone();
                     hops += 1;
-                    if hops > 64 {
+                    if hops > MAX_TF_DEPTH {
                         return Err(fail(format!(
                             "the transform tree above {cloud_frame} has a cycle"
                         )));
@@ -501,14 +529,20 @@ impl McapDrive {
     ) -> Result<Option<Isometry3<f64>>> {
         let mut current = frame;
         let mut pose = Isometry3::identity();
-        while current != ancestor {
+        for _ in 0..=MAX_TF_DEPTH {
+            if current == ancestor {
+                return Ok(Some(pose));
+            }
             let Some(edge) = self.edges.get(current) else {
                 return Ok(None);
             };
             pose = self.edge_at(current, edge, stamp_ns)? * pose;
             current = &edge.parent;
         }
-        Ok(Some(pose))
+        Err(Error::Mcap {
+            path: self.path.clone(),
+            message: format!("the transform tree above {frame} has a cycle"),
+        })
     }
 
     /// The camera image of a cloud from a raw message, posed for the cloud's frame:

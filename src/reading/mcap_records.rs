@@ -31,8 +31,8 @@ enum Field {
 
 use Field::*;
 
-/// The layout of every record the reader parses; a chunk's own header is checked
-/// before reading (`check_chunk_sizes`) and its records are checked one by one here.
+/// The layout of every record the reader parses. Top-level chunks are checked
+/// before reading (`check_chunk_sizes`) and their records one by one here.
 fn layout(opcode: u8) -> &'static [Field] {
     match opcode {
         op::HEADER => &[Bytes32("profile"), Bytes32("library")],
@@ -49,6 +49,8 @@ fn layout(opcode: u8) -> &'static [Field] {
             StringMap("metadata"),
         ],
         op::MESSAGE => &[Fixed(22), Rest],
+        // Only a chunk inside a chunk reaches here: the reader opens top-level ones.
+        op::CHUNK => &[Fixed(28), Bytes32("compression"), Bytes64("records")],
         op::MESSAGE_INDEX => &[Fixed(2), Bytes32("records")],
         op::CHUNK_INDEX => &[
             Fixed(32),
