@@ -222,10 +222,12 @@ fn decompressed_len(compression: &str, records: &[u8], limit: u64) -> std::io::R
     use std::io::Read;
     let mut sink = std::io::sink();
     match compression {
-        "zstd" => zstd::stream::read::Decoder::new(records)
-            .and_then(|decoder| std::io::copy(&mut decoder.take(limit + 1), &mut sink)),
-        _ => lz4::Decoder::new(records)
-            .and_then(|decoder| std::io::copy(&mut decoder.take(limit + 1), &mut sink)),
+        "zstd" => zstd::stream::read::Decoder::new(records).and_then(|decoder| {
+            std::io::copy(&mut decoder.take(limit.saturating_add(1)), &mut sink)
+        }),
+        _ => lz4::Decoder::new(records).and_then(|decoder| {
+            std::io::copy(&mut decoder.take(limit.saturating_add(1)), &mut sink)
+        }),
     }
 }
 
