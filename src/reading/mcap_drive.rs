@@ -16,6 +16,7 @@ use nalgebra::{Isometry3, Quaternion as NQuaternion, Translation3, UnitQuaternio
 use serde::Deserialize;
 
 use super::Frame;
+use super::mcap_records::{Messages, check_chunk_sizes};
 use crate::appearance::{CameraImage, RgbImage, png_pixels};
 use crate::error::{Error, Result};
 use crate::ros::{Header, Odometry, PointCloud2, TfMessage, Transform, datatype, decode};
@@ -67,7 +68,7 @@ struct Edge {
 pub struct McapDrive {
     path: PathBuf,
     map: memmap2::Mmap,
-    /// See [`check_chunk_sizes`].
+    /// See [`check_chunk_sizes`]: no record of the file is longer.
     longest_record: usize,
     cloud_topic: String,
     cloud_frame: String,
@@ -108,136 +109,6 @@ pub fn isometry(t: &Transform) -> Result<Isometry3<f64>, String> {
 /// More frames than any real transform tree stacks: a longer chain is a cycle.
 const MAX_TF_DEPTH: usize = 64;
 
-/// A compressed chunk may claim up to this many times its compressed size, or up
-/// to `TRUSTED_CHUNK_BYTES`, before its claim is checked by decompressing it.
-const TRUSTED_CHUNK_RATIO: u64 = 64;
-const TRUSTED_CHUNK_BYTES: u64 = 64 << 20;
-
-/// Checks every chunk's declared uncompressed size before the mcap crate, which
-/// reserves that size up front, sees it: an uncompressed chunk must declare its own
-/// length, and a compressed one claiming more than `TRUSTED_CHUNK_RATIO` times its
-/// bytes is decompressed into a counter (no buffer) to confirm the claim. So
-/// allocation follows the data a file holds, not what its header says. Returns the
-/// longest record the file can hold: its own length or its largest chunk's.
-fn check_chunk_sizes(map: &[u8]) -> Result<usize, String> {
-    const CHUNK: u8 = 0x06;
-    const DATA_END: u8 = 0x0f;
-    let u64_at = |at: usize| -> Option<u64> {
-        Some(u64::from_le_bytes(map.get(at..at + 8)?.try_into().ok()?))
-    };
-    let u32_at = |at: usize| -> Option<u32> {
-        Some(u32::from_le_bytes(map.get(at..at + 4)?.try_into().ok()?))
-    };
-    // Records after the 8-byte magic: opcode u8, length u64, content. A malformed
-    // chunk ends the walk; the mcap crate then reports it with its own message.
-    let mut longest = map.len();
-    let mut offset = 8usize;
-    while let (Some(&opcode), Some(length)) = (map.get(offset), u64_at(offset + 1)) {
-        let content = offset + 9;
-        let Some(end) = usize::try_from(length)
-            .ok()
-            .and_then(|length| content.checked_add(length))
-            .filter(|&end| end <= map.len())
-        else {
-            return Err(format!(
-                "truncated: the record at byte {offset} (opcode {opcode:#04x}) is {length} bytes long, but the file ends {} bytes after its start",
-                map.len() - offset
-            ));
-        };
-        if opcode == DATA_END {
-            return Ok(longest);
-        }
-        if opcode == CHUNK {
-            // start time, end time, uncompressed size, uncompressed CRC, compression.
-            let parsed = (|| {
-                let declared = u64_at(content + 16)?;
-                let name_len = u32_at(content + 28)? as usize;
-                let name_end = (content + 32).checked_add(name_len)?;
-                let compression = std::str::from_utf8(map.get(content + 32..name_end)?).ok()?;
-                let records_len = usize::try_from(u64_at(name_end)?).ok()?;
-                let records = map.get(name_end + 8..(name_end + 8).checked_add(records_len)?)?;
-                Some((declared, compression, records))
-            })();
-            let Some((declared, compression, records)) = parsed else {
-                return Ok(longest);
-            };
-            let present = records.len() as u64;
-            let plausible = declared <= TRUSTED_CHUNK_BYTES.max(present * TRUSTED_CHUNK_RATIO);
-            let actual = match compression {
-                "" if declared != present => Some(present),
-                "zstd" | "lz4" if !plausible => Some(
-                    decompressed_len(compression, records, declared).map_err(|e| {
-                        format!(
-                            "chunk at byte {offset}: its {compression} data do not decompress: {e}"
-                        )
-                    })?,
-                ),
-                _ => None,
-            };
-            if let Some(actual) = actual.filter(|&actual| actual != declared) {
-                return Err(format!(
-                    "chunk at byte {offset} declares {declared} bytes uncompressed, but its {} bytes of {} data hold {actual}",
-                    present,
-                    if compression.is_empty() {
-                        "uncompressed"
-                    } else {
-                        compression
-                    }
-                ));
-            }
-            if compression.is_empty() {
-                check_chunk_records(records).map_err(|e| format!("chunk at byte {offset}: {e}"))?;
-            }
-            longest = longest.max(usize::try_from(declared).unwrap_or(usize::MAX));
-        }
-        offset = end;
-    }
-    Ok(longest)
-}
-
-/// Checks that the records of an uncompressed chunk tile it exactly: the mcap
-/// crate subtracts each record's declared length from what the chunk has left, and
-/// one longer than the rest would wrap that count around.
-fn check_chunk_records(records: &[u8]) -> Result<(), String> {
-    let mut at = 0usize;
-    while at < records.len() {
-        let length = records
-            .get(at + 1..at + 9)
-            .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
-            .ok_or_else(|| format!("its records end inside the header of the one at {at}"))?;
-        let left = (records.len() - at - 9) as u64;
-        if length > left {
-            return Err(format!(
-                "its record at {at} (opcode {:#04x}) claims {length} bytes, but {left} are left in the chunk",
-                records[at]
-            ));
-        }
-        at += 9 + length as usize;
-    }
-    Ok(())
-}
-
-/// How many bytes `records` decompress to, counting at most `limit + 1`.
-fn decompressed_len(compression: &str, records: &[u8], limit: u64) -> std::io::Result<u64> {
-    use std::io::Read;
-    let mut sink = std::io::sink();
-    match compression {
-        "zstd" => zstd::stream::read::Decoder::new(records).and_then(|decoder| {
-            std::io::copy(&mut decoder.take(limit.saturating_add(1)), &mut sink)
-        }),
-        _ => lz4::Decoder::new(records).and_then(|decoder| {
-            std::io::copy(&mut decoder.take(limit.saturating_add(1)), &mut sink)
-        }),
-    }
-}
-
-/// The messages of a mapped file: chunk CRCs checked (a corrupt chunk is an error,
-/// not silently wrong points), no record longer than `longest_record` and no length
-/// field beyond its record (see [`super::mcap_records`]).
-fn messages(map: &[u8], longest_record: usize) -> super::mcap_records::Messages<'_> {
-    super::mcap_records::Messages::new(map, longest_record)
-}
-
 /// Only the header of a message, decoded without the rest.
 #[derive(Deserialize)]
 struct HeaderOnly {
@@ -261,7 +132,7 @@ impl McapDrive {
         let mut intrinsics: HashMap<String, (nalgebra::Matrix3<f64>, (u32, u32))> = HashMap::new();
         let mut image_topics: BTreeMap<String, (bool, String)> = BTreeMap::new();
         let longest_record = check_chunk_sizes(&map).map_err(fail)?;
-        let stream = messages(&map, longest_record);
+        let stream = Messages::new(&map, longest_record);
         for (ordinal, message) in stream.enumerate() {
             let message = message.map_err(|e| fail(format!("message {ordinal}: {e}")))?;
             let channel = &message.channel;
@@ -596,7 +467,7 @@ impl McapDrive {
             path: self.path.clone(),
             message,
         };
-        for message in messages(&self.map, self.longest_record) {
+        for message in Messages::new(&self.map, self.longest_record) {
             on_message(&message.map_err(fail)?)?;
         }
         Ok(())
@@ -615,7 +486,7 @@ impl McapDrive {
             path: self.path.clone(),
             message,
         };
-        let stream = messages(&self.map, self.longest_record);
+        let stream = Messages::new(&self.map, self.longest_record);
         let camera_topic = self.camera.as_ref().map(|c| c.topic.as_str());
         let mut pending: Option<(usize, Vec<u8>)> = None;
         // Images since the cloud before the pending one: (stamp, raw message).
@@ -872,76 +743,4 @@ pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
         labels,
         dropped,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// An MCAP in memory holding one message of `payload`.
-    fn one_message_file(payload: &[u8], compression: Option<mcap::Compression>) -> Vec<u8> {
-        let mut writer = mcap::WriteOptions::new()
-            .compression(compression)
-            .create(std::io::Cursor::new(Vec::new()))
-            .unwrap();
-        let schema = writer.add_schema("blob", "", b"").unwrap();
-        let channel = writer
-            .add_channel(schema, "/blob", "cdr", &Default::default())
-            .unwrap();
-        let header = mcap::records::MessageHeader {
-            channel_id: channel,
-            sequence: 0,
-            log_time: 1,
-            publish_time: 1,
-        };
-        writer.write_to_known_channel(&header, payload).unwrap();
-        writer.finish().unwrap();
-        writer.into_inner().into_inner()
-    }
-
-    /// The byte offset of the first chunk's declared uncompressed size.
-    fn declared_size_offset(file: &[u8]) -> usize {
-        let mut offset = 8;
-        while file[offset] != 0x06 {
-            let length = u64::from_le_bytes(file[offset + 1..offset + 9].try_into().unwrap());
-            offset += 9 + length as usize;
-        }
-        offset + 9 + 16
-    }
-
-    #[test]
-    fn a_chunk_that_really_decompresses_a_thousandfold_is_accepted() {
-        // 80 MiB of zeros compress to a few kB, past both trust limits, so the
-        // claim is checked by decompressing, and holds.
-        let zeros = vec![0u8; 80 << 20];
-        for compression in [mcap::Compression::Zstd, mcap::Compression::Lz4] {
-            let file = one_message_file(&zeros, Some(compression));
-            assert!(file.len() < 1 << 20, "{}", file.len());
-            // The records may be as long as the chunk, and the message is read whole.
-            let longest_record = check_chunk_sizes(&file).unwrap();
-            assert!(longest_record > 80 << 20, "{longest_record}");
-            let message = messages(&file, longest_record).next().unwrap().unwrap();
-            assert_eq!(message.data.len(), 80 << 20);
-        }
-    }
-
-    #[test]
-    fn chunks_that_claim_more_than_they_hold_are_refused() {
-        let payload: Vec<u8> = (0..4096u32).map(|i| (i * 7 % 251) as u8).collect();
-        for compression in [
-            Some(mcap::Compression::Zstd),
-            Some(mcap::Compression::Lz4),
-            None,
-        ] {
-            let mut file = one_message_file(&payload, compression);
-            assert!(check_chunk_sizes(&file).is_ok());
-            let at = declared_size_offset(&file);
-            file[at..at + 8].copy_from_slice(&(1u64 << 40).to_le_bytes());
-            let err = check_chunk_sizes(&file).unwrap_err();
-            assert!(
-                err.contains("declares 1099511627776 bytes uncompressed") && err.contains("hold"),
-                "{err}"
-            );
-        }
-    }
 }

@@ -126,6 +126,167 @@ fn check_lengths(opcode: u8, body: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
+/// A compressed chunk may claim up to this many times its compressed size, or up
+/// to `TRUSTED_CHUNK_BYTES`, before its claim is checked by decompressing it.
+const TRUSTED_CHUNK_RATIO: u64 = 64;
+const TRUSTED_CHUNK_BYTES: u64 = 64 << 20;
+
+/// A record whose length runs past the bytes that hold it.
+struct Overrun {
+    offset: usize,
+    opcode: u8,
+    length: u64,
+    available: usize,
+}
+
+/// The records of `bytes` from `offset` on, each an opcode, a u64 length and a
+/// body: yields (offset, opcode, body). It ends at a header cut short, leaving
+/// `offset` there, or with an [`Overrun`] at a body that does not fit.
+struct RecordWalk<'a> {
+    bytes: &'a [u8],
+    offset: usize,
+}
+
+impl<'a> Iterator for RecordWalk<'a> {
+    type Item = Result<(usize, u8, &'a [u8]), Overrun>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let offset = self.offset;
+        let opcode = *self.bytes.get(offset)?;
+        let length = u64::from_le_bytes(self.bytes.get(offset + 1..offset + 9)?.try_into().ok()?);
+        let available = self.bytes.len() - offset - 9;
+        let Some(end) = usize::try_from(length)
+            .ok()
+            .filter(|&length| length <= available)
+            .map(|length| offset + 9 + length)
+        else {
+            // Nothing after an overrun can be found.
+            self.offset = self.bytes.len();
+            return Some(Err(Overrun {
+                offset,
+                opcode,
+                length,
+                available,
+            }));
+        };
+        self.offset = end;
+        Some(Ok((offset, opcode, &self.bytes[offset + 9..end])))
+    }
+}
+
+/// Checks every chunk's declared uncompressed size before the mcap crate, which
+/// reserves that size up front, sees it: an uncompressed chunk must declare its own
+/// length, and a compressed one claiming more than `TRUSTED_CHUNK_RATIO` times its
+/// bytes is decompressed into a counter (no buffer) to confirm the claim. So
+/// allocation follows the data a file holds, not what its header says. Returns the
+/// longest record the file can hold: its own length or its largest chunk's.
+pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<usize, String> {
+    let mut longest = map.len();
+    // After the 8-byte magic. A malformed chunk header ends the walk, as does a
+    // record header cut short; the mcap crate then reports it with its own message.
+    for record in (RecordWalk {
+        bytes: map,
+        offset: 8,
+    }) {
+        let (offset, opcode, body) = record.map_err(|o| {
+            format!(
+                "truncated: the record at byte {} (opcode {:#04x}) is {} bytes long, but the file ends {} bytes after its start",
+                o.offset,
+                o.opcode,
+                o.length,
+                o.available + 9
+            )
+        })?;
+        if opcode == op::DATA_END {
+            break;
+        }
+        if opcode != op::CHUNK {
+            continue;
+        }
+        let Some((declared, compression, records)) = chunk_parts(body) else {
+            break;
+        };
+        let present = records.len() as u64;
+        let plausible = declared <= TRUSTED_CHUNK_BYTES.max(present * TRUSTED_CHUNK_RATIO);
+        let actual = match compression {
+            "" if declared != present => Some(present),
+            "zstd" | "lz4" if !plausible => Some(
+                decompressed_len(compression, records, declared).map_err(|e| {
+                    format!("chunk at byte {offset}: its {compression} data do not decompress: {e}")
+                })?,
+            ),
+            _ => None,
+        };
+        if let Some(actual) = actual.filter(|&actual| actual != declared) {
+            let kind = if compression.is_empty() {
+                "uncompressed"
+            } else {
+                compression
+            };
+            return Err(format!(
+                "chunk at byte {offset} declares {declared} bytes uncompressed, but its {present} bytes of {kind} data hold {actual}"
+            ));
+        }
+        if compression.is_empty() {
+            check_chunk_records(records).map_err(|e| format!("chunk at byte {offset}: {e}"))?;
+        }
+        longest = longest.max(usize::try_from(declared).unwrap_or(usize::MAX));
+    }
+    Ok(longest)
+}
+
+/// A chunk's declared uncompressed size, compression and records: after the start
+/// and end times (16 bytes) come the size (8) and the uncompressed CRC (4).
+fn chunk_parts(body: &[u8]) -> Option<(u64, &str, &[u8])> {
+    let u64_at = |at: usize| Some(u64::from_le_bytes(body.get(at..at + 8)?.try_into().ok()?));
+    let declared = u64_at(16)?;
+    let name_len = u32::from_le_bytes(body.get(28..32)?.try_into().ok()?) as usize;
+    let name_end = 32usize.checked_add(name_len)?;
+    let compression = std::str::from_utf8(body.get(32..name_end)?).ok()?;
+    let records_len = usize::try_from(u64_at(name_end)?).ok()?;
+    let records = body.get(name_end + 8..(name_end + 8).checked_add(records_len)?)?;
+    Some((declared, compression, records))
+}
+
+/// Checks that the records of an uncompressed chunk tile it exactly: the mcap
+/// crate subtracts each record's declared length from what the chunk has left, and
+/// one longer than the rest would wrap that count around.
+fn check_chunk_records(records: &[u8]) -> Result<(), String> {
+    let mut walk = RecordWalk {
+        bytes: records,
+        offset: 0,
+    };
+    for record in walk.by_ref() {
+        record.map_err(|o| {
+            format!(
+                "its record at {} (opcode {:#04x}) claims {} bytes, but {} are left in the chunk",
+                o.offset, o.opcode, o.length, o.available
+            )
+        })?;
+    }
+    if walk.offset < records.len() {
+        return Err(format!(
+            "its records end inside the header of the one at {}",
+            walk.offset
+        ));
+    }
+    Ok(())
+}
+
+/// How many bytes `records` decompress to, counting at most `limit + 1`.
+fn decompressed_len(compression: &str, records: &[u8], limit: u64) -> std::io::Result<u64> {
+    use std::io::Read;
+    let mut sink = std::io::sink();
+    match compression {
+        "zstd" => zstd::stream::read::Decoder::new(records).and_then(|decoder| {
+            std::io::copy(&mut decoder.take(limit.saturating_add(1)), &mut sink)
+        }),
+        _ => lz4::Decoder::new(records).and_then(|decoder| {
+            std::io::copy(&mut decoder.take(limit.saturating_add(1)), &mut sink)
+        }),
+    }
+}
+
 /// The messages of `file` in file order, linked to their channels.
 pub(super) struct Messages<'a> {
     file: &'a [u8],
@@ -264,5 +425,78 @@ mod tests {
         assert!(err.contains("ends inside the length of its topic"), "{err}");
         let err = check_lengths(op::CHANNEL, &good[..3]).unwrap_err();
         assert!(err.contains("shorter than its fields"), "{err}");
+    }
+
+    /// An MCAP in memory holding one message of `payload`.
+    fn one_message_file(payload: &[u8], compression: Option<mcap::Compression>) -> Vec<u8> {
+        let mut writer = mcap::WriteOptions::new()
+            .compression(compression)
+            .create(std::io::Cursor::new(Vec::new()))
+            .unwrap();
+        let schema = writer.add_schema("blob", "", b"").unwrap();
+        let channel = writer
+            .add_channel(schema, "/blob", "cdr", &Default::default())
+            .unwrap();
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: 0,
+            log_time: 1,
+            publish_time: 1,
+        };
+        writer.write_to_known_channel(&header, payload).unwrap();
+        writer.finish().unwrap();
+        writer.into_inner().into_inner()
+    }
+
+    /// The byte offset of the first chunk's declared uncompressed size.
+    fn declared_size_offset(file: &[u8]) -> usize {
+        let walk = RecordWalk {
+            bytes: file,
+            offset: 8,
+        };
+        let (offset, ..) = walk
+            .map(|r| r.ok().unwrap())
+            .find(|&(_, opcode, _)| opcode == op::CHUNK)
+            .unwrap();
+        offset + 9 + 16
+    }
+
+    #[test]
+    fn a_chunk_that_really_decompresses_a_thousandfold_is_accepted() {
+        // 80 MiB of zeros compress to a few kB, past both trust limits, so the
+        // claim is checked by decompressing, and holds.
+        let zeros = vec![0u8; 80 << 20];
+        for compression in [mcap::Compression::Zstd, mcap::Compression::Lz4] {
+            let file = one_message_file(&zeros, Some(compression));
+            assert!(file.len() < 1 << 20, "{}", file.len());
+            // The records may be as long as the chunk, and the message is read whole.
+            let longest_record = check_chunk_sizes(&file).unwrap();
+            assert!(longest_record > 80 << 20, "{longest_record}");
+            let message = Messages::new(&file, longest_record)
+                .next()
+                .unwrap()
+                .unwrap();
+            assert_eq!(message.data.len(), 80 << 20);
+        }
+    }
+
+    #[test]
+    fn chunks_that_claim_more_than_they_hold_are_refused() {
+        let payload: Vec<u8> = (0..4096u32).map(|i| (i * 7 % 251) as u8).collect();
+        for compression in [
+            Some(mcap::Compression::Zstd),
+            Some(mcap::Compression::Lz4),
+            None,
+        ] {
+            let mut file = one_message_file(&payload, compression);
+            assert!(check_chunk_sizes(&file).is_ok());
+            let at = declared_size_offset(&file);
+            file[at..at + 8].copy_from_slice(&(1u64 << 40).to_le_bytes());
+            let err = check_chunk_sizes(&file).unwrap_err();
+            assert!(
+                err.contains("declares 1099511627776 bytes uncompressed") && err.contains("hold"),
+                "{err}"
+            );
+        }
     }
 }
