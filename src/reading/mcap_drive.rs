@@ -604,6 +604,9 @@ fn raw_image(message: &crate::ros::Image) -> Result<RgbImage, String> {
             ));
         }
     };
+    if width == 0 || height == 0 {
+        return Err(format!("an empty {width}x{height} image"));
+    }
     if step < width * channels || message.data.len() < step * height {
         return Err(format!(
             "{} bytes for {width}x{height} {} with step {step}",
