@@ -38,12 +38,14 @@ fn dataset(seq: &Path, out: &Path, extra: &[&str]) -> Value {
 }
 
 #[test]
-fn rows_match_the_pipeline_cell_by_cell_in_pyarrow() {
+fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     let Some(seq) = common::semantickitti_00() else {
         return;
     };
     let Ok(python) = std::env::var("TRAVMAP_CLIENT_PYTHON") else {
-        eprintln!("skipping: TRAVMAP_CLIENT_PYTHON (a Python with pyarrow) is not set");
+        eprintln!(
+            "skipping: TRAVMAP_CLIENT_PYTHON (a Python with pyarrow, duckdb and polars) is not set"
+        );
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -77,6 +79,11 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow() {
     assert_eq!(columns.len(), 8 + 20 + 88 + 2);
     assert_eq!(columns[8], serde_json::json!(["linearity", "float"]));
     assert_eq!(columns[2], serde_json::json!(["stamp_ns", "int64"]));
+    // The script has checked that DuckDB and Polars read every row as pyarrow does.
+    assert_eq!(read["duckdb_metadata_keys"], read["metadata_keys"]);
+    let polars_types = read["polars_types"].as_array().unwrap();
+    assert_eq!(polars_types[8], "Float32");
+    assert_eq!(polars_types[columns.len() - 1], "Boolean");
 
     // The same frame through the library, on the training grid the command uses.
     let mut config = travmap::Config::default();

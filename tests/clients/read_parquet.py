@@ -1,6 +1,7 @@
 """Reads a travmap cell dataset with pyarrow and prints what the Rust test checks:
 the row count, the column names and types, the travmap metadata keys, and every
-row of one frame (as JSON; nulls as null).
+row of one frame (as JSON; nulls as null). DuckDB and Polars read the whole file
+too; every row they give must equal pyarrow's, or the script fails.
 
     python read_parquet.py cells.parquet FRAME
 """
@@ -8,12 +9,37 @@ row of one frame (as JSON; nulls as null).
 import json
 import sys
 
+import duckdb
+import polars
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 path, frame = sys.argv[1], int(sys.argv[2])
 table = pq.read_table(path)
 metadata = pq.read_metadata(path).metadata
+expected = table.to_pylist()
+
+
+def agree(reader, rows, columns):
+    assert columns == table.column_names, f"{reader} columns {columns}"
+    assert len(rows) == len(expected), f"{reader} read {len(rows)} rows, pyarrow {len(expected)}"
+    for index, (row, want) in enumerate(zip(rows, expected)):
+        assert row == want, f"{reader} row {index} differs from pyarrow's"
+
+
+with duckdb.connect() as connection:
+    result = connection.execute("SELECT * FROM read_parquet(?)", [path])
+    columns = [column[0] for column in result.description]
+    agree("duckdb", [dict(zip(columns, values)) for values in result.fetchall()], columns)
+    duckdb_keys = sorted(
+        key.decode()
+        for (key,) in connection.execute(
+            "SELECT key FROM parquet_kv_metadata(?)", [path]
+        ).fetchall()
+    )
+frame_polars = polars.read_parquet(path)
+agree("polars", frame_polars.to_dicts(), frame_polars.columns)
+
 rows = table.filter(pc.equal(table["frame"], frame)).to_pylist()
 print(
     json.dumps(
@@ -21,6 +47,8 @@ print(
             "rows": table.num_rows,
             "columns": [[field.name, str(field.type)] for field in table.schema],
             "metadata_keys": sorted(key.decode() for key in metadata),
+            "duckdb_metadata_keys": duckdb_keys,
+            "polars_types": [str(dtype) for dtype in frame_polars.dtypes],
             "frame_rows": rows,
         }
     )
