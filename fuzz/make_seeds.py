@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Writes the seed corpus in fuzz/seeds/ from the shared data: small, real inputs
 for every target of travmap::fuzzing. Run from the repository root after
-`cargo build --release`; needs `../shared/data` and the Python `mcap` package.
+`cargo build --release`; needs `../shared/data` and the Python `mcap` and `pyarrow` packages.
 
     python3 fuzz/make_seeds.py [--travmap target/release/travmap] [--data ../shared/data]
 """
@@ -15,6 +15,7 @@ import subprocess
 import tempfile
 import zlib
 
+import pyarrow.parquet as pq
 from mcap.reader import make_reader
 
 POINTS = 64  # points per scan in the seeds: real layout, cheap to mutate
@@ -91,6 +92,18 @@ def main() -> None:
             )
             seed("mcap_file", drive.name, drive.read_bytes())
         messages = first_message_per_topic(tmp / "drive-none.mcap")
+        # Frame 0's cells on a 6 m grid (9 rows, every column), as travmap writes them
+        # (zstd) and as pyarrow rewrites them (uncompressed, dictionary-encoded).
+        cells = tmp / "cells.parquet"
+        subprocess.run(
+            [args.travmap, "dataset", str(seq), "-o", str(cells), "--frames", "0..1",
+             "--set", "training.grid_size_m=6", "-q"],
+            check=True,
+        )
+        seed("dataset_file", "travmap-zstd.parquet", cells.read_bytes())
+        pyarrow_cells = tmp / "pyarrow.parquet"
+        pq.write_table(pq.read_table(cells), pyarrow_cells, compression="none")
+        seed("dataset_file", "pyarrow-uncompressed.parquet", pyarrow_cells.read_bytes())
     seed("ros_point_cloud", "velodyne_points.cdr", messages["/velodyne_points"])
     seed("ros_tf", "tf.cdr", messages["/tf"])
     seed("ros_tf", "tf_static.cdr", messages["/tf_static"])

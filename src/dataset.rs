@@ -12,7 +12,7 @@
 //! configuration the rows were computed with, as JSON; reading checks it.
 
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{BufWriter, Read};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -25,10 +25,11 @@ use parquet::file::properties::WriterProperties;
 use parquet::file::reader::{FileReader, RowGroupReader};
 use parquet::file::serialized_reader::SerializedFileReader;
 use parquet::file::writer::SerializedFileWriter;
+use parquet::schema::types::SchemaDescriptor;
 
 use crate::Config;
 use crate::classifier::training::TrainingSet;
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, contain_panics};
 use crate::features::{FEATURE_COUNT, FEATURE_NAMES};
 use crate::grid::CellClass;
 use crate::pipeline::FrameResult;
@@ -36,6 +37,9 @@ use crate::writing::AtomicFile;
 
 /// Rows per row group: about 60 MB of columns in memory at a time.
 const ROW_GROUP_ROWS: usize = 1 << 17;
+/// The largest row group read back (pyarrow writes up to 2^20 rows by default):
+/// about 2 GB of columns in memory.
+const MAX_READ_GROUP_ROWS: usize = 1 << 22;
 
 const CONFIG_KEY: &str = "travmap.config";
 const FORMAT_KEY: &str = "travmap.format";
@@ -338,6 +342,25 @@ where
     read_all(reader, rows)
 }
 
+/// Reads a whole column of a row group that must have a value in every row.
+fn read_required<T: DataType>(
+    group: &dyn RowGroupReader,
+    index: usize,
+    rows: usize,
+) -> parquet::errors::Result<Vec<T::T>>
+where
+    T::T: Default + Clone,
+{
+    let (values, present) = read_column::<T>(group, index, rows)?;
+    match present.iter().position(|&p| !p) {
+        None => Ok(values),
+        Some(row) => Err(parquet::errors::ParquetError::General(format!(
+            "column `{}` is null in row {row} of its row group; travmap needs a value in every row",
+            group.metadata().column(index).column_path().string()
+        ))),
+    }
+}
+
 fn read_all<T: DataType>(
     mut reader: ColumnReaderImpl<T>,
     rows: usize,
@@ -359,8 +382,16 @@ fn read_all<T: DataType>(
     let present = if levels.is_empty() {
         vec![true; rows]
     } else {
-        levels.iter().map(|&l| l > 0).collect()
+        levels.iter().map(|&l| l > 0).collect::<Vec<_>>()
     };
+    let present_count = present.iter().filter(|&&p| p).count();
+    if present.len() != rows || values.len() != present_count {
+        return Err(parquet::errors::ParquetError::General(format!(
+            "a column of {rows} rows gave {} levels and {} values for {present_count} present rows",
+            present.len(),
+            values.len()
+        )));
+    }
     Ok((values, present))
 }
 
@@ -381,8 +412,29 @@ fn feature_settings(config: &Config) -> serde_json::Value {
 /// that its cells were computed with `config`'s feature settings. Returns the
 /// number of rows added.
 pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -> Result<usize> {
-    let fail = |e: parquet::errors::ParquetError| read_error(path, e);
     let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut magic = [0u8; 4];
+    if (&file).read_exact(&mut magic).is_err() || &magic != b"PAR1" {
+        return Err(read_error(
+            path,
+            format!("begins with {magic:02x?}, not PAR1: not a Parquet file"),
+        ));
+    }
+    contain_panics(|| read_parquet_rows(path, file, config, set)).unwrap_or_else(|panic| {
+        Err(read_error(
+            path,
+            format!("corrupt Parquet file (the parquet reader stopped: {panic})"),
+        ))
+    })
+}
+
+fn read_parquet_rows(
+    path: &Path,
+    file: File,
+    config: &Config,
+    set: &mut TrainingSet,
+) -> Result<usize> {
+    let fail = |e: parquet::errors::ParquetError| read_error(path, e);
     let reader = SerializedFileReader::new(file).map_err(fail)?;
     let metadata = reader.metadata().file_metadata();
     let value_of = |key: &str| {
@@ -414,21 +466,41 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
     }
     let expected = schema(&appearance_columns(config));
     let expected = parquet::schema::parser::parse_message_type(&expected).expect("schema parses");
-    let columns: Vec<String> = metadata
-        .schema_descr()
-        .columns()
-        .iter()
-        .map(|c| c.name().to_string())
-        .collect();
-    let wanted: Vec<String> = expected
-        .get_fields()
-        .iter()
-        .map(|f| f.name().to_string())
-        .collect();
+    let expected = SchemaDescriptor::new(Arc::new(expected));
+    // Name and physical type of every column. Other writers may annotate columns
+    // differently or make every column nullable (Polars does); a null where travmap
+    // needs a value is caught when the column is read. The typed column readers
+    // below panic on a type they were not made for, so this check comes first.
+    let layout = |descr: &SchemaDescriptor| -> Vec<String> {
+        descr
+            .columns()
+            .iter()
+            .map(|c| {
+                let repeated = if c.max_rep_level() > 0 {
+                    " (repeated)"
+                } else {
+                    ""
+                };
+                format!("{} {}{repeated}", c.name(), c.physical_type())
+            })
+            .collect()
+    };
+    let (columns, wanted) = (layout(metadata.schema_descr()), layout(&expected));
     if columns != wanted {
+        let first = columns
+            .iter()
+            .zip(&wanted)
+            .position(|(a, b)| a != b)
+            .unwrap_or(columns.len().min(wanted.len()));
         return Err(read_error(
             path,
-            format!("columns {columns:?}; expected {wanted:?}"),
+            format!(
+                "column {first} is `{}`; expected `{}` ({} columns, expected {})",
+                columns.get(first).map_or("(none)", String::as_str),
+                wanted.get(first).map_or("(none)", String::as_str),
+                columns.len(),
+                wanted.len(),
+            ),
         ));
     }
 
@@ -437,16 +509,24 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
     let mut added = 0;
     for g in 0..reader.num_row_groups() {
         let group = reader.get_row_group(g).map_err(fail)?;
-        let rows = group.metadata().num_rows() as usize;
-        let (x_m, _) = read_column::<DoubleType>(group.as_ref(), 5, rows).map_err(fail)?;
-        let (y_m, _) = read_column::<DoubleType>(group.as_ref(), 6, rows).map_err(fail)?;
+        // Columns are read whole, so a corrupt count must not size them.
+        let rows = usize::try_from(group.metadata().num_rows())
+            .ok()
+            .filter(|&rows| rows <= MAX_READ_GROUP_ROWS)
+            .ok_or_else(|| {
+                read_error(
+                    path,
+                    format!(
+                        "row group {g} declares {} rows; travmap reads groups of 0 to {MAX_READ_GROUP_ROWS}",
+                        group.metadata().num_rows()
+                    ),
+                )
+            })?;
+        let x_m = read_required::<DoubleType>(group.as_ref(), 5, rows).map_err(fail)?;
+        let y_m = read_required::<DoubleType>(group.as_ref(), 6, rows).map_err(fail)?;
         let mut features = Vec::with_capacity(FEATURE_COUNT);
         for f in 0..FEATURE_COUNT {
-            features.push(
-                read_column::<FloatType>(group.as_ref(), 8 + f, rows)
-                    .map_err(fail)?
-                    .0,
-            );
+            features.push(read_required::<FloatType>(group.as_ref(), 8 + f, rows).map_err(fail)?);
         }
         let mut appearance = Vec::with_capacity(appearance_len);
         let mut seen = vec![true; rows];
@@ -489,4 +569,53 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
         }
     }
     Ok(added)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A file with the cell schema as `edit` changes it and travmap's metadata.
+    fn write_with_schema(path: &Path, config: &Config, edit: impl Fn(String) -> String) {
+        let schema = edit(schema(&appearance_columns(config)));
+        let schema = parquet::schema::parser::parse_message_type(&schema).unwrap();
+        let properties = WriterProperties::builder()
+            .set_key_value_metadata(Some(vec![
+                KeyValue::new(FORMAT_KEY.into(), FORMAT.to_string()),
+                KeyValue::new(CONFIG_KEY.into(), serde_json::to_string(config).unwrap()),
+            ]))
+            .build();
+        let file = File::create(path).unwrap();
+        SerializedFileWriter::new(file, Arc::new(schema), Arc::new(properties))
+            .unwrap()
+            .close()
+            .unwrap();
+    }
+
+    #[test]
+    fn a_column_of_another_type_is_refused_before_it_is_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cells.parquet");
+        let config = Config::default();
+        let read = |path: &Path| {
+            read_training_rows(path, &config, &mut TrainingSet::default())
+                .map_err(|e| e.to_string())
+        };
+        write_with_schema(&path, &config, |s| s);
+        assert_eq!(read(&path), Ok(0));
+        write_with_schema(&path, &config, |s| {
+            s.replace("REQUIRED DOUBLE x_m", "REQUIRED INT64 x_m")
+        });
+        let err = read(&path).unwrap_err();
+        assert!(
+            err.contains("cells.parquet")
+                && err.contains("column 5 is `x_m INT64`; expected `x_m DOUBLE`"),
+            "{err}"
+        );
+        write_with_schema(&path, &config, |s| {
+            s.replace("; OPTIONAL BOOLEAN predicted_traversable", "")
+        });
+        let err = read(&path).unwrap_err();
+        assert!(err.contains("column 117 is `(none)`; expected `predicted_traversable BOOLEAN` (117 columns, expected 118)"), "{err}");
+    }
 }

@@ -5,7 +5,10 @@
 
 use std::path::Path;
 
+use crate::Config;
 use crate::classifier::SvmModel;
+use crate::classifier::training::TrainingSet;
+use crate::dataset::read_training_rows;
 use crate::reading::mcap_drive::{DriveOptions, McapDrive, cloud_points, image_pixels, isometry};
 use crate::reading::{
     drop_non_finite, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
@@ -17,7 +20,7 @@ pub type Target = fn(&[u8]);
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 10] = [
+pub const TARGETS: [(&str, Target); 11] = [
     ("kitti_calib", kitti_calib),
     ("kitti_poses", kitti_poses),
     ("kitti_scan", kitti_scan),
@@ -28,6 +31,7 @@ pub const TARGETS: [(&str, Target); 10] = [
     ("ros_tf", ros_tf),
     ("mcap_file", mcap_file),
     ("model", model),
+    ("dataset_file", dataset_file),
 ];
 
 const NAMED: &str = "fuzzed";
@@ -105,17 +109,31 @@ pub fn ros_tf(data: &[u8]) {
 
 /// A whole MCAP file: opened as a drive, then every frame read, images included.
 pub fn mcap_file(data: &[u8]) {
-    // The drive maps a file; one per thread, because tests run targets in parallel.
+    with_file(data, "mcap", |path| {
+        if let Ok(drive) = McapDrive::open(path, &DriveOptions::default()) {
+            let _ = drive.for_each_frame::<crate::Error>(&(0..usize::MAX), |_| Ok(()));
+        }
+    });
+}
+
+/// A cell dataset (Parquet) read back as training rows, as `train` reads it.
+pub fn dataset_file(data: &[u8]) {
+    with_file(data, "parquet", |path| {
+        let mut set = TrainingSet::default();
+        let _ = read_training_rows(path, &Config::default(), &mut set);
+    });
+}
+
+/// Runs `read` on `data` written to a file, for the readers that take a path. One
+/// file per thread, because the tests run targets in parallel.
+fn with_file(data: &[u8], extension: &str, read: impl FnOnce(&Path)) {
     let path = std::env::temp_dir().join(format!(
-        "travmap-fuzz-{}-{:?}.mcap",
+        "travmap-fuzz-{}-{:?}.{extension}",
         std::process::id(),
         std::thread::current().id()
     ));
-    if std::fs::write(&path, data).is_err() {
-        return;
-    }
-    if let Ok(drive) = McapDrive::open(&path, &DriveOptions::default()) {
-        let _ = drive.for_each_frame::<crate::Error>(&(0..usize::MAX), |_| Ok(()));
+    if std::fs::write(&path, data).is_ok() {
+        read(&path);
     }
     let _ = std::fs::remove_file(&path);
 }

@@ -1,6 +1,8 @@
 //! `travmap dataset`: the Parquet rows match the pipeline's own values cell by cell
-//! (read back with pyarrow, the reader most users will have), and `train` learns
-//! the same model from the Parquet file as from the sequence itself.
+//! (read back with pyarrow, the reader most users will have, and checked against
+//! DuckDB and Polars), `train` learns the same model from the Parquet file as from
+//! the sequence itself, and reads the same rows from the file as rewritten by
+//! pyarrow (every codec), DuckDB and Polars.
 
 mod common;
 
@@ -8,6 +10,8 @@ use std::path::Path;
 
 use serde_json::Value;
 use travmap::classifier::SvmModel;
+use travmap::classifier::training::TrainingSet;
+use travmap::dataset::read_training_rows;
 use travmap::evaluation::Selection;
 use travmap::grid::CellClass;
 use travmap::reading::Source;
@@ -58,10 +62,13 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
 
     let frame = 1;
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/read_parquet.py");
+    let rewrites = dir.path().join("rewrites");
+    std::fs::create_dir(&rewrites).unwrap();
     let out = std::process::Command::new(&python)
         .arg(&script)
         .arg(&cells)
         .arg(frame.to_string())
+        .arg(&rewrites)
         .output()
         .unwrap();
     assert!(
@@ -132,6 +139,37 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
         let predicted = result.filtered.as_ref().unwrap()[cell];
         assert_eq!(row["predicted_traversable"], as_bool(predicted));
     }
+
+    // What other writers make of the file trains on the same rows.
+    let training_rows = |path: &Path| {
+        let mut set = TrainingSet::default();
+        read_training_rows(path, &config, &mut set).map(|_| set)
+    };
+    let ours = training_rows(&cells).unwrap();
+    assert!(ours.len() > 10_000, "{} labelled rows", ours.len());
+    for writer in [
+        "pyarrow-none",
+        "pyarrow-snappy",
+        "pyarrow-gzip",
+        "pyarrow-brotli",
+        "pyarrow-lz4",
+        "duckdb",
+        "polars",
+    ] {
+        let theirs = training_rows(&rewrites.join(format!("{writer}.parquet")))
+            .unwrap_or_else(|e| panic!("{writer}: {e}"));
+        assert_eq!(theirs.features, ours.features, "{writer}");
+        assert_eq!(theirs.traversable, ours.traversable, "{writer}");
+        assert_eq!(theirs.centre_in_world, ours.centre_in_world, "{writer}");
+        assert_eq!(theirs.appearance_row, ours.appearance_row, "{writer}");
+    }
+    let err = training_rows(&rewrites.join("polars-null-x_m.parquet"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("polars-null-x_m.parquet") && err.contains("column `x_m` is null in row 0"),
+        "{err}"
+    );
 }
 
 #[test]
