@@ -111,9 +111,12 @@ impl Error {
 
 thread_local! {
     static CONTAINING_PANICS: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    /// Where the last contained panic on this thread happened.
+    static CONTAINED_AT: std::cell::RefCell<String> = const { std::cell::RefCell::new(String::new()) };
 }
 
-/// Runs `f`, turning a panic inside it into `Err(message)`, printed by nobody.
+/// Runs `f`, turning a panic inside it into `Err(message and location)`, printed by
+/// nobody.
 ///
 /// For third-party readers that panic on malformed input instead of returning an
 /// error (the `parquet` crate does, on corrupt metadata: apache/arrow-rs#9742). The
@@ -124,7 +127,17 @@ pub(crate) fn contain_panics<T>(f: impl FnOnce() -> T) -> std::result::Result<T,
     QUIET_HOOK.call_once(|| {
         let previous = std::panic::take_hook();
         std::panic::set_hook(Box::new(move |info| {
-            if !CONTAINING_PANICS.with(|c| c.get()) {
+            if CONTAINING_PANICS.with(|c| c.get()) {
+                let at = info.location().map(|l| {
+                    // A registry path from the crate's name on: parquet-60.1.0/src/...
+                    let file = l.file();
+                    let from_crate = file
+                        .find(".crates.io-")
+                        .and_then(|i| file[i..].find('/').map(|j| &file[i + j + 1..]));
+                    format!("{}:{}", from_crate.unwrap_or(file), l.line())
+                });
+                CONTAINED_AT.with(|c| *c.borrow_mut() = at.unwrap_or_default());
+            } else {
                 previous(info);
             }
         }));
@@ -133,10 +146,12 @@ pub(crate) fn contain_panics<T>(f: impl FnOnce() -> T) -> std::result::Result<T,
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
     CONTAINING_PANICS.with(|c| c.set(outer));
     result.map_err(|payload| {
-        payload
+        let message = payload
             .downcast_ref::<&str>()
             .map(|s| s.to_string())
             .or_else(|| payload.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "a panic without a message".into())
+            .unwrap_or_else(|| "a panic without a message".into());
+        let at = CONTAINED_AT.with(|c| std::mem::take(&mut *c.borrow_mut()));
+        format!("{message}, at {at}")
     })
 }

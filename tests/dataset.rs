@@ -240,3 +240,38 @@ fn datasets_from_other_settings_or_other_writers_are_refused() {
     assert!(err.contains("junk.parquet"), "{err}");
     assert!(!model.exists(), "no model is written on failure");
 }
+
+#[test]
+fn corrupt_datasets_are_errors_naming_the_file_not_panics() {
+    // Inputs on which the parquet crate panics (found by the dataset_file fuzz target).
+    let regressions = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/regressions/dataset_file");
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("m.json");
+    for (name, panic) in [
+        (
+            "negative-column-start.parquet",
+            "column start and length should not be negative, at parquet-60.1.0/src/file/metadata/mod.rs",
+        ),
+        (
+            "dictionary-decoder-never-set.parquet",
+            "Decoder for dict should have been set",
+        ),
+        (
+            "byte-stream-split-out-of-bounds.parquet",
+            "index out of bounds",
+        ),
+    ] {
+        let input = regressions.join(name);
+        let err = clean_failure(travmap(&[
+            "train",
+            input.to_str().unwrap(),
+            "-o",
+            model.to_str().unwrap(),
+        ]));
+        assert!(
+            err.contains(name) && err.contains("corrupt Parquet file") && err.contains(panic),
+            "{err}"
+        );
+        assert!(!model.exists());
+    }
+}
