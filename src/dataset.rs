@@ -337,9 +337,49 @@ fn read_column<T: DataType>(
 where
     T::T: Default + Clone,
 {
-    let reader: ColumnReaderImpl<T> =
-        parquet::column::reader::get_typed_column_reader(group.get_column_reader(index)?);
-    read_all(reader, rows)
+    let mut values = Vec::with_capacity(rows.min(ROW_GROUP_ROWS));
+    let mut levels = Vec::with_capacity(rows.min(ROW_GROUP_ROWS));
+    contained(|| {
+        let mut reader: ColumnReaderImpl<T> =
+            parquet::column::reader::get_typed_column_reader(group.get_column_reader(index)?);
+        let mut read = 0;
+        while read < rows {
+            let (records, _, _) =
+                reader.read_records(rows - read, Some(&mut levels), None, &mut values)?;
+            if records == 0 {
+                return Err(parquet::errors::ParquetError::EOF(format!(
+                    "{read} of {rows} rows"
+                )));
+            }
+            read += records;
+        }
+        Ok(())
+    })?;
+    // A required column has no levels: every row is present.
+    let present = if levels.is_empty() {
+        vec![true; rows]
+    } else {
+        levels.iter().map(|&l| l > 0).collect::<Vec<_>>()
+    };
+    let present_count = present.iter().filter(|&&p| p).count();
+    if present.len() != rows || values.len() != present_count {
+        return Err(parquet::errors::ParquetError::General(format!(
+            "a column of {rows} rows gave {} levels and {} values for {present_count} present rows",
+            present.len(),
+            values.len()
+        )));
+    }
+    Ok((values, present))
+}
+
+/// Runs a call into the parquet crate, which panics on some corrupt input rather
+/// than returning an error (apache/arrow-rs#9742): the panic becomes an error.
+fn contained<T>(call: impl FnOnce() -> parquet::errors::Result<T>) -> parquet::errors::Result<T> {
+    contain_panics(call).unwrap_or_else(|panic| {
+        Err(parquet::errors::ParquetError::General(format!(
+            "corrupt Parquet file (the parquet reader stopped: {panic})"
+        )))
+    })
 }
 
 /// Reads a whole column of a row group that must have a value in every row.
@@ -359,40 +399,6 @@ where
             group.metadata().column(index).column_path().string()
         ))),
     }
-}
-
-fn read_all<T: DataType>(
-    mut reader: ColumnReaderImpl<T>,
-    rows: usize,
-) -> parquet::errors::Result<(Vec<T::T>, Vec<bool>)> {
-    let mut values = Vec::with_capacity(rows.min(ROW_GROUP_ROWS));
-    let mut levels = Vec::with_capacity(rows.min(ROW_GROUP_ROWS));
-    let mut read = 0;
-    while read < rows {
-        let (records, _, _) =
-            reader.read_records(rows - read, Some(&mut levels), None, &mut values)?;
-        if records == 0 {
-            return Err(parquet::errors::ParquetError::EOF(format!(
-                "{read} of {rows} rows"
-            )));
-        }
-        read += records;
-    }
-    // A required column has no levels: every row is present.
-    let present = if levels.is_empty() {
-        vec![true; rows]
-    } else {
-        levels.iter().map(|&l| l > 0).collect::<Vec<_>>()
-    };
-    let present_count = present.iter().filter(|&&p| p).count();
-    if present.len() != rows || values.len() != present_count {
-        return Err(parquet::errors::ParquetError::General(format!(
-            "a column of {rows} rows gave {} levels and {} values for {present_count} present rows",
-            present.len(),
-            values.len()
-        )));
-    }
-    Ok((values, present))
 }
 
 /// The settings that decide a cell's features and label: a dataset made with
@@ -425,23 +431,8 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
             ),
         ));
     }
-    let data = bytes::Bytes::from(data);
-    contain_panics(|| read_parquet_rows(path, data, config, set)).unwrap_or_else(|panic| {
-        Err(read_error(
-            path,
-            format!("corrupt Parquet file (the parquet reader stopped: {panic})"),
-        ))
-    })
-}
-
-fn read_parquet_rows(
-    path: &Path,
-    data: bytes::Bytes,
-    config: &Config,
-    set: &mut TrainingSet,
-) -> Result<usize> {
     let fail = |e: parquet::errors::ParquetError| read_error(path, e);
-    let reader = SerializedFileReader::new(data).map_err(fail)?;
+    let reader = contained(|| SerializedFileReader::new(bytes::Bytes::from(data))).map_err(fail)?;
     let metadata = reader.metadata().file_metadata();
     let value_of = |key: &str| {
         metadata
@@ -514,7 +505,7 @@ fn read_parquet_rows(
     let appearance_len = wanted.len() - 10 - FEATURE_COUNT;
     let mut added = 0;
     for g in 0..reader.num_row_groups() {
-        let group = reader.get_row_group(g).map_err(fail)?;
+        let group = contained(|| reader.get_row_group(g)).map_err(fail)?;
         // Columns are read whole, so a corrupt count must not size them.
         let rows = usize::try_from(group.metadata().num_rows())
             .ok()
