@@ -570,6 +570,7 @@ pub fn train(
             "model": model_path,
             "sha256": model.sha256_hex(),
             "config": config,
+            "cells": set.len(),
             "training": model.training,
             "support_vectors": model.support_vector_count(),
             "c": model.c,
@@ -590,6 +591,13 @@ pub fn train(
             model.training.traversable_samples,
             model.training.sources.join("; ")
         );
+        if model.training.samples < set.len() {
+            println!(
+                "  a seeded random {} of the {} cells (training.max_fit_samples)",
+                model.training.samples,
+                set.len()
+            );
+        }
         println!(
             "grid search (spatially-blocked {}-fold CV accuracy, cells before filtering):",
             config.training.folds

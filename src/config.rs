@@ -121,8 +121,13 @@ pub struct TrainingConfig {
     /// a world cell and its copies in other frames are always in one fold.
     pub block_size_m: f64,
     /// The grid search uses a seeded random subset of at most this many cells
-    /// (default 6000); the final model is trained on all of them.
+    /// (default 6000).
     pub max_search_samples: usize,
+    /// The final model is fitted on a seeded random subset of at most this many
+    /// cells (default 50,000), a superset of the search's: the solver's time grows
+    /// faster than the cell count, and a training set gathered from a fleet's logs
+    /// can hold millions.
+    pub max_fit_samples: usize,
     /// Stopping tolerance of the SMO solver on the KKT gap (default 1e-3, libsvm's).
     pub tolerance: f64,
     /// Kernel row cache per solver, MiB (default 200).
@@ -209,6 +214,7 @@ impl Default for TrainingConfig {
             folds: 5,
             block_size_m: 4.0,
             max_search_samples: 6000,
+            max_fit_samples: 50_000,
             tolerance: 1e-3,
             cache_mib: 200,
             seed: 0,
@@ -327,6 +333,12 @@ impl Config {
                 self.training.folds
             ));
         }
+        if self.training.max_fit_samples < self.training.max_search_samples {
+            return fail(format!(
+                "training.max_fit_samples ({}) must be >= training.max_search_samples ({})",
+                self.training.max_fit_samples, self.training.max_search_samples
+            ));
+        }
         for (name, values) in [
             ("training.c_values", &self.training.c_values),
             ("training.gamma_values", &self.training.gamma_values),
@@ -388,5 +400,18 @@ mod tests {
         let mut config = Config::default();
         config.features.subcell_size_m = 0.3;
         assert!(config.validate().is_err());
+    }
+
+    #[test]
+    fn validate_rejects_a_fit_subset_smaller_than_the_search_subset() {
+        let mut config = Config::default();
+        config
+            .set("training.max_fit_samples=5000")
+            .expect("a known key");
+        let message = config.validate().unwrap_err().to_string();
+        assert!(
+            message.contains("training.max_fit_samples (5000)"),
+            "{message}"
+        );
     }
 }

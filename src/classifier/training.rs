@@ -270,12 +270,21 @@ fn train_one(
         )));
     }
 
-    // The search runs on a seeded random subset when the set is large.
+    // The search and the final fit run on seeded random subsets when the set is
+    // large; the fit's subset holds the search's.
     let mut order: Vec<usize> = (0..set.len()).collect();
     SplitMix64(t.seed).shuffle(&mut order);
-    order.truncate(t.max_search_samples.max(t.folds));
-    order.sort_unstable();
-    let search_set = set.subset(&order);
+    let subset = |n: usize| {
+        let mut indices = order[..n.min(order.len())].to_vec();
+        indices.sort_unstable();
+        set.subset(&indices)
+    };
+    let search_set = subset(t.max_search_samples.max(t.folds));
+    let fit_set = if set.len() > t.max_fit_samples {
+        std::borrow::Cow::Owned(subset(t.max_fit_samples))
+    } else {
+        std::borrow::Cow::Borrowed(set)
+    };
     let folds = spatial_folds(&search_set.centre_in_world, t.block_size_m, t.folds, t.seed);
     let used_folds: Vec<usize> = (0..t.folds).filter(|f| folds.contains(f)).collect();
     if used_folds.len() < 2 {
@@ -326,8 +335,8 @@ fn train_one(
     let best = search.iter().fold(search[0], |best, r| {
         if r.accuracy > best.accuracy { *r } else { best }
     });
-    let mut model = fit(set, best.c, best.gamma, config);
-    model.reduced_set = fit_reduced_set(&model, set, config);
+    let mut model = fit(&fit_set, best.c, best.gamma, config);
+    model.reduced_set = fit_reduced_set(&model, &fit_set, config);
     progress(total, total);
     model.training.search = search;
     model.training.seconds = started.elapsed().as_secs_f64();
@@ -466,8 +475,9 @@ mod tests {
         }
     }
 
-    #[test]
-    fn training_learns_a_separable_feature_and_stores_the_search() {
+    /// 600 cells on a 30 x 20 m patch, a third non-traversable, separable by the
+    /// first feature; the second is noise on a large scale, so standardisation matters.
+    fn separable_set() -> TrainingSet {
         let mut set = TrainingSet {
             dimension: 2,
             ..Default::default()
@@ -476,7 +486,6 @@ mod tests {
         for i in 0..600 {
             let traversable = i % 3 != 0;
             let x = if traversable { 0.1 } else { 0.6 } + rng.uniform(-0.15, 0.15) as f32;
-            // The second feature is noise on a large scale: standardisation matters.
             set.push(
                 &[x, 1000.0 * rng.uniform(-1.0, 1.0) as f32],
                 None,
@@ -484,6 +493,12 @@ mod tests {
                 [(i % 30) as f64, (i / 30) as f64],
             );
         }
+        set
+    }
+
+    #[test]
+    fn training_learns_a_separable_feature_and_stores_the_search() {
+        let set = separable_set();
         let mut config = Config::default();
         config.training.c_values = vec![1.0, 10.0];
         config.training.gamma_values = vec![0.1, 1.0];
@@ -498,6 +513,37 @@ mod tests {
         let mut scratch = model.scratch();
         assert!(model.decision_value(&[0.1, 0.0], &mut scratch) > 0.0);
         assert!(model.decision_value(&[0.6, 0.0], &mut scratch) < 0.0);
+    }
+
+    #[test]
+    fn a_large_set_is_fitted_on_a_seeded_subset_that_still_separates_it() {
+        let set = separable_set();
+        let mut config = Config::default();
+        config.training.c_values = vec![10.0];
+        config.training.gamma_values = vec![0.1];
+        config.training.max_search_samples = 100;
+        config.training.max_fit_samples = 200;
+        let model = train(&set, &config, &|_, _| {}).unwrap();
+        assert_eq!(model.training.samples, 200);
+        // A third of the cells is non-traversable; a random subset keeps about that.
+        let traversable = model.training.traversable_samples;
+        assert!((115..=150).contains(&traversable), "{traversable} of 200");
+        assert!(model.support_vector_count() <= 200);
+        assert!(accuracy(&model, &set) > 0.98);
+        // Seeded: the same subset, so the same model.
+        let again = train(&set, &config, &|_, _| {}).unwrap();
+        let (mut a, mut b) = (model.scratch(), again.scratch());
+        for row in set.features.chunks_exact(2).take(20) {
+            assert_eq!(
+                model.exact_decision_value(row, &mut a),
+                again.exact_decision_value(row, &mut b)
+            );
+        }
+        config.training.max_fit_samples = 600;
+        assert_eq!(
+            train(&set, &config, &|_, _| {}).unwrap().training.samples,
+            600
+        );
     }
 
     #[test]
