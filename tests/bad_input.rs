@@ -327,6 +327,13 @@ fn keep_going_skips_a_corrupt_frame_and_exits_3() {
         "{}",
         common::stdout(&out)
     );
+    // Without it, an annotation that fails at frame 1, after frame 0 was written,
+    // leaves no output and no temporary file.
+    let out_dir = tempfile::tempdir().unwrap();
+    let stopped = out_dir.path().join("stopped.mcap");
+    let err = clean_failure(travmap(&["annotate", seq, "-o", stopped.to_str().unwrap()]));
+    assert!(err.contains("000001.bin"), "{err}");
+    assert_eq!(std::fs::read_dir(out_dir.path()).unwrap().count(), 0);
     // The annotated output is complete and records the skip.
     let mcap_path = dir.path().join("a.mcap");
     let out = travmap(&[
