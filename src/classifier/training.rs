@@ -280,11 +280,7 @@ fn train_one(
         set.subset(&indices)
     };
     let search_set = subset(t.max_search_samples.max(t.folds));
-    let fit_set = if set.len() > t.max_fit_samples {
-        std::borrow::Cow::Owned(subset(t.max_fit_samples))
-    } else {
-        std::borrow::Cow::Borrowed(set)
-    };
+    let fit_set = subset(t.max_fit_samples);
     let folds = spatial_folds(&search_set.centre_in_world, t.block_size_m, t.folds, t.seed);
     let used_folds: Vec<usize> = (0..t.folds).filter(|f| folds.contains(f)).collect();
     if used_folds.len() < 2 {
