@@ -239,6 +239,15 @@ impl FeatureConfig {
 }
 
 impl Config {
+    /// The configuration training cells are computed with: this one on the training
+    /// grid (`training.grid_size_m`), so `train`, `dataset` and `crossval` see the
+    /// same cells.
+    pub fn for_training_cells(&self) -> Config {
+        let mut config = self.clone();
+        config.grid.size_m = self.training.grid_size_m;
+        config
+    }
+
     /// Reads a TOML file; fields it does not name keep their defaults.
     pub fn from_toml_file(path: &std::path::Path) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;

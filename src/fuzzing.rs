@@ -6,14 +6,16 @@
 use std::path::Path;
 
 use crate::Config;
-use crate::classifier::SvmModel;
-use crate::classifier::training::TrainingSet;
-use crate::dataset::read_training_rows;
-use crate::reading::mcap_drive::{DriveOptions, McapDrive, cloud_points, image_pixels, isometry};
-use crate::reading::{
+use crate::method::classifier::SvmModel;
+use crate::training::TrainingSet;
+use crate::outputs::dataset::read_training_rows;
+use crate::io::cloud::cloud_points;
+use crate::io::image::image_pixels;
+use crate::io::mcap_drive::{DriveOptions, McapDrive, isometry};
+use crate::io::kitti::{
     drop_non_finite, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
 };
-use crate::ros::{CameraInfo, Odometry, PointCloud2, TfMessage, Transform, decode};
+use crate::io::ros::{CameraInfo, Odometry, PointCloud2, TfMessage, Transform, decode};
 
 /// A fuzz target: arbitrary bytes in, nothing out.
 pub type Target = fn(&[u8]);
@@ -111,7 +113,7 @@ pub fn ros_tf(data: &[u8]) {
 pub fn mcap_file(data: &[u8]) {
     with_file(data, "mcap", |path| {
         if let Ok(drive) = McapDrive::open(path, &DriveOptions::default()) {
-            let _ = drive.for_each_frame::<crate::Error>(&(0..usize::MAX), |_| Ok(()));
+            drive.read(&(0..usize::MAX)).for_each(drop);
         }
     });
 }

@@ -2,40 +2,29 @@
 //! "Pushing the Limits of Learning-based Traversability Analysis for Autonomous
 //! Driving on CPU" (specified in METHOD.md).
 //!
-//! The stages, in the order [`pipeline::Pipeline::process_frame`] calls them:
-//! [`reading`] (0), [`integration`] (1), [`grid`] (2), [`features`] (3),
-//! [`appearance`] (3b), [`classifier`] (4), [`filter`] (5); beside them
-//! [`ground_truth`], [`metrics`] and [`evaluation`]. Around the method: [`writing`]
-//! (MCAP output, with [`ros`] messages), [`conversion`] (KITTI -> MCAP),
-//! [`annotation`] (the annotated MCAP), [`dataset`] (Parquet cell tables),
-//! [`rendering`] (pictures) and [`benchmark`].
-//! [`commands`] holds one function per subcommand of the binary; [`fuzzing`] the
-//! entry points of the fuzz targets.
+//! Layers, each importing only those above it (ARCHITECTURE.md):
+//! - shared: [`config`], [`error`], [`geometry`], [`random`], [`stopwatch`] and
+//!   [`frame`], what readers produce and the method consumes;
+//! - [`io`]: drives (KITTI directories, ROS 2 MCAP) into [`frame::Frame`]s;
+//! - [`method`]: the stages in the order [`method::pipeline::Pipeline`] calls them;
+//! - [`drive`]: where the two meet: a source's selected frames run through the method;
+//! - [`training`], [`scoring`] and [`outputs`]: what is made of the results.
+//!
+//! [`fuzzing`] holds the entry points of the fuzz targets.
 
-pub mod annotation;
-pub mod appearance;
-pub mod benchmark;
-pub mod classifier;
-pub mod commands;
 pub mod config;
-pub mod conversion;
-pub mod dataset;
+pub mod drive;
 pub mod error;
-pub mod evaluation;
-pub mod features;
-pub mod filter;
+pub mod frame;
 pub mod fuzzing;
 pub mod geometry;
-pub mod grid;
-pub mod ground_truth;
-pub mod integration;
-pub mod metrics;
-pub mod pipeline;
+pub mod io;
+pub mod method;
+pub mod outputs;
 pub mod random;
-pub mod reading;
-pub mod rendering;
-pub mod ros;
-pub mod writing;
+pub mod scoring;
+pub mod stopwatch;
+pub mod training;
 
 pub use config::Config;
 pub use error::{Error, Result};

@@ -7,8 +7,9 @@ use std::path::Path;
 
 use common::{success, travmap};
 use serde_json::Value;
-use travmap::appearance::{CameraImage, decode_png};
-use travmap::reading::{read_calibration, read_scan};
+use travmap::frame::CameraImage;
+use travmap::io::image::decode_png;
+use travmap::io::kitti::{read_calibration, read_scan};
 
 /// The 3x4 matrix of `key` in a KITTI calib file, parsed by hand (independent of travmap).
 fn calib_matrix(path: &Path, key: &str) -> Vec<f64> {
@@ -257,7 +258,7 @@ fn colour_separates_what_geometry_cannot() {
 
 #[test]
 fn a_cell_keeps_its_colour_five_frames_later_after_the_grid_moved() {
-    use travmap::pipeline::Pipeline;
+    use travmap::method::pipeline::Pipeline;
     let Some(meta) = common::shared_data("kitti-odometry-meta/sequences/03") else {
         return;
     };
@@ -270,7 +271,7 @@ fn a_cell_keeps_its_colour_five_frames_later_after_the_grid_moved() {
     }
     let mut config = travmap::Config::default();
     config.grid.size_m = 24.0;
-    let sequence = travmap::reading::KittiSequence::open(&seq).unwrap();
+    let sequence = travmap::io::KittiSequence::open(&seq).unwrap();
     let mut pipeline = Pipeline::new(&config).unwrap();
     let results: Vec<_> = (0..6)
         .map(|i| pipeline.process_frame(sequence.read_frame(i).unwrap(), None))

@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{clean_failure, success, travmap};
+use common::{clean_failure, success, travmap, usage_error};
 
 const IDENTITY_3X4: &str = "1 0 0 0 0 1 0 0 0 0 1 0";
 /// Sequence 00's velodyne -> cam0.
@@ -221,7 +221,7 @@ fn a_tr_or_pose_that_is_not_rigid() {
 fn a_model_file_of_another_version() {
     let dir = tempfile::tempdir().unwrap();
     write_sequence(dir.path());
-    let model = travmap::classifier::SvmModel::embedded_default().unwrap();
+    let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
     let mut json: serde_json::Value = serde_json::from_slice(&model.to_json()).unwrap();
     json["version"] = 99.into();
     let path = dir.path().join("old-model.json");
@@ -275,7 +275,8 @@ fn bad_frame_range_and_model_file() {
         err.contains("no scans in frames 5..9") && err.contains("0..=1"),
         "{err}"
     );
-    let err = clean_failure(travmap(&["eval", seq, "--frames", "3..1"]));
+    // A malformed range is a usage error, refused before anything is read.
+    let err = usage_error(travmap(&["eval", seq, "--frames", "3..1"]));
     assert!(err.contains("is empty"), "{err}");
     let model = dir.path().join("broken.json");
     std::fs::write(&model, b"{\"format\": \"travmap-svm\", \"version\": 1, ").unwrap();

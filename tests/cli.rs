@@ -154,10 +154,10 @@ fn embedded_model_is_what_the_documented_command_trains() {
         v["training"]["seconds"] = Value::Null;
         v
     };
-    let shipped = std::fs::read("src/classifier/default_model.json").unwrap();
+    let shipped = std::fs::read("src/training/default_model.json").unwrap();
     assert!(
         strip_time(&std::fs::read(&model).unwrap()) == strip_time(&shipped),
-        "src/classifier/default_model.json is stale: retrain it with the README's command"
+        "src/training/default_model.json is stale: retrain it with the README's command"
     );
 }
 
@@ -257,8 +257,8 @@ fn bench_prints_every_stage_and_throughput() {
 
 #[test]
 fn render_draws_truth_prediction_and_errors_cell_by_cell() {
-    use travmap::grid::CellClass;
-    use travmap::rendering::{GAP_PX, cell_origin_px, colour};
+    use travmap::method::grid::CellClass;
+    use travmap::outputs::rendering::{GAP_PX, cell_origin_px, colour};
     let Some(seq) = sample() else { return };
     let dir = tempfile::tempdir().unwrap();
     let picture = dir.path().join("frame.png");
@@ -272,26 +272,24 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
         "-q",
     ]));
     let bytes = std::fs::read(&picture).unwrap();
-    let image = travmap::appearance::decode_png(&bytes, &picture).unwrap();
+    let image = travmap::io::image::decode_png(&bytes, &picture).unwrap();
     assert_eq!((image.width, image.height), (3 * 240 + 2 * GAP_PX, 240));
 
     // The same frame through the library: every cell's colour in every panel.
     let config = travmap::Config::default();
-    let model = travmap::classifier::SvmModel::embedded_default().unwrap();
-    let source =
-        travmap::reading::Source::open(std::path::Path::new(&seq), &Default::default()).unwrap();
+    let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
+    let selection = travmap::drive::Selection {
+        source: travmap::io::Source::open(std::path::Path::new(&seq), &Default::default())
+            .unwrap(),
+        frames: 2..3,
+    };
     let mut result = None;
-    travmap::pipeline::run_sequence::<travmap::Error>(
-        &source,
-        &(2..3),
-        &config,
-        Some(&model),
-        |r| {
+    selection
+        .run::<travmap::Error>(&config, Some(&model), |r| {
             result = Some(r);
             Ok(())
-        },
-    )
-    .unwrap();
+        })
+        .unwrap();
     let result = result.unwrap();
     let (truth, predicted) = (result.ground_truth.unwrap(), result.filtered.unwrap());
     let class = |c: CellClass| match c {

@@ -9,13 +9,13 @@ mod common;
 use std::path::Path;
 
 use serde_json::Value;
-use travmap::classifier::SvmModel;
-use travmap::classifier::training::TrainingSet;
-use travmap::dataset::read_training_rows;
-use travmap::evaluation::Selection;
-use travmap::grid::CellClass;
-use travmap::reading::Source;
-use travmap::reading::mcap_drive::DriveOptions;
+use travmap::method::classifier::SvmModel;
+use travmap::training::TrainingSet;
+use travmap::outputs::dataset::read_training_rows;
+use travmap::drive::Selection;
+use travmap::method::grid::CellClass;
+use travmap::io::Source;
+use travmap::io::mcap_drive::DriveOptions;
 
 use common::{clean_failure, success, travmap};
 
@@ -126,7 +126,7 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
         assert_eq!(row["y_m"].as_f64().unwrap(), y);
         assert_eq!(row["stamp_ns"], result.stamp_ns);
         assert_eq!(row["points"], result.cells.point_count(cell));
-        for (name, &value) in travmap::features::FEATURE_NAMES
+        for (name, &value) in travmap::method::features::FEATURE_NAMES
             .iter()
             .zip(result.features.cell(cell))
         {

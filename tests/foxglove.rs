@@ -7,7 +7,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 use serde_json::Value;
-use travmap::ros::{PointCloud2, TfMessage, decode};
+use travmap::io::ros::{PointCloud2, TfMessage, decode};
 
 use common::{success, travmap};
 
@@ -124,6 +124,6 @@ fn the_layout_names_topics_fields_and_frames_of_an_annotated_file() {
     // The camera topic is the one `convert` writes for image_2 (no images here).
     assert_eq!(
         layout["configById"]["Image!camera"]["imageMode"]["imageTopic"],
-        travmap::conversion::IMAGE_TOPIC
+        travmap::outputs::conversion::IMAGE_TOPIC
     );
 }

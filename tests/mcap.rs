@@ -8,10 +8,11 @@ use std::path::Path;
 
 use common::{clean_failure, success, travmap};
 use serde_json::Value;
-use travmap::reading::KittiSequence;
-use travmap::reading::mcap_drive::{DriveOptions, McapDrive, cloud_points};
-use travmap::ros::{OccupancyGrid, decode};
-use travmap::writing::{Compression, McapSink};
+use travmap::io::KittiSequence;
+use travmap::io::cloud::cloud_points;
+use travmap::io::mcap_drive::{DriveOptions, McapDrive};
+use travmap::io::ros::{OccupancyGrid, decode};
+use travmap::outputs::writing::{Compression, McapSink};
 
 fn sample() -> Option<String> {
     common::semantickitti_00().map(|p| p.display().to_string())
@@ -47,21 +48,19 @@ fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
     assert_eq!(mcap_drive.frame_count(), 6);
     assert_eq!(mcap_drive.world_frame(), "map");
     let mut index = 0;
-    mcap_drive
-        .for_each_frame::<travmap::Error>(&(0..6), |frame| {
-            let expected = kitti.read_frame(index).unwrap();
-            assert_eq!(frame.index, expected.index);
-            assert_eq!(frame.stamp_ns, expected.stamp_ns);
-            assert_eq!(frame.points_in_velodyne, expected.points_in_velodyne);
-            assert_eq!(frame.labels, expected.labels);
-            assert_eq!(
-                frame.world_from_velodyne, expected.world_from_velodyne,
-                "frame {index}"
-            );
-            index += 1;
-            Ok(())
-        })
-        .unwrap();
+    for frame in mcap_drive.read(&(0..6)) {
+        let frame = frame.unwrap();
+        let expected = kitti.read_frame(index).unwrap();
+        assert_eq!(frame.index, expected.index);
+        assert_eq!(frame.stamp_ns, expected.stamp_ns);
+        assert_eq!(frame.points_in_velodyne, expected.points_in_velodyne);
+        assert_eq!(frame.labels, expected.labels);
+        assert_eq!(
+            frame.world_from_velodyne, expected.world_from_velodyne,
+            "frame {index}"
+        );
+        index += 1;
+    }
     assert_eq!(index, 6);
 
     // Annotating either input gives the same grids, to the last cell, and the same metrics.
@@ -350,7 +349,7 @@ fn compression_options_all_round_trip() {
 /// A drive of two synthetic clouds in frame `lidar`, posed by Odometry of `base`
 /// in `odom` and a static `base -> lidar`, with a second cloud topic.
 fn write_odometry_drive(path: &Path) {
-    use travmap::ros::*;
+    use travmap::io::ros::*;
     let mut sink = McapSink::create(path, Compression::None).unwrap();
     let covariance = Covariance6([0.0; 36]);
     for (i, x) in [(0u64, 0.0), (1, 2.0)] {
@@ -468,13 +467,7 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
     };
     let drive = McapDrive::open(&path, &options).unwrap();
     assert_eq!(drive.world_frame(), "odom");
-    let mut frames = Vec::new();
-    drive
-        .for_each_frame::<travmap::Error>(&(0..1), |f| {
-            frames.push(f);
-            Ok(())
-        })
-        .unwrap();
+    let frames: Vec<_> = drive.read(&(0..1)).map(Result::unwrap).collect();
     let frame = &frames[0];
     // The NaN point is dropped; the others read through float64 big-endian fields.
     assert_eq!(
@@ -672,20 +665,20 @@ fn convert_passes_png_images_through_with_camera_info() {
     .unwrap();
     assert_eq!(doc["summary"]["images"], 1);
     let png = std::fs::read(seq.join("image_2/000000.png")).unwrap();
-    let images = messages::<travmap::ros::CompressedImage>(&out, "/camera_2/image/compressed");
+    let images = messages::<travmap::io::ros::CompressedImage>(&out, "/camera_2/image/compressed");
     assert_eq!(images.len(), 1);
     let (log_time, image) = &images[0];
     assert_eq!(image.data, png, "the PNG bytes pass through unchanged");
     assert_eq!(image.format, "png");
     assert_eq!(image.header.frame_id, "camera_2");
     assert_eq!(*log_time, 1_317_000_000_000_000_000);
-    let infos = messages::<travmap::ros::CameraInfo>(&out, "/camera_2/camera_info");
+    let infos = messages::<travmap::io::ros::CameraInfo>(&out, "/camera_2/camera_info");
     let info = &infos[0].1;
     assert_eq!((info.width, info.height), (1242, 375));
     assert_eq!(info.k[0], 721.5377);
     // P = [K | 0] in camera_2's own frame; the baseline is in /tf_static.
     assert_eq!((info.p[0], info.p[3]), (721.5377, 0.0));
-    let statics = messages::<travmap::ros::TfMessage>(&out, "/tf_static");
+    let statics = messages::<travmap::io::ros::TfMessage>(&out, "/tf_static");
     let frames: Vec<(&str, &str)> = statics[0]
         .1
         .transforms
@@ -869,7 +862,7 @@ fn corrupt_mcap_files_are_clear_errors() {
 
 #[test]
 fn clouds_whose_data_disagree_with_their_layout_are_errors() {
-    use travmap::ros::{Header, PointCloud2, PointField, datatype};
+    use travmap::io::ros::{Header, PointCloud2, PointField, datatype};
     let cloud = |data_len: usize, fields: Vec<PointField>| PointCloud2 {
         header: Header::default(),
         height: 2,
@@ -919,7 +912,7 @@ fn clouds_whose_data_disagree_with_their_layout_are_errors() {
 
 #[test]
 fn an_image_that_disagrees_with_its_camera_info_and_a_non_cdr_cloud_are_errors() {
-    use travmap::ros::{CameraInfo, PointCloud2, RosMessage, encode};
+    use travmap::io::ros::{CameraInfo, PointCloud2, RosMessage, encode};
     let dir = tempfile::tempdir().unwrap();
     let Some(seq) = one_frame_with_image(dir.path()) else {
         return;

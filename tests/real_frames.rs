@@ -6,8 +6,9 @@ mod common;
 use std::collections::HashMap;
 
 use travmap::geometry::Moments;
-use travmap::integration::{WorldScan, scan_to_world};
-use travmap::reading::{KittiSequence, read_labels, read_poses, read_scan};
+use travmap::method::integration::{WorldScan, scan_to_world};
+use travmap::io::KittiSequence;
+use travmap::io::kitti::{read_labels, read_poses, read_scan};
 
 const VOXEL_M: f32 = 0.5;
 
@@ -199,9 +200,9 @@ fn labels_join_the_right_points() {
 }
 
 #[test]
-fn frames_in_parallel_equal_frames_one_by_one() {
-    use travmap::classifier::SvmModel;
-    use travmap::pipeline::{Pipeline, process_in_parallel};
+fn frames_in_batches_equal_frames_one_by_one() {
+    use travmap::method::classifier::SvmModel;
+    use travmap::method::pipeline::Pipeline;
     let Some(dir) = common::semantickitti_00() else {
         return;
     };
@@ -214,9 +215,27 @@ fn frames_in_parallel_equal_frames_one_by_one() {
         .iter()
         .map(|f| pipeline.process_frame(f.clone(), Some(&model)))
         .collect();
-    let parallel = process_in_parallel(&Pipeline::new(&config).unwrap(), frames, 0, Some(&model));
-    assert_eq!(parallel.len(), 6);
-    for (a, b) in one_by_one.iter().zip(&parallel) {
+    let whole = Pipeline::new(&config)
+        .unwrap()
+        .process_frames(frames.clone(), Some(&model));
+    // Two batches, the second starting with a window the first filled.
+    let mut batched = Pipeline::new(&config).unwrap();
+    let mut halves = batched.process_frames(frames[..2].to_vec(), Some(&model));
+    halves.extend(batched.process_frames(frames[2..].to_vec(), Some(&model)));
+    // Warm-up frames fill the window without results.
+    let mut warmed = Pipeline::new(&config).unwrap();
+    for frame in &frames[..3] {
+        warmed.warm_up(frame.clone());
+    }
+    let after_warm_up = warmed.process_frames(frames[3..].to_vec(), Some(&model));
+    assert_eq!(whole.len(), 6);
+    assert_eq!(halves.len(), 6);
+    let pairs = one_by_one
+        .iter()
+        .zip(&whole)
+        .chain(one_by_one.iter().zip(&halves))
+        .chain(one_by_one[3..].iter().zip(&after_warm_up));
+    for (a, b) in pairs {
         assert_eq!(a.index, b.index);
         assert_eq!(a.layout, b.layout);
         assert_eq!(a.features, b.features);

@@ -55,11 +55,20 @@ pub fn success(output: Output) -> String {
 
 /// Asserts a clean failure: exit code 1, an `error:` line, no panic. Returns stderr.
 pub fn clean_failure(output: Output) -> String {
+    failure_with_code(output, 1)
+}
+
+/// Asserts a usage error (a malformed argument): exit code 2, an `error:` line.
+pub fn usage_error(output: Output) -> String {
+    failure_with_code(output, 2)
+}
+
+fn failure_with_code(output: Output, code: i32) -> String {
     let err = stderr(&output);
     assert_eq!(
         output.status.code(),
-        Some(1),
-        "expected exit 1, stderr: {err}"
+        Some(code),
+        "expected exit {code}, stderr: {err}"
     );
     assert!(err.starts_with("error: "), "{err}");
     assert!(!err.contains("panicked"), "{err}");

@@ -1,0 +1,98 @@
+//! `travmap annotate`: the annotated MCAP (predicted and ground-truth grids, the
+//! classified cloud, metrics, the input's messages copied through).
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::Args;
+use serde_json::json;
+use travmap::outputs::annotation::{self, AnnotationOptions};
+use travmap::stopwatch::Stopwatch;
+
+use super::convert::CompressionArg;
+use super::{Inputs, Outcome, frame_count, load_model, model_json, outcome};
+
+/// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
+#[derive(Args)]
+pub struct AnnotateArgs {
+    #[command(flatten)]
+    inputs: Inputs,
+    /// Where to write the MCAP.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Model file (default: the model compiled into travmap).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    #[command(flatten)]
+    compression: CompressionArg,
+    /// Do not copy the input's messages into the output.
+    #[arg(long)]
+    no_passthrough: bool,
+    /// Height of the drawn grids relative to the sensor, metres.
+    #[arg(long, default_value_t = -1.73, allow_negative_numbers = true)]
+    grid_height: f64,
+}
+
+pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
+    let config = &args.inputs.settings.load()?;
+    let (output, output_path) = (args.inputs.output, args.output.as_path());
+    let options = AnnotationOptions {
+        compression: args.compression.compression(),
+        passthrough: !args.no_passthrough,
+        grid_height_m: args.grid_height,
+    };
+    let (model, model_name) = load_model(args.model.as_deref(), config)?;
+    let selection = args.inputs.open_one(
+        config.appearance.enabled,
+        "annotate takes one input (a KITTI sequence directory or an MCAP file)",
+    )?;
+    let metadata = BTreeMap::from([
+        (
+            "travmap_version".to_string(),
+            env!("CARGO_PKG_VERSION").to_string(),
+        ),
+        ("config".to_string(), serde_json::to_string(config)?),
+        ("model".to_string(), model_name.clone()),
+        ("model_sha256".to_string(), model.sha256_hex()),
+        ("input".to_string(), selection.describe()),
+    ]);
+    let selections = [selection];
+    let bar = output.progress(frame_count(&selections), "annotating");
+    let watch = Stopwatch::start();
+    let summary = annotation::annotate(
+        &selections[0],
+        config,
+        &model,
+        metadata,
+        output_path,
+        &options,
+        &|| bar.inc(1),
+    )?;
+    bar.finish_and_clear();
+    let seconds = watch.elapsed_ms() * 1e-3;
+    if output.json {
+        let doc = json!({"output": output_path, "config": config, "model": model_json(&model, &model_name), "summary": summary, "seconds": seconds});
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else if !output.quiet {
+        println!(
+            "wrote {} ({} frames, {} messages copied through, {:.1} MB, {:.1} frames/s)",
+            output_path.display(),
+            summary.frames,
+            summary.passthrough_messages,
+            summary.output_bytes as f64 / 1e6,
+            summary.frames as f64 / seconds
+        );
+        if summary.evaluation.frames > 0 {
+            let s = summary.evaluation.scores;
+            println!(
+                "{} frames with ground truth: Acc {:.1} mIoU {:.1} F1 {:.1} (filtered)",
+                summary.evaluation.frames,
+                100.0 * s.accuracy,
+                100.0 * s.miou,
+                100.0 * s.f1
+            );
+        }
+    }
+    Ok(outcome(&selections))
+}

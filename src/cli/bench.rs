@@ -1,0 +1,96 @@
+//! `travmap bench`: per-stage latency (median, p95) and throughput on 1 thread and
+//! all cores.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::Args;
+use serde_json::json;
+use travmap::scoring::benchmark::benchmark;
+
+use super::{Inputs, Outcome, load_model, model_json, outcome};
+
+/// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
+#[derive(Args)]
+pub struct BenchArgs {
+    #[command(flatten)]
+    inputs: Inputs,
+    /// Model file (default: the model compiled into travmap).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Times each measurement is repeated.
+    #[arg(long, default_value_t = 20)]
+    repeats: usize,
+}
+
+pub fn bench(args: BenchArgs) -> Result<Outcome> {
+    let config = &args.inputs.settings.load()?;
+    let output = args.inputs.output;
+    let repeats = args.repeats;
+    let (model, model_name) = load_model(args.model.as_deref(), config)?;
+    let selection = args
+        .inputs
+        .open_one(config.appearance.enabled, "bench takes one sequence directory")?;
+    let report = benchmark(
+        &selection.source,
+        &selection.frames,
+        config,
+        &model,
+        repeats,
+    )?;
+    if output.json {
+        let doc = json!({"config": config, "model": model_json(&model, &model_name), "input": selection.describe(), "report": report});
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+        return Ok(outcome(std::slice::from_ref(&selection)));
+    }
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "input: {}", selection.describe())?;
+    writeln!(
+        out,
+        "{} timed frames x {} repeats; n = {} scans of {:.0} points, {} x {} grid of {} m ({:.0} predictable cells, {:.0} points in grid); {model_name}, {} support vectors",
+        report.timed_frames,
+        report.repeats,
+        config.integration.scans,
+        report.mean_points_per_scan,
+        config.grid.cells_per_side(),
+        config.grid.cells_per_side(),
+        config.grid.cell_size_m,
+        report.predictable_cells,
+        report.points_in_grid,
+        report.support_vectors
+    )?;
+    writeln!(
+        out,
+        "{:<34} {:>9} {:>9}",
+        "stage (1 thread, frame by frame)", "median ms", "p95 ms"
+    )?;
+    let t = &report.stages_ms;
+    for (name, spread) in [
+        ("read + image decode (not in latency)", t.read),
+        ("integrate", t.integrate),
+        ("grid", t.grid),
+        ("geometric features", t.features),
+        ("appearance: projection + voting", t.appearance),
+        ("classify", t.classify),
+        ("filter", t.filter),
+        ("latency: scan in to filtered grid", t.latency),
+    ] {
+        writeln!(out, "{name:<34} {:>9.3} {:>9.3}", spread.median, spread.p95)?;
+    }
+    writeln!(
+        out,
+        "{:<34} {:>9}",
+        "write", "not in this table: see `annotate` frames/s"
+    )?;
+    writeln!(
+        out,
+        "throughput (whole selection, rayon across frames): {:.1} frames/s on 1 thread, {:.1} frames/s on {} threads ({:.2}x)",
+        report.one_thread.frames_per_second,
+        report.all_cores.frames_per_second,
+        report.all_cores.threads,
+        report.speedup
+    )?;
+    Ok(outcome(std::slice::from_ref(&selection)))
+}
+

@@ -1,0 +1,25 @@
+//! `travmap config`: the effective configuration as TOML (or JSON).
+
+use anyhow::Result;
+use clap::Args;
+
+use super::{Outcome, Settings};
+
+/// Print the effective configuration (TOML; JSON with --json).
+#[derive(Args)]
+pub struct ConfigArgs {
+    #[command(flatten)]
+    settings: Settings,
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn config(args: ConfigArgs) -> Result<Outcome> {
+    let config = args.settings.load()?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&config)?);
+    } else {
+        print!("{}", toml::to_string(&config)?);
+    }
+    Ok(Outcome::Complete)
+}

@@ -1,0 +1,114 @@
+//! `travmap convert`: a KITTI / SemanticKITTI sequence to a ROS 2 MCAP.
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use clap::{Args, ValueEnum};
+use serde_json::json;
+use travmap::io::Source;
+use travmap::io::mcap_drive::DriveOptions;
+use travmap::outputs::conversion::convert_kitti;
+use travmap::outputs::writing::Compression;
+use travmap::stopwatch::Stopwatch;
+
+use super::{Outcome, Output, frame_count, open_selection, outcome, parse_frame_range};
+
+/// Convert a KITTI / SemanticKITTI sequence to a ROS 2 MCAP (clouds, poses on /tf, images).
+#[derive(Args)]
+pub struct ConvertArgs {
+    /// The sequence directory.
+    sequence: PathBuf,
+    /// Where to write the MCAP.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Frames to convert: A..B (B excluded), A..=B, A.. or N. Default: all.
+    #[arg(long, value_parser = parse_frame_range)]
+    frames: Option<std::ops::Range<usize>>,
+    #[command(flatten)]
+    compression: CompressionArg,
+    /// Seconds since the Unix epoch added to times.txt for every stamp.
+    #[arg(long, default_value_t = 0.0)]
+    start_time: f64,
+    #[command(flatten)]
+    report: Output,
+}
+
+/// MCAP chunk compression, for the commands that write MCAP.
+#[derive(Args)]
+pub struct CompressionArg {
+    /// Chunk compression.
+    #[arg(long = "compression", value_enum, default_value_t = Codec::Zstd)]
+    codec: Codec,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Codec {
+    Zstd,
+    Lz4,
+    None,
+}
+
+impl CompressionArg {
+    pub fn compression(&self) -> Compression {
+        match self.codec {
+            Codec::Zstd => Compression::Zstd,
+            Codec::Lz4 => Compression::Lz4,
+            Codec::None => Compression::None,
+        }
+    }
+}
+
+pub fn convert(args: ConvertArgs) -> Result<Outcome> {
+    let (output, output_path) = (args.report, args.output.as_path());
+    let compression = args.compression.compression();
+    let start_time_s = args.start_time;
+    if !(start_time_s.is_finite() && start_time_s >= 0.0) {
+        bail!("--start-time must be seconds >= 0, got {start_time_s}");
+    }
+    let frames = args.frames.unwrap_or(0..usize::MAX);
+    let selection = open_selection(
+        &args.sequence,
+        &frames,
+        &DriveOptions::default(),
+        false,
+        false,
+    )?;
+    let selections = [selection];
+    let Source::Kitti(sequence) = &selections[0].source else {
+        bail!("convert takes one KITTI sequence directory");
+    };
+    let bar = output.progress(frame_count(&selections), "converting");
+    let watch = Stopwatch::start();
+    let start_ns = (start_time_s * 1e9).round() as u64;
+    let summary = convert_kitti(
+        sequence,
+        &frames,
+        output_path,
+        compression,
+        start_ns,
+        &|| bar.inc(1),
+    )?;
+    bar.finish_and_clear();
+    let seconds = watch.elapsed_ms() * 1e-3;
+    if output.json {
+        let doc = json!({"output": output_path, "compression": compression, "summary": summary, "seconds": seconds});
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else if !output.quiet {
+        println!(
+            "wrote {} ({} frames, {} with labels, {} images, {:.1} MB, {:.1} frames/s)",
+            output_path.display(),
+            summary.frames,
+            summary.labelled_frames,
+            summary.images,
+            summary.output_bytes as f64 / 1e6,
+            summary.frames as f64 / seconds
+        );
+        if summary.dropped_points > 0 {
+            eprintln!(
+                "{} points with a non-finite coordinate were left out",
+                summary.dropped_points
+            );
+        }
+    }
+    Ok(outcome(&selections))
+}

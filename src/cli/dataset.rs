@@ -1,0 +1,68 @@
+//! `travmap dataset`: one Parquet row per predictable cell per frame, on the
+//! training grid (`training.grid_size_m`), the cells `train` learns from.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::Args;
+use serde_json::json;
+use travmap::outputs::dataset::DatasetWriter;
+use travmap::stopwatch::Stopwatch;
+
+use super::{Inputs, Outcome, frame_count, load_model, outcome};
+
+/// One Parquet row per predictable cell per frame: features, appearance, ground
+/// truth and (with --model) the prediction, on the training grid.
+#[derive(Args)]
+pub struct DatasetArgs {
+    #[command(flatten)]
+    inputs: Inputs,
+    /// Where to write the Parquet file.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Add the prediction of this model file (by default no prediction column values).
+    #[arg(long)]
+    model: Option<PathBuf>,
+}
+
+pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
+    let config = &args.inputs.settings.load()?;
+    let output = args.inputs.output;
+    let output_path = args.output.as_path();
+    let selections = args.inputs.open(config.appearance.enabled)?;
+    let model = match args.model.as_deref() {
+        Some(path) => Some(load_model(Some(path), config)?.0),
+        None => None,
+    };
+    let grid_config = config.for_training_cells();
+    let watch = Stopwatch::start();
+    let bar = output.progress(frame_count(&selections), "extracting cells");
+    let mut writer = DatasetWriter::create(output_path, config)?;
+    for selection in &selections {
+        let source = selection.source.path().display().to_string();
+        selection.run::<anyhow::Error>(&grid_config, model.as_ref(), |result| {
+            writer.push_frame(&source, &result)?;
+            bar.inc(1);
+            Ok(())
+        })?;
+    }
+    let summary = writer.finish()?;
+    bar.finish_and_clear();
+    let seconds = watch.elapsed_ms() * 1e-3;
+    if output.json {
+        let doc = json!({"output": output_path, "summary": summary, "seconds": seconds, "cells_per_s": summary.rows as f64 / seconds});
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else if !output.quiet {
+        println!(
+            "wrote {}: {} cells from {} frames ({} labelled, {} with appearance), {:.0} cells/s",
+            output_path.display(),
+            summary.rows,
+            summary.frames,
+            summary.labelled_rows,
+            summary.rows_with_appearance,
+            summary.rows as f64 / seconds
+        );
+    }
+    Ok(outcome(&selections))
+}
+

@@ -1,0 +1,190 @@
+//! `travmap eval`: the paper's table (Acc, mIoU, F1, FPR, TPR, FNR, TNR, latency)
+//! for the selected frames, with the geometry-only ablation when a camera saw cells.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::Args;
+use serde_json::json;
+use travmap::drive::Selection;
+use travmap::method::classifier::SvmModel;
+use travmap::scoring::evaluation::{Evaluation, EvaluationReport};
+use travmap::scoring::metrics::Scores;
+
+use super::{Inputs, Outcome, frame_count, load_model, model_json, outcome};
+
+/// Score predictions against SemanticKITTI ground truth (the paper's table).
+#[derive(Args)]
+pub struct EvalArgs {
+    #[command(flatten)]
+    inputs: Inputs,
+    /// Model file (default: the model compiled into travmap).
+    #[arg(long)]
+    model: Option<PathBuf>,
+}
+
+pub fn eval(args: EvalArgs) -> Result<Outcome> {
+    let config = &args.inputs.settings.load()?;
+    let output = args.inputs.output;
+    let model_path = args.model.as_deref();
+    let (model, model_name) = load_model(model_path, config)?;
+    let selections = args.inputs.open(config.appearance.enabled)?;
+    let evaluate = |model: &SvmModel, message: &str| -> Result<EvaluationReport> {
+        let bar = output.progress(frame_count(&selections), message);
+        let mut evaluation = Evaluation::default();
+        for selection in &selections {
+            selection.run::<anyhow::Error>(config, Some(model), |result| {
+                bar.inc(1);
+                evaluation.add(&result);
+                Ok(())
+            })?;
+        }
+        bar.finish_and_clear();
+        Ok(evaluation.report())
+    };
+    let report = evaluate(&model, "evaluating")?;
+    // The ablation of the paper: the same frames without appearance features.
+    let geometry_only = match &model.hybrid {
+        Some(_) if report.frames_with_images > 0 => {
+            let mut geometric = model.clone();
+            geometric.hybrid = None;
+            Some(evaluate(&geometric, "geometry only")?)
+        }
+        _ => None,
+    };
+    let sources: Vec<String> = selections.iter().map(Selection::describe).collect();
+    if output.json {
+        let doc = json!({
+            "config": config,
+            "model": model_json(&model, &model_name),
+            "inputs": sources,
+            "report": report,
+            "geometry_only_report": geometry_only,
+        });
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+        return Ok(outcome(&selections));
+    }
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "inputs: {}", sources.join("; "))?;
+    let hybrid = match &model.hybrid {
+        Some(h) => format!(
+            "a hybrid model with {} support vectors for cells a camera saw",
+            h.support_vector_count()
+        ),
+        None => "no hybrid model".into(),
+    };
+    writeln!(
+        out,
+        "model: {model_name} (sha256 {}, {} support vectors, C {}, gamma {}; {hybrid}), trained on {}",
+        &model.sha256_hex()[..12],
+        model.support_vector_count(),
+        model.c,
+        model.gamma,
+        model.training.sources.join("; ")
+    )?;
+    if report.frames == 0 {
+        writeln!(
+            out,
+            "no frame has ground truth (labels/ for every scan of its window): nothing to score"
+        )?;
+    }
+    write_table(&mut out, &report, true)?;
+    if report.dropped_points > 0 {
+        writeln!(
+            out,
+            "{} points with a non-finite coordinate were dropped",
+            report.dropped_points
+        )?;
+    }
+    match &geometry_only {
+        Some(geometric) => {
+            writeln!(
+                out,
+                "ablation: the rows above use appearance for the {} cells of {} frames that a camera saw; without it:",
+                report.cells_with_appearance, report.frames_with_images
+            )?;
+            write_table(&mut out, geometric, true)?;
+        }
+        None if report.frames_with_images == 0 => {
+            writeln!(out, "no camera images in these frames: geometry only")?;
+        }
+        None => writeln!(out, "the model has no hybrid part: geometry only")?,
+    }
+    if model_path.is_none() {
+        writeln!(
+            out,
+            "note: the embedded model was trained on the shipped labelled frames; scores on those frames are \
+             training scores. `travmap crossval` gives the spatially held-out accuracy."
+        )?;
+    }
+    Ok(outcome(&selections))
+}
+
+/// The paper's geometry-only row (METHOD.md section 10), for reference.
+const PAPER_GEOMETRY_ONLY: [f64; 7] = [85.8, 79.5, 87.9, 11.8, 89.4, 10.6, 88.2];
+
+fn score_row(s: &Scores) -> [f64; 7] {
+    [s.accuracy, s.miou, s.f1, s.fpr, s.tpr, s.fnr, s.tnr].map(|v| 100.0 * v)
+}
+
+/// `with_latency` false where the frames were not run one at a time (cross-validation).
+pub(super) fn write_table(out: &mut impl Write, report: &EvaluationReport, with_latency: bool) -> Result<()> {
+    writeln!(
+        out,
+        "{:<22} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>11}",
+        "", "Acc", "mIoU", "F1", "FPR", "TPR", "FNR", "TNR", "latency"
+    )?;
+    let row = |name: &str, values: [f64; 7], latency: &str| {
+        let cells: String = values.iter().map(|v| format!(" {v:>6.1}")).collect();
+        format!("{name:<22}{cells} {latency:>11}")
+    };
+    let latency = if with_latency {
+        format!("{:.2} ms", report.timings_ms.latency.median)
+    } else {
+        "n/a".into()
+    };
+    writeln!(
+        out,
+        "{}",
+        row("travmap (filtered)", score_row(&report.scores), &latency)
+    )?;
+    writeln!(
+        out,
+        "{}",
+        row(
+            "travmap (SVM only)",
+            score_row(&report.unfiltered_scores),
+            ""
+        )
+    )?;
+    writeln!(
+        out,
+        "{}",
+        row("paper, geometry only", PAPER_GEOMETRY_ONLY, "13 ms SVM")
+    )?;
+    let c = &report.confusion;
+    writeln!(
+        out,
+        "cells: TP {} TN {} FP {} FN {} unpredictable {} over {} frames",
+        c.tp, c.tn, c.fp, c.r#fn, c.unknown, report.frames
+    )?;
+    let t = &report.timings_ms;
+    if !with_latency {
+        return Ok(());
+    }
+    writeln!(
+        out,
+        "median ms per frame: read {:.2}, integrate {:.2}, grid {:.2}, features {:.2}, appearance {:.2}, classify {:.2}, filter {:.2}; latency p95 {:.2}",
+        t.read.median,
+        t.integrate.median,
+        t.grid.median,
+        t.features.median,
+        t.appearance.median,
+        t.classify.median,
+        t.filter.median,
+        t.latency.p95
+    )?;
+    Ok(())
+}
+

@@ -1,0 +1,283 @@
+//! What every subcommand shares: the input and output arguments, loading the
+//! configuration and the model, opening the inputs, progress bars and how a command
+//! ends. One file per subcommand beside this one; `main.rs` dispatches to them.
+
+pub mod annotate;
+pub mod bench;
+pub mod config;
+pub mod convert;
+pub mod crossval;
+pub mod dataset;
+pub mod eval;
+pub mod render;
+pub mod run;
+pub mod train;
+
+use std::io::IsTerminal;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::json;
+use travmap::Config;
+use travmap::drive::Selection;
+use travmap::io::Source;
+use travmap::io::mcap_drive::DriveOptions;
+use travmap::method::classifier::SvmModel;
+
+/// How a command ended: exit code 0, or 3 when it completed but skipped frames
+/// (`--keep-going`), as the mcap CLI reports data loss.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    Complete,
+    Skipped(usize),
+}
+
+/// The configuration: defaults, then a file, then `--set`s.
+#[derive(Args)]
+pub struct Settings {
+    /// TOML file overriding configuration defaults (see `travmap config`).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Override one setting, e.g. --set grid.size_m=24 (repeatable).
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    sets: Vec<String>,
+}
+
+impl Settings {
+    /// The effective configuration: defaults, then the file, then each `--set`.
+    pub fn load(&self) -> Result<Config> {
+        let mut config = match &self.config {
+            Some(path) => Config::from_toml_file(path)?,
+            None => Config::default(),
+        };
+        for assignment in &self.sets {
+            config.set(assignment)?;
+        }
+        config.validate()?;
+        Ok(config)
+    }
+}
+
+/// How a command reports.
+#[derive(Args, Clone, Copy)]
+pub struct Output {
+    /// Machine-readable output.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress bars, no tables.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+impl Output {
+    /// A progress bar on a terminal, hidden otherwise or with `--quiet` / `--json`.
+    pub fn progress(&self, length: u64, message: &str) -> ProgressBar {
+        if self.quiet || self.json || !std::io::stderr().is_terminal() {
+            return ProgressBar::hidden();
+        }
+        let bar = ProgressBar::new(length).with_message(message.to_string());
+        bar.set_style(
+            ProgressStyle::with_template("{msg:<24} [{bar:30}] {pos}/{len} {elapsed}")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        bar
+    }
+}
+
+/// The drives a command reads, the frames of each, and how to read them.
+#[derive(Args)]
+pub struct Inputs {
+    /// KITTI odometry / SemanticKITTI sequence directories (holding velodyne/, calib.txt,
+    /// poses.txt, times.txt) or ROS 2 MCAP drives.
+    #[arg(required = true)]
+    pub sequences: Vec<PathBuf>,
+    /// MCAP input: the PointCloud2 topic (needed when there are several).
+    #[arg(long)]
+    cloud_topic: Option<String>,
+    /// MCAP input: the world frame poses are taken in (default: the root of the
+    /// transform tree above the clouds' frame).
+    #[arg(long)]
+    world_frame: Option<String>,
+    /// MCAP input: the camera's Image or CompressedImage topic (needed when there are
+    /// several with a CameraInfo).
+    #[arg(long)]
+    camera_topic: Option<String>,
+    /// Frames to use: A..B (B excluded), A..=B, A.. or N. Default: all.
+    #[arg(long, value_parser = parse_frame_range)]
+    pub frames: Option<Range<usize>>,
+    #[command(flatten)]
+    pub settings: Settings,
+    #[command(flatten)]
+    pub output: Output,
+    /// Skip frames whose input is unreadable, report them, and exit with code 3
+    /// (instead of stopping at the first one with code 1).
+    #[arg(long)]
+    keep_going: bool,
+}
+
+impl Inputs {
+    fn drive_options(&self) -> DriveOptions {
+        DriveOptions {
+            cloud_topic: self.cloud_topic.clone(),
+            world_frame: self.world_frame.clone(),
+            camera_topic: self.camera_topic.clone(),
+        }
+    }
+
+    /// Opens every input; `read_images` decodes camera images into the frames.
+    pub fn open(&self, read_images: bool) -> Result<Vec<Selection>> {
+        self.open_paths(&self.sequences, read_images)
+    }
+
+    /// Opens `paths` (some of the inputs) as [`Inputs::open`] does.
+    pub fn open_paths(&self, paths: &[PathBuf], read_images: bool) -> Result<Vec<Selection>> {
+        let frames = self.frames.clone().unwrap_or(0..usize::MAX);
+        let options = self.drive_options();
+        paths
+            .iter()
+            .map(|path| open_selection(path, &frames, &options, self.keep_going, read_images))
+            .collect()
+    }
+
+    /// Opens the one input of a command that takes one; `what` says what it takes.
+    pub fn open_one(&self, read_images: bool, what: &str) -> Result<Selection> {
+        let mut selections = self.open(read_images)?;
+        if selections.len() != 1 {
+            bail!("{what}, got {}", selections.len());
+        }
+        Ok(selections.remove(0))
+    }
+}
+
+/// Opens one input and checks that it has frames in `frames`.
+pub fn open_selection(
+    path: &Path,
+    frames: &Range<usize>,
+    options: &DriveOptions,
+    keep_going: bool,
+    read_images: bool,
+) -> Result<Selection> {
+    let mut source = Source::open(path, options)?;
+    source.set_read_images(read_images);
+    source.set_keep_going(keep_going);
+    if source.frames_in(frames).is_empty() {
+        let all = source.frames();
+        let has = match (all.first(), all.last()) {
+            (Some(first), Some(last)) => format!("frames {first}..={last}"),
+            _ => "no frames".into(),
+        };
+        bail!(
+            "{}: no scans in frames {}..{} (the input has {has})",
+            path.display(),
+            frames.start,
+            frames.end,
+        );
+    }
+    Ok(Selection {
+        source,
+        frames: frames.clone(),
+    })
+}
+
+/// Parses a frame range: `A..B` (B excluded), `A..=B`, `A..`, `..B` or a single `N`.
+pub fn parse_frame_range(text: &str) -> Result<Range<usize>> {
+    let number = |s: &str, default: usize| -> Result<usize> {
+        let s = s.trim();
+        if s.is_empty() {
+            return Ok(default);
+        }
+        s.parse()
+            .with_context(|| format!("frame range `{text}`: `{s}` is not a frame number"))
+    };
+    let range = if let Some((a, b)) = text.split_once("..=") {
+        number(a, 0)?..number(b, usize::MAX - 1)? + 1
+    } else if let Some((a, b)) = text.split_once("..") {
+        number(a, 0)?..number(b, usize::MAX)?
+    } else {
+        let n = number(text, 0)?;
+        n..n + 1
+    };
+    if range.is_empty() {
+        bail!("frame range `{text}` is empty (A..B excludes B)");
+    }
+    Ok(range)
+}
+
+/// A model file, or the embedded default model, checked against `config`; with the
+/// name to report it by.
+pub fn load_model(path: Option<&Path>, config: &Config) -> Result<(SvmModel, String)> {
+    let (model, name) = match path {
+        Some(path) => {
+            let bytes = std::fs::read(path)
+                .with_context(|| format!("cannot read model {}", path.display()))?;
+            let name = path.display().to_string();
+            (SvmModel::from_json(&bytes, &name)?, name)
+        }
+        None => (
+            SvmModel::embedded_default()?,
+            "embedded default model".into(),
+        ),
+    };
+    model.check_compatible(config)?;
+    Ok((model, name))
+}
+
+/// The model's identity in JSON outputs.
+pub fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {
+    json!({
+        "name": name,
+        "sha256": model.sha256_hex(),
+        "support_vectors": model.support_vector_count(),
+        "c": model.c,
+        "gamma": model.gamma,
+        "trained_on": model.training.sources,
+    })
+}
+
+/// Frames the selections will hand on, for progress bars.
+pub fn frame_count(selections: &[Selection]) -> u64 {
+    selections
+        .iter()
+        .map(|s| s.source.frames_in(&s.frames).len() as u64)
+        .sum()
+}
+
+/// Prints every skipped frame to stderr, once, and says how the command ended.
+pub fn outcome(selections: &[Selection]) -> Outcome {
+    let mut skipped = 0;
+    for selection in selections {
+        for skip in selection.source.skipped() {
+            eprintln!(
+                "skipped frame {} of {}: {}",
+                skip.frame,
+                selection.source.path().display(),
+                skip.reason
+            );
+            skipped += 1;
+        }
+    }
+    if skipped == 0 {
+        Outcome::Complete
+    } else {
+        Outcome::Skipped(skipped)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_ranges() {
+        assert_eq!(parse_frame_range("0..3").unwrap(), 0..3);
+        assert_eq!(parse_frame_range("2..=4").unwrap(), 2..5);
+        assert_eq!(parse_frame_range("7").unwrap(), 7..8);
+        assert_eq!(parse_frame_range("5..").unwrap(), 5..usize::MAX);
+        assert!(parse_frame_range("3..3").is_err());
+        assert!(parse_frame_range("a..3").is_err());
+    }
+}

@@ -1,0 +1,92 @@
+//! `travmap render`: ground truth, prediction and errors of frames as PNG pictures,
+//! one file (`--frame N`) or one per frame into a directory (`--all`).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use serde_json::json;
+use travmap::outputs::rendering;
+use travmap::outputs::writing::write_atomically;
+
+use super::{Inputs, Outcome, frame_count, load_model, outcome};
+
+/// Draw ground truth, prediction and errors of a frame side by side as PNG.
+#[derive(Args)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    inputs: Inputs,
+    /// The PNG to write (with --frame) or the directory for one PNG per frame (--all).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// The frame to draw.
+    #[arg(long, conflicts_with = "all")]
+    frame: Option<usize>,
+    /// Draw every selected frame (see --frames) into the output directory.
+    #[arg(long)]
+    all: bool,
+    /// Model file (default: the model compiled into travmap).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Pixels per cell side.
+    #[arg(long, default_value_t = 8)]
+    cell_pixels: u32,
+}
+
+pub fn render(mut args: RenderArgs) -> Result<Outcome> {
+    match (args.frame, args.all) {
+        (Some(frame), _) => args.inputs.frames = Some(frame..frame + 1),
+        (None, true) => {}
+        (None, false) => bail!("render needs --frame N or --all"),
+    }
+    let cell_px = args.cell_pixels;
+    if !(1..=64).contains(&cell_px) {
+        bail!("--cell-pixels must be in 1..=64, got {cell_px}");
+    }
+    let config = &args.inputs.settings.load()?;
+    let (output, output_path) = (args.inputs.output, args.output.as_path());
+    let (model, _) = load_model(args.model.as_deref(), config)?;
+    let selection = args
+        .inputs
+        .open_one(config.appearance.enabled, "render takes one input")?;
+    if args.all {
+        std::fs::create_dir_all(output_path)
+            .with_context(|| format!("cannot create {}", output_path.display()))?;
+    }
+    let selections = [selection];
+    let bar = output.progress(frame_count(&selections), "rendering");
+    let mut written = Vec::new();
+    selections[0].run::<anyhow::Error>(config, Some(&model), |result| {
+        let path = if args.all {
+            output_path.join(format!("{:06}.png", result.index))
+        } else {
+            output_path.to_path_buf()
+        };
+        write_atomically(
+            &path,
+            &rendering::encode_png(&rendering::render(&result, cell_px)),
+        )?;
+        written.push(path);
+        bar.inc(1);
+        Ok(())
+    })?;
+    bar.finish_and_clear();
+    if written.is_empty() {
+        bail!("no frame was rendered");
+    }
+    if output.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&json!({"pictures": written}))?
+        );
+    } else if !output.quiet {
+        println!(
+            "wrote {} picture(s): ground truth | prediction | errors (orange false positive, blue false negative)",
+            written.len()
+        );
+        for path in &written {
+            println!("  {}", path.display());
+        }
+    }
+    Ok(outcome(&selections))
+}

@@ -1,0 +1,116 @@
+//! `travmap run`: the filtered grid of every frame, as a table, text pictures or
+//! JSON lines.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::Args;
+use serde_json::json;
+use travmap::method::grid::CellClass;
+use travmap::scoring::evaluation::Evaluation;
+
+use super::{Inputs, Outcome, frame_count, load_model, model_json, outcome};
+
+/// Predict the filtered traversability grid of every frame.
+#[derive(Args)]
+pub struct RunArgs {
+    #[command(flatten)]
+    inputs: Inputs,
+    /// Model file (default: the model compiled into travmap).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Draw each grid as text ('.' traversable, '#' not, ' ' unknown; x right, y up).
+    #[arg(long)]
+    ascii: bool,
+}
+
+pub fn run(args: RunArgs) -> Result<Outcome> {
+    let config = args.inputs.settings.load()?;
+    let output = args.inputs.output;
+    let (model, model_name) = load_model(args.model.as_deref(), &config)?;
+    let selections = args.inputs.open(config.appearance.enabled)?;
+    let bar = output.progress(frame_count(&selections), "predicting");
+    let mut stdout = std::io::stdout().lock();
+    if output.json {
+        writeln!(
+            stdout,
+            "{}",
+            json!({"config": config, "model": model_json(&model, &model_name)})
+        )?;
+    } else if !output.quiet {
+        writeln!(
+            stdout,
+            "model: {model_name} ({} support vectors)",
+            model.support_vector_count()
+        )?;
+        writeln!(
+            stdout,
+            "{:>6} {:>10} {:>6} {:>11} {:>11} {:>9} {:>10}",
+            "frame", "stamp_s", "cells", "predictable", "traversable", "non-trav", "latency_ms"
+        )?;
+    }
+    let mut evaluation = Evaluation::default();
+    for selection in &selections {
+        selection.run::<anyhow::Error>(&config, Some(&model), |result| {
+            bar.inc(1);
+            evaluation.add(&result);
+            let grid = result.filtered.as_deref().unwrap_or(&[]);
+            let count = |class: CellClass| grid.iter().filter(|c| **c == class).count();
+            let (traversable, non_traversable) = (
+                count(CellClass::Traversable),
+                count(CellClass::NonTraversable),
+            );
+            if output.json {
+                let cells: Vec<i8> = grid.iter().map(|c| c.occupancy()).collect();
+                let line = json!({
+                    "input": selection.source.path(),
+                    "frame": result.index,
+                    "stamp_ns": result.stamp_ns,
+                    "cell_size_m": result.layout.cell_size_m,
+                    "cells_per_side": result.layout.cells_per_side,
+                    "min_corner_in_world": result.layout.min_corner_in_world(),
+                    "cells": cells,
+                    "timings_ms": result.timings,
+                    "dropped_points": result.dropped_points,
+                });
+                writeln!(stdout, "{line}")?;
+            } else if !output.quiet {
+                writeln!(
+                    stdout,
+                    "{:>6} {:>10.3} {:>6} {:>11} {:>11} {:>9} {:>10.2}",
+                    result.index,
+                    result.stamp_ns as f64 * 1e-9,
+                    grid.len(),
+                    traversable + non_traversable,
+                    traversable,
+                    non_traversable,
+                    result.timings.latency_ms
+                )?;
+                if args.ascii {
+                    write_ascii_grid(&mut stdout, grid, result.layout.cells_per_side)?;
+                }
+            }
+            Ok(())
+        })?;
+    }
+    bar.finish_and_clear();
+    if !output.json && !output.quiet {
+        let latency = evaluation.report().timings_ms.latency;
+        writeln!(
+            stdout,
+            "median latency {:.2} ms per frame (p95 {:.2} ms)",
+            latency.median, latency.p95
+        )?;
+    }
+    Ok(outcome(&selections))
+}
+
+/// Rows from north (max y) down, so the picture reads like a map with x to the right.
+fn write_ascii_grid(out: &mut impl Write, grid: &[CellClass], cells_per_side: usize) -> Result<()> {
+    for row in grid.chunks(cells_per_side).rev() {
+        let line: String = row.iter().map(|c| c.symbol()).collect();
+        writeln!(out, "  |{line}|")?;
+    }
+    Ok(())
+}

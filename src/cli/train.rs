@@ -1,0 +1,153 @@
+//! `travmap train`: grid search over C and gamma with spatially-blocked CV, a final
+//! fit, and the model file; from drives and from Parquet cell datasets.
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use clap::Args;
+use serde_json::json;
+use travmap::method::features::FEATURE_COUNT;
+use travmap::outputs::dataset::read_training_rows;
+use travmap::outputs::writing::write_atomically;
+use travmap::training::crossval::collect_training_set;
+use travmap::training::{TrainingSet, train as train_model};
+
+use super::{Inputs, Outcome, frame_count, outcome};
+
+/// Train the SVM (grid search over C and gamma, spatially-blocked CV).
+#[derive(Args)]
+pub struct TrainArgs {
+    #[command(flatten)]
+    inputs: Inputs,
+    /// Where to write the model (JSON).
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+pub fn train(args: TrainArgs) -> Result<Outcome> {
+    let config = &args.inputs.settings.load()?;
+    let output = args.inputs.output;
+    let model_path = args.output.as_path();
+    // Cell datasets (`travmap dataset`) join the cells of the drives given.
+    let (datasets, drives): (Vec<PathBuf>, Vec<PathBuf>) = args
+        .inputs
+        .sequences
+        .iter()
+        .cloned()
+        .partition(|path| path.extension().is_some_and(|e| e == "parquet"));
+    let selections = if drives.is_empty() {
+        Vec::new()
+    } else {
+        args.inputs.open_paths(&drives, config.appearance.enabled)?
+    };
+    let mut set = if selections.is_empty() {
+        TrainingSet {
+            dimension: FEATURE_COUNT,
+            ..Default::default()
+        }
+    } else {
+        let bar = output.progress(frame_count(&selections), "collecting cells");
+        let set = collect_training_set(&selections, config, &mut || bar.inc(1))?;
+        bar.finish_and_clear();
+        set
+    };
+    for path in &datasets {
+        let rows = read_training_rows(path, config, &mut set)?;
+        set.sources
+            .push(format!("{} ({rows} labelled cells)", path.display()));
+    }
+    if set.is_empty() {
+        bail!(
+            "no labelled cells in {}",
+            datasets
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let searches =
+        config.training.c_values.len() * config.training.gamma_values.len() * config.training.folds
+            + 1;
+    let bar = output.progress(searches as u64, "grid search + final fit");
+    let model = train_model(&set, config, &|done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })?;
+    bar.finish_and_clear();
+    write_atomically(model_path, &model.to_json())?;
+    let best = model
+        .training
+        .search
+        .iter()
+        .find(|r| r.c == model.c && r.gamma == model.gamma)
+        .copied();
+    if output.json {
+        let doc = json!({
+            "model": model_path,
+            "sha256": model.sha256_hex(),
+            "config": config,
+            "cells": set.len(),
+            "training": model.training,
+            "support_vectors": model.support_vector_count(),
+            "c": model.c,
+            "gamma": model.gamma,
+            "hybrid": model.hybrid.as_ref().map(|h| json!({
+                "samples": h.training.samples,
+                "support_vectors": h.support_vector_count(),
+                "c": h.c,
+                "gamma": h.gamma,
+                "search": h.training.search,
+            })),
+        });
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else if !output.quiet {
+        println!(
+            "trained on {} cells ({} traversable) from {}",
+            model.training.samples,
+            model.training.traversable_samples,
+            model.training.sources.join("; ")
+        );
+        if model.training.samples < set.len() {
+            println!(
+                "  a seeded random {} of the {} cells (training.max_fit_samples)",
+                model.training.samples,
+                set.len()
+            );
+        }
+        println!(
+            "grid search (spatially-blocked {}-fold CV accuracy, cells before filtering):",
+            config.training.folds
+        );
+        for r in &model.training.search {
+            println!(
+                "  C {:>8} gamma {:>8}  {:.1} %",
+                r.c,
+                r.gamma,
+                100.0 * r.accuracy
+            );
+        }
+        println!(
+            "chosen C {} gamma {} (CV accuracy {:.1} %): {} support vectors, {} solver iterations, {:.1} s",
+            model.c,
+            model.gamma,
+            100.0 * best.map_or(0.0, |b| b.accuracy),
+            model.support_vector_count(),
+            model.training.solver_iterations,
+            model.training.seconds
+        );
+        match &model.hybrid {
+            Some(h) => println!(
+                "hybrid model (geometry + appearance) on the {} cells a camera saw: C {} gamma {}, {} support vectors",
+                h.training.samples,
+                h.c,
+                h.gamma,
+                h.support_vector_count()
+            ),
+            None => println!("no hybrid model: no labelled cell was seen by a camera"),
+        }
+        println!("wrote {}", model_path.display());
+    }
+    Ok(outcome(&selections))
+}
+

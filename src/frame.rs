@@ -1,0 +1,81 @@
+//! What the readers produce and the method consumes: a [`Frame`] (one LiDAR scan
+//! with its pose, stamp, labels) and its [`CameraImage`]. Nothing here reads a file.
+
+use nalgebra::{Isometry3, Matrix3, Matrix3x4, Matrix4};
+
+/// One LiDAR scan with everything the method needs about it.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// Frame number in its sequence (the file stem).
+    pub index: usize,
+    /// Time since the start of the sequence, nanoseconds.
+    pub stamp_ns: u64,
+    /// Sensor pose: maps velodyne coordinates to the z-up world frame.
+    pub world_from_velodyne: Isometry3<f64>,
+    /// x, y, z (metres) and remission per point, in the velodyne frame.
+    pub points_in_velodyne: Vec<[f32; 4]>,
+    /// SemanticKITTI label per point (lower 16 bits class, upper 16 instance).
+    pub labels: Option<Vec<u32>>,
+    /// The colour camera's image of this frame, when the input has one.
+    pub camera: Option<CameraImage>,
+    /// Points the reader dropped for a non-finite coordinate (MCAP clouds with
+    /// `is_dense` false; a KITTI scan with one is an error instead).
+    pub dropped_points: usize,
+}
+
+/// A decoded 8-bit RGB image, row-major.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RgbImage {
+    pub width: u32,
+    pub height: u32,
+    pub rgb: Vec<u8>,
+}
+
+/// The colour camera of a frame and its image.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CameraImage {
+    /// `P2 * Tr`: homogeneous velodyne coordinates to homogeneous pixels.
+    pub image_from_velodyne: Matrix3x4<f64>,
+    pub image: RgbImage,
+}
+
+impl CameraImage {
+    pub fn new(
+        projection: &Matrix4<f64>,
+        cam0_from_velodyne: &Matrix4<f64>,
+        image: RgbImage,
+    ) -> Self {
+        let p = projection * cam0_from_velodyne;
+        Self {
+            image_from_velodyne: p.fixed_view::<3, 4>(0, 0).into_owned(),
+            image,
+        }
+    }
+
+    /// From intrinsics K and the camera's pose: `K [R | t]` with `[R | t]` =
+    /// `camera_from_velodyne`.
+    pub fn from_intrinsics(
+        k: &Matrix3<f64>,
+        camera_from_velodyne: &Isometry3<f64>,
+        image: RgbImage,
+    ) -> Self {
+        let extrinsics: Matrix3x4<f64> = camera_from_velodyne
+            .to_homogeneous()
+            .fixed_view::<3, 4>(0, 0)
+            .into_owned();
+        Self {
+            image_from_velodyne: k * extrinsics,
+            image,
+        }
+    }
+
+    /// Pixel coordinates (x right, y down; pixel (i, j) spans [i, i+1) x [j, j+1)) of a
+    /// velodyne point, None behind (or within 1 mm of) the camera plane.
+    pub fn project(&self, p: [f64; 3]) -> Option<[f64; 2]> {
+        let m = &self.image_from_velodyne;
+        let row = |r: usize| m[(r, 0)] * p[0] + m[(r, 1)] * p[1] + m[(r, 2)] * p[2] + m[(r, 3)];
+        let w = row(2);
+        (w > 1e-3).then(|| [row(0) / w, row(1) / w])
+    }
+}
+

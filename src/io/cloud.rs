@@ -1,0 +1,121 @@
+//! `sensor_msgs/PointCloud2` payloads into flat point arrays: any field layout,
+//! either byte order, every length checked against the data before anything is
+//! reserved.
+
+use crate::io::ros::{PointCloud2, PointField, datatype};
+
+/// Reads one numeric value of a field as f64.
+fn read_value(bytes: &[u8], datatype_id: u8, big_endian: bool) -> f64 {
+    macro_rules! get {
+        ($t:ty, $n:literal) => {{
+            let mut raw = [0u8; $n];
+            raw.copy_from_slice(&bytes[..$n]);
+            if big_endian {
+                <$t>::from_be_bytes(raw) as f64
+            } else {
+                <$t>::from_le_bytes(raw) as f64
+            }
+        }};
+    }
+    match datatype_id {
+        datatype::INT8 => bytes[0] as i8 as f64,
+        datatype::UINT8 => bytes[0] as f64,
+        datatype::INT16 => get!(i16, 2),
+        datatype::UINT16 => get!(u16, 2),
+        datatype::INT32 => get!(i32, 4),
+        datatype::UINT32 => get!(u32, 4),
+        datatype::FLOAT32 => get!(f32, 4),
+        _ => get!(f64, 8),
+    }
+}
+
+/// The points of a cloud as the method reads them.
+pub struct CloudPoints {
+    /// x, y, z, intensity (0 without an intensity field).
+    pub points: Vec<[f32; 4]>,
+    /// The `label` field, when present.
+    pub labels: Option<Vec<u32>>,
+    /// Points dropped for a non-finite coordinate.
+    pub dropped: usize,
+}
+
+/// Reads x, y, z, intensity and label; points with a non-finite coordinate are dropped.
+pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
+    let field = |names: &[&str]| {
+        cloud
+            .fields
+            .iter()
+            .find(|f| names.contains(&f.name.as_str()))
+    };
+    let checked = |name: &str, f: &PointField| -> Result<(usize, u8), String> {
+        let size = datatype::size(f.datatype)
+            .ok_or_else(|| format!("field `{name}` has unknown datatype {}", f.datatype))?;
+        if f.offset as usize + size > cloud.point_step as usize {
+            return Err(format!(
+                "field `{name}` (offset {}, {size} bytes) lies outside point_step {}",
+                f.offset, cloud.point_step
+            ));
+        }
+        Ok((f.offset as usize, f.datatype))
+    };
+    let mut xyz = Vec::new();
+    for name in ["x", "y", "z"] {
+        let f = field(&[name]).ok_or_else(|| {
+            format!(
+                "no `{name}` field (fields: {:?})",
+                cloud.fields.iter().map(|f| &f.name).collect::<Vec<_>>()
+            )
+        })?;
+        xyz.push(checked(name, f)?);
+    }
+    let intensity = field(&["intensity", "remission", "i"])
+        .map(|f| checked("intensity", f))
+        .transpose()?;
+    let label = field(&["label"]).map(|f| checked("label", f)).transpose()?;
+    let (width, height) = (cloud.width as usize, cloud.height as usize);
+    let (step, row_step) = (cloud.point_step as usize, cloud.row_step as usize);
+    // In u128: four u32 header fields multiplied and added can pass 2^64.
+    let row_bytes = width as u128 * step as u128;
+    let needed = if height == 0 || width == 0 {
+        0
+    } else {
+        (height as u128 - 1) * row_step as u128 + row_bytes
+    };
+    if (row_step as u128) < row_bytes || (cloud.data.len() as u128) < needed {
+        return Err(format!(
+            "data holds {} bytes; width {width} x height {height} with point_step {step} and row_step {row_step} need {needed}",
+            cloud.data.len()
+        ));
+    }
+    let mut points = Vec::with_capacity(width * height);
+    let mut labels = label.map(|_| Vec::with_capacity(width * height));
+    let mut dropped = 0;
+    let big = cloud.is_bigendian;
+    for row in 0..height {
+        for col in 0..width {
+            let at = row * row_step + col * step;
+            let point = &cloud.data[at..at + step];
+            let value =
+                |(offset, datatype_id): (usize, u8)| read_value(&point[offset..], datatype_id, big);
+            let (x, y, z) = (value(xyz[0]), value(xyz[1]), value(xyz[2]));
+            if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                dropped += 1;
+                continue;
+            }
+            points.push([
+                x as f32,
+                y as f32,
+                z as f32,
+                intensity.map_or(0.0, value) as f32,
+            ]);
+            if let (Some(labels), Some(field)) = (labels.as_mut(), label) {
+                labels.push(value(field) as u32);
+            }
+        }
+    }
+    Ok(CloudPoints {
+        points,
+        labels,
+        dropped,
+    })
+}

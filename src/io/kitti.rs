@@ -1,0 +1,593 @@
+//! KITTI odometry / SemanticKITTI sequence directories (METHOD.md section 1):
+//! `velodyne/NNNNNN.bin`, optional `labels/NNNNNN.label` and `image_2/NNNNNN.png`,
+//! `calib.txt`, `poses.txt`, `times.txt`. Output: per frame the scan in the velodyne
+//! frame, its labels, its camera image, its stamp and `world_from_velodyne`, where
+//! `world` is the first scan's z-up velodyne frame. Every malformed input is an
+//! [`Error`] naming the file.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Isometry3, Matrix3, Matrix4};
+
+use super::SkipLog;
+use super::image::decode_png;
+use crate::error::{Error, Result};
+use crate::frame::{CameraImage, Frame, RgbImage};
+use crate::geometry::rigid;
+
+/// KITTI calibration: the camera projections and velodyne -> cam0.
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    /// `P0..P3` as 4x4 with a last row 0 0 0 1; `None` where calib.txt lacks them.
+    pub projections: [Option<Matrix4<f64>>; 4],
+    /// `Tr`: maps velodyne coordinates to cam0 coordinates.
+    pub cam0_from_velodyne: Matrix4<f64>,
+}
+
+impl Calibration {
+    /// The rigid velodyne -> camera_0 pose (`inv(Tr)`), as `/tf_static` carries it.
+    pub fn velodyne_from_camera_0(&self) -> Isometry3<f64> {
+        // Tr is checked invertible when the file is read.
+        rigid(
+            &self
+                .cam0_from_velodyne
+                .try_inverse()
+                .unwrap_or_else(Matrix4::identity),
+        )
+    }
+
+    /// The colour camera: its intrinsics K (P2's left 3x3) and camera_0 -> camera_2,
+    /// the baseline `t` of `P2 = K [I | t]`. None without P2.
+    pub fn camera_2(&self) -> Option<(Matrix3<f64>, Isometry3<f64>)> {
+        let p2 = self.projections[2]?;
+        let k: Matrix3<f64> = p2.fixed_view::<3, 3>(0, 0).into_owned();
+        // camera_2 coordinates are camera_0's plus t.
+        let t = [p2[(0, 3)] / p2[(0, 0)], p2[(1, 3)] / p2[(1, 1)], p2[(2, 3)]];
+        let camera_0_from_camera_2 = Isometry3::translation(-t[0], -t[1], -t[2]);
+        Some((k, camera_0_from_camera_2))
+    }
+
+    /// The colour camera as the appearance stage uses it, composed from the same
+    /// rigid transforms that `convert` writes to `/tf_static`.
+    pub fn camera_2_image(&self, image: RgbImage) -> Option<CameraImage> {
+        let (k, camera_0_from_camera_2) = self.camera_2()?;
+        let velodyne_from_camera_2 = self.velodyne_from_camera_0() * camera_0_from_camera_2;
+        Some(CameraImage::from_intrinsics(
+            &k,
+            &velodyne_from_camera_2.inverse(),
+            image,
+        ))
+    }
+}
+
+/// An opened sequence: calibration, poses and times are read at once, scans on demand.
+#[derive(Clone, Debug)]
+pub struct KittiSequence {
+    dir: PathBuf,
+    calibration: Calibration,
+    /// `pose_i` of poses.txt: cam0 of frame i in the first cam0 frame.
+    first_cam0_from_cam0: Vec<Matrix4<f64>>,
+    stamps_ns: Vec<u64>,
+    /// Frame numbers that have a `velodyne/NNNNNN.bin`, ascending.
+    frames: Vec<usize>,
+    /// Decode `image_2` PNGs into frames (when P2 is known).
+    read_images: bool,
+    pub(super) skips: SkipLog,
+}
+
+impl KittiSequence {
+    /// Opens `dir`, a directory holding `velodyne/`, `calib.txt`, `poses.txt`, `times.txt`.
+    pub fn open(dir: &Path) -> Result<Self> {
+        if !dir.is_dir() {
+            return Err(Error::Sequence {
+                path: dir.to_path_buf(),
+                message: "not a directory; expected a KITTI sequence directory holding \
+                          velodyne/, calib.txt, poses.txt and times.txt"
+                    .into(),
+            });
+        }
+        let calibration = read_calibration(&dir.join("calib.txt"))?;
+        let first_cam0_from_cam0 = read_poses(&dir.join("poses.txt"))?;
+        let stamps_ns = read_times(&dir.join("times.txt"))?;
+        let frames = list_scans(&dir.join("velodyne"))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            calibration,
+            first_cam0_from_cam0,
+            stamps_ns,
+            frames,
+            read_images: true,
+            skips: SkipLog::default(),
+        })
+    }
+
+    /// What happens to frames whose files are unreadable.
+    pub fn skip_log(&self) -> &SkipLog {
+        &self.skips
+    }
+
+    /// Whether [`Self::read_frame`] decodes `image_2` (default true); decoding costs
+    /// more than the rest of the method, so it is skipped when appearance is off.
+    pub fn set_read_images(&mut self, read_images: bool) {
+        self.read_images = read_images;
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    pub fn calibration(&self) -> &Calibration {
+        &self.calibration
+    }
+
+    /// Frame numbers with a scan, ascending.
+    pub fn frames(&self) -> &[usize] {
+        &self.frames
+    }
+
+    /// Frame numbers with a scan inside `range`.
+    pub fn frames_in(&self, range: &Range<usize>) -> Vec<usize> {
+        self.frames
+            .iter()
+            .copied()
+            .filter(|f| range.contains(f))
+            .collect()
+    }
+
+    /// True when frame `index` has a label file.
+    pub fn has_labels(&self, index: usize) -> bool {
+        self.label_path(index).is_file()
+    }
+
+    /// `T_world_velo(i) = inv(Tr) * pose_i * Tr` (METHOD.md section 1): the pose file
+    /// holds cam0 poses, and the world is the first scan's velodyne frame, so that the
+    /// ground is the world x-y plane.
+    pub fn world_from_velodyne(&self, index: usize) -> Result<Isometry3<f64>> {
+        let pose = self
+            .first_cam0_from_cam0
+            .get(index)
+            .ok_or_else(|| Error::MissingPose {
+                path: self.dir.join("poses.txt"),
+                frame: index,
+                lines: self.first_cam0_from_cam0.len(),
+            })?;
+        let tr = self.calibration.cam0_from_velodyne;
+        let velodyne_from_cam0 = tr.try_inverse().ok_or_else(|| Error::Parse {
+            path: self.dir.join("calib.txt"),
+            line: 0,
+            message: "Tr is not invertible".into(),
+        })?;
+        Ok(rigid(&(velodyne_from_cam0 * pose * tr)))
+    }
+
+    pub fn stamp_ns(&self, index: usize) -> Result<u64> {
+        self.stamps_ns
+            .get(index)
+            .copied()
+            .ok_or_else(|| Error::MissingTime {
+                path: self.dir.join("times.txt"),
+                frame: index,
+                lines: self.stamps_ns.len(),
+            })
+    }
+
+    /// Reads frame `index`: scan, labels when present, pose and stamp.
+    pub fn read_frame(&self, index: usize) -> Result<Frame> {
+        let scan_path = self.scan_path(index);
+        let mut points_in_velodyne = read_scan(&scan_path)?;
+        let label_path = self.label_path(index);
+        let mut labels = if label_path.is_file() {
+            Some(read_labels(
+                &label_path,
+                &scan_path,
+                points_in_velodyne.len(),
+            )?)
+        } else {
+            None
+        };
+        let dropped_points = drop_non_finite(&mut points_in_velodyne, labels.as_mut());
+        let camera = match (self.read_images, self.image_path(index)) {
+            (true, Some(_)) if self.calibration.projections[2].is_none() => {
+                return Err(Error::MissingCalibration {
+                    path: self.dir.join("calib.txt"),
+                    key: "P2",
+                    hint: " for the images in image_2/ (--set appearance.enabled=false ignores them)",
+                });
+            }
+            (true, Some(path)) => {
+                let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+                self.calibration.camera_2_image(decode_png(&bytes, &path)?)
+            }
+            _ => None,
+        };
+        Ok(Frame {
+            index,
+            stamp_ns: self.stamp_ns(index)?,
+            world_from_velodyne: self.world_from_velodyne(index)?,
+            points_in_velodyne,
+            labels,
+            camera,
+            dropped_points,
+        })
+    }
+
+    /// `image_2/NNNNNN.png` of frame `index`, when it exists.
+    pub fn image_path(&self, index: usize) -> Option<PathBuf> {
+        let path = self.dir.join("image_2").join(format!("{index:06}.png"));
+        path.is_file().then_some(path)
+    }
+
+    fn scan_path(&self, index: usize) -> PathBuf {
+        self.dir.join("velodyne").join(format!("{index:06}.bin"))
+    }
+
+    fn label_path(&self, index: usize) -> PathBuf {
+        self.dir.join("labels").join(format!("{index:06}.label"))
+    }
+}
+
+/// Reads a KITTI `.bin` scan: little-endian float32 x, y, z, remission per point.
+/// Every point is kept, non-finite ones too, so that labels still line up.
+pub fn read_scan(path: &Path) -> Result<Vec<[f32; 4]>> {
+    parse_scan(&std::fs::read(path).map_err(|e| Error::io(path, e))?, path)
+}
+
+/// [`read_scan`] on the file's bytes; `path` names it in errors.
+pub fn parse_scan(bytes: &[u8], path: &Path) -> Result<Vec<[f32; 4]>> {
+    if !bytes.len().is_multiple_of(16) {
+        return Err(Error::RecordSize {
+            path: path.to_path_buf(),
+            size_bytes: bytes.len() as u64,
+            record_bytes: 16,
+            what: "float32 x, y, z, remission per point",
+        });
+    }
+    Ok(bytes
+        .chunks_exact(16)
+        .map(|record| {
+            let value = |k: usize| {
+                f32::from_le_bytes([
+                    record[4 * k],
+                    record[4 * k + 1],
+                    record[4 * k + 2],
+                    record[4 * k + 3],
+                ])
+            };
+            [value(0), value(1), value(2), value(3)]
+        })
+        .collect())
+}
+
+/// Removes the points with a NaN or infinite coordinate, and their labels, so that
+/// one bad return costs one point, not the frame. Returns how many were removed.
+pub fn drop_non_finite(points: &mut Vec<[f32; 4]>, labels: Option<&mut Vec<u32>>) -> usize {
+    let finite = |p: &[f32; 4]| p[0].is_finite() && p[1].is_finite() && p[2].is_finite();
+    if let Some(labels) = labels {
+        let mut index = 0;
+        labels.retain(|_| {
+            index += 1;
+            finite(&points[index - 1])
+        });
+    }
+    let before = points.len();
+    points.retain(finite);
+    before - points.len()
+}
+
+/// Reads a SemanticKITTI `.label` file (uint32 per point) and checks its count.
+pub fn read_labels(path: &Path, scan_path: &Path, points: usize) -> Result<Vec<u32>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_labels(&bytes, path, scan_path, points)
+}
+
+/// [`read_labels`] on the file's bytes; `path` names it in errors.
+pub fn parse_labels(
+    bytes: &[u8],
+    path: &Path,
+    scan_path: &Path,
+    points: usize,
+) -> Result<Vec<u32>> {
+    if !bytes.len().is_multiple_of(4) {
+        return Err(Error::RecordSize {
+            path: path.to_path_buf(),
+            size_bytes: bytes.len() as u64,
+            record_bytes: 4,
+            what: "uint32 label per point",
+        });
+    }
+    let labels: Vec<u32> = bytes
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    if labels.len() != points {
+        return Err(Error::LabelCount {
+            path: path.to_path_buf(),
+            scan: scan_path.to_path_buf(),
+            labels: labels.len(),
+            points,
+        });
+    }
+    Ok(labels)
+}
+
+fn read_text(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
+}
+
+/// Parses whitespace-separated numbers of one line, naming the file and line on failure.
+fn parse_numbers(path: &Path, line_no: usize, text: &str) -> Result<Vec<f64>> {
+    text.split_whitespace()
+        .map(|token| {
+            let value: f64 = token
+                .parse()
+                .map_err(|_| Error::parse(path, line_no, format!("`{token}` is not a number")))?;
+            if value.is_finite() {
+                Ok(value)
+            } else {
+                Err(Error::parse(
+                    path,
+                    line_no,
+                    format!("`{token}` is not finite"),
+                ))
+            }
+        })
+        .collect()
+}
+
+/// KITTI's matrices carry about seven digits; a rotation block further than this
+/// from orthonormal is not a rotation written out, but a corrupt file.
+const ORTHONORMALITY_TOLERANCE: f64 = 1e-3;
+
+/// Errors unless `m` is a rotation and a translation.
+fn check_rigid(path: &Path, line_no: usize, what: &str, m: &Matrix4<f64>) -> Result<()> {
+    let error = crate::geometry::orthonormality_error(m);
+    if error <= ORTHONORMALITY_TOLERANCE {
+        Ok(())
+    } else {
+        Err(Error::parse(
+            path,
+            line_no,
+            format!(
+                "{what} is not a rigid transform: its 3x3 block R is {error:.3e} from R^T R = I (tolerance {ORTHONORMALITY_TOLERANCE:e})"
+            ),
+        ))
+    }
+}
+
+/// A 3x4 row-major matrix of 12 numbers as a 4x4 with last row 0 0 0 1.
+fn matrix_3x4(path: &Path, line_no: usize, values: &[f64]) -> Result<Matrix4<f64>> {
+    if values.len() != 12 {
+        return Err(Error::parse(
+            path,
+            line_no,
+            format!("expected 12 numbers (a 3x4 matrix), found {}", values.len()),
+        ));
+    }
+    let mut m = Matrix4::identity();
+    for r in 0..3 {
+        for c in 0..4 {
+            m[(r, c)] = values[4 * r + c];
+        }
+    }
+    Ok(m)
+}
+
+/// Reads `calib.txt`: `KEY: numbers` lines. The odometry format has `Tr` (velodyne
+/// -> rectified cam0); the object format has `R0_rect` (9 numbers) and
+/// `Tr_velo_to_cam`, and then `Tr = R0_rect * Tr_velo_to_cam`. `P0..P3` are optional.
+pub fn read_calibration(path: &Path) -> Result<Calibration> {
+    parse_calibration(&read_text(path)?, path)
+}
+
+/// [`read_calibration`] on the file's text; `path` names it in errors.
+pub fn parse_calibration(text: &str, path: &Path) -> Result<Calibration> {
+    let mut projections = [None; 4];
+    let (mut tr, mut rectification, mut velo_to_cam) = (None, None, None);
+    for (i, line) in text.lines().enumerate() {
+        let line_no = i + 1;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let (key, rest) = line
+            .split_once(':')
+            .ok_or_else(|| Error::parse(path, line_no, "expected `KEY: numbers`"))?;
+        let slot = match key.trim() {
+            "P0" => &mut projections[0],
+            "P1" => &mut projections[1],
+            "P2" => &mut projections[2],
+            "P3" => &mut projections[3],
+            "Tr" => &mut tr,
+            "Tr_velo_to_cam" => &mut velo_to_cam,
+            "R0_rect" => {
+                let values = parse_numbers(path, line_no, rest)?;
+                if values.len() != 9 {
+                    return Err(Error::parse(
+                        path,
+                        line_no,
+                        format!("expected 9 numbers (a 3x3 matrix), found {}", values.len()),
+                    ));
+                }
+                let mut r = Matrix4::identity();
+                for (k, v) in values.iter().enumerate() {
+                    r[(k / 3, k % 3)] = *v;
+                }
+                rectification = Some(r);
+                continue;
+            }
+            // Other keys (e.g. Tr_imu_to_velo) are not used by the method.
+            _ => continue,
+        };
+        let values = parse_numbers(path, line_no, rest)?;
+        *slot = Some(matrix_3x4(path, line_no, &values)?);
+    }
+    let cam0_from_velodyne = match (tr, rectification, velo_to_cam) {
+        (Some(tr), _, _) => tr,
+        (None, Some(r), Some(v)) => r * v,
+        _ => {
+            return Err(Error::MissingCalibration {
+                path: path.to_path_buf(),
+                key: "Tr",
+                hint: " (or, in the object format, R0_rect and Tr_velo_to_cam)",
+            });
+        }
+    };
+    check_rigid(path, 0, "Tr", &cam0_from_velodyne)?;
+    Ok(Calibration {
+        projections,
+        cam0_from_velodyne,
+    })
+}
+
+/// Reads `poses.txt`: one 3x4 row-major cam0 pose per line, line N+1 for frame N.
+pub fn read_poses(path: &Path) -> Result<Vec<Matrix4<f64>>> {
+    parse_poses(&read_text(path)?, path)
+}
+
+/// [`read_poses`] on the file's text; `path` names it in errors.
+pub fn parse_poses(text: &str, path: &Path) -> Result<Vec<Matrix4<f64>>> {
+    text.lines()
+        .enumerate()
+        .filter(|(_, line)| !line.trim().is_empty())
+        .map(|(i, line)| {
+            let values = parse_numbers(path, i + 1, line)?;
+            let pose = matrix_3x4(path, i + 1, &values)?;
+            check_rigid(path, i + 1, "the pose", &pose)?;
+            Ok(pose)
+        })
+        .collect()
+}
+
+/// Reads `times.txt`: seconds since the sequence start, one per line, increasing.
+pub fn read_times(path: &Path) -> Result<Vec<u64>> {
+    parse_times(&read_text(path)?, path)
+}
+
+/// [`read_times`] on the file's text; `path` names it in errors.
+pub fn parse_times(text: &str, path: &Path) -> Result<Vec<u64>> {
+    let mut stamps_ns: Vec<u64> = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let seconds: f64 = line
+            .parse()
+            .map_err(|_| Error::parse(path, i + 1, format!("`{line}` is not a number")))?;
+        if !(seconds.is_finite() && seconds >= 0.0) {
+            return Err(Error::parse(
+                path,
+                i + 1,
+                format!("`{line}`: expected finite seconds >= 0"),
+            ));
+        }
+        let stamp_ns = (seconds * 1e9).round() as u64;
+        if stamps_ns.last().is_some_and(|&last| stamp_ns <= last) {
+            return Err(Error::parse(
+                path,
+                i + 1,
+                "times must increase strictly from line to line",
+            ));
+        }
+        stamps_ns.push(stamp_ns);
+    }
+    Ok(stamps_ns)
+}
+
+/// Frame numbers of the `NNNNNN.bin` files in `velodyne_dir`, ascending.
+fn list_scans(velodyne_dir: &Path) -> Result<Vec<usize>> {
+    let entries = std::fs::read_dir(velodyne_dir).map_err(|e| Error::io(velodyne_dir, e))?;
+    let mut frames = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| Error::io(velodyne_dir, e))?;
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if let Some(stem) = name.strip_suffix(".bin")
+            && let Ok(index) = stem.parse::<usize>()
+        {
+            frames.push(index);
+        }
+    }
+    if frames.is_empty() {
+        return Err(Error::Sequence {
+            path: velodyne_dir.to_path_buf(),
+            message: "no NNNNNN.bin scans".into(),
+        });
+    }
+    frames.sort_unstable();
+    Ok(frames)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        path
+    }
+
+    #[test]
+    fn scan_size_must_be_a_multiple_of_16() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "a.bin", &[0u8; 20]);
+        let err = read_scan(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("a.bin") && err.contains("20 bytes") && err.contains("16"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn non_finite_points_are_dropped_with_their_labels() {
+        let mut points = vec![
+            [1.0, 2.0, 3.0, 0.5],
+            [1.0, f32::NAN, 3.0, 0.5],
+            [4.0, 5.0, 6.0, 0.5],
+            [f32::INFINITY, 0.0, 0.0, 0.5],
+            // A NaN remission is harmless: the method never reads it.
+            [7.0, 8.0, 9.0, f32::NAN],
+        ];
+        let mut labels = vec![10, 11, 12, 13, 14];
+        assert_eq!(drop_non_finite(&mut points, Some(&mut labels)), 2);
+        assert_eq!(labels, [10, 12, 14]);
+        assert_eq!(points[1], [4.0, 5.0, 6.0, 0.5]);
+        assert_eq!(points.len(), 3);
+    }
+
+    #[test]
+    fn label_count_must_match_point_count() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "a.label", &[0u8; 12]);
+        let err = read_labels(&path, Path::new("a.bin"), 4)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("3 labels for 4 points"), "{err}");
+    }
+
+    #[test]
+    fn calibration_without_tr_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = "P0: 1 0 0 0 0 1 0 0 0 0 1 0\n";
+        let path = write(dir.path(), "calib.txt", p.as_bytes());
+        let err = read_calibration(&path).unwrap_err().to_string();
+        assert!(err.contains("calib.txt") && err.contains("`Tr:`"), "{err}");
+        let path = write(dir.path(), "calib.txt", b"Tr: 1 0 0\n");
+        let err = read_calibration(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("calib.txt:1") && err.contains("found 3"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn times_must_increase() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "times.txt", b"0.0\n0.1\n0.1\n");
+        let err = read_times(&path).unwrap_err().to_string();
+        assert!(err.contains("times.txt:3"), "{err}");
+        let path = write(dir.path(), "times.txt", b"0.0\n1.037359e-01\n");
+        assert_eq!(read_times(&path).unwrap(), vec![0, 103_735_900]);
+    }
+}

@@ -1,0 +1,140 @@
+//! Stage 0, reading: a drive into [`Frame`]s (METHOD.md section 1). A [`Source`] is
+//! a KITTI odometry / SemanticKITTI sequence directory ([`kitti`]) or a ROS 2 MCAP
+//! file ([`mcap_drive`]); [`ros`] holds the ROS 2 message types, [`cloud`] and
+//! [`image`] decode their payloads. Nothing here knows the method.
+
+pub mod cloud;
+pub mod image;
+pub mod kitti;
+pub mod mcap_drive;
+mod mcap_records;
+pub mod ros;
+
+use std::ops::Range;
+use std::path::Path;
+
+use crate::error::{Error, Result};
+use crate::frame::Frame;
+pub use kitti::KittiSequence;
+
+/// A frame left out because its input was unreadable (`--keep-going`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Skip {
+    pub frame: usize,
+    pub reason: String,
+}
+
+/// Whether a frame whose input is unreadable stops the run (the default) or is
+/// skipped and recorded, and the record.
+#[derive(Clone, Debug, Default)]
+pub struct SkipLog {
+    keep_going: bool,
+    skipped: std::sync::Arc<std::sync::Mutex<Vec<Skip>>>,
+}
+
+impl SkipLog {
+    /// Records `error` for `frame` when keeping going, else returns it.
+    pub fn handle(&self, frame: usize, error: Error) -> Result<()> {
+        if !self.keep_going {
+            return Err(error);
+        }
+        let reason = error.to_string();
+        if let Ok(mut skipped) = self.skipped.lock()
+            && !skipped
+                .iter()
+                .any(|s| s.frame == frame && s.reason == reason)
+        {
+            // Passes over the same input (passthrough, then the method) report a frame once.
+            skipped.push(Skip { frame, reason });
+        }
+        Ok(())
+    }
+
+    pub fn skipped(&self) -> Vec<Skip> {
+        self.skipped.lock().map(|s| s.clone()).unwrap_or_default()
+    }
+}
+
+/// A drive to read: a KITTI sequence directory or an MCAP file.
+pub enum Source {
+    Kitti(Box<KittiSequence>),
+    Mcap(Box<mcap_drive::McapDrive>),
+}
+
+impl Source {
+    /// A directory is a KITTI sequence, a file an MCAP drive.
+    pub fn open(path: &Path, options: &mcap_drive::DriveOptions) -> Result<Self> {
+        if path.is_file() {
+            Ok(Source::Mcap(Box::new(mcap_drive::McapDrive::open(
+                path, options,
+            )?)))
+        } else {
+            Ok(Source::Kitti(Box::new(KittiSequence::open(path)?)))
+        }
+    }
+
+    /// See [`KittiSequence::set_read_images`].
+    pub fn set_read_images(&mut self, read_images: bool) {
+        if let Source::Kitti(sequence) = self {
+            sequence.set_read_images(read_images);
+        }
+    }
+
+    /// Skip (and record) frames whose input is unreadable instead of stopping.
+    pub fn set_keep_going(&mut self, keep_going: bool) {
+        let log = SkipLog {
+            keep_going,
+            skipped: Default::default(),
+        };
+        match self {
+            Source::Kitti(sequence) => sequence.skips = log,
+            Source::Mcap(drive) => drive.skips = log,
+        }
+    }
+
+    /// The frames skipped so far.
+    pub fn skipped(&self) -> Vec<Skip> {
+        match self {
+            Source::Kitti(sequence) => sequence.skips.skipped(),
+            Source::Mcap(drive) => drive.skips.skipped(),
+        }
+    }
+
+    pub fn path(&self) -> &Path {
+        match self {
+            Source::Kitti(s) => s.dir(),
+            Source::Mcap(d) => d.path(),
+        }
+    }
+
+    /// Frame numbers in `range`, ascending.
+    pub fn frames_in(&self, range: &Range<usize>) -> Vec<usize> {
+        match self {
+            Source::Kitti(s) => s.frames_in(range),
+            Source::Mcap(d) => {
+                (range.start.min(d.frame_count())..range.end.min(d.frame_count())).collect()
+            }
+        }
+    }
+
+    /// All frame numbers, ascending.
+    pub fn frames(&self) -> Vec<usize> {
+        self.frames_in(&(0..usize::MAX))
+    }
+
+    /// The frames in `range`, in order. With `--keep-going` (see
+    /// [`Source::set_keep_going`]) an unreadable frame is recorded and left out;
+    /// otherwise its error ends the run.
+    pub fn read<'a>(&'a self, range: &Range<usize>) -> Box<dyn Iterator<Item = Result<Frame>> + 'a> {
+        match self {
+            Source::Kitti(sequence) => Box::new(sequence.frames_in(range).into_iter().filter_map(
+                |index| match sequence.read_frame(index) {
+                    Ok(frame) => Some(Ok(frame)),
+                    Err(error) => sequence.skips.handle(index, error).err().map(Err),
+                },
+            )),
+            Source::Mcap(drive) => Box::new(drive.read(range)),
+        }
+    }
+}
+

@@ -1,0 +1,318 @@
+//! Stage 4, classification (METHOD.md section 6): an RBF-kernel SVM on standardised
+//! features, and its versioned model file.
+//!
+//! Input: a [`FeatureGrid`]. Output: one [`CellClass`] per cell. Prediction runs over
+//! a flat f32 support-vector matrix with precomputed squared norms and one reused
+//! buffer per grid, no allocation per cell. Training lives in [`training`], the
+//! solver in [`smo`].
+
+pub mod kernel;
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::Config;
+use crate::error::{Error, Result};
+use crate::method::features::{FEATURE_NAMES, FeatureGrid};
+use crate::method::grid::CellClass;
+
+/// How a model was trained, kept in the model file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrainingSummary {
+    /// The inputs and frames the cells came from.
+    pub sources: Vec<String>,
+    pub samples: usize,
+    pub traversable_samples: usize,
+    /// Spatially-blocked cross-validated accuracy (cells, before filtering) of
+    /// every (C, gamma) tried.
+    pub search: Vec<SearchResult>,
+    pub solver_iterations: usize,
+    pub solver_converged: bool,
+    pub seconds: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SearchResult {
+    pub c: f64,
+    pub gamma: f64,
+    pub accuracy: f64,
+}
+
+/// A smaller expansion `sum_j w_j K(c_j, x) + b` fitted by least squares to the exact
+/// decision function on training cells: prediction costs the centres' count instead
+/// of the support vectors'.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReducedSet {
+    /// Row-major `centres x dimension`, standardised.
+    pub centres: Vec<f32>,
+    pub weights: Vec<f32>,
+    pub bias: f32,
+    /// Share of the fitting cells on which its sign equals the exact model's.
+    pub training_agreement: f64,
+    blocks: kernel::SupportVectorBlocks,
+}
+
+impl ReducedSet {
+    pub fn new(centres: Vec<f32>, weights: Vec<f32>, bias: f32, training_agreement: f64) -> Self {
+        let d = if weights.is_empty() {
+            1
+        } else {
+            centres.len() / weights.len()
+        };
+        let blocks = kernel::SupportVectorBlocks::new(&centres, &weights, d);
+        Self {
+            centres,
+            weights,
+            bias,
+            training_agreement,
+            blocks,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.weights.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.weights.is_empty()
+    }
+}
+
+/// Reusable buffers of prediction, one per thread.
+#[derive(Default)]
+pub struct PredictionScratch {
+    standardised: Vec<f32>,
+    /// Geometric and appearance values side by side, for the hybrid model.
+    row: Vec<f32>,
+}
+
+/// A trained RBF SVM, ready to predict.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SvmModel {
+    pub feature_mean: Vec<f32>,
+    /// 1 / standard deviation per feature (1 for constant features).
+    pub feature_inverse_std: Vec<f32>,
+    pub c: f64,
+    pub gamma: f64,
+    pub rho: f32,
+    pub dual_coefficients: Vec<f32>,
+    /// Row-major `support_vector_count x dimension`.
+    pub support_vectors: Vec<f32>,
+    /// The support vectors again, laid out for fast prediction.
+    blocks: kernel::SupportVectorBlocks,
+    pub config: Config,
+    pub training: TrainingSummary,
+    /// Used by [`SvmModel::decision_value`] when present.
+    pub reduced_set: Option<ReducedSet>,
+    /// Classifies the cells that have appearance features (METHOD.md section 5's
+    /// Decision); this model classifies the others.
+    pub hybrid: Option<Box<SvmModel>>,
+}
+
+impl SvmModel {
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        feature_mean: Vec<f32>,
+        feature_inverse_std: Vec<f32>,
+        c: f64,
+        gamma: f64,
+        rho: f32,
+        dual_coefficients: Vec<f32>,
+        support_vectors: Vec<f32>,
+        config: Config,
+        training: TrainingSummary,
+    ) -> Self {
+        let d = feature_mean.len();
+        let blocks = kernel::SupportVectorBlocks::new(&support_vectors, &dual_coefficients, d);
+        Self {
+            feature_mean,
+            feature_inverse_std,
+            c,
+            gamma,
+            rho,
+            dual_coefficients,
+            support_vectors,
+            blocks,
+            config,
+            training,
+            reduced_set: None,
+            hybrid: None,
+        }
+    }
+
+    pub fn dimension(&self) -> usize {
+        self.feature_mean.len()
+    }
+
+    pub fn support_vector_count(&self) -> usize {
+        self.dual_coefficients.len()
+    }
+
+    /// Feature names: the geometric ones, plus the appearance ones for a hybrid model.
+    pub fn feature_names(&self) -> Vec<String> {
+        let mut names: Vec<String> = FEATURE_NAMES.iter().map(|n| n.to_string()).collect();
+        if self.dimension() > FEATURE_NAMES.len() {
+            names.extend(appearance_feature_names(&self.config.appearance));
+        }
+        names
+    }
+
+    /// Errors when `config` would compute features differently from the training cells.
+    pub fn check_compatible(&self, config: &Config) -> Result<()> {
+        let trained = &self.config;
+        let mismatch = if trained.grid.cell_size_m != config.grid.cell_size_m {
+            Some(format!(
+                "grid.cell_size_m = {} (model) vs {}",
+                trained.grid.cell_size_m, config.grid.cell_size_m
+            ))
+        } else if self.hybrid.is_some()
+            && trained.appearance != config.appearance
+            && config.appearance.enabled
+        {
+            Some(format!(
+                "appearance = {:?} (model) vs {:?}",
+                trained.appearance, config.appearance
+            ))
+        } else if trained.features != config.features {
+            Some(format!(
+                "features = {:?} (model) vs {:?}",
+                trained.features, config.features
+            ))
+        } else {
+            None
+        };
+        match mismatch {
+            Some(m) => Err(Error::Model {
+                source_name: "model".into(),
+                message: format!("trained with different feature settings: {m}"),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    pub fn scratch(&self) -> PredictionScratch {
+        PredictionScratch::default()
+    }
+
+    pub(crate) fn standardise<'s>(
+        &self,
+        features: &[f32],
+        scratch: &'s mut PredictionScratch,
+    ) -> &'s [f32] {
+        scratch.standardised.resize(self.dimension(), 0.0);
+        for (((z, &x), &m), &s) in scratch
+            .standardised
+            .iter_mut()
+            .zip(features)
+            .zip(&self.feature_mean)
+            .zip(&self.feature_inverse_std)
+        {
+            *z = (x - m) * s;
+        }
+        &scratch.standardised
+    }
+
+    /// Decision value of one raw (unstandardised) feature row; > 0 is traversable.
+    /// Uses the reduced set when the model has one.
+    pub fn decision_value(&self, features: &[f32], scratch: &mut PredictionScratch) -> f32 {
+        let gamma = self.gamma as f32;
+        let z = self.standardise(features, scratch);
+        match &self.reduced_set {
+            Some(reduced) => reduced.blocks.rbf_sum(z, gamma) + reduced.bias,
+            None => self.blocks.rbf_sum(z, gamma) - self.rho,
+        }
+    }
+
+    /// The decision value over every support vector, reduced set or not.
+    pub fn exact_decision_value(&self, features: &[f32], scratch: &mut PredictionScratch) -> f32 {
+        let z = self.standardise(features, scratch);
+        self.blocks.rbf_sum(z, self.gamma as f32) - self.rho
+    }
+
+    /// The decision value with or without the reduced set (`classifier.use_reduced_set`).
+    fn decision_value_using(
+        &self,
+        features: &[f32],
+        scratch: &mut PredictionScratch,
+        use_reduced_set: bool,
+    ) -> f32 {
+        if use_reduced_set {
+            self.decision_value(features, scratch)
+        } else {
+            self.exact_decision_value(features, scratch)
+        }
+    }
+
+    /// The class of one predictable cell: by the hybrid model when the cell has
+    /// appearance values and the model has one, else by the geometric model; each
+    /// by its reduced set when it has one and `use_reduced_set` says so.
+    pub fn classify_cell(
+        &self,
+        geometric: &[f32],
+        appearance: Option<&[f32]>,
+        scratch: &mut PredictionScratch,
+        use_reduced_set: bool,
+    ) -> CellClass {
+        let value = match (&self.hybrid, appearance) {
+            (Some(hybrid), Some(appearance)) => {
+                let mut row = std::mem::take(&mut scratch.row);
+                row.clear();
+                row.extend_from_slice(geometric);
+                row.extend_from_slice(appearance);
+                let value = hybrid.decision_value_using(&row, scratch, use_reduced_set);
+                scratch.row = row;
+                value
+            }
+            _ => self.decision_value_using(geometric, scratch, use_reduced_set),
+        };
+        if value > 0.0 {
+            CellClass::Traversable
+        } else {
+            CellClass::NonTraversable
+        }
+    }
+
+    /// Classifies every predictable cell of a grid; the others stay unknown.
+    pub fn classify(&self, grid: &FeatureGrid, use_reduced_set: bool) -> Vec<CellClass> {
+        let mut scratch = self.scratch();
+        (0..grid.predictable.len())
+            .map(|cell| {
+                if grid.predictable[cell] {
+                    self.classify_cell(
+                        grid.cell(cell),
+                        grid.appearance(cell),
+                        &mut scratch,
+                        use_reduced_set,
+                    )
+                } else {
+                    CellClass::Unknown
+                }
+            })
+            .collect()
+    }
+}
+
+/// Names of the appearance values: hue, saturation and value buckets.
+pub fn appearance_feature_names(config: &crate::config::AppearanceConfig) -> Vec<String> {
+    [
+        ("hue", config.hue_bins),
+        ("saturation", config.saturation_bins),
+        ("value", config.value_bins),
+    ]
+    .iter()
+    .flat_map(|&(prefix, n)| (0..n).map(move |i| format!("{prefix}_{i:02}")))
+    .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_model_for_other_cell_sizes_is_refused() {
+        let model = SvmModel::embedded_default().unwrap();
+        let mut config = Config::default();
+        config.grid.cell_size_m = 0.5;
+        config.features.subcell_size_m = 0.25;
+        assert!(model.check_compatible(&config).is_err());
+    }
+}

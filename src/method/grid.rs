@@ -1,0 +1,254 @@
+//! Stage 2, grid (METHOD.md section 3): the integrated points that fall in the square
+//! grid around the sensor, sorted by cell.
+//!
+//! Input: the window of [`WorldScan`]s and the sensor position. Output: [`CellPoints`],
+//! flat arrays in cell order (a counting sort, two passes, no per-cell allocation).
+//! The grid is axis-aligned with `world` and its corner is snapped to a multiple of
+//! the cell size, so a world cell keeps its identity from frame to frame.
+
+use crate::method::integration::WorldScan;
+
+/// The label of a cell, predicted or ground truth.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CellClass {
+    /// Too few points to predict (or no ground truth).
+    Unknown,
+    Traversable,
+    NonTraversable,
+}
+
+impl CellClass {
+    /// One character per cell for text pictures of a grid.
+    pub fn symbol(self) -> char {
+        match self {
+            CellClass::Unknown => ' ',
+            CellClass::Traversable => '.',
+            CellClass::NonTraversable => '#',
+        }
+    }
+
+    /// The `nav_msgs/OccupancyGrid` value of a cell: 0 free (traversable), 100
+    /// occupied, -1 unknown; also the cells of `run --json`.
+    pub fn occupancy(self) -> i8 {
+        match self {
+            CellClass::Unknown => -1,
+            CellClass::Traversable => 0,
+            CellClass::NonTraversable => 100,
+        }
+    }
+}
+
+/// Where the grid lies in the world.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GridLayout {
+    pub cell_size_m: f64,
+    pub cells_per_side: usize,
+    /// World cell key (`floor(x / r)`, `floor(y / r)`) of cell (col 0, row 0).
+    pub first_cell_key: [i64; 2],
+}
+
+impl GridLayout {
+    /// The grid of `cells_per_side` cells centred on `centre_in_world` (x, y); its
+    /// corner is a whole number of cells from the world origin.
+    pub fn centred_on(centre_in_world: [f64; 2], cell_size_m: f64, cells_per_side: usize) -> Self {
+        let half = (cells_per_side / 2) as i64;
+        let key = |v: f64| (v / cell_size_m).floor() as i64 - half;
+        Self {
+            cell_size_m,
+            cells_per_side,
+            first_cell_key: [key(centre_in_world[0]), key(centre_in_world[1])],
+        }
+    }
+
+    pub fn cell_count(&self) -> usize {
+        self.cells_per_side * self.cells_per_side
+    }
+
+    /// World x, y of the grid's min corner.
+    pub fn min_corner_in_world(&self) -> [f64; 2] {
+        self.first_cell_key.map(|k| k as f64 * self.cell_size_m)
+    }
+
+    /// Cell index (`row * cells_per_side + col`, col along world x) of a point
+    /// given relative to the min corner, or None outside the grid.
+    #[inline]
+    pub fn cell_of_local(&self, x_m: f64, y_m: f64) -> Option<usize> {
+        // Truncation is floor on the non-negative side, and unlike `floor` it stays
+        // an instruction on baseline x86-64 (no SSE4.1): this runs for every point.
+        let col = x_m / self.cell_size_m;
+        let row = y_m / self.cell_size_m;
+        let l = self.cells_per_side as f64;
+        if col >= 0.0 && row >= 0.0 && col < l && row < l {
+            Some(row as usize * self.cells_per_side + col as usize)
+        } else {
+            None
+        }
+    }
+
+    /// (col, row) of a cell index.
+    pub fn col_row(&self, cell: usize) -> (usize, usize) {
+        (cell % self.cells_per_side, cell / self.cells_per_side)
+    }
+
+    /// World cell key of a cell index: the cell's identity across frames.
+    pub fn world_key(&self, cell: usize) -> [i64; 2] {
+        let (col, row) = self.col_row(cell);
+        [
+            self.first_cell_key[0] + col as i64,
+            self.first_cell_key[1] + row as i64,
+        ]
+    }
+
+    /// World x, y of a cell's centre.
+    pub fn cell_centre_in_world(&self, cell: usize) -> [f64; 2] {
+        self.world_key(cell)
+            .map(|k| (k as f64 + 0.5) * self.cell_size_m)
+    }
+}
+
+/// The in-grid points of the integrated cloud, sorted by cell.
+#[derive(Clone, Debug)]
+pub struct CellPoints {
+    pub layout: GridLayout,
+    /// Cell `c` holds points `cell_start[c]..cell_start[c + 1]`.
+    pub cell_start: Vec<u32>,
+    /// x, y relative to the grid's min corner, z as in the world, metres.
+    pub points_in_grid: Vec<[f32; 3]>,
+    /// Distance of each point from the sensor origin of its own scan, metres.
+    pub range_m: Vec<f32>,
+    /// Per-point labels, present when every scan of the window has them.
+    pub labels: Option<Vec<u32>>,
+}
+
+impl CellPoints {
+    pub fn cell_range(&self, cell: usize) -> std::ops::Range<usize> {
+        self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize
+    }
+
+    pub fn point_count(&self, cell: usize) -> usize {
+        self.cell_range(cell).len()
+    }
+}
+
+/// Sorts the points of `scans` that fall inside `layout` into cells.
+pub fn grid_points(scans: &[WorldScan], layout: GridLayout) -> CellPoints {
+    let [min_x, min_y] = layout.min_corner_in_world();
+    let cell_count = layout.cell_count();
+
+    // Pass 1: the cell of every in-grid point, and the count per cell.
+    let mut in_grid: Vec<(u32, u32, u32)> = Vec::new(); // (cell, scan, point)
+    let mut counts = vec![0u32; cell_count];
+    for (s, scan) in scans.iter().enumerate() {
+        for (i, p) in scan.points_in_world.iter().enumerate() {
+            if let Some(cell) = layout.cell_of_local(p[0] as f64 - min_x, p[1] as f64 - min_y) {
+                counts[cell] += 1;
+                in_grid.push((cell as u32, s as u32, i as u32));
+            }
+        }
+    }
+    let mut cell_start = vec![0u32; cell_count + 1];
+    for c in 0..cell_count {
+        cell_start[c + 1] = cell_start[c] + counts[c];
+    }
+
+    // Pass 2: scatter the in-grid points into cell order.
+    let with_labels = scans.iter().all(|s| s.labels.is_some());
+    let mut points_in_grid = vec![[0f32; 3]; in_grid.len()];
+    let mut range_m = vec![0f32; in_grid.len()];
+    let mut labels = if with_labels {
+        vec![0u32; in_grid.len()]
+    } else {
+        Vec::new()
+    };
+    let mut next = cell_start.clone();
+    for &(cell, s, i) in &in_grid {
+        let (scan, i) = (&scans[s as usize], i as usize);
+        let at = next[cell as usize] as usize;
+        next[cell as usize] += 1;
+        let p = scan.points_in_world[i];
+        let o = scan.origin_in_world;
+        let (x, y, z) = (p[0] as f64, p[1] as f64, p[2] as f64);
+        points_in_grid[at] = [(x - min_x) as f32, (y - min_y) as f32, p[2]];
+        range_m[at] = ((x - o[0]).powi(2) + (y - o[1]).powi(2) + (z - o[2]).powi(2)).sqrt() as f32;
+        if with_labels && let Some(scan_labels) = &scan.labels {
+            labels[at] = scan_labels[i];
+        }
+    }
+    CellPoints {
+        layout,
+        cell_start,
+        points_in_grid,
+        range_m,
+        labels: with_labels.then_some(labels),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Moments;
+
+    fn scan(points: Vec<[f32; 3]>, origin: [f64; 3]) -> WorldScan {
+        WorldScan {
+            index: 0,
+            stamp_ns: 0,
+            labels: Some((0..points.len() as u32).collect()),
+            points_in_world: points,
+            origin_in_world: origin,
+            moments: Moments::default(),
+        }
+    }
+
+    #[test]
+    fn layout_is_snapped_and_centred() {
+        let layout = GridLayout::centred_on([10.13, -3.9], 0.4, 30);
+        // floor(10.13 / 0.4) = 25, floor(-3.9 / 0.4) = -10, minus 15 cells.
+        assert_eq!(layout.first_cell_key, [10, -25]);
+        let [x, y] = layout.min_corner_in_world();
+        assert!((x - 4.0).abs() < 1e-12 && (y + 10.0).abs() < 1e-12);
+        // The sensor lies inside the grid, in cell (15, 15).
+        let cell = layout.cell_of_local(10.13 - x, -3.9 - y).unwrap();
+        assert_eq!(layout.col_row(cell), (15, 15));
+        assert_eq!(layout.world_key(cell), [25, -10]);
+        // Moving the sensor by less than a cell keeps every world key.
+        let moved = GridLayout::centred_on([10.2, -3.7], 0.4, 30);
+        assert_eq!(moved, layout);
+    }
+
+    #[test]
+    fn points_are_sorted_into_cells_and_outside_points_dropped() {
+        let layout = GridLayout::centred_on([0.0, 0.0], 1.0, 4); // x, y in [-2, 2)
+        let a = scan(
+            vec![[0.5, 0.5, 1.0], [5.0, 0.0, 0.0], [-1.5, -1.5, 2.0]],
+            [0.0; 3],
+        );
+        let b = scan(vec![[0.6, 0.4, 3.0]], [0.5, 0.5, 0.0]);
+        let cells = grid_points(&[a, b], layout);
+        assert_eq!(cells.points_in_grid.len(), 3);
+        let c = layout.cell_of_local(2.5, 2.5).unwrap();
+        assert_eq!(cells.point_count(c), 2);
+        let r = cells.cell_range(c);
+        assert_eq!(cells.points_in_grid[r.start], [2.5, 2.5, 1.0]);
+        assert_eq!(cells.labels.as_ref().unwrap()[r.start..r.end], [0, 0]);
+        // The second point of the cell came from scan b: its range is from b's origin.
+        assert!((cells.range_m[r.start + 1] - (0.01f32 + 0.01 + 9.0).sqrt()).abs() < 1e-5);
+        assert_eq!(
+            cells.point_count(layout.cell_of_local(0.5, 0.5).unwrap()),
+            1
+        );
+    }
+
+    #[test]
+    fn a_window_with_one_unlabelled_scan_has_no_labels() {
+        let layout = GridLayout::centred_on([0.0, 0.0], 1.0, 4);
+        let labelled = scan(vec![[0.5, 0.5, 1.0]], [0.0; 3]);
+        let mut unlabelled = scan(vec![[0.6, 0.4, 3.0]], [0.0; 3]);
+        unlabelled.labels = None;
+        assert!(
+            grid_points(&[labelled, unlabelled], layout)
+                .labels
+                .is_none()
+        );
+    }
+}

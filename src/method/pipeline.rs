@@ -1,0 +1,317 @@
+//! The method in order. [`Pipeline::process_frames`] calls every stage, one comment
+//! per step; the [`IntegrationWindow`] and the colour memory are the only state
+//! carried from frame to frame.
+//!
+//! Frames are processed in batches of consecutive frames (one frame is a batch of
+//! one): the grid, the geometric features and the image's votes of a frame need no
+//! state, so the frames of a batch run them in parallel; the colour memory then takes
+//! the votes in frame order, and classification and filter run in parallel again.
+//! The results are the same whatever the batch size.
+
+use nalgebra::Isometry3;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::config::Config;
+use crate::error::Result;
+use crate::frame::{CameraImage, Frame};
+use crate::method::appearance::{AppearanceVoter, ColourMemory, FrameVotes};
+use crate::method::classifier::SvmModel;
+use crate::method::features::{FeatureExtractor, FeatureGrid};
+use crate::method::filter::OutlierFilter;
+use crate::method::grid::{CellClass, CellPoints, GridLayout, grid_points};
+use crate::method::ground_truth::GroundTruth;
+use crate::method::integration::{IntegrationWindow, WorldScan, ground_normal, scan_to_world};
+use crate::stopwatch::timed;
+
+/// Wall time of each stage for one frame, milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct StageTimings {
+    pub read_ms: f64,
+    pub integrate_ms: f64,
+    pub grid_ms: f64,
+    pub features_ms: f64,
+    /// Projection and pixel voting, plus the colour memory's update (0 without images).
+    pub appearance_ms: f64,
+    pub classify_ms: f64,
+    pub filter_ms: f64,
+    /// Scan in to filtered grid out: integrate + grid + features + appearance +
+    /// classify + filter.
+    pub latency_ms: f64,
+}
+
+/// Everything the method produced for one frame.
+#[derive(Clone, Debug)]
+pub struct FrameResult {
+    pub index: usize,
+    pub stamp_ns: u64,
+    pub layout: GridLayout,
+    /// The sensor's position in the world.
+    pub sensor_in_world: [f64; 3],
+    /// The integrated points inside the grid, by cell.
+    pub cells: CellPoints,
+    /// Points of this frame's scan that the reader dropped (non-finite coordinates).
+    pub dropped_points: usize,
+    pub features: FeatureGrid,
+    /// The classifier's labels before filtering (None without a model).
+    pub predicted: Option<Vec<CellClass>>,
+    /// The labels after the outlier filter (None without a model).
+    pub filtered: Option<Vec<CellClass>>,
+    /// Ground truth, when every scan of the window has labels.
+    pub ground_truth: Option<Vec<CellClass>>,
+    pub timings: StageTimings,
+}
+
+impl FrameResult {
+    /// Cells with features and ground truth: (cell, traversable).
+    pub fn labelled_cells(&self) -> impl Iterator<Item = (usize, bool)> + '_ {
+        let truth = self.ground_truth.as_deref().unwrap_or(&[]);
+        truth.iter().enumerate().filter_map(|(cell, &t)| {
+            (self.features.predictable[cell] && t != CellClass::Unknown)
+                .then_some((cell, t == CellClass::Traversable))
+        })
+    }
+}
+
+/// What a frame brings besides its scan, set aside while the scan is integrated.
+struct FrameExtras {
+    world_from_velodyne: Isometry3<f64>,
+    camera: Option<CameraImage>,
+    dropped_points: usize,
+    integrate_ms: f64,
+}
+
+/// The stages, built once from a validated configuration, and the state carried
+/// from frame to frame: the scan window and the colour memory.
+pub struct Pipeline {
+    window: IntegrationWindow,
+    colours: ColourMemory,
+    features: FeatureExtractor,
+    appearance: Option<AppearanceVoter>,
+    filter: OutlierFilter,
+    ground_truth: GroundTruth,
+    cell_size_m: f64,
+    cells_per_side: usize,
+    use_reduced_set: bool,
+}
+
+impl Pipeline {
+    pub fn new(config: &Config) -> Result<Self> {
+        config.validate()?;
+        Ok(Self {
+            window: IntegrationWindow::new(config.integration.scans),
+            colours: ColourMemory::default(),
+            features: FeatureExtractor {
+                config: config.features.clone(),
+                min_points: config.grid.min_points,
+            },
+            appearance: config.appearance.enabled.then(|| AppearanceVoter {
+                config: config.appearance.clone(),
+                min_points: config.grid.min_points,
+            }),
+            filter: OutlierFilter {
+                config: config.filter.clone(),
+            },
+            ground_truth: GroundTruth {
+                config: config.ground_truth.clone(),
+            },
+            cell_size_m: config.grid.cell_size_m,
+            cells_per_side: config.grid.cells_per_side(),
+            use_reduced_set: config.classifier.use_reduced_set,
+        })
+    }
+
+    /// The scan window, to ask which frames fill it.
+    pub fn window(&self) -> &IntegrationWindow {
+        &self.window
+    }
+
+    /// Stage 1 alone, for a frame before the first one wanted: its scan joins the
+    /// window so that the next frames integrate it. Returns the time it took, ms.
+    pub fn warm_up(&mut self, frame: Frame) -> f64 {
+        self.start_afresh_before(frame.index);
+        let (scan, integrate_ms) = timed(|| scan_to_world(frame));
+        self.window.extend([scan]);
+        self.window.forget_old();
+        integrate_ms
+    }
+
+    /// Runs the method on one frame; `model` None skips classification and filter.
+    pub fn process_frame(&mut self, frame: Frame, model: Option<&SvmModel>) -> FrameResult {
+        let mut results = self.process_frames(vec![frame], model);
+        results.pop().expect("one result per frame")
+    }
+
+    /// Runs the method on consecutive frames (ascending indices), in parallel where
+    /// the method allows; the results are those of [`Self::process_frame`] frame by frame.
+    pub fn process_frames(
+        &mut self,
+        mut frames: Vec<Frame>,
+        model: Option<&SvmModel>,
+    ) -> Vec<FrameResult> {
+        let Some(first) = frames.first() else {
+            return Vec::new();
+        };
+        self.start_afresh_before(first.index);
+        let extras: Vec<FrameExtras> = frames
+            .iter_mut()
+            .map(|f| FrameExtras {
+                world_from_velodyne: f.world_from_velodyne,
+                camera: f.camera.take(),
+                dropped_points: f.dropped_points,
+                integrate_ms: 0.0,
+            })
+            .collect();
+
+        // 1. Integration: each scan into the world, joined with the previous n - 1.
+        let held = self.window.scans().len();
+        let (scans, integrate_ms): (Vec<WorldScan>, Vec<f64>) =
+            map_frames(frames, |frame| timed(|| scan_to_world(frame)))
+                .into_iter()
+                .unzip();
+        self.window.extend(scans);
+        let extras: Vec<FrameExtras> = extras
+            .into_iter()
+            .zip(integrate_ms)
+            .map(|(extras, integrate_ms)| FrameExtras {
+                integrate_ms,
+                ..extras
+            })
+            .collect();
+
+        // 2. Grid, 3. geometric features, and the first half of 3b: each image's pixels
+        // vote for the cells they show.
+        let observations = map_frames(
+            extras.into_iter().enumerate().collect(),
+            |(i, extras)| self.observe(self.window.window_of(held + i), extras),
+        );
+
+        // 3b. Appearance: the votes join the colour memory in frame order, which gives
+        // each frame's appearance features.
+        let observations: Vec<Observation> = observations
+            .into_iter()
+            .map(|mut observation| {
+                let (appearance, remember_ms) = timed(|| self.remember_colours(&observation));
+                observation.appearance = appearance;
+                observation.result.timings.appearance_ms += remember_ms;
+                observation
+            })
+            .collect();
+
+        // 4. Classification, 5. outlier filter.
+        let results = map_frames(observations, |observation| self.decide(observation, model));
+        self.window.forget_old();
+        results
+    }
+
+    /// A frame from the past (a new pass over the sequence) starts afresh.
+    fn start_afresh_before(&mut self, index: usize) {
+        if self.window.restarts_at(index) {
+            self.window.clear();
+            self.colours = ColourMemory::default();
+        }
+    }
+
+    /// Stages 2, 3 and the voting of 3b on the window of a frame (its scan last).
+    fn observe(&self, window: &[WorldScan], extras: FrameExtras) -> Observation {
+        let current = &window[window.len() - 1];
+        let mut timings = StageTimings {
+            integrate_ms: extras.integrate_ms,
+            ..StageTimings::default()
+        };
+        let layout = GridLayout::centred_on(
+            [current.origin_in_world[0], current.origin_in_world[1]],
+            self.cell_size_m,
+            self.cells_per_side,
+        );
+        let cells;
+        (cells, timings.grid_ms) = timed(|| grid_points(window, layout));
+        let features;
+        (features, timings.features_ms) =
+            timed(|| self.features.compute(&cells, ground_normal(window)));
+        let votes;
+        (votes, timings.appearance_ms) = timed(|| match (&self.appearance, &extras.camera) {
+            (Some(voter), Some(camera)) => {
+                voter.vote(&cells, &extras.world_from_velodyne, camera)
+            }
+            _ => FrameVotes::default(),
+        });
+        // Ground truth from the same cloud, outside the latency.
+        let ground_truth = self.ground_truth.label(&cells);
+        Observation {
+            result: FrameResult {
+                index: current.index,
+                stamp_ns: current.stamp_ns,
+                layout,
+                sensor_in_world: current.origin_in_world,
+                cells,
+                dropped_points: extras.dropped_points,
+                features,
+                predicted: None,
+                filtered: None,
+                ground_truth,
+                timings,
+            },
+            votes,
+            appearance: None,
+        }
+    }
+
+    /// Adds an observation's votes to the colour memory and returns the appearance
+    /// features of its grid (None without appearance, or while no image has been seen).
+    fn remember_colours(&mut self, observation: &Observation) -> Option<(Vec<f32>, Vec<bool>)> {
+        let voter = self.appearance.as_ref()?;
+        self.colours.add(&observation.votes);
+        let layout = &observation.result.layout;
+        // A cell more than a grid side away is not coming back soon.
+        self.colours
+            .forget_outside(layout, layout.cells_per_side as i64);
+        if self.colours.is_empty() {
+            return None;
+        }
+        Some(self.colours.features(layout, voter.histogram_len()))
+    }
+
+    /// Stages 4 and 5 on an observation with its appearance features.
+    fn decide(&self, observation: Observation, model: Option<&SvmModel>) -> FrameResult {
+        let mut result = observation.result;
+        if let Some((values, seen)) = observation.appearance {
+            result.features.set_appearance(values, seen);
+        }
+        let timings = &mut result.timings;
+        if let Some(model) = model {
+            let labels;
+            (labels, timings.classify_ms) =
+                timed(|| model.classify(&result.features, self.use_reduced_set));
+            let filtered;
+            (filtered, timings.filter_ms) =
+                timed(|| self.filter.apply(&labels, result.layout.cells_per_side));
+            result.filtered = Some(filtered);
+            result.predicted = Some(labels);
+        }
+        timings.latency_ms = timings.integrate_ms
+            + timings.grid_ms
+            + timings.features_ms
+            + timings.appearance_ms
+            + timings.classify_ms
+            + timings.filter_ms;
+        result
+    }
+}
+
+/// What one frame shows, and its appearance features once the colour memory has
+/// taken its votes.
+struct Observation {
+    result: FrameResult,
+    votes: FrameVotes,
+    appearance: Option<(Vec<f32>, Vec<bool>)>,
+}
+
+/// `f` over the frames of a batch, in parallel; a batch of one stays on this thread.
+fn map_frames<T: Send, U: Send>(items: Vec<T>, f: impl Fn(T) -> U + Sync + Send) -> Vec<U> {
+    if items.len() == 1 {
+        items.into_iter().map(f).collect()
+    } else {
+        items.into_par_iter().map(f).collect()
+    }
+}

@@ -1,0 +1,262 @@
+//! `travmap annotate`: the method's results as an MCAP that Foxglove, rerun and
+//! rosbags open.
+//!
+//! Per frame, in the world frame (`map` for KITTI input): the filtered prediction and
+//! the ground truth as `nav_msgs/msg/OccupancyGrid` (0 traversable, 100 not, -1
+//! unknown), the integrated in-grid points as a PointCloud2 with each point's cell
+//! class, and `travmap_msgs/msg/FrameMetrics`. By default the input's own messages are
+//! copied through (for KITTI input: what `convert` writes), so the file stands alone.
+//! A metadata record `travmap` holds the version, the effective config and the
+//! model's hash. The file is written atomically.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::method::classifier::SvmModel;
+use crate::config::Config;
+use crate::outputs::conversion::{MAP_FRAME, write_kitti_frames};
+use crate::error::{Error, Result};
+use crate::drive::Selection;
+use crate::scoring::evaluation::{Evaluation, EvaluationReport};
+use crate::method::grid::CellClass;
+use crate::scoring::metrics::Confusion;
+use crate::method::pipeline::FrameResult;
+use crate::io::Source;
+use crate::io::ros::{
+    FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion,
+    Time, Vector3, datatype,
+};
+use crate::outputs::writing::{Compression, McapSink};
+
+pub const PREDICTION_TOPIC: &str = "/travmap/prediction";
+pub const GROUND_TRUTH_TOPIC: &str = "/travmap/ground_truth";
+pub const CLOUD_TOPIC: &str = "/travmap/cloud";
+pub const METRICS_TOPIC: &str = "/travmap/metrics";
+
+#[derive(Clone, Debug)]
+pub struct AnnotationOptions {
+    pub compression: Compression,
+    /// Copy the input's messages into the output.
+    pub passthrough: bool,
+    /// Height of the drawn grids relative to the sensor, metres (KITTI's HDL-64E sits
+    /// 1.73 m above the road).
+    pub grid_height_m: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct AnnotationSummary {
+    pub frames: usize,
+    pub passthrough_messages: usize,
+    pub output_bytes: u64,
+    pub evaluation: EvaluationReport,
+}
+
+fn grid_message(
+    result: &FrameResult,
+    classes: &[CellClass],
+    world_frame: &str,
+    height_m: f64,
+) -> OccupancyGrid {
+    let [x, y] = result.layout.min_corner_in_world();
+    let stamp = Time::from_ns(result.stamp_ns);
+    OccupancyGrid {
+        header: Header {
+            stamp,
+            frame_id: world_frame.into(),
+        },
+        info: MapMetaData {
+            map_load_time: stamp,
+            resolution: result.layout.cell_size_m as f32,
+            width: result.layout.cells_per_side as u32,
+            height: result.layout.cells_per_side as u32,
+            origin: Pose {
+                position: Vector3 {
+                    x,
+                    y,
+                    z: result.sensor_in_world[2] + height_m,
+                },
+                orientation: Quaternion::default(),
+            },
+        },
+        data: classes.iter().map(|&c| c.occupancy()).collect(),
+    }
+}
+
+/// The in-grid points in world coordinates with `class` (and `ground_truth`) int8.
+fn cloud_message(result: &FrameResult, classes: &[CellClass], world_frame: &str) -> PointCloud2 {
+    let cells = &result.cells;
+    let [min_x, min_y] = result.layout.min_corner_in_world();
+    let mut fields = PointField::xyz_float32();
+    fields.push(PointField::scalar("class", 12, datatype::INT8));
+    if result.ground_truth.is_some() {
+        fields.push(PointField::scalar("ground_truth", 13, datatype::INT8));
+    }
+    let n = cells.points_in_grid.len();
+    let mut data = Vec::with_capacity(16 * n);
+    for cell in 0..result.layout.cell_count() {
+        let class = classes[cell].occupancy();
+        let truth = result
+            .ground_truth
+            .as_ref()
+            .map_or(-1, |t| t[cell].occupancy());
+        for p in &cells.points_in_grid[cells.cell_range(cell)] {
+            data.extend_from_slice(&((p[0] as f64 + min_x) as f32).to_le_bytes());
+            data.extend_from_slice(&((p[1] as f64 + min_y) as f32).to_le_bytes());
+            data.extend_from_slice(&p[2].to_le_bytes());
+            data.extend_from_slice(&[class as u8, truth as u8, 0, 0]);
+        }
+    }
+    PointCloud2 {
+        header: Header {
+            stamp: Time::from_ns(result.stamp_ns),
+            frame_id: world_frame.into(),
+        },
+        height: 1,
+        width: n as u32,
+        fields,
+        is_bigendian: false,
+        point_step: 16,
+        row_step: (16 * n) as u32,
+        data,
+        is_dense: true,
+    }
+}
+
+fn metrics_message(result: &FrameResult, classes: &[CellClass], world_frame: &str) -> FrameMetrics {
+    let count = |class: CellClass| classes.iter().filter(|&&c| c == class).count() as u32;
+    let confusion = result
+        .ground_truth
+        .as_ref()
+        .map(|truth| Confusion::of_grids(classes, truth));
+    let c = confusion.unwrap_or_default();
+    let scores = confusion.map(|c| c.scores());
+    FrameMetrics {
+        header: Header {
+            stamp: Time::from_ns(result.stamp_ns),
+            frame_id: world_frame.into(),
+        },
+        frame_index: result.index as u32,
+        predictable_cells: count(CellClass::Traversable) + count(CellClass::NonTraversable),
+        traversable_cells: count(CellClass::Traversable),
+        non_traversable_cells: count(CellClass::NonTraversable),
+        has_ground_truth: confusion.is_some(),
+        true_positives: c.tp as u32,
+        true_negatives: c.tn as u32,
+        false_positives: c.fp as u32,
+        false_negatives: c.r#fn as u32,
+        unpredictable_with_ground_truth: c.unknown as u32,
+        accuracy: scores.map_or(f32::NAN, |s| s.accuracy as f32),
+        miou: scores.map_or(f32::NAN, |s| s.miou as f32),
+        f1: scores.map_or(f32::NAN, |s| s.f1 as f32),
+        latency_ms: result.timings.latency_ms as f32,
+        dropped_points: result.dropped_points as u32,
+    }
+}
+
+/// Annotates `selection` into `output`; `metadata` goes into the `travmap` record.
+pub fn annotate(
+    selection: &Selection,
+    config: &Config,
+    model: &SvmModel,
+    metadata: BTreeMap<String, String>,
+    output: &Path,
+    options: &AnnotationOptions,
+    on_frame: &(dyn Fn() + Sync),
+) -> Result<AnnotationSummary> {
+    let mut sink = McapSink::create(output, options.compression)?;
+    let mut passthrough_messages = 0;
+    let world_frame = match &selection.source {
+        Source::Kitti(sequence) => {
+            if options.passthrough {
+                let written =
+                    write_kitti_frames(&mut sink, sequence, &selection.frames, 0, &|| {})?;
+                passthrough_messages = written.frames * 2 + written.images * 2 + 1;
+            }
+            MAP_FRAME.to_string()
+        }
+        Source::Mcap(drive) => {
+            if options.passthrough {
+                drive.for_each_message(|message| {
+                    let channel = &message.channel;
+                    let (name, encoding, data) = match &channel.schema {
+                        Some(schema) => (
+                            schema.name.as_str(),
+                            schema.encoding.as_str(),
+                            &schema.data[..],
+                        ),
+                        None => ("", "", &[][..]),
+                    };
+                    let id = sink.channel(
+                        &channel.topic,
+                        name,
+                        encoding,
+                        data,
+                        &channel.message_encoding,
+                    )?;
+                    sink.write_raw(
+                        id,
+                        message.log_time,
+                        message.publish_time,
+                        message.data.to_vec(),
+                    )?;
+                    passthrough_messages += 1;
+                    Ok(())
+                })?;
+            }
+            drive.world_frame().to_string()
+        }
+    };
+    let mut evaluation = Evaluation::default();
+    let mut frames = 0;
+    selection.run::<Error>(config, Some(model), |result| {
+        let classes = result.filtered.as_deref().unwrap_or(&[]);
+        let stamp = result.stamp_ns;
+        sink.write(
+            PREDICTION_TOPIC,
+            stamp,
+            &grid_message(&result, classes, &world_frame, options.grid_height_m),
+        )?;
+        if let Some(truth) = &result.ground_truth {
+            sink.write(
+                GROUND_TRUTH_TOPIC,
+                stamp,
+                &grid_message(&result, truth, &world_frame, options.grid_height_m),
+            )?;
+        }
+        sink.write(
+            CLOUD_TOPIC,
+            stamp,
+            &cloud_message(&result, classes, &world_frame),
+        )?;
+        sink.write(
+            METRICS_TOPIC,
+            stamp,
+            &metrics_message(&result, classes, &world_frame),
+        )?;
+        evaluation.add(&result);
+        frames += 1;
+        on_frame();
+        Ok(())
+    })?;
+    let mut metadata = metadata;
+    let skipped = selection.source.skipped();
+    if !skipped.is_empty() {
+        // serde_json cannot fail on a list of plain structs.
+        metadata.insert(
+            "skipped_frames".into(),
+            serde_json::to_string(&skipped).unwrap_or_default(),
+        );
+    }
+    sink.write_metadata("travmap", metadata)?;
+    sink.finish()?;
+    Ok(AnnotationSummary {
+        frames,
+        passthrough_messages,
+        output_bytes: std::fs::metadata(output)
+            .map_err(|e| Error::io(output, e))?
+            .len(),
+        evaluation: evaluation.report(),
+    })
+}

@@ -1,0 +1,324 @@
+//! KITTI / SemanticKITTI sequence -> ROS 2 MCAP (`travmap convert`).
+//!
+//! Per scan: a `sensor_msgs/msg/PointCloud2` (x, y, z, intensity float32, plus a
+//! `label` uint32 when SemanticKITTI labels exist) in frame `velodyne`, and `/tf` with
+//! the scan's pose in the z-up `map` frame (the first scan's velodyne frame,
+//! `inv(Tr) * pose_i * Tr`). Per image: the PNG passed through unchanged as a
+//! `sensor_msgs/msg/CompressedImage` and a `sensor_msgs/msg/CameraInfo` from P2. Once:
+//! `/tf_static` with velodyne -> camera_0 (from Tr) and camera_0 -> camera_2 (the
+//! baseline in P2). Log time = header stamp = start time + times.txt. Frames are read
+//! and encoded in parallel batches, written in order.
+
+use std::ops::Range;
+use std::path::Path;
+
+use nalgebra::{Isometry3, Matrix3};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::frame::Frame;
+use crate::io::KittiSequence;
+use crate::io::ros::{
+    CameraInfo, CompressedImage, Header, PointCloud2, PointField, Quaternion, RegionOfInterest,
+    TfMessage, Time, Transform, TransformStamped, Vector3, datatype, encode,
+};
+use crate::outputs::writing::{Compression, McapSink};
+
+pub const CLOUD_TOPIC: &str = "/velodyne_points";
+pub const IMAGE_TOPIC: &str = "/camera_2/image/compressed";
+pub const CAMERA_INFO_TOPIC: &str = "/camera_2/camera_info";
+pub const MAP_FRAME: &str = "map";
+pub const VELODYNE_FRAME: &str = "velodyne";
+pub const CAMERA_0_FRAME: &str = "camera_0";
+pub const CAMERA_2_FRAME: &str = "camera_2";
+
+/// Frames encoded in parallel before they are written in order.
+const BATCH: usize = 16;
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ConversionSummary {
+    pub frames: usize,
+    pub images: usize,
+    pub labelled_frames: usize,
+    /// Scan points left out for a non-finite coordinate.
+    pub dropped_points: u64,
+    pub output_bytes: u64,
+}
+
+/// A ROS transform from a rigid pose, its quaternion as it is.
+pub fn transform_from_pose(pose: &Isometry3<f64>) -> Transform {
+    let (t, q) = (pose.translation.vector, pose.rotation);
+    Transform {
+        translation: Vector3 {
+            x: t.x,
+            y: t.y,
+            z: t.z,
+        },
+        rotation: Quaternion {
+            x: q.i,
+            y: q.j,
+            z: q.k,
+            w: q.w,
+        },
+    }
+}
+
+fn header(stamp_ns: u64, frame_id: &str) -> Header {
+    Header {
+        stamp: Time::from_ns(stamp_ns),
+        frame_id: frame_id.to_string(),
+    }
+}
+
+/// The PointCloud2 of a scan: x, y, z, intensity (float32) and label (uint32).
+pub fn scan_to_cloud(frame: &Frame, stamp_ns: u64) -> PointCloud2 {
+    let mut fields = PointField::xyz_float32();
+    fields.push(PointField::scalar("intensity", 12, datatype::FLOAT32));
+    if frame.labels.is_some() {
+        fields.push(PointField::scalar("label", 16, datatype::UINT32));
+    }
+    let point_step = if frame.labels.is_some() { 20 } else { 16 };
+    let n = frame.points_in_velodyne.len();
+    let mut data = Vec::with_capacity(n * point_step);
+    for (i, p) in frame.points_in_velodyne.iter().enumerate() {
+        for v in p {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+        if let Some(labels) = &frame.labels {
+            data.extend_from_slice(&labels[i].to_le_bytes());
+        }
+    }
+    PointCloud2 {
+        header: header(stamp_ns, VELODYNE_FRAME),
+        height: 1,
+        width: n as u32,
+        fields,
+        is_bigendian: false,
+        point_step: point_step as u32,
+        row_step: (n * point_step) as u32,
+        data,
+        is_dense: true,
+    }
+}
+
+/// Width and height from a PNG's IHDR chunk.
+pub fn png_size(bytes: &[u8]) -> Option<(u32, u32)> {
+    const SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', b'\r', b'\n', 0x1a, b'\n'];
+    if bytes.len() < 24 || bytes[..8] != SIGNATURE || &bytes[12..16] != b"IHDR" {
+        return None;
+    }
+    let be =
+        |at: usize| u32::from_be_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]]);
+    Some((be(16), be(20)))
+}
+
+/// CameraInfo of a rectified KITTI camera in its own frame: K, R identity, no
+/// distortion, P = [K | 0] (the baseline is in `/tf_static`, so that P projects
+/// points given in this camera's frame, as ROS defines it).
+pub fn camera_info(k: &Matrix3<f64>, width: u32, height: u32, stamp_ns: u64) -> CameraInfo {
+    let k9 = [
+        k[(0, 0)],
+        k[(0, 1)],
+        k[(0, 2)],
+        k[(1, 0)],
+        k[(1, 1)],
+        k[(1, 2)],
+        k[(2, 0)],
+        k[(2, 1)],
+        k[(2, 2)],
+    ];
+    CameraInfo {
+        header: header(stamp_ns, CAMERA_2_FRAME),
+        height,
+        width,
+        distortion_model: "plumb_bob".into(),
+        d: vec![0.0; 5],
+        k: k9,
+        r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        p: [
+            k9[0], k9[1], k9[2], 0.0, k9[3], k9[4], k9[5], 0.0, k9[6], k9[7], k9[8], 0.0,
+        ],
+        binning_x: 0,
+        binning_y: 0,
+        roi: RegionOfInterest::default(),
+    }
+}
+
+/// `/tf_static`: velodyne -> camera_0 from Tr, camera_0 -> camera_2 from P2's baseline.
+fn static_transforms(sequence: &KittiSequence, stamp_ns: u64) -> TfMessage {
+    let calibration = sequence.calibration();
+    let mut transforms = vec![TransformStamped {
+        header: header(stamp_ns, VELODYNE_FRAME),
+        child_frame_id: CAMERA_0_FRAME.into(),
+        transform: transform_from_pose(&calibration.velodyne_from_camera_0()),
+    }];
+    if let Some((_, camera_0_from_camera_2)) = calibration.camera_2() {
+        transforms.push(TransformStamped {
+            header: header(stamp_ns, CAMERA_0_FRAME),
+            child_frame_id: CAMERA_2_FRAME.into(),
+            transform: transform_from_pose(&camera_0_from_camera_2),
+        });
+    }
+    TfMessage { transforms }
+}
+
+/// One frame's messages, CDR-encoded.
+struct EncodedFrame {
+    stamp_ns: u64,
+    cloud: Vec<u8>,
+    tf: Vec<u8>,
+    image: Option<(Vec<u8>, Vec<u8>)>,
+    labelled: bool,
+    dropped_points: usize,
+}
+
+fn encode_frame(sequence: &KittiSequence, index: usize, start_ns: u64) -> Result<EncodedFrame> {
+    let frame = sequence.read_frame(index)?;
+    let stamp_ns = start_ns + frame.stamp_ns;
+    let cloud = scan_to_cloud(&frame, stamp_ns);
+    let tf = TfMessage {
+        transforms: vec![TransformStamped {
+            header: header(stamp_ns, MAP_FRAME),
+            child_frame_id: VELODYNE_FRAME.into(),
+            transform: transform_from_pose(&frame.world_from_velodyne),
+        }],
+    };
+    let image = match (
+        sequence.image_path(index),
+        sequence.calibration().camera_2(),
+    ) {
+        (Some(path), Some((k, _))) => {
+            let png = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+            let (width, height) = png_size(&png).ok_or_else(|| Error::Sequence {
+                path: path.clone(),
+                message: "not a PNG image (no PNG signature and IHDR header)".into(),
+            })?;
+            let info = camera_info(&k, width, height, stamp_ns);
+            let image = CompressedImage {
+                header: header(stamp_ns, CAMERA_2_FRAME),
+                format: "png".into(),
+                data: png,
+            };
+            Some((encode(&image, image.data.len() + 64), encode(&info, 512)))
+        }
+        _ => None,
+    };
+    Ok(EncodedFrame {
+        stamp_ns,
+        cloud: encode(&cloud, cloud.data.len() + 256),
+        tf: encode(&tf, 128),
+        image,
+        labelled: frame.labels.is_some(),
+        dropped_points: frame.dropped_points,
+    })
+}
+
+/// Writes the frames of `sequence` in `frames` into `sink` as `convert` does, and
+/// returns the counts (output_bytes 0: the sink is not finished here).
+pub fn write_kitti_frames(
+    sink: &mut McapSink,
+    sequence: &KittiSequence,
+    frames: &Range<usize>,
+    start_ns: u64,
+    on_frame: &(dyn Fn() + Sync),
+) -> Result<ConversionSummary> {
+    let indices = sequence.frames_in(frames);
+    let mut summary = ConversionSummary {
+        frames: 0,
+        images: 0,
+        labelled_frames: 0,
+        dropped_points: 0,
+        output_bytes: 0,
+    };
+    for batch in indices.chunks(BATCH) {
+        // A frame whose files are unreadable stops the conversion, unless the
+        // sequence keeps going (annotate --keep-going), which skips and records it.
+        let encoded: Vec<Option<EncodedFrame>> = batch
+            .par_iter()
+            .map(|&index| match encode_frame(sequence, index, start_ns) {
+                Ok(frame) => Ok(Some(frame)),
+                Err(error) => sequence.skip_log().handle(index, error).map(|()| None),
+            })
+            .collect::<Result<_>>()?;
+        for frame in encoded.into_iter().flatten() {
+            let EncodedFrame {
+                stamp_ns,
+                cloud,
+                tf,
+                image,
+                labelled,
+                dropped_points,
+            } = frame;
+            if summary.frames == 0 {
+                sink.write(
+                    "/tf_static",
+                    stamp_ns,
+                    &static_transforms(sequence, stamp_ns),
+                )?;
+            }
+            sink.write_encoded::<PointCloud2>(CLOUD_TOPIC, stamp_ns, cloud)?;
+            sink.write_encoded::<TfMessage>("/tf", stamp_ns, tf)?;
+            if let Some((image, info)) = image {
+                sink.write_encoded::<CompressedImage>(IMAGE_TOPIC, stamp_ns, image)?;
+                sink.write_encoded::<CameraInfo>(CAMERA_INFO_TOPIC, stamp_ns, info)?;
+                summary.images += 1;
+            }
+            summary.frames += 1;
+            summary.labelled_frames += labelled as usize;
+            summary.dropped_points += dropped_points as u64;
+            on_frame();
+        }
+    }
+    Ok(summary)
+}
+
+/// Converts the frames of `sequence` in `frames` into `output`. `on_frame` is called
+/// after each written frame.
+pub fn convert_kitti(
+    sequence: &KittiSequence,
+    frames: &Range<usize>,
+    output: &Path,
+    compression: Compression,
+    start_ns: u64,
+    on_frame: &(dyn Fn() + Sync),
+) -> Result<ConversionSummary> {
+    let mut sink = McapSink::create(output, compression)?;
+    let mut summary = write_kitti_frames(&mut sink, sequence, frames, start_ns, on_frame)?;
+    sink.finish()?;
+    summary.output_bytes = std::fs::metadata(output)
+        .map_err(|e| Error::io(output, e))?
+        .len();
+    Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transform_of_a_rotation_about_z() {
+        let mut m = nalgebra::Matrix4::identity();
+        m[(0, 0)] = 0.0;
+        m[(0, 1)] = -1.0;
+        m[(1, 0)] = 1.0;
+        m[(1, 1)] = 0.0;
+        m[(0, 3)] = 2.0;
+        let t = transform_from_pose(&crate::geometry::rigid(&m));
+        let half = std::f64::consts::FRAC_1_SQRT_2;
+        assert!((t.rotation.z - half).abs() < 1e-12 && (t.rotation.w - half).abs() < 1e-12);
+        assert_eq!(t.translation.x, 2.0);
+    }
+
+    #[test]
+    fn png_size_reads_ihdr() {
+        let mut png = vec![
+            0x89, b'P', b'N', b'G', b'\r', b'\n', 0x1a, b'\n', 0, 0, 0, 13,
+        ];
+        png.extend_from_slice(b"IHDR");
+        png.extend_from_slice(&1242u32.to_be_bytes());
+        png.extend_from_slice(&375u32.to_be_bytes());
+        assert_eq!(png_size(&png), Some((1242, 375)));
+        assert_eq!(png_size(b"GIF89a.................."), None);
+    }
+}

@@ -1,0 +1,618 @@
+//! Datasets: one Parquet row per predictable cell per frame, with every feature,
+//! the ground truth and the prediction, for training across many logs and for
+//! analysis in pyarrow, DuckDB or Polars; and the [`TrainingSet`] read back from
+//! such files.
+//!
+//! Columns, in order (README "Datasets" lists them with units):
+//! `source`, `frame`, `stamp_ns`, `row`, `col`, `x_m`, `y_m`, `points`, the 20
+//! geometric features by name (float), the appearance values `hue_0..`,
+//! `saturation_0..`, `value_0..` (float, null where no camera ever saw the cell),
+//! `ground_truth_traversable` and `predicted_traversable` (boolean, null without
+//! labels / without a model). The key-value metadata `travmap.config` holds the
+//! configuration the rows were computed with, as JSON; reading checks it.
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::Path;
+use std::sync::Arc;
+
+use parquet::basic::{Compression, ZstdLevel};
+use parquet::column::reader::ColumnReaderImpl;
+use parquet::column::writer::ColumnWriter;
+use parquet::data_type::{ByteArray, DataType};
+use parquet::file::metadata::KeyValue;
+use parquet::file::properties::WriterProperties;
+use parquet::file::reader::{FileReader, RowGroupReader};
+use parquet::file::serialized_reader::SerializedFileReader;
+use parquet::file::writer::SerializedFileWriter;
+use parquet::schema::types::SchemaDescriptor;
+
+use crate::Config;
+use crate::training::TrainingSet;
+use crate::error::{Error, Result, contain_panics};
+use crate::method::features::{FEATURE_COUNT, FEATURE_NAMES};
+use crate::method::grid::CellClass;
+use crate::method::pipeline::FrameResult;
+use crate::outputs::writing::AtomicFile;
+
+/// Rows per row group: about 60 MB of columns in memory at a time.
+const ROW_GROUP_ROWS: usize = 1 << 17;
+/// The largest row group read back (pyarrow writes up to 2^20 rows by default):
+/// about 2 GB of columns in memory.
+const MAX_READ_GROUP_ROWS: usize = 1 << 22;
+
+const CONFIG_KEY: &str = "travmap.config";
+const FORMAT_KEY: &str = "travmap.format";
+const FORMAT: &str = "travmap-cells 1";
+
+/// Names of the appearance columns for `config`'s buckets.
+pub fn appearance_columns(config: &Config) -> Vec<String> {
+    let a = &config.appearance;
+    let named = |name: &'static str, n: u32| (0..n).map(move |i| format!("{name}_{i}"));
+    named("hue", a.hue_bins)
+        .chain(named("saturation", a.saturation_bins))
+        .chain(named("value", a.value_bins))
+        .collect()
+}
+
+/// The Parquet schema of the cell rows.
+fn schema(appearance: &[String]) -> String {
+    let mut fields = vec![
+        "REQUIRED BYTE_ARRAY source (STRING)".to_string(),
+        "REQUIRED INT64 frame".into(),
+        "REQUIRED INT64 stamp_ns".into(),
+        "REQUIRED INT32 row".into(),
+        "REQUIRED INT32 col".into(),
+        "REQUIRED DOUBLE x_m".into(),
+        "REQUIRED DOUBLE y_m".into(),
+        "REQUIRED INT32 points".into(),
+    ];
+    fields.extend(FEATURE_NAMES.iter().map(|n| format!("REQUIRED FLOAT {n}")));
+    fields.extend(appearance.iter().map(|n| format!("OPTIONAL FLOAT {n}")));
+    fields.push("OPTIONAL BOOLEAN ground_truth_traversable".into());
+    fields.push("OPTIONAL BOOLEAN predicted_traversable".into());
+    format!("message travmap_cells {{ {}; }}", fields.join("; "))
+}
+
+/// A nullable column: values of the present rows, and 1 / 0 per row.
+#[derive(Default)]
+struct Nullable<T> {
+    values: Vec<T>,
+    defined: Vec<i16>,
+}
+
+impl<T> Nullable<T> {
+    fn push(&mut self, value: Option<T>) {
+        self.defined.push(value.is_some() as i16);
+        self.values.extend(value);
+    }
+}
+
+/// The rows of one row group, by column.
+#[derive(Default)]
+struct Columns {
+    source: Vec<ByteArray>,
+    frame: Vec<i64>,
+    stamp_ns: Vec<i64>,
+    row: Vec<i32>,
+    col: Vec<i32>,
+    x_m: Vec<f64>,
+    y_m: Vec<f64>,
+    points: Vec<i32>,
+    features: Vec<Vec<f32>>,
+    appearance: Vec<Vec<f32>>,
+    /// Whether each row has appearance values (all of them or none).
+    appearance_defined: Vec<i16>,
+    ground_truth: Nullable<bool>,
+    predicted: Nullable<bool>,
+}
+
+impl Columns {
+    fn new(appearance_len: usize) -> Self {
+        Self {
+            features: vec![Vec::new(); FEATURE_COUNT],
+            appearance: vec![Vec::new(); appearance_len],
+            ..Default::default()
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.frame.len()
+    }
+}
+
+/// A cell dataset being written; atomically, like every output.
+pub struct DatasetWriter {
+    writer: SerializedFileWriter<BufWriter<File>>,
+    output: AtomicFile,
+    columns: Columns,
+    appearance_len: usize,
+    summary: DatasetSummary,
+}
+
+/// What a dataset holds, for the summary.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct DatasetSummary {
+    pub rows: u64,
+    pub frames: u64,
+    pub labelled_rows: u64,
+    pub rows_with_appearance: u64,
+}
+
+impl DatasetWriter {
+    pub fn create(path: &Path, config: &Config) -> Result<Self> {
+        let appearance = appearance_columns(config);
+        let schema = parquet::schema::parser::parse_message_type(&schema(&appearance))
+            .expect("the cell schema parses");
+        let config_json = serde_json::to_string(config).expect("config serialises");
+        let properties = WriterProperties::builder()
+            .set_compression(Compression::ZSTD(ZstdLevel::default()))
+            .set_created_by(concat!("travmap ", env!("CARGO_PKG_VERSION")).into())
+            .set_key_value_metadata(Some(vec![
+                KeyValue::new(FORMAT_KEY.into(), FORMAT.to_string()),
+                KeyValue::new(CONFIG_KEY.into(), config_json),
+            ]))
+            .build();
+        let (output, file) = AtomicFile::create(path)?;
+        let writer = SerializedFileWriter::new(
+            BufWriter::with_capacity(1 << 20, file),
+            Arc::new(schema),
+            Arc::new(properties),
+        )
+        .map_err(|e| write_error(path, e))?;
+        Ok(Self {
+            writer,
+            output,
+            columns: Columns::new(appearance.len()),
+            appearance_len: appearance.len(),
+            summary: DatasetSummary::default(),
+        })
+    }
+
+    /// Appends the predictable cells of one frame.
+    pub fn push_frame(&mut self, source: &str, result: &FrameResult) -> Result<()> {
+        let source = ByteArray::from(source);
+        let classes = |grid: &Option<Vec<CellClass>>, cell: usize| {
+            grid.as_ref().and_then(|g| match g[cell] {
+                CellClass::Traversable => Some(true),
+                CellClass::NonTraversable => Some(false),
+                CellClass::Unknown => None,
+            })
+        };
+        let c = &mut self.columns;
+        let summary = &mut self.summary;
+        summary.frames += 1;
+        for cell in (0..result.layout.cell_count()).filter(|&i| result.features.predictable[i]) {
+            let (col, row) = result.layout.col_row(cell);
+            let [x_m, y_m] = result.layout.cell_centre_in_world(cell);
+            c.source.push(source.clone());
+            c.frame.push(result.index as i64);
+            c.stamp_ns.push(result.stamp_ns as i64);
+            c.row.push(row as i32);
+            c.col.push(col as i32);
+            c.x_m.push(x_m);
+            c.y_m.push(y_m);
+            c.points.push(result.cells.point_count(cell) as i32);
+            for (column, &value) in c.features.iter_mut().zip(result.features.cell(cell)) {
+                column.push(value);
+            }
+            match result.features.appearance(cell) {
+                Some(values) if values.len() == self.appearance_len => {
+                    c.appearance_defined.push(1);
+                    summary.rows_with_appearance += 1;
+                    for (column, &value) in c.appearance.iter_mut().zip(values) {
+                        column.push(value);
+                    }
+                }
+                _ => c.appearance_defined.push(0),
+            }
+            let truth = classes(&result.ground_truth, cell);
+            summary.labelled_rows += truth.is_some() as u64;
+            summary.rows += 1;
+            c.ground_truth.push(truth);
+            c.predicted.push(classes(&result.filtered, cell));
+        }
+        if self.columns.len() >= ROW_GROUP_ROWS {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<()> {
+        let rows = self.columns.len();
+        if rows == 0 {
+            return Ok(());
+        }
+        let columns = std::mem::replace(&mut self.columns, Columns::new(self.appearance_len));
+        let path = self.output_path();
+        let fail = |e| write_error(&path, e);
+        let mut group = self.writer.next_row_group().map_err(fail)?;
+        let mut index = 0;
+        while let Some(mut column) = group.next_column().map_err(fail)? {
+            write_column(column.untyped(), &columns, index).map_err(fail)?;
+            column.close().map_err(fail)?;
+            index += 1;
+        }
+        group.close().map_err(fail)?;
+        Ok(())
+    }
+
+    fn output_path(&self) -> std::path::PathBuf {
+        self.output.path().to_path_buf()
+    }
+
+    /// Writes the last row group and the footer, then renames the file into place.
+    pub fn finish(mut self) -> Result<DatasetSummary> {
+        self.flush()?;
+        let path = self.output_path();
+        let file = self
+            .writer
+            .into_inner()
+            .map_err(|e| write_error(&path, e))?
+            .into_inner()
+            .map_err(|e| write_error(&path, e.into_error().into()))?;
+        file.sync_all()
+            .map_err(|source| Error::Write { path, source })?;
+        self.output.commit()?;
+        Ok(self.summary)
+    }
+}
+
+fn write_error(path: &Path, e: parquet::errors::ParquetError) -> Error {
+    Error::Write {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(e),
+    }
+}
+
+/// Writes column `index` of the schema from `columns`.
+fn write_column(
+    writer: &mut ColumnWriter<'_>,
+    columns: &Columns,
+    index: usize,
+) -> parquet::errors::Result<()> {
+    let features = 8..8 + FEATURE_COUNT;
+    let appearance = features.end..features.end + columns.appearance.len();
+    let written = match writer {
+        ColumnWriter::ByteArrayColumnWriter(w) => w.write_batch(&columns.source, None, None),
+        ColumnWriter::Int64ColumnWriter(w) => {
+            let values = if index == 1 {
+                &columns.frame
+            } else {
+                &columns.stamp_ns
+            };
+            w.write_batch(values, None, None)
+        }
+        ColumnWriter::Int32ColumnWriter(w) => {
+            let values = match index {
+                3 => &columns.row,
+                4 => &columns.col,
+                _ => &columns.points,
+            };
+            w.write_batch(values, None, None)
+        }
+        ColumnWriter::DoubleColumnWriter(w) => {
+            let values = if index == 5 {
+                &columns.x_m
+            } else {
+                &columns.y_m
+            };
+            w.write_batch(values, None, None)
+        }
+        ColumnWriter::FloatColumnWriter(w) if features.contains(&index) => {
+            w.write_batch(&columns.features[index - features.start], None, None)
+        }
+        ColumnWriter::FloatColumnWriter(w) if appearance.contains(&index) => w.write_batch(
+            &columns.appearance[index - appearance.start],
+            Some(&columns.appearance_defined),
+            None,
+        ),
+        ColumnWriter::BoolColumnWriter(w) => {
+            let column = if index == appearance.end {
+                &columns.ground_truth
+            } else {
+                &columns.predicted
+            };
+            w.write_batch(&column.values, Some(&column.defined), None)
+        }
+        _ => unreachable!("column {index} is not in the cell schema"),
+    };
+    written.map(|_| ())
+}
+
+fn read_error(path: &Path, message: impl std::fmt::Display) -> Error {
+    Error::Dataset {
+        path: path.to_path_buf(),
+        message: message.to_string(),
+    }
+}
+
+/// Reads a whole column of a row group: its present values, and per row whether
+/// it is present (all true for a required column).
+fn read_column<T: DataType>(
+    group: &dyn RowGroupReader,
+    index: usize,
+    rows: usize,
+) -> parquet::errors::Result<(Vec<T::T>, Vec<bool>)>
+where
+    T::T: Default + Clone,
+{
+    let mut values = Vec::with_capacity(rows.min(ROW_GROUP_ROWS));
+    let mut levels = Vec::with_capacity(rows.min(ROW_GROUP_ROWS));
+    contained(|| {
+        let mut reader: ColumnReaderImpl<T> =
+            parquet::column::reader::get_typed_column_reader(group.get_column_reader(index)?);
+        let mut read = 0;
+        while read < rows {
+            let (records, _, _) =
+                reader.read_records(rows - read, Some(&mut levels), None, &mut values)?;
+            if records == 0 {
+                return Err(parquet::errors::ParquetError::EOF(format!(
+                    "{read} of {rows} rows"
+                )));
+            }
+            read += records;
+        }
+        Ok(())
+    })?;
+    // A required column has no levels: every row is present.
+    let present = if levels.is_empty() {
+        vec![true; rows]
+    } else {
+        levels.iter().map(|&l| l > 0).collect::<Vec<_>>()
+    };
+    let present_count = present.iter().filter(|&&p| p).count();
+    if present.len() != rows || values.len() != present_count {
+        return Err(parquet::errors::ParquetError::General(format!(
+            "a column of {rows} rows gave {} levels and {} values for {present_count} present rows",
+            present.len(),
+            values.len()
+        )));
+    }
+    Ok((values, present))
+}
+
+/// Runs a call into the parquet crate, which panics on some corrupt input rather
+/// than returning an error (apache/arrow-rs#9742): the panic becomes an error.
+fn contained<T>(call: impl FnOnce() -> parquet::errors::Result<T>) -> parquet::errors::Result<T> {
+    contain_panics(call).unwrap_or_else(|panic| {
+        Err(parquet::errors::ParquetError::General(format!(
+            "corrupt Parquet file (the parquet reader stopped: {panic})"
+        )))
+    })
+}
+
+/// Reads a whole column of a row group that must have a value in every row.
+fn read_required<T: DataType>(
+    group: &dyn RowGroupReader,
+    index: usize,
+    rows: usize,
+) -> parquet::errors::Result<Vec<T::T>>
+where
+    T::T: Default + Clone,
+{
+    let (values, present) = read_column::<T>(group, index, rows)?;
+    match present.iter().position(|&p| !p) {
+        None => Ok(values),
+        Some(row) => Err(parquet::errors::ParquetError::General(format!(
+            "column `{}` is null in row {row} of its row group; travmap needs a value in every row",
+            group.metadata().column(index).column_path().string()
+        ))),
+    }
+}
+
+/// The settings that decide a cell's features and label: a dataset made with
+/// others cannot train a model used with these.
+fn feature_settings(config: &Config) -> serde_json::Value {
+    serde_json::json!({
+        "integration": config.integration,
+        "grid.cell_size_m": config.grid.cell_size_m,
+        "grid.min_points": config.grid.min_points,
+        "features": config.features,
+        "appearance": config.appearance,
+        "ground_truth": config.ground_truth,
+    })
+}
+
+/// Appends the labelled rows of the dataset at `path` to `set`, after checking
+/// that its cells were computed with `config`'s feature settings. Returns the
+/// number of rows added.
+pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -> Result<usize> {
+    // In memory: the parquet crate reads a `File` with many small unbuffered reads,
+    // millions of them on some corrupt page headers (15 s for a 26 kB file). The
+    // rows take more memory than the compressed file does anyway.
+    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if !data.starts_with(b"PAR1") {
+        return Err(read_error(
+            path,
+            format!(
+                "begins with {:02x?}, not PAR1: not a Parquet file",
+                &data[..data.len().min(4)]
+            ),
+        ));
+    }
+    let fail = |e: parquet::errors::ParquetError| read_error(path, e);
+    let reader = contained(|| SerializedFileReader::new(bytes::Bytes::from(data))).map_err(fail)?;
+    let metadata = reader.metadata().file_metadata();
+    let value_of = |key: &str| {
+        metadata
+            .key_value_metadata()
+            .and_then(|kv| kv.iter().find(|e| e.key == key))
+            .and_then(|e| e.value.clone())
+    };
+    if value_of(FORMAT_KEY).as_deref() != Some(FORMAT) {
+        return Err(read_error(
+            path,
+            format!(
+                "not a travmap cell dataset (metadata {FORMAT_KEY} is {:?}; expected {FORMAT:?})",
+                value_of(FORMAT_KEY)
+            ),
+        ));
+    }
+    let written: Config = value_of(CONFIG_KEY)
+        .and_then(|json| serde_json::from_str(&json).ok())
+        .ok_or_else(|| read_error(path, format!("no readable {CONFIG_KEY} metadata")))?;
+    let (theirs, ours) = (feature_settings(&written), feature_settings(config));
+    if theirs != ours {
+        return Err(read_error(
+            path,
+            format!(
+                "extracted with other feature settings: {theirs} (dataset) vs {ours} (now); pass the same --config / --set as for `travmap dataset`"
+            ),
+        ));
+    }
+    let expected = schema(&appearance_columns(config));
+    let expected = parquet::schema::parser::parse_message_type(&expected).expect("schema parses");
+    let expected = SchemaDescriptor::new(Arc::new(expected));
+    // Name and physical type of every column. Other writers may annotate columns
+    // differently or make every column nullable (Polars does); a null where travmap
+    // needs a value is caught when the column is read. The typed column readers
+    // below panic on a type they were not made for, so this check comes first.
+    let layout = |descr: &SchemaDescriptor| -> Vec<String> {
+        descr
+            .columns()
+            .iter()
+            .map(|c| {
+                let repeated = if c.max_rep_level() > 0 {
+                    " (repeated)"
+                } else {
+                    ""
+                };
+                format!("{} {}{repeated}", c.name(), c.physical_type())
+            })
+            .collect()
+    };
+    let (columns, wanted) = (layout(metadata.schema_descr()), layout(&expected));
+    if columns != wanted {
+        let first = columns
+            .iter()
+            .zip(&wanted)
+            .position(|(a, b)| a != b)
+            .unwrap_or(columns.len().min(wanted.len()));
+        return Err(read_error(
+            path,
+            format!(
+                "column {first} is `{}`; expected `{}` ({} columns, expected {})",
+                columns.get(first).map_or("(none)", String::as_str),
+                wanted.get(first).map_or("(none)", String::as_str),
+                columns.len(),
+                wanted.len(),
+            ),
+        ));
+    }
+
+    use parquet::data_type::{BoolType, DoubleType, FloatType};
+    let appearance_len = wanted.len() - 10 - FEATURE_COUNT;
+    let mut added = 0;
+    for g in 0..reader.num_row_groups() {
+        let group = contained(|| reader.get_row_group(g)).map_err(fail)?;
+        // Columns are read whole, so a corrupt count must not size them.
+        let rows = usize::try_from(group.metadata().num_rows())
+            .ok()
+            .filter(|&rows| rows <= MAX_READ_GROUP_ROWS)
+            .ok_or_else(|| {
+                read_error(
+                    path,
+                    format!(
+                        "row group {g} declares {} rows; travmap reads groups of 0 to {MAX_READ_GROUP_ROWS}",
+                        group.metadata().num_rows()
+                    ),
+                )
+            })?;
+        let x_m = read_required::<DoubleType>(group.as_ref(), 5, rows).map_err(fail)?;
+        let y_m = read_required::<DoubleType>(group.as_ref(), 6, rows).map_err(fail)?;
+        let mut features = Vec::with_capacity(FEATURE_COUNT);
+        for f in 0..FEATURE_COUNT {
+            features.push(read_required::<FloatType>(group.as_ref(), 8 + f, rows).map_err(fail)?);
+        }
+        let mut appearance = Vec::with_capacity(appearance_len);
+        let mut seen = vec![true; rows];
+        for a in 0..appearance_len {
+            let (values, present) =
+                read_column::<FloatType>(group.as_ref(), 8 + FEATURE_COUNT + a, rows)
+                    .map_err(fail)?;
+            // Values are packed over the present rows; spread them back.
+            let mut spread = vec![0.0f32; rows];
+            let mut next = values.into_iter();
+            for (row, &p) in present.iter().enumerate() {
+                if p {
+                    spread[row] = next.next().unwrap_or_default();
+                } else {
+                    seen[row] = false;
+                }
+            }
+            appearance.push(spread);
+        }
+        let truth_column = 8 + FEATURE_COUNT + appearance_len;
+        let (truth, labelled) =
+            read_column::<BoolType>(group.as_ref(), truth_column, rows).map_err(fail)?;
+        let mut truth = truth.into_iter();
+        let mut row_features = [0.0f32; FEATURE_COUNT];
+        let mut row_appearance = vec![0.0f32; appearance_len];
+        for row in 0..rows {
+            if !labelled[row] {
+                continue;
+            }
+            let traversable = truth.next().unwrap_or_default();
+            for (f, column) in features.iter().enumerate() {
+                row_features[f] = column[row];
+            }
+            for (a, column) in appearance.iter().enumerate() {
+                row_appearance[a] = column[row];
+            }
+            let appearance = (seen[row] && appearance_len > 0).then_some(&row_appearance[..]);
+            set.push(&row_features, appearance, traversable, [x_m[row], y_m[row]]);
+            added += 1;
+        }
+    }
+    Ok(added)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A file with the cell schema as `edit` changes it and travmap's metadata.
+    fn write_with_schema(path: &Path, config: &Config, edit: impl Fn(String) -> String) {
+        let schema = edit(schema(&appearance_columns(config)));
+        let schema = parquet::schema::parser::parse_message_type(&schema).unwrap();
+        let properties = WriterProperties::builder()
+            .set_key_value_metadata(Some(vec![
+                KeyValue::new(FORMAT_KEY.into(), FORMAT.to_string()),
+                KeyValue::new(CONFIG_KEY.into(), serde_json::to_string(config).unwrap()),
+            ]))
+            .build();
+        let file = File::create(path).unwrap();
+        SerializedFileWriter::new(file, Arc::new(schema), Arc::new(properties))
+            .unwrap()
+            .close()
+            .unwrap();
+    }
+
+    #[test]
+    fn a_column_of_another_type_is_refused_before_it_is_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cells.parquet");
+        let config = Config::default();
+        let read = |path: &Path| {
+            read_training_rows(path, &config, &mut TrainingSet::default())
+                .map_err(|e| e.to_string())
+        };
+        write_with_schema(&path, &config, |s| s);
+        assert_eq!(read(&path), Ok(0));
+        write_with_schema(&path, &config, |s| {
+            s.replace("REQUIRED DOUBLE x_m", "REQUIRED INT64 x_m")
+        });
+        let err = read(&path).unwrap_err();
+        assert!(
+            err.contains("cells.parquet")
+                && err.contains("column 5 is `x_m INT64`; expected `x_m DOUBLE`"),
+            "{err}"
+        );
+        write_with_schema(&path, &config, |s| {
+            s.replace("; OPTIONAL BOOLEAN predicted_traversable", "")
+        });
+        let err = read(&path).unwrap_err();
+        assert!(err.contains("column 117 is `(none)`; expected `predicted_traversable BOOLEAN` (117 columns, expected 118)"), "{err}");
+    }
+}

@@ -1,0 +1,10 @@
+//! What travmap writes: MCAP ([`writing`], used by [`conversion`] and
+//! [`annotation`]), Parquet cell tables ([`dataset`]) and pictures ([`rendering`]).
+//! Every file goes through [`writing::AtomicFile`]: a temporary beside the output,
+//! renamed when complete.
+
+pub mod annotation;
+pub mod conversion;
+pub mod dataset;
+pub mod rendering;
+pub mod writing;

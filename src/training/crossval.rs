@@ -1,0 +1,160 @@
+//! The cells training learns from, and spatially-blocked cross-validation: an honest
+//! accuracy when the training and test frames overlap in space (as the shipped
+//! frames do).
+
+use serde::Serialize;
+
+use super::{TrainingSet, spatial_folds, train};
+use crate::config::Config;
+use crate::drive::Selection;
+use crate::error::{Error, Result};
+use crate::method::classifier::{PredictionScratch, SvmModel};
+use crate::method::features::FEATURE_COUNT;
+use crate::method::filter::OutlierFilter;
+use crate::method::grid::CellClass;
+use crate::method::pipeline::FrameResult;
+use crate::scoring::evaluation::{Evaluation, EvaluationReport};
+
+/// Collects the labelled cells of the selected frames on the training grid
+/// (`training.grid_size_m`).
+pub fn collect_training_set(
+    selections: &[Selection],
+    config: &Config,
+    on_frame: &mut dyn FnMut(),
+) -> Result<TrainingSet> {
+    let training_config = config.for_training_cells();
+    let mut set = TrainingSet {
+        dimension: FEATURE_COUNT,
+        ..Default::default()
+    };
+    for selection in selections {
+        set.sources.push(selection.describe());
+        selection.run::<Error>(&training_config, None, |result| {
+            for (cell, traversable) in result.labelled_cells() {
+                set.push(
+                    result.features.cell(cell),
+                    result.features.appearance(cell),
+                    traversable,
+                    result.layout.cell_centre_in_world(cell),
+                );
+            }
+            on_frame();
+            Ok(())
+        })?;
+    }
+    if set.is_empty() {
+        return Err(Error::Training(
+            "no labelled cells in the selected frames (SemanticKITTI labels/ are needed)".into(),
+        ));
+    }
+    Ok(set)
+}
+
+/// One outer fold of the cross-validation.
+#[derive(Clone, Debug, Serialize)]
+pub struct FoldReport {
+    pub fold: usize,
+    pub training_cells: usize,
+    pub test_cells: usize,
+    pub c: f64,
+    pub gamma: f64,
+    pub support_vectors: usize,
+    pub training_seconds: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct CrossValidationReport {
+    pub block_size_m: f64,
+    pub folds: Vec<FoldReport>,
+    pub evaluation: EvaluationReport,
+}
+
+/// Spatially-blocked cross-validation: the world plane is cut into blocks of
+/// `training.block_size_m`, blocks are dealt into `training.folds` folds, and each
+/// evaluation cell is predicted by a model (with its own inner grid search) trained
+/// only on cells of the other folds. The out-of-fold predictions of each frame are
+/// then filtered and scored like a normal run, so no test cell's world position is
+/// ever a training cell.
+pub fn cross_validate(
+    selections: &[Selection],
+    config: &Config,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<CrossValidationReport> {
+    let pool = collect_training_set(selections, config, &mut || {})?;
+    let mut frames: Vec<FrameResult> = Vec::new();
+    for selection in selections {
+        selection.run::<Error>(config, None, |result| {
+            if result.ground_truth.is_some() {
+                frames.push(result);
+            }
+            Ok(())
+        })?;
+    }
+    // One block -> fold map over the pool's and the evaluation cells' centres.
+    let mut centres = pool.centre_in_world.clone();
+    for result in &frames {
+        centres
+            .extend((0..result.layout.cell_count()).map(|c| result.layout.cell_centre_in_world(c)));
+    }
+    let t = &config.training;
+    let fold_of = spatial_folds(&centres, t.block_size_m, t.folds, t.seed);
+    let (pool_folds, mut frame_folds) = fold_of.split_at(pool.len());
+
+    let mut models: Vec<Option<SvmModel>> = Vec::new();
+    let mut fold_reports = Vec::new();
+    for fold in 0..t.folds {
+        let training: Vec<usize> = (0..pool.len()).filter(|&i| pool_folds[i] != fold).collect();
+        let test_cells = pool_folds.iter().filter(|&&f| f == fold).count();
+        if test_cells == 0 || training.is_empty() {
+            models.push(None);
+            continue;
+        }
+        progress(&format!(
+            "fold {}/{}: training on {} cells",
+            fold + 1,
+            t.folds,
+            training.len()
+        ));
+        let model = train(&pool.subset(&training), config, &|_, _| {})?;
+        fold_reports.push(FoldReport {
+            fold,
+            training_cells: training.len(),
+            test_cells,
+            c: model.c,
+            gamma: model.gamma,
+            support_vectors: model.support_vector_count(),
+            training_seconds: model.training.seconds,
+        });
+        models.push(Some(model));
+    }
+
+    let filter = OutlierFilter {
+        config: config.filter.clone(),
+    };
+    let mut evaluation = Evaluation::default();
+    let mut scratch = PredictionScratch::default();
+    for mut result in frames {
+        let (folds_here, rest) = frame_folds.split_at(result.layout.cell_count());
+        frame_folds = rest;
+        let predicted: Vec<CellClass> = (0..result.layout.cell_count())
+            .map(|cell| match &models[folds_here[cell]] {
+                Some(model) if result.features.predictable[cell] => model.classify_cell(
+                    result.features.cell(cell),
+                    result.features.appearance(cell),
+                    &mut scratch,
+                    config.classifier.use_reduced_set,
+                ),
+                _ => CellClass::Unknown,
+            })
+            .collect();
+        result.filtered = Some(filter.apply(&predicted, result.layout.cells_per_side));
+        result.predicted = Some(predicted);
+        evaluation.add(&result);
+    }
+    Ok(CrossValidationReport {
+        block_size_m: t.block_size_m,
+        folds: fold_reports,
+        evaluation: evaluation.report(),
+    })
+}
+

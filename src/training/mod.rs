@@ -1,0 +1,633 @@
+//! Training (METHOD.md section 6): z-score standardisation, a grid search over C
+//! and gamma with cross-validation, and a final fit on every training cell.
+//!
+//! Folds are spatial (Decision of this project): the world plane is cut into square
+//! blocks and whole blocks go to one fold, so no cell, nor its copies seen in other
+//! frames, is in a training fold and its test fold at once. Random folds would let
+//! the search reward memorising cells (consecutive frames share most cells).
+
+use rayon::prelude::*;
+
+pub mod crossval;
+pub mod model_file;
+pub mod smo;
+
+use crate::method::classifier::{PredictionScratch, ReducedSet, SearchResult, SvmModel, TrainingSummary};
+use smo::{Parameters, Problem};
+use crate::config::{Config, TrainingConfig};
+use crate::error::{Error, Result};
+use crate::random::SplitMix64;
+
+/// Labelled cells: raw features and where each cell lies in the world.
+#[derive(Clone, Debug, Default)]
+pub struct TrainingSet {
+    /// Row-major `len x dimension` raw features.
+    pub features: Vec<f32>,
+    pub dimension: usize,
+    pub traversable: Vec<bool>,
+    /// World x, y of each cell's centre, metres.
+    pub centre_in_world: Vec<[f64; 2]>,
+    /// Where the cells came from, for the model's record.
+    pub sources: Vec<String>,
+    /// Appearance values of the cells a camera has seen, `appearance_len` each.
+    pub appearance: Vec<f32>,
+    pub appearance_len: usize,
+    /// Per cell, its row in `appearance` (seen cells: the hybrid model's cells).
+    pub appearance_row: Vec<Option<usize>>,
+}
+
+impl TrainingSet {
+    pub fn len(&self) -> usize {
+        self.traversable.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.traversable.is_empty()
+    }
+
+    pub fn push(
+        &mut self,
+        features: &[f32],
+        appearance: Option<&[f32]>,
+        traversable: bool,
+        centre_in_world: [f64; 2],
+    ) {
+        self.features.extend_from_slice(features);
+        self.traversable.push(traversable);
+        self.centre_in_world.push(centre_in_world);
+        let row = appearance.map(|values| {
+            self.appearance_len = values.len();
+            self.appearance.extend_from_slice(values);
+            self.appearance.len() / values.len().max(1) - 1
+        });
+        self.appearance_row.push(row);
+    }
+
+    fn appearance_of(&self, i: usize) -> Option<&[f32]> {
+        let n = self.appearance_len;
+        self.appearance_row[i].map(|row| &self.appearance[row * n..(row + 1) * n])
+    }
+
+    /// The seen cells with geometric and appearance values side by side, for the
+    /// hybrid model; None when no cell was seen.
+    pub fn hybrid(&self) -> Option<TrainingSet> {
+        let d = self.dimension;
+        let mut out = TrainingSet {
+            dimension: d + self.appearance_len,
+            sources: self.sources.clone(),
+            ..Default::default()
+        };
+        for i in 0..self.len() {
+            if let Some(appearance) = self.appearance_of(i) {
+                let mut row = self.features[i * d..(i + 1) * d].to_vec();
+                row.extend_from_slice(appearance);
+                out.push(&row, None, self.traversable[i], self.centre_in_world[i]);
+            }
+        }
+        (!out.is_empty()).then_some(out)
+    }
+
+    /// The cells at `indices`, in that order.
+    pub fn subset(&self, indices: &[usize]) -> TrainingSet {
+        let d = self.dimension;
+        let mut out = TrainingSet {
+            dimension: d,
+            sources: self.sources.clone(),
+            appearance_len: self.appearance_len,
+            ..Default::default()
+        };
+        for &i in indices {
+            out.push(
+                &self.features[i * d..(i + 1) * d],
+                self.appearance_of(i),
+                self.traversable[i],
+                self.centre_in_world[i],
+            );
+        }
+        out
+    }
+}
+
+/// Assigns every cell to one of `folds` folds by its world block: blocks are
+/// shuffled with `seed` and dealt round-robin, so folds hold similar block counts.
+pub fn spatial_folds(
+    centres: &[[f64; 2]],
+    block_size_m: f64,
+    folds: usize,
+    seed: u64,
+) -> Vec<usize> {
+    let block_of = |c: &[f64; 2]| {
+        [
+            (c[0] / block_size_m).floor() as i64,
+            (c[1] / block_size_m).floor() as i64,
+        ]
+    };
+    let mut blocks: Vec<[i64; 2]> = centres.iter().map(block_of).collect();
+    blocks.sort_unstable();
+    blocks.dedup();
+    SplitMix64(seed).shuffle(&mut blocks);
+    let fold_of_block: std::collections::HashMap<[i64; 2], usize> = blocks
+        .iter()
+        .enumerate()
+        .map(|(i, b)| (*b, i % folds))
+        .collect();
+    centres
+        .iter()
+        .map(|c| fold_of_block[&block_of(c)])
+        .collect()
+}
+
+/// Mean and 1/deviation of each feature; constant features get 1.
+fn standardisation(set: &TrainingSet) -> (Vec<f32>, Vec<f32>) {
+    let d = set.dimension;
+    let n = set.len().max(1) as f64;
+    let mut mean = vec![0f64; d];
+    for row in set.features.chunks_exact(d) {
+        for (m, &v) in mean.iter_mut().zip(row) {
+            *m += v as f64;
+        }
+    }
+    mean.iter_mut().for_each(|m| *m /= n);
+    let mut variance = vec![0f64; d];
+    for row in set.features.chunks_exact(d) {
+        for ((s, &v), m) in variance.iter_mut().zip(row).zip(&mean) {
+            *s += (v as f64 - m).powi(2);
+        }
+    }
+    let inverse_std = variance
+        .iter()
+        .map(|s| {
+            let std = (s / n).sqrt();
+            if std > 1e-12 { (1.0 / std) as f32 } else { 1.0 }
+        })
+        .collect();
+    (mean.iter().map(|&m| m as f32).collect(), inverse_std)
+}
+
+/// Fits one SVM on `set` with the given C and gamma.
+fn fit(set: &TrainingSet, c: f64, gamma: f64, config: &Config) -> SvmModel {
+    let d = set.dimension;
+    let (mean, inverse_std) = standardisation(set);
+    let standardised: Vec<f32> = set
+        .features
+        .chunks_exact(d)
+        .flat_map(|row| {
+            row.iter()
+                .zip(&mean)
+                .zip(&inverse_std)
+                .map(|((&x, &m), &s)| (x - m) * s)
+                .collect::<Vec<f32>>()
+        })
+        .collect();
+    let labels: Vec<f32> = set
+        .traversable
+        .iter()
+        .map(|&t| if t { 1.0 } else { -1.0 })
+        .collect();
+    let problem = Problem {
+        samples: &standardised,
+        dimension: d,
+        labels: &labels,
+    };
+    let parameters = Parameters {
+        c,
+        gamma,
+        tolerance: config.training.tolerance,
+        cache_bytes: config.training.cache_mib << 20,
+    };
+    let solution = smo::solve(&problem, &parameters);
+    let (mut coefficients, mut support_vectors) = (Vec::new(), Vec::new());
+    for (i, &a) in solution.alpha.iter().enumerate() {
+        if a > 0.0 {
+            coefficients.push((a * labels[i] as f64) as f32);
+            support_vectors.extend_from_slice(&standardised[i * d..(i + 1) * d]);
+        }
+    }
+    let summary = TrainingSummary {
+        sources: set.sources.clone(),
+        samples: set.len(),
+        traversable_samples: set.traversable.iter().filter(|t| **t).count(),
+        search: Vec::new(),
+        solver_iterations: solution.iterations,
+        solver_converged: solution.converged,
+        seconds: 0.0,
+    };
+    SvmModel::new(
+        mean,
+        inverse_std,
+        c,
+        gamma,
+        solution.rho as f32,
+        coefficients,
+        support_vectors,
+        config.clone(),
+        summary,
+    )
+}
+
+/// Share of `set`'s cells that `model` classifies right.
+fn accuracy(model: &SvmModel, set: &TrainingSet) -> f64 {
+    let d = set.dimension;
+    let mut scratch = model.scratch();
+    let right = set
+        .features
+        .chunks_exact(d)
+        .zip(&set.traversable)
+        .filter(|(row, t)| (model.decision_value(row, &mut scratch) > 0.0) == **t)
+        .count();
+    right as f64 / set.len().max(1) as f64
+}
+
+/// Trains the geometric model on every cell and, when cameras saw some, the hybrid
+/// model on those (METHOD.md section 5's Decision). A hybrid set that cannot be
+/// trained (one class, too few blocks) leaves the model geometric-only.
+pub fn train(
+    set: &TrainingSet,
+    config: &Config,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<SvmModel> {
+    let mut model = train_one(set, config, progress)?;
+    if let Some(hybrid) = set.hybrid() {
+        match train_one(&hybrid, config, progress) {
+            Ok(hybrid) => model.hybrid = Some(Box::new(hybrid)),
+            Err(Error::Training(_)) => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(model)
+}
+
+/// Grid search with spatially-blocked cross-validation, then a fit on all of `set`.
+/// `progress(done, total)` is called after each fit.
+fn train_one(
+    set: &TrainingSet,
+    config: &Config,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<SvmModel> {
+    let started = std::time::Instant::now();
+    let t: &TrainingConfig = &config.training;
+    let traversable = set.traversable.iter().filter(|t| **t).count();
+    if traversable == 0 || traversable == set.len() {
+        return Err(Error::Training(format!(
+            "{} cells, {traversable} traversable: both classes are needed",
+            set.len()
+        )));
+    }
+
+    // The search and the final fit run on seeded random subsets when the set is
+    // large; the fit's subset holds the search's.
+    let mut order: Vec<usize> = (0..set.len()).collect();
+    SplitMix64(t.seed).shuffle(&mut order);
+    let subset = |n: usize| {
+        let mut indices = order[..n.min(order.len())].to_vec();
+        indices.sort_unstable();
+        set.subset(&indices)
+    };
+    let search_set = subset(t.max_search_samples.max(t.folds));
+    let fit_set = subset(t.max_fit_samples);
+    let folds = spatial_folds(&search_set.centre_in_world, t.block_size_m, t.folds, t.seed);
+    let used_folds: Vec<usize> = (0..t.folds).filter(|f| folds.contains(f)).collect();
+    if used_folds.len() < 2 {
+        return Err(Error::Training(format!(
+            "the cells span fewer than 2 blocks of {} m: lower training.block_size_m",
+            t.block_size_m
+        )));
+    }
+    let candidates: Vec<(f64, f64)> = t
+        .c_values
+        .iter()
+        .flat_map(|&c| t.gamma_values.iter().map(move |&g| (c, g)))
+        .collect();
+    let jobs: Vec<(usize, usize)> = (0..candidates.len())
+        .flat_map(|k| used_folds.iter().map(move |&f| (k, f)))
+        .collect();
+    let total = jobs.len() + 1;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let scores: Vec<(usize, usize, f64)> = jobs
+        .par_iter()
+        .map(|&(k, fold)| {
+            let (train_idx, test_idx): (Vec<usize>, Vec<usize>) =
+                (0..search_set.len()).partition(|&i| folds[i] != fold);
+            let (c, gamma) = candidates[k];
+            let model = fit(&search_set.subset(&train_idx), c, gamma, config);
+            let test = search_set.subset(&test_idx);
+            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            progress(n, total);
+            (k, test.len(), accuracy(&model, &test) * test.len() as f64)
+        })
+        .collect();
+    let search: Vec<SearchResult> = candidates
+        .iter()
+        .enumerate()
+        .map(|(k, &(c, gamma))| {
+            let (right, cells) = scores
+                .iter()
+                .filter(|s| s.0 == k)
+                .fold((0.0, 0usize), |(r, n), s| (r + s.2, n + s.1));
+            SearchResult {
+                c,
+                gamma,
+                accuracy: right / cells.max(1) as f64,
+            }
+        })
+        .collect();
+    // The first best in (C, gamma) order: ties go to the smaller, smoother model.
+    let best = search.iter().fold(search[0], |best, r| {
+        if r.accuracy > best.accuracy { *r } else { best }
+    });
+    let mut model = fit(&fit_set, best.c, best.gamma, config);
+    model.reduced_set = fit_reduced_set(&model, &fit_set, config);
+    progress(total, total);
+    model.training.search = search;
+    model.training.seconds = started.elapsed().as_secs_f64();
+    Ok(model)
+}
+
+/// Lloyd's k-means on row-major `points`, started from a seeded random subset;
+/// an emptied cluster keeps its previous centre.
+fn k_means(
+    points: &[f32],
+    d: usize,
+    k: usize,
+    iterations: usize,
+    rng: &mut SplitMix64,
+) -> Vec<f32> {
+    let n = points.len() / d;
+    let mut start: Vec<usize> = (0..n).collect();
+    rng.shuffle(&mut start);
+    let mut centres: Vec<f32> = start[..k]
+        .iter()
+        .flat_map(|&i| points[i * d..(i + 1) * d].iter().copied())
+        .collect();
+    for _ in 0..iterations {
+        let mut sums = vec![0f64; k * d];
+        let mut counts = vec![0usize; k];
+        for p in points.chunks_exact(d) {
+            let nearest = centres
+                .chunks_exact(d)
+                .map(|c| c.iter().zip(p).map(|(a, b)| (a - b) * (a - b)).sum::<f32>())
+                .enumerate()
+                .fold((0, f32::INFINITY), |best, (j, dist)| {
+                    if dist < best.1 { (j, dist) } else { best }
+                })
+                .0;
+            counts[nearest] += 1;
+            for (s, &v) in sums[nearest * d..(nearest + 1) * d].iter_mut().zip(p) {
+                *s += v as f64;
+            }
+        }
+        for j in (0..k).filter(|&j| counts[j] > 0) {
+            for (c, s) in centres[j * d..(j + 1) * d]
+                .iter_mut()
+                .zip(&sums[j * d..(j + 1) * d])
+            {
+                *c = (s / counts[j] as f64) as f32;
+            }
+        }
+    }
+    centres
+}
+
+/// Fits `training.reduced_set_size` kernel centres (k-means centres of the support
+/// vectors) and their weights and bias by ridge least squares to the exact
+/// decision values on at most `training.reduced_set_samples` training cells. None
+/// when the model has no more support vectors than that.
+fn fit_reduced_set(model: &SvmModel, set: &TrainingSet, config: &Config) -> Option<ReducedSet> {
+    let t = &config.training;
+    let d = model.dimension();
+    let sv_count = model.support_vector_count();
+    if t.reduced_set_size == 0 || sv_count <= t.reduced_set_size {
+        return None;
+    }
+    let mut rng = SplitMix64(t.seed ^ 0x5EED);
+    let centres = k_means(&model.support_vectors, d, t.reduced_set_size, 10, &mut rng);
+    let mut rows: Vec<usize> = (0..set.len()).collect();
+    rng.shuffle(&mut rows);
+    rows.truncate(t.reduced_set_samples.max(1));
+
+    // Design matrix: the kernel to every centre plus a column of ones for the bias.
+    let m = t.reduced_set_size;
+    let gamma = model.gamma;
+    let mut scratch = PredictionScratch::default();
+    let mut design = nalgebra::DMatrix::<f64>::zeros(rows.len(), m + 1);
+    let mut target = nalgebra::DVector::<f64>::zeros(rows.len());
+    for (r, &i) in rows.iter().enumerate() {
+        let features = &set.features[i * d..(i + 1) * d];
+        target[r] = model.exact_decision_value(features, &mut scratch) as f64;
+        let z = model.standardise(features, &mut scratch);
+        for (j, c) in centres.chunks_exact(d).enumerate() {
+            let distance: f64 = c.iter().zip(z).map(|(a, b)| ((a - b) as f64).powi(2)).sum();
+            design[(r, j)] = (-gamma * distance).exp();
+        }
+        design[(r, m)] = 1.0;
+    }
+    // Rows near the decision boundary decide signs: weight them up, w = 1 / (1 + f^2).
+    let mut weighted = design.clone();
+    let mut weighted_target = target.clone();
+    for r in 0..rows.len() {
+        let w = (1.0 / (1.0 + target[r] * target[r])).sqrt();
+        weighted.row_mut(r).scale_mut(w);
+        weighted_target[r] *= w;
+    }
+    let mut normal = weighted.transpose() * &weighted;
+    let right = weighted.transpose() * &weighted_target;
+    // A small ridge keeps the system positive definite when centres nearly coincide.
+    let ridge = 1e-6 * (0..=m).map(|j| normal[(j, j)]).fold(0.0, f64::max);
+    for j in 0..=m {
+        normal[(j, j)] += ridge;
+    }
+    let solution = normal.cholesky()?.solve(&right);
+    let fitted = &design * &solution;
+    let agreeing = fitted
+        .iter()
+        .zip(target.iter())
+        .filter(|(f, e)| (**f > 0.0) == (**e > 0.0))
+        .count();
+    Some(ReducedSet::new(
+        centres,
+        solution.iter().take(m).map(|&w| w as f32).collect(),
+        solution[m] as f32,
+        agreeing as f64 / rows.len() as f64,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spatial_folds_keep_blocks_whole_and_use_every_fold() {
+        let centres: Vec<[f64; 2]> = (0..400)
+            .map(|i| [(i % 20) as f64 * 0.4, (i / 20) as f64 * 0.4])
+            .collect();
+        let folds = spatial_folds(&centres, 2.0, 5, 1);
+        for (a, fa) in centres.iter().zip(&folds) {
+            for (b, fb) in centres.iter().zip(&folds) {
+                if (a[0] / 2.0).floor() == (b[0] / 2.0).floor()
+                    && (a[1] / 2.0).floor() == (b[1] / 2.0).floor()
+                {
+                    assert_eq!(fa, fb);
+                }
+            }
+        }
+        for f in 0..5 {
+            assert!(folds.contains(&f));
+        }
+    }
+
+    /// 600 cells on a 30 x 20 m patch, a third non-traversable, separable by the
+    /// first feature; the second is noise on a large scale, so standardisation matters.
+    fn separable_set() -> TrainingSet {
+        let mut set = TrainingSet {
+            dimension: 2,
+            ..Default::default()
+        };
+        let mut rng = SplitMix64(9);
+        for i in 0..600 {
+            let traversable = i % 3 != 0;
+            let x = if traversable { 0.1 } else { 0.6 } + rng.uniform(-0.15, 0.15) as f32;
+            set.push(
+                &[x, 1000.0 * rng.uniform(-1.0, 1.0) as f32],
+                None,
+                traversable,
+                [(i % 30) as f64, (i / 30) as f64],
+            );
+        }
+        set
+    }
+
+    #[test]
+    fn training_learns_a_separable_feature_and_stores_the_search() {
+        let set = separable_set();
+        let mut config = Config::default();
+        config.training.c_values = vec![1.0, 10.0];
+        config.training.gamma_values = vec![0.1, 1.0];
+        let model = train(&set, &config, &|_, _| {}).unwrap();
+        assert_eq!(model.training.search.len(), 4);
+        assert!(
+            model.training.search.iter().all(|r| r.accuracy > 0.95),
+            "{:?}",
+            model.training.search
+        );
+        assert!(accuracy(&model, &set) > 0.98);
+        let mut scratch = model.scratch();
+        assert!(model.decision_value(&[0.1, 0.0], &mut scratch) > 0.0);
+        assert!(model.decision_value(&[0.6, 0.0], &mut scratch) < 0.0);
+    }
+
+    #[test]
+    fn a_large_set_is_fitted_on_a_seeded_subset_that_still_separates_it() {
+        let set = separable_set();
+        let mut config = Config::default();
+        config.training.c_values = vec![10.0];
+        config.training.gamma_values = vec![0.1];
+        config.training.max_search_samples = 100;
+        config.training.max_fit_samples = 200;
+        let model = train(&set, &config, &|_, _| {}).unwrap();
+        assert_eq!(model.training.samples, 200);
+        // A third of the cells is non-traversable; a random subset keeps about that.
+        let traversable = model.training.traversable_samples;
+        assert!((115..=150).contains(&traversable), "{traversable} of 200");
+        assert!(model.support_vector_count() <= 200);
+        assert!(accuracy(&model, &set) > 0.98);
+        // Seeded: the same subset, so the same model.
+        let again = train(&set, &config, &|_, _| {}).unwrap();
+        let (mut a, mut b) = (model.scratch(), again.scratch());
+        for row in set.features.chunks_exact(2).take(20) {
+            assert_eq!(
+                model.exact_decision_value(row, &mut a),
+                again.exact_decision_value(row, &mut b)
+            );
+        }
+        config.training.max_fit_samples = 600;
+        assert_eq!(
+            train(&set, &config, &|_, _| {}).unwrap().training.samples,
+            600
+        );
+    }
+
+    #[test]
+    fn reduced_set_follows_the_exact_decision_function() {
+        // A curved boundary that needs many support vectors: x^2 + y^2 < 1.
+        let mut set = TrainingSet {
+            dimension: 2,
+            ..Default::default()
+        };
+        let mut rng = SplitMix64(21);
+        for i in 0..1500 {
+            let (x, y) = (rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0));
+            set.push(
+                &[x as f32, y as f32],
+                None,
+                x * x + y * y < 1.0,
+                [(i % 40) as f64, (i / 40) as f64],
+            );
+        }
+        let mut config = Config::default();
+        config.training.c_values = vec![10.0];
+        config.training.gamma_values = vec![1.0];
+        config.training.reduced_set_size = 24;
+        let model = train(&set, &config, &|_, _| {}).unwrap();
+        assert!(
+            model.support_vector_count() > 24,
+            "{} support vectors",
+            model.support_vector_count()
+        );
+        let reduced = model.reduced_set.as_ref().expect("a reduced set");
+        assert_eq!(reduced.len(), 24);
+        assert!(
+            reduced.training_agreement > 0.98,
+            "{}",
+            reduced.training_agreement
+        );
+        let mut scratch = model.scratch();
+        let agreeing = set
+            .features
+            .chunks_exact(2)
+            .filter(|row| {
+                (model.decision_value(row, &mut scratch) > 0.0)
+                    == (model.exact_decision_value(row, &mut scratch) > 0.0)
+            })
+            .count();
+        assert!(
+            agreeing as f64 / set.len() as f64 > 0.98,
+            "{agreeing} of {}",
+            set.len()
+        );
+        // The file keeps it.
+        let mut exact = model.clone();
+        exact.reduced_set = None;
+        assert_ne!(exact.to_json(), model.to_json());
+    }
+
+    #[test]
+    fn k_means_finds_separated_clusters() {
+        let points: Vec<f32> = (0..60)
+            .flat_map(|i| {
+                if i % 2 == 0 {
+                    [0.0 + 0.01 * i as f32, 0.0]
+                } else {
+                    [10.0, 10.0 + 0.01 * i as f32]
+                }
+            })
+            .collect();
+        let centres = k_means(&points, 2, 2, 5, &mut SplitMix64(1));
+        let mut xs: Vec<f32> = centres.chunks_exact(2).map(|c| c[0]).collect();
+        xs.sort_by(f32::total_cmp);
+        assert!(
+            (xs[0] - 0.29).abs() < 0.01 && (xs[1] - 10.0).abs() < 1e-4,
+            "{centres:?}"
+        );
+    }
+
+    #[test]
+    fn one_class_is_an_error() {
+        let mut set = TrainingSet {
+            dimension: 1,
+            ..Default::default()
+        };
+        set.push(&[1.0], None, true, [0.0, 0.0]);
+        set.push(&[2.0], None, true, [9.0, 0.0]);
+        assert!(train(&set, &Config::default(), &|_, _| {}).is_err());
+    }
+}

@@ -1,0 +1,265 @@
+//! The model file: a versioned JSON document holding the geometric SVM, its reduced
+//! set and the hybrid model, plus the default model compiled into the binary.
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::config::Config;
+use crate::error::{Error, Result};
+use crate::method::classifier::{ReducedSet, SvmModel, TrainingSummary, appearance_feature_names};
+use crate::method::features::FEATURE_NAMES;
+
+/// The format tag and version of model files this build reads and writes.
+pub const MODEL_FORMAT: &str = "travmap-svm";
+pub const MODEL_VERSION: u32 = 1;
+
+/// The default geometry-only model, trained on the shipped labelled SemanticKITTI
+/// frames (see README, "The embedded model").
+pub const DEFAULT_MODEL_JSON: &[u8] = include_bytes!("default_model.json");
+
+/// The model file: a JSON document, versioned.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ModelFile {
+    format: String,
+    version: u32,
+    feature_names: Vec<String>,
+    feature_mean: Vec<f32>,
+    feature_std: Vec<f32>,
+    c: f64,
+    gamma: f64,
+    rho: f64,
+    /// `alpha_i * y_i` per support vector.
+    dual_coefficients: Vec<f32>,
+    /// Standardised support vectors, one row each.
+    support_vectors: Vec<Vec<f32>>,
+    /// The effective configuration the training cells were made with.
+    config: Config,
+    training: TrainingSummary,
+    #[serde(default)]
+    reduced_set: Option<ReducedSetFile>,
+    /// The hybrid model (geometric + appearance features) for cells a camera has seen.
+    #[serde(default)]
+    hybrid: Option<Box<ModelFile>>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ReducedSetFile {
+    /// Standardised kernel centres, one row each.
+    centres: Vec<Vec<f32>>,
+    weights: Vec<f32>,
+    bias: f32,
+    training_agreement: f64,
+}
+
+impl SvmModel {
+    /// The model compiled into the binary.
+    pub fn embedded_default() -> Result<Self> {
+        Self::from_json(DEFAULT_MODEL_JSON, "embedded default model")
+    }
+
+    /// Reads a model file, checking format, version, shapes and finiteness.
+    pub fn from_json(bytes: &[u8], source_name: &str) -> Result<Self> {
+        let fail = |message: String| Error::Model {
+            source_name: source_name.to_string(),
+            message,
+        };
+        let header: serde_json::Value = serde_json::from_slice(bytes)
+            .map_err(|e| fail(format!("not a JSON model file: {e}")))?;
+        let format = header.get("format").and_then(|f| f.as_str());
+        let version = header.get("version").and_then(|v| v.as_u64());
+        if format != Some(MODEL_FORMAT) || version != Some(MODEL_VERSION as u64) {
+            return Err(fail(format!(
+                "format {format:?} version {version:?}; this travmap reads \"{MODEL_FORMAT}\" version {MODEL_VERSION}"
+            )));
+        }
+        let file: ModelFile =
+            serde_json::from_value(header).map_err(|e| fail(format!("malformed model: {e}")))?;
+        let names: Vec<String> = FEATURE_NAMES.iter().map(|n| n.to_string()).collect();
+        Self::from_file(file, source_name, &names)
+    }
+
+    /// Checks and loads one model of a file; `expected_names` are its features.
+    fn from_file(file: ModelFile, source_name: &str, expected_names: &[String]) -> Result<Self> {
+        let fail = |message: String| Error::Model {
+            source_name: source_name.to_string(),
+            message,
+        };
+        let d = expected_names.len();
+        if file.feature_names != expected_names {
+            return Err(fail(format!(
+                "features {:?}; this travmap computes {:?}",
+                file.feature_names, expected_names
+            )));
+        }
+        if file.feature_mean.len() != d || file.feature_std.len() != d {
+            return Err(fail(format!("{d} means and deviations expected")));
+        }
+        if file.support_vectors.len() != file.dual_coefficients.len() {
+            return Err(fail(format!(
+                "{} support vectors but {} coefficients",
+                file.support_vectors.len(),
+                file.dual_coefficients.len()
+            )));
+        }
+        if let Some((i, sv)) = file
+            .support_vectors
+            .iter()
+            .enumerate()
+            .find(|(_, sv)| sv.len() != d)
+        {
+            return Err(fail(format!(
+                "support vector {i} has {} values, expected {d}",
+                sv.len()
+            )));
+        }
+        let numbers = file
+            .feature_mean
+            .iter()
+            .chain(&file.feature_std)
+            .chain(&file.dual_coefficients)
+            .chain(file.support_vectors.iter().flatten());
+        if numbers.clone().any(|v| !v.is_finite())
+            || !(file.gamma.is_finite() && file.gamma > 0.0 && file.rho.is_finite())
+            || file.feature_std.iter().any(|s| *s <= 0.0)
+        {
+            return Err(fail("non-finite or non-positive parameters".into()));
+        }
+        file.config.validate()?;
+        let hybrid = match file.hybrid {
+            Some(hybrid) => {
+                let mut names = expected_names.to_vec();
+                names.extend(appearance_feature_names(&file.config.appearance));
+                Some(Box::new(Self::from_file(
+                    *hybrid,
+                    &format!("{source_name} (hybrid model)"),
+                    &names,
+                )?))
+            }
+            None => None,
+        };
+        let reduced_set = match file.reduced_set {
+            None => None,
+            Some(r) => {
+                if r.centres.len() != r.weights.len() || r.centres.iter().any(|c| c.len() != d) {
+                    return Err(fail(format!(
+                        "reduced set: {} centres, {} weights, {d} values per centre expected",
+                        r.centres.len(),
+                        r.weights.len()
+                    )));
+                }
+                if r.centres
+                    .iter()
+                    .flatten()
+                    .chain(&r.weights)
+                    .any(|v| !v.is_finite())
+                    || !r.bias.is_finite()
+                {
+                    return Err(fail("reduced set: non-finite parameters".into()));
+                }
+                Some(ReducedSet::new(
+                    r.centres.concat(),
+                    r.weights,
+                    r.bias,
+                    r.training_agreement,
+                ))
+            }
+        };
+        let mut model = Self::new(
+            file.feature_mean,
+            file.feature_std.iter().map(|s| 1.0 / s).collect(),
+            file.c,
+            file.gamma,
+            file.rho as f32,
+            file.dual_coefficients,
+            file.support_vectors.concat(),
+            file.config,
+            file.training,
+        );
+        model.reduced_set = reduced_set;
+        model.hybrid = hybrid;
+        Ok(model)
+    }
+
+    fn to_file(&self) -> ModelFile {
+        let d = self.dimension();
+        ModelFile {
+            format: MODEL_FORMAT.into(),
+            version: MODEL_VERSION,
+            feature_names: self.feature_names(),
+            feature_mean: self.feature_mean.clone(),
+            feature_std: self.feature_inverse_std.iter().map(|s| 1.0 / s).collect(),
+            c: self.c,
+            gamma: self.gamma,
+            rho: self.rho as f64,
+            dual_coefficients: self.dual_coefficients.clone(),
+            support_vectors: self
+                .support_vectors
+                .chunks_exact(d)
+                .map(<[f32]>::to_vec)
+                .collect(),
+            config: self.config.clone(),
+            training: self.training.clone(),
+            reduced_set: self.reduced_set.as_ref().map(|r| ReducedSetFile {
+                centres: r.centres.chunks_exact(d).map(<[f32]>::to_vec).collect(),
+                weights: r.weights.clone(),
+                bias: r.bias,
+                training_agreement: r.training_agreement,
+            }),
+            hybrid: self.hybrid.as_ref().map(|h| Box::new(h.to_file())),
+        }
+    }
+
+    pub fn to_json(&self) -> Vec<u8> {
+        let mut bytes = serde_json::to_vec(&self.to_file()).expect("model serialises");
+        bytes.push(b'\n');
+        bytes
+    }
+
+    /// SHA-256 of the model file, to name exactly which model produced a result.
+    pub fn sha256_hex(&self) -> String {
+        Sha256::digest(self.to_json())
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect()
+    }
+
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn embedded_model_loads_and_round_trips() {
+        let model = SvmModel::embedded_default().expect("the shipped model must load");
+        assert!(model.support_vector_count() > 0);
+        assert_eq!(model.dimension(), FEATURE_NAMES.len());
+        model.check_compatible(&Config::default()).unwrap();
+        let again = SvmModel::from_json(&model.to_json(), "round trip").unwrap();
+        assert_eq!(again.to_json(), model.to_json());
+    }
+
+    #[test]
+    fn wrong_version_and_shapes_are_clear_errors() {
+        let model = SvmModel::embedded_default().unwrap();
+        let mut json: serde_json::Value = serde_json::from_slice(&model.to_json()).unwrap();
+        json["version"] = 99.into();
+        let err = SvmModel::from_json(json.to_string().as_bytes(), "m.json")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("m.json") && err.contains("version Some(99)"),
+            "{err}"
+        );
+        json["version"] = MODEL_VERSION.into();
+        json["dual_coefficients"] = serde_json::json!([1.0]);
+        let err = SvmModel::from_json(json.to_string().as_bytes(), "m.json")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("coefficients"), "{err}");
+        assert!(SvmModel::from_json(b"{", "m.json").is_err());
+    }
+
+}
