@@ -76,6 +76,31 @@ pub enum Error {
     #[error("{path}: {message}")]
     Mcap { path: PathBuf, message: String },
 
+    #[error("{path}: channel {topic} ({schema}), message at log time {log_time_ns} ns: {problem}")]
+    McapMessage {
+        path: PathBuf,
+        topic: String,
+        schema: String,
+        log_time_ns: u64,
+        problem: String,
+    },
+
+    #[error(
+        "{path}: channel {topic} ({schema}) has message encoding `{encoding}`; travmap reads `cdr` (ROS 2)"
+    )]
+    McapEncoding {
+        path: PathBuf,
+        topic: String,
+        schema: String,
+        encoding: String,
+    },
+
+    #[error("{path}: {problem}")]
+    Transform {
+        path: PathBuf,
+        problem: crate::io::transforms::TransformError,
+    },
+
     #[error("invalid configuration: {0}")]
     Config(String),
 
@@ -87,6 +112,14 @@ pub enum Error {
 
     #[error("training set: {0}")]
     Training(String),
+
+    #[error("cannot start {threads} worker threads: {message}")]
+    ThreadPool { threads: usize, message: String },
+
+    #[error(
+        "{selected} frames selected; the benchmark needs at least {needed} consecutive ones (a full integration window)"
+    )]
+    TooFewFrames { selected: usize, needed: usize },
 }
 
 /// Result with the library's error type.

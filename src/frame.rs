@@ -78,4 +78,3 @@ impl CameraImage {
         (w > 1e-3).then(|| [row(0) / w, row(1) / w])
     }
 }
-

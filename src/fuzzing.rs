@@ -6,16 +6,17 @@
 use std::path::Path;
 
 use crate::Config;
-use crate::method::classifier::SvmModel;
-use crate::training::TrainingSet;
-use crate::outputs::dataset::read_training_rows;
 use crate::io::cloud::cloud_points;
 use crate::io::image::image_pixels;
-use crate::io::mcap_drive::{DriveOptions, McapDrive, isometry};
 use crate::io::kitti::{
     drop_non_finite, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
 };
+use crate::io::mcap_drive::{DriveOptions, McapDrive};
 use crate::io::ros::{CameraInfo, Odometry, PointCloud2, TfMessage, Transform, decode};
+use crate::io::transforms::isometry;
+use crate::method::classifier::SvmModel;
+use crate::outputs::dataset::reading::read_training_rows;
+use crate::training::TrainingSet;
 
 /// A fuzz target: arbitrary bytes in, nothing out.
 pub type Target = fn(&[u8]);

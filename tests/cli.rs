@@ -279,8 +279,7 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
     let config = travmap::Config::default();
     let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
     let selection = travmap::drive::Selection {
-        source: travmap::io::Source::open(std::path::Path::new(&seq), &Default::default())
-            .unwrap(),
+        source: travmap::io::Source::open(std::path::Path::new(&seq), &Default::default()).unwrap(),
         frames: 2..3,
     };
     let mut result = None;

@@ -9,13 +9,13 @@ mod common;
 use std::path::Path;
 
 use serde_json::Value;
-use travmap::method::classifier::SvmModel;
-use travmap::training::TrainingSet;
-use travmap::outputs::dataset::read_training_rows;
 use travmap::drive::Selection;
-use travmap::method::grid::CellClass;
 use travmap::io::Source;
 use travmap::io::mcap_drive::DriveOptions;
+use travmap::method::classifier::SvmModel;
+use travmap::method::grid::CellClass;
+use travmap::outputs::dataset::reading::read_training_rows;
+use travmap::training::TrainingSet;
 
 use common::{clean_failure, success, travmap};
 
@@ -46,10 +46,10 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     let Some(seq) = common::semantickitti_00() else {
         return;
     };
-    let Ok(python) = std::env::var("TRAVMAP_CLIENT_PYTHON") else {
-        eprintln!(
-            "skipping: TRAVMAP_CLIENT_PYTHON (a Python with pyarrow, duckdb and polars) is not set"
-        );
+    let Some(python) = common::env_var(
+        "TRAVMAP_CLIENT_PYTHON",
+        "a Python with pyarrow, duckdb and polars",
+    ) else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();

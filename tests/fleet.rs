@@ -11,8 +11,8 @@ fn the_ray_fleet_script_passes_its_tests() {
     if common::semantickitti_00().is_none() {
         return;
     }
-    let Ok(python) = std::env::var("TRAVMAP_CLIENT_PYTHON") else {
-        eprintln!("skipping: TRAVMAP_CLIENT_PYTHON (a Python with ray and pytest) is not set");
+    let Some(python) = common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with ray and pytest")
+    else {
         return;
     };
     let fleet = Path::new(env!("CARGO_MANIFEST_DIR")).join("fleet");

@@ -254,9 +254,9 @@ fn real_clients_decode_what_travmap_writes() {
     let python = std::env::var("TRAVMAP_CLIENT_PYTHON").ok();
     let node_modules = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/node_modules");
     if python.is_none() && !node_modules.is_dir() {
-        eprintln!(
-            "skipping: no client installed (.ci/run sets TRAVMAP_CLIENT_PYTHON to a venv with mcap, \
-             mcap-ros2-support and rosbags, and runs npm ci in tests/clients)"
+        common::skip::<()>(
+            "no client installed (.ci/run sets TRAVMAP_CLIENT_PYTHON to a venv with mcap, \
+             mcap-ros2-support and rosbags, and runs npm ci in tests/clients)",
         );
         return;
     }
@@ -295,7 +295,7 @@ fn real_clients_decode_what_travmap_writes() {
         summaries.push(("python mcap-ros2-support", sorted(&doc["mcap"])));
         summaries.push(("python rosbags", sorted(&doc["rosbags"])));
     } else {
-        eprintln!("skipping the Python clients: TRAVMAP_CLIENT_PYTHON is not set");
+        common::skip::<()>("the Python clients: TRAVMAP_CLIENT_PYTHON is not set");
     }
     if node_modules.is_dir() {
         summaries.push((
@@ -303,7 +303,7 @@ fn real_clients_decode_what_travmap_writes() {
             sorted(&decode("node", "decode_mcap.mjs")),
         ));
     } else {
-        eprintln!("skipping the Node client: run npm ci in tests/clients");
+        common::skip::<()>("the Node client: run npm ci in tests/clients");
     }
     for (client, entries) in &summaries {
         check_client_summary(client, entries, &seq, &runs);
@@ -528,8 +528,8 @@ fn shared_mcap_files_give_clear_errors() {
 #[test]
 fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
     let Some(seq) = sample() else { return };
-    let Ok(rerun) = std::env::var("TRAVMAP_RERUN") else {
-        eprintln!("skipping: TRAVMAP_RERUN is not set (.ci/run points it at rerun-sdk's `rerun`)");
+    let Some(rerun) = common::env_var("TRAVMAP_RERUN", ".ci/run points it at rerun-sdk's `rerun`")
+    else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();

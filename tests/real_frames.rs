@@ -6,9 +6,9 @@ mod common;
 use std::collections::HashMap;
 
 use travmap::geometry::Moments;
-use travmap::method::integration::{WorldScan, scan_to_world};
 use travmap::io::KittiSequence;
 use travmap::io::kitti::{read_labels, read_poses, read_scan};
+use travmap::method::integration::{WorldScan, scan_to_world};
 
 const VOXEL_M: f32 = 0.5;
 

@@ -29,9 +29,10 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
     let output = args.inputs.output;
     let repeats = args.repeats;
     let (model, model_name) = load_model(args.model.as_deref(), config)?;
-    let selection = args
-        .inputs
-        .open_one(config.appearance.enabled, "bench takes one sequence directory")?;
+    let selection = args.inputs.open_one(
+        config.appearance.enabled,
+        "bench takes one sequence directory",
+    )?;
     let report = benchmark(
         &selection.source,
         &selection.frames,
@@ -93,4 +94,3 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
     )?;
     Ok(outcome(std::slice::from_ref(&selection)))
 }
-

@@ -57,4 +57,3 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
     write_table(&mut out, &report.evaluation, false)?;
     Ok(outcome(&selections))
 }
-

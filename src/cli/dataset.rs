@@ -65,4 +65,3 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     }
     Ok(outcome(&selections))
 }
-

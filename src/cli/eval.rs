@@ -129,7 +129,11 @@ fn score_row(s: &Scores) -> [f64; 7] {
 }
 
 /// `with_latency` false where the frames were not run one at a time (cross-validation).
-pub(super) fn write_table(out: &mut impl Write, report: &EvaluationReport, with_latency: bool) -> Result<()> {
+pub(super) fn write_table(
+    out: &mut impl Write,
+    report: &EvaluationReport,
+    with_latency: bool,
+) -> Result<()> {
     writeln!(
         out,
         "{:<22} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>11}",
@@ -187,4 +191,3 @@ pub(super) fn write_table(out: &mut impl Write, report: &EvaluationReport, with_
     )?;
     Ok(())
 }
-

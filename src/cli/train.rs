@@ -7,7 +7,7 @@ use anyhow::{Result, bail};
 use clap::Args;
 use serde_json::json;
 use travmap::method::features::FEATURE_COUNT;
-use travmap::outputs::dataset::read_training_rows;
+use travmap::outputs::dataset::reading::read_training_rows;
 use travmap::outputs::writing::write_atomically;
 use travmap::training::crossval::collect_training_set;
 use travmap::training::{TrainingSet, train as train_model};
@@ -150,4 +150,3 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
     }
     Ok(outcome(&selections))
 }
-

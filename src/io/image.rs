@@ -132,4 +132,3 @@ fn raw_image(message: &crate::io::ros::Image) -> Result<RgbImage, String> {
         rgb,
     })
 }
-

@@ -12,15 +12,16 @@ use std::collections::{BTreeMap, HashMap};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use nalgebra::{Isometry3, Quaternion as NQuaternion, Translation3, UnitQuaternion};
+use nalgebra::Isometry3;
 use serde::Deserialize;
 
 use super::image::image_pixels;
 use super::mcap_records::{Messages, check_chunk_sizes};
-use crate::frame::{CameraImage, Frame};
 use crate::error::{Error, Result};
+use crate::frame::{CameraImage, Frame};
 use crate::io::cloud::cloud_points;
 use crate::io::ros::{Header, Odometry, PointCloud2, TfMessage, Transform, decode};
+use crate::io::transforms::{TransformTree, isometry};
 
 const POINT_CLOUD: &str = "sensor_msgs/msg/PointCloud2";
 const TF_MESSAGE: &str = "tf2_msgs/msg/TFMessage";
@@ -31,9 +32,6 @@ const RAW_IMAGE: &str = "sensor_msgs/msg/Image";
 
 /// An image is paired with a cloud when their stamps are at most this far apart.
 const IMAGE_PAIRING_NS: u64 = 50_000_000;
-
-/// A transform sample is used up to this far past either end of its edge's record.
-const TF_EXTRAPOLATION_NS: u64 = 100_000_000;
 
 /// What to read from the drive; everything found by itself when None.
 #[derive(Clone, Debug, Default)]
@@ -56,15 +54,6 @@ struct CameraSource {
     size: (u32, u32),
 }
 
-/// Parent and transform samples of one frame in the transform tree.
-#[derive(Clone, Debug, Default)]
-struct Edge {
-    parent: String,
-    /// (stamp, parent_from_child), sorted by stamp; one sample for static edges.
-    samples: Vec<(u64, Isometry3<f64>)>,
-    is_static: bool,
-}
-
 /// An opened MCAP drive.
 pub struct McapDrive {
     path: PathBuf,
@@ -75,45 +64,202 @@ pub struct McapDrive {
     cloud_frame: String,
     world_frame: String,
     stamps_ns: Vec<u64>,
-    edges: HashMap<String, Edge>,
+    transforms: TransformTree,
     camera: Option<CameraSource>,
     pub(super) skips: super::SkipLog,
 }
-
-/// The rigid pose of a ROS transform; an error for non-finite values or a
-/// quaternion too short to normalise, which would turn every point into NaN.
-pub fn isometry(t: &Transform) -> Result<Isometry3<f64>, String> {
-    let (p, r) = (&t.translation, &t.rotation);
-    let q = NQuaternion::new(r.w, r.x, r.y, r.z);
-    let finite = [p.x, p.y, p.z, r.w, r.x, r.y, r.z]
-        .iter()
-        .all(|v| v.is_finite());
-    if !finite || q.norm() < 1e-6 {
-        return Err(format!(
-            "transform ({}, {}, {}), rotation (w {}, x {}, y {}, z {}): expected finite values and a unit quaternion",
-            p.x, p.y, p.z, r.w, r.x, r.y, r.z
-        ));
-    }
-    // Unit quaternions as written (travmap's own) are used as they are, so that a
-    // converted KITTI pose comes back bit-identical.
-    let rotation = if (q.norm() - 1.0).abs() < 1e-12 {
-        UnitQuaternion::new_unchecked(q)
-    } else {
-        UnitQuaternion::new_normalize(q)
-    };
-    Ok(Isometry3::from_parts(
-        Translation3::new(p.x, p.y, p.z),
-        rotation,
-    ))
-}
-
-/// More frames than any real transform tree stacks: a longer chain is a cycle.
-const MAX_TF_DEPTH: usize = 64;
 
 /// Only the header of a message, decoded without the rest.
 #[derive(Deserialize)]
 struct HeaderOnly {
     header: Header,
+}
+
+/// What one pass over a drive finds: topics, cloud stamps, transforms, cameras.
+#[derive(Default)]
+struct Contents {
+    /// Topic -> schema name, of every channel.
+    topics: BTreeMap<String, String>,
+    /// Cloud topic -> (frame, stamps).
+    cloud_stamps: HashMap<String, (String, Vec<u64>)>,
+    transforms: TransformTree,
+    /// Per camera frame: K and the image size (width, height).
+    intrinsics: HashMap<String, (nalgebra::Matrix3<f64>, (u32, u32))>,
+    /// Image topic -> (compressed, frame).
+    image_topics: BTreeMap<String, (bool, String)>,
+}
+
+impl Contents {
+    /// Takes note of one message of the drive at `path`.
+    fn add(&mut self, path: &Path, message: &mcap::Message) -> Result<()> {
+        let channel = &message.channel;
+        let schema = channel
+            .schema
+            .as_ref()
+            .map(|s| s.name.clone())
+            .unwrap_or_default();
+        self.topics
+            .entry(channel.topic.clone())
+            .or_insert_with(|| schema.clone());
+        let problem = |problem: String| Error::McapMessage {
+            path: path.to_path_buf(),
+            topic: channel.topic.clone(),
+            schema: schema.clone(),
+            log_time_ns: message.log_time,
+            problem,
+        };
+        let known = matches!(
+            schema.as_str(),
+            POINT_CLOUD | TF_MESSAGE | ODOMETRY | CAMERA_INFO | COMPRESSED_IMAGE | RAW_IMAGE
+        );
+        if known && channel.message_encoding != "cdr" {
+            return Err(Error::McapEncoding {
+                path: path.to_path_buf(),
+                topic: channel.topic.clone(),
+                schema,
+                encoding: channel.message_encoding.clone(),
+            });
+        }
+        match schema.as_str() {
+            POINT_CLOUD => {
+                let header: HeaderOnly = decode(&message.data).map_err(problem)?;
+                let stamp = match header.header.stamp.to_ns() {
+                    0 => message.log_time,
+                    ns => ns,
+                };
+                let entry = self
+                    .cloud_stamps
+                    .entry(channel.topic.clone())
+                    .or_insert_with(|| (header.header.frame_id.clone(), Vec::new()));
+                entry.1.push(stamp);
+            }
+            TF_MESSAGE => {
+                let tf: TfMessage = decode(&message.data).map_err(problem)?;
+                let is_static = channel.topic == "/tf_static";
+                for t in tf.transforms {
+                    let (parent, child) = (&t.header.frame_id, &t.child_frame_id);
+                    let pose = isometry(&t.transform)
+                        .map_err(|e| problem(format!("{parent} -> {child}: {e}")))?;
+                    self.transforms
+                        .add(parent, child, t.header.stamp.to_ns(), pose, is_static);
+                }
+            }
+            ODOMETRY => {
+                let odometry: Odometry = decode(&message.data).map_err(problem)?;
+                let pose = odometry.pose.pose;
+                let transform = Transform {
+                    translation: pose.position,
+                    rotation: pose.orientation,
+                };
+                let pose = isometry(&transform).map_err(|e| problem(e.to_string()))?;
+                self.transforms.add(
+                    &odometry.header.frame_id,
+                    &odometry.child_frame_id,
+                    odometry.header.stamp.to_ns(),
+                    pose,
+                    false,
+                );
+            }
+            CAMERA_INFO => {
+                let info: crate::io::ros::CameraInfo = decode(&message.data).map_err(problem)?;
+                self.intrinsics
+                    .entry(info.header.frame_id.clone())
+                    .or_insert_with(|| {
+                        (
+                            nalgebra::Matrix3::from_row_slice(&info.k),
+                            (info.width, info.height),
+                        )
+                    });
+            }
+            COMPRESSED_IMAGE | RAW_IMAGE if !self.image_topics.contains_key(&channel.topic) => {
+                let header: HeaderOnly = decode(&message.data).map_err(problem)?;
+                self.image_topics.insert(
+                    channel.topic.clone(),
+                    (schema == COMPRESSED_IMAGE, header.header.frame_id),
+                );
+            }
+            // Other channels are not the method's input.
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// The PointCloud2 topic asked for, or the only one.
+    fn cloud_topic(&self, options: &DriveOptions) -> Result<String, String> {
+        let list_clouds = || {
+            let clouds: Vec<&str> = self
+                .topics
+                .iter()
+                .filter(|(_, s)| *s == POINT_CLOUD)
+                .map(|(t, _)| t.as_str())
+                .collect();
+            let all: Vec<String> = self
+                .topics
+                .iter()
+                .map(|(t, s)| format!("{t} ({s})"))
+                .collect();
+            format!(
+                "PointCloud2 topics: [{}]; all topics: [{}]",
+                clouds.join(", "),
+                all.join(", ")
+            )
+        };
+        match &options.cloud_topic {
+            Some(topic) if self.cloud_stamps.contains_key(topic) => Ok(topic.clone()),
+            Some(topic) => Err(format!(
+                "no PointCloud2 messages on topic {topic}; {}",
+                list_clouds()
+            )),
+            None => match self.cloud_stamps.keys().collect::<Vec<_>>().as_slice() {
+                [only] => Ok((*only).clone()),
+                [] => Err(format!("no PointCloud2 topic; {}", list_clouds())),
+                _ => Err(format!(
+                    "several PointCloud2 topics, choose one with --cloud-topic; {}",
+                    list_clouds()
+                )),
+            },
+        }
+    }
+
+    /// The camera: the image topic asked for, or the only one whose frame has a
+    /// CameraInfo; None without one.
+    fn camera(&self, options: &DriveOptions) -> Result<Option<CameraSource>, String> {
+        let source = |topic: &str, compressed: bool, frame: &str| {
+            let (k, size) = self
+                .intrinsics
+                .get(frame)
+                .ok_or_else(|| format!("no CameraInfo for frame `{frame}` of {topic}"))?;
+            Ok(Some(CameraSource {
+                topic: topic.to_string(),
+                compressed,
+                frame: frame.to_string(),
+                intrinsics: *k,
+                size: *size,
+            }))
+        };
+        if let Some(topic) = &options.camera_topic {
+            let (compressed, frame) = self.image_topics.get(topic).ok_or_else(|| {
+                format!(
+                    "no Image or CompressedImage messages on {topic}; image topics: [{}]",
+                    self.image_topics
+                        .keys()
+                        .cloned()
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            })?;
+            return source(topic, *compressed, frame);
+        }
+        let usable: Vec<(&String, &(bool, String))> = self
+            .image_topics
+            .iter()
+            .filter(|(_, (_, frame))| self.intrinsics.contains_key(frame))
+            .collect();
+        match usable.as_slice() {
+            [(topic, (compressed, frame))] => source(topic, *compressed, frame),
+            _ => Ok(None),
+        }
+    }
 }
 
 impl McapDrive {
@@ -126,195 +272,38 @@ impl McapDrive {
             path: path.to_path_buf(),
             message,
         };
-        let mut topics: BTreeMap<String, String> = BTreeMap::new();
-        let mut cloud_stamps: HashMap<String, (String, Vec<u64>)> = HashMap::new();
-        let mut edges: HashMap<String, Edge> = HashMap::new();
-        // Per camera frame: K and the image size (width, height).
-        let mut intrinsics: HashMap<String, (nalgebra::Matrix3<f64>, (u32, u32))> = HashMap::new();
-        let mut image_topics: BTreeMap<String, (bool, String)> = BTreeMap::new();
         let longest_record = check_chunk_sizes(&map).map_err(fail)?;
-        let stream = Messages::new(&map, longest_record);
-        for (ordinal, message) in stream.enumerate() {
+        let mut contents = Contents::default();
+        for (ordinal, message) in Messages::new(&map, longest_record).enumerate() {
             let message = message.map_err(|e| fail(format!("message {ordinal}: {e}")))?;
-            let channel = &message.channel;
-            let schema = channel
-                .schema
-                .as_ref()
-                .map(|s| s.name.clone())
-                .unwrap_or_default();
-            topics
-                .entry(channel.topic.clone())
-                .or_insert_with(|| schema.clone());
-            let decode_failure = |e: String| {
-                fail(format!(
-                    "channel {} ({schema}), message at log time {} ns: {e}",
-                    channel.topic, message.log_time
-                ))
-            };
-            let known = matches!(
-                schema.as_str(),
-                POINT_CLOUD | TF_MESSAGE | ODOMETRY | CAMERA_INFO | COMPRESSED_IMAGE | RAW_IMAGE
-            );
-            if known && channel.message_encoding != "cdr" {
-                return Err(fail(format!(
-                    "channel {} ({schema}) has message encoding `{}`; travmap reads `cdr` (ROS 2)",
-                    channel.topic, channel.message_encoding
-                )));
-            }
-            match schema.as_str() {
-                POINT_CLOUD => {
-                    let header: HeaderOnly = decode(&message.data).map_err(decode_failure)?;
-                    let stamp = match header.header.stamp.to_ns() {
-                        0 => message.log_time,
-                        ns => ns,
-                    };
-                    let entry = cloud_stamps
-                        .entry(channel.topic.clone())
-                        .or_insert_with(|| (header.header.frame_id.clone(), Vec::new()));
-                    entry.1.push(stamp);
-                }
-                TF_MESSAGE => {
-                    let tf: TfMessage = decode(&message.data).map_err(decode_failure)?;
-                    let is_static = channel.topic == "/tf_static";
-                    for t in tf.transforms {
-                        let edge = edges.entry(t.child_frame_id.clone()).or_default();
-                        edge.parent = t.header.frame_id.clone();
-                        edge.is_static = is_static;
-                        let pose = isometry(&t.transform).map_err(|e| {
-                            decode_failure(format!("{} -> {}: {e}", edge.parent, t.child_frame_id))
-                        })?;
-                        edge.samples.push((t.header.stamp.to_ns(), pose));
-                    }
-                }
-                ODOMETRY => {
-                    let odometry: Odometry = decode(&message.data).map_err(decode_failure)?;
-                    let edge = edges.entry(odometry.child_frame_id.clone()).or_default();
-                    edge.parent = odometry.header.frame_id.clone();
-                    let pose = odometry.pose.pose;
-                    let transform = Transform {
-                        translation: pose.position,
-                        rotation: pose.orientation,
-                    };
-                    edge.samples.push((
-                        odometry.header.stamp.to_ns(),
-                        isometry(&transform).map_err(decode_failure)?,
-                    ));
-                }
-                CAMERA_INFO => {
-                    let info: crate::io::ros::CameraInfo =
-                        decode(&message.data).map_err(decode_failure)?;
-                    intrinsics
-                        .entry(info.header.frame_id.clone())
-                        .or_insert_with(|| {
-                            (
-                                nalgebra::Matrix3::from_row_slice(&info.k),
-                                (info.width, info.height),
-                            )
-                        });
-                }
-                COMPRESSED_IMAGE | RAW_IMAGE if !image_topics.contains_key(&channel.topic) => {
-                    let header: HeaderOnly = decode(&message.data).map_err(decode_failure)?;
-                    image_topics.insert(
-                        channel.topic.clone(),
-                        (schema == COMPRESSED_IMAGE, header.header.frame_id),
-                    );
-                }
-                // Other channels are not the method's input.
-                _ => {}
-            }
+            contents.add(path, &message)?;
         }
-        for edge in edges.values_mut() {
-            edge.samples.sort_by_key(|s| s.0);
-        }
-        let list_clouds = || {
-            let clouds: Vec<&str> = topics
-                .iter()
-                .filter(|(_, s)| *s == POINT_CLOUD)
-                .map(|(t, _)| t.as_str())
-                .collect();
-            let all: Vec<String> = topics.iter().map(|(t, s)| format!("{t} ({s})")).collect();
-            format!(
-                "PointCloud2 topics: [{}]; all topics: [{}]",
-                clouds.join(", "),
-                all.join(", ")
-            )
-        };
-        let cloud_topic = match &options.cloud_topic {
-            Some(topic) if cloud_stamps.contains_key(topic) => topic.clone(),
-            Some(topic) => {
-                return Err(fail(format!(
-                    "no PointCloud2 messages on topic {topic}; {}",
-                    list_clouds()
-                )));
-            }
-            None => match cloud_stamps.keys().collect::<Vec<_>>().as_slice() {
-                [only] => (*only).clone(),
-                [] => return Err(fail(format!("no PointCloud2 topic; {}", list_clouds()))),
-                _ => {
-                    return Err(fail(format!(
-                        "several PointCloud2 topics, choose one with --cloud-topic; {}",
-                        list_clouds()
-                    )));
-                }
-            },
-        };
-        let (cloud_frame, stamps_ns) = cloud_stamps.remove(&cloud_topic).unwrap_or_default();
+        contents.transforms.sort();
+        let cloud_topic = contents.cloud_topic(options).map_err(fail)?;
+        let (cloud_frame, stamps_ns) = contents
+            .cloud_stamps
+            .remove(&cloud_topic)
+            .unwrap_or_default();
         // The world is the root of the tree above the cloud's frame, unless named.
         let world_frame = match &options.world_frame {
             Some(frame) => frame.clone(),
             None => {
-                let mut frame = cloud_frame.clone();
-                let mut hops = 0;
-                while let Some(edge) = edges.get(&frame) {
-                    frame = edge.parent.clone();
-                    hops += 1;
-                    if hops > MAX_TF_DEPTH {
-                        return Err(fail(format!(
-                            "the transform tree above {cloud_frame} has a cycle"
-                        )));
-                    }
-                }
-                if frame == cloud_frame {
+                let root = contents
+                    .transforms
+                    .root_above(&cloud_frame)
+                    .map_err(|problem| Error::Transform {
+                        path: path.to_path_buf(),
+                        problem,
+                    })?;
+                if root == cloud_frame {
                     return Err(fail(format!(
                         "no pose for the clouds' frame `{cloud_frame}`: travmap needs /tf (and /tf_static) or an Odometry topic linking it to a world frame"
                     )));
                 }
-                frame
+                root
             }
         };
-        // The camera: an image topic whose frame has intrinsics.
-        let usable: Vec<(&String, &(bool, String))> = image_topics
-            .iter()
-            .filter(|(_, (_, frame))| intrinsics.contains_key(frame))
-            .collect();
-        let camera = match (&options.camera_topic, usable.as_slice()) {
-            (Some(topic), _) => {
-                let (compressed, frame) = image_topics.get(topic).ok_or_else(|| {
-                    fail(format!(
-                        "no Image or CompressedImage messages on {topic}; image topics: [{}]",
-                        image_topics.keys().cloned().collect::<Vec<_>>().join(", ")
-                    ))
-                })?;
-                let (k, size) = intrinsics
-                    .get(frame)
-                    .ok_or_else(|| fail(format!("no CameraInfo for frame `{frame}` of {topic}")))?;
-                Some(CameraSource {
-                    topic: topic.clone(),
-                    compressed: *compressed,
-                    frame: frame.clone(),
-                    intrinsics: *k,
-                    size: *size,
-                })
-            }
-            (None, [(topic, (compressed, frame))]) => Some(CameraSource {
-                topic: (*topic).clone(),
-                compressed: *compressed,
-                frame: frame.clone(),
-                intrinsics: intrinsics[frame].0,
-                size: intrinsics[frame].1,
-            }),
-            _ => None,
-        };
+        let camera = contents.camera(options).map_err(fail)?;
         Ok(Self {
             path: path.to_path_buf(),
             map,
@@ -323,7 +312,7 @@ impl McapDrive {
             cloud_frame,
             world_frame,
             stamps_ns,
-            edges,
+            transforms: contents.transforms,
             camera,
             skips: super::SkipLog::default(),
         })
@@ -346,41 +335,6 @@ impl McapDrive {
         self.stamps_ns.len()
     }
 
-    /// `parent_from_child` of one edge at `stamp_ns`: the sample at that stamp, or
-    /// interpolated between the two around it (linear, slerp).
-    fn edge_at(&self, child: &str, edge: &Edge, stamp_ns: u64) -> Result<Isometry3<f64>> {
-        let samples = &edge.samples;
-        if (edge.is_static || samples.len() == 1)
-            && let Some((t, pose)) = samples.first()
-            && (edge.is_static || t.abs_diff(stamp_ns) <= TF_EXTRAPOLATION_NS)
-        {
-            return Ok(*pose);
-        }
-        let after = samples.partition_point(|s| s.0 < stamp_ns);
-        if let Some(&(t, pose)) = samples.get(after)
-            && t == stamp_ns
-        {
-            return Ok(pose);
-        }
-        match (after.checked_sub(1).map(|i| samples[i]), samples.get(after)) {
-            (Some((t0, p0)), Some(&(t1, p1))) => {
-                let s = (stamp_ns - t0) as f64 / (t1 - t0) as f64;
-                Ok(p0.lerp_slerp(&p1, s))
-            }
-            (Some((t0, p0)), None) if stamp_ns - t0 <= TF_EXTRAPOLATION_NS => Ok(p0),
-            (None, Some(&(t1, p1))) if t1 - stamp_ns <= TF_EXTRAPOLATION_NS => Ok(p1),
-            _ => Err(Error::Mcap {
-                path: self.path.clone(),
-                message: format!(
-                    "no transform {} -> {child} near {stamp_ns} ns (recorded {}..{} ns)",
-                    edge.parent,
-                    samples.first().map_or(0, |s| s.0),
-                    samples.last().map_or(0, |s| s.0)
-                ),
-            }),
-        }
-    }
-
     /// `world_from_cloud` at `stamp_ns`, composed up the transform tree.
     pub fn world_from_cloud(&self, stamp_ns: u64) -> Result<Isometry3<f64>> {
         self.ancestor_from(&self.world_frame, &self.cloud_frame, stamp_ns)?
@@ -393,30 +347,19 @@ impl McapDrive {
             })
     }
 
-    /// `ancestor_from_frame` at `stamp_ns`, composed up the tree; None when
-    /// `ancestor` is not above `frame`.
+    /// `ancestor_from_frame` at `stamp_ns`; None when `ancestor` is not above `frame`.
     fn ancestor_from(
         &self,
         ancestor: &str,
         frame: &str,
         stamp_ns: u64,
     ) -> Result<Option<Isometry3<f64>>> {
-        let mut current = frame;
-        let mut pose = Isometry3::identity();
-        for _ in 0..=MAX_TF_DEPTH {
-            if current == ancestor {
-                return Ok(Some(pose));
-            }
-            let Some(edge) = self.edges.get(current) else {
-                return Ok(None);
-            };
-            pose = self.edge_at(current, edge, stamp_ns)? * pose;
-            current = &edge.parent;
-        }
-        Err(Error::Mcap {
-            path: self.path.clone(),
-            message: format!("the transform tree above {frame} has a cycle"),
-        })
+        self.transforms
+            .ancestor_from(ancestor, frame, stamp_ns)
+            .map_err(|problem| Error::Transform {
+                path: self.path.clone(),
+                problem,
+            })
     }
 
     /// The camera image of a cloud from a raw message, posed for the cloud's frame:

@@ -9,6 +9,7 @@ pub mod kitti;
 pub mod mcap_drive;
 mod mcap_records;
 pub mod ros;
+pub mod transforms;
 
 use std::ops::Range;
 use std::path::Path;
@@ -38,7 +39,13 @@ impl SkipLog {
         if !self.keep_going {
             return Err(error);
         }
-        let reason = error.to_string();
+        // The whole chain: "cannot read x.bin: No such file or directory".
+        let mut reason = error.to_string();
+        let mut cause = std::error::Error::source(&error);
+        while let Some(inner) = cause {
+            reason.push_str(&format!(": {inner}"));
+            cause = inner.source();
+        }
         if let Ok(mut skipped) = self.skipped.lock()
             && !skipped
                 .iter()
@@ -125,16 +132,20 @@ impl Source {
     /// The frames in `range`, in order. With `--keep-going` (see
     /// [`Source::set_keep_going`]) an unreadable frame is recorded and left out;
     /// otherwise its error ends the run.
-    pub fn read<'a>(&'a self, range: &Range<usize>) -> Box<dyn Iterator<Item = Result<Frame>> + 'a> {
+    pub fn read<'a>(
+        &'a self,
+        range: &Range<usize>,
+    ) -> Box<dyn Iterator<Item = Result<Frame>> + 'a> {
         match self {
-            Source::Kitti(sequence) => Box::new(sequence.frames_in(range).into_iter().filter_map(
-                |index| match sequence.read_frame(index) {
-                    Ok(frame) => Some(Ok(frame)),
-                    Err(error) => sequence.skips.handle(index, error).err().map(Err),
-                },
-            )),
+            Source::Kitti(sequence) => {
+                Box::new(sequence.frames_in(range).into_iter().filter_map(|index| {
+                    match sequence.read_frame(index) {
+                        Ok(frame) => Some(Ok(frame)),
+                        Err(error) => sequence.skips.handle(index, error).err().map(Err),
+                    }
+                }))
+            }
             Source::Mcap(drive) => Box::new(drive.read(range)),
         }
     }
 }
-

@@ -5,8 +5,8 @@
 //! Input: a [`Frame`]. Output: a [`WorldScan`]; the [`IntegrationWindow`] keeps the
 //! last n of them and [`ground_normal`] fits the plane of their union.
 
-use crate::geometry::Moments;
 use crate::frame::Frame;
+use crate::geometry::Moments;
 
 /// One scan in the world frame.
 #[derive(Clone, Debug)]

@@ -181,10 +181,9 @@ impl Pipeline {
 
         // 2. Grid, 3. geometric features, and the first half of 3b: each image's pixels
         // vote for the cells they show.
-        let observations = map_frames(
-            extras.into_iter().enumerate().collect(),
-            |(i, extras)| self.observe(self.window.window_of(held + i), extras),
-        );
+        let observations = map_frames(extras.into_iter().enumerate().collect(), |(i, extras)| {
+            self.observe(self.window.window_of(held + i), extras)
+        });
 
         // 3b. Appearance: the votes join the colour memory in frame order, which gives
         // each frame's appearance features.
@@ -231,9 +230,7 @@ impl Pipeline {
             timed(|| self.features.compute(&cells, ground_normal(window)));
         let votes;
         (votes, timings.appearance_ms) = timed(|| match (&self.appearance, &extras.camera) {
-            (Some(voter), Some(camera)) => {
-                voter.vote(&cells, &extras.world_from_velodyne, camera)
-            }
+            (Some(voter), Some(camera)) => voter.vote(&cells, &extras.world_from_velodyne, camera),
             _ => FrameVotes::default(),
         });
         // Ground truth from the same cloud, outside the latency.

@@ -14,21 +14,21 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use crate::method::classifier::SvmModel;
 use crate::config::Config;
-use crate::outputs::conversion::{MAP_FRAME, write_kitti_frames};
-use crate::error::{Error, Result};
 use crate::drive::Selection;
-use crate::scoring::evaluation::{Evaluation, EvaluationReport};
-use crate::method::grid::CellClass;
-use crate::scoring::metrics::Confusion;
-use crate::method::pipeline::FrameResult;
+use crate::error::{Error, Result};
 use crate::io::Source;
 use crate::io::ros::{
     FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion,
     Time, Vector3, datatype,
 };
+use crate::method::classifier::SvmModel;
+use crate::method::grid::CellClass;
+use crate::method::pipeline::FrameResult;
+use crate::outputs::conversion::{MAP_FRAME, write_kitti_frames};
 use crate::outputs::writing::{Compression, McapSink};
+use crate::scoring::evaluation::{Evaluation, EvaluationReport};
+use crate::scoring::metrics::Confusion;
 
 pub const PREDICTION_TOPIC: &str = "/travmap/prediction";
 pub const GROUND_TRUTH_TOPIC: &str = "/travmap/ground_truth";

@@ -46,7 +46,10 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool> {
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
-        .map_err(|e| Error::Config(format!("cannot start {threads} worker threads: {e}")))
+        .map_err(|e| Error::ThreadPool {
+            threads,
+            message: e.to_string(),
+        })
 }
 
 /// Benchmarks `frames` of `sequence`, each measurement repeated `repeats` times.
@@ -70,11 +73,10 @@ pub fn benchmark(
     }
     let timed_frames = indices.iter().filter(|&&i| i >= first_timed).count();
     if timed_frames == 0 {
-        return Err(Error::Config(format!(
-            "{} frames selected; the benchmark needs at least {} consecutive ones (a full integration window)",
-            indices.len(),
-            config.integration.scans
-        )));
+        return Err(Error::TooFewFrames {
+            selected: indices.len(),
+            needed: config.integration.scans,
+        });
     }
 
     // Stage latency: one frame at a time on one thread.

@@ -157,4 +157,3 @@ pub fn cross_validate(
         evaluation: evaluation.report(),
     })
 }
-

@@ -10,13 +10,15 @@ use rayon::prelude::*;
 
 pub mod crossval;
 pub mod model_file;
+mod reduced_set;
 pub mod smo;
 
-use crate::method::classifier::{PredictionScratch, ReducedSet, SearchResult, SvmModel, TrainingSummary};
-use smo::{Parameters, Problem};
 use crate::config::{Config, TrainingConfig};
 use crate::error::{Error, Result};
+use crate::method::classifier::{SearchResult, SvmModel, TrainingSummary};
 use crate::random::SplitMix64;
+use reduced_set::fit_reduced_set;
+use smo::{Parameters, Problem};
 
 /// Labelled cells: raw features and where each cell lies in the world.
 #[derive(Clone, Debug, Default)]
@@ -343,114 +345,6 @@ fn train_one(
     Ok(model)
 }
 
-/// Lloyd's k-means on row-major `points`, started from a seeded random subset;
-/// an emptied cluster keeps its previous centre.
-fn k_means(
-    points: &[f32],
-    d: usize,
-    k: usize,
-    iterations: usize,
-    rng: &mut SplitMix64,
-) -> Vec<f32> {
-    let n = points.len() / d;
-    let mut start: Vec<usize> = (0..n).collect();
-    rng.shuffle(&mut start);
-    let mut centres: Vec<f32> = start[..k]
-        .iter()
-        .flat_map(|&i| points[i * d..(i + 1) * d].iter().copied())
-        .collect();
-    for _ in 0..iterations {
-        let mut sums = vec![0f64; k * d];
-        let mut counts = vec![0usize; k];
-        for p in points.chunks_exact(d) {
-            let nearest = centres
-                .chunks_exact(d)
-                .map(|c| c.iter().zip(p).map(|(a, b)| (a - b) * (a - b)).sum::<f32>())
-                .enumerate()
-                .fold((0, f32::INFINITY), |best, (j, dist)| {
-                    if dist < best.1 { (j, dist) } else { best }
-                })
-                .0;
-            counts[nearest] += 1;
-            for (s, &v) in sums[nearest * d..(nearest + 1) * d].iter_mut().zip(p) {
-                *s += v as f64;
-            }
-        }
-        for j in (0..k).filter(|&j| counts[j] > 0) {
-            for (c, s) in centres[j * d..(j + 1) * d]
-                .iter_mut()
-                .zip(&sums[j * d..(j + 1) * d])
-            {
-                *c = (s / counts[j] as f64) as f32;
-            }
-        }
-    }
-    centres
-}
-
-/// Fits `training.reduced_set_size` kernel centres (k-means centres of the support
-/// vectors) and their weights and bias by ridge least squares to the exact
-/// decision values on at most `training.reduced_set_samples` training cells. None
-/// when the model has no more support vectors than that.
-fn fit_reduced_set(model: &SvmModel, set: &TrainingSet, config: &Config) -> Option<ReducedSet> {
-    let t = &config.training;
-    let d = model.dimension();
-    let sv_count = model.support_vector_count();
-    if t.reduced_set_size == 0 || sv_count <= t.reduced_set_size {
-        return None;
-    }
-    let mut rng = SplitMix64(t.seed ^ 0x5EED);
-    let centres = k_means(&model.support_vectors, d, t.reduced_set_size, 10, &mut rng);
-    let mut rows: Vec<usize> = (0..set.len()).collect();
-    rng.shuffle(&mut rows);
-    rows.truncate(t.reduced_set_samples.max(1));
-
-    // Design matrix: the kernel to every centre plus a column of ones for the bias.
-    let m = t.reduced_set_size;
-    let gamma = model.gamma;
-    let mut scratch = PredictionScratch::default();
-    let mut design = nalgebra::DMatrix::<f64>::zeros(rows.len(), m + 1);
-    let mut target = nalgebra::DVector::<f64>::zeros(rows.len());
-    for (r, &i) in rows.iter().enumerate() {
-        let features = &set.features[i * d..(i + 1) * d];
-        target[r] = model.exact_decision_value(features, &mut scratch) as f64;
-        let z = model.standardise(features, &mut scratch);
-        for (j, c) in centres.chunks_exact(d).enumerate() {
-            let distance: f64 = c.iter().zip(z).map(|(a, b)| ((a - b) as f64).powi(2)).sum();
-            design[(r, j)] = (-gamma * distance).exp();
-        }
-        design[(r, m)] = 1.0;
-    }
-    // Rows near the decision boundary decide signs: weight them up, w = 1 / (1 + f^2).
-    let mut weighted = design.clone();
-    let mut weighted_target = target.clone();
-    for r in 0..rows.len() {
-        let w = (1.0 / (1.0 + target[r] * target[r])).sqrt();
-        weighted.row_mut(r).scale_mut(w);
-        weighted_target[r] *= w;
-    }
-    let mut normal = weighted.transpose() * &weighted;
-    let right = weighted.transpose() * &weighted_target;
-    // A small ridge keeps the system positive definite when centres nearly coincide.
-    let ridge = 1e-6 * (0..=m).map(|j| normal[(j, j)]).fold(0.0, f64::max);
-    for j in 0..=m {
-        normal[(j, j)] += ridge;
-    }
-    let solution = normal.cholesky()?.solve(&right);
-    let fitted = &design * &solution;
-    let agreeing = fitted
-        .iter()
-        .zip(target.iter())
-        .filter(|(f, e)| (**f > 0.0) == (**e > 0.0))
-        .count();
-    Some(ReducedSet::new(
-        centres,
-        solution.iter().take(m).map(|&w| w as f32).collect(),
-        solution[m] as f32,
-        agreeing as f64 / rows.len() as f64,
-    ))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -543,80 +437,6 @@ mod tests {
         assert_eq!(
             train(&set, &config, &|_, _| {}).unwrap().training.samples,
             600
-        );
-    }
-
-    #[test]
-    fn reduced_set_follows_the_exact_decision_function() {
-        // A curved boundary that needs many support vectors: x^2 + y^2 < 1.
-        let mut set = TrainingSet {
-            dimension: 2,
-            ..Default::default()
-        };
-        let mut rng = SplitMix64(21);
-        for i in 0..1500 {
-            let (x, y) = (rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0));
-            set.push(
-                &[x as f32, y as f32],
-                None,
-                x * x + y * y < 1.0,
-                [(i % 40) as f64, (i / 40) as f64],
-            );
-        }
-        let mut config = Config::default();
-        config.training.c_values = vec![10.0];
-        config.training.gamma_values = vec![1.0];
-        config.training.reduced_set_size = 24;
-        let model = train(&set, &config, &|_, _| {}).unwrap();
-        assert!(
-            model.support_vector_count() > 24,
-            "{} support vectors",
-            model.support_vector_count()
-        );
-        let reduced = model.reduced_set.as_ref().expect("a reduced set");
-        assert_eq!(reduced.len(), 24);
-        assert!(
-            reduced.training_agreement > 0.98,
-            "{}",
-            reduced.training_agreement
-        );
-        let mut scratch = model.scratch();
-        let agreeing = set
-            .features
-            .chunks_exact(2)
-            .filter(|row| {
-                (model.decision_value(row, &mut scratch) > 0.0)
-                    == (model.exact_decision_value(row, &mut scratch) > 0.0)
-            })
-            .count();
-        assert!(
-            agreeing as f64 / set.len() as f64 > 0.98,
-            "{agreeing} of {}",
-            set.len()
-        );
-        // The file keeps it.
-        let mut exact = model.clone();
-        exact.reduced_set = None;
-        assert_ne!(exact.to_json(), model.to_json());
-    }
-
-    #[test]
-    fn k_means_finds_separated_clusters() {
-        let points: Vec<f32> = (0..60)
-            .flat_map(|i| {
-                if i % 2 == 0 {
-                    [0.0 + 0.01 * i as f32, 0.0]
-                } else {
-                    [10.0, 10.0 + 0.01 * i as f32]
-                }
-            })
-            .collect();
-        let centres = k_means(&points, 2, 2, 5, &mut SplitMix64(1));
-        let mut xs: Vec<f32> = centres.chunks_exact(2).map(|c| c[0]).collect();
-        xs.sort_by(f32::total_cmp);
-        assert!(
-            (xs[0] - 0.29).abs() < 0.01 && (xs[1] - 10.0).abs() < 1e-4,
-            "{centres:?}"
         );
     }
 

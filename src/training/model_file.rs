@@ -224,7 +224,6 @@ impl SvmModel {
             .map(|b| format!("{b:02x}"))
             .collect()
     }
-
 }
 
 #[cfg(test)]
@@ -261,5 +260,4 @@ mod tests {
         assert!(err.contains("coefficients"), "{err}");
         assert!(SvmModel::from_json(b"{", "m.json").is_err());
     }
-
 }

@@ -17,12 +17,31 @@ pub fn shared_data(relative: &str) -> Option<PathBuf> {
     if path.exists() {
         Some(path)
     } else {
-        eprintln!(
-            "skipping: {} not found (../shared/data is not beside the repository)",
+        skip(&format!(
+            "{} not found (../shared/data is not beside the repository)",
             path.display()
-        );
-        None
+        ))
     }
+}
+
+/// An environment variable a test needs (a client's path), or None with the
+/// reason printed.
+pub fn env_var(name: &str, what: &str) -> Option<String> {
+    match std::env::var(name) {
+        Ok(value) => Some(value),
+        Err(_) => skip(&format!("{name} ({what}) is not set")),
+    }
+}
+
+/// Skips a test for a missing prerequisite with the reason printed; in CI (`CI`
+/// set) a missing prerequisite fails the test instead, so a green CI run is one
+/// that ran everything.
+pub fn skip<T>(reason: &str) -> Option<T> {
+    if std::env::var_os("CI").is_some() {
+        panic!("CI must run this test, but {reason}");
+    }
+    eprintln!("skipping: {reason}");
+    None
 }
 
 /// Runs the travmap binary with `args` from the repository root.

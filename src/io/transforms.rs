@@ -1,0 +1,187 @@
+//! The transform tree of a drive: `/tf`, `/tf_static` and Odometry samples per
+//! edge, each edge interpolated at a stamp (linear, slerp) and composed up the tree.
+//! ROS names frames child -> parent; a pose here is `parent_from_child`.
+
+use std::collections::HashMap;
+
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+
+use crate::io::ros::Transform;
+
+/// A transform sample is used up to this far past either end of its edge's record.
+const EXTRAPOLATION_NS: u64 = 100_000_000;
+
+/// More frames than any real transform tree stacks: a longer chain is a cycle.
+const MAX_DEPTH: usize = 64;
+
+/// Why a pose could not be had from the tree.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TransformError {
+    #[error(
+        "no transform {parent} -> {child} near {stamp_ns} ns (recorded {first_ns}..{last_ns} ns)"
+    )]
+    NoSample {
+        parent: String,
+        child: String,
+        stamp_ns: u64,
+        first_ns: u64,
+        last_ns: u64,
+    },
+    #[error("the transform tree above {frame} has a cycle")]
+    Cycle { frame: String },
+    #[error(
+        "transform ({x}, {y}, {z}), rotation (w {qw}, x {qx}, y {qy}, z {qz}): expected finite values and a unit quaternion"
+    )]
+    NotRigid {
+        x: f64,
+        y: f64,
+        z: f64,
+        qw: f64,
+        qx: f64,
+        qy: f64,
+        qz: f64,
+    },
+}
+
+/// Parent and transform samples of one frame in the transform tree.
+#[derive(Clone, Debug, Default)]
+struct Edge {
+    parent: String,
+    /// (stamp, parent_from_child), sorted by stamp; one sample for static edges.
+    samples: Vec<(u64, Isometry3<f64>)>,
+    is_static: bool,
+}
+
+/// Every edge of a drive's tree, by child frame.
+#[derive(Clone, Debug, Default)]
+pub struct TransformTree {
+    edges: HashMap<String, Edge>,
+}
+
+impl TransformTree {
+    /// Adds `parent_from_child` at `stamp_ns`; call [`Self::sort`] once all are in.
+    pub fn add(
+        &mut self,
+        parent: &str,
+        child: &str,
+        stamp_ns: u64,
+        pose: Isometry3<f64>,
+        is_static: bool,
+    ) {
+        let edge = self.edges.entry(child.to_string()).or_default();
+        edge.parent = parent.to_string();
+        edge.is_static = is_static;
+        edge.samples.push((stamp_ns, pose));
+    }
+
+    /// Orders every edge's samples by stamp.
+    pub fn sort(&mut self) {
+        for edge in self.edges.values_mut() {
+            edge.samples.sort_by_key(|s| s.0);
+        }
+    }
+
+    /// The root of the tree above `frame` (`frame` itself when it has no parent).
+    pub fn root_above(&self, frame: &str) -> Result<String, TransformError> {
+        let mut current = frame;
+        for _ in 0..=MAX_DEPTH {
+            match self.edges.get(current) {
+                Some(edge) => current = &edge.parent,
+                None => return Ok(current.to_string()),
+            }
+        }
+        Err(TransformError::Cycle {
+            frame: frame.to_string(),
+        })
+    }
+
+    /// `ancestor_from_frame` at `stamp_ns`, composed up the tree; None when
+    /// `ancestor` is not above `frame`.
+    pub fn ancestor_from(
+        &self,
+        ancestor: &str,
+        frame: &str,
+        stamp_ns: u64,
+    ) -> Result<Option<Isometry3<f64>>, TransformError> {
+        let mut current = frame;
+        let mut pose = Isometry3::identity();
+        for _ in 0..=MAX_DEPTH {
+            if current == ancestor {
+                return Ok(Some(pose));
+            }
+            let Some(edge) = self.edges.get(current) else {
+                return Ok(None);
+            };
+            pose = edge_at(current, edge, stamp_ns)? * pose;
+            current = &edge.parent;
+        }
+        Err(TransformError::Cycle {
+            frame: frame.to_string(),
+        })
+    }
+}
+
+/// `parent_from_child` of one edge at `stamp_ns`: the sample at that stamp, or
+/// interpolated between the two around it (linear, slerp).
+fn edge_at(child: &str, edge: &Edge, stamp_ns: u64) -> Result<Isometry3<f64>, TransformError> {
+    let samples = &edge.samples;
+    if (edge.is_static || samples.len() == 1)
+        && let Some((t, pose)) = samples.first()
+        && (edge.is_static || t.abs_diff(stamp_ns) <= EXTRAPOLATION_NS)
+    {
+        return Ok(*pose);
+    }
+    let after = samples.partition_point(|s| s.0 < stamp_ns);
+    if let Some(&(t, pose)) = samples.get(after)
+        && t == stamp_ns
+    {
+        return Ok(pose);
+    }
+    match (after.checked_sub(1).map(|i| samples[i]), samples.get(after)) {
+        (Some((t0, p0)), Some(&(t1, p1))) => {
+            let s = (stamp_ns - t0) as f64 / (t1 - t0) as f64;
+            Ok(p0.lerp_slerp(&p1, s))
+        }
+        (Some((t0, p0)), None) if stamp_ns - t0 <= EXTRAPOLATION_NS => Ok(p0),
+        (None, Some(&(t1, p1))) if t1 - stamp_ns <= EXTRAPOLATION_NS => Ok(p1),
+        _ => Err(TransformError::NoSample {
+            parent: edge.parent.clone(),
+            child: child.to_string(),
+            stamp_ns,
+            first_ns: samples.first().map_or(0, |s| s.0),
+            last_ns: samples.last().map_or(0, |s| s.0),
+        }),
+    }
+}
+
+/// The rigid pose of a ROS transform; an error for non-finite values or a
+/// quaternion too short to normalise, which would turn every point into NaN.
+pub fn isometry(t: &Transform) -> Result<Isometry3<f64>, TransformError> {
+    let (p, r) = (&t.translation, &t.rotation);
+    let q = Quaternion::new(r.w, r.x, r.y, r.z);
+    let finite = [p.x, p.y, p.z, r.w, r.x, r.y, r.z]
+        .iter()
+        .all(|v| v.is_finite());
+    if !finite || q.norm() < 1e-6 {
+        return Err(TransformError::NotRigid {
+            x: p.x,
+            y: p.y,
+            z: p.z,
+            qw: r.w,
+            qx: r.x,
+            qy: r.y,
+            qz: r.z,
+        });
+    }
+    // Unit quaternions as written (travmap's own) are used as they are, so that a
+    // converted KITTI pose comes back bit-identical.
+    let rotation = if (q.norm() - 1.0).abs() < 1e-12 {
+        UnitQuaternion::new_unchecked(q)
+    } else {
+        UnitQuaternion::new_normalize(q)
+    };
+    Ok(Isometry3::from_parts(
+        Translation3::new(p.x, p.y, p.z),
+        rotation,
+    ))
+}
