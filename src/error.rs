@@ -14,6 +14,14 @@ pub enum Error {
         source: std::io::Error,
     },
 
+    #[error(
+        "{output} would overwrite the input {input}: travmap never writes over what it reads; choose another -o"
+    )]
+    OutputIsInput { output: PathBuf, input: PathBuf },
+
+    #[error("{output} is a directory; -o names the file to write")]
+    OutputIsDirectory { output: PathBuf },
+
     #[error("cannot write {path}")]
     Write {
         path: PathBuf,

@@ -2,7 +2,8 @@
 //! function in `cli/` over library types; then maps how it ended to an exit code.
 //!
 //! Exit codes: 0 complete, 1 error (no output written), 2 usage error, 3 completed
-//! with skipped frames (`--keep-going`), 130 interrupted (no output written).
+//! with skipped frames (`--keep-going`), 129 / 130 / 143 hung up / interrupted /
+//! terminated (no output written), 141 stdout closed early (`| head`).
 
 mod cli;
 
@@ -38,11 +39,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    // Interrupted: remove partial outputs, exit as shells expect after SIGINT.
-    let _ = ctrlc::set_handler(|| {
-        travmap::outputs::writing::remove_temporary_files();
-        std::process::exit(130);
-    });
+    remove_outputs_on_signals();
     let outcome = match Cli::parse().command {
         Command::Run(args) => cli::run::run(args),
         Command::Eval(args) => cli::eval::eval(args),
@@ -65,5 +62,26 @@ fn main() -> ExitCode {
             eprintln!("error: {error:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+/// SIGINT, SIGTERM and SIGHUP (Ctrl-C; Docker, systemd, Ray and SLURM stopping a
+/// job; a closed terminal) remove the temporary outputs and exit with 128 + the
+/// signal, as shells expect. A closed stdout (`travmap eval | head`) ends the
+/// process quietly with SIGPIPE's status, as Unix tools do, instead of an error;
+/// outputs are committed before anything is printed, so none is left half-written.
+fn remove_outputs_on_signals() {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    // SAFETY: restores the default disposition before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+    if let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) {
+        std::thread::spawn(move || {
+            if let Some(signal) = signals.forever().next() {
+                travmap::outputs::writing::remove_temporary_files();
+                std::process::exit(128 + signal);
+            }
+        });
     }
 }

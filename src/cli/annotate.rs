@@ -11,7 +11,7 @@ use travmap::outputs::annotation::{self, AnnotationOptions};
 use travmap::stopwatch::Stopwatch;
 
 use super::convert::CompressionArg;
-use super::{Inputs, Outcome, frame_count, load_model, model_json, outcome};
+use super::{Inputs, Outcome, check_output, frame_count, load_model, model_json, outcome};
 
 /// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
 #[derive(Args)]
@@ -37,6 +37,7 @@ pub struct AnnotateArgs {
 pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
+    check_output(output_path, &args.inputs.files(args.model.as_deref()))?;
     let options = AnnotationOptions {
         compression: args.compression.compression(),
         passthrough: !args.no_passthrough,

@@ -8,10 +8,13 @@ use serde_json::json;
 use travmap::io::Source;
 use travmap::io::mcap_drive::DriveOptions;
 use travmap::outputs::conversion::convert_kitti;
+use travmap::outputs::preflight::InputFiles;
 use travmap::outputs::writing::Compression;
 use travmap::stopwatch::Stopwatch;
 
-use super::{Outcome, Output, frame_count, open_selection, outcome, parse_frame_range};
+use super::{
+    Outcome, Output, check_output, frame_count, open_selection, outcome, parse_frame_range,
+};
 
 /// Convert a KITTI / SemanticKITTI sequence to a ROS 2 MCAP (clouds, poses on /tf, images).
 #[derive(Args)]
@@ -65,6 +68,13 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
     if !(start_time_s.is_finite() && start_time_s >= 0.0) {
         bail!("--start-time must be seconds >= 0, got {start_time_s}");
     }
+    if args.sequence.is_file() {
+        bail!(
+            "{}: convert takes a KITTI sequence directory (velodyne/, calib.txt, poses.txt, times.txt); this is a file",
+            args.sequence.display()
+        );
+    }
+    check_output(output_path, &InputFiles::of(&[&args.sequence]))?;
     let frames = args.frames.unwrap_or(0..usize::MAX);
     let selection = open_selection(
         &args.sequence,

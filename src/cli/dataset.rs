@@ -9,7 +9,7 @@ use serde_json::json;
 use travmap::outputs::dataset::DatasetWriter;
 use travmap::stopwatch::Stopwatch;
 
-use super::{Inputs, Outcome, frame_count, load_model, outcome};
+use super::{Inputs, Outcome, check_output, frame_count, load_model, outcome};
 
 /// One Parquet row per predictable cell per frame: features, appearance, ground
 /// truth and (with --model) the prediction, on the training grid.
@@ -29,6 +29,7 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = args.inputs.output;
     let output_path = args.output.as_path();
+    check_output(output_path, &args.inputs.files(args.model.as_deref()))?;
     let selections = args.inputs.open(config.appearance.enabled)?;
     let model = match args.model.as_deref() {
         Some(path) => Some(load_model(Some(path), config)?.0),

@@ -26,6 +26,7 @@ use travmap::drive::Selection;
 use travmap::io::Source;
 use travmap::io::mcap_drive::DriveOptions;
 use travmap::method::classifier::SvmModel;
+use travmap::outputs::preflight::{InputFiles, check_output_directory, check_output_file};
 
 /// How a command ended: exit code 0, or 3 when it completed but skipped frames
 /// (`--keep-going`), as the mcap CLI reports data loss.
@@ -135,12 +136,21 @@ impl Inputs {
 
     /// Opens `paths` (some of the inputs) as [`Inputs::open`] does.
     pub fn open_paths(&self, paths: &[PathBuf], read_images: bool) -> Result<Vec<Selection>> {
+        refuse_repeats(paths)?;
         let frames = self.frames.clone().unwrap_or(0..usize::MAX);
         let options = self.drive_options();
         paths
             .iter()
             .map(|path| open_selection(path, &frames, &options, self.keep_going, read_images))
             .collect()
+    }
+
+    /// Every file the command reads: the inputs, `--config` and `model`.
+    pub fn files(&self, model: Option<&Path>) -> InputFiles {
+        let mut paths: Vec<&Path> = self.sequences.iter().map(PathBuf::as_path).collect();
+        paths.extend(model);
+        paths.extend(self.settings.config.as_deref());
+        InputFiles::of(&paths)
     }
 
     /// Opens the one input of a command that takes one; `what` says what it takes.
@@ -151,6 +161,41 @@ impl Inputs {
         }
         Ok(selections.remove(0))
     }
+}
+
+/// The same input twice (however spelled) would count its frames twice.
+fn refuse_repeats(paths: &[PathBuf]) -> Result<()> {
+    let mut seen: Vec<(PathBuf, &Path)> = Vec::new();
+    for path in paths {
+        let canonical = std::fs::canonicalize(path).unwrap_or_else(|_| path.clone());
+        if let Some((_, first)) = seen.iter().find(|(c, _)| *c == canonical) {
+            bail!(
+                "{} and {} are the same input; give each input once",
+                first.display(),
+                path.display()
+            );
+        }
+        seen.push((canonical, path));
+    }
+    Ok(())
+}
+
+/// Before any work: the file `output` replaces none of `inputs` and can be written.
+/// Temporary files that killed runs left beside it are removed, and said so.
+pub fn check_output(output: &Path, inputs: &InputFiles) -> Result<()> {
+    let preflight = check_output_file(output, inputs)?;
+    for stale in preflight.removed_stale {
+        eprintln!(
+            "removed {}, left by a travmap run that was killed",
+            stale.display()
+        );
+    }
+    Ok(())
+}
+
+/// Before any work: the directory `output` (one file per frame) is no input's.
+pub fn check_output_dir(output: &Path, inputs: &InputFiles) -> Result<()> {
+    Ok(check_output_directory(output, inputs)?)
 }
 
 /// Opens one input and checks that it has frames in `frames`.

@@ -9,7 +9,7 @@ use serde_json::json;
 use travmap::outputs::rendering;
 use travmap::outputs::writing::write_atomically;
 
-use super::{Inputs, Outcome, frame_count, load_model, outcome};
+use super::{Inputs, Outcome, check_output, check_output_dir, frame_count, load_model, outcome};
 
 /// Draw ground truth, prediction and errors of a frame side by side as PNG.
 #[derive(Args)]
@@ -45,6 +45,12 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
     }
     let config = &args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
+    let inputs = args.inputs.files(args.model.as_deref());
+    if args.all {
+        check_output_dir(output_path, &inputs)?;
+    } else {
+        check_output(output_path, &inputs)?;
+    }
     let (model, _) = load_model(args.model.as_deref(), config)?;
     let selection = args
         .inputs

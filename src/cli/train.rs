@@ -12,7 +12,7 @@ use travmap::outputs::writing::write_atomically;
 use travmap::training::crossval::collect_training_set;
 use travmap::training::{TrainingSet, train as train_model};
 
-use super::{Inputs, Outcome, frame_count, outcome};
+use super::{Inputs, Outcome, check_output, frame_count, outcome};
 
 /// Train the SVM (grid search over C and gamma, spatially-blocked CV).
 #[derive(Args)]
@@ -28,6 +28,7 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = args.inputs.output;
     let model_path = args.output.as_path();
+    check_output(model_path, &args.inputs.files(None))?;
     // Cell datasets (`travmap dataset`) join the cells of the drives given.
     let (datasets, drives): (Vec<PathBuf>, Vec<PathBuf>) = args
         .inputs

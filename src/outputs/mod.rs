@@ -6,5 +6,6 @@
 pub mod annotation;
 pub mod conversion;
 pub mod dataset;
+pub mod preflight;
 pub mod rendering;
 pub mod writing;

@@ -35,13 +35,36 @@ pub fn forget_temporary(path: &Path) {
     }
 }
 
-/// Deletes every tracked temporary file (from the SIGINT handler).
+/// Deletes every tracked temporary file (from the signal handler).
 pub fn remove_temporary_files() {
     if let Ok(files) = TEMPORARY_FILES.lock() {
         for path in files.iter() {
             let _ = std::fs::remove_file(path);
         }
     }
+}
+
+/// What tells a temporary output from others: `.NAME.tmp-PID` beside `NAME`.
+pub const TEMPORARY_INFIX: &str = ".tmp-";
+
+/// The temporary file an output is written to: hidden, beside it, named after this
+/// process so that a later run can tell a dead run's leftovers from a live one's.
+pub fn temporary_path(path: &Path) -> std::io::Result<PathBuf> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path.file_name().ok_or_else(|| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "the output path has no file name",
+        )
+    })?;
+    Ok(dir.join(format!(
+        ".{}{TEMPORARY_INFIX}{}",
+        name.to_string_lossy(),
+        std::process::id()
+    )))
 }
 
 /// An output being written under a temporary name beside it: [`AtomicFile::commit`]
@@ -55,25 +78,11 @@ pub struct AtomicFile {
 impl AtomicFile {
     /// The guard and the temporary file to write.
     pub fn create(path: &Path) -> Result<(Self, File)> {
-        let dir = path
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
         let write_error = |source| Error::Write {
             path: path.to_path_buf(),
             source,
         };
-        let name = path.file_name().ok_or_else(|| {
-            write_error(std::io::Error::new(
-                std::io::ErrorKind::InvalidInput,
-                "the output path has no file name",
-            ))
-        })?;
-        let temporary_path = dir.join(format!(
-            ".{}.tmp-{}",
-            name.to_string_lossy(),
-            std::process::id()
-        ));
+        let temporary_path = temporary_path(path).map_err(write_error)?;
         let file = File::create(&temporary_path).map_err(write_error)?;
         track_temporary(&temporary_path);
         let guard = Self {
