@@ -22,6 +22,23 @@ pub enum Error {
     #[error("{output} is a directory; -o names the file to write")]
     OutputIsDirectory { output: PathBuf },
 
+    #[error("{path}: no space left on device (wrote {written_bytes}{} bytes); nothing was left behind", expected_bytes.map(|b| format!(" of {b}")).unwrap_or_default())]
+    NoSpace {
+        path: PathBuf,
+        written_bytes: u64,
+        expected_bytes: Option<u64>,
+    },
+
+    #[error("cannot write {path} as MCAP")]
+    McapWrite {
+        path: PathBuf,
+        #[source]
+        source: mcap::McapError,
+    },
+
+    #[error("cannot write {path}: the writer thread stopped")]
+    WriterStopped { path: PathBuf },
+
     #[error("cannot write {path}")]
     Write {
         path: PathBuf,
@@ -81,8 +98,65 @@ pub enum Error {
     #[error("{path}: {message}")]
     Sequence { path: PathBuf, message: String },
 
-    #[error("{path}: {message}")]
-    Mcap { path: PathBuf, message: String },
+    /// The MCAP container itself: magic, records, chunks, CRCs, lengths (the text
+    /// comes from the record checks in `io/mcap_records.rs` or the mcap crate and
+    /// carries the byte offsets).
+    #[error("{path}: {problem}")]
+    McapContainer { path: PathBuf, problem: String },
+
+    #[error("{path}: message {ordinal}: {problem}")]
+    McapRecord {
+        path: PathBuf,
+        ordinal: usize,
+        problem: String,
+    },
+
+    #[error("{path}: unreadable from cloud {cloud} on: {problem}")]
+    McapUnreadableFrom {
+        path: PathBuf,
+        cloud: usize,
+        problem: String,
+    },
+
+    #[error("{path}: {problem}; PointCloud2 topics: [{}]; all topics: [{}]", cloud_topics.join(", "), all_topics.join(", "))]
+    McapCloudTopic {
+        path: PathBuf,
+        problem: CloudTopicProblem,
+        cloud_topics: Vec<String>,
+        /// `topic (schema)` of every channel.
+        all_topics: Vec<String>,
+    },
+
+    #[error(
+        "{path}: no pose for the clouds' frame `{frame}`: travmap needs /tf (and /tf_static) or an Odometry topic linking it to a world frame"
+    )]
+    McapNoPose { path: PathBuf, frame: String },
+
+    #[error("{path}: no transform from `{frame}` up to the world frame `{world_frame}`")]
+    McapNotBelowWorld {
+        path: PathBuf,
+        frame: String,
+        world_frame: String,
+    },
+
+    #[error("{path}: {topic} cloud {cloud}: {problem}")]
+    McapCloud {
+        path: PathBuf,
+        topic: String,
+        cloud: usize,
+        problem: String,
+    },
+
+    #[error("{path}: {topic} at {stamp_ns} ns: {problem}")]
+    McapImage {
+        path: PathBuf,
+        topic: String,
+        stamp_ns: u64,
+        problem: String,
+    },
+
+    #[error("{path}: {problem}")]
+    McapCamera { path: PathBuf, problem: String },
 
     #[error("{path}: channel {topic} ({schema}), message at log time {log_time_ns} ns: {problem}")]
     McapMessage {
@@ -128,6 +202,31 @@ pub enum Error {
         "{selected} frames selected; the benchmark needs at least {needed} consecutive ones (a full integration window)"
     )]
     TooFewFrames { selected: usize, needed: usize },
+}
+
+/// Why no PointCloud2 topic could be chosen.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum CloudTopicProblem {
+    NotFound(String),
+    None,
+    Several,
+}
+
+impl std::fmt::Display for CloudTopicProblem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            CloudTopicProblem::NotFound(topic) => {
+                write!(f, "no PointCloud2 messages on topic {topic}")
+            }
+            CloudTopicProblem::None => write!(f, "no PointCloud2 topic"),
+            CloudTopicProblem::Several => {
+                write!(
+                    f,
+                    "several PointCloud2 topics, choose one with --cloud-topic"
+                )
+            }
+        }
+    }
 }
 
 /// Result with the library's error type.

@@ -17,7 +17,7 @@ use serde::Deserialize;
 
 use super::image::image_pixels;
 use super::mcap_records::{Messages, check_chunk_sizes};
-use crate::error::{Error, Result};
+use crate::error::{CloudTopicProblem, Error, Result};
 use crate::frame::{CameraImage, Frame};
 use crate::io::cloud::cloud_points;
 use crate::io::ros::{Header, Odometry, PointCloud2, TfMessage, Transform, decode};
@@ -185,40 +185,31 @@ impl Contents {
     }
 
     /// The PointCloud2 topic asked for, or the only one.
-    fn cloud_topic(&self, options: &DriveOptions) -> Result<String, String> {
-        let list_clouds = || {
-            let clouds: Vec<&str> = self
+    fn cloud_topic(&self, path: &Path, options: &DriveOptions) -> Result<String> {
+        let problem = match &options.cloud_topic {
+            Some(topic) if self.cloud_stamps.contains_key(topic) => return Ok(topic.clone()),
+            Some(topic) => CloudTopicProblem::NotFound(topic.clone()),
+            None => match self.cloud_stamps.keys().collect::<Vec<_>>().as_slice() {
+                [only] => return Ok((*only).clone()),
+                [] => CloudTopicProblem::None,
+                _ => CloudTopicProblem::Several,
+            },
+        };
+        Err(Error::McapCloudTopic {
+            path: path.to_path_buf(),
+            problem,
+            cloud_topics: self
                 .topics
                 .iter()
                 .filter(|(_, s)| *s == POINT_CLOUD)
-                .map(|(t, _)| t.as_str())
-                .collect();
-            let all: Vec<String> = self
+                .map(|(t, _)| t.clone())
+                .collect(),
+            all_topics: self
                 .topics
                 .iter()
                 .map(|(t, s)| format!("{t} ({s})"))
-                .collect();
-            format!(
-                "PointCloud2 topics: [{}]; all topics: [{}]",
-                clouds.join(", "),
-                all.join(", ")
-            )
-        };
-        match &options.cloud_topic {
-            Some(topic) if self.cloud_stamps.contains_key(topic) => Ok(topic.clone()),
-            Some(topic) => Err(format!(
-                "no PointCloud2 messages on topic {topic}; {}",
-                list_clouds()
-            )),
-            None => match self.cloud_stamps.keys().collect::<Vec<_>>().as_slice() {
-                [only] => Ok((*only).clone()),
-                [] => Err(format!("no PointCloud2 topic; {}", list_clouds())),
-                _ => Err(format!(
-                    "several PointCloud2 topics, choose one with --cloud-topic; {}",
-                    list_clouds()
-                )),
-            },
-        }
+                .collect(),
+        })
     }
 
     /// The camera: the image topic asked for, or the only one whose frame has a
@@ -268,18 +259,21 @@ impl McapDrive {
         // SAFETY: the file is opened read-only and not modified while mapped by travmap;
         // another process truncating it under us is outside what any reader can guard.
         let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
-        let fail = |message: String| Error::Mcap {
+        let longest_record = check_chunk_sizes(&map).map_err(|problem| Error::McapContainer {
             path: path.to_path_buf(),
-            message,
-        };
-        let longest_record = check_chunk_sizes(&map).map_err(fail)?;
+            problem,
+        })?;
         let mut contents = Contents::default();
         for (ordinal, message) in Messages::new(&map, longest_record).enumerate() {
-            let message = message.map_err(|e| fail(format!("message {ordinal}: {e}")))?;
+            let message = message.map_err(|problem| Error::McapRecord {
+                path: path.to_path_buf(),
+                ordinal,
+                problem,
+            })?;
             contents.add(path, &message)?;
         }
         contents.transforms.sort();
-        let cloud_topic = contents.cloud_topic(options).map_err(fail)?;
+        let cloud_topic = contents.cloud_topic(path, options)?;
         let (cloud_frame, stamps_ns) = contents
             .cloud_stamps
             .remove(&cloud_topic)
@@ -296,14 +290,20 @@ impl McapDrive {
                         problem,
                     })?;
                 if root == cloud_frame {
-                    return Err(fail(format!(
-                        "no pose for the clouds' frame `{cloud_frame}`: travmap needs /tf (and /tf_static) or an Odometry topic linking it to a world frame"
-                    )));
+                    return Err(Error::McapNoPose {
+                        path: path.to_path_buf(),
+                        frame: cloud_frame,
+                    });
                 }
                 root
             }
         };
-        let camera = contents.camera(options).map_err(fail)?;
+        let camera = contents
+            .camera(options)
+            .map_err(|problem| Error::McapCamera {
+                path: path.to_path_buf(),
+                problem,
+            })?;
         Ok(Self {
             path: path.to_path_buf(),
             map,
@@ -338,12 +338,10 @@ impl McapDrive {
     /// `world_from_cloud` at `stamp_ns`, composed up the transform tree.
     pub fn world_from_cloud(&self, stamp_ns: u64) -> Result<Isometry3<f64>> {
         self.ancestor_from(&self.world_frame, &self.cloud_frame, stamp_ns)?
-            .ok_or_else(|| Error::Mcap {
+            .ok_or_else(|| Error::McapNotBelowWorld {
                 path: self.path.clone(),
-                message: format!(
-                    "no transform from `{}` up to the world frame `{}`",
-                    self.cloud_frame, self.world_frame
-                ),
+                frame: self.cloud_frame.clone(),
+                world_frame: self.world_frame.clone(),
             })
     }
 
@@ -372,9 +370,11 @@ impl McapDrive {
         image_stamp_ns: u64,
         cloud_stamp_ns: u64,
     ) -> Result<CameraImage> {
-        let fail = |message: String| Error::Mcap {
+        let fail = |problem: String| Error::McapImage {
             path: self.path.clone(),
-            message: format!("{} at {image_stamp_ns} ns: {message}", camera.topic),
+            topic: camera.topic.clone(),
+            stamp_ns: image_stamp_ns,
+            problem,
         };
         let image = image_pixels(data, camera.compressed).map_err(fail)?;
         if (image.width, image.height) != camera.size {
@@ -389,8 +389,10 @@ impl McapDrive {
                 None => {
                     let world_from_camera = self
                         .ancestor_from(&self.world_frame, &camera.frame, image_stamp_ns)?
-                        .ok_or_else(|| {
-                            fail(format!("no transform from `{}` to the world", camera.frame))
+                        .ok_or_else(|| Error::McapNotBelowWorld {
+                            path: self.path.clone(),
+                            frame: camera.frame.clone(),
+                            world_frame: self.world_frame.clone(),
                         })?;
                     self.world_from_cloud(cloud_stamp_ns)?.inverse() * world_from_camera
                 }
@@ -407,12 +409,13 @@ impl McapDrive {
         &self,
         mut on_message: impl FnMut(&mcap::Message) -> Result<()>,
     ) -> Result<()> {
-        let fail = |message: String| Error::Mcap {
-            path: self.path.clone(),
-            message,
-        };
-        for message in Messages::new(&self.map, self.longest_record) {
-            on_message(&message.map_err(fail)?)?;
+        for (ordinal, message) in Messages::new(&self.map, self.longest_record).enumerate() {
+            let message = message.map_err(|problem| Error::McapRecord {
+                path: self.path.clone(),
+                ordinal,
+                problem,
+            })?;
+            on_message(&message)?;
         }
         Ok(())
     }
@@ -434,9 +437,11 @@ impl McapDrive {
 
     /// Frame `current` from its cloud message and the candidate images.
     fn frame(&self, current: usize, data: &[u8], images: &[(u64, Vec<u8>)]) -> Result<Frame> {
-        let fail = |message: String| Error::Mcap {
+        let fail = |problem: String| Error::McapCloud {
             path: self.path.clone(),
-            message: format!("{} cloud {current}: {message}", self.cloud_topic),
+            topic: self.cloud_topic.clone(),
+            cloud: current,
+            problem,
         };
         let cloud: PointCloud2 = decode(data).map_err(fail)?;
         let stamp_ns = self.stamps_ns[current];
@@ -503,9 +508,10 @@ impl Iterator for McapFrames<'_> {
                 // A corrupt stretch of the file: with --keep-going, what came before counts.
                 Some(Err(e)) => {
                     self.stream_ended = true;
-                    let error = Error::Mcap {
+                    let error = Error::McapUnreadableFrom {
                         path: self.drive.path.clone(),
-                        message: format!("unreadable from cloud {} on: {e}", self.next_cloud),
+                        cloud: self.next_cloud,
+                        problem: e,
                     };
                     if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
                         return Some(Err(error));
@@ -518,10 +524,12 @@ impl Iterator for McapFrames<'_> {
                     Ok(header) => self
                         .images
                         .push((header.header.stamp.to_ns(), message.data.to_vec())),
-                    Err(e) => {
-                        return Some(Err(Error::Mcap {
+                    Err(problem) => {
+                        return Some(Err(Error::McapImage {
                             path: self.drive.path.clone(),
-                            message: format!("{}: {e}", message.channel.topic),
+                            topic: message.channel.topic.clone(),
+                            stamp_ns: message.log_time,
+                            problem,
                         }));
                     }
                 }

@@ -99,6 +99,11 @@ impl AtomicFile {
     }
 
     /// Renames the written file over the output (the caller has flushed and synced it).
+    /// Bytes in the temporary file so far.
+    pub fn written_bytes(&self) -> u64 {
+        std::fs::metadata(&self.temporary_path).map_or(0, |m| m.len())
+    }
+
     pub fn commit(mut self) -> Result<()> {
         std::fs::rename(&self.temporary_path, &self.path).map_err(|source| Error::Write {
             path: self.path.clone(),
@@ -119,15 +124,49 @@ impl Drop for AtomicFile {
     }
 }
 
+/// The error of a failed write to `output`'s temporary file: a full disk says so
+/// with the bytes written (of `expected_bytes`, when known).
+pub fn write_failure(
+    path: &Path,
+    output: &AtomicFile,
+    error: Option<mcap::McapError>,
+    expected_bytes: Option<u64>,
+) -> Error {
+    match error {
+        Some(mcap::McapError::Io(source)) if source.raw_os_error() == Some(libc::ENOSPC) => {
+            Error::NoSpace {
+                path: path.to_path_buf(),
+                written_bytes: output.written_bytes(),
+                expected_bytes,
+            }
+        }
+        Some(mcap::McapError::Io(source)) => Error::Write {
+            path: path.to_path_buf(),
+            source,
+        },
+        Some(other) => Error::McapWrite {
+            path: path.to_path_buf(),
+            source: other,
+        },
+        None => Error::WriterStopped {
+            path: path.to_path_buf(),
+        },
+    }
+}
+
 /// Writes `bytes` to `path` atomically.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     use std::io::Write;
     let (guard, mut file) = AtomicFile::create(path)?;
     file.write_all(bytes)
         .and_then(|_| file.sync_all())
-        .map_err(|source| Error::Write {
-            path: path.to_path_buf(),
-            source,
+        .map_err(|source| {
+            write_failure(
+                path,
+                &guard,
+                Some(mcap::McapError::Io(source)),
+                Some(bytes.len() as u64),
+            )
         })?;
     guard.commit()
 }
@@ -174,7 +213,7 @@ enum Record {
 /// An MCAP being written; see the module documentation.
 pub struct McapSink {
     sender: Option<SyncSender<Record>>,
-    thread: Option<JoinHandle<std::result::Result<(), String>>>,
+    thread: Option<JoinHandle<std::result::Result<(), mcap::McapError>>>,
     /// None once finished.
     output: Option<AtomicFile>,
     path: PathBuf,
@@ -187,8 +226,8 @@ pub struct McapSink {
 fn write_records(
     mut writer: mcap::Writer<BufWriter<File>>,
     records: Receiver<Record>,
-) -> std::result::Result<(), String> {
-    let fail = |e: mcap::McapError| e.to_string();
+) -> std::result::Result<(), mcap::McapError> {
+    let fail = |e: mcap::McapError| e;
     for record in records {
         match record {
             Record::Schema {
@@ -235,8 +274,8 @@ fn write_records(
     let file = writer
         .into_inner()
         .into_inner()
-        .map_err(|e| e.error().to_string())?;
-    file.sync_all().map_err(|e| e.to_string())
+        .map_err(|e| mcap::McapError::Io(e.into_error()))?;
+    Ok(file.sync_all()?)
 }
 
 impl McapSink {
@@ -254,15 +293,9 @@ impl McapSink {
                 Compression::None => None,
             })
             .compression_threads(threads);
-        let writer = match options.create(BufWriter::with_capacity(1 << 20, file)) {
-            Ok(writer) => writer,
-            Err(e) => {
-                return Err(Error::Mcap {
-                    path: path.to_path_buf(),
-                    message: e.to_string(),
-                });
-            }
-        };
+        let writer = options
+            .create(BufWriter::with_capacity(1 << 20, file))
+            .map_err(|e| write_failure(path, &output, Some(e), None))?;
         let (sender, receiver) = sync_channel(QUEUE);
         let thread = std::thread::Builder::new()
             .name("mcap-writer".into())
@@ -293,15 +326,23 @@ impl McapSink {
 
     /// The writer thread's error, after it stopped.
     fn writer_error(&mut self) -> Error {
+        let error = self.join_writer().and_then(Result::err);
+        self.failure(error)
+    }
+
+    /// Closes the queue and waits for the writer thread: its result, or None when it
+    /// panicked or was already joined.
+    fn join_writer(&mut self) -> Option<std::result::Result<(), mcap::McapError>> {
         self.sender = None;
-        let message = match self.thread.take().map(JoinHandle::join) {
-            Some(Ok(Err(message))) => message,
-            Some(Err(_)) => "the writer thread panicked".into(),
-            _ => "the writer stopped".into(),
-        };
-        Error::Mcap {
-            path: self.path.clone(),
-            message: format!("writing failed: {message}"),
+        self.thread.take()?.join().ok()
+    }
+
+    fn failure(&self, error: Option<mcap::McapError>) -> Error {
+        match &self.output {
+            Some(output) => write_failure(&self.path, output, error, None),
+            None => Error::WriterStopped {
+                path: self.path.clone(),
+            },
         }
     }
 
@@ -386,21 +427,17 @@ impl McapSink {
 
     /// Waits for the writer, then renames the temporary file over the output.
     pub fn finish(mut self) -> Result<()> {
-        self.sender = None;
-        match self.thread.take().map(JoinHandle::join) {
-            Some(Ok(Ok(()))) => {}
-            Some(Ok(Err(message))) => {
-                return Err(Error::Mcap {
+        let error = match self.join_writer() {
+            Some(Ok(())) => None,
+            Some(Err(error)) => Some(error),
+            None => {
+                return Err(Error::WriterStopped {
                     path: self.path.clone(),
-                    message: format!("writing failed: {message}"),
                 });
             }
-            _ => {
-                return Err(Error::Mcap {
-                    path: self.path.clone(),
-                    message: "the writer thread failed".into(),
-                });
-            }
+        };
+        if let Some(error) = error {
+            return Err(self.failure(Some(error)));
         }
         match self.output.take() {
             Some(output) => output.commit(),

@@ -93,3 +93,29 @@ fn failure_with_code(output: Output, code: i32) -> String {
     assert!(!err.contains("panicked"), "{err}");
     err
 }
+
+/// A sequence of `frames` scans in `dir`: the shipped scans over and over (as
+/// links), with the sample's calibration, poses and times; long enough to interrupt.
+pub fn long_sequence(sample: &Path, dir: &Path, frames: usize) -> PathBuf {
+    let long = dir.join("long");
+    std::fs::create_dir_all(long.join("velodyne")).unwrap();
+    std::fs::copy(sample.join("calib.txt"), long.join("calib.txt")).unwrap();
+    let head = |name: &str| -> String {
+        std::fs::read_to_string(sample.join(name))
+            .unwrap()
+            .lines()
+            .take(frames)
+            .map(|l| format!("{l}\n"))
+            .collect()
+    };
+    std::fs::write(long.join("poses.txt"), head("poses.txt")).unwrap();
+    std::fs::write(long.join("times.txt"), head("times.txt")).unwrap();
+    for i in 0..frames {
+        std::os::unix::fs::symlink(
+            sample.join(format!("velodyne/{:06}.bin", i % 6)),
+            long.join(format!("velodyne/{i:06}.bin")),
+        )
+        .unwrap();
+    }
+    long
+}

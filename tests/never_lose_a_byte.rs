@@ -1,0 +1,336 @@
+//! No command, with any flag, changes an input; outputs appear whole or not at all:
+//! `-o` aimed at every input however spelled, signals, a killed run's leftovers, a
+//! full disk.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{clean_failure, success, travmap};
+use sha2::{Digest, Sha256};
+
+/// SHA-256 of every file below `root` (links followed), by path.
+fn digests(root: &Path) -> BTreeMap<PathBuf, String> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(path) = stack.pop() {
+        let metadata = std::fs::symlink_metadata(&path).unwrap();
+        if metadata.is_symlink() && path.is_dir() {
+            continue; // a link to a directory already walked
+        }
+        if path.is_dir() {
+            for entry in std::fs::read_dir(&path).unwrap() {
+                stack.push(entry.unwrap().path());
+            }
+        } else {
+            let bytes = std::fs::read(&path).unwrap();
+            let digest: String = Sha256::digest(&bytes)
+                .iter()
+                .map(|b| format!("{b:02x}"))
+                .collect();
+            out.insert(path, digest);
+        }
+    }
+    out
+}
+
+/// A copy of the first three shipped frames (labels too), a drive converted from
+/// it, a model and a config file: every kind of input a command reads.
+fn inputs(sample: &Path, dir: &Path) -> (PathBuf, PathBuf, PathBuf, PathBuf) {
+    let seq = dir.join("seq");
+    for sub in ["velodyne", "labels"] {
+        std::fs::create_dir_all(seq.join(sub)).unwrap();
+    }
+    for name in ["calib.txt", "poses.txt", "times.txt"] {
+        std::fs::copy(sample.join(name), seq.join(name)).unwrap();
+    }
+    for i in 0..3 {
+        for (sub, ext) in [("velodyne", "bin"), ("labels", "label")] {
+            let name = format!("{sub}/{i:06}.{ext}");
+            std::fs::copy(sample.join(&name), seq.join(&name)).unwrap();
+        }
+    }
+    let drive = dir.join("d.mcap");
+    success(travmap(&["convert", p(&seq), "-o", p(&drive), "-q"]));
+    let model = dir.join("model.json");
+    std::fs::write(&model, travmap_model()).unwrap();
+    let config = dir.join("config.toml");
+    std::fs::write(&config, "[grid]\nmin_points = 2\n").unwrap();
+    (seq, drive, model, config)
+}
+
+fn travmap_model() -> Vec<u8> {
+    travmap::method::classifier::SvmModel::embedded_default()
+        .unwrap()
+        .to_json()
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+#[test]
+fn no_writing_command_can_overwrite_any_of_its_inputs() {
+    let Some(sample) = common::semantickitti_00() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (seq, drive, model, config) = inputs(&sample, dir.path());
+    std::fs::create_dir_all(dir.path().join("x")).unwrap();
+    std::os::unix::fs::symlink(dir.path(), dir.path().join("via")).unwrap();
+    std::fs::hard_link(&drive, dir.path().join("hard.mcap")).unwrap();
+    let before = digests(dir.path());
+
+    // The drive spelled otherwise, and files inside the sequence directory.
+    let drive_spellings = [
+        drive.clone(),
+        dir.path().join("x/../d.mcap"),
+        dir.path().join("via/d.mcap"),
+        dir.path().join("hard.mcap"),
+    ];
+    let seq_files = [
+        seq.join("calib.txt"),
+        seq.join("velodyne/000001.bin"),
+        seq.join("labels/000002.label"),
+        dir.path().join("via/seq/poses.txt"),
+    ];
+    let (seq, drive, model, config) = (p(&seq), p(&drive), p(&model), p(&config));
+    let with_model = ["--model", model, "--config", config, "-q"];
+    // Each writing command, its arguments, and every output that is one of its inputs.
+    let commands: Vec<(Vec<&str>, Vec<&Path>)> = vec![
+        (
+            vec!["convert", seq, "-q"],
+            seq_files.iter().map(PathBuf::as_path).collect(),
+        ),
+        (
+            [&["annotate", drive][..], &with_model].concat(),
+            drive_spellings
+                .iter()
+                .map(PathBuf::as_path)
+                .chain([Path::new(model), Path::new(config)])
+                .collect(),
+        ),
+        (
+            [&["annotate", seq][..], &with_model].concat(),
+            seq_files.iter().map(PathBuf::as_path).collect(),
+        ),
+        (
+            [&["dataset", drive, seq][..], &with_model].concat(),
+            drive_spellings
+                .iter()
+                .chain(&seq_files)
+                .map(PathBuf::as_path)
+                .chain([Path::new(model), Path::new(config)])
+                .collect(),
+        ),
+        (
+            vec!["train", seq, drive, "--config", config, "-q"],
+            drive_spellings
+                .iter()
+                .chain(&seq_files)
+                .map(PathBuf::as_path)
+                .chain([Path::new(config)])
+                .collect(),
+        ),
+        (
+            [&["render", drive, "--frame", "2"][..], &with_model].concat(),
+            drive_spellings
+                .iter()
+                .map(PathBuf::as_path)
+                .chain([Path::new(model), Path::new(config)])
+                .collect(),
+        ),
+    ];
+    for (args, targets) in &commands {
+        for target in targets {
+            let mut args = args.clone();
+            args.extend(["-o", p(target)]);
+            let out = travmap(&args);
+            assert_eq!(out.status.code(), Some(1), "{args:?}");
+            let err = common::stderr(&out);
+            assert!(err.contains("would overwrite the input"), "{args:?}: {err}");
+        }
+    }
+    // A directory of pictures inside an input directory.
+    let err = clean_failure(travmap(&[
+        "render",
+        seq,
+        "--all",
+        "-o",
+        &format!("{seq}/velodyne"),
+    ]));
+    assert!(err.contains("would overwrite the input"), "{err}");
+    assert_eq!(digests(dir.path()), before, "an input changed");
+}
+
+#[test]
+fn outputs_that_cannot_be_written_are_refused_before_any_work() {
+    let Some(sample) = common::semantickitti_00() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let seq = p(&sample);
+    let directory = dir.path().join("a-directory");
+    std::fs::create_dir_all(&directory).unwrap();
+    let started = Instant::now();
+    let err = clean_failure(travmap(&["train", seq, "-o", p(&directory)]));
+    assert!(err.contains("is a directory"), "{err}");
+    let missing = dir.path().join("missing/m.json");
+    let err = clean_failure(travmap(&["train", seq, "-o", p(&missing)]));
+    assert!(err.contains("does not exist"), "{err}");
+    // Training takes seconds: refusing took no training.
+    assert!(
+        started.elapsed() < Duration::from_secs(3),
+        "{:?}",
+        started.elapsed()
+    );
+}
+
+/// Starts a conversion of a long sequence into `out_dir`, waits until its temporary
+/// file exists, and sends `signal`. None when it finished first.
+fn interrupt_conversion(sample: &Path, dir: &Path, signal: &str) -> Option<(i32, PathBuf)> {
+    let long = common::long_sequence(sample, dir, 200);
+    let out_dir = dir.join("out");
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let output = out_dir.join("drive.mcap");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_travmap"))
+        .args(["convert", p(&long), "-o", p(&output), "-q"])
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    let has_temporary = || {
+        std::fs::read_dir(&out_dir)
+            .unwrap()
+            .any(|e| e.unwrap().file_name().to_string_lossy().contains(".tmp-"))
+    };
+    while !has_temporary() && started.elapsed() < Duration::from_secs(20) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    std::thread::sleep(Duration::from_millis(150));
+    let sent = Command::new("kill")
+        .args([&format!("-{signal}"), &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let status = child.wait().unwrap();
+    if status.success() {
+        eprintln!("skipping {signal}: the conversion finished before the signal");
+        return None;
+    }
+    use std::os::unix::process::ExitStatusExt;
+    Some((status.code().or(status.signal()).unwrap(), out_dir))
+}
+
+#[test]
+fn sigint_sigterm_and_sighup_remove_the_temporary_output() {
+    let Some(sample) = common::semantickitti_00() else {
+        return;
+    };
+    for (signal, code) in [("INT", 130), ("TERM", 143), ("HUP", 129)] {
+        let dir = tempfile::tempdir().unwrap();
+        let Some((status, out_dir)) = interrupt_conversion(&sample, dir.path(), signal) else {
+            continue;
+        };
+        assert_eq!(status, code, "SIG{signal}");
+        let left: Vec<_> = std::fs::read_dir(&out_dir).unwrap().collect();
+        assert!(left.is_empty(), "SIG{signal} left {left:?}");
+    }
+}
+
+#[test]
+fn the_next_run_removes_what_a_killed_run_left() {
+    let Some(sample) = common::semantickitti_00() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let Some((status, out_dir)) = interrupt_conversion(&sample, dir.path(), "KILL") else {
+        return;
+    };
+    assert_eq!(status, 9, "killed by SIGKILL");
+    let stale: Vec<_> = std::fs::read_dir(&out_dir).unwrap().collect();
+    assert_eq!(
+        stale.len(),
+        1,
+        "SIGKILL cannot be caught: its temporary file stays"
+    );
+    let output = out_dir.join("drive.mcap");
+    let out = travmap(&[
+        "convert",
+        p(&sample),
+        "--frames",
+        "0..2",
+        "-o",
+        p(&output),
+        "-q",
+    ]);
+    let err = common::stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("left by a travmap run that was killed"),
+        "{err}"
+    );
+    let left: Vec<_> = std::fs::read_dir(&out_dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(left, ["drive.mcap"]);
+}
+
+#[test]
+fn a_full_disk_is_named_and_leaves_nothing() {
+    let Some(sample) = common::semantickitti_00() else {
+        return;
+    };
+    // A 1 MiB file system: the conversion of six scans (8.8 MB) fills it.
+    let small = tempfile::tempdir().unwrap();
+    let mounted = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=1m", "tmpfs", p(small.path())])
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        eprintln!("skipping: cannot mount a small tmpfs here (not root?)");
+        return;
+    }
+    let output = small.path().join("drive.mcap");
+    let out = travmap(&["convert", p(&sample), "-o", p(&output), "-q"]);
+    let left: Vec<_> = std::fs::read_dir(small.path()).unwrap().collect();
+    let _ = Command::new("umount").arg(small.path()).status();
+    let err = clean_failure(out);
+    assert!(err.contains("no space left on device (wrote"), "{err}");
+    assert!(left.is_empty(), "left {left:?}");
+}
+
+#[test]
+fn a_closed_stdout_ends_quietly() {
+    let Some(sample) = common::semantickitti_00() else {
+        return;
+    };
+    // `travmap run ... | head -c 1`: the reader goes away after one byte.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_travmap"))
+        .args(["run", p(&sample), "--ascii"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdout = child.stdout.take().unwrap();
+    let mut one = [0u8; 1];
+    std::io::Read::read_exact(&mut stdout, &mut one).unwrap();
+    drop(stdout);
+    let out = child.wait_with_output().unwrap();
+    use std::os::unix::process::ExitStatusExt;
+    assert_eq!(
+        out.status.signal(),
+        Some(13),
+        "ended by SIGPIPE, as `cat` is"
+    );
+    assert!(
+        out.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
