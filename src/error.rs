@@ -19,6 +19,9 @@ pub enum Error {
     )]
     OutputIsInput { output: PathBuf, input: PathBuf },
 
+    #[error("cannot write {output}: the directory {directory} does not exist")]
+    NoOutputDirectory { output: PathBuf, directory: PathBuf },
+
     #[error("{output} is a directory; -o names the file to write")]
     OutputIsDirectory { output: PathBuf },
 
@@ -53,6 +56,11 @@ pub enum Error {
         record_bytes: u64,
         what: &'static str,
     },
+
+    #[error(
+        "{path}: 0 bytes, no points: a scan file that was never written (--keep-going skips it)"
+    )]
+    EmptyScan { path: PathBuf },
 
     #[error("{path}: {message}")]
     Dataset { path: PathBuf, message: String },
@@ -192,6 +200,27 @@ pub enum Error {
         message: String,
     },
 
+    #[error(
+        "model {source_name}: format `{format}` version {version}; this travmap reads `{}` version {}",
+        crate::training::model_file::MODEL_FORMAT,
+        crate::training::model_file::MODEL_VERSION
+    )]
+    ModelVersion {
+        source_name: String,
+        format: String,
+        version: String,
+    },
+
+    #[error(
+        "model {model} was trained with {setting} = {model_value}, this run has {value}; run it with --set {setting}={model_value} (or train a model with these settings)"
+    )]
+    ModelSettings {
+        model: String,
+        setting: String,
+        model_value: String,
+        value: String,
+    },
+
     #[error("training set: {0}")]
     Training(String),
 
@@ -233,6 +262,42 @@ impl std::fmt::Display for CloudTopicProblem {
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
+    /// The file the error is about, when there is one (for `--json` errors).
+    pub fn path(&self) -> Option<&std::path::Path> {
+        match self {
+            Error::Io { path, .. }
+            | Error::NoSpace { path, .. }
+            | Error::McapWrite { path, .. }
+            | Error::WriterStopped { path, .. }
+            | Error::Write { path, .. }
+            | Error::RecordSize { path, .. }
+            | Error::EmptyScan { path, .. }
+            | Error::Dataset { path, .. }
+            | Error::LabelCount { path, .. }
+            | Error::Parse { path, .. }
+            | Error::MissingCalibration { path, .. }
+            | Error::MissingPose { path, .. }
+            | Error::MissingTime { path, .. }
+            | Error::Sequence { path, .. }
+            | Error::McapContainer { path, .. }
+            | Error::McapRecord { path, .. }
+            | Error::McapUnreadableFrom { path, .. }
+            | Error::McapCloudTopic { path, .. }
+            | Error::McapNoPose { path, .. }
+            | Error::McapNotBelowWorld { path, .. }
+            | Error::McapCloud { path, .. }
+            | Error::McapImage { path, .. }
+            | Error::McapCamera { path, .. }
+            | Error::McapMessage { path, .. }
+            | Error::McapEncoding { path, .. }
+            | Error::Transform { path, .. } => Some(path),
+            Error::OutputIsInput { output, .. }
+            | Error::OutputIsDirectory { output }
+            | Error::NoOutputDirectory { output, .. } => Some(output),
+            _ => None,
+        }
+    }
+
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.into(),

@@ -40,7 +40,17 @@ enum Command {
 
 fn main() -> ExitCode {
     remove_outputs_on_signals();
-    let outcome = match Cli::parse().command {
+    // `--json` anywhere: errors too are JSON (on stderr), usage errors included.
+    let json = std::env::args_os().any(|a| a == "--json");
+    let command = match Cli::try_parse() {
+        Ok(cli) => cli.command,
+        Err(usage) if json && usage.use_stderr() => {
+            cli::print_json_error(&usage.render().to_string(), None, usage.exit_code());
+            return ExitCode::from(usage.exit_code() as u8);
+        }
+        Err(usage) => usage.exit(),
+    };
+    let outcome = match command {
         Command::Run(args) => cli::run::run(args),
         Command::Eval(args) => cli::eval::eval(args),
         Command::Train(args) => cli::train::train(args),
@@ -55,8 +65,17 @@ fn main() -> ExitCode {
     match outcome {
         Ok(Outcome::Complete) => ExitCode::SUCCESS,
         Ok(Outcome::Skipped(frames)) => {
-            eprintln!("completed with {frames} skipped frame(s)");
+            if !json {
+                eprintln!("completed with {frames} skipped frame(s)");
+            }
             ExitCode::from(3)
+        }
+        Err(error) if json => {
+            let file = error
+                .chain()
+                .find_map(|e| e.downcast_ref::<travmap::Error>()?.path());
+            cli::print_json_error(&format!("{error:#}"), file, 1);
+            ExitCode::FAILURE
         }
         Err(error) => {
             eprintln!("error: {error:#}");

@@ -139,11 +139,10 @@ fn malformed_pose_line() {
 /// The frame lines of `run --json` on `dir`, without the input's name and the
 /// timings, which vary from run to run.
 fn run_json(dir: &Path) -> Vec<serde_json::Value> {
-    success(travmap(&["run", dir.to_str().unwrap(), "--json"]))
-        .lines()
-        .skip(1)
-        .map(|line| {
-            let mut value: serde_json::Value = serde_json::from_str(line).unwrap();
+    common::json_records(&success(travmap(&["run", dir.to_str().unwrap(), "--json"])))
+        .0
+        .into_iter()
+        .map(|mut value| {
             if let Some(object) = value.as_object_mut() {
                 object.retain(|key, _| key != "input" && key != "timings_ms");
             }
@@ -233,7 +232,7 @@ fn a_model_file_of_another_version() {
         path.to_str().unwrap(),
     ]));
     assert!(
-        err.contains("old-model.json") && err.contains("version Some(99)"),
+        err.contains("old-model.json") && err.contains("format `travmap-svm` version 99;"),
         "{err}"
     );
 }
@@ -393,4 +392,17 @@ fn images_without_p2_in_the_calibration() {
         "--set",
         "appearance.enabled=false",
     ]));
+}
+
+#[test]
+fn an_empty_scan_file_is_an_error_not_an_empty_scan() {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    std::fs::remove_dir_all(dir.path().join("labels")).unwrap();
+    std::fs::write(dir.path().join("velodyne/000001.bin"), b"").unwrap();
+    let err = clean_failure(eval(dir.path()));
+    assert!(
+        err.contains("000001.bin: 0 bytes, no points") && err.contains("--keep-going"),
+        "{err}"
+    );
 }

@@ -72,13 +72,12 @@ fn eval_json_reports_config_model_and_scores() {
 fn run_emits_one_grid_per_frame() {
     let Some(seq) = sample() else { return };
     let out = success(travmap(&["run", &seq, "--frames", "3..6", "--json"]));
-    let lines: Vec<Value> = out
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
-    assert_eq!(lines.len(), 4, "a header and three frames");
-    assert!(lines[0]["config"].is_object() && lines[0]["model"].is_object());
-    for (line, frame) in lines[1..].iter().zip(3..) {
+    let (lines, summary) = common::json_records(&out);
+    assert_eq!(lines.len(), 3, "three frames");
+    assert!(summary["config"].is_object() && summary["model"].is_object());
+    assert_eq!(summary["frames"], 3);
+    assert!(summary["latency_ms"]["median"].as_f64().unwrap() > 0.0);
+    for (line, frame) in lines.iter().zip(3..) {
         assert_eq!(line["frame"], frame);
         let cells = line["cells"].as_array().unwrap();
         assert_eq!(cells.len(), 900);
@@ -183,8 +182,8 @@ fn config_prints_the_effective_settings_and_rejects_unknown_keys() {
         "grid.size_m=24",
     ])))
     .unwrap();
-    assert_eq!(doc["grid"]["size_m"], 24.0);
-    assert_eq!(doc["features"]["curvity_bins"], 160);
+    assert_eq!(doc["config"]["grid"]["size_m"], 24.0);
+    assert_eq!(doc["config"]["features"]["curvity_bins"], 160);
     let toml = success(travmap(&["config"]));
     assert!(
         toml.contains("[grid]") && toml.contains("cell_size_m = 0.4"),
@@ -204,7 +203,7 @@ fn config_prints_the_effective_settings_and_rejects_unknown_keys() {
         file.to_str().unwrap(),
     ])))
     .unwrap();
-    assert_eq!(doc["features"]["curvity_bins"], 80);
+    assert_eq!(doc["config"]["features"]["curvity_bins"], 80);
     let err = clean_failure(travmap(&["config", "--set", "grid.bogus=1"]));
     assert!(err.contains("no field `bogus`"), "{err}");
     let err = clean_failure(travmap(&["config", "--set", "grid.size_m=-3"]));
@@ -220,7 +219,11 @@ fn a_model_trained_for_other_features_is_refused() {
         "--set",
         "features.curvity_bins=80",
     ]));
-    assert!(err.contains("different feature settings"), "{err}");
+    assert!(
+        err.contains("embedded default model was trained with features.curvity_bins = 160")
+            && err.contains("--set features.curvity_bins=160"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -342,4 +345,58 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
     ]));
     assert_eq!(std::fs::read_dir(&all).unwrap().count(), 3);
     clean_failure(travmap(&["render", &seq, "-o", all.to_str().unwrap()]));
+}
+
+#[test]
+fn suspicious_arguments_are_refused_or_warned_about() {
+    let Some(seq) = sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    // The same input twice, however spelled, would count its frames twice.
+    let again = format!("{seq}/../00");
+    let err = clean_failure(travmap(&["eval", &seq, &again]));
+    assert!(err.contains("are the same input"), "{err}");
+    // convert reads KITTI directories only.
+    let drive = dir.path().join("d.mcap");
+    success(travmap(&[
+        "convert",
+        &seq,
+        "--frames",
+        "0..2",
+        "-o",
+        drive.to_str().unwrap(),
+        "-q",
+    ]));
+    let other = dir.path().join("e.mcap");
+    let err = clean_failure(travmap(&[
+        "convert",
+        drive.to_str().unwrap(),
+        "-o",
+        other.to_str().unwrap(),
+    ]));
+    assert!(
+        err.contains("convert takes a KITTI sequence directory"),
+        "{err}"
+    );
+    // Unbounded or empty repeats, and --frame with --frames, are usage errors.
+    for args in [
+        vec!["bench", &seq, "--repeats", "0"],
+        vec!["bench", &seq, "--repeats", "4000000000"],
+        vec![
+            "render", &seq, "--frame", "1", "--frames", "0..2", "-o", "x.png",
+        ],
+    ] {
+        let err = common::usage_error(travmap(&args));
+        assert!(
+            err.contains("--repeats") || err.contains("--frames"),
+            "{err}"
+        );
+    }
+    // MCAP-only flags on a KITTI directory are said to be ignored.
+    let out = travmap(&["eval", &seq, "--frames", "0..3", "--cloud-topic", "/points"]);
+    assert!(out.status.success());
+    let err = common::stderr(&out);
+    assert!(
+        err.contains("warning: --cloud-topic applies to MCAP inputs"),
+        "{err}"
+    );
 }

@@ -120,11 +120,7 @@ fn annotated_grid_matches_run_and_carries_metadata() {
         "-q",
     ]));
     let run = success(travmap(&["run", &seq, "--frames", "1..4", "--json"]));
-    let runs: Vec<Value> = run
-        .lines()
-        .skip(1)
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let (runs, _) = common::json_records(&run);
     let grids = messages::<OccupancyGrid>(&out, "/travmap/prediction");
     assert_eq!(grids.len(), 3);
     for ((log_time, grid), run) in grids.iter().zip(&runs) {
@@ -270,11 +266,7 @@ fn real_clients_decode_what_travmap_writes() {
         "-q",
     ]));
     let run = success(travmap(&["run", &seq, "--json"]));
-    let runs: Vec<Value> = run
-        .lines()
-        .skip(1)
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let (runs, _) = common::json_records(&run);
     let clients = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients");
     let decode = |program: &str, script: &str| -> Value {
         let decoded = std::process::Command::new(program)
@@ -598,7 +590,7 @@ fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
         "no 30 x 30 GridMap in the .rrd"
     );
     let run = success(travmap(&["run", &seq, "--frames", "0", "--json"]));
-    let first: Value = serde_json::from_str(run.lines().nth(1).unwrap()).unwrap();
+    let first = common::json_records(&run).0.remove(0);
     let corner = first["min_corner_in_world"].as_array().unwrap();
     let expected = format!(
         "[[{:?}, {:?}, ",

@@ -11,7 +11,9 @@ use travmap::outputs::annotation::{self, AnnotationOptions};
 use travmap::stopwatch::Stopwatch;
 
 use super::convert::CompressionArg;
-use super::{Inputs, Outcome, check_output, frame_count, load_model, model_json, outcome};
+use super::{
+    Inputs, Outcome, check_output, frame_count, load_model, model_json, outcome, print_json_summary,
+};
 
 /// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
 #[derive(Args)]
@@ -73,8 +75,11 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     bar.finish_and_clear();
     let seconds = watch.elapsed_ms() * 1e-3;
     if output.json {
-        let doc = json!({"output": output_path, "config": config, "model": model_json(&model, &model_name), "summary": summary, "seconds": seconds});
-        println!("{}", serde_json::to_string_pretty(&doc)?);
+        print_json_summary(
+            "annotate",
+            &selections,
+            json!({"output": output_path, "config": config, "model": model_json(&model, &model_name), "summary": summary, "elapsed_ms": seconds * 1e3}),
+        )?;
     } else if !output.quiet {
         println!(
             "wrote {} ({} frames, {} messages copied through, {:.1} MB, {:.1} frames/s)",

@@ -9,7 +9,7 @@ use clap::Args;
 use serde_json::json;
 use travmap::scoring::benchmark::benchmark;
 
-use super::{Inputs, Outcome, load_model, model_json, outcome};
+use super::{Inputs, Outcome, load_model, model_json, outcome, print_json_summary};
 
 /// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
 #[derive(Args)]
@@ -20,14 +20,14 @@ pub struct BenchArgs {
     #[arg(long)]
     model: Option<PathBuf>,
     /// Times each measurement is repeated.
-    #[arg(long, default_value_t = 20)]
-    repeats: usize,
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u16).range(1..=1000))]
+    repeats: u16,
 }
 
 pub fn bench(args: BenchArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = args.inputs.output;
-    let repeats = args.repeats;
+    let repeats = usize::from(args.repeats);
     let (model, model_name) = load_model(args.model.as_deref(), config)?;
     let selection = args.inputs.open_one(
         config.appearance.enabled,
@@ -41,8 +41,11 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
         repeats,
     )?;
     if output.json {
-        let doc = json!({"config": config, "model": model_json(&model, &model_name), "input": selection.describe(), "report": report});
-        println!("{}", serde_json::to_string_pretty(&doc)?);
+        print_json_summary(
+            "bench",
+            std::slice::from_ref(&selection),
+            json!({"config": config, "model": model_json(&model, &model_name), "report": report}),
+        )?;
         return Ok(outcome(std::slice::from_ref(&selection)));
     }
     let mut out = std::io::stdout().lock();

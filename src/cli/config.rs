@@ -3,7 +3,7 @@
 use anyhow::Result;
 use clap::Args;
 
-use super::{Outcome, Settings};
+use super::{Outcome, Settings, print_json_summary};
 
 /// Print the effective configuration (TOML; JSON with --json).
 #[derive(Args)]
@@ -17,7 +17,7 @@ pub struct ConfigArgs {
 pub fn config(args: ConfigArgs) -> Result<Outcome> {
     let config = args.settings.load()?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&config)?);
+        print_json_summary("config", &[], serde_json::json!({ "config": config }))?;
     } else {
         print!("{}", toml::to_string(&config)?);
     }

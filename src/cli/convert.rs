@@ -14,6 +14,7 @@ use travmap::stopwatch::Stopwatch;
 
 use super::{
     Outcome, Output, check_output, frame_count, open_selection, outcome, parse_frame_range,
+    print_json_summary,
 };
 
 /// Convert a KITTI / SemanticKITTI sequence to a ROS 2 MCAP (clouds, poses on /tf, images).
@@ -101,8 +102,11 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
     bar.finish_and_clear();
     let seconds = watch.elapsed_ms() * 1e-3;
     if output.json {
-        let doc = json!({"output": output_path, "compression": compression, "summary": summary, "seconds": seconds});
-        println!("{}", serde_json::to_string_pretty(&doc)?);
+        print_json_summary(
+            "convert",
+            &selections,
+            json!({"output": output_path, "compression": compression, "summary": summary, "elapsed_ms": seconds * 1e3}),
+        )?;
     } else if !output.quiet {
         println!(
             "wrote {} ({} frames, {} with labels, {} images, {:.1} MB, {:.1} frames/s)",

@@ -9,7 +9,7 @@ use travmap::drive::Selection;
 use travmap::training::crossval::{CrossValidationReport, cross_validate};
 
 use super::eval::write_table;
-use super::{Inputs, Outcome, outcome};
+use super::{Inputs, Outcome, outcome, print_json_summary};
 
 /// Held-out accuracy by spatially-blocked cross-validation over the frames.
 #[derive(Args)]
@@ -30,8 +30,11 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
     bar.finish_and_clear();
     let sources: Vec<String> = selections.iter().map(Selection::describe).collect();
     if output.json {
-        let doc = json!({"config": config, "inputs": sources, "report": report});
-        println!("{}", serde_json::to_string_pretty(&doc)?);
+        print_json_summary(
+            "crossval",
+            &selections,
+            json!({"config": config, "report": report}),
+        )?;
         return Ok(outcome(&selections));
     }
     let mut out = std::io::stdout().lock();

@@ -9,7 +9,7 @@ use serde_json::json;
 use travmap::outputs::dataset::DatasetWriter;
 use travmap::stopwatch::Stopwatch;
 
-use super::{Inputs, Outcome, check_output, frame_count, load_model, outcome};
+use super::{Inputs, Outcome, check_output, frame_count, load_model, outcome, print_json_summary};
 
 /// One Parquet row per predictable cell per frame: features, appearance, ground
 /// truth and (with --model) the prediction, on the training grid.
@@ -51,8 +51,11 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     bar.finish_and_clear();
     let seconds = watch.elapsed_ms() * 1e-3;
     if output.json {
-        let doc = json!({"output": output_path, "summary": summary, "seconds": seconds, "cells_per_s": summary.rows as f64 / seconds});
-        println!("{}", serde_json::to_string_pretty(&doc)?);
+        print_json_summary(
+            "dataset",
+            &selections,
+            json!({"output": output_path, "config": config, "summary": summary, "elapsed_ms": seconds * 1e3, "cells_per_s": summary.rows as f64 / seconds}),
+        )?;
     } else if !output.quiet {
         println!(
             "wrote {}: {} cells from {} frames ({} labelled, {} with appearance), {:.0} cells/s",

@@ -12,7 +12,7 @@ use travmap::method::classifier::SvmModel;
 use travmap::scoring::evaluation::{Evaluation, EvaluationReport};
 use travmap::scoring::metrics::Scores;
 
-use super::{Inputs, Outcome, frame_count, load_model, model_json, outcome};
+use super::{Inputs, Outcome, frame_count, load_model, model_json, outcome, print_json_summary};
 
 /// Score predictions against SemanticKITTI ground truth (the paper's table).
 #[derive(Args)]
@@ -55,14 +55,16 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     };
     let sources: Vec<String> = selections.iter().map(Selection::describe).collect();
     if output.json {
-        let doc = json!({
-            "config": config,
-            "model": model_json(&model, &model_name),
-            "inputs": sources,
-            "report": report,
-            "geometry_only_report": geometry_only,
-        });
-        println!("{}", serde_json::to_string_pretty(&doc)?);
+        print_json_summary(
+            "eval",
+            &selections,
+            json!({
+                "config": config,
+                "model": model_json(&model, &model_name),
+                "report": report,
+                "geometry_only_report": geometry_only,
+            }),
+        )?;
         return Ok(outcome(&selections));
     }
     let mut out = std::io::stdout().lock();

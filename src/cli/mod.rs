@@ -207,6 +207,19 @@ pub fn open_selection(
     read_images: bool,
 ) -> Result<Selection> {
     let mut source = Source::open(path, options)?;
+    if let Source::Kitti(_) = source {
+        let mcap_only = [
+            ("--cloud-topic", &options.cloud_topic),
+            ("--world-frame", &options.world_frame),
+            ("--camera-topic", &options.camera_topic),
+        ];
+        for (flag, _) in mcap_only.iter().filter(|(_, value)| value.is_some()) {
+            eprintln!(
+                "warning: {flag} applies to MCAP inputs; {} is a KITTI directory, so it is ignored there",
+                path.display()
+            );
+        }
+    }
     source.set_read_images(read_images);
     source.set_keep_going(keep_going);
     if source.frames_in(frames).is_empty() {
@@ -267,7 +280,7 @@ pub fn load_model(path: Option<&Path>, config: &Config) -> Result<(SvmModel, Str
             "embedded default model".into(),
         ),
     };
-    model.check_compatible(config)?;
+    model.check_compatible(config, &name)?;
     Ok((model, name))
 }
 
@@ -281,6 +294,62 @@ pub fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {
         "gamma": model.gamma,
         "trained_on": model.training.sources,
     })
+}
+
+/// `--json` output, one convention for every command (README "Machine-readable
+/// output", schemas in `schemas/json/`): JSON Lines on stdout, a `frame` record per
+/// frame where a command streams frames, then one `summary` record naming the
+/// command, its `inputs` (always a list) and the frames it `skipped`.
+pub fn print_json_frame(mut fields: serde_json::Value) -> Result<()> {
+    fields["type"] = "frame".into();
+    print_json_line(&fields)
+}
+
+/// The `summary` record of [`print_json_frame`]'s convention: `fields` with the
+/// command, the inputs (unless `fields` names them) and the skipped frames.
+pub fn print_json_summary(
+    command: &str,
+    selections: &[Selection],
+    mut fields: serde_json::Value,
+) -> Result<()> {
+    fields["type"] = "summary".into();
+    fields["command"] = command.into();
+    if fields.get("inputs").is_none() {
+        fields["inputs"] = selections
+            .iter()
+            .map(Selection::describe)
+            .collect::<Vec<_>>()
+            .into();
+    }
+    fields["skipped"] = selections
+        .iter()
+        .flat_map(|s| {
+            let input = s.source.path().display().to_string();
+            s.source.skipped().into_iter().map(
+                move |skip| json!({"input": input, "frame": skip.frame, "reason": skip.reason}),
+            )
+        })
+        .collect::<Vec<_>>()
+        .into();
+    print_json_line(&fields)
+}
+
+/// An error under `--json`: one `error` record on stderr, with the file it is
+/// about when there is one and the exit code.
+pub fn print_json_error(message: &str, file: Option<&Path>, exit_code: i32) {
+    let record = json!({
+        "type": "error",
+        "error": message.trim_start_matches("error: ").trim_end(),
+        "file": file,
+        "exit_code": exit_code,
+    });
+    eprintln!("{record}");
+}
+
+fn print_json_line(value: &serde_json::Value) -> Result<()> {
+    use std::io::Write;
+    writeln!(std::io::stdout().lock(), "{value}")?;
+    Ok(())
 }
 
 /// Frames the selections will hand on, for progress bars.

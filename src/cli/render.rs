@@ -9,7 +9,10 @@ use serde_json::json;
 use travmap::outputs::rendering;
 use travmap::outputs::writing::write_atomically;
 
-use super::{Inputs, Outcome, check_output, check_output_dir, frame_count, load_model, outcome};
+use super::{
+    Inputs, Outcome, check_output, check_output_dir, frame_count, load_model, outcome,
+    print_json_summary,
+};
 
 /// Draw ground truth, prediction and errors of a frame side by side as PNG.
 #[derive(Args)]
@@ -20,7 +23,7 @@ pub struct RenderArgs {
     #[arg(short, long)]
     output: PathBuf,
     /// The frame to draw.
-    #[arg(long, conflicts_with = "all")]
+    #[arg(long, conflicts_with_all = ["all", "frames"])]
     frame: Option<usize>,
     /// Draw every selected frame (see --frames) into the output directory.
     #[arg(long)]
@@ -81,10 +84,7 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         bail!("no frame was rendered");
     }
     if output.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&json!({"pictures": written}))?
-        );
+        print_json_summary("render", &selections, json!({"pictures": written}))?;
     } else if !output.quiet {
         println!(
             "wrote {} picture(s): ground truth | prediction | errors (orange false positive, blue false negative)",

@@ -10,7 +10,10 @@ use serde_json::json;
 use travmap::method::grid::CellClass;
 use travmap::scoring::evaluation::Evaluation;
 
-use super::{Inputs, Outcome, frame_count, load_model, model_json, outcome};
+use super::{
+    Inputs, Outcome, frame_count, load_model, model_json, outcome, print_json_frame,
+    print_json_summary,
+};
 
 /// Predict the filtered traversability grid of every frame.
 #[derive(Args)]
@@ -32,13 +35,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let selections = args.inputs.open(config.appearance.enabled)?;
     let bar = output.progress(frame_count(&selections), "predicting");
     let mut stdout = std::io::stdout().lock();
-    if output.json {
-        writeln!(
-            stdout,
-            "{}",
-            json!({"config": config, "model": model_json(&model, &model_name)})
-        )?;
-    } else if !output.quiet {
+    if !output.json && !output.quiet {
         writeln!(
             stdout,
             "model: {model_name} ({} support vectors)",
@@ -51,9 +48,11 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         )?;
     }
     let mut evaluation = Evaluation::default();
+    let mut frames = 0usize;
     for selection in &selections {
         selection.run::<anyhow::Error>(&config, Some(&model), |result| {
             bar.inc(1);
+            frames += 1;
             evaluation.add(&result);
             let grid = result.filtered.as_deref().unwrap_or(&[]);
             let count = |class: CellClass| grid.iter().filter(|c| **c == class).count();
@@ -63,7 +62,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
             );
             if output.json {
                 let cells: Vec<i8> = grid.iter().map(|c| c.occupancy()).collect();
-                let line = json!({
+                print_json_frame(json!({
                     "input": selection.source.path(),
                     "frame": result.index,
                     "stamp_ns": result.stamp_ns,
@@ -73,8 +72,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                     "cells": cells,
                     "timings_ms": result.timings,
                     "dropped_points": result.dropped_points,
-                });
-                writeln!(stdout, "{line}")?;
+                }))?;
             } else if !output.quiet {
                 writeln!(
                     stdout,
@@ -95,8 +93,21 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         })?;
     }
     bar.finish_and_clear();
-    if !output.json && !output.quiet {
-        let latency = evaluation.report().timings_ms.latency;
+    let report = evaluation.report();
+    if output.json {
+        print_json_summary(
+            "run",
+            &selections,
+            json!({
+                "config": config,
+                "model": model_json(&model, &model_name),
+                "frames": frames,
+                "latency_ms": report.timings_ms.latency,
+                "dropped_points": report.dropped_points,
+            }),
+        )?;
+    } else if !output.quiet {
+        let latency = report.timings_ms.latency;
         writeln!(
             stdout,
             "median latency {:.2} ms per frame (p95 {:.2} ms)",

@@ -12,7 +12,7 @@ use travmap::outputs::writing::write_atomically;
 use travmap::training::crossval::collect_training_set;
 use travmap::training::{TrainingSet, train as train_model};
 
-use super::{Inputs, Outcome, check_output, frame_count, outcome};
+use super::{Inputs, Outcome, check_output, frame_count, model_json, outcome, print_json_summary};
 
 /// Train the SVM (grid search over C and gamma, spatially-blocked CV).
 #[derive(Args)]
@@ -85,8 +85,10 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
         .copied();
     if output.json {
         let doc = json!({
-            "model": model_path,
-            "sha256": model.sha256_hex(),
+            "output": model_path,
+            "model": model_json(&model, &model_path.display().to_string()),
+            // Training sets can come from datasets too: their descriptions.
+            "inputs": model.training.sources,
             "config": config,
             "cells": set.len(),
             "training": model.training,
@@ -101,7 +103,7 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
                 "search": h.training.search,
             })),
         });
-        println!("{}", serde_json::to_string_pretty(&doc)?);
+        print_json_summary("train", &selections, doc)?;
     } else if !output.quiet {
         println!(
             "trained on {} cells ({} traversable) from {}",

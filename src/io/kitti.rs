@@ -243,6 +243,12 @@ pub fn parse_scan(bytes: &[u8], path: &Path) -> Result<Vec<[f32; 4]>> {
             what: "float32 x, y, z, remission per point",
         });
     }
+    // An empty file is a scan that was never written, not a scan of nothing.
+    if bytes.is_empty() {
+        return Err(Error::EmptyScan {
+            path: path.to_path_buf(),
+        });
+    }
     Ok(bytes
         .chunks_exact(16)
         .map(|record| {

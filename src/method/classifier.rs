@@ -156,37 +156,32 @@ impl SvmModel {
         names
     }
 
-    /// Errors when `config` would compute features differently from the training cells.
-    pub fn check_compatible(&self, config: &Config) -> Result<()> {
-        let trained = &self.config;
-        let mismatch = if trained.grid.cell_size_m != config.grid.cell_size_m {
-            Some(format!(
-                "grid.cell_size_m = {} (model) vs {}",
-                trained.grid.cell_size_m, config.grid.cell_size_m
-            ))
-        } else if self.hybrid.is_some()
-            && trained.appearance != config.appearance
-            && config.appearance.enabled
-        {
-            Some(format!(
-                "appearance = {:?} (model) vs {:?}",
-                trained.appearance, config.appearance
-            ))
-        } else if trained.features != config.features {
-            Some(format!(
-                "features = {:?} (model) vs {:?}",
-                trained.features, config.features
-            ))
-        } else {
-            None
-        };
-        match mismatch {
-            Some(m) => Err(Error::Model {
-                source_name: "model".into(),
-                message: format!("trained with different feature settings: {m}"),
-            }),
-            None => Ok(()),
+    /// Errors when `config` would compute features differently from the training
+    /// cells; the error names the first setting that differs, both values, and the
+    /// `--set` that runs the model as trained. `model_name` names the model file.
+    pub fn check_compatible(&self, config: &Config, model_name: &str) -> Result<()> {
+        let trained = serde_json::to_value(&self.config).unwrap_or_default();
+        let wanted = serde_json::to_value(config).unwrap_or_default();
+        let mut sections = vec!["grid.cell_size_m", "features"];
+        // The appearance settings matter only where the hybrid model is used.
+        if self.hybrid.is_some() && config.appearance.enabled {
+            sections.push("appearance");
         }
+        for section in sections {
+            let pointer = format!("/{}", section.replace('.', "/"));
+            let (model_value, value) = (trained.pointer(&pointer), wanted.pointer(&pointer));
+            if model_value == value {
+                continue;
+            }
+            let (setting, model_value, value) = first_difference(section, model_value, value);
+            return Err(Error::ModelSettings {
+                model: model_name.to_string(),
+                setting,
+                model_value,
+                value,
+            });
+        }
+        Ok(())
     }
 
     pub fn scratch(&self) -> PredictionScratch {
@@ -291,6 +286,22 @@ impl SvmModel {
     }
 }
 
+/// The first key (dotted, below `prefix`) where two configuration values differ,
+/// with both values as TOML-like text.
+fn first_difference(
+    prefix: &str,
+    a: Option<&serde_json::Value>,
+    b: Option<&serde_json::Value>,
+) -> (String, String, String) {
+    if let (Some(serde_json::Value::Object(a)), Some(serde_json::Value::Object(b))) = (a, b)
+        && let Some(key) = a.keys().find(|k| a.get(*k) != b.get(*k))
+    {
+        return first_difference(&format!("{prefix}.{key}"), a.get(key), b.get(key));
+    }
+    let text = |v: Option<&serde_json::Value>| v.map_or("nothing".into(), ToString::to_string);
+    (prefix.to_string(), text(a), text(b))
+}
+
 /// Names of the appearance values: hue, saturation and value buckets.
 pub fn appearance_feature_names(config: &crate::config::AppearanceConfig) -> Vec<String> {
     [
@@ -313,6 +324,22 @@ mod tests {
         let mut config = Config::default();
         config.grid.cell_size_m = 0.5;
         config.features.subcell_size_m = 0.25;
-        assert!(model.check_compatible(&config).is_err());
+        let err = model
+            .check_compatible(&config, "m.json")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("m.json")
+                && err.contains("grid.cell_size_m = 0.4")
+                && err.contains("--set grid.cell_size_m=0.4"),
+            "{err}"
+        );
+        config.grid.cell_size_m = 0.4;
+        config.features.curvity_bins = 7;
+        let err = model
+            .check_compatible(&config, "m.json")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("--set features.curvity_bins=160"), "{err}");
     }
 }

@@ -118,10 +118,10 @@ pub fn check_output_file(output: &Path, inputs: &InputFiles) -> Result<Preflight
     };
     let dir = parent_dir(output);
     if !dir.is_dir() {
-        return Err(write_error(std::io::Error::new(
-            std::io::ErrorKind::NotFound,
-            format!("the directory {} does not exist", dir.display()),
-        )));
+        return Err(Error::NoOutputDirectory {
+            output: output.to_path_buf(),
+            directory: dir.to_path_buf(),
+        });
     }
     let removed_stale = remove_stale_temporaries(output);
     // The temporary file is created beside the output: try it now, not after the work.
@@ -230,13 +230,16 @@ mod tests {
     fn temporaries_of_dead_processes_are_removed() {
         let dir = tempfile::tempdir().unwrap();
         let output = dir.path().join("x.mcap");
-        // No process has pid 2^31 - 2; this one is alive.
+        // No process has pid 2^31 - 2; the test runner's parent is alive (not this
+        // process, whose own temporary name the check itself uses).
         let dead = dir
             .path()
             .join(format!(".x.mcap{TEMPORARY_INFIX}2147483646"));
+        // SAFETY: getppid has no preconditions.
+        let parent = unsafe { libc::getppid() };
         let alive = dir
             .path()
-            .join(format!(".x.mcap{TEMPORARY_INFIX}{}", std::process::id()));
+            .join(format!(".x.mcap{TEMPORARY_INFIX}{parent}"));
         std::fs::write(&dead, b"").unwrap();
         std::fs::write(&alive, b"").unwrap();
         let preflight = check_output_file(&output, &InputFiles::default()).unwrap();

@@ -70,9 +70,11 @@ impl SvmModel {
         let format = header.get("format").and_then(|f| f.as_str());
         let version = header.get("version").and_then(|v| v.as_u64());
         if format != Some(MODEL_FORMAT) || version != Some(MODEL_VERSION as u64) {
-            return Err(fail(format!(
-                "format {format:?} version {version:?}; this travmap reads \"{MODEL_FORMAT}\" version {MODEL_VERSION}"
-            )));
+            return Err(Error::ModelVersion {
+                source_name: source_name.to_string(),
+                format: format.unwrap_or("none").to_string(),
+                version: version.map_or("none".into(), |v| v.to_string()),
+            });
         }
         let file: ModelFile =
             serde_json::from_value(header).map_err(|e| fail(format!("malformed model: {e}")))?;
@@ -235,7 +237,9 @@ mod tests {
         let model = SvmModel::embedded_default().expect("the shipped model must load");
         assert!(model.support_vector_count() > 0);
         assert_eq!(model.dimension(), FEATURE_NAMES.len());
-        model.check_compatible(&Config::default()).unwrap();
+        model
+            .check_compatible(&Config::default(), "embedded")
+            .unwrap();
         let again = SvmModel::from_json(&model.to_json(), "round trip").unwrap();
         assert_eq!(again.to_json(), model.to_json());
     }
@@ -249,7 +253,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            err.contains("m.json") && err.contains("version Some(99)"),
+            err.contains("m.json") && err.contains("version 99;"),
             "{err}"
         );
         json["version"] = MODEL_VERSION.into();

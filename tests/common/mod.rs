@@ -119,3 +119,16 @@ pub fn long_sequence(sample: &Path, dir: &Path, frames: usize) -> PathBuf {
     }
     long
 }
+
+/// `--json` output: the `frame` records and the closing `summary` record (the
+/// convention of every command).
+pub fn json_records(stdout: &str) -> (Vec<serde_json::Value>, serde_json::Value) {
+    let mut records: Vec<serde_json::Value> = stdout
+        .lines()
+        .map(|line| serde_json::from_str(line).expect("one JSON object per line"))
+        .collect();
+    let summary = records.pop().expect("a summary record");
+    assert_eq!(summary["type"], "summary", "{summary}");
+    assert!(records.iter().all(|r| r["type"] == "frame"));
+    (records, summary)
+}

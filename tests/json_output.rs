@@ -1,0 +1,147 @@
+//! One JSON convention for every command: JSON Lines on stdout (`frame` records,
+//! then one `summary`), an `error` object on stderr; each command's output checked
+//! against its schema in `schemas/json/` by Python's jsonschema.
+
+mod common;
+
+use std::path::Path;
+
+use common::travmap;
+
+/// Runs travmap with `args` (which include `--json`), validates what it printed
+/// against `command`'s schema, and returns its exit code.
+fn validate(command: &str, args: &[&str]) -> i32 {
+    let python = common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with jsonschema")
+        .expect("checked by the caller");
+    let out = travmap(args);
+    let dir = tempfile::tempdir().unwrap();
+    let (stdout, stderr) = (dir.path().join("stdout"), dir.path().join("stderr"));
+    std::fs::write(&stdout, &out.stdout).unwrap();
+    std::fs::write(&stderr, &out.stderr).unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let checked = std::process::Command::new(python)
+        .arg(root.join("tests/clients/validate_json.py"))
+        .arg(root.join("schemas/json"))
+        .args([command, stdout.to_str().unwrap(), stderr.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        checked.status.success(),
+        "{args:?}: {}\nstdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&checked.stderr),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    let count: serde_json::Value = serde_json::from_slice(&checked.stdout).unwrap();
+    assert!(
+        count["checked"].as_u64().unwrap() > 0,
+        "{args:?}: nothing printed"
+    );
+    out.status.code().unwrap()
+}
+
+#[test]
+fn every_command_prints_json_that_matches_its_schema() {
+    let Some(seq) = common::semantickitti_00() else {
+        return;
+    };
+    if common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with jsonschema").is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let seq = seq.to_str().unwrap();
+    let out = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let (drive, model, cells) = (out("d.mcap"), out("m.json"), out("c.parquet"));
+    let (annotated, picture) = (out("a.mcap"), out("f.png"));
+    let quick = [
+        "--set",
+        "training.c_values=[10]",
+        "--set",
+        "training.gamma_values=[0.05]",
+    ];
+    let runs: Vec<(&str, Vec<&str>)> = vec![
+        (
+            "convert",
+            vec!["convert", seq, "--frames", "0..4", "-o", &drive],
+        ),
+        ("run", vec!["run", seq, "--frames", "2..4"]),
+        ("run", vec!["run", &drive]),
+        ("eval", vec!["eval", seq, "--frames", "0..3"]),
+        (
+            "train",
+            [
+                &["train", seq, "--frames", "0..3", "-o", &model][..],
+                &quick,
+            ]
+            .concat(),
+        ),
+        (
+            "crossval",
+            [
+                &[
+                    "crossval",
+                    seq,
+                    "--frames",
+                    "0..3",
+                    "--set",
+                    "training.folds=3",
+                ][..],
+                &quick,
+            ]
+            .concat(),
+        ),
+        ("dataset", vec!["dataset", &drive, "-o", &cells]),
+        ("annotate", vec!["annotate", &drive, "-o", &annotated]),
+        (
+            "render",
+            vec!["render", seq, "--frame", "2", "-o", &picture],
+        ),
+        (
+            "bench",
+            vec!["bench", seq, "--frames", "0..4", "--repeats", "1"],
+        ),
+        ("config", vec!["config"]),
+    ];
+    for (command, mut args) in runs {
+        args.push("--json");
+        assert_eq!(validate(command, &args), 0, "{args:?}");
+    }
+    // Errors: a missing input (exit 1, naming it) and a malformed flag (exit 2).
+    assert_eq!(validate("eval", &["eval", "/no/such/input", "--json"]), 1);
+    assert_eq!(
+        validate("eval", &["eval", seq, "--frames", "x", "--json"]),
+        2
+    );
+}
+
+#[test]
+fn skipped_frames_are_listed_in_the_summary() {
+    let Some(seq) = common::semantickitti_00() else {
+        return;
+    };
+    // Frame 1's scan is cut short: with --keep-going it is skipped, exit 3.
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("seq");
+    std::fs::create_dir_all(copy.join("velodyne")).unwrap();
+    for name in ["calib.txt", "poses.txt", "times.txt"] {
+        std::fs::copy(seq.join(name), copy.join(name)).unwrap();
+    }
+    for i in 0..3 {
+        let name = format!("velodyne/{i:06}.bin");
+        std::fs::copy(seq.join(&name), copy.join(&name)).unwrap();
+    }
+    std::fs::write(copy.join("velodyne/000001.bin"), [0u8; 20]).unwrap();
+    let out = travmap(&["run", copy.to_str().unwrap(), "--json", "--keep-going"]);
+    assert_eq!(out.status.code(), Some(3));
+    let (frames, summary) = common::json_records(&common::stdout(&out));
+    assert_eq!(frames.len(), 2);
+    let skipped = summary["skipped"].as_array().unwrap();
+    assert_eq!(skipped.len(), 1, "{summary}");
+    assert_eq!(skipped[0]["frame"], 1);
+    assert!(
+        skipped[0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("not a multiple of 16")
+    );
+}
