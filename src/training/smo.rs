@@ -136,47 +136,28 @@ pub fn solve(problem: &Problem, parameters: &Parameters) -> Solution {
             let diff = a_i - a_j;
             a_i += delta;
             a_j += delta;
-            if diff > 0.0 {
-                if a_j < 0.0 {
-                    a_j = 0.0;
-                    a_i = diff;
-                }
-            } else if a_i < 0.0 {
-                a_i = 0.0;
-                a_j = -diff;
+            // a_i - a_j = diff stays: clip the lower one at 0, then the higher at C.
+            let (high, low, gap) = if diff > 0.0 {
+                (&mut a_i, &mut a_j, diff)
+            } else {
+                (&mut a_j, &mut a_i, -diff)
+            };
+            if *low < 0.0 {
+                *low = 0.0;
+                *high = gap;
             }
-            if diff > 0.0 {
-                if a_i > c {
-                    a_i = c;
-                    a_j = c - diff;
-                }
-            } else if a_j > c {
-                a_j = c;
-                a_i = c + diff;
+            if *high > c {
+                *high = c;
+                *low = c - gap;
             }
         } else {
             let delta = (gradient[i] - gradient[j]) / positive_curvature(2.0 - 2.0 * q_ij);
             let sum = a_i + a_j;
             a_i -= delta;
             a_j += delta;
-            if sum > c {
-                if a_i > c {
-                    a_i = c;
-                    a_j = sum - c;
-                }
-            } else if a_j < 0.0 {
-                a_j = 0.0;
-                a_i = sum;
-            }
-            if sum > c {
-                if a_j > c {
-                    a_j = c;
-                    a_i = sum - c;
-                }
-            } else if a_i < 0.0 {
-                a_i = 0.0;
-                a_j = sum;
-            }
+            // a_i + a_j = sum stays: clip each against the box in turn.
+            clip_with_sum(&mut a_i, &mut a_j, sum, c);
+            clip_with_sum(&mut a_j, &mut a_i, sum, c);
         }
         alpha[i] = a_i;
         alpha[j] = a_j;
@@ -191,6 +172,20 @@ pub fn solve(problem: &Problem, parameters: &Parameters) -> Solution {
         rho,
         iterations,
         converged,
+    }
+}
+
+/// libsvm's clipping of a pair with a fixed sum: `first` down to C when the sum
+/// exceeds C, else `second` up to 0, the other taking up the rest.
+fn clip_with_sum(first: &mut f64, second: &mut f64, sum: f64, c: f64) {
+    if sum > c {
+        if *first > c {
+            *first = c;
+            *second = sum - c;
+        }
+    } else if *second < 0.0 {
+        *second = 0.0;
+        *first = sum;
     }
 }
 
