@@ -8,11 +8,11 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use travmap::outputs::annotation::{self, AnnotationOptions};
-use travmap::stopwatch::Stopwatch;
 
 use super::convert::CompressionArg;
 use super::{
-    Inputs, Outcome, check_output, frame_count, load_model, model_json, outcome, print_json_summary,
+    Inputs, ModelArg, Outcome, check_output, frame_count, model_json, outcome, print_json_summary,
+    print_wrote,
 };
 
 /// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
@@ -23,9 +23,8 @@ pub struct AnnotateArgs {
     /// Where to write the MCAP.
     #[arg(short, long)]
     output: PathBuf,
-    /// Model file (default: the model compiled into travmap).
-    #[arg(long)]
-    model: Option<PathBuf>,
+    #[command(flatten)]
+    model: ModelArg,
     #[command(flatten)]
     compression: CompressionArg,
     /// Do not copy the input's messages into the output.
@@ -39,13 +38,13 @@ pub struct AnnotateArgs {
 pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
-    check_output(output_path, &args.inputs.files(args.model.as_deref()))?;
+    check_output(output_path, &args.inputs.files(args.model.path.as_deref()))?;
     let options = AnnotationOptions {
         compression: args.compression.compression(),
         passthrough: !args.no_passthrough,
         grid_height_m: args.grid_height,
     };
-    let (model, model_name) = load_model(args.model.as_deref(), config)?;
+    let (model, model_name) = args.model.load(config)?;
     let selection = args.inputs.open_one(
         config.appearance.enabled,
         "annotate takes one input (a KITTI sequence directory or an MCAP file)",
@@ -62,7 +61,6 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     ]);
     let selections = [selection];
     let bar = output.progress(frame_count(&selections), "annotating");
-    let watch = Stopwatch::start();
     let summary = annotation::annotate(
         &selections[0],
         config,
@@ -72,22 +70,19 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
         &options,
         &|| bar.inc(1),
     )?;
-    bar.finish_and_clear();
-    let seconds = watch.elapsed_ms() * 1e-3;
+    let seconds = bar.finish();
     if output.json {
-        print_json_summary(
-            "annotate",
-            &selections,
-            json!({"output": output_path, "config": config, "model": model_json(&model, &model_name), "summary": summary, "elapsed_ms": seconds * 1e3}),
-        )?;
+        let model = model_json(&model, &model_name);
+        let fields = json!({"output": output_path, "config": config, "model": model, "summary": summary, "elapsed_ms": seconds * 1e3});
+        print_json_summary("annotate", &selections, fields)?;
     } else if !output.quiet {
-        println!(
-            "wrote {} ({} frames, {} messages copied through, {:.1} MB, {:.1} frames/s)",
-            output_path.display(),
+        let copied = format!("{} messages copied through", summary.passthrough_messages);
+        print_wrote(
+            output_path,
             summary.frames,
-            summary.passthrough_messages,
-            summary.output_bytes as f64 / 1e6,
-            summary.frames as f64 / seconds
+            &copied,
+            summary.output_bytes,
+            seconds,
         );
         if summary.evaluation.frames > 0 {
             let s = summary.evaluation.scores;

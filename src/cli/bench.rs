@@ -2,23 +2,21 @@
 //! all cores.
 
 use std::io::Write;
-use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use travmap::scoring::benchmark::benchmark;
 
-use super::{Inputs, Outcome, load_model, model_json, outcome, print_json_summary};
+use super::{Inputs, ModelArg, Outcome, model_json, outcome, print_json_summary};
 
 /// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
 #[derive(Args)]
 pub struct BenchArgs {
     #[command(flatten)]
     inputs: Inputs,
-    /// Model file (default: the model compiled into travmap).
-    #[arg(long)]
-    model: Option<PathBuf>,
+    #[command(flatten)]
+    model: ModelArg,
     /// Times each measurement is repeated.
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u16).range(1..=1000))]
     repeats: u16,
@@ -28,7 +26,7 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = args.inputs.output;
     let repeats = usize::from(args.repeats);
-    let (model, model_name) = load_model(args.model.as_deref(), config)?;
+    let (model, model_name) = args.model.load(config)?;
     let selection = args.inputs.open_one(
         config.appearance.enabled,
         "bench takes one sequence directory",

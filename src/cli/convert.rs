@@ -10,11 +10,10 @@ use travmap::io::mcap_drive::DriveOptions;
 use travmap::outputs::conversion::convert_kitti;
 use travmap::outputs::preflight::InputFiles;
 use travmap::outputs::writing::Compression;
-use travmap::stopwatch::Stopwatch;
 
 use super::{
     Outcome, Output, check_output, frame_count, open_selection, outcome, parse_frame_range,
-    print_json_summary,
+    print_json_summary, print_wrote,
 };
 
 /// Convert a KITTI / SemanticKITTI sequence to a ROS 2 MCAP (clouds, poses on /tf, images).
@@ -89,7 +88,6 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
         bail!("convert takes one KITTI sequence directory");
     };
     let bar = output.progress(frame_count(&selections), "converting");
-    let watch = Stopwatch::start();
     let start_ns = (start_time_s * 1e9).round() as u64;
     let summary = convert_kitti(
         sequence,
@@ -99,23 +97,21 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
         start_ns,
         &|| bar.inc(1),
     )?;
-    bar.finish_and_clear();
-    let seconds = watch.elapsed_ms() * 1e-3;
+    let seconds = bar.finish();
     if output.json {
-        print_json_summary(
-            "convert",
-            &selections,
-            json!({"output": output_path, "compression": compression, "summary": summary, "elapsed_ms": seconds * 1e3}),
-        )?;
+        let fields = json!({"output": output_path, "compression": compression, "summary": summary, "elapsed_ms": seconds * 1e3});
+        print_json_summary("convert", &selections, fields)?;
     } else if !output.quiet {
-        println!(
-            "wrote {} ({} frames, {} with labels, {} images, {:.1} MB, {:.1} frames/s)",
-            output_path.display(),
+        let contents = format!(
+            "{} with labels, {} images",
+            summary.labelled_frames, summary.images
+        );
+        print_wrote(
+            output_path,
             summary.frames,
-            summary.labelled_frames,
-            summary.images,
-            summary.output_bytes as f64 / 1e6,
-            summary.frames as f64 / seconds
+            &contents,
+            summary.output_bytes,
+            seconds,
         );
         if summary.dropped_points > 0 {
             eprintln!(

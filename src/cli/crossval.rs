@@ -27,7 +27,7 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
         bar.set_message(message.to_string());
         bar.inc(1);
     })?;
-    bar.finish_and_clear();
+    bar.finish();
     let sources: Vec<String> = selections.iter().map(Selection::describe).collect();
     if output.json {
         print_json_summary(

@@ -7,7 +7,6 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use travmap::outputs::dataset::DatasetWriter;
-use travmap::stopwatch::Stopwatch;
 
 use super::{Inputs, Outcome, check_output, frame_count, load_model, outcome, print_json_summary};
 
@@ -36,7 +35,6 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
         None => None,
     };
     let grid_config = config.for_training_cells();
-    let watch = Stopwatch::start();
     let bar = output.progress(frame_count(&selections), "extracting cells");
     let mut writer = DatasetWriter::create(output_path, config)?;
     for selection in &selections {
@@ -48,14 +46,11 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
         })?;
     }
     let summary = writer.finish()?;
-    bar.finish_and_clear();
-    let seconds = watch.elapsed_ms() * 1e-3;
+    let seconds = bar.finish();
     if output.json {
-        print_json_summary(
-            "dataset",
-            &selections,
-            json!({"output": output_path, "config": config, "summary": summary, "elapsed_ms": seconds * 1e3, "cells_per_s": summary.rows as f64 / seconds}),
-        )?;
+        let cells_per_s = summary.rows as f64 / seconds;
+        let fields = json!({"output": output_path, "config": config, "summary": summary, "elapsed_ms": seconds * 1e3, "cells_per_s": cells_per_s});
+        print_json_summary("dataset", &selections, fields)?;
     } else if !output.quiet {
         println!(
             "wrote {}: {} cells from {} frames ({} labelled, {} with appearance), {:.0} cells/s",

@@ -2,7 +2,6 @@
 //! for the selected frames, with the geometry-only ablation when a camera saw cells.
 
 use std::io::Write;
-use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
@@ -12,23 +11,22 @@ use travmap::method::classifier::SvmModel;
 use travmap::scoring::evaluation::{Evaluation, EvaluationReport};
 use travmap::scoring::metrics::Scores;
 
-use super::{Inputs, Outcome, frame_count, load_model, model_json, outcome, print_json_summary};
+use super::{Inputs, ModelArg, Outcome, frame_count, model_json, outcome, print_json_summary};
 
 /// Score predictions against SemanticKITTI ground truth (the paper's table).
 #[derive(Args)]
 pub struct EvalArgs {
     #[command(flatten)]
     inputs: Inputs,
-    /// Model file (default: the model compiled into travmap).
-    #[arg(long)]
-    model: Option<PathBuf>,
+    #[command(flatten)]
+    model: ModelArg,
 }
 
 pub fn eval(args: EvalArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = args.inputs.output;
-    let model_path = args.model.as_deref();
-    let (model, model_name) = load_model(model_path, config)?;
+    let model_path = args.model.path.as_deref();
+    let (model, model_name) = args.model.load(config)?;
     let selections = args.inputs.open(config.appearance.enabled)?;
     let evaluate = |model: &SvmModel, message: &str| -> Result<EvaluationReport> {
         let bar = output.progress(frame_count(&selections), message);
@@ -40,7 +38,7 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
                 Ok(())
             })?;
         }
-        bar.finish_and_clear();
+        bar.finish();
         Ok(evaluation.report())
     };
     let report = evaluate(&model, "evaluating")?;

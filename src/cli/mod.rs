@@ -27,6 +27,7 @@ use travmap::io::Source;
 use travmap::io::mcap_drive::DriveOptions;
 use travmap::method::classifier::SvmModel;
 use travmap::outputs::preflight::{InputFiles, check_output_directory, check_output_file};
+use travmap::stopwatch::Stopwatch;
 
 /// How a command ended: exit code 0, or 3 when it completed but skipped frames
 /// (`--keep-going`), as the mcap CLI reports data loss.
@@ -74,10 +75,15 @@ pub struct Output {
 }
 
 impl Output {
-    /// A progress bar on a terminal, hidden otherwise or with `--quiet` / `--json`.
-    pub fn progress(&self, length: u64, message: &str) -> ProgressBar {
+    /// A progress bar on a terminal (hidden otherwise or with `--quiet` / `--json`),
+    /// and the stopwatch of the work it follows.
+    pub fn progress(&self, length: u64, message: &str) -> Progress {
+        let watch = Stopwatch::start();
         if self.quiet || self.json || !std::io::stderr().is_terminal() {
-            return ProgressBar::hidden();
+            return Progress {
+                bar: ProgressBar::hidden(),
+                watch,
+            };
         }
         let bar = ProgressBar::new(length).with_message(message.to_string());
         bar.set_style(
@@ -85,7 +91,29 @@ impl Output {
                 .expect("valid template")
                 .progress_chars("=> "),
         );
-        bar
+        Progress { bar, watch }
+    }
+}
+
+/// A command's progress bar and the time since it started.
+pub struct Progress {
+    bar: ProgressBar,
+    watch: Stopwatch,
+}
+
+impl std::ops::Deref for Progress {
+    type Target = ProgressBar;
+
+    fn deref(&self) -> &ProgressBar {
+        &self.bar
+    }
+}
+
+impl Progress {
+    /// Clears the bar; returns the seconds the work took.
+    pub fn finish(self) -> f64 {
+        self.bar.finish();
+        self.watch.elapsed_ms() * 1e-3
     }
 }
 
@@ -265,6 +293,21 @@ pub fn parse_frame_range(text: &str) -> Result<Range<usize>> {
     Ok(range)
 }
 
+/// The model a command predicts with.
+#[derive(Args)]
+pub struct ModelArg {
+    /// Model file (default: the model compiled into travmap).
+    #[arg(long = "model")]
+    pub path: Option<PathBuf>,
+}
+
+impl ModelArg {
+    /// The model, checked against `config`, and the name to report it by.
+    pub fn load(&self, config: &Config) -> Result<(SvmModel, String)> {
+        load_model(self.path.as_deref(), config)
+    }
+}
+
 /// A model file, or the embedded default model, checked against `config`; with the
 /// name to report it by.
 pub fn load_model(path: Option<&Path>, config: &Config) -> Result<(SvmModel, String)> {
@@ -332,6 +375,17 @@ pub fn print_json_summary(
         .collect::<Vec<_>>()
         .into();
     print_json_line(&fields)
+}
+
+/// The line a command that wrote an MCAP ends with:
+/// `wrote PATH (N frames, CONTENTS, M MB, R frames/s)`.
+pub fn print_wrote(path: &Path, frames: usize, contents: &str, bytes: u64, seconds: f64) {
+    println!(
+        "wrote {} ({frames} frames, {contents}, {:.1} MB, {:.1} frames/s)",
+        path.display(),
+        bytes as f64 / 1e6,
+        frames as f64 / seconds
+    );
 }
 
 /// An error under `--json`: one `error` record on stderr, with the file it is

@@ -10,7 +10,7 @@ use travmap::outputs::rendering;
 use travmap::outputs::writing::write_atomically;
 
 use super::{
-    Inputs, Outcome, check_output, check_output_dir, frame_count, load_model, outcome,
+    Inputs, ModelArg, Outcome, check_output, check_output_dir, frame_count, outcome,
     print_json_summary,
 };
 
@@ -28,9 +28,8 @@ pub struct RenderArgs {
     /// Draw every selected frame (see --frames) into the output directory.
     #[arg(long)]
     all: bool,
-    /// Model file (default: the model compiled into travmap).
-    #[arg(long)]
-    model: Option<PathBuf>,
+    #[command(flatten)]
+    model: ModelArg,
     /// Pixels per cell side.
     #[arg(long, default_value_t = 8)]
     cell_pixels: u32,
@@ -48,13 +47,13 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
     }
     let config = &args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
-    let inputs = args.inputs.files(args.model.as_deref());
+    let inputs = args.inputs.files(args.model.path.as_deref());
     if args.all {
         check_output_dir(output_path, &inputs)?;
     } else {
         check_output(output_path, &inputs)?;
     }
-    let (model, _) = load_model(args.model.as_deref(), config)?;
+    let (model, _) = args.model.load(config)?;
     let selection = args
         .inputs
         .open_one(config.appearance.enabled, "render takes one input")?;
@@ -79,7 +78,7 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         bar.inc(1);
         Ok(())
     })?;
-    bar.finish_and_clear();
+    bar.finish();
     if written.is_empty() {
         bail!("no frame was rendered");
     }

@@ -2,7 +2,6 @@
 //! JSON lines.
 
 use std::io::Write;
-use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
@@ -11,7 +10,7 @@ use travmap::method::grid::CellClass;
 use travmap::scoring::evaluation::Evaluation;
 
 use super::{
-    Inputs, Outcome, frame_count, load_model, model_json, outcome, print_json_frame,
+    Inputs, ModelArg, Outcome, frame_count, model_json, outcome, print_json_frame,
     print_json_summary,
 };
 
@@ -20,9 +19,8 @@ use super::{
 pub struct RunArgs {
     #[command(flatten)]
     inputs: Inputs,
-    /// Model file (default: the model compiled into travmap).
-    #[arg(long)]
-    model: Option<PathBuf>,
+    #[command(flatten)]
+    model: ModelArg,
     /// Draw each grid as text ('.' traversable, '#' not, ' ' unknown; x right, y up).
     #[arg(long)]
     ascii: bool,
@@ -31,7 +29,7 @@ pub struct RunArgs {
 pub fn run(args: RunArgs) -> Result<Outcome> {
     let config = args.inputs.settings.load()?;
     let output = args.inputs.output;
-    let (model, model_name) = load_model(args.model.as_deref(), &config)?;
+    let (model, model_name) = args.model.load(&config)?;
     let selections = args.inputs.open(config.appearance.enabled)?;
     let bar = output.progress(frame_count(&selections), "predicting");
     let mut stdout = std::io::stdout().lock();
@@ -92,7 +90,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
             Ok(())
         })?;
     }
-    bar.finish_and_clear();
+    bar.finish();
     let report = evaluation.report();
     if output.json {
         print_json_summary(

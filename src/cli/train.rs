@@ -49,7 +49,7 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
     } else {
         let bar = output.progress(frame_count(&selections), "collecting cells");
         let set = collect_training_set(&selections, config, &mut || bar.inc(1))?;
-        bar.finish_and_clear();
+        bar.finish();
         set
     };
     for path in &datasets {
@@ -75,7 +75,7 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     })?;
-    bar.finish_and_clear();
+    bar.finish();
     write_atomically(model_path, &model.to_json())?;
     let best = model
         .training

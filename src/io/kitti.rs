@@ -233,16 +233,27 @@ pub fn read_scan(path: &Path) -> Result<Vec<[f32; 4]>> {
     parse_scan(&std::fs::read(path).map_err(|e| Error::io(path, e))?, path)
 }
 
+/// A file of fixed-size records must be a whole number of them.
+fn check_record_size(
+    bytes: &[u8],
+    path: &Path,
+    record_bytes: u64,
+    what: &'static str,
+) -> Result<()> {
+    if (bytes.len() as u64).is_multiple_of(record_bytes) {
+        return Ok(());
+    }
+    Err(Error::RecordSize {
+        path: path.to_path_buf(),
+        size_bytes: bytes.len() as u64,
+        record_bytes,
+        what,
+    })
+}
+
 /// [`read_scan`] on the file's bytes; `path` names it in errors.
 pub fn parse_scan(bytes: &[u8], path: &Path) -> Result<Vec<[f32; 4]>> {
-    if !bytes.len().is_multiple_of(16) {
-        return Err(Error::RecordSize {
-            path: path.to_path_buf(),
-            size_bytes: bytes.len() as u64,
-            record_bytes: 16,
-            what: "float32 x, y, z, remission per point",
-        });
-    }
+    check_record_size(bytes, path, 16, "float32 x, y, z, remission per point")?;
     // An empty file is a scan that was never written, not a scan of nothing.
     if bytes.is_empty() {
         return Err(Error::EmptyScan {
@@ -294,14 +305,7 @@ pub fn parse_labels(
     scan_path: &Path,
     points: usize,
 ) -> Result<Vec<u32>> {
-    if !bytes.len().is_multiple_of(4) {
-        return Err(Error::RecordSize {
-            path: path.to_path_buf(),
-            size_bytes: bytes.len() as u64,
-            record_bytes: 4,
-            what: "uint32 label per point",
-        });
-    }
+    check_record_size(bytes, path, 4, "uint32 label per point")?;
     let labels: Vec<u32> = bytes
         .chunks_exact(4)
         .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
@@ -363,18 +367,25 @@ fn check_rigid(path: &Path, line_no: usize, what: &str, m: &Matrix4<f64>) -> Res
 
 /// A 3x4 row-major matrix of 12 numbers as a 4x4 with last row 0 0 0 1.
 fn matrix_3x4(path: &Path, line_no: usize, values: &[f64]) -> Result<Matrix4<f64>> {
-    if values.len() != 12 {
+    top_rows(path, line_no, values, 4)
+}
+
+/// A row-major 3 x `columns` matrix (3x4 or 3x3) as the top rows of a 4x4 identity.
+fn top_rows(path: &Path, line_no: usize, values: &[f64], columns: usize) -> Result<Matrix4<f64>> {
+    if values.len() != 3 * columns {
         return Err(Error::parse(
             path,
             line_no,
-            format!("expected 12 numbers (a 3x4 matrix), found {}", values.len()),
+            format!(
+                "expected {} numbers (a 3x{columns} matrix), found {}",
+                3 * columns,
+                values.len()
+            ),
         ));
     }
     let mut m = Matrix4::identity();
-    for r in 0..3 {
-        for c in 0..4 {
-            m[(r, c)] = values[4 * r + c];
-        }
+    for (k, v) in values.iter().enumerate() {
+        m[(k / columns, k % columns)] = *v;
     }
     Ok(m)
 }
@@ -407,17 +418,7 @@ pub fn parse_calibration(text: &str, path: &Path) -> Result<Calibration> {
             "Tr_velo_to_cam" => &mut velo_to_cam,
             "R0_rect" => {
                 let values = parse_numbers(path, line_no, rest)?;
-                if values.len() != 9 {
-                    return Err(Error::parse(
-                        path,
-                        line_no,
-                        format!("expected 9 numbers (a 3x3 matrix), found {}", values.len()),
-                    ));
-                }
-                let mut r = Matrix4::identity();
-                for (k, v) in values.iter().enumerate() {
-                    r[(k / 3, k % 3)] = *v;
-                }
+                let r = top_rows(path, line_no, &values, 3)?;
                 rectification = Some(r);
                 continue;
             }

@@ -215,14 +215,14 @@ mod tests {
     #[test]
     fn directories_and_missing_places_are_refused_before_work() {
         let dir = tempfile::tempdir().unwrap();
-        let inputs = InputFiles::default();
-        let err = check_output_file(dir.path(), &inputs)
-            .unwrap_err()
-            .to_string();
+        let refusal = |output: &Path| {
+            check_output_file(output, &InputFiles::default())
+                .unwrap_err()
+                .to_string()
+        };
+        let err = refusal(dir.path());
         assert!(err.contains("is a directory"), "{err}");
-        let err = check_output_file(&dir.path().join("missing/x.mcap"), &inputs)
-            .unwrap_err()
-            .to_string();
+        let err = refusal(&dir.path().join("missing/x.mcap"));
         assert!(err.contains("does not exist"), "{err}");
     }
 
@@ -237,9 +237,7 @@ mod tests {
             .join(format!(".x.mcap{TEMPORARY_INFIX}2147483646"));
         // SAFETY: getppid has no preconditions.
         let parent = unsafe { libc::getppid() };
-        let alive = dir
-            .path()
-            .join(format!(".x.mcap{TEMPORARY_INFIX}{parent}"));
+        let alive = dir.path().join(format!(".x.mcap{TEMPORARY_INFIX}{parent}"));
         std::fs::write(&dead, b"").unwrap();
         std::fs::write(&alive, b"").unwrap();
         let preflight = check_output_file(&output, &InputFiles::default()).unwrap();

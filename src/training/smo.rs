@@ -297,6 +297,15 @@ mod tests {
         f
     }
 
+    fn parameters(c: f64, gamma: f64, tolerance: f64, cache_bytes: usize) -> Parameters {
+        Parameters {
+            c,
+            gamma,
+            tolerance,
+            cache_bytes,
+        }
+    }
+
     #[test]
     fn separates_two_blobs_and_satisfies_the_constraints() {
         let mut rng = SplitMix64(11);
@@ -312,13 +321,7 @@ mod tests {
             dimension: 2,
             labels: &labels,
         };
-        let parameters = Parameters {
-            c: 1.0,
-            gamma: 0.5,
-            tolerance: 1e-3,
-            cache_bytes: 1 << 20,
-        };
-        let s = solve(&problem, &parameters);
+        let s = solve(&problem, &parameters(1.0, 0.5, 1e-3, 1 << 20));
         assert!(s.converged);
         let balance: f64 = s
             .alpha
@@ -348,13 +351,7 @@ mod tests {
             dimension: 2,
             labels: &labels,
         };
-        let parameters = Parameters {
-            c: 10.0,
-            gamma: 1.0,
-            tolerance: 1e-6,
-            cache_bytes: 16,
-        };
-        let s = solve(&problem, &parameters);
+        let s = solve(&problem, &parameters(10.0, 1.0, 1e-6, 16));
         for (x, y) in points.iter().zip(labels) {
             assert_eq!(decision(&problem, &s, 1.0, x).signum() as f32, y);
         }
@@ -386,16 +383,8 @@ mod tests {
             dimension: 3,
             labels: &labels,
         };
-        let big = Parameters {
-            c: 5.0,
-            gamma: 0.3,
-            tolerance: 1e-3,
-            cache_bytes: 1 << 20,
-        };
-        let tiny = Parameters {
-            cache_bytes: 0,
-            ..big
-        };
+        let big = parameters(5.0, 0.3, 1e-3, 1 << 20);
+        let tiny = parameters(5.0, 0.3, 1e-3, 0);
         let (a, b) = (solve(&problem, &big), solve(&problem, &tiny));
         assert_eq!(a.alpha, b.alpha);
         assert_eq!(a.rho, b.rho);

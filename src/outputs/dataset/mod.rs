@@ -273,11 +273,7 @@ fn write_column(
     let written = match writer {
         ColumnWriter::ByteArrayColumnWriter(w) => w.write_batch(&columns.source, None, None),
         ColumnWriter::Int64ColumnWriter(w) => {
-            let values = if index == 1 {
-                &columns.frame
-            } else {
-                &columns.stamp_ns
-            };
+            let values = [&columns.frame, &columns.stamp_ns][index - 1];
             w.write_batch(values, None, None)
         }
         ColumnWriter::Int32ColumnWriter(w) => {
@@ -289,11 +285,7 @@ fn write_column(
             w.write_batch(values, None, None)
         }
         ColumnWriter::DoubleColumnWriter(w) => {
-            let values = if index == 5 {
-                &columns.x_m
-            } else {
-                &columns.y_m
-            };
+            let values = [&columns.x_m, &columns.y_m][index - 5];
             w.write_batch(values, None, None)
         }
         ColumnWriter::FloatColumnWriter(w) if features.contains(&index) => {
