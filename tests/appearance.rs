@@ -3,15 +3,15 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use common::{success, travmap};
-use serde_json::Value;
+use common::{arg, json_summary, success, travmap};
 use travmap::frame::CameraImage;
 use travmap::io::image::decode_png;
 use travmap::io::kitti::{read_calibration, read_scan};
 
-/// The 3x4 matrix of `key` in a KITTI calib file, parsed by hand (independent of travmap).
+/// The matrix of `key` (3x4, or 3x3 for R0_rect) in a KITTI calib file, parsed by
+/// hand (independent of travmap).
 fn calib_matrix(path: &Path, key: &str) -> Vec<f64> {
     let text = std::fs::read_to_string(path).unwrap();
     let line = text
@@ -54,14 +54,7 @@ fn every_point_of_the_camera_cropped_kitti_scan_lands_in_its_image() {
 
     // Pixels of a few points against P2 * R0_rect * Tr_velo_to_cam computed here by hand.
     let p2 = calib_matrix(&calib_path, "P2");
-    let r0: Vec<f64> = {
-        let text = std::fs::read_to_string(&calib_path).unwrap();
-        let line = text.lines().find(|l| l.starts_with("R0_rect:")).unwrap();
-        line.split_whitespace()
-            .skip(1)
-            .map(|v| v.parse().unwrap())
-            .collect()
-    };
+    let r0 = calib_matrix(&calib_path, "R0_rect");
     let tr = calib_matrix(&calib_path, "Tr_velo_to_cam");
     for &i in &[0usize, 5000, 17_237] {
         let v = [
@@ -174,37 +167,46 @@ fn write_colour_scene(dir: &Path, meta: &Path, frames: usize) {
     }
 }
 
-#[test]
-fn colour_separates_what_geometry_cannot() {
-    let Some(meta) = common::shared_data("kitti-odometry-meta/sequences/03") else {
-        return;
-    };
+/// The search grid of the quick training runs (`--set` settings), on a grid that
+/// sees the images: KITTI's camera sees the road from ~6 m ahead, and a 24 m grid
+/// (12 m ahead) overlaps it.
+const QUICK: [&str; 4] = [
+    "training.c_values=[1.0, 10.0]",
+    "training.gamma_values=[0.05, 0.2]",
+    "training.grid_size_m=24",
+    "grid.size_m=24",
+];
+
+/// `args` followed by the quick search grid.
+fn quick<'a>(args: &[&'a str]) -> Vec<&'a str> {
+    common::with_settings(args, &QUICK)
+}
+
+/// The colour scene of `frames` frames in `<temporary directory>/seq`: the directory
+/// and the sequence; None without the shared data.
+fn colour_scene(frames: usize) -> Option<(tempfile::TempDir, PathBuf)> {
+    let meta = common::shared_data("kitti-odometry-meta/sequences/03")?;
     let dir = tempfile::tempdir().unwrap();
     let seq = dir.path().join("seq");
-    write_colour_scene(&seq, &meta, 4);
-    let seq = seq.to_str().unwrap();
+    write_colour_scene(&seq, &meta, frames);
+    Some((dir, seq))
+}
+
+#[test]
+fn colour_separates_what_geometry_cannot() {
+    let Some((dir, seq)) = colour_scene(4) else {
+        return;
+    };
+    let seq = arg(&seq);
     let model = dir.path().join("m.json");
-    // KITTI's camera sees the road from ~6 m ahead: a 24 m grid (12 m ahead) overlaps it.
-    let quick = [
-        "--set",
-        "training.c_values=[1.0, 10.0]",
-        "--set",
-        "training.gamma_values=[0.05, 0.2]",
-        "--set",
-        "training.grid_size_m=24",
-        "--set",
-        "grid.size_m=24",
-    ];
-    let mut args = vec!["train", seq, "-o", model.to_str().unwrap(), "--json"];
-    args.extend(quick);
-    let trained: Value = serde_json::from_str(&success(travmap(&args))).unwrap();
+    let model = arg(&model);
+    let trained = json_summary(&quick(&["train", seq, "-o", model]));
     assert!(
         trained["hybrid"].is_object(),
         "a hybrid model is trained when images exist: {trained}"
     );
-    let mut args = vec!["eval", seq, "--model", model.to_str().unwrap(), "--json"];
-    args.extend(quick);
-    let doc: Value = serde_json::from_str(&success(travmap(&args))).unwrap();
+    let eval = |input: &str| json_summary(&quick(&["eval", input, "--model", model]));
+    let doc = eval(seq);
     let hybrid = doc["report"]["unfiltered_scores"]["accuracy"]
         .as_f64()
         .unwrap();
@@ -220,23 +222,8 @@ fn colour_separates_what_geometry_cannot() {
     );
     // The same scene as MCAP (PNG images, CameraInfo, /tf_static) gives the same result.
     let drive = dir.path().join("scene.mcap");
-
-    success(travmap(&[
-        "convert",
-        seq,
-        "-o",
-        drive.to_str().unwrap(),
-        "-q",
-    ]));
-    let mut args = vec![
-        "eval",
-        drive.to_str().unwrap(),
-        "--model",
-        model.to_str().unwrap(),
-        "--json",
-    ];
-    args.extend(quick);
-    let from_mcap: Value = serde_json::from_str(&success(travmap(&args))).unwrap();
+    common::write_output("convert", seq, &drive, &[]);
+    let from_mcap = eval(arg(&drive));
     assert_eq!(
         from_mcap["report"]["cells_with_appearance"],
         doc["report"]["cells_with_appearance"]
@@ -247,9 +234,7 @@ fn colour_separates_what_geometry_cannot() {
         doc["geometry_only_report"]["confusion"]
     );
     // The text output shows both rows.
-    let mut args = vec!["eval", seq, "--model", model.to_str().unwrap()];
-    args.extend(quick);
-    let text = success(travmap(&args));
+    let text = success(travmap(&quick(&["eval", seq, "--model", model])));
     assert!(
         text.contains("ablation") && text.matches("travmap (filtered)").count() == 2,
         "{text}"
@@ -259,12 +244,9 @@ fn colour_separates_what_geometry_cannot() {
 #[test]
 fn a_cell_keeps_its_colour_five_frames_later_after_the_grid_moved() {
     use travmap::method::pipeline::Pipeline;
-    let Some(meta) = common::shared_data("kitti-odometry-meta/sequences/03") else {
+    let Some((_dir, seq)) = colour_scene(6) else {
         return;
     };
-    let dir = tempfile::tempdir().unwrap();
-    let seq = dir.path().join("seq");
-    write_colour_scene(&seq, &meta, 6);
     // Only frame 0 has an image.
     for i in 1..6 {
         std::fs::remove_file(seq.join(format!("image_2/{i:06}.png"))).unwrap();

@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{clean_failure, success, travmap, usage_error};
+use common::{arg, assert_contains, clean_failure, success, travmap, usage_error};
 
 const IDENTITY_3X4: &str = "1 0 0 0 0 1 0 0 0 0 1 0";
 /// Sequence 00's velodyne -> cam0.
@@ -64,82 +64,77 @@ fn write_sequence(dir: &Path) {
     }
 }
 
+/// The valid sequence in a new temporary directory.
+fn sequence() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    write_sequence(dir.path());
+    dir
+}
+
 fn eval(dir: &Path) -> std::process::Output {
-    travmap(&["eval", dir.to_str().unwrap()])
+    travmap(&["eval", arg(dir)])
+}
+
+/// The error of `eval` on the valid sequence with `file` rewritten as `contents`.
+fn error_with(file: &str, contents: impl AsRef<[u8]>) -> String {
+    let dir = sequence();
+    std::fs::write(dir.path().join(file), contents).unwrap();
+    clean_failure(eval(dir.path()))
+}
+
+/// Cuts the last `bytes` bytes off the file at `path`.
+fn cut_short(path: &Path, bytes: usize) {
+    let mut content = std::fs::read(path).unwrap();
+    content.truncate(content.len() - bytes);
+    std::fs::write(path, content).unwrap();
 }
 
 #[test]
 fn the_synthetic_sequence_itself_is_fine() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
-    let out = success(eval(dir.path()));
-    assert!(out.contains("over 2 frames"), "{out}");
+    let out = success(eval(sequence().path()));
+    assert_contains(&out, &["over 2 frames"]);
 }
 
 #[test]
 fn scan_size_not_a_multiple_of_16() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
-    let scan = dir.path().join("velodyne/000001.bin");
-    let mut bytes = std::fs::read(&scan).unwrap();
-    bytes.truncate(bytes.len() - 5);
-    std::fs::write(&scan, bytes).unwrap();
+    let dir = sequence();
+    cut_short(&dir.path().join("velodyne/000001.bin"), 5);
     let err = clean_failure(eval(dir.path()));
-    assert!(
-        err.contains("000001.bin") && err.contains("not a multiple of 16"),
-        "{err}"
-    );
+    assert_contains(&err, &["000001.bin", "not a multiple of 16"]);
 }
 
 #[test]
 fn label_count_differs_from_point_count() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
+    let dir = sequence();
     let labels = dir.path().join("labels/000000.label");
     let mut bytes = std::fs::read(&labels).unwrap();
     bytes.extend_from_slice(&40u32.to_le_bytes());
     std::fs::write(&labels, bytes).unwrap();
     let err = clean_failure(eval(dir.path()));
     let points = scene_points().len();
-    assert!(
-        err.contains("000000.label")
-            && err.contains(&format!("{} labels for {points} points", points + 1)),
-        "{err}"
-    );
+    let counts = format!("{} labels for {points} points", points + 1);
+    assert_contains(&err, &["000000.label", &counts]);
 }
 
 #[test]
 fn missing_pose_line() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
-    std::fs::write(dir.path().join("poses.txt"), format!("{IDENTITY_3X4}\n")).unwrap();
-    let err = clean_failure(eval(dir.path()));
-    assert!(
-        err.contains("poses.txt") && err.contains("no pose for frame 1"),
-        "{err}"
-    );
+    let err = error_with("poses.txt", format!("{IDENTITY_3X4}\n"));
+    assert_contains(&err, &["poses.txt", "no pose for frame 1"]);
 }
 
 #[test]
 fn malformed_pose_line() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
-    std::fs::write(
-        dir.path().join("poses.txt"),
+    let err = error_with(
+        "poses.txt",
         format!("{IDENTITY_3X4}\n1 0 0 x 0 1 0 0 0 0 1 0\n"),
-    )
-    .unwrap();
-    let err = clean_failure(eval(dir.path()));
-    assert!(
-        err.contains("poses.txt:2") && err.contains("`x` is not a number"),
-        "{err}"
     );
+    assert_contains(&err, &["poses.txt:2", "`x` is not a number"]);
 }
 
 /// The frame lines of `run --json` on `dir`, without the input's name and the
 /// timings, which vary from run to run.
 fn run_json(dir: &Path) -> Vec<serde_json::Value> {
-    common::json_records(&success(travmap(&["run", dir.to_str().unwrap(), "--json"])))
+    common::json_records(&success(travmap(&["run", arg(dir), "--json"])))
         .0
         .into_iter()
         .map(|mut value| {
@@ -153,24 +148,22 @@ fn run_json(dir: &Path) -> Vec<serde_json::Value> {
 
 #[test]
 fn non_finite_points_are_dropped_and_counted() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
+    let dir = sequence();
     let mut points = scene_points();
     points[17][1] = f32::NAN;
     points[30][2] = f32::INFINITY;
     write_scan(&dir.path().join("velodyne/000001.bin"), &points);
     let out = success(eval(dir.path()));
-    assert!(
-        out.contains("2 points with a non-finite coordinate were dropped"),
-        "{out}"
+    assert_contains(
+        &out,
+        &["2 points with a non-finite coordinate were dropped"],
     );
     let with_bad_points = run_json(dir.path());
     assert_eq!(with_bad_points[0]["dropped_points"], 0);
     assert_eq!(with_bad_points[1]["dropped_points"], 2);
 
     // The same as a sequence without those points: the labels stay aligned.
-    let clean = tempfile::tempdir().unwrap();
-    write_sequence(clean.path());
+    let clean = sequence();
     let kept: Vec<[f32; 4]> = (0..points.len())
         .filter(|i| ![17, 30].contains(i))
         .map(|i| points[i])
@@ -191,179 +184,111 @@ fn non_finite_points_are_dropped_and_counted() {
 
 #[test]
 fn a_tr_or_pose_that_is_not_rigid() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
-    std::fs::write(
-        dir.path().join("calib.txt"),
-        "Tr: 1 2 3 0 4 5 6 0 7 8 10 0\n",
-    )
-    .unwrap();
-    let err = clean_failure(eval(dir.path()));
-    assert!(
-        err.contains("calib.txt") && err.contains("Tr is not a rigid transform"),
-        "{err}"
-    );
-    write_sequence(dir.path());
-    std::fs::write(
-        dir.path().join("poses.txt"),
+    let err = error_with("calib.txt", "Tr: 1 2 3 0 4 5 6 0 7 8 10 0\n");
+    assert_contains(&err, &["calib.txt", "Tr is not a rigid transform"]);
+    let err = error_with(
+        "poses.txt",
         format!("{IDENTITY_3X4}\n2 0 0 0 0 2 0 0 0 0 2 0\n"),
-    )
-    .unwrap();
-    let err = clean_failure(eval(dir.path()));
-    assert!(
-        err.contains("poses.txt:2") && err.contains("the pose is not a rigid transform"),
-        "{err}"
     );
+    assert_contains(&err, &["poses.txt:2", "the pose is not a rigid transform"]);
 }
 
 #[test]
 fn a_model_file_of_another_version() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
+    let dir = sequence();
     let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
     let mut json: serde_json::Value = serde_json::from_slice(&model.to_json()).unwrap();
     json["version"] = 99.into();
     let path = dir.path().join("old-model.json");
     std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
-    let err = clean_failure(travmap(&[
-        "eval",
-        dir.path().to_str().unwrap(),
-        "--model",
-        path.to_str().unwrap(),
-    ]));
-    assert!(
-        err.contains("old-model.json") && err.contains("format `travmap-svm` version 99;"),
-        "{err}"
+    let err = clean_failure(travmap(&["eval", arg(dir.path()), "--model", arg(&path)]));
+    assert_contains(
+        &err,
+        &["old-model.json", "format `travmap-svm` version 99;"],
     );
 }
 
 #[test]
 fn calibration_without_tr() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
-    std::fs::write(
-        dir.path().join("calib.txt"),
-        format!("P0: {IDENTITY_3X4}\n"),
-    )
-    .unwrap();
-    let err = clean_failure(eval(dir.path()));
-    assert!(
-        err.contains("calib.txt") && err.contains("no `Tr:` line"),
-        "{err}"
-    );
+    let err = error_with("calib.txt", format!("P0: {IDENTITY_3X4}\n"));
+    assert_contains(&err, &["calib.txt", "no `Tr:` line"]);
 }
 
 #[test]
 fn missing_files_and_directories() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
+    let dir = sequence();
     std::fs::remove_file(dir.path().join("times.txt")).unwrap();
     let err = clean_failure(eval(dir.path()));
-    assert!(err.contains("times.txt"), "{err}");
+    assert_contains(&err, &["times.txt"]);
     let err = clean_failure(eval(&dir.path().join("nowhere")));
-    assert!(err.contains("not a directory"), "{err}");
+    assert_contains(&err, &["not a directory"]);
 }
 
 #[test]
 fn bad_frame_range_and_model_file() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
-    let seq = dir.path().to_str().unwrap();
+    let dir = sequence();
+    let seq = arg(dir.path());
     let err = clean_failure(travmap(&["eval", seq, "--frames", "5..9"]));
-    assert!(
-        err.contains("no scans in frames 5..9") && err.contains("0..=1"),
-        "{err}"
-    );
+    assert_contains(&err, &["no scans in frames 5..9", "0..=1"]);
     // A malformed range is a usage error, refused before anything is read.
     let err = usage_error(travmap(&["eval", seq, "--frames", "3..1"]));
-    assert!(err.contains("is empty"), "{err}");
+    assert_contains(&err, &["is empty"]);
     let model = dir.path().join("broken.json");
     std::fs::write(&model, b"{\"format\": \"travmap-svm\", \"version\": 1, ").unwrap();
-    let err = clean_failure(travmap(&["eval", seq, "--model", model.to_str().unwrap()]));
-    assert!(err.contains("broken.json"), "{err}");
+    let err = clean_failure(travmap(&["eval", seq, "--model", arg(&model)]));
+    assert_contains(&err, &["broken.json"]);
 }
 
 #[test]
 fn training_without_labels_is_an_error_and_writes_nothing() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
+    let dir = sequence();
     std::fs::remove_dir_all(dir.path().join("labels")).unwrap();
     let model = dir.path().join("m.json");
-    let err = clean_failure(travmap(&[
-        "train",
-        dir.path().to_str().unwrap(),
-        "-o",
-        model.to_str().unwrap(),
-    ]));
-    assert!(err.contains("no labelled cells"), "{err}");
+    let err = clean_failure(travmap(&["train", arg(dir.path()), "-o", arg(&model)]));
+    assert_contains(&err, &["no labelled cells"]);
     assert!(!model.exists());
     // Evaluation without labels runs and says there is nothing to score.
     let out = success(eval(dir.path()));
-    assert!(out.contains("no frame has ground truth"), "{out}");
+    assert_contains(&out, &["no frame has ground truth"]);
 }
 
 #[test]
 fn keep_going_skips_a_corrupt_frame_and_exits_3() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
-    let scan = dir.path().join("velodyne/000001.bin");
-    let mut bytes = std::fs::read(&scan).unwrap();
-    bytes.truncate(bytes.len() - 3);
-    std::fs::write(&scan, bytes).unwrap();
-    let seq = dir.path().to_str().unwrap();
+    let dir = sequence();
+    cut_short(&dir.path().join("velodyne/000001.bin"), 3);
+    let seq = arg(dir.path());
     // Without --keep-going the first bad frame stops the run.
     clean_failure(travmap(&["eval", seq]));
     let out = travmap(&["eval", seq, "--keep-going"]);
     assert_eq!(out.status.code(), Some(3), "{}", common::stderr(&out));
     let err = common::stderr(&out);
-    assert!(
-        err.contains("skipped frame 1")
-            && err.contains("000001.bin")
-            && err.contains("completed with 1 skipped frame"),
-        "{err}"
+    assert_contains(
+        &err,
+        &[
+            "skipped frame 1",
+            "000001.bin",
+            "completed with 1 skipped frame",
+        ],
     );
-    assert!(
-        common::stdout(&out).contains("over 1 frames"),
-        "{}",
-        common::stdout(&out)
-    );
+    assert_contains(&common::stdout(&out), &["over 1 frames"]);
     // Without it, an annotation that fails at frame 1, after frame 0 was written,
     // leaves no output and no temporary file.
     let out_dir = tempfile::tempdir().unwrap();
     let stopped = out_dir.path().join("stopped.mcap");
-    let err = clean_failure(travmap(&["annotate", seq, "-o", stopped.to_str().unwrap()]));
-    assert!(err.contains("000001.bin"), "{err}");
+    let err = clean_failure(travmap(&["annotate", seq, "-o", arg(&stopped)]));
+    assert_contains(&err, &["000001.bin"]);
     assert_eq!(std::fs::read_dir(out_dir.path()).unwrap().count(), 0);
     // The annotated output is complete and records the skip.
     let mcap_path = dir.path().join("a.mcap");
-    let out = travmap(&[
-        "annotate",
-        seq,
-        "-o",
-        mcap_path.to_str().unwrap(),
-        "--keep-going",
-        "-q",
-    ]);
+    let out = travmap(&["annotate", seq, "-o", arg(&mcap_path), "--keep-going", "-q"]);
     assert_eq!(out.status.code(), Some(3));
-    let bytes = std::fs::read(&mcap_path).unwrap();
-    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
-    let index = summary
-        .metadata_indexes
-        .iter()
-        .find(|m| m.name == "travmap")
-        .unwrap();
-    let metadata = mcap::read::metadata(&bytes, index).unwrap();
-    assert!(
-        metadata.metadata["skipped_frames"].contains("\"frame\":1"),
-        "{:?}",
-        metadata.metadata
-    );
+    let metadata = common::travmap_metadata(&std::fs::read(&mcap_path).unwrap());
+    assert_contains(&metadata["skipped_frames"], &["\"frame\":1"]);
 }
 
 #[test]
 fn images_without_p2_in_the_calibration() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
+    let dir = sequence();
     std::fs::write(
         dir.path().join("calib.txt"),
         format!("P0: {IDENTITY_3X4}\nTr: {TR}\n"),
@@ -382,13 +307,10 @@ fn images_without_p2_in_the_calibration() {
     }
     std::fs::write(dir.path().join("image_2/000000.png"), png_bytes).unwrap();
     let err = clean_failure(eval(dir.path()));
-    assert!(
-        err.contains("calib.txt") && err.contains("no `P2:` line") && err.contains("image_2"),
-        "{err}"
-    );
+    assert_contains(&err, &["calib.txt", "no `P2:` line", "image_2"]);
     success(travmap(&[
         "eval",
-        dir.path().to_str().unwrap(),
+        arg(dir.path()),
         "--set",
         "appearance.enabled=false",
     ]));
@@ -396,13 +318,9 @@ fn images_without_p2_in_the_calibration() {
 
 #[test]
 fn an_empty_scan_file_is_an_error_not_an_empty_scan() {
-    let dir = tempfile::tempdir().unwrap();
-    write_sequence(dir.path());
+    let dir = sequence();
     std::fs::remove_dir_all(dir.path().join("labels")).unwrap();
     std::fs::write(dir.path().join("velodyne/000001.bin"), b"").unwrap();
     let err = clean_failure(eval(dir.path()));
-    assert!(
-        err.contains("000001.bin: 0 bytes, no points") && err.contains("--keep-going"),
-        "{err}"
-    );
+    assert_contains(&err, &["000001.bin: 0 bytes, no points", "--keep-going"]);
 }

@@ -3,20 +3,21 @@
 
 mod common;
 
-use common::{clean_failure, success, travmap};
+use common::{arg, assert_contains, clean_failure, json_summary, success, travmap, write_output};
 use serde_json::Value;
 
+/// The shipped sample's path as an argument.
 fn sample() -> Option<String> {
-    common::semantickitti_00().map(|p| p.display().to_string())
+    common::sample().map(|p| p.display().to_string())
 }
 
-/// The search grid of the quick training runs of these tests.
-const QUICK: [&str; 4] = [
-    "--set",
-    "training.c_values=[10.0]",
-    "--set",
-    "training.gamma_values=[0.05]",
-];
+/// The search grid of the quick training runs of these tests (`--set` settings).
+const QUICK: [&str; 2] = ["training.c_values=[10.0]", "training.gamma_values=[0.05]"];
+
+/// `args` followed by the quick search grid.
+fn quick<'a>(args: &[&'a str]) -> Vec<&'a str> {
+    common::with_settings(args, &QUICK)
+}
 
 #[test]
 fn eval_with_no_flags_prints_the_papers_table() {
@@ -43,16 +44,7 @@ fn eval_with_no_flags_prints_the_papers_table() {
 #[test]
 fn eval_json_reports_config_model_and_scores() {
     let Some(seq) = sample() else { return };
-    let out = success(travmap(&[
-        "eval",
-        &seq,
-        "--frames",
-        "0..3",
-        "--json",
-        "--set",
-        "grid.size_m=16",
-    ]));
-    let doc: Value = serde_json::from_str(&out).unwrap();
+    let doc = json_summary(&["eval", &seq, "--frames", "0..3", "--set", "grid.size_m=16"]);
     assert_eq!(doc["config"]["grid"]["size_m"], 16.0);
     assert_eq!(doc["config"]["integration"]["scans"], 3);
     assert_eq!(doc["report"]["frames"], 3);
@@ -108,10 +100,8 @@ fn train_writes_a_model_that_eval_uses() {
     let Some(seq) = sample() else { return };
     let dir = tempfile::tempdir().unwrap();
     let model = dir.path().join("m.json");
-    let model = model.to_str().unwrap();
-    let mut args = vec!["train", &seq, "--frames", "0..2", "-o", model, "--json"];
-    args.extend(QUICK);
-    let doc: Value = serde_json::from_str(&success(travmap(&args))).unwrap();
+    let model = arg(&model);
+    let doc = json_summary(&quick(&["train", &seq, "--frames", "0..2", "-o", model]));
     assert_eq!(doc["c"], 10.0);
     assert!(doc["support_vectors"].as_u64().unwrap() > 10);
     assert!(doc["training"]["samples"].as_u64().unwrap() > 5000);
@@ -119,10 +109,7 @@ fn train_writes_a_model_that_eval_uses() {
     assert_eq!(file["format"], "travmap-svm");
     assert_eq!(file["version"], 1);
     let out = success(travmap(&["eval", &seq, "--model", model, "--frames", "2"]));
-    assert!(
-        out.contains("over 1 frames") && out.contains("m.json"),
-        "{out}"
-    );
+    assert_contains(&out, &["over 1 frames", "m.json"]);
     // No temporary file is left beside the model.
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
@@ -139,15 +126,8 @@ fn embedded_model_is_what_the_documented_command_trains() {
     let dir = tempfile::tempdir().unwrap();
     let model = dir.path().join("default.json");
     // The README's retraining command, with the path as the README gives it.
-    success(travmap(&[
-        "train",
-        "../shared/data/semantickitti-00/sequences/00",
-        "--frames",
-        "0..3",
-        "-o",
-        model.to_str().unwrap(),
-        "-q",
-    ]));
+    let readme_path = "../shared/data/semantickitti-00/sequences/00";
+    write_output("train", readme_path, &model, &["--frames", "0..3"]);
     let strip_time = |bytes: &[u8]| {
         let mut v: Value = serde_json::from_slice(bytes).unwrap();
         v["training"]["seconds"] = Value::Null;
@@ -163,9 +143,7 @@ fn embedded_model_is_what_the_documented_command_trains() {
 #[test]
 fn crossval_reports_held_out_scores() {
     let Some(seq) = sample() else { return };
-    let mut args = vec!["crossval", &seq, "--json", "--set", "training.folds=3"];
-    args.extend(QUICK);
-    let doc: Value = serde_json::from_str(&success(travmap(&args))).unwrap();
+    let doc = json_summary(&quick(&["crossval", &seq, "--set", "training.folds=3"]));
     let report = &doc["report"];
     assert_eq!(report["evaluation"]["frames"], 3);
     assert_eq!(report["folds"].as_array().unwrap().len(), 3);
@@ -175,20 +153,11 @@ fn crossval_reports_held_out_scores() {
 
 #[test]
 fn config_prints_the_effective_settings_and_rejects_unknown_keys() {
-    let doc: Value = serde_json::from_str(&success(travmap(&[
-        "config",
-        "--json",
-        "--set",
-        "grid.size_m=24",
-    ])))
-    .unwrap();
+    let doc = json_summary(&["config", "--set", "grid.size_m=24"]);
     assert_eq!(doc["config"]["grid"]["size_m"], 24.0);
     assert_eq!(doc["config"]["features"]["curvity_bins"], 160);
     let toml = success(travmap(&["config"]));
-    assert!(
-        toml.contains("[grid]") && toml.contains("cell_size_m = 0.4"),
-        "{toml}"
-    );
+    assert_contains(&toml, &["[grid]", "cell_size_m = 0.4"]);
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("c.toml");
     std::fs::write(
@@ -196,18 +165,12 @@ fn config_prints_the_effective_settings_and_rejects_unknown_keys() {
         toml.replace("curvity_bins = 160", "curvity_bins = 80"),
     )
     .unwrap();
-    let doc: Value = serde_json::from_str(&success(travmap(&[
-        "config",
-        "--json",
-        "--config",
-        file.to_str().unwrap(),
-    ])))
-    .unwrap();
+    let doc = json_summary(&["config", "--config", arg(&file)]);
     assert_eq!(doc["config"]["features"]["curvity_bins"], 80);
     let err = clean_failure(travmap(&["config", "--set", "grid.bogus=1"]));
-    assert!(err.contains("no field `bogus`"), "{err}");
+    assert_contains(&err, &["no field `bogus`"]);
     let err = clean_failure(travmap(&["config", "--set", "grid.size_m=-3"]));
-    assert!(err.contains("grid.size_m must be > 0"), "{err}");
+    assert_contains(&err, &["grid.size_m must be > 0"]);
 }
 
 #[test]
@@ -219,10 +182,12 @@ fn a_model_trained_for_other_features_is_refused() {
         "--set",
         "features.curvity_bins=80",
     ]));
-    assert!(
-        err.contains("embedded default model was trained with features.curvity_bins = 160")
-            && err.contains("--set features.curvity_bins=160"),
-        "{err}"
+    assert_contains(
+        &err,
+        &[
+            "embedded default model was trained with features.curvity_bins = 160",
+            "--set features.curvity_bins=160",
+        ],
     );
 }
 
@@ -244,14 +209,7 @@ fn bench_prints_every_stage_and_throughput() {
     ] {
         assert!(out.contains(stage), "missing {stage}:\n{out}");
     }
-    let doc: Value = serde_json::from_str(&success(travmap(&[
-        "bench",
-        &seq,
-        "--repeats",
-        "2",
-        "--json",
-    ])))
-    .unwrap();
+    let doc = json_summary(&["bench", &seq, "--repeats", "2"]);
     let report = &doc["report"];
     assert_eq!(report["timed_frames"], 4);
     assert!(report["stages_ms"]["latency"]["median"].as_f64().unwrap() > 0.0);
@@ -265,15 +223,7 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
     let Some(seq) = sample() else { return };
     let dir = tempfile::tempdir().unwrap();
     let picture = dir.path().join("frame.png");
-    success(travmap(&[
-        "render",
-        &seq,
-        "--frame",
-        "2",
-        "-o",
-        picture.to_str().unwrap(),
-        "-q",
-    ]));
+    write_output("render", &seq, &picture, &["--frame", "2"]);
     let bytes = std::fs::read(&picture).unwrap();
     let image = travmap::io::image::decode_png(&bytes, &picture).unwrap();
     assert_eq!((image.width, image.height), (3 * 240 + 2 * GAP_PX, 240));
@@ -333,18 +283,9 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
     );
     // --all writes one picture per frame.
     let all = dir.path().join("all");
-    success(travmap(&[
-        "render",
-        &seq,
-        "--all",
-        "--frames",
-        "0..3",
-        "-o",
-        all.to_str().unwrap(),
-        "-q",
-    ]));
+    write_output("render", &seq, &all, &["--all", "--frames", "0..3"]);
     assert_eq!(std::fs::read_dir(&all).unwrap().count(), 3);
-    clean_failure(travmap(&["render", &seq, "-o", all.to_str().unwrap()]));
+    clean_failure(travmap(&["render", &seq, "-o", arg(&all)]));
 }
 
 #[test]
@@ -354,29 +295,13 @@ fn suspicious_arguments_are_refused_or_warned_about() {
     // The same input twice, however spelled, would count its frames twice.
     let again = format!("{seq}/../00");
     let err = clean_failure(travmap(&["eval", &seq, &again]));
-    assert!(err.contains("are the same input"), "{err}");
+    assert_contains(&err, &["are the same input"]);
     // convert reads KITTI directories only.
     let drive = dir.path().join("d.mcap");
-    success(travmap(&[
-        "convert",
-        &seq,
-        "--frames",
-        "0..2",
-        "-o",
-        drive.to_str().unwrap(),
-        "-q",
-    ]));
+    write_output("convert", &seq, &drive, &["--frames", "0..2"]);
     let other = dir.path().join("e.mcap");
-    let err = clean_failure(travmap(&[
-        "convert",
-        drive.to_str().unwrap(),
-        "-o",
-        other.to_str().unwrap(),
-    ]));
-    assert!(
-        err.contains("convert takes a KITTI sequence directory"),
-        "{err}"
-    );
+    let err = clean_failure(travmap(&["convert", arg(&drive), "-o", arg(&other)]));
+    assert_contains(&err, &["convert takes a KITTI sequence directory"]);
     // Unbounded or empty repeats, and --frame with --frames, are usage errors.
     for args in [
         vec!["bench", &seq, "--repeats", "0"],
@@ -395,8 +320,5 @@ fn suspicious_arguments_are_refused_or_warned_about() {
     let out = travmap(&["eval", &seq, "--frames", "0..3", "--cloud-topic", "/points"]);
     assert!(out.status.success());
     let err = common::stderr(&out);
-    assert!(
-        err.contains("warning: --cloud-topic applies to MCAP inputs"),
-        "{err}"
-    );
+    assert_contains(&err, &["warning: --cloud-topic applies to MCAP inputs"]);
 }

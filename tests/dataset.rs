@@ -17,35 +17,28 @@ use travmap::method::grid::CellClass;
 use travmap::outputs::dataset::reading::read_training_rows;
 use travmap::training::TrainingSet;
 
-use common::{clean_failure, success, travmap};
+use common::{arg, assert_contains, clean_failure, json_summary, travmap};
 
-/// A grid search small enough for a test: the point is the comparison.
-const QUICK_TRAINING: [&str; 6] = [
-    "--set",
+/// A grid search small enough for a test (`--set` settings): the point is the comparison.
+const QUICK_TRAINING: [&str; 3] = [
     "training.c_values=[10.0]",
-    "--set",
     "training.gamma_values=[0.05]",
-    "--set",
     "training.folds=2",
 ];
 
+/// `travmap dataset <seq> -o <out> <extra...> --json`: its summary.
 fn dataset(seq: &Path, out: &Path, extra: &[&str]) -> Value {
-    let mut args = vec![
-        "dataset",
-        seq.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--json",
-    ];
-    args.extend_from_slice(extra);
-    serde_json::from_str(&success(travmap(&args))).unwrap()
+    json_summary(&[&["dataset", arg(seq), "-o", arg(out)][..], extra].concat())
+}
+
+/// The error of `travmap train <input> -o <model>`, which must fail cleanly.
+fn train_error(input: &Path, model: &Path) -> String {
+    clean_failure(travmap(&["train", arg(input), "-o", arg(model)]))
 }
 
 #[test]
 fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
-    let Some(seq) = common::semantickitti_00() else {
-        return;
-    };
+    let Some(seq) = common::sample() else { return };
     let Some(python) = common::env_var(
         "TRAVMAP_CLIENT_PYTHON",
         "a Python with pyarrow, duckdb and polars",
@@ -57,24 +50,19 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     let model = SvmModel::embedded_default().unwrap();
     std::fs::write(&model_path, model.to_json()).unwrap();
     let cells = dir.path().join("cells.parquet");
-    let summary = dataset(&seq, &cells, &["--model", model_path.to_str().unwrap()]);
+    let summary = dataset(&seq, &cells, &["--model", arg(&model_path)]);
     assert_eq!(summary["summary"]["frames"], 6);
 
     let frame = 1;
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/read_parquet.py");
     let rewrites = dir.path().join("rewrites");
     std::fs::create_dir(&rewrites).unwrap();
-    let out = std::process::Command::new(&python)
-        .arg(&script)
-        .arg(&cells)
-        .arg(frame.to_string())
-        .arg(&rewrites)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = common::run_client(
+        std::process::Command::new(&python)
+            .arg(&script)
+            .arg(&cells)
+            .arg(frame.to_string())
+            .arg(&rewrites),
     );
     let read: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(read["rows"], summary["summary"]["rows"]);
@@ -166,31 +154,22 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     let err = training_rows(&rewrites.join("polars-null-x_m.parquet"))
         .unwrap_err()
         .to_string();
-    assert!(
-        err.contains("polars-null-x_m.parquet") && err.contains("column `x_m` is null in row 0"),
-        "{err}"
+    assert_contains(
+        &err,
+        &["polars-null-x_m.parquet", "column `x_m` is null in row 0"],
     );
 }
 
 #[test]
 fn training_on_the_parquet_file_gives_the_model_training_on_the_sequence_gives() {
-    let Some(seq) = common::semantickitti_00() else {
-        return;
-    };
+    let Some(seq) = common::sample() else { return };
     let dir = tempfile::tempdir().unwrap();
     let cells = dir.path().join("cells.parquet");
     dataset(&seq, &cells, &[]);
     let train = |input: &Path, name: &str| -> Value {
         let model = dir.path().join(name);
-        let mut args = vec![
-            "train",
-            input.to_str().unwrap(),
-            "-o",
-            model.to_str().unwrap(),
-            "-q",
-        ];
-        args.extend_from_slice(&QUICK_TRAINING);
-        success(travmap(&args));
+        let quick = common::with_settings(&[], &QUICK_TRAINING);
+        common::write_output("train", input, &model, &quick);
         let mut doc: Value = serde_json::from_slice(&std::fs::read(&model).unwrap()).unwrap();
         let training = doc["training"].as_object_mut().unwrap();
         training.remove("sources");
@@ -208,9 +187,7 @@ fn training_on_the_parquet_file_gives_the_model_training_on_the_sequence_gives()
 
 #[test]
 fn datasets_from_other_settings_or_other_writers_are_refused() {
-    let Some(seq) = common::semantickitti_00() else {
-        return;
-    };
+    let Some(seq) = common::sample() else { return };
     let dir = tempfile::tempdir().unwrap();
     let cells = dir.path().join("coarse.parquet");
     dataset(
@@ -219,25 +196,15 @@ fn datasets_from_other_settings_or_other_writers_are_refused() {
         &["--frames", "0..1", "--set", "features.curvity_bins=80"],
     );
     let model = dir.path().join("m.json");
-    let err = clean_failure(travmap(&[
-        "train",
-        cells.to_str().unwrap(),
-        "-o",
-        model.to_str().unwrap(),
-    ]));
-    assert!(
-        err.contains("coarse.parquet") && err.contains("extracted with other feature settings"),
-        "{err}"
+    let err = train_error(&cells, &model);
+    assert_contains(
+        &err,
+        &["coarse.parquet", "extracted with other feature settings"],
     );
     let not_parquet = dir.path().join("junk.parquet");
     std::fs::write(&not_parquet, b"not a parquet file at all").unwrap();
-    let err = clean_failure(travmap(&[
-        "train",
-        not_parquet.to_str().unwrap(),
-        "-o",
-        model.to_str().unwrap(),
-    ]));
-    assert!(err.contains("junk.parquet"), "{err}");
+    let err = train_error(&not_parquet, &model);
+    assert_contains(&err, &["junk.parquet"]);
     assert!(!model.exists(), "no model is written on failure");
 }
 
@@ -261,17 +228,8 @@ fn corrupt_datasets_are_errors_naming_the_file_not_panics() {
             "index out of bounds",
         ),
     ] {
-        let input = regressions.join(name);
-        let err = clean_failure(travmap(&[
-            "train",
-            input.to_str().unwrap(),
-            "-o",
-            model.to_str().unwrap(),
-        ]));
-        assert!(
-            err.contains(name) && err.contains("corrupt Parquet file") && err.contains(panic),
-            "{err}"
-        );
+        let err = train_error(&regressions.join(name), &model);
+        assert_contains(&err, &[name, "corrupt Parquet file", panic]);
         assert!(!model.exists());
     }
 }

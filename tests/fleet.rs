@@ -8,7 +8,7 @@ use std::path::Path;
 
 #[test]
 fn the_ray_fleet_script_passes_its_tests() {
-    if common::semantickitti_00().is_none() {
+    if common::sample().is_none() {
         return;
     }
     let Some(python) = common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with ray and pytest")

@@ -9,8 +9,6 @@ use std::path::Path;
 use serde_json::Value;
 use travmap::io::ros::{PointCloud2, TfMessage, decode};
 
-use common::{success, travmap};
-
 fn layout() -> Value {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("foxglove/layout.json");
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
@@ -46,20 +44,10 @@ fn every_panel_in_the_tree_is_configured_and_every_configuration_is_shown() {
 
 #[test]
 fn the_layout_names_topics_fields_and_frames_of_an_annotated_file() {
-    let Some(seq) = common::semantickitti_00() else {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_, out)) = common::sample_annotated(dir.path(), &["--frames", "0..3"]) else {
         return;
     };
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("a.mcap");
-    success(travmap(&[
-        "annotate",
-        seq.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--frames",
-        "0..3",
-        "-q",
-    ]));
     let bytes = std::fs::read(&out).unwrap();
     let mut topics = BTreeSet::new();
     let mut frames = BTreeSet::new();

@@ -15,17 +15,15 @@ mod common;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use common::{success, travmap};
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 use travmap::io::ros::{FrameMetrics, OccupancyGrid, PointCloud2, Time, decode};
+use travmap::outputs::annotation::{
+    CLOUD_TOPIC, GROUND_TRUTH_TOPIC, METRICS_TOPIC, PREDICTION_TOPIC,
+};
 
 const FIXTURE: &str = "fixtures/golden-annotate-00.json";
 const FRAMES: &str = "0..3";
-const PREDICTION: &str = "/travmap/prediction";
-const GROUND_TRUTH: &str = "/travmap/ground_truth";
-const CLOUD: &str = "/travmap/cloud";
-const METRICS: &str = "/travmap/metrics";
 
 fn sha256_hex(bytes: &[u8]) -> String {
     Sha256::digest(bytes)
@@ -109,10 +107,10 @@ fn summarise(path: &Path) -> Value {
         let topic = message.channel.topic.as_str();
         *topics.entry(topic.to_string()).or_default() += 1;
         let (key, value) = match topic {
-            PREDICTION => ("prediction", grid(&decode(&message.data).unwrap())),
-            GROUND_TRUTH => ("ground_truth", grid(&decode(&message.data).unwrap())),
-            CLOUD => ("cloud", cloud(&decode(&message.data).unwrap())),
-            METRICS => ("metrics", metrics(&decode(&message.data).unwrap())),
+            PREDICTION_TOPIC => ("prediction", grid(&decode(&message.data).unwrap())),
+            GROUND_TRUTH_TOPIC => ("ground_truth", grid(&decode(&message.data).unwrap())),
+            CLOUD_TOPIC => ("cloud", cloud(&decode(&message.data).unwrap())),
+            METRICS_TOPIC => ("metrics", metrics(&decode(&message.data).unwrap())),
             _ => continue,
         };
         let previous = frames
@@ -125,16 +123,10 @@ fn summarise(path: &Path) -> Value {
             message.log_time
         );
     }
-    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
-    let index = summary
-        .metadata_indexes
-        .iter()
-        .find(|m| m.name == "travmap")
-        .expect("a travmap metadata record");
-    let metadata = mcap::read::metadata(&bytes, index).unwrap();
+    let metadata = common::travmap_metadata(&bytes);
     json!({
         "command": format!("travmap annotate <semantickitti-00>/sequences/00 --frames {FRAMES} --no-passthrough -q"),
-        "model_sha256": metadata.metadata["model_sha256"],
+        "model_sha256": metadata["model_sha256"],
         "topics": topics,
         // A frame without ground truth has no ground_truth key.
         "frames": frames.into_values().collect::<Vec<_>>(),
@@ -233,21 +225,11 @@ fn differences(path: &str, expected: &Value, actual: &Value, out: &mut Vec<Strin
 
 #[test]
 fn annotate_of_semantickitti_00_frames_0_to_3_matches_the_golden_file() {
-    let Some(sequence) = common::semantickitti_00() else {
+    let dir = tempfile::tempdir().unwrap();
+    let flags = ["--frames", FRAMES, "--no-passthrough"];
+    let Some((_, output)) = common::sample_annotated(dir.path(), &flags) else {
         return;
     };
-    let dir = tempfile::tempdir().unwrap();
-    let output = dir.path().join("a.mcap");
-    success(travmap(&[
-        "annotate",
-        sequence.to_str().unwrap(),
-        "--frames",
-        FRAMES,
-        "--no-passthrough",
-        "-o",
-        output.to_str().unwrap(),
-        "-q",
-    ]));
     let actual = summarise(&output);
     check_consistency(&actual);
     let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join(FIXTURE);

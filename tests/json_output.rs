@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::travmap;
+use common::{arg, travmap, with_settings};
 
 /// Runs travmap with `args` (which include `--json`), validates what it printed
 /// against `command`'s schema, and returns its exit code.
@@ -22,7 +22,7 @@ fn validate(command: &str, args: &[&str]) -> i32 {
     let checked = std::process::Command::new(python)
         .arg(root.join("tests/clients/validate_json.py"))
         .arg(root.join("schemas/json"))
-        .args([command, stdout.to_str().unwrap(), stderr.to_str().unwrap()])
+        .args([command, arg(&stdout), arg(&stderr)])
         .output()
         .unwrap();
     assert!(
@@ -42,23 +42,17 @@ fn validate(command: &str, args: &[&str]) -> i32 {
 
 #[test]
 fn every_command_prints_json_that_matches_its_schema() {
-    let Some(seq) = common::semantickitti_00() else {
-        return;
-    };
+    let Some(seq) = common::sample() else { return };
     if common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with jsonschema").is_none() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let seq = seq.to_str().unwrap();
-    let out = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let seq = arg(&seq);
+    let out = |name: &str| arg(&dir.path().join(name)).to_string();
     let (drive, model, cells) = (out("d.mcap"), out("m.json"), out("c.parquet"));
     let (annotated, picture) = (out("a.mcap"), out("f.png"));
-    let quick = [
-        "--set",
-        "training.c_values=[10]",
-        "--set",
-        "training.gamma_values=[0.05]",
-    ];
+    let quick = ["training.c_values=[10]", "training.gamma_values=[0.05]"];
+    let quick_crossval = [&quick[..], &["training.folds=3"]].concat();
     let runs: Vec<(&str, Vec<&str>)> = vec![
         (
             "convert",
@@ -69,26 +63,11 @@ fn every_command_prints_json_that_matches_its_schema() {
         ("eval", vec!["eval", seq, "--frames", "0..3"]),
         (
             "train",
-            [
-                &["train", seq, "--frames", "0..3", "-o", &model][..],
-                &quick,
-            ]
-            .concat(),
+            with_settings(&["train", seq, "--frames", "0..3", "-o", &model], &quick),
         ),
         (
             "crossval",
-            [
-                &[
-                    "crossval",
-                    seq,
-                    "--frames",
-                    "0..3",
-                    "--set",
-                    "training.folds=3",
-                ][..],
-                &quick,
-            ]
-            .concat(),
+            with_settings(&["crossval", seq, "--frames", "0..3"], &quick_crossval),
         ),
         ("dataset", vec!["dataset", &drive, "-o", &cells]),
         ("annotate", vec!["annotate", &drive, "-o", &annotated]),
@@ -116,9 +95,7 @@ fn every_command_prints_json_that_matches_its_schema() {
 
 #[test]
 fn skipped_frames_are_listed_in_the_summary() {
-    let Some(seq) = common::semantickitti_00() else {
-        return;
-    };
+    let Some(seq) = common::sample() else { return };
     // Frame 1's scan is cut short: with --keep-going it is skipped, exit 3.
     let dir = tempfile::tempdir().unwrap();
     let copy = dir.path().join("seq");
@@ -131,7 +108,7 @@ fn skipped_frames_are_listed_in_the_summary() {
         std::fs::copy(seq.join(&name), copy.join(&name)).unwrap();
     }
     std::fs::write(copy.join("velodyne/000001.bin"), [0u8; 20]).unwrap();
-    let out = travmap(&["run", copy.to_str().unwrap(), "--json", "--keep-going"]);
+    let out = travmap(&["run", arg(&copy), "--json", "--keep-going"]);
     assert_eq!(out.status.code(), Some(3));
     let (frames, summary) = common::json_records(&common::stdout(&out));
     assert_eq!(frames.len(), 2);

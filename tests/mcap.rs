@@ -4,19 +4,16 @@
 mod common;
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::process::Command;
 
-use common::{clean_failure, success, travmap};
+use common::{arg, assert_contains, clean_failure, json_summary, success, travmap, write_output};
 use serde_json::Value;
 use travmap::io::KittiSequence;
 use travmap::io::cloud::cloud_points;
 use travmap::io::mcap_drive::{DriveOptions, McapDrive};
 use travmap::io::ros::{OccupancyGrid, decode};
 use travmap::outputs::writing::{Compression, McapSink};
-
-fn sample() -> Option<String> {
-    common::semantickitti_00().map(|p| p.display().to_string())
-}
 
 /// Every message of `topic` in an MCAP, decoded by travmap's own reader.
 fn messages<T: serde::de::DeserializeOwned>(path: &Path, topic: &str) -> Vec<(u64, T)> {
@@ -31,19 +28,13 @@ fn messages<T: serde::de::DeserializeOwned>(path: &Path, topic: &str) -> Vec<(u6
 
 #[test]
 fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
-    let Some(seq) = sample() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let drive = dir.path().join("drive.mcap");
-    success(travmap(&[
-        "convert",
-        &seq,
-        "-o",
-        drive.to_str().unwrap(),
-        "-q",
-    ]));
+    let Some((seq, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+        return;
+    };
 
     // The frames read back: same points, labels, stamps and poses, bit for bit.
-    let kitti = KittiSequence::open(Path::new(&seq)).unwrap();
+    let kitti = KittiSequence::open(&seq).unwrap();
     let mcap_drive = McapDrive::open(&drive, &DriveOptions::default()).unwrap();
     assert_eq!(mcap_drive.frame_count(), 6);
     assert_eq!(mcap_drive.world_frame(), "map");
@@ -66,22 +57,8 @@ fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
     // Annotating either input gives the same grids, to the last cell, and the same metrics.
     let from_kitti = dir.path().join("a.mcap");
     let from_mcap = dir.path().join("b.mcap");
-    let a: Value = serde_json::from_str(&success(travmap(&[
-        "annotate",
-        &seq,
-        "-o",
-        from_kitti.to_str().unwrap(),
-        "--json",
-    ])))
-    .unwrap();
-    let b: Value = serde_json::from_str(&success(travmap(&[
-        "annotate",
-        drive.to_str().unwrap(),
-        "-o",
-        from_mcap.to_str().unwrap(),
-        "--json",
-    ])))
-    .unwrap();
+    let a = json_summary(&["annotate", arg(&seq), "-o", arg(&from_kitti)]);
+    let b = json_summary(&["annotate", arg(&drive), "-o", arg(&from_mcap)]);
     assert_eq!(
         a["summary"]["evaluation"]["confusion"],
         b["summary"]["evaluation"]["confusion"]
@@ -106,20 +83,12 @@ fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
 
 #[test]
 fn annotated_grid_matches_run_and_carries_metadata() {
-    let Some(seq) = sample() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("a.mcap");
-    success(travmap(&[
-        "annotate",
-        &seq,
-        "-o",
-        out.to_str().unwrap(),
-        "--frames",
-        "1..4",
-        "--no-passthrough",
-        "-q",
-    ]));
-    let run = success(travmap(&["run", &seq, "--frames", "1..4", "--json"]));
+    let flags = ["--frames", "1..4", "--no-passthrough"];
+    let Some((seq, out)) = common::sample_annotated(dir.path(), &flags) else {
+        return;
+    };
+    let run = success(travmap(&["run", arg(&seq), "--frames", "1..4", "--json"]));
     let (runs, _) = common::json_records(&run);
     let grids = messages::<OccupancyGrid>(&out, "/travmap/prediction");
     assert_eq!(grids.len(), 3);
@@ -147,26 +116,17 @@ fn annotated_grid_matches_run_and_carries_metadata() {
         topics.iter().all(|t| t.starts_with("/travmap/")),
         "{topics:?}"
     );
-    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
-    let index = summary
-        .metadata_indexes
-        .iter()
-        .find(|m| m.name == "travmap")
-        .expect("a travmap metadata record");
-    let metadata = mcap::read::metadata(&bytes, index).unwrap();
-    assert_eq!(
-        metadata.metadata["travmap_version"],
-        env!("CARGO_PKG_VERSION")
-    );
-    assert_eq!(metadata.metadata["model_sha256"].len(), 64);
-    let config: Value = serde_json::from_str(&metadata.metadata["config"]).unwrap();
+    let metadata = common::travmap_metadata(&bytes);
+    assert_eq!(metadata["travmap_version"], env!("CARGO_PKG_VERSION"));
+    assert_eq!(metadata["model_sha256"].len(), 64);
+    let config: Value = serde_json::from_str(&metadata["config"]).unwrap();
     assert_eq!(config["grid"]["size_m"], 12.0);
 }
 
 /// Checks one client's summary of an annotated file of the whole sample against
 /// travmap's own values: message counts, point counts, first and last points,
 /// stamps, and grid cells as `travmap run` prints them.
-fn check_client_summary(client: &str, entries: &[Value], seq: &str, runs: &[Value]) {
+fn check_client_summary(client: &str, entries: &[Value], seq: &Path, runs: &[Value]) {
     let on = |topic: &str| {
         entries
             .iter()
@@ -177,7 +137,7 @@ fn check_client_summary(client: &str, entries: &[Value], seq: &str, runs: &[Valu
     assert_eq!(on("/tf").len(), 6, "{client}");
     assert_eq!(on("/travmap/metrics").len(), 6, "{client}");
     assert_eq!(on("/travmap/ground_truth").len(), 3, "{client}");
-    let sequence = KittiSequence::open(Path::new(seq)).unwrap();
+    let sequence = KittiSequence::open(seq).unwrap();
     for (cloud, index) in on("/velodyne_points").iter().zip(0..) {
         let frame = sequence.read_frame(index).unwrap();
         assert_eq!(cloud["points"], frame.points_in_velodyne.len(), "{client}");
@@ -246,7 +206,7 @@ fn sorted(entries: &Value) -> Vec<Value> {
 
 #[test]
 fn real_clients_decode_what_travmap_writes() {
-    let Some(seq) = sample() else { return };
+    let Some(seq) = common::sample() else { return };
     let python = std::env::var("TRAVMAP_CLIENT_PYTHON").ok();
     let node_modules = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/node_modules");
     if python.is_none() && !node_modules.is_dir() {
@@ -258,27 +218,12 @@ fn real_clients_decode_what_travmap_writes() {
     }
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("a.mcap");
-    success(travmap(&[
-        "annotate",
-        &seq,
-        "-o",
-        out.to_str().unwrap(),
-        "-q",
-    ]));
-    let run = success(travmap(&["run", &seq, "--json"]));
+    write_output("annotate", &seq, &out, &[]);
+    let run = success(travmap(&["run", arg(&seq), "--json"]));
     let (runs, _) = common::json_records(&run);
     let clients = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients");
     let decode = |program: &str, script: &str| -> Value {
-        let decoded = std::process::Command::new(program)
-            .arg(clients.join(script))
-            .arg(&out)
-            .output()
-            .unwrap();
-        assert!(
-            decoded.status.success(),
-            "{program} {script}: {}",
-            String::from_utf8_lossy(&decoded.stderr)
-        );
+        let decoded = common::run_client(Command::new(program).arg(clients.join(script)).arg(&out));
         serde_json::from_slice(&decoded.stdout).unwrap()
     };
     let mut summaries = Vec::new();
@@ -305,29 +250,28 @@ fn real_clients_decode_what_travmap_writes() {
 
 #[test]
 fn compression_options_all_round_trip() {
-    let Some(seq) = sample() else { return };
+    let Some(seq) = common::sample() else { return };
     let dir = tempfile::tempdir().unwrap();
     let mut sizes = BTreeMap::new();
     for compression in ["zstd", "lz4", "none"] {
         let out = dir.path().join(format!("{compression}.mcap"));
-        let doc: Value = serde_json::from_str(&success(travmap(&[
+        let (seq, out) = (arg(&seq), arg(&out));
+        let doc = json_summary(&[
             "convert",
-            &seq,
+            seq,
             "-o",
-            out.to_str().unwrap(),
+            out,
             "--frames",
             "0..2",
             "--compression",
             compression,
-            "--json",
-        ])))
-        .unwrap();
+        ]);
         assert_eq!(doc["summary"]["frames"], 2);
         sizes.insert(
             compression,
             doc["summary"]["output_bytes"].as_u64().unwrap(),
         );
-        let eval = success(travmap(&["eval", out.to_str().unwrap()]));
+        let eval = success(travmap(&["eval", out]));
         assert!(eval.contains("over 2 frames"), "{eval}");
     }
     assert!(
@@ -435,22 +379,17 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
         Err(e) => e.to_string(),
         Ok(_) => panic!("two cloud topics must be ambiguous"),
     };
-    assert!(
-        err.contains("several PointCloud2 topics")
-            && err.contains("/other_points")
-            && err.contains("/points"),
-        "{err}"
+    assert_contains(
+        &err,
+        &["several PointCloud2 topics", "/other_points", "/points"],
     );
-    let err = clean_failure(travmap(&[
-        "run",
-        path.to_str().unwrap(),
-        "--cloud-topic",
-        "/nope",
-    ]));
-    assert!(
-        err.contains("no PointCloud2 messages on topic /nope")
-            && err.contains("/odom (nav_msgs/msg/Odometry)"),
-        "{err}"
+    let err = clean_failure(travmap(&["run", arg(&path), "--cloud-topic", "/nope"]));
+    assert_contains(
+        &err,
+        &[
+            "no PointCloud2 messages on topic /nope",
+            "/odom (nav_msgs/msg/Odometry)",
+        ],
     );
 
     let options = DriveOptions {
@@ -476,7 +415,7 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
     assert_eq!(frame.dropped_points, 1, "the NaN point is counted");
     let run = success(travmap(&[
         "run",
-        path.to_str().unwrap(),
+        arg(&path),
         "--cloud-topic",
         "/points",
         "--json",
@@ -490,36 +429,30 @@ fn shared_mcap_files_give_clear_errors() {
     let Some(dir) = common::shared_data("mcap") else {
         return;
     };
-    let err = clean_failure(travmap(&[
-        "eval",
-        dir.join("rosbag2_cdr_test.mcap").to_str().unwrap(),
-    ]));
-    assert!(
-        err.contains("no PointCloud2 topic")
-            && err.contains("/test_topic (test_msgs/msg/BasicTypes)"),
-        "{err}"
+    let all_types = dir.join("rosbags_rs_all_std_types.mcap");
+    let err = clean_failure(travmap(&["eval", arg(&dir.join("rosbag2_cdr_test.mcap"))]));
+    assert_contains(
+        &err,
+        &[
+            "no PointCloud2 topic",
+            "/test_topic (test_msgs/msg/BasicTypes)",
+        ],
     );
     // Every TF and Odometry message of the all-types file decodes; its cloud has no pose.
-    let err = clean_failure(travmap(&[
-        "eval",
-        dir.join("rosbags_rs_all_std_types.mcap").to_str().unwrap(),
-    ]));
-    assert!(
-        err.contains("no pose for the clouds' frame `test_frame`"),
-        "{err}"
-    );
+    let err = clean_failure(travmap(&["eval", arg(&all_types)]));
+    assert_contains(&err, &["no pose for the clouds' frame `test_frame`"]);
     // A truncated copy is a clear error, not a panic.
-    let bytes = std::fs::read(dir.join("rosbags_rs_all_std_types.mcap")).unwrap();
+    let bytes = std::fs::read(&all_types).unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let cut = tmp.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
-    let err = clean_failure(travmap(&["eval", cut.to_str().unwrap()]));
+    let err = clean_failure(travmap(&["eval", arg(&cut)]));
     assert!(err.contains("cut.mcap"), "{err}");
 }
 
 #[test]
 fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
-    let Some(seq) = sample() else { return };
+    let Some(seq) = common::sample() else { return };
     let Some(rerun) = common::env_var("TRAVMAP_RERUN", ".ci/run points it at rerun-sdk's `rerun`")
     else {
         return;
@@ -527,36 +460,11 @@ fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
     let dir = tempfile::tempdir().unwrap();
     let mcap_path = dir.path().join("a.mcap");
     let rrd = dir.path().join("a.rrd");
-    success(travmap(&[
-        "annotate",
-        &seq,
-        "-o",
-        mcap_path.to_str().unwrap(),
-        "-q",
-    ]));
-    let converted = std::process::Command::new(&rerun)
-        .args(["mcap", "convert"])
-        .arg(&mcap_path)
-        .arg("-o")
-        .arg(&rrd)
-        .output()
-        .unwrap();
-    assert!(
-        converted.status.success(),
-        "{}",
-        String::from_utf8_lossy(&converted.stderr)
-    );
+    write_output("annotate", &seq, &mcap_path, &[]);
+    let rerun_mcap = ["mcap", "convert", arg(&mcap_path), "-o", arg(&rrd)];
+    common::run_client(Command::new(&rerun).args(rerun_mcap));
     // `rerun mcap convert` exits 0 even on bad input: check what the .rrd holds.
-    let printed = std::process::Command::new(&rerun)
-        .args(["rrd", "print", "-v"])
-        .arg(&rrd)
-        .output()
-        .unwrap();
-    assert!(
-        printed.status.success(),
-        "{}",
-        String::from_utf8_lossy(&printed.stderr)
-    );
+    let printed = common::run_client(Command::new(&rerun).args(["rrd", "print", "-v"]).arg(&rrd));
     let text = String::from_utf8_lossy(&printed.stdout);
     // Chunk headers read "... with N rows (size) - /entity - data columns: [...]".
     let rows = |entity: &str, column: &str| -> usize {
@@ -579,7 +487,7 @@ fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
     assert_eq!(rows("/travmap/cloud", "Points3D:positions"), 6);
     assert_eq!(rows("/velodyne_points", "Points3D:positions"), 6);
     // The grids' size and the first grid's corner, in the data itself.
-    let data = std::process::Command::new(&rerun)
+    let data = Command::new(&rerun)
         .args(["rrd", "print", "-vvv"])
         .arg(&rrd)
         .output()
@@ -589,7 +497,7 @@ fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
         data.contains("width: 30, height: 30"),
         "no 30 x 30 GridMap in the .rrd"
     );
-    let run = success(travmap(&["run", &seq, "--frames", "0", "--json"]));
+    let run = success(travmap(&["run", arg(&seq), "--frames", "0", "--json"]));
     let first = common::json_records(&run).0.remove(0);
     let corner = first["min_corner_in_world"].as_array().unwrap();
     let expected = format!(
@@ -603,13 +511,15 @@ fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
     );
 }
 
-/// A one-frame KITTI sequence in `dir/seq` with the real image and camera-cropped scan
-/// of kitti-object-000008 and sequence 03's calibration (the same 2011_09_26
-/// cameras); None without the shared data.
-fn one_frame_with_image(dir: &Path) -> Option<std::path::PathBuf> {
+/// A one-frame KITTI sequence in `<temporary directory>/seq` with the real image and
+/// camera-cropped scan of kitti-object-000008 and sequence 03's calibration (the
+/// same 2011_09_26 cameras): the directory and the sequence; None without the shared
+/// data.
+fn one_frame_with_image() -> Option<(tempfile::TempDir, PathBuf)> {
     let object = common::shared_data("kitti-object-000008/training")?;
     let meta = common::shared_data("kitti-odometry-meta/sequences/03")?;
-    let seq = dir.join("seq");
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
     for sub in ["velodyne", "image_2"] {
         std::fs::create_dir_all(seq.join(sub)).unwrap();
     }
@@ -635,26 +545,17 @@ fn one_frame_with_image(dir: &Path) -> Option<std::path::PathBuf> {
     };
     std::fs::write(seq.join("poses.txt"), first_line("poses.txt")).unwrap();
     std::fs::write(seq.join("times.txt"), first_line("times.txt")).unwrap();
-    Some(seq)
+    Some((dir, seq))
 }
 
 #[test]
 fn convert_passes_png_images_through_with_camera_info() {
-    let dir = tempfile::tempdir().unwrap();
-    let Some(seq) = one_frame_with_image(dir.path()) else {
+    let Some((dir, seq)) = one_frame_with_image() else {
         return;
     };
     let out = dir.path().join("d.mcap");
-    let doc: Value = serde_json::from_str(&success(travmap(&[
-        "convert",
-        seq.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--start-time",
-        "1317000000",
-        "--json",
-    ])))
-    .unwrap();
+    let start = ["--start-time", "1317000000"];
+    let doc = json_summary(&[&["convert", arg(&seq), "-o", arg(&out)][..], &start].concat());
     assert_eq!(doc["summary"]["images"], 1);
     let png = std::fs::read(seq.join("image_2/000000.png")).unwrap();
     let images = messages::<travmap::io::ros::CompressedImage>(&out, "/camera_2/image/compressed");
@@ -685,86 +586,55 @@ fn convert_passes_png_images_through_with_camera_info() {
 
 #[test]
 fn an_output_in_a_missing_directory_is_a_clear_error() {
-    let Some(seq) = sample() else { return };
+    let Some(seq) = common::sample() else { return };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("missing/drive.mcap");
-    let err = clean_failure(travmap(&[
-        "convert",
-        &seq,
-        "-o",
-        out.to_str().unwrap(),
-        "--frames",
-        "0",
-    ]));
-    assert!(
-        err.contains("cannot write") && err.contains("missing/drive.mcap"),
-        "{err}"
-    );
+    let (seq, out_arg) = (arg(&seq), arg(&out));
+    let err = clean_failure(travmap(&["convert", seq, "-o", out_arg, "--frames", "0"]));
+    assert_contains(&err, &["cannot write", "missing/drive.mcap"]);
     assert!(!out.exists());
-    let err = clean_failure(travmap(&[
-        "annotate",
-        &seq,
-        "-o",
-        out.to_str().unwrap(),
-        "--frames",
-        "0",
-    ]));
-    assert!(err.contains("cannot write"), "{err}");
+    let err = clean_failure(travmap(&["annotate", seq, "-o", out_arg, "--frames", "0"]));
+    assert_contains(&err, &["cannot write"]);
 }
 
 #[test]
 fn corrupt_mcap_files_are_clear_errors() {
-    let Some(seq) = sample() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let good = dir.path().join("good.mcap");
-    success(travmap(&[
-        "convert",
-        &seq,
-        "-o",
-        good.to_str().unwrap(),
-        "--frames",
-        "0..2",
-        "--compression",
-        "none",
-        "-q",
-    ]));
+    let flags = ["--frames", "0..2", "--compression", "none"];
+    let Some((_, good)) = common::sample_as_mcap(dir.path(), &flags) else {
+        return;
+    };
     let bytes = std::fs::read(&good).unwrap();
     let write = |name: &str, data: &[u8]| {
         let path = dir.path().join(name);
         std::fs::write(&path, data).unwrap();
-        path.to_str().unwrap().to_string()
+        arg(&path).to_string()
     };
     // Bad magic.
     let mut bad_magic = bytes.clone();
     bad_magic[1] = b'X';
     let err = clean_failure(travmap(&["eval", &write("magic.mcap", &bad_magic)]));
-    assert!(
-        err.contains("magic.mcap") && err.to_lowercase().contains("magic"),
-        "{err}"
-    );
+    assert_contains(&err, &["magic.mcap"]);
+    assert_contains(&err.to_lowercase(), &["magic"]);
     // A flipped byte inside a chunk's records: the chunk CRC no longer matches.
     let mut flipped = bytes.clone();
     let middle = bytes.len() / 3;
     flipped[middle] ^= 0x55;
     let err = clean_failure(travmap(&["eval", &write("crc.mcap", &flipped)]));
-    assert!(
-        err.contains("crc.mcap") && err.contains("Chunk CRC failed"),
-        "{err}"
-    );
+    assert_contains(&err, &["crc.mcap", "Chunk CRC failed"]);
     // Cut a few bytes into the first chunk.
     let err = clean_failure(travmap(&["eval", &write("cut.mcap", &bytes[..100])]));
-    assert!(
-        err.contains("cut.mcap: truncated: the record at byte 42 (opcode 0x06) is")
-            && err.contains("the file ends 58 bytes after its start"),
-        "{err}"
+    assert_contains(
+        &err,
+        &[
+            "cut.mcap: truncated: the record at byte 42 (opcode 0x06) is",
+            "the file ends 58 bytes after its start",
+        ],
     );
     // Cut inside a record's opcode and length, at the start and in the summary.
     for (name, end) in [("head.mcap", 12), ("tail.mcap", bytes.len() - 30)] {
         let err = clean_failure(travmap(&["eval", &write(name, &bytes[..end])]));
-        assert!(
-            err.contains(name) && err.contains("ended in the middle of a record"),
-            "{err}"
-        );
+        assert_contains(&err, &[name, "ended in the middle of a record"]);
     }
     // A chunk claiming a terabyte uncompressed: refused before anything is reserved.
     let mut chunk = 8;
@@ -774,13 +644,8 @@ fn corrupt_mcap_files_are_clear_errors() {
     let mut huge = bytes.clone();
     huge[chunk + 25..chunk + 33].copy_from_slice(&(1u64 << 40).to_le_bytes());
     let err = clean_failure(travmap(&["eval", &write("huge.mcap", &huge)]));
-    assert!(
-        err.contains("huge.mcap")
-            && err.contains(&format!(
-                "chunk at byte {chunk} declares 1099511627776 bytes"
-            )),
-        "{err}"
-    );
+    let declared = format!("chunk at byte {chunk} declares 1099511627776 bytes");
+    assert_contains(&err, &["huge.mcap", &declared]);
 }
 
 #[test]
@@ -797,27 +662,13 @@ fn clouds_whose_data_disagree_with_their_layout_are_errors() {
         data: vec![0; data_len],
         is_dense: true,
     };
-    let err = cloud_points(&cloud(60, PointField::xyz_float32()))
-        .err()
-        .unwrap();
-    assert!(
-        err.contains("data holds 60 bytes") && err.contains("need 72"),
-        "{err}"
-    );
-    let err = cloud_points(&cloud(
-        72,
-        vec![PointField::scalar("y", 4, datatype::FLOAT32)],
-    ))
-    .err()
-    .unwrap();
-    assert!(err.contains("no `x` field"), "{err}");
-    let err = cloud_points(&cloud(
-        72,
-        vec![PointField::scalar("x", 10, datatype::FLOAT32)],
-    ))
-    .err()
-    .unwrap();
-    assert!(err.contains("outside point_step"), "{err}");
+    let error = |data_len, fields| cloud_points(&cloud(data_len, fields)).err().unwrap();
+    let err = error(60, PointField::xyz_float32());
+    assert_contains(&err, &["data holds 60 bytes", "need 72"]);
+    let err = error(72, vec![PointField::scalar("y", 4, datatype::FLOAT32)]);
+    assert_contains(&err, &["no `x` field"]);
+    let err = error(72, vec![PointField::scalar("x", 10, datatype::FLOAT32)]);
+    assert_contains(&err, &["outside point_step"]);
     assert_eq!(
         cloud_points(&cloud(72, PointField::xyz_float32()))
             .unwrap()
@@ -836,19 +687,12 @@ fn clouds_whose_data_disagree_with_their_layout_are_errors() {
 #[test]
 fn an_image_that_disagrees_with_its_camera_info_and_a_non_cdr_cloud_are_errors() {
     use travmap::io::ros::{CameraInfo, PointCloud2, RosMessage, encode};
-    let dir = tempfile::tempdir().unwrap();
-    let Some(seq) = one_frame_with_image(dir.path()) else {
+    let Some((dir, seq)) = one_frame_with_image() else {
         return;
     };
     let good = dir.path().join("good.mcap");
-    success(travmap(&[
-        "convert",
-        seq.to_str().unwrap(),
-        "-o",
-        good.to_str().unwrap(),
-        "-q",
-    ]));
-    success(travmap(&["run", good.to_str().unwrap(), "-q"]));
+    write_output("convert", &seq, &good, &[]);
+    success(travmap(&["run", arg(&good), "-q"]));
 
     // The same file with a CameraInfo that claims another width.
     let bytes = std::fs::read(&good).unwrap();
@@ -876,10 +720,10 @@ fn an_image_that_disagrees_with_its_camera_info_and_a_non_cdr_cloud_are_errors()
             .unwrap();
     }
     sink.finish().unwrap();
-    let err = clean_failure(travmap(&["run", bad.to_str().unwrap()]));
-    assert!(
-        err.contains("the image is 1242x375 but its CameraInfo says 1000x375"),
-        "{err}"
+    let err = clean_failure(travmap(&["run", arg(&bad)]));
+    assert_contains(
+        &err,
+        &["the image is 1242x375 but its CameraInfo says 1000x375"],
     );
 
     // A PointCloud2 channel whose messages are not CDR.
@@ -896,9 +740,9 @@ fn an_image_that_disagrees_with_its_camera_info_and_a_non_cdr_cloud_are_errors()
         .unwrap();
     sink.write_raw(id, 1, 1, b"{}".to_vec()).unwrap();
     sink.finish().unwrap();
-    let err = clean_failure(travmap(&["eval", json.to_str().unwrap()]));
-    assert!(
-        err.contains("channel /points (sensor_msgs/msg/PointCloud2) has message encoding `json`"),
-        "{err}"
+    let err = clean_failure(travmap(&["eval", arg(&json)]));
+    assert_contains(
+        &err,
+        &["channel /points (sensor_msgs/msg/PointCloud2) has message encoding `json`"],
     );
 }

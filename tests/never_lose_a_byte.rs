@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{clean_failure, success, travmap};
+use common::{arg, clean_failure, travmap};
 use sha2::{Digest, Sha256};
 
 /// SHA-256 of every file below `root` (links followed), by path.
@@ -54,7 +54,7 @@ fn inputs(sample: &Path, dir: &Path) -> (PathBuf, PathBuf, PathBuf, PathBuf) {
         }
     }
     let drive = dir.join("d.mcap");
-    success(travmap(&["convert", p(&seq), "-o", p(&drive), "-q"]));
+    common::write_output("convert", &seq, &drive, &[]);
     let model = dir.join("model.json");
     std::fs::write(&model, travmap_model()).unwrap();
     let config = dir.join("config.toml");
@@ -68,13 +68,9 @@ fn travmap_model() -> Vec<u8> {
         .to_json()
 }
 
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
-
 #[test]
 fn no_writing_command_can_overwrite_any_of_its_inputs() {
-    let Some(sample) = common::semantickitti_00() else {
+    let Some(sample) = common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -97,7 +93,7 @@ fn no_writing_command_can_overwrite_any_of_its_inputs() {
         seq.join("labels/000002.label"),
         dir.path().join("via/seq/poses.txt"),
     ];
-    let (seq, drive, model, config) = (p(&seq), p(&drive), p(&model), p(&config));
+    let (seq, drive, model, config) = (arg(&seq), arg(&drive), arg(&model), arg(&config));
     let with_model = ["--model", model, "--config", config, "-q"];
     // Each writing command, its arguments, and every output that is one of its inputs.
     let commands: Vec<(Vec<&str>, Vec<&Path>)> = vec![
@@ -147,7 +143,7 @@ fn no_writing_command_can_overwrite_any_of_its_inputs() {
     for (args, targets) in &commands {
         for target in targets {
             let mut args = args.clone();
-            args.extend(["-o", p(target)]);
+            args.extend(["-o", arg(target)]);
             let out = travmap(&args);
             assert_eq!(out.status.code(), Some(1), "{args:?}");
             let err = common::stderr(&out);
@@ -168,18 +164,18 @@ fn no_writing_command_can_overwrite_any_of_its_inputs() {
 
 #[test]
 fn outputs_that_cannot_be_written_are_refused_before_any_work() {
-    let Some(sample) = common::semantickitti_00() else {
+    let Some(sample) = common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let seq = p(&sample);
+    let seq = arg(&sample);
     let directory = dir.path().join("a-directory");
     std::fs::create_dir_all(&directory).unwrap();
     let started = Instant::now();
-    let err = clean_failure(travmap(&["train", seq, "-o", p(&directory)]));
+    let err = clean_failure(travmap(&["train", seq, "-o", arg(&directory)]));
     assert!(err.contains("is a directory"), "{err}");
     let missing = dir.path().join("missing/m.json");
-    let err = clean_failure(travmap(&["train", seq, "-o", p(&missing)]));
+    let err = clean_failure(travmap(&["train", seq, "-o", arg(&missing)]));
     assert!(err.contains("does not exist"), "{err}");
     // Training takes seconds: refusing took no training.
     assert!(
@@ -197,7 +193,7 @@ fn interrupt_conversion(sample: &Path, dir: &Path, signal: &str) -> Option<(i32,
     std::fs::create_dir_all(&out_dir).unwrap();
     let output = out_dir.join("drive.mcap");
     let mut child = Command::new(env!("CARGO_BIN_EXE_travmap"))
-        .args(["convert", p(&long), "-o", p(&output), "-q"])
+        .args(["convert", arg(&long), "-o", arg(&output), "-q"])
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
@@ -227,7 +223,7 @@ fn interrupt_conversion(sample: &Path, dir: &Path, signal: &str) -> Option<(i32,
 
 #[test]
 fn sigint_sigterm_and_sighup_remove_the_temporary_output() {
-    let Some(sample) = common::semantickitti_00() else {
+    let Some(sample) = common::sample() else {
         return;
     };
     for (signal, code) in [("INT", 130), ("TERM", 143), ("HUP", 129)] {
@@ -243,7 +239,7 @@ fn sigint_sigterm_and_sighup_remove_the_temporary_output() {
 
 #[test]
 fn the_next_run_removes_what_a_killed_run_left() {
-    let Some(sample) = common::semantickitti_00() else {
+    let Some(sample) = common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -260,11 +256,11 @@ fn the_next_run_removes_what_a_killed_run_left() {
     let output = out_dir.join("drive.mcap");
     let out = travmap(&[
         "convert",
-        p(&sample),
+        arg(&sample),
         "--frames",
         "0..2",
         "-o",
-        p(&output),
+        arg(&output),
         "-q",
     ]);
     let err = common::stderr(&out);
@@ -282,13 +278,13 @@ fn the_next_run_removes_what_a_killed_run_left() {
 
 #[test]
 fn a_full_disk_is_named_and_leaves_nothing() {
-    let Some(sample) = common::semantickitti_00() else {
+    let Some(sample) = common::sample() else {
         return;
     };
     // A 1 MiB file system: the conversion of six scans (8.8 MB) fills it.
     let small = tempfile::tempdir().unwrap();
     let mounted = Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=1m", "tmpfs", p(small.path())])
+        .args(["-t", "tmpfs", "-o", "size=1m", "tmpfs", arg(small.path())])
         .stderr(Stdio::null())
         .status()
         .is_ok_and(|s| s.success());
@@ -297,7 +293,7 @@ fn a_full_disk_is_named_and_leaves_nothing() {
         return;
     }
     let output = small.path().join("drive.mcap");
-    let out = travmap(&["convert", p(&sample), "-o", p(&output), "-q"]);
+    let out = travmap(&["convert", arg(&sample), "-o", arg(&output), "-q"]);
     let left: Vec<_> = std::fs::read_dir(small.path()).unwrap().collect();
     let _ = Command::new("umount").arg(small.path()).status();
     let err = clean_failure(out);
@@ -307,12 +303,12 @@ fn a_full_disk_is_named_and_leaves_nothing() {
 
 #[test]
 fn a_closed_stdout_ends_quietly() {
-    let Some(sample) = common::semantickitti_00() else {
+    let Some(sample) = common::sample() else {
         return;
     };
     // `travmap run ... | head -c 1`: the reader goes away after one byte.
     let mut child = Command::new(env!("CARGO_BIN_EXE_travmap"))
-        .args(["run", p(&sample), "--ascii"])
+        .args(["run", arg(&sample), "--ascii"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()

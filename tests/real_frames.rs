@@ -61,9 +61,7 @@ fn world_scans(sequence: &KittiSequence, frames: std::ops::Range<usize>) -> Vec<
 
 #[test]
 fn consecutive_scans_coincide_in_the_world_frame() {
-    let Some(dir) = common::semantickitti_00() else {
-        return;
-    };
+    let Some(dir) = common::sample() else { return };
     let sequence = KittiSequence::open(&dir).unwrap();
     let scans = world_scans(&sequence, 0..6);
     for pair in scans.windows(2) {
@@ -123,9 +121,7 @@ fn consecutive_scans_coincide_in_the_world_frame() {
 
 #[test]
 fn the_road_lies_in_the_world_xy_plane() {
-    let Some(dir) = common::semantickitti_00() else {
-        return;
-    };
+    let Some(dir) = common::sample() else { return };
     let sequence = KittiSequence::open(&dir).unwrap();
     for scan in world_scans(&sequence, 0..3) {
         let labels = scan.labels.as_ref().expect("frames 0-2 are labelled");
@@ -153,9 +149,7 @@ fn the_road_lies_in_the_world_xy_plane() {
 
 #[test]
 fn shipped_scans_and_labels_match_their_provenance() {
-    let Some(dir) = common::semantickitti_00() else {
-        return;
-    };
+    let Some(dir) = common::sample() else { return };
     let sequence = KittiSequence::open(&dir).unwrap();
     assert_eq!(sequence.frames(), &[0, 1, 2, 3, 4, 5]);
     let counts: Vec<usize> = (0..6)
@@ -172,7 +166,7 @@ fn labels_join_the_right_points() {
     // The mmdetection3d 50-point subset of frame 0 with its labels, at the indices
     // PROVENANCE.md lists: each point and label must equal the full frame's.
     let (Some(full), Some(subset)) = (
-        common::semantickitti_00(),
+        common::sample(),
         common::shared_data("semantickitti-mmdet3d-50pt/sequences/00"),
     ) else {
         return;
@@ -203,9 +197,7 @@ fn labels_join_the_right_points() {
 fn frames_in_batches_equal_frames_one_by_one() {
     use travmap::method::classifier::SvmModel;
     use travmap::method::pipeline::Pipeline;
-    let Some(dir) = common::semantickitti_00() else {
-        return;
-    };
+    let Some(dir) = common::sample() else { return };
     let sequence = KittiSequence::open(&dir).unwrap();
     let model = SvmModel::embedded_default().unwrap();
     let config = travmap::Config::default();

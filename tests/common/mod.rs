@@ -1,13 +1,19 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)] // each test binary uses its own subset of these helpers
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::Output;
+use std::process::{Command, Output};
 
-/// The shipped SemanticKITTI sample, or None (with the reason printed) when
-/// `../shared/data` is not beside the repository.
-pub fn semantickitti_00() -> Option<PathBuf> {
+/// The shipped SemanticKITTI sample (semantickitti-00, sequence 00), or None (with
+/// the reason printed) when `../shared/data` is not beside the repository.
+pub fn sample() -> Option<PathBuf> {
     shared_data("semantickitti-00/sequences/00")
+}
+
+/// The shipped sample under its data set's name: the same as [`sample`].
+pub fn semantickitti_00() -> Option<PathBuf> {
+    sample()
 }
 
 pub fn shared_data(relative: &str) -> Option<PathBuf> {
@@ -51,6 +57,93 @@ pub fn travmap(args: &[&str]) -> Output {
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .expect("travmap runs")
+}
+
+/// A path as a command-line argument (the tests' paths are UTF-8).
+pub fn arg(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// Runs `travmap <command> <input> -o <output> <extra...> -q` and asserts success:
+/// how the tests make the files they read back (MCAPs, models, pictures, tables).
+pub fn write_output(command: &str, input: impl AsRef<Path>, output: &Path, extra: &[&str]) {
+    let mut args = vec![command, arg(input.as_ref()), "-o", arg(output)];
+    args.extend_from_slice(extra);
+    args.push("-q");
+    success(travmap(&args));
+}
+
+/// The shipped sample converted to `dir/drive.mcap` (with `extra` flags): the
+/// sample's path and the drive's, or None without the shared data.
+pub fn sample_as_mcap(dir: &Path, extra: &[&str]) -> Option<(PathBuf, PathBuf)> {
+    let sample = sample()?;
+    let drive = dir.join("drive.mcap");
+    write_output("convert", &sample, &drive, extra);
+    Some((sample, drive))
+}
+
+/// The shipped sample annotated into `dir/a.mcap` (with `extra` flags): the
+/// sample's path and the annotated file's, or None without the shared data.
+pub fn sample_annotated(dir: &Path, extra: &[&str]) -> Option<(PathBuf, PathBuf)> {
+    let sample = sample()?;
+    let annotated = dir.join("a.mcap");
+    write_output("annotate", &sample, &annotated, extra);
+    Some((sample, annotated))
+}
+
+/// `args` followed by `--set <setting>` for each of `settings`.
+pub fn with_settings<'a>(args: &[&'a str], settings: &[&'a str]) -> Vec<&'a str> {
+    let mut all = args.to_vec();
+    for setting in settings {
+        all.extend(["--set", setting]);
+    }
+    all
+}
+
+/// Runs travmap with `args` and `--json`, asserts success, and returns what it
+/// printed: a single `summary` record, no `frame` records.
+pub fn json_summary(args: &[&str]) -> serde_json::Value {
+    let args = [args, &["--json"]].concat();
+    let (frames, summary) = json_records(&success(travmap(&args)));
+    assert!(
+        frames.is_empty(),
+        "{args:?}: {} frame records",
+        frames.len()
+    );
+    summary
+}
+
+/// Runs another program (a client, a converter) and asserts it succeeded, with
+/// its stderr as the message.
+pub fn run_client(command: &mut Command) -> Output {
+    let output = command.output().unwrap();
+    assert!(
+        output.status.success(),
+        "{:?}: {}",
+        command,
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output
+}
+
+/// Asserts that `text` contains every one of `parts`, and shows `text` if not.
+#[track_caller]
+pub fn assert_contains(text: &str, parts: &[&str]) {
+    for part in parts {
+        assert!(text.contains(part), "{part:?} not in:\n{text}");
+    }
+}
+
+/// The `travmap` metadata record of an MCAP file (its bytes): version, model
+/// hash, configuration, skipped frames.
+pub fn travmap_metadata(mcap_bytes: &[u8]) -> BTreeMap<String, String> {
+    let summary = mcap::Summary::read(mcap_bytes).unwrap().unwrap();
+    let index = summary
+        .metadata_indexes
+        .iter()
+        .find(|m| m.name == "travmap")
+        .expect("a travmap metadata record");
+    mcap::read::metadata(mcap_bytes, index).unwrap().metadata
 }
 
 pub fn stdout(output: &Output) -> String {

@@ -1,0 +1,124 @@
+//! Remission features across sensors: a cloud without intensity runs with the
+//! model's fallback and says so; intensity on Velodyne's 0..255 scale gives the same
+//! grids as KITTI's 0..1.
+
+mod common;
+
+use std::path::Path;
+
+use travmap::io::mcap_drive::{DriveOptions, McapDrive};
+use travmap::io::ros::{PointCloud2, TfMessage, datatype, decode};
+use travmap::outputs::writing::{Compression, McapSink};
+
+/// Rewrites the converted drive `from` into `to` with each cloud's intensity
+/// changed by `edit` (clouds and transforms only).
+fn rewrite_clouds(from: &Path, to: &Path, edit: impl Fn(&mut PointCloud2)) {
+    let drive = McapDrive::open(from, &DriveOptions::default()).unwrap();
+    let mut sink = McapSink::create(to, Compression::None).unwrap();
+    drive
+        .for_each_message(|message| {
+            let topic = message.channel.topic.as_str();
+            let schema = message.channel.schema.as_ref().map(|s| s.name.as_str());
+            match schema {
+                Some("sensor_msgs/msg/PointCloud2") => {
+                    let mut cloud: PointCloud2 = decode(&message.data).unwrap();
+                    edit(&mut cloud);
+                    sink.write(topic, message.log_time, &cloud)
+                }
+                Some("tf2_msgs/msg/TFMessage") => {
+                    let tf: TfMessage = decode(&message.data).unwrap();
+                    sink.write(topic, message.log_time, &tf)
+                }
+                _ => Ok(()),
+            }
+        })
+        .unwrap();
+    sink.finish().unwrap();
+}
+
+/// The intensity field of a converted cloud: its offset.
+fn intensity_offset(cloud: &PointCloud2) -> usize {
+    let field = cloud.fields.iter().find(|f| f.name == "intensity").unwrap();
+    assert_eq!(field.datatype, datatype::FLOAT32);
+    field.offset as usize
+}
+
+fn run_json(input: &Path) -> (Vec<serde_json::Value>, serde_json::Value, String) {
+    let out = common::travmap(&["run", input.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    let (frames, summary) = common::json_records(&common::stdout(&out));
+    (frames, summary, common::stderr(&out))
+}
+
+#[test]
+fn intensity_scales_and_a_cloud_without_intensity() {
+    let Some(seq) = common::semantickitti_00() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let original = dir.path().join("original.mcap");
+    let out = common::travmap(&[
+        "convert",
+        seq.to_str().unwrap(),
+        "-o",
+        original.to_str().unwrap(),
+        "-q",
+    ]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+
+    // Velodyne's 0..255: every intensity times 255.
+    let bytes = dir.path().join("byte.mcap");
+    rewrite_clouds(&original, &bytes, |cloud| {
+        let at = intensity_offset(cloud);
+        let step = cloud.point_step as usize;
+        for point in cloud.data.chunks_exact_mut(step) {
+            let raw: [u8; 4] = point[at..at + 4].try_into().unwrap();
+            let scaled = f32::from_le_bytes(raw) * 255.0;
+            point[at..at + 4].copy_from_slice(&scaled.to_le_bytes());
+        }
+    });
+    // No intensity field at all (x, y, z and the label stay where they were).
+    let bare = dir.path().join("bare.mcap");
+    rewrite_clouds(&original, &bare, |cloud| {
+        cloud.fields.retain(|f| f.name != "intensity");
+    });
+
+    let (unit_frames, unit, _) = run_json(&original);
+    let (byte_frames, byte, _) = run_json(&bytes);
+    assert_eq!(unit_frames.len(), 6);
+    assert_eq!(unit["frames_without_remission"], 0);
+    assert_eq!(byte["frames_without_remission"], 0);
+    for (a, b) in unit_frames.iter().zip(&byte_frames) {
+        assert_eq!(a["remission"], "unit");
+        assert_eq!(b["remission"], "byte");
+        assert_eq!(a["cells"], b["cells"], "frame {}", a["frame"]);
+    }
+
+    let (bare_frames, bare_summary, _) = run_json(&bare);
+    assert_eq!(bare_summary["frames_without_remission"], 6);
+    assert!(
+        bare_frames
+            .iter()
+            .all(|f| f["remission"] == "missing" && f["without_remission"] == true)
+    );
+    // The fallback still predicts most of the street as the full model does.
+    let agree: usize = unit_frames
+        .iter()
+        .zip(&bare_frames)
+        .map(|(a, b)| {
+            let (a, b) = (
+                a["cells"].as_array().unwrap(),
+                b["cells"].as_array().unwrap(),
+            );
+            a.iter().zip(b).filter(|(x, y)| x == y).count()
+        })
+        .sum();
+    assert!(agree > 6 * 900 * 9 / 10, "{agree} of 5400 cells agree");
+    // In text the fallback is said on stderr.
+    let out = common::travmap(&["run", bare.to_str().unwrap()]);
+    let err = common::stderr(&out);
+    assert!(
+        out.status.success() && err.contains("6 frames had no usable remission"),
+        "{err}"
+    );
+}
