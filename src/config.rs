@@ -77,6 +77,20 @@ pub struct FeatureConfig {
     pub curvity_bins: usize,
     /// Sub-cells with fewer points contribute no normal to unevenness (default 3).
     pub unevenness_min_points: usize,
+    /// Feature groups beyond the paper's 20 (README "Features beyond the paper"):
+    /// `"remission"` and `"context"` (default `["remission"]`); `[]` is the paper's
+    /// method.
+    pub groups: Vec<FeatureGroup>,
+}
+
+/// A group of features beyond the paper's 20, in the order they follow them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FeatureGroup {
+    /// Per-cell statistics of the points' remission (intensity) on a 0..1 scale.
+    Remission,
+    /// What a cell's neighbourhood says: height steps, occupancy, range.
+    Context,
 }
 
 /// METHOD.md section 7.
@@ -162,6 +176,8 @@ impl Default for FeatureConfig {
             subcell_size_m: 0.2,
             curvity_bins: 160,
             unevenness_min_points: 3,
+            // Remission wins the cross-scene numbers (README "Features beyond the paper").
+            groups: vec![FeatureGroup::Remission],
         }
     }
 }
@@ -232,9 +248,33 @@ impl GridConfig {
 }
 
 impl FeatureConfig {
+    /// The groups without remission: what a cloud without usable intensity gets.
+    pub fn without_remission(&self) -> FeatureConfig {
+        FeatureConfig {
+            groups: self
+                .groups
+                .iter()
+                .copied()
+                .filter(|g| *g != FeatureGroup::Remission)
+                .collect(),
+            ..self.clone()
+        }
+    }
+
     /// Internal sub-cells per cell side, `r / r_i`.
     pub fn subcells_per_side(&self, cell_size_m: f64) -> usize {
         (cell_size_m / self.subcell_size_m).round() as usize
+    }
+}
+
+/// A configuration written before `features.groups` existed used the paper's 20
+/// features only; reading one, a missing `groups` means `[]`, not today's default.
+/// `config` is the JSON of a [`Config`] as a model or dataset file stores it.
+pub fn written_before_groups(config: &mut serde_json::Value) {
+    if let Some(features) = config.get_mut("features").and_then(|f| f.as_object_mut()) {
+        features
+            .entry("groups")
+            .or_insert_with(|| serde_json::Value::Array(Vec::new()));
     }
 }
 
@@ -304,6 +344,10 @@ impl Config {
         positive("grid.size_m", self.grid.size_m)?;
         positive("grid.cell_size_m", self.grid.cell_size_m)?;
         positive("features.subcell_size_m", self.features.subcell_size_m)?;
+        let groups = &self.features.groups;
+        if (1..groups.len()).any(|i| groups[..i].contains(&groups[i])) {
+            return fail(format!("features.groups names a group twice: {groups:?}"));
+        }
         positive("training.grid_size_m", self.training.grid_size_m)?;
         positive("training.block_size_m", self.training.block_size_m)?;
         positive("training.tolerance", self.training.tolerance)?;

@@ -12,8 +12,11 @@ pub struct Frame {
     pub stamp_ns: u64,
     /// Sensor pose: maps velodyne coordinates to the z-up world frame.
     pub world_from_velodyne: Isometry3<f64>,
-    /// x, y, z (metres) and remission per point, in the velodyne frame.
+    /// x, y, z (metres) and remission per point, in the velodyne frame; remission
+    /// on a 0..1 scale when `remission` says it is usable, else 0.
     pub points_in_velodyne: Vec<[f32; 4]>,
+    /// What the input's remission / intensity was, and so whether it is usable.
+    pub remission: RemissionScale,
     /// SemanticKITTI label per point (lower 16 bits class, upper 16 instance).
     pub labels: Option<Vec<u32>>,
     /// The colour camera's image of this frame, when the input has one.
@@ -21,6 +24,29 @@ pub struct Frame {
     /// Points the reader dropped for a non-finite coordinate (MCAP clouds with
     /// `is_dense` false; a KITTI scan with one is an error instead).
     pub dropped_points: usize,
+}
+
+/// The scale an input's remission / intensity came on. Readers bring every usable
+/// scale to 0..1 (KITTI's own): remission features mean the same on every sensor.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RemissionScale {
+    /// 0..1 as recorded (KITTI `.bin`, float intensity that never exceeds 1).
+    Unit,
+    /// 0..255 (Velodyne drivers: uint8, or float up to 255), divided by 255.
+    Byte,
+    /// No intensity field.
+    Missing,
+    /// An intensity field on a scale travmap does not know (e.g. Ouster's uint16
+    /// reflectivity): not used.
+    Unknown,
+}
+
+impl RemissionScale {
+    /// Whether remission features can be computed from it.
+    pub fn is_usable(self) -> bool {
+        matches!(self, RemissionScale::Unit | RemissionScale::Byte)
+    }
 }
 
 /// A decoded 8-bit RGB image, row-major.

@@ -41,6 +41,7 @@ fn scan(
         points_in_world: points,
         origin_in_world: origin,
         labels,
+        remission: None,
         moments,
     }
 }
@@ -986,6 +987,7 @@ fn random_grid(
             points_in_grid,
             range_m,
             labels: None,
+            remission: None,
         },
         made_as,
     }
@@ -1000,7 +1002,7 @@ fn check_features(
 ) -> usize {
     let cells = &grid.cells;
     let layout = cells.layout;
-    let fast = extractor.compute(cells, ground);
+    let fast = extractor.compute(cells, ground, [0.0; 3]);
     let mut compared = 0;
     for cell in 0..layout.cell_count() {
         let range = cells.cell_range(cell);
@@ -1072,6 +1074,7 @@ fn every_feature_matches_a_direct_computation_from_method_md() {
                     subcell_size_m,
                     curvity_bins,
                     unevenness_min_points,
+                    groups: Vec::new(),
                 },
                 min_points,
             };
@@ -1236,8 +1239,12 @@ fn degenerate_cells_take_the_guards_defined_values() {
             range_m: vec![9.5; points.len()],
             points_in_grid: points,
             labels: None,
+            remission: None,
         };
-        extractor.compute(&cells, [0.0, 0.0, 1.0]).cell(0).to_vec()
+        extractor
+            .compute(&cells, [0.0, 0.0, 1.0], [0.0; 3])
+            .cell(0)
+            .to_vec()
     };
     let value = |f: &[f32], name: &str| f[feature(name)] as f64;
     // k identical points: every eigenvalue 0, d_m = 0.

@@ -32,8 +32,10 @@ fn dataset(seq: &Path, out: &Path, extra: &[&str]) -> Value {
 }
 
 /// The error of `travmap train <input> -o <model>`, which must fail cleanly.
-fn train_error(input: &Path, model: &Path) -> String {
-    clean_failure(travmap(&["train", arg(input), "-o", arg(model)]))
+fn train_error(input: &Path, model: &Path, extra: &[&str]) -> String {
+    let mut args = vec!["train", arg(input), "-o", arg(model)];
+    args.extend(extra);
+    clean_failure(travmap(&args))
 }
 
 #[test]
@@ -71,7 +73,7 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
         serde_json::json!(["travmap.config", "travmap.format"])
     );
     let columns = read["columns"].as_array().unwrap();
-    assert_eq!(columns.len(), 8 + 20 + 88 + 2);
+    assert_eq!(columns.len(), 8 + 20 + 3 + 88 + 2, "+ 3 remission columns");
     assert_eq!(columns[8], serde_json::json!(["linearity", "float"]));
     assert_eq!(columns[2], serde_json::json!(["stamp_ns", "int64"]));
     // The script has checked that DuckDB and Polars read every row as pyarrow does.
@@ -171,9 +173,13 @@ fn training_on_the_parquet_file_gives_the_model_training_on_the_sequence_gives()
         let quick = common::with_settings(&[], &QUICK_TRAINING);
         common::write_output("train", input, &model, &quick);
         let mut doc: Value = serde_json::from_slice(&std::fs::read(&model).unwrap()).unwrap();
-        let training = doc["training"].as_object_mut().unwrap();
-        training.remove("sources");
-        training.remove("seconds");
+        let strip = |part: &mut Value| {
+            let training = part["training"].as_object_mut().unwrap();
+            training.remove("sources");
+            training.remove("seconds");
+        };
+        strip(&mut doc);
+        strip(&mut doc["fallback"]);
         doc
     };
     let from_parquet = train(&cells, "parquet.json");
@@ -196,14 +202,14 @@ fn datasets_from_other_settings_or_other_writers_are_refused() {
         &["--frames", "0..1", "--set", "features.curvity_bins=80"],
     );
     let model = dir.path().join("m.json");
-    let err = train_error(&cells, &model);
+    let err = train_error(&cells, &model, &[]);
     assert_contains(
         &err,
         &["coarse.parquet", "extracted with other feature settings"],
     );
     let not_parquet = dir.path().join("junk.parquet");
     std::fs::write(&not_parquet, b"not a parquet file at all").unwrap();
-    let err = train_error(&not_parquet, &model);
+    let err = train_error(&not_parquet, &model, &[]);
     assert_contains(&err, &["junk.parquet"]);
     assert!(!model.exists(), "no model is written on failure");
 }
@@ -228,7 +234,9 @@ fn corrupt_datasets_are_errors_naming_the_file_not_panics() {
             "index out of bounds",
         ),
     ] {
-        let err = train_error(&regressions.join(name), &model);
+        // Written before feature groups existed: the paper's 20 features.
+        let paper = ["--set", "features.groups=[]"];
+        let err = train_error(&regressions.join(name), &model, &paper);
         assert_contains(&err, &[name, "corrupt Parquet file", panic]);
         assert!(!model.exists());
     }

@@ -1,4 +1,6 @@
-//! `travmap crossval`: the spatially-blocked held-out evaluation.
+//! `travmap crossval`: held-out scores. With one input, spatially-blocked
+//! cross-validation; with several, each input held out in turn (a scene the model
+//! has never seen), unless `--spatial`.
 
 use std::io::Write;
 
@@ -6,22 +8,39 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use travmap::drive::Selection;
-use travmap::training::crossval::{CrossValidationReport, cross_validate};
+use travmap::training::crossval::{
+    CrossValidationReport, LeaveOneOutReport, cross_validate, leave_one_input_out,
+};
 
 use super::eval::write_table;
 use super::{Inputs, Outcome, outcome, print_json_summary};
 
-/// Held-out accuracy by spatially-blocked cross-validation over the frames.
+/// Held-out scores: spatially-blocked CV over one input's frames, or each of several
+/// inputs held out in turn.
 #[derive(Args)]
 pub struct CrossvalArgs {
     #[command(flatten)]
     inputs: Inputs,
+    /// With several inputs, pool them into spatially-blocked CV instead of holding
+    /// out each input in turn.
+    #[arg(long)]
+    spatial: bool,
 }
 
 pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = args.inputs.output;
     let selections = args.inputs.open(config.appearance.enabled)?;
+    if selections.len() > 1 && !args.spatial {
+        let bar = output.progress(selections.len() as u64, "holding out");
+        let report = leave_one_input_out(&selections, config, &|message| {
+            bar.set_message(message.to_string());
+            bar.inc(1);
+        })?;
+        bar.finish();
+        print_leave_one_out(&report, &selections, config, output.json)?;
+        return Ok(outcome(&selections));
+    }
     let bar = output.progress(config.training.folds as u64, "cross-validating");
     let report: CrossValidationReport = cross_validate(&selections, config, &|message| {
         bar.set_message(message.to_string());
@@ -59,4 +78,35 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
     }
     write_table(&mut out, &report.evaluation, false)?;
     Ok(outcome(&selections))
+}
+
+fn print_leave_one_out(
+    report: &LeaveOneOutReport,
+    selections: &[Selection],
+    config: &travmap::Config,
+    json: bool,
+) -> Result<()> {
+    if json {
+        return print_json_summary(
+            "crossval",
+            selections,
+            json!({"config": config, "report": report}),
+        );
+    }
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "leave-one-input-out: each input scored by a model trained (with its own grid search) on the others"
+    )?;
+    for held in &report.held_out {
+        writeln!(
+            out,
+            "held out {}: trained on {} cells, C {} gamma {}, {} support vectors",
+            held.input, held.training_cells, held.c, held.gamma, held.support_vectors
+        )?;
+        write_table(&mut out, &held.evaluation, false)?;
+    }
+    writeln!(out, "pooled over every held-out frame:")?;
+    write_table(&mut out, &report.pooled, false)?;
+    Ok(())
 }

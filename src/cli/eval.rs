@@ -90,6 +90,13 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         )?;
     }
     write_table(&mut out, &report, true)?;
+    if report.frames_without_remission > 0 {
+        writeln!(
+            out,
+            "{} frames had no usable remission (intensity): the model's fallback without remission features classified them",
+            report.frames_without_remission
+        )?;
+    }
     if report.dropped_points > 0 {
         writeln!(
             out,

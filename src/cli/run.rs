@@ -70,6 +70,8 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                     "cells": cells,
                     "timings_ms": result.timings,
                     "dropped_points": result.dropped_points,
+                    "remission": result.remission,
+                    "without_remission": result.without_remission,
                 }))?;
             } else if !output.quiet {
                 writeln!(
@@ -102,9 +104,16 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                 "frames": frames,
                 "latency_ms": report.timings_ms.latency,
                 "dropped_points": report.dropped_points,
+                "frames_without_remission": report.frames_without_remission,
             }),
         )?;
     } else if !output.quiet {
+        if report.frames_without_remission > 0 {
+            eprintln!(
+                "note: {} frames had no usable remission (intensity): the model's fallback without remission features classified them",
+                report.frames_without_remission
+            );
+        }
         let latency = report.timings_ms.latency;
         writeln!(
             stdout,

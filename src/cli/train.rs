@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::Args;
 use serde_json::json;
-use travmap::method::features::FEATURE_COUNT;
 use travmap::outputs::dataset::reading::read_training_rows;
 use travmap::outputs::writing::write_atomically;
 use travmap::training::crossval::collect_training_set;
@@ -42,10 +41,7 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
         args.inputs.open_paths(&drives, config.appearance.enabled)?
     };
     let mut set = if selections.is_empty() {
-        TrainingSet {
-            dimension: FEATURE_COUNT,
-            ..Default::default()
-        }
+        TrainingSet::for_features(config)
     } else {
         let bar = output.progress(frame_count(&selections), "collecting cells");
         let set = collect_training_set(&selections, config, &mut || bar.inc(1))?;

@@ -2,6 +2,7 @@
 //! either byte order, every length checked against the data before anything is
 //! reserved.
 
+use crate::frame::RemissionScale;
 use crate::io::ros::{PointCloud2, PointField, datatype};
 
 /// Reads one numeric value of a field as f64.
@@ -31,8 +32,10 @@ fn read_value(bytes: &[u8], datatype_id: u8, big_endian: bool) -> f64 {
 
 /// The points of a cloud as the method reads them.
 pub struct CloudPoints {
-    /// x, y, z, intensity (0 without an intensity field).
+    /// x, y, z, intensity on a 0..1 scale (0 when `remission` is not usable).
     pub points: Vec<[f32; 4]>,
+    /// The scale the intensity field came on.
+    pub remission: RemissionScale,
     /// The `label` field, when present.
     pub labels: Option<Vec<u32>>,
     /// Points dropped for a non-finite coordinate.
@@ -113,9 +116,36 @@ pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
             }
         }
     }
+    let remission = normalise_remission(&mut points, intensity.map(|(_, datatype)| datatype));
     Ok(CloudPoints {
         points,
         labels,
+        remission,
         dropped,
     })
+}
+
+/// Brings the intensity of `points` to 0..1 by its field's type and range: uint8
+/// and floats up to 255 are Velodyne's 0..255; floats up to 1 are KITTI's own; any
+/// other scale is not guessed at (zeroed, and said so by the returned scale).
+fn normalise_remission(points: &mut [[f32; 4]], datatype_id: Option<u8>) -> RemissionScale {
+    let Some(datatype_id) = datatype_id else {
+        return RemissionScale::Missing;
+    };
+    let largest = points.iter().map(|p| p[3]).fold(0.0f32, f32::max);
+    let scale = match datatype_id {
+        datatype::UINT8 => RemissionScale::Byte,
+        datatype::FLOAT32 | datatype::FLOAT64 if largest <= 1.0 => RemissionScale::Unit,
+        datatype::FLOAT32 | datatype::FLOAT64 if largest <= 255.0 => RemissionScale::Byte,
+        _ => RemissionScale::Unknown,
+    };
+    let factor = match scale {
+        RemissionScale::Unit => return scale,
+        RemissionScale::Byte => 1.0 / 255.0,
+        _ => 0.0,
+    };
+    for p in points.iter_mut() {
+        p[3] *= factor;
+    }
+    scale
 }

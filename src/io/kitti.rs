@@ -13,7 +13,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix4};
 use super::SkipLog;
 use super::image::decode_png;
 use crate::error::{Error, Result};
-use crate::frame::{CameraImage, Frame, RgbImage};
+use crate::frame::{CameraImage, Frame, RemissionScale, RgbImage};
 use crate::geometry::rigid;
 
 /// KITTI calibration: the camera projections and velodyne -> cam0.
@@ -206,6 +206,8 @@ impl KittiSequence {
             stamp_ns: self.stamp_ns(index)?,
             world_from_velodyne: self.world_from_velodyne(index)?,
             points_in_velodyne,
+            // KITTI's remission is 0..1 already.
+            remission: RemissionScale::Unit,
             labels,
             camera,
             dropped_points,

@@ -462,6 +462,7 @@ impl McapDrive {
             world_from_velodyne: self.world_from_cloud(stamp_ns)?,
             points_in_velodyne: points.points,
             labels: points.labels,
+            remission: points.remission,
             dropped_points: points.dropped,
             camera,
         })

@@ -11,8 +11,9 @@ pub mod kernel;
 use serde::{Deserialize, Serialize};
 
 use crate::config::Config;
+use crate::config::FeatureGroup;
 use crate::error::{Error, Result};
-use crate::method::features::{FEATURE_NAMES, FeatureGrid};
+use crate::method::features::{FeatureGrid, feature_names};
 use crate::method::grid::CellClass;
 
 /// How a model was trained, kept in the model file.
@@ -106,6 +107,9 @@ pub struct SvmModel {
     /// Classifies the cells that have appearance features (METHOD.md section 5's
     /// Decision); this model classifies the others.
     pub hybrid: Option<Box<SvmModel>>,
+    /// The same model without remission features, for clouds without usable
+    /// intensity; present exactly when this model uses remission.
+    pub fallback: Option<Box<SvmModel>>,
 }
 
 impl SvmModel {
@@ -136,6 +140,7 @@ impl SvmModel {
             training,
             reduced_set: None,
             hybrid: None,
+            fallback: None,
         }
     }
 
@@ -149,8 +154,8 @@ impl SvmModel {
 
     /// Feature names: the geometric ones, plus the appearance ones for a hybrid model.
     pub fn feature_names(&self) -> Vec<String> {
-        let mut names: Vec<String> = FEATURE_NAMES.iter().map(|n| n.to_string()).collect();
-        if self.dimension() > FEATURE_NAMES.len() {
+        let mut names = feature_names(&self.config.features.groups);
+        if self.dimension() > names.len() {
             names.extend(appearance_feature_names(&self.config.appearance));
         }
         names
@@ -266,13 +271,23 @@ impl SvmModel {
         }
     }
 
+    /// The model for features computed with `groups`: this one, or its fallback
+    /// when the cloud had no usable remission.
+    pub fn model_for(&self, groups: &[FeatureGroup]) -> &SvmModel {
+        match &self.fallback {
+            Some(fallback) if fallback.config.features.groups == groups => fallback,
+            _ => self,
+        }
+    }
+
     /// Classifies every predictable cell of a grid; the others stay unknown.
     pub fn classify(&self, grid: &FeatureGrid, use_reduced_set: bool) -> Vec<CellClass> {
-        let mut scratch = self.scratch();
+        let model = self.model_for(&grid.groups);
+        let mut scratch = model.scratch();
         (0..grid.predictable.len())
             .map(|cell| {
                 if grid.predictable[cell] {
-                    self.classify_cell(
+                    model.classify_cell(
                         grid.cell(cell),
                         grid.appearance(cell),
                         &mut scratch,

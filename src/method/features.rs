@@ -1,13 +1,15 @@
-//! Stage 3, geometric features (METHOD.md section 4): 20 values per predictable cell.
+//! Stage 3, geometric features (METHOD.md section 4): 20 values per predictable cell,
+//! followed by the values of the configured [`feature_groups`] (ours, not the paper's).
 //!
-//! Input: [`CellPoints`] and the ground-plane normal of the integrated cloud.
-//! Output: [`FeatureGrid`], a flat row-major `cells x FEATURE_COUNT` f32 array and a
-//! predictable mask. One pass over each cell's points for the moments, one for the
+//! Input: [`CellPoints`], the ground-plane normal of the integrated cloud and the
+//! sensor's position. Output: [`FeatureGrid`], a flat row-major `cells x dimension`
+//! f32 array and a predictable mask. One pass over each cell's points for the moments, one for the
 //! extremes; scratch buffers are allocated once per frame, never per cell. Every
 //! division is guarded so that no feature is NaN.
 
-use crate::config::FeatureConfig;
+use crate::config::{FeatureConfig, FeatureGroup};
 use crate::geometry::Moments;
+use crate::method::feature_groups;
 use crate::method::grid::CellPoints;
 
 /// Feature names, in the order of the values of a cell.
@@ -34,14 +36,31 @@ pub const FEATURE_NAMES: [&str; FEATURE_COUNT] = [
     "volume",
 ];
 
-/// Values per cell.
+/// The paper's values per cell.
 pub const FEATURE_COUNT: usize = 20;
+
+/// Names of every value of a cell: the paper's 20, then those of `groups`.
+pub fn feature_names(groups: &[FeatureGroup]) -> Vec<String> {
+    let extra = feature_groups::ordered(groups)
+        .into_iter()
+        .flat_map(|g| feature_groups::names(g).iter());
+    FEATURE_NAMES
+        .iter()
+        .chain(extra)
+        .map(|n| n.to_string())
+        .collect()
+}
 
 /// Per-cell features of one grid.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FeatureGrid {
-    /// Row-major `cell_count x FEATURE_COUNT`; zeros for unpredictable cells.
+    /// Row-major `cell_count x dimension`; zeros for unpredictable cells.
     pub values: Vec<f32>,
+    /// Values per cell: the paper's 20 and those of `groups`.
+    pub dimension: usize,
+    /// The groups computed (ordered): the configured ones, less remission when the
+    /// cloud had no usable remission.
+    pub groups: Vec<FeatureGroup>,
     /// Cells with at least `min_points` points.
     pub predictable: Vec<bool>,
     /// Appearance values (METHOD.md section 5), row-major `cells x appearance_len`;
@@ -54,7 +73,7 @@ pub struct FeatureGrid {
 
 impl FeatureGrid {
     pub fn cell(&self, cell: usize) -> &[f32] {
-        &self.values[cell * FEATURE_COUNT..(cell + 1) * FEATURE_COUNT]
+        &self.values[cell * self.dimension..(cell + 1) * self.dimension]
     }
 
     /// The appearance values of a cell that an image has covered.
@@ -85,18 +104,34 @@ pub struct FeatureExtractor {
 struct Scratch {
     subcells: Vec<Moments>,
     occupied_bins: Vec<bool>,
+    remission: Vec<f32>,
 }
 
 impl FeatureExtractor {
-    pub fn compute(&self, cells: &CellPoints, ground_normal: [f64; 3]) -> FeatureGrid {
+    /// The features of every cell; `sensor_in_world` is where the sensor was.
+    pub fn compute(
+        &self,
+        cells: &CellPoints,
+        ground_normal: [f64; 3],
+        sensor_in_world: [f64; 3],
+    ) -> FeatureGrid {
         let layout = &cells.layout;
         let cell_count = layout.cell_count();
         let per_side = self.config.subcells_per_side(layout.cell_size_m);
         let mut scratch = Scratch {
             subcells: vec![Moments::default(); per_side * per_side],
             occupied_bins: vec![false; self.config.curvity_bins],
+            remission: Vec::new(),
         };
-        let mut values = vec![0f32; cell_count * FEATURE_COUNT];
+        let groups = match cells.remission {
+            Some(_) => feature_groups::ordered(&self.config.groups),
+            None => feature_groups::ordered(&self.config.without_remission().groups),
+        };
+        let dimension = feature_names(&groups).len();
+        let remission_at = groups
+            .contains(&FeatureGroup::Remission)
+            .then_some(FEATURE_COUNT);
+        let mut values = vec![0f32; cell_count * dimension];
         let mut predictable = vec![false; cell_count];
         for cell in 0..cell_count {
             let range = cells.cell_range(cell);
@@ -109,18 +144,38 @@ impl FeatureExtractor {
                 col as f64 * layout.cell_size_m,
                 row as f64 * layout.cell_size_m,
             ];
-            let out = &mut values[cell * FEATURE_COUNT..(cell + 1) * FEATURE_COUNT];
-            out.copy_from_slice(&self.cell_features(
+            let row = &mut values[cell * dimension..(cell + 1) * dimension];
+            row[..FEATURE_COUNT].copy_from_slice(&self.cell_features(
                 &cells.points_in_grid[range.clone()],
-                &cells.range_m[range],
+                &cells.range_m[range.clone()],
                 cell_min,
                 layout.cell_size_m,
                 ground_normal,
                 &mut scratch,
             ));
+            if let (Some(at), Some(remission)) = (remission_at, &cells.remission) {
+                row[at..at + feature_groups::REMISSION_NAMES.len()].copy_from_slice(
+                    &feature_groups::remission(&remission[range], &mut scratch.remission),
+                );
+            }
+        }
+        if groups.contains(&FeatureGroup::Context) {
+            let [min_x, min_y] = layout.min_corner_in_world();
+            let sensor_in_grid = [sensor_in_world[0] - min_x, sensor_in_world[1] - min_y];
+            let offset = dimension - feature_groups::CONTEXT_NAMES.len();
+            feature_groups::context(
+                cells,
+                &predictable,
+                sensor_in_grid,
+                &mut values,
+                dimension,
+                offset,
+            );
         }
         FeatureGrid {
             values,
+            dimension,
+            groups,
             predictable,
             appearance: Vec::new(),
             appearance_len: 0,
@@ -305,6 +360,7 @@ mod tests {
         let mut scratch = Scratch {
             subcells: vec![Moments::default(); 4],
             occupied_bins: vec![false; e.config.curvity_bins],
+            remission: Vec::new(),
         };
         e.cell_features(
             points,

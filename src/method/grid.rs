@@ -119,6 +119,8 @@ pub struct CellPoints {
     pub range_m: Vec<f32>,
     /// Per-point labels, present when every scan of the window has them.
     pub labels: Option<Vec<u32>>,
+    /// Per-point remission (0..1), present when every scan of the window has it.
+    pub remission: Option<Vec<f32>>,
 }
 
 impl CellPoints {
@@ -154,6 +156,12 @@ pub fn grid_points(scans: &[WorldScan], layout: GridLayout) -> CellPoints {
 
     // Pass 2: scatter the in-grid points into cell order.
     let with_labels = scans.iter().all(|s| s.labels.is_some());
+    let with_remission = scans.iter().all(|s| s.remission.is_some());
+    let mut remission = if with_remission {
+        vec![0f32; in_grid.len()]
+    } else {
+        Vec::new()
+    };
     let mut points_in_grid = vec![[0f32; 3]; in_grid.len()];
     let mut range_m = vec![0f32; in_grid.len()];
     let mut labels = if with_labels {
@@ -174,6 +182,9 @@ pub fn grid_points(scans: &[WorldScan], layout: GridLayout) -> CellPoints {
         if with_labels && let Some(scan_labels) = &scan.labels {
             labels[at] = scan_labels[i];
         }
+        if with_remission && let Some(scan_remission) = &scan.remission {
+            remission[at] = scan_remission[i];
+        }
     }
     CellPoints {
         layout,
@@ -181,6 +192,7 @@ pub fn grid_points(scans: &[WorldScan], layout: GridLayout) -> CellPoints {
         points_in_grid,
         range_m,
         labels: with_labels.then_some(labels),
+        remission: with_remission.then_some(remission),
     }
 }
 
@@ -194,6 +206,7 @@ mod tests {
             index: 0,
             stamp_ns: 0,
             labels: Some((0..points.len() as u32).collect()),
+            remission: None,
             points_in_world: points,
             origin_in_world: origin,
             moments: Moments::default(),

@@ -17,6 +17,8 @@ pub struct WorldScan {
     /// Where the sensor was when it took this scan; curvity measures ranges from it.
     pub origin_in_world: [f64; 3],
     pub labels: Option<Vec<u32>>,
+    /// Remission per point on a 0..1 scale, when the input's is usable.
+    pub remission: Option<Vec<f32>>,
     /// Moments of `points_in_world`, so that the plane of several scans costs O(1).
     pub moments: Moments,
 }
@@ -45,6 +47,10 @@ pub fn scan_to_world(frame: Frame) -> WorldScan {
         points_in_world,
         origin_in_world: [m[(0, 3)], m[(1, 3)], m[(2, 3)]],
         labels: frame.labels,
+        remission: frame
+            .remission
+            .is_usable()
+            .then(|| frame.points_in_velodyne.iter().map(|p| p[3]).collect()),
         moments,
     }
 }
@@ -144,6 +150,7 @@ mod tests {
             stamp_ns: 7,
             world_from_velodyne,
             points_in_velodyne: vec![[1.0, 0.0, 2.0, 0.5], [0.0, 1.0, 0.0, 0.1]],
+            remission: crate::frame::RemissionScale::Unit,
             labels: None,
             camera: None,
             dropped_points: 0,
@@ -164,6 +171,7 @@ mod tests {
             points_in_world: Vec::new(),
             origin_in_world: [0.0; 3],
             labels: None,
+            remission: None,
             moments: Moments::default(),
         }
     }

@@ -6,6 +6,7 @@
 
 pub mod appearance;
 pub mod classifier;
+pub mod feature_groups;
 pub mod features;
 pub mod filter;
 pub mod grid;

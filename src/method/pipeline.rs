@@ -14,7 +14,7 @@ use serde::Serialize;
 
 use crate::config::Config;
 use crate::error::Result;
-use crate::frame::{CameraImage, Frame};
+use crate::frame::{CameraImage, Frame, RemissionScale};
 use crate::method::appearance::{AppearanceVoter, ColourMemory, FrameVotes};
 use crate::method::classifier::SvmModel;
 use crate::method::features::{FeatureExtractor, FeatureGrid};
@@ -52,6 +52,11 @@ pub struct FrameResult {
     pub cells: CellPoints,
     /// Points of this frame's scan that the reader dropped (non-finite coordinates).
     pub dropped_points: usize,
+    /// The scale of the scan's remission, as the reader found it.
+    pub remission: RemissionScale,
+    /// Remission features were configured but the window had no usable remission,
+    /// so they were left out and the model's fallback classified the frame.
+    pub without_remission: bool,
     pub features: FeatureGrid,
     /// The classifier's labels before filtering (None without a model).
     pub predicted: Option<Vec<CellClass>>,
@@ -76,6 +81,7 @@ impl FrameResult {
 /// What a frame brings besides its scan, set aside while the scan is integrated.
 struct FrameExtras {
     world_from_velodyne: Isometry3<f64>,
+    remission: RemissionScale,
     camera: Option<CameraImage>,
     dropped_points: usize,
     integrate_ms: f64,
@@ -93,6 +99,8 @@ pub struct Pipeline {
     cell_size_m: f64,
     cells_per_side: usize,
     use_reduced_set: bool,
+    /// Feature groups configured.
+    feature_groups: usize,
 }
 
 impl Pipeline {
@@ -118,6 +126,7 @@ impl Pipeline {
             cell_size_m: config.grid.cell_size_m,
             cells_per_side: config.grid.cells_per_side(),
             use_reduced_set: config.classifier.use_reduced_set,
+            feature_groups: config.features.groups.len(),
         })
     }
 
@@ -157,6 +166,7 @@ impl Pipeline {
             .iter_mut()
             .map(|f| FrameExtras {
                 world_from_velodyne: f.world_from_velodyne,
+                remission: f.remission,
                 camera: f.camera.take(),
                 dropped_points: f.dropped_points,
                 integrate_ms: 0.0,
@@ -226,8 +236,10 @@ impl Pipeline {
         let cells;
         (cells, timings.grid_ms) = timed(|| grid_points(window, layout));
         let features;
-        (features, timings.features_ms) =
-            timed(|| self.features.compute(&cells, ground_normal(window)));
+        (features, timings.features_ms) = timed(|| {
+            self.features
+                .compute(&cells, ground_normal(window), current.origin_in_world)
+        });
         let votes;
         (votes, timings.appearance_ms) = timed(|| match (&self.appearance, &extras.camera) {
             (Some(voter), Some(camera)) => voter.vote(&cells, &extras.world_from_velodyne, camera),
@@ -243,6 +255,8 @@ impl Pipeline {
                 sensor_in_world: current.origin_in_world,
                 cells,
                 dropped_points: extras.dropped_points,
+                remission: extras.remission,
+                without_remission: features.groups.len() < self.feature_groups,
                 features,
                 predicted: None,
                 filtered: None,

@@ -241,7 +241,7 @@ mod tests {
         std::fs::write(&dead, b"").unwrap();
         std::fs::write(&alive, b"").unwrap();
         let preflight = check_output_file(&output, &InputFiles::default()).unwrap();
-        assert_eq!(preflight.removed_stale, [dead.clone()]);
+        assert_eq!(preflight.removed_stale, std::slice::from_ref(&dead));
         assert!(!dead.exists() && alive.exists());
     }
 }

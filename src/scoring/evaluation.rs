@@ -72,6 +72,9 @@ pub struct EvaluationReport {
     pub cells_with_appearance: u64,
     /// Points the readers dropped for a non-finite coordinate, over all frames.
     pub dropped_points: u64,
+    /// Frames classified by the fallback model: remission features configured, but
+    /// the input had no usable remission (missing, or on an unknown scale).
+    pub frames_without_remission: usize,
     pub timings_ms: TimingReport,
 }
 
@@ -82,6 +85,7 @@ pub struct Evaluation {
     frames_with_images: usize,
     cells_with_appearance: u64,
     dropped_points: u64,
+    frames_without_remission: usize,
     filtered: Confusion,
     unfiltered: Confusion,
     timings: Vec<StageTimings>,
@@ -92,6 +96,7 @@ impl Evaluation {
     pub fn add(&mut self, result: &FrameResult) {
         self.timings.push(result.timings);
         self.dropped_points += result.dropped_points as u64;
+        self.frames_without_remission += result.without_remission as usize;
         let features = &result.features;
         let seen = (0..features.predictable.len())
             .filter(|&c| features.predictable[c] && features.appearance(c).is_some())
@@ -119,6 +124,7 @@ impl Evaluation {
             frames_with_images: self.frames_with_images,
             cells_with_appearance: self.cells_with_appearance,
             dropped_points: self.dropped_points,
+            frames_without_remission: self.frames_without_remission,
             timings_ms: TimingReport::of(&self.timings),
         }
     }

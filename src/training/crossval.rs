@@ -9,7 +9,6 @@ use crate::config::Config;
 use crate::drive::Selection;
 use crate::error::{Error, Result};
 use crate::method::classifier::{PredictionScratch, SvmModel};
-use crate::method::features::FEATURE_COUNT;
 use crate::method::filter::OutlierFilter;
 use crate::method::grid::CellClass;
 use crate::method::pipeline::FrameResult;
@@ -17,19 +16,23 @@ use crate::scoring::evaluation::{Evaluation, EvaluationReport};
 
 /// Collects the labelled cells of the selected frames on the training grid
 /// (`training.grid_size_m`).
-pub fn collect_training_set(
-    selections: &[Selection],
+pub fn collect_training_set<'a>(
+    selections: impl IntoIterator<Item = &'a Selection>,
     config: &Config,
     on_frame: &mut dyn FnMut(),
 ) -> Result<TrainingSet> {
     let training_config = config.for_training_cells();
-    let mut set = TrainingSet {
-        dimension: FEATURE_COUNT,
-        ..Default::default()
-    };
+    let mut set = TrainingSet::for_features(config);
     for selection in selections {
         set.sources.push(selection.describe());
         selection.run::<Error>(&training_config, None, |result| {
+            if result.features.dimension != set.dimension {
+                return Err(Error::Training(format!(
+                    "{} frame {}: no usable remission (intensity), so no remission features to train on; train without them (--set features.groups=[\"context\"]) or on inputs with intensity",
+                    selection.source.path().display(),
+                    result.index
+                )));
+            }
             for (cell, traversable) in result.labelled_cells() {
                 set.push(
                     result.features.cell(cell),
@@ -155,5 +158,70 @@ pub fn cross_validate(
         block_size_m: t.block_size_m,
         folds: fold_reports,
         evaluation: evaluation.report(),
+    })
+}
+
+/// One input held out: trained on the others, scored on it.
+#[derive(Clone, Debug, Serialize)]
+pub struct HeldOutReport {
+    /// The held-out input and its frames.
+    pub input: String,
+    pub training_cells: usize,
+    pub c: f64,
+    pub gamma: f64,
+    pub support_vectors: usize,
+    pub evaluation: EvaluationReport,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct LeaveOneOutReport {
+    pub held_out: Vec<HeldOutReport>,
+    /// Every held-out frame scored together.
+    pub pooled: EvaluationReport,
+}
+
+/// Leave-one-input-out cross-validation: each input (a scene) in turn is scored by
+/// a model trained, with its own grid search, on the cells of all the others. No
+/// spatial blocks are needed: different inputs are different places. This is how
+/// the model fares on a scene it has never seen.
+pub fn leave_one_input_out(
+    selections: &[Selection],
+    config: &Config,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<LeaveOneOutReport> {
+    if selections.len() < 2 {
+        return Err(Error::Training(
+            "leave-one-input-out needs at least two inputs".into(),
+        ));
+    }
+    let mut pooled = Evaluation::default();
+    let mut held_out = Vec::new();
+    for (i, test) in selections.iter().enumerate() {
+        let others = selections
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != i)
+            .map(|(_, s)| s);
+        progress(&format!("holding out {}", test.describe()));
+        let set = collect_training_set(others, config, &mut || {})?;
+        let model = train(&set, config, &|_, _| {})?;
+        let mut evaluation = Evaluation::default();
+        test.run::<Error>(config, Some(&model), |result| {
+            evaluation.add(&result);
+            pooled.add(&result);
+            Ok(())
+        })?;
+        held_out.push(HeldOutReport {
+            input: test.describe(),
+            training_cells: set.len(),
+            c: model.c,
+            gamma: model.gamma,
+            support_vectors: model.support_vector_count(),
+            evaluation: evaluation.report(),
+        });
+    }
+    Ok(LeaveOneOutReport {
+        held_out,
+        pooled: pooled.report(),
     })
 }

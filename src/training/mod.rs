@@ -13,9 +13,11 @@ pub mod model_file;
 mod reduced_set;
 pub mod smo;
 
-use crate::config::{Config, TrainingConfig};
+use crate::config::{Config, FeatureGroup, TrainingConfig};
 use crate::error::{Error, Result};
 use crate::method::classifier::{SearchResult, SvmModel, TrainingSummary};
+use crate::method::feature_groups::REMISSION_NAMES;
+use crate::method::features::{FEATURE_COUNT, feature_names};
 use crate::random::SplitMix64;
 use reduced_set::fit_reduced_set;
 use smo::{Parameters, Problem};
@@ -39,6 +41,30 @@ pub struct TrainingSet {
 }
 
 impl TrainingSet {
+    /// An empty set of cells computed with `config`'s features.
+    pub fn for_features(config: &Config) -> TrainingSet {
+        TrainingSet {
+            dimension: feature_names(&config.features.groups).len(),
+            ..Default::default()
+        }
+    }
+
+    /// The same cells without the feature columns `columns`.
+    pub fn without_columns(&self, columns: std::ops::Range<usize>) -> TrainingSet {
+        let d = self.dimension;
+        let mut out = TrainingSet {
+            dimension: d - columns.len(),
+            features: Vec::with_capacity(self.len() * (d - columns.len())),
+            ..self.clone()
+        };
+        out.features.clear();
+        for row in self.features.chunks_exact(d) {
+            out.features.extend_from_slice(&row[..columns.start]);
+            out.features.extend_from_slice(&row[columns.end..]);
+        }
+        out
+    }
+
     pub fn len(&self) -> usize {
         self.traversable.len()
     }
@@ -256,6 +282,22 @@ pub fn train(
             Err(e) => return Err(e),
         }
     }
+    // Clouds without usable intensity get the same model without remission: the
+    // same cells with the remission columns left out, so no second pass is needed.
+    if config.features.groups.contains(&FeatureGroup::Remission) {
+        let mut without = config.clone();
+        without.features = config.features.without_remission();
+        let columns = FEATURE_COUNT..FEATURE_COUNT + REMISSION_NAMES.len();
+        if set.dimension < columns.end {
+            return Err(Error::Training(format!(
+                "{} values per cell: too few for remission features ({} expected)",
+                set.dimension,
+                feature_names(&config.features.groups).len()
+            )));
+        }
+        let fallback = train(&set.without_columns(columns), &without, progress)?;
+        model.fallback = Some(Box::new(fallback));
+    }
     Ok(model)
 }
 
@@ -349,6 +391,14 @@ fn train_one(
 mod tests {
     use super::*;
 
+    /// Training parameters for synthetic sets (of any dimension): no feature groups,
+    /// so no fallback model is trained from remission columns they do not have.
+    pub(super) fn paper_config() -> Config {
+        let mut config = Config::default();
+        config.features.groups.clear();
+        config
+    }
+
     #[test]
     fn spatial_folds_keep_blocks_whole_and_use_every_fold() {
         let centres: Vec<[f64; 2]> = (0..400)
@@ -393,7 +443,7 @@ mod tests {
     #[test]
     fn training_learns_a_separable_feature_and_stores_the_search() {
         let set = separable_set();
-        let mut config = Config::default();
+        let mut config = paper_config();
         config.training.c_values = vec![1.0, 10.0];
         config.training.gamma_values = vec![0.1, 1.0];
         let model = train(&set, &config, &|_, _| {}).unwrap();
@@ -412,7 +462,7 @@ mod tests {
     #[test]
     fn a_large_set_is_fitted_on_a_seeded_subset_that_still_separates_it() {
         let set = separable_set();
-        let mut config = Config::default();
+        let mut config = paper_config();
         config.training.c_values = vec![10.0];
         config.training.gamma_values = vec![0.1];
         config.training.max_search_samples = 100;
@@ -448,6 +498,6 @@ mod tests {
         };
         set.push(&[1.0], None, true, [0.0, 0.0]);
         set.push(&[2.0], None, true, [9.0, 0.0]);
-        assert!(train(&set, &Config::default(), &|_, _| {}).is_err());
+        assert!(train(&set, &paper_config(), &|_, _| {}).is_err());
     }
 }

@@ -4,10 +4,10 @@
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use crate::config::Config;
+use crate::config::{Config, FeatureGroup, written_before_groups};
 use crate::error::{Error, Result};
 use crate::method::classifier::{ReducedSet, SvmModel, TrainingSummary, appearance_feature_names};
-use crate::method::features::FEATURE_NAMES;
+use crate::method::features::feature_names;
 
 /// The format tag and version of model files this build reads and writes.
 pub const MODEL_FORMAT: &str = "travmap-svm";
@@ -41,6 +41,10 @@ struct ModelFile {
     /// The hybrid model (geometric + appearance features) for cells a camera has seen.
     #[serde(default)]
     hybrid: Option<Box<ModelFile>>,
+    /// The model without remission features, for clouds without usable intensity;
+    /// present exactly when this one uses remission.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    fallback: Option<Box<ModelFile>>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -51,6 +55,19 @@ struct ReducedSetFile {
     weights: Vec<f32>,
     bias: f32,
     training_agreement: f64,
+}
+
+/// Every configuration in a model file (the model's, its hybrid's and fallback's),
+/// read as [`written_before_groups`] says.
+fn older_configs(model: &mut serde_json::Value) {
+    if let Some(config) = model.get_mut("config") {
+        written_before_groups(config);
+    }
+    for part in ["hybrid", "fallback"] {
+        if let Some(inner) = model.get_mut(part).filter(|p| p.is_object()) {
+            older_configs(inner);
+        }
+    }
 }
 
 impl SvmModel {
@@ -76,10 +93,23 @@ impl SvmModel {
                 version: version.map_or("none".into(), |v| v.to_string()),
             });
         }
+        let mut header = header;
+        older_configs(&mut header);
         let file: ModelFile =
             serde_json::from_value(header).map_err(|e| fail(format!("malformed model: {e}")))?;
-        let names: Vec<String> = FEATURE_NAMES.iter().map(|n| n.to_string()).collect();
-        Self::from_file(file, source_name, &names)
+        let names = feature_names(&file.config.features.groups);
+        let model = Self::from_file(file, source_name, &names)?;
+        let uses_remission = model
+            .config
+            .features
+            .groups
+            .contains(&FeatureGroup::Remission);
+        if uses_remission != model.fallback.is_some() {
+            return Err(fail(
+                "a model with remission features carries a fallback model without them, and only such a model does".into(),
+            ));
+        }
+        Ok(model)
     }
 
     /// Checks and loads one model of a file; `expected_names` are its features.
@@ -141,6 +171,21 @@ impl SvmModel {
             }
             None => None,
         };
+        let fallback = match file.fallback {
+            Some(fallback) => {
+                let features = file.config.features.without_remission();
+                if fallback.config.features != features {
+                    return Err(fail(format!(
+                        "fallback model: features {:?}, expected {features:?}",
+                        fallback.config.features
+                    )));
+                }
+                let names = feature_names(&features.groups);
+                let source = format!("{source_name} (fallback model)");
+                Some(Box::new(Self::from_file(*fallback, &source, &names)?))
+            }
+            None => None,
+        };
         let reduced_set = match file.reduced_set {
             None => None,
             Some(r) => {
@@ -181,6 +226,7 @@ impl SvmModel {
         );
         model.reduced_set = reduced_set;
         model.hybrid = hybrid;
+        model.fallback = fallback;
         Ok(model)
     }
 
@@ -210,6 +256,7 @@ impl SvmModel {
                 training_agreement: r.training_agreement,
             }),
             hybrid: self.hybrid.as_ref().map(|h| Box::new(h.to_file())),
+            fallback: self.fallback.as_ref().map(|f| Box::new(f.to_file())),
         }
     }
 
@@ -236,7 +283,10 @@ mod tests {
     fn embedded_model_loads_and_round_trips() {
         let model = SvmModel::embedded_default().expect("the shipped model must load");
         assert!(model.support_vector_count() > 0);
-        assert_eq!(model.dimension(), FEATURE_NAMES.len());
+        assert_eq!(
+            model.dimension(),
+            feature_names(&Config::default().features.groups).len()
+        );
         model
             .check_compatible(&Config::default(), "embedded")
             .unwrap();

@@ -141,7 +141,7 @@ mod tests {
                 [(i % 40) as f64, (i / 40) as f64],
             );
         }
-        let mut config = Config::default();
+        let mut config = crate::training::tests::paper_config();
         config.training.c_values = vec![10.0];
         config.training.gamma_values = vec![1.0];
         config.training.reduced_set_size = 24;

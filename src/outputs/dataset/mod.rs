@@ -27,7 +27,7 @@ use parquet::file::writer::SerializedFileWriter;
 
 use crate::Config;
 use crate::error::{Error, Result};
-use crate::method::features::{FEATURE_COUNT, FEATURE_NAMES};
+use crate::method::features::feature_names;
 use crate::method::grid::CellClass;
 use crate::method::pipeline::FrameResult;
 use crate::outputs::writing::AtomicFile;
@@ -53,7 +53,9 @@ pub fn appearance_columns(config: &Config) -> Vec<String> {
 }
 
 /// The Parquet schema of the cell rows.
-fn schema(appearance: &[String]) -> String {
+/// The message type of the cell table: `features` and `appearance` are the value
+/// columns' names.
+fn schema(features: &[String], appearance: &[String]) -> String {
     let mut fields = vec![
         "REQUIRED BYTE_ARRAY source (STRING)".to_string(),
         "REQUIRED INT64 frame".into(),
@@ -64,7 +66,7 @@ fn schema(appearance: &[String]) -> String {
         "REQUIRED DOUBLE y_m".into(),
         "REQUIRED INT32 points".into(),
     ];
-    fields.extend(FEATURE_NAMES.iter().map(|n| format!("REQUIRED FLOAT {n}")));
+    fields.extend(features.iter().map(|n| format!("REQUIRED FLOAT {n}")));
     fields.extend(appearance.iter().map(|n| format!("OPTIONAL FLOAT {n}")));
     fields.push("OPTIONAL BOOLEAN ground_truth_traversable".into());
     fields.push("OPTIONAL BOOLEAN predicted_traversable".into());
@@ -105,9 +107,9 @@ struct Columns {
 }
 
 impl Columns {
-    fn new(appearance_len: usize) -> Self {
+    fn new(feature_count: usize, appearance_len: usize) -> Self {
         Self {
-            features: vec![Vec::new(); FEATURE_COUNT],
+            features: vec![Vec::new(); feature_count],
             appearance: vec![Vec::new(); appearance_len],
             ..Default::default()
         }
@@ -139,7 +141,8 @@ pub struct DatasetSummary {
 impl DatasetWriter {
     pub fn create(path: &Path, config: &Config) -> Result<Self> {
         let appearance = appearance_columns(config);
-        let schema = parquet::schema::parser::parse_message_type(&schema(&appearance))
+        let features = feature_names(&config.features.groups);
+        let schema = parquet::schema::parser::parse_message_type(&schema(&features, &appearance))
             .expect("the cell schema parses");
         let config_json = serde_json::to_string(config).expect("config serialises");
         let properties = WriterProperties::builder()
@@ -160,7 +163,7 @@ impl DatasetWriter {
         Ok(Self {
             writer,
             output,
-            columns: Columns::new(appearance.len()),
+            columns: Columns::new(features.len(), appearance.len()),
             appearance_len: appearance.len(),
             summary: DatasetSummary::default(),
         })
@@ -168,6 +171,15 @@ impl DatasetWriter {
 
     /// Appends the predictable cells of one frame.
     pub fn push_frame(&mut self, source: &str, result: &FrameResult) -> Result<()> {
+        if result.features.dimension != self.columns.features.len() {
+            return Err(Error::Dataset {
+                path: self.output_path(),
+                message: format!(
+                    "{source} frame {}: no usable remission (intensity) for the remission columns; extract without them (--set features.groups=[\"context\"])",
+                    result.index
+                ),
+            });
+        }
         let source = ByteArray::from(source);
         let classes = |grid: &Option<Vec<CellClass>>, cell: usize| {
             grid.as_ref().and_then(|g| match g[cell] {
@@ -220,7 +232,8 @@ impl DatasetWriter {
         if rows == 0 {
             return Ok(());
         }
-        let columns = std::mem::replace(&mut self.columns, Columns::new(self.appearance_len));
+        let empty = Columns::new(self.columns.features.len(), self.appearance_len);
+        let columns = std::mem::replace(&mut self.columns, empty);
         let path = self.output_path();
         let fail = |e| write_error(&path, e);
         let mut group = self.writer.next_row_group().map_err(fail)?;
@@ -268,7 +281,7 @@ fn write_column(
     columns: &Columns,
     index: usize,
 ) -> parquet::errors::Result<()> {
-    let features = 8..8 + FEATURE_COUNT;
+    let features = 8..8 + columns.features.len();
     let appearance = features.end..features.end + columns.appearance.len();
     let written = match writer {
         ColumnWriter::ByteArrayColumnWriter(w) => w.write_batch(&columns.source, None, None),
@@ -330,7 +343,8 @@ mod tests {
 
     /// A file with the cell schema as `edit` changes it and travmap's metadata.
     fn write_with_schema(path: &Path, config: &Config, edit: impl Fn(String) -> String) {
-        let schema = edit(schema(&appearance_columns(config)));
+        let features = feature_names(&config.features.groups);
+        let schema = edit(schema(&features, &appearance_columns(config)));
         let schema = parquet::schema::parser::parse_message_type(&schema).unwrap();
         let properties = WriterProperties::builder()
             .set_key_value_metadata(Some(vec![
@@ -369,6 +383,6 @@ mod tests {
             s.replace("; OPTIONAL BOOLEAN predicted_traversable", "")
         });
         let err = read(&path).unwrap_err();
-        assert!(err.contains("column 117 is `(none)`; expected `predicted_traversable BOOLEAN` (117 columns, expected 118)"), "{err}");
+        assert!(err.contains("column 120 is `(none)`; expected `predicted_traversable BOOLEAN` (120 columns, expected 121)"), "{err}");
     }
 }

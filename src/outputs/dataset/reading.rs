@@ -18,8 +18,9 @@ use super::{
     feature_settings, schema,
 };
 use crate::Config;
+use crate::config::written_before_groups;
 use crate::error::{Error, Result, contain_panics};
-use crate::method::features::FEATURE_COUNT;
+use crate::method::features::feature_names;
 use crate::training::TrainingSet;
 
 fn read_error(path: &Path, message: impl std::fmt::Display) -> Error {
@@ -139,7 +140,11 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
         ));
     }
     let written: Config = value_of(CONFIG_KEY)
-        .and_then(|json| serde_json::from_str(&json).ok())
+        .and_then(|json| serde_json::from_str::<serde_json::Value>(&json).ok())
+        .and_then(|mut value| {
+            written_before_groups(&mut value);
+            serde_json::from_value(value).ok()
+        })
         .ok_or_else(|| read_error(path, format!("no readable {CONFIG_KEY} metadata")))?;
     let (theirs, ours) = (feature_settings(&written), feature_settings(config));
     if theirs != ours {
@@ -150,7 +155,9 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
             ),
         ));
     }
-    let expected = schema(&appearance_columns(config));
+    let feature_columns = feature_names(&config.features.groups);
+    let feature_count = feature_columns.len();
+    let expected = schema(&feature_columns, &appearance_columns(config));
     let expected = parquet::schema::parser::parse_message_type(&expected).expect("schema parses");
     let expected = SchemaDescriptor::new(Arc::new(expected));
     // Name and physical type of every column. Other writers may annotate columns
@@ -191,7 +198,7 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
     }
 
     use parquet::data_type::{BoolType, DoubleType, FloatType};
-    let appearance_len = wanted.len() - 10 - FEATURE_COUNT;
+    let appearance_len = wanted.len() - 10 - feature_count;
     let mut added = 0;
     for g in 0..reader.num_row_groups() {
         let group = contained(|| reader.get_row_group(g)).map_err(fail)?;
@@ -210,15 +217,15 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
             })?;
         let x_m = read_required::<DoubleType>(group.as_ref(), 5, rows).map_err(fail)?;
         let y_m = read_required::<DoubleType>(group.as_ref(), 6, rows).map_err(fail)?;
-        let mut features = Vec::with_capacity(FEATURE_COUNT);
-        for f in 0..FEATURE_COUNT {
+        let mut features = Vec::with_capacity(feature_count);
+        for f in 0..feature_count {
             features.push(read_required::<FloatType>(group.as_ref(), 8 + f, rows).map_err(fail)?);
         }
         let mut appearance = Vec::with_capacity(appearance_len);
         let mut seen = vec![true; rows];
         for a in 0..appearance_len {
             let (values, present) =
-                read_column::<FloatType>(group.as_ref(), 8 + FEATURE_COUNT + a, rows)
+                read_column::<FloatType>(group.as_ref(), 8 + feature_count + a, rows)
                     .map_err(fail)?;
             // Values are packed over the present rows; spread them back.
             let mut spread = vec![0.0f32; rows];
@@ -232,11 +239,11 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
             }
             appearance.push(spread);
         }
-        let truth_column = 8 + FEATURE_COUNT + appearance_len;
+        let truth_column = 8 + feature_count + appearance_len;
         let (truth, labelled) =
             read_column::<BoolType>(group.as_ref(), truth_column, rows).map_err(fail)?;
         let mut truth = truth.into_iter();
-        let mut row_features = [0.0f32; FEATURE_COUNT];
+        let mut row_features = vec![0.0f32; feature_count];
         let mut row_appearance = vec![0.0f32; appearance_len];
         for row in 0..rows {
             if !labelled[row] {
