@@ -6,6 +6,7 @@
 pub mod cloud;
 pub mod image;
 pub mod kitti;
+mod kitti_text;
 pub mod mcap_drive;
 mod mcap_records;
 pub mod ros;
