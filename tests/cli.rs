@@ -328,3 +328,15 @@ fn suspicious_arguments_are_refused_or_warned_about() {
     let err = common::stderr(&out);
     assert_contains(&err, &["warning: --cloud-topic applies to MCAP inputs"]);
 }
+
+#[test]
+fn frames_without_ground_truth_score_n_a_not_zero() {
+    let Some(seq) = sample() else { return };
+    // Frames 3-5 of the sample have no labels.
+    let out = success(travmap(&["eval", &seq, "--frames", "3..6"]));
+    assert_contains(&out, &["no frame has ground truth", "n/a"]);
+    assert!(!out.contains("travmap (filtered)        0.0"), "{out}");
+    let doc = json_summary(&["eval", &seq, "--frames", "3..6"]);
+    assert_eq!(doc["report"]["frames"], 0);
+    assert!(doc["report"]["scores"].is_null() && doc["report"]["unfiltered_scores"].is_null());
+}

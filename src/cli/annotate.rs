@@ -84,8 +84,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
             summary.output_bytes,
             seconds,
         );
-        if summary.evaluation.frames > 0 {
-            let s = summary.evaluation.scores;
+        if let Some(s) = summary.evaluation.scores {
             println!(
                 "{} frames with ground truth: Acc {:.1} mIoU {:.1} F1 {:.1} (filtered)",
                 summary.evaluation.frames,

@@ -131,8 +131,12 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
 /// The paper's geometry-only row (METHOD.md section 10), for reference.
 const PAPER_GEOMETRY_ONLY: [f64; 7] = [85.8, 79.5, 87.9, 11.8, 89.4, 10.6, 88.2];
 
-fn score_row(s: &Scores) -> [f64; 7] {
-    [s.accuracy, s.miou, s.f1, s.fpr, s.tpr, s.fnr, s.tnr].map(|v| 100.0 * v)
+/// Percentages of a row; `n/a` without scores (no labelled frame).
+fn score_row(s: Option<&Scores>) -> [Option<f64>; 7] {
+    match s {
+        Some(s) => [s.accuracy, s.miou, s.f1, s.fpr, s.tpr, s.fnr, s.tnr].map(|v| Some(100.0 * v)),
+        None => [None; 7],
+    }
 }
 
 /// `with_latency` false where the frames were not run one at a time (cross-validation).
@@ -146,8 +150,14 @@ pub(super) fn write_table(
         "{:<22} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>11}",
         "", "Acc", "mIoU", "F1", "FPR", "TPR", "FNR", "TNR", "latency"
     )?;
-    let row = |name: &str, values: [f64; 7], latency: &str| {
-        let cells: String = values.iter().map(|v| format!(" {v:>6.1}")).collect();
+    let row = |name: &str, values: [Option<f64>; 7], latency: &str| {
+        let cells: String = values
+            .iter()
+            .map(|v| match v {
+                Some(v) => format!(" {v:>6.1}"),
+                None => format!(" {:>6}", "n/a"),
+            })
+            .collect();
         format!("{name:<22}{cells} {latency:>11}")
     };
     let latency = if with_latency {
@@ -158,21 +168,29 @@ pub(super) fn write_table(
     writeln!(
         out,
         "{}",
-        row("travmap (filtered)", score_row(&report.scores), &latency)
+        row(
+            "travmap (filtered)",
+            score_row(report.scores.as_ref()),
+            &latency
+        )
     )?;
     writeln!(
         out,
         "{}",
         row(
             "travmap (SVM only)",
-            score_row(&report.unfiltered_scores),
+            score_row(report.unfiltered_scores.as_ref()),
             ""
         )
     )?;
     writeln!(
         out,
         "{}",
-        row("paper, geometry only", PAPER_GEOMETRY_ONLY, "13 ms SVM")
+        row(
+            "paper, geometry only",
+            PAPER_GEOMETRY_ONLY.map(Some),
+            "13 ms SVM"
+        )
     )?;
     let c = &report.confusion;
     writeln!(

@@ -64,9 +64,10 @@ pub struct EvaluationReport {
     pub frames: usize,
     /// After the outlier filter: the method's output.
     pub confusion: Confusion,
-    pub scores: Scores,
+    /// None (`null` in JSON) without a scored frame: no score is 0.
+    pub scores: Option<Scores>,
     /// The classifier alone, before the filter.
-    pub unfiltered_scores: Scores,
+    pub unfiltered_scores: Option<Scores>,
     /// Frames with a camera image, and their predictable cells that some image covered.
     pub frames_with_images: usize,
     pub cells_with_appearance: u64,
@@ -119,8 +120,8 @@ impl Evaluation {
         EvaluationReport {
             frames: self.frames,
             confusion: self.filtered,
-            scores: self.filtered.scores(),
-            unfiltered_scores: self.unfiltered.scores(),
+            scores: (self.frames > 0).then(|| self.filtered.scores()),
+            unfiltered_scores: (self.frames > 0).then(|| self.unfiltered.scores()),
             frames_with_images: self.frames_with_images,
             cells_with_appearance: self.cells_with_appearance,
             dropped_points: self.dropped_points,
