@@ -152,6 +152,29 @@ pub struct TrainingConfig {
     pub reduced_set_size: usize,
     /// Training cells the reduced set is fitted on, at most (default 20,000).
     pub reduced_set_samples: usize,
+    /// Per-class weights on C (libsvm's `-w`): `"balanced"` (default), each class
+    /// weighted by cells / (2 x its cells) so the rarer class counts as much, or
+    /// `"none"` (the paper's).
+    pub class_weights: ClassWeights,
+    /// What the grid search maximises over the held-out folds: `"miou"` (default:
+    /// accuracy rewards calling everything road) or `"accuracy"`.
+    pub criterion: Criterion,
+}
+
+/// Per-class weights on the SVM's C.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ClassWeights {
+    None,
+    Balanced,
+}
+
+/// The score the grid search maximises.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Criterion {
+    Accuracy,
+    Miou,
 }
 
 impl Default for IntegrationConfig {
@@ -236,6 +259,8 @@ impl Default for TrainingConfig {
             seed: 0,
             reduced_set_size: 384,
             reduced_set_samples: 20_000,
+            class_weights: ClassWeights::Balanced,
+            criterion: Criterion::Miou,
         }
     }
 }

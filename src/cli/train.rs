@@ -115,22 +115,25 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
             );
         }
         println!(
-            "grid search (spatially-blocked {}-fold CV accuracy, cells before filtering):",
-            config.training.folds
+            "grid search (spatially-blocked {}-fold CV, cells before filtering; by {:?}, class weights {:?}):",
+            config.training.folds, config.training.criterion, config.training.class_weights
         );
         for r in &model.training.search {
             println!(
-                "  C {:>8} gamma {:>8}  {:.1} %",
+                "  C {:>8} gamma {:>8}  accuracy {:.1} %  mIoU {:.1} %",
                 r.c,
                 r.gamma,
-                100.0 * r.accuracy
+                100.0 * r.accuracy,
+                100.0 * r.miou
             );
         }
+        let (accuracy, miou) = best.map_or((0.0, 0.0), |b| (b.accuracy, b.miou));
         println!(
-            "chosen C {} gamma {} (CV accuracy {:.1} %): {} support vectors, {} solver iterations, {:.1} s",
+            "chosen C {} gamma {} (CV accuracy {:.1} %, mIoU {:.1} %): {} support vectors, {} solver iterations, {:.1} s",
             model.c,
             model.gamma,
-            100.0 * best.map_or(0.0, |b| b.accuracy),
+            100.0 * accuracy,
+            100.0 * miou,
             model.support_vector_count(),
             model.training.solver_iterations,
             model.training.seconds

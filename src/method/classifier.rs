@@ -36,6 +36,10 @@ pub struct SearchResult {
     pub c: f64,
     pub gamma: f64,
     pub accuracy: f64,
+    /// Mean IoU of the two classes over the held-out folds (0 in models trained
+    /// before it was recorded).
+    #[serde(default)]
+    pub miou: f64,
 }
 
 /// A smaller expansion `sum_j w_j K(c_j, x) + b` fitted by least squares to the exact

@@ -13,12 +13,14 @@ pub mod model_file;
 mod reduced_set;
 pub mod smo;
 
-use crate::config::{Config, FeatureGroup, TrainingConfig};
+use crate::config::{ClassWeights, Config, Criterion, FeatureGroup, TrainingConfig};
 use crate::error::{Error, Result};
 use crate::method::classifier::{SearchResult, SvmModel, TrainingSummary};
 use crate::method::feature_groups::REMISSION_NAMES;
 use crate::method::features::{FEATURE_COUNT, feature_names};
+use crate::method::grid::CellClass;
 use crate::random::SplitMix64;
+use crate::scoring::metrics::Confusion;
 use reduced_set::fit_reduced_set;
 use smo::{Parameters, Problem};
 
@@ -217,8 +219,11 @@ fn fit(set: &TrainingSet, c: f64, gamma: f64, config: &Config) -> SvmModel {
         dimension: d,
         labels: &labels,
     };
+    let (positive_weight, negative_weight) = class_weights(set, config.training.class_weights);
     let parameters = Parameters {
         c,
+        positive_weight,
+        negative_weight,
         gamma,
         tolerance: config.training.tolerance,
         cache_bytes: config.training.cache_mib << 20,
@@ -254,16 +259,36 @@ fn fit(set: &TrainingSet, c: f64, gamma: f64, config: &Config) -> SvmModel {
 }
 
 /// Share of `set`'s cells that `model` classifies right.
-fn accuracy(model: &SvmModel, set: &TrainingSet) -> f64 {
+/// The weights on C of the traversable and the non-traversable class.
+fn class_weights(set: &TrainingSet, weights: ClassWeights) -> (f64, f64) {
+    match weights {
+        ClassWeights::None => (1.0, 1.0),
+        ClassWeights::Balanced => {
+            let n = set.len() as f64;
+            let traversable = set.traversable.iter().filter(|t| **t).count() as f64;
+            let weight = |cells: f64| if cells > 0.0 { n / (2.0 * cells) } else { 1.0 };
+            (weight(traversable), weight(n - traversable))
+        }
+    }
+}
+
+/// The confusion of `model` on the cells of `set`.
+fn confusion(model: &SvmModel, set: &TrainingSet) -> Confusion {
     let d = set.dimension;
     let mut scratch = model.scratch();
-    let right = set
-        .features
-        .chunks_exact(d)
-        .zip(&set.traversable)
-        .filter(|(row, t)| (model.decision_value(row, &mut scratch) > 0.0) == **t)
-        .count();
-    right as f64 / set.len().max(1) as f64
+    let class = |traversable: bool| {
+        if traversable {
+            CellClass::Traversable
+        } else {
+            CellClass::NonTraversable
+        }
+    };
+    let mut confusion = Confusion::default();
+    for (row, &truth) in set.features.chunks_exact(d).zip(&set.traversable) {
+        let predicted = model.decision_value(row, &mut scratch) > 0.0;
+        confusion.add(class(predicted), class(truth));
+    }
+    confusion
 }
 
 /// Trains the geometric model on every cell and, when cameras saw some, the hybrid
@@ -347,7 +372,7 @@ fn train_one(
         .collect();
     let total = jobs.len() + 1;
     let done = std::sync::atomic::AtomicUsize::new(0);
-    let scores: Vec<(usize, usize, f64)> = jobs
+    let scores: Vec<(usize, Confusion)> = jobs
         .par_iter()
         .map(|&(k, fold)| {
             let (train_idx, test_idx): (Vec<usize>, Vec<usize>) =
@@ -357,28 +382,37 @@ fn train_one(
             let test = search_set.subset(&test_idx);
             let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             progress(n, total);
-            (k, test.len(), accuracy(&model, &test) * test.len() as f64)
+            (k, confusion(&model, &test))
         })
         .collect();
     let search: Vec<SearchResult> = candidates
         .iter()
         .enumerate()
         .map(|(k, &(c, gamma))| {
-            let (right, cells) = scores
-                .iter()
-                .filter(|s| s.0 == k)
-                .fold((0.0, 0usize), |(r, n), s| (r + s.2, n + s.1));
+            let mut pooled = Confusion::default();
+            for (_, fold) in scores.iter().filter(|s| s.0 == k) {
+                pooled.merge(fold);
+            }
+            let scores = pooled.scores();
             SearchResult {
                 c,
                 gamma,
-                accuracy: right / cells.max(1) as f64,
+                accuracy: scores.accuracy,
+                miou: scores.miou,
             }
         })
         .collect();
     // The first best in (C, gamma) order: ties go to the smaller, smoother model.
-    let best = search.iter().fold(search[0], |best, r| {
-        if r.accuracy > best.accuracy { *r } else { best }
-    });
+    let score = |r: &SearchResult| match t.criterion {
+        Criterion::Accuracy => r.accuracy,
+        Criterion::Miou => r.miou,
+    };
+    let best = search.iter().fold(
+        search[0],
+        |best, r| {
+            if score(r) > score(&best) { *r } else { best }
+        },
+    );
     let mut model = fit(&fit_set, best.c, best.gamma, config);
     model.reduced_set = fit_reduced_set(&model, &fit_set, config);
     progress(total, total);

@@ -22,6 +22,9 @@ pub struct Problem<'a> {
 #[derive(Clone, Copy, Debug)]
 pub struct Parameters {
     pub c: f64,
+    /// C of a sample is `c` times its class's weight (libsvm's `-w`).
+    pub positive_weight: f64,
+    pub negative_weight: f64,
     pub gamma: f64,
     /// Stop when the maximal KKT violation is below this.
     pub tolerance: f64,
@@ -105,11 +108,20 @@ impl<'a> KernelRows<'a> {
     }
 }
 
-/// Solves `min 1/2 a'Qa - e'a` subject to `0 <= a_i <= C`, `y'a = 0`.
+/// Solves `min 1/2 a'Qa - e'a` subject to `0 <= a_i <= C_i`, `y'a = 0`, with `C_i`
+/// the class-weighted C of sample i.
 pub fn solve(problem: &Problem, parameters: &Parameters) -> Solution {
     let n = problem.labels.len();
-    let c = parameters.c;
     let y: Vec<f64> = problem.labels.iter().map(|&v| v as f64).collect();
+    // The upper bound of each variable: C times its class's weight.
+    let (c_positive, c_negative) = (
+        parameters.c * parameters.positive_weight,
+        parameters.c * parameters.negative_weight,
+    );
+    let c: Vec<f64> = y
+        .iter()
+        .map(|&y| if y > 0.0 { c_positive } else { c_negative })
+        .collect();
     let mut kernel = KernelRows::new(problem, parameters.gamma, parameters.cache_bytes);
     let mut alpha = vec![0.0f64; n];
     let mut gradient = vec![-1.0f64; n];
@@ -119,7 +131,7 @@ pub fn solve(problem: &Problem, parameters: &Parameters) -> Solution {
 
     while iterations < max_iterations {
         let Some((i, j)) =
-            select_working_set(&y, &alpha, &gradient, c, parameters.tolerance, &mut kernel)
+            select_working_set(&y, &alpha, &gradient, &c, parameters.tolerance, &mut kernel)
         else {
             converged = true;
             break;
@@ -136,19 +148,25 @@ pub fn solve(problem: &Problem, parameters: &Parameters) -> Solution {
             let diff = a_i - a_j;
             a_i += delta;
             a_j += delta;
-            // a_i - a_j = diff stays: clip the lower one at 0, then the higher at C.
-            let (high, low, gap) = if diff > 0.0 {
-                (&mut a_i, &mut a_j, diff)
-            } else {
-                (&mut a_j, &mut a_i, -diff)
-            };
-            if *low < 0.0 {
-                *low = 0.0;
-                *high = gap;
+            // a_i - a_j = diff stays: clip at 0, then at each one's C (libsvm).
+            let (c_i, c_j) = (c[i], c[j]);
+            if diff > 0.0 {
+                if a_j < 0.0 {
+                    a_j = 0.0;
+                    a_i = diff;
+                }
+            } else if a_i < 0.0 {
+                a_i = 0.0;
+                a_j = -diff;
             }
-            if *high > c {
-                *high = c;
-                *low = c - gap;
+            if diff > c_i - c_j {
+                if a_i > c_i {
+                    a_i = c_i;
+                    a_j = c_i - diff;
+                }
+            } else if a_j > c_j {
+                a_j = c_j;
+                a_i = c_j + diff;
             }
         } else {
             let delta = (gradient[i] - gradient[j]) / positive_curvature(2.0 - 2.0 * q_ij);
@@ -156,8 +174,8 @@ pub fn solve(problem: &Problem, parameters: &Parameters) -> Solution {
             a_i -= delta;
             a_j += delta;
             // a_i + a_j = sum stays: clip each against the box in turn.
-            clip_with_sum(&mut a_i, &mut a_j, sum, c);
-            clip_with_sum(&mut a_j, &mut a_i, sum, c);
+            clip_with_sum(&mut a_i, &mut a_j, sum, c[i]);
+            clip_with_sum(&mut a_j, &mut a_i, sum, c[j]);
         }
         alpha[i] = a_i;
         alpha[j] = a_j;
@@ -166,7 +184,7 @@ pub fn solve(problem: &Problem, parameters: &Parameters) -> Solution {
             *g += qi as f64 * d_i + qj as f64 * d_j;
         }
     }
-    let rho = offset(&y, &alpha, &gradient, c);
+    let rho = offset(&y, &alpha, &gradient, &c);
     Solution {
         alpha,
         rho,
@@ -175,8 +193,8 @@ pub fn solve(problem: &Problem, parameters: &Parameters) -> Solution {
     }
 }
 
-/// libsvm's clipping of a pair with a fixed sum: `first` down to C when the sum
-/// exceeds C, else `second` up to 0, the other taking up the rest.
+/// libsvm's clipping of a pair with a fixed sum: `first` down to its bound `c` when
+/// the sum exceeds it, else `second` up to 0, the other taking up the rest.
 fn clip_with_sum(first: &mut f64, second: &mut f64, sum: f64, c: f64) {
     if sum > c {
         if *first > c {
@@ -198,7 +216,7 @@ fn select_working_set(
     y: &[f64],
     alpha: &[f64],
     gradient: &[f64],
-    c: f64,
+    c: &[f64],
     tolerance: f64,
     kernel: &mut KernelRows,
 ) -> Option<(usize, usize)> {
@@ -206,7 +224,7 @@ fn select_working_set(
     let mut i = None;
     for t in 0..y.len() {
         let violation = if y[t] > 0.0 {
-            (alpha[t] < c).then_some(-gradient[t])
+            (alpha[t] < c[t]).then_some(-gradient[t])
         } else {
             (alpha[t] > 0.0).then_some(gradient[t])
         };
@@ -230,7 +248,7 @@ fn select_working_set(
             g_max2 = g_max2.max(gradient[t]);
             (g_max + gradient[t], 2.0 - 2.0 * y[i] * q_i[t] as f64)
         } else {
-            if alpha[t] >= c {
+            if alpha[t] >= c[t] {
                 continue;
             }
             g_max2 = g_max2.max(-gradient[t]);
@@ -251,12 +269,12 @@ fn select_working_set(
 }
 
 /// rho: the mean of y_i G_i over free variables, else the middle of the feasible range.
-fn offset(y: &[f64], alpha: &[f64], gradient: &[f64], c: f64) -> f64 {
+fn offset(y: &[f64], alpha: &[f64], gradient: &[f64], c: &[f64]) -> f64 {
     let (mut upper, mut lower) = (f64::INFINITY, f64::NEG_INFINITY);
     let (mut free, mut free_sum) = (0usize, 0.0f64);
     for t in 0..y.len() {
         let yg = y[t] * gradient[t];
-        let at_upper = alpha[t] >= c;
+        let at_upper = alpha[t] >= c[t];
         let at_lower = alpha[t] <= 0.0;
         if at_upper {
             if y[t] < 0.0 {
@@ -300,6 +318,8 @@ mod tests {
     fn parameters(c: f64, gamma: f64, tolerance: f64, cache_bytes: usize) -> Parameters {
         Parameters {
             c,
+            positive_weight: 1.0,
+            negative_weight: 1.0,
             gamma,
             tolerance,
             cache_bytes,
