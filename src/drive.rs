@@ -14,9 +14,20 @@ use crate::stopwatch::Stopwatch;
 pub struct Selection {
     pub source: Source,
     pub frames: Range<usize>,
+    /// Give each result its scan's SHA-256 (`FrameResult::scan_sha256`): costs a
+    /// few milliseconds a frame, so only where a frame's identity matters.
+    pub fingerprint_scans: bool,
 }
 
 impl Selection {
+    pub fn new(source: Source, frames: Range<usize>) -> Self {
+        Self {
+            source,
+            frames,
+            fingerprint_scans: false,
+        }
+    }
+
     /// Runs the pipeline over the selected frames, reading the n - 1 frames before
     /// the first one to fill the window, and hands each result to `on_frame`, which
     /// may return its own error type (the binary's, say).
@@ -37,8 +48,10 @@ impl Selection {
             if frame.index < first {
                 pipeline.warm_up(frame);
             } else {
+                let scan_sha256 = self.fingerprint_scans.then(|| frame.content_sha256());
                 let mut result = pipeline.process_frame(frame, model);
                 result.timings.read_ms = read_ms;
+                result.scan_sha256 = scan_sha256;
                 on_frame(result)?;
             }
             reading.lap_ms();

@@ -26,6 +26,24 @@ pub struct Frame {
     pub dropped_points: usize,
 }
 
+impl Frame {
+    /// SHA-256 of the scan's points (and labels), hex: which scan this is by its
+    /// content, however the input is spelled or stored (a KITTI file, an MCAP copy).
+    pub fn content_sha256(&self) -> String {
+        use sha2::{Digest, Sha256};
+        let mut hash = Sha256::new();
+        for p in &self.points_in_velodyne {
+            for v in &p[..3] {
+                hash.update(v.to_le_bytes());
+            }
+        }
+        for label in self.labels.iter().flatten() {
+            hash.update(label.to_le_bytes());
+        }
+        hash.finalize().iter().map(|b| format!("{b:02x}")).collect()
+    }
+}
+
 /// The scale an input's remission / intensity came on. Readers bring every usable
 /// scale to 0..1 (KITTI's own): remission features mean the same on every sensor.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]

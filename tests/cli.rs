@@ -3,6 +3,8 @@
 
 mod common;
 
+use std::path::Path;
+
 use common::{arg, assert_contains, clean_failure, json_summary, success, travmap, write_output};
 use serde_json::Value;
 
@@ -237,10 +239,8 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
     // The same frame through the library: every cell's colour in every panel.
     let config = travmap::Config::default();
     let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
-    let selection = travmap::drive::Selection {
-        source: travmap::io::Source::open(std::path::Path::new(&seq), &Default::default()).unwrap(),
-        frames: 2..3,
-    };
+    let source = travmap::io::Source::open(Path::new(&seq), &Default::default()).unwrap();
+    let selection = travmap::drive::Selection::new(source, 2..3);
     let mut result = None;
     selection
         .run::<travmap::Error>(&config, Some(&model), |r| {
@@ -339,4 +339,47 @@ fn frames_without_ground_truth_score_n_a_not_zero() {
     let doc = json_summary(&["eval", &seq, "--frames", "3..6"]);
     assert_eq!(doc["report"]["frames"], 0);
     assert!(doc["report"]["scores"].is_null() && doc["report"]["unfiltered_scores"].is_null());
+}
+
+#[test]
+fn eval_tells_training_scans_from_unseen_ones_by_content() {
+    let Some(seq) = sample() else { return };
+    let Some(other) = common::shared_data("semantickitti-07-000964/sequences/07") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    // The embedded model learnt from the shipped frames 0-2: an MCAP copy is the same scans.
+    let (_, drive) = common::sample_as_mcap(dir.path(), &[]).unwrap();
+    let out = success(travmap(&["eval", arg(&drive)]));
+    assert_contains(
+        &out,
+        &["every scored frame is a scan this model was trained on"],
+    );
+    // A model of frames 0-1 on frames 0-2, and on another street.
+    let model = dir.path().join("m.json");
+    write_output(
+        "train",
+        Path::new(&seq),
+        &model,
+        &quick(&["--frames", "0..2"]),
+    );
+    let out = success(travmap(&[
+        "eval",
+        &seq,
+        "--frames",
+        "0..3",
+        "--model",
+        arg(&model),
+    ]));
+    assert_contains(
+        &out,
+        &["2 of the 3 scored frames are scans this model was trained on"],
+    );
+    let out = success(travmap(&["eval", arg(&other), "--model", arg(&model)]));
+    assert_contains(
+        &out,
+        &["none of the scored frames is a scan this model was trained on"],
+    );
+    let doc = json_summary(&["eval", arg(&other), "--model", arg(&model)]);
+    assert_eq!(doc["training_frames_scored"], 0);
 }

@@ -1,6 +1,7 @@
 //! `travmap eval`: the paper's table (Acc, mIoU, F1, FPR, TPR, FNR, TNR, latency)
 //! for the selected frames, with the geometry-only ablation when a camera saw cells.
 
+use std::collections::HashSet;
 use std::io::Write;
 
 use anyhow::Result;
@@ -25,15 +26,32 @@ pub struct EvalArgs {
 pub fn eval(args: EvalArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = args.inputs.output;
-    let model_path = args.model.path.as_deref();
     let (model, model_name) = args.model.load(config)?;
-    let selections = args.inputs.open(config.appearance.enabled)?;
-    let evaluate = |model: &SvmModel, message: &str| -> Result<EvaluationReport> {
+    let mut selections = args.inputs.open(config.appearance.enabled)?;
+    // Training scans are recognised by content, not by the path as typed.
+    let trained_on: HashSet<&str> = model
+        .training
+        .frame_sha256
+        .iter()
+        .map(String::as_str)
+        .collect();
+    for selection in &mut selections {
+        selection.fingerprint_scans = !trained_on.is_empty();
+    }
+    let evaluate = |model: &SvmModel,
+                    message: &str,
+                    training_frames: &mut usize|
+     -> Result<EvaluationReport> {
         let bar = output.progress(frame_count(&selections), message);
         let mut evaluation = Evaluation::default();
         for selection in &selections {
             selection.run::<anyhow::Error>(config, Some(model), |result| {
                 bar.inc(1);
+                let seen = result
+                    .scan_sha256
+                    .as_deref()
+                    .is_some_and(|s| trained_on.contains(s));
+                *training_frames += (seen && result.ground_truth.is_some()) as usize;
                 evaluation.add(&result);
                 Ok(())
             })?;
@@ -41,13 +59,16 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         bar.finish();
         Ok(evaluation.report())
     };
-    let report = evaluate(&model, "evaluating")?;
+    let mut training_frames = 0usize;
+    let report = evaluate(&model, "evaluating", &mut training_frames)?;
+    // Training frames among the scored ones; None when the model does not say.
+    let training_frames = (!trained_on.is_empty()).then_some(training_frames);
     // The ablation of the paper: the same frames without appearance features.
     let geometry_only = match &model.hybrid {
         Some(_) if report.frames_with_images > 0 => {
             let mut geometric = model.clone();
             geometric.hybrid = None;
-            Some(evaluate(&geometric, "geometry only")?)
+            Some(evaluate(&geometric, "geometry only", &mut 0)?)
         }
         _ => None,
     };
@@ -61,6 +82,7 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
                 "model": model_json(&model, &model_name),
                 "report": report,
                 "geometry_only_report": geometry_only,
+                "training_frames_scored": training_frames,
             }),
         )?;
         return Ok(outcome(&selections));
@@ -118,14 +140,28 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         }
         None => writeln!(out, "the model has no hybrid part: geometry only")?,
     }
-    if model_path.is_none() {
-        writeln!(
-            out,
-            "note: the embedded model was trained on the shipped labelled frames; scores on those frames are \
-             training scores. `travmap crossval` gives the spatially held-out accuracy."
-        )?;
+    if report.frames > 0 {
+        writeln!(out, "{}", training_note(training_frames, report.frames))?;
     }
     Ok(outcome(&selections))
+}
+
+/// Whether the scores are training scores: how many scored frames the model was
+/// trained on, by scan content (None: the model does not record it).
+fn training_note(training_frames: Option<usize>, scored: usize) -> String {
+    let held_out = "`travmap crossval` gives held-out scores";
+    match training_frames {
+        None => format!(
+            "note: this model does not record which scans it learnt from (trained from datasets, or by an older travmap); on its training frames these would be training scores. {held_out}."
+        ),
+        Some(0) => "none of the scored frames is a scan this model was trained on (compared by content): held-out scores".into(),
+        Some(n) if n == scored => format!(
+            "note: every scored frame is a scan this model was trained on (compared by content): these are training scores. {held_out}."
+        ),
+        Some(n) => format!(
+            "note: {n} of the {scored} scored frames are scans this model was trained on (compared by content): those are training scores. {held_out}."
+        ),
+    }
 }
 
 /// The paper's geometry-only row (METHOD.md section 10), for reference.

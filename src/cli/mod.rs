@@ -263,10 +263,7 @@ pub fn open_selection(
             frames.end,
         );
     }
-    Ok(Selection {
-        source,
-        frames: frames.clone(),
-    })
+    Ok(Selection::new(source, frames.clone()))
 }
 
 /// Parses a frame range: `A..B` (B excluded), `A..=B`, `A..`, `..B` or a single `N`.

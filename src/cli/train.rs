@@ -35,11 +35,15 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
         .iter()
         .cloned()
         .partition(|path| path.extension().is_some_and(|e| e == "parquet"));
-    let selections = if drives.is_empty() {
+    let mut selections = if drives.is_empty() {
         Vec::new()
     } else {
         args.inputs.open_paths(&drives, config.appearance.enabled)?
     };
+    // The model records which scans it learnt from, so `eval` can tell them apart.
+    for selection in &mut selections {
+        selection.fingerprint_scans = true;
+    }
     let mut set = if selections.is_empty() {
         TrainingSet::for_features(config)
     } else {

@@ -29,6 +29,11 @@ pub struct TrainingSummary {
     pub solver_iterations: usize,
     pub solver_converged: bool,
     pub seconds: f64,
+    /// SHA-256 of each labelled scan the cells came from (none for cells read from
+    /// datasets, or in models trained before it was recorded): lets `eval` tell
+    /// training frames from unseen ones by content.
+    #[serde(default)]
+    pub frame_sha256: Vec<String>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -64,6 +64,8 @@ pub struct FrameResult {
     pub filtered: Option<Vec<CellClass>>,
     /// Ground truth, when every scan of the window has labels.
     pub ground_truth: Option<Vec<CellClass>>,
+    /// SHA-256 of the frame's scan, when the caller asked for it.
+    pub scan_sha256: Option<String>,
     pub timings: StageTimings,
 }
 
@@ -261,6 +263,7 @@ impl Pipeline {
                 predicted: None,
                 filtered: None,
                 ground_truth,
+                scan_sha256: None,
                 timings,
             },
             votes,

@@ -33,6 +33,9 @@ pub fn collect_training_set<'a>(
                     result.index
                 )));
             }
+            if let (Some(sha), true) = (&result.scan_sha256, result.ground_truth.is_some()) {
+                set.frame_sha256.push(sha.clone());
+            }
             for (cell, traversable) in result.labelled_cells() {
                 set.push(
                     result.features.cell(cell),

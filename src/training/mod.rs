@@ -35,6 +35,8 @@ pub struct TrainingSet {
     pub centre_in_world: Vec<[f64; 2]>,
     /// Where the cells came from, for the model's record.
     pub sources: Vec<String>,
+    /// SHA-256 of each labelled scan the cells came from.
+    pub frame_sha256: Vec<String>,
     /// Appearance values of the cells a camera has seen, `appearance_len` each.
     pub appearance: Vec<f32>,
     pub appearance_len: usize,
@@ -105,6 +107,7 @@ impl TrainingSet {
         let mut out = TrainingSet {
             dimension: d + self.appearance_len,
             sources: self.sources.clone(),
+            frame_sha256: self.frame_sha256.clone(),
             ..Default::default()
         };
         for i in 0..self.len() {
@@ -123,6 +126,7 @@ impl TrainingSet {
         let mut out = TrainingSet {
             dimension: d,
             sources: self.sources.clone(),
+            frame_sha256: self.frame_sha256.clone(),
             appearance_len: self.appearance_len,
             ..Default::default()
         };
@@ -244,6 +248,7 @@ fn fit(set: &TrainingSet, c: f64, gamma: f64, config: &Config) -> SvmModel {
         solver_iterations: solution.iterations,
         solver_converged: solution.converged,
         seconds: 0.0,
+        frame_sha256: set.frame_sha256.clone(),
     };
     SvmModel::new(
         mean,
