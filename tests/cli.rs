@@ -383,3 +383,20 @@ fn eval_tells_training_scans_from_unseen_ones_by_content() {
     let doc = json_summary(&["eval", arg(&other), "--model", arg(&model)]);
     assert_eq!(doc["training_frames_scored"], 0);
 }
+
+#[test]
+fn crossval_over_several_inputs_holds_out_each_in_turn() {
+    let Some(seq) = sample() else { return };
+    let Some(other) = common::shared_data("semantickitti-07-000964/sequences/07") else {
+        return;
+    };
+    let doc = json_summary(&quick(&["crossval", &seq, arg(&other)]));
+    let held_out = doc["report"]["held_out"].as_array().unwrap();
+    assert_eq!(held_out.len(), 2);
+    // Seq 00 has three labelled frames, seq 07 one; each scored by the other's model.
+    assert_eq!(held_out[0]["evaluation"]["frames"], 3);
+    assert_eq!(held_out[1]["evaluation"]["frames"], 1);
+    assert_eq!(doc["report"]["pooled"]["frames"], 4);
+    let miou = doc["report"]["pooled"]["scores"]["miou"].as_f64().unwrap();
+    assert!(miou > 0.75, "pooled held-out mIoU {miou}");
+}
