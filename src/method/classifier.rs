@@ -104,6 +104,9 @@ pub struct SvmModel {
     pub c: f64,
     pub gamma: f64,
     pub rho: f32,
+    /// A cell is traversable when its decision value exceeds this (0 unless the
+    /// cross-validation chose another, `training.tune_threshold`).
+    pub threshold: f32,
     pub dual_coefficients: Vec<f32>,
     /// Row-major `support_vector_count x dimension`.
     pub support_vectors: Vec<f32>,
@@ -142,6 +145,7 @@ impl SvmModel {
             c,
             gamma,
             rho,
+            threshold: 0.0,
             dual_coefficients,
             support_vectors,
             blocks,
@@ -273,7 +277,11 @@ impl SvmModel {
             }
             _ => self.decision_value_using(geometric, scratch, use_reduced_set),
         };
-        if value > 0.0 {
+        let threshold = match (&self.hybrid, appearance) {
+            (Some(hybrid), Some(_)) => hybrid.threshold,
+            _ => self.threshold,
+        };
+        if value > threshold {
             CellClass::Traversable
         } else {
             CellClass::NonTraversable

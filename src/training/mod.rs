@@ -277,10 +277,19 @@ fn class_weights(set: &TrainingSet, weights: ClassWeights) -> (f64, f64) {
     }
 }
 
-/// The confusion of `model` on the cells of `set`.
-fn confusion(model: &SvmModel, set: &TrainingSet) -> Confusion {
+/// The decision value of every cell of `set` under `model`, with its truth.
+fn decision_values(model: &SvmModel, set: &TrainingSet) -> Vec<(f32, bool)> {
     let d = set.dimension;
     let mut scratch = model.scratch();
+    set.features
+        .chunks_exact(d)
+        .zip(&set.traversable)
+        .map(|(row, &truth)| (model.decision_value(row, &mut scratch), truth))
+        .collect()
+}
+
+/// The confusion of cells called traversable when their value exceeds `threshold`.
+fn confusion(values: &[(f32, bool)], threshold: f32) -> Confusion {
     let class = |traversable: bool| {
         if traversable {
             CellClass::Traversable
@@ -289,11 +298,56 @@ fn confusion(model: &SvmModel, set: &TrainingSet) -> Confusion {
         }
     };
     let mut confusion = Confusion::default();
-    for (row, &truth) in set.features.chunks_exact(d).zip(&set.traversable) {
-        let predicted = model.decision_value(row, &mut scratch) > 0.0;
-        confusion.add(class(predicted), class(truth));
+    for &(value, truth) in values {
+        confusion.add(class(value > threshold), class(truth));
     }
     confusion
+}
+
+/// The threshold in [-1, 1] (the margin) that scores best by `criterion` on held-out
+/// decision values; ties go to the one nearest 0. Candidates are the midpoints
+/// between consecutive values, swept once over the sorted values.
+fn best_threshold(values: &[(f32, bool)], criterion: Criterion) -> f32 {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let traversable = sorted.iter().filter(|v| v.1).count() as u64;
+    // Below the first value everything is traversable.
+    let mut confusion = Confusion {
+        tp: traversable,
+        fp: sorted.len() as u64 - traversable,
+        ..Confusion::default()
+    };
+    let score = |c: &Confusion| {
+        let s = c.scores();
+        match criterion {
+            Criterion::Accuracy => s.accuracy,
+            Criterion::Miou => s.miou,
+        }
+    };
+    let (mut best, mut best_score) = (0.0f32, score(&self::confusion(values, 0.0)));
+    for (k, &(value, truth)) in sorted.iter().enumerate() {
+        // Raising the threshold past `value` turns this cell non-traversable.
+        if truth {
+            confusion.tp -= 1;
+            confusion.r#fn += 1;
+        } else {
+            confusion.fp -= 1;
+            confusion.tn += 1;
+        }
+        let next = sorted.get(k + 1).map_or(value + 1.0, |n| n.0);
+        if next == value {
+            continue;
+        }
+        let threshold = (value + next) / 2.0;
+        if !(-1.0..=1.0).contains(&threshold) {
+            continue;
+        }
+        let s = score(&confusion);
+        if s > best_score || (s == best_score && threshold.abs() < best.abs()) {
+            (best, best_score) = (threshold, s);
+        }
+    }
+    best
 }
 
 /// Trains the geometric model on every cell and, when cameras saw some, the hybrid
@@ -377,7 +431,7 @@ fn train_one(
         .collect();
     let total = jobs.len() + 1;
     let done = std::sync::atomic::AtomicUsize::new(0);
-    let scores: Vec<(usize, Confusion)> = jobs
+    let held_out: Vec<(usize, Vec<(f32, bool)>)> = jobs
         .par_iter()
         .map(|&(k, fold)| {
             let (train_idx, test_idx): (Vec<usize>, Vec<usize>) =
@@ -387,7 +441,7 @@ fn train_one(
             let test = search_set.subset(&test_idx);
             let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             progress(n, total);
-            (k, confusion(&model, &test))
+            (k, decision_values(&model, &test))
         })
         .collect();
     let search: Vec<SearchResult> = candidates
@@ -395,8 +449,8 @@ fn train_one(
         .enumerate()
         .map(|(k, &(c, gamma))| {
             let mut pooled = Confusion::default();
-            for (_, fold) in scores.iter().filter(|s| s.0 == k) {
-                pooled.merge(fold);
+            for (_, values) in held_out.iter().filter(|s| s.0 == k) {
+                pooled.merge(&confusion(values, 0.0));
             }
             let scores = pooled.scores();
             SearchResult {
@@ -420,6 +474,18 @@ fn train_one(
     );
     let mut model = fit(&fit_set, best.c, best.gamma, config);
     model.reduced_set = fit_reduced_set(&model, &fit_set, config);
+    if t.tune_threshold {
+        let best_k = candidates
+            .iter()
+            .position(|&(c, g)| c == best.c && g == best.gamma)
+            .unwrap_or(0);
+        let values: Vec<(f32, bool)> = held_out
+            .iter()
+            .filter(|s| s.0 == best_k)
+            .flat_map(|s| s.1.iter().copied())
+            .collect();
+        model.threshold = best_threshold(&values, t.criterion);
+    }
     progress(total, total);
     model.training.search = search;
     model.training.seconds = started.elapsed().as_secs_f64();
@@ -492,7 +558,12 @@ mod tests {
             "{:?}",
             model.training.search
         );
-        assert!(confusion(&model, &set).scores().accuracy > 0.98);
+        assert!(
+            confusion(&decision_values(&model, &set), 0.0)
+                .scores()
+                .accuracy
+                > 0.98
+        );
         let mut scratch = model.scratch();
         assert!(model.decision_value(&[0.1, 0.0], &mut scratch) > 0.0);
         assert!(model.decision_value(&[0.6, 0.0], &mut scratch) < 0.0);
@@ -512,7 +583,12 @@ mod tests {
         let traversable = model.training.traversable_samples;
         assert!((115..=150).contains(&traversable), "{traversable} of 200");
         assert!(model.support_vector_count() <= 200);
-        assert!(confusion(&model, &set).scores().accuracy > 0.98);
+        assert!(
+            confusion(&decision_values(&model, &set), 0.0)
+                .scores()
+                .accuracy
+                > 0.98
+        );
         // Seeded: the same subset, so the same model.
         let again = train(&set, &config, &|_, _| {}).unwrap();
         let (mut a, mut b) = (model.scratch(), again.scratch());
@@ -527,6 +603,23 @@ mod tests {
             train(&set, &config, &|_, _| {}).unwrap().training.samples,
             600
         );
+    }
+
+    #[test]
+    fn the_threshold_moves_to_where_the_held_out_classes_part() {
+        // Non-traversable cells at 0.1-0.3, traversable at 0.5-0.7: at 0 every cell
+        // is called traversable; between 0.3 and 0.5 all are right.
+        let values: Vec<(f32, bool)> = [0.1, 0.2, 0.3]
+            .map(|v| (v, false))
+            .into_iter()
+            .chain([0.5, 0.6, 0.7].map(|v| (v, true)))
+            .collect();
+        let t = best_threshold(&values, Criterion::Miou);
+        assert!((t - 0.4).abs() < 1e-6, "{t}");
+        assert_eq!(confusion(&values, t).scores().miou, 1.0);
+        // Separated at 0 already: the threshold stays at 0.
+        let centred: Vec<(f32, bool)> = values.iter().map(|&(v, y)| (v - 0.4, y)).collect();
+        assert_eq!(best_threshold(&centred, Criterion::Accuracy), 0.0);
     }
 
     #[test]

@@ -29,6 +29,9 @@ struct ModelFile {
     c: f64,
     gamma: f64,
     rho: f64,
+    /// The decision threshold (0 in models from before it existed).
+    #[serde(default)]
+    threshold: f64,
     /// `alpha_i * y_i` per support vector.
     dual_coefficients: Vec<f32>,
     /// Standardised support vectors, one row each.
@@ -154,6 +157,7 @@ impl SvmModel {
             .chain(file.support_vectors.iter().flatten());
         if numbers.clone().any(|v| !v.is_finite())
             || !(file.gamma.is_finite() && file.gamma > 0.0 && file.rho.is_finite())
+            || !file.threshold.is_finite()
             || file.feature_std.iter().any(|s| *s <= 0.0)
         {
             return Err(fail("non-finite or non-positive parameters".into()));
@@ -224,6 +228,7 @@ impl SvmModel {
             file.config,
             file.training,
         );
+        model.threshold = file.threshold as f32;
         model.reduced_set = reduced_set;
         model.hybrid = hybrid;
         model.fallback = fallback;
@@ -241,6 +246,7 @@ impl SvmModel {
             c: self.c,
             gamma: self.gamma,
             rho: self.rho as f64,
+            threshold: self.threshold as f64,
             dual_coefficients: self.dual_coefficients.clone(),
             support_vectors: self
                 .support_vectors
