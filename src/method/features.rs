@@ -39,6 +39,15 @@ pub const FEATURE_NAMES: [&str; FEATURE_COUNT] = [
 /// The paper's values per cell.
 pub const FEATURE_COUNT: usize = 20;
 
+/// Values per cell: the paper's 20 and those of `groups`.
+pub fn feature_count(groups: &[FeatureGroup]) -> usize {
+    FEATURE_COUNT
+        + feature_groups::ordered(groups)
+            .into_iter()
+            .map(|g| feature_groups::names(g).len())
+            .sum::<usize>()
+}
+
 /// Names of every value of a cell: the paper's 20, then those of `groups`.
 pub fn feature_names(groups: &[FeatureGroup]) -> Vec<String> {
     let extra = feature_groups::ordered(groups)
@@ -127,7 +136,7 @@ impl FeatureExtractor {
             Some(_) => feature_groups::ordered(&self.config.groups),
             None => feature_groups::ordered(&self.config.without_remission().groups),
         };
-        let dimension = feature_names(&groups).len();
+        let dimension = feature_count(&groups);
         let remission_at = groups
             .contains(&FeatureGroup::Remission)
             .then_some(FEATURE_COUNT);

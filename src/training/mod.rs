@@ -17,7 +17,7 @@ use crate::config::{ClassWeights, Config, Criterion, FeatureGroup, TrainingConfi
 use crate::error::{Error, Result};
 use crate::method::classifier::{SearchResult, SvmModel, TrainingSummary};
 use crate::method::feature_groups::REMISSION_NAMES;
-use crate::method::features::{FEATURE_COUNT, feature_names};
+use crate::method::features::{FEATURE_COUNT, feature_count};
 use crate::method::grid::CellClass;
 use crate::random::SplitMix64;
 use crate::scoring::metrics::Confusion;
@@ -48,7 +48,7 @@ impl TrainingSet {
     /// An empty set of cells computed with `config`'s features.
     pub fn for_features(config: &Config) -> TrainingSet {
         TrainingSet {
-            dimension: feature_names(&config.features.groups).len(),
+            dimension: feature_count(&config.features.groups),
             ..Default::default()
         }
     }
@@ -376,7 +376,7 @@ pub fn train(
             return Err(Error::Training(format!(
                 "{} values per cell: too few for remission features ({} expected)",
                 set.dimension,
-                feature_names(&config.features.groups).len()
+                feature_count(&config.features.groups)
             )));
         }
         let fallback = train(&set.without_columns(columns), &without, progress)?;

@@ -284,6 +284,7 @@ impl SvmModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::method::features::feature_count;
 
     #[test]
     fn embedded_model_loads_and_round_trips() {
@@ -291,7 +292,7 @@ mod tests {
         assert!(model.support_vector_count() > 0);
         assert_eq!(
             model.dimension(),
-            feature_names(&Config::default().features.groups).len()
+            feature_count(&Config::default().features.groups)
         );
         model
             .check_compatible(&Config::default(), "embedded")
