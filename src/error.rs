@@ -106,28 +106,34 @@ pub enum Error {
     #[error("{path}: {message}")]
     Sequence { path: PathBuf, message: String },
 
-    /// The MCAP container itself: magic, records, chunks, CRCs, lengths (the text
-    /// comes from the record checks in `io/mcap_records.rs` or the mcap crate and
-    /// carries the byte offsets).
+    #[error("{path} does not exist")]
+    InputMissing { path: PathBuf },
+
+    #[error("{path} is {what}; {}", crate::io::format::READABLE)]
+    UnsupportedInput { path: PathBuf, what: String },
+
+    /// The container itself (MCAP, bag, sqlite, rosbag2 metadata): magic, records, chunks, CRCs, lengths (the text
+    /// comes from the record checks in `io/mcap_records.rs`, the mcap crate,
+    /// `io/bag.rs` or `io/rosbag2.rs` and carries the byte offsets).
     #[error("{path}: {problem}")]
-    McapContainer { path: PathBuf, problem: String },
+    LogContainer { path: PathBuf, problem: String },
 
     #[error("{path}: message {ordinal}: {problem}")]
-    McapRecord {
+    LogRecord {
         path: PathBuf,
         ordinal: usize,
         problem: String,
     },
 
     #[error("{path}: unreadable from cloud {cloud} on: {problem}")]
-    McapUnreadableFrom {
+    LogUnreadableFrom {
         path: PathBuf,
         cloud: usize,
         problem: String,
     },
 
     #[error("{path}: {problem}; PointCloud2 topics: [{}]; all topics: [{}]", cloud_topics.join(", "), all_topics.join(", "))]
-    McapCloudTopic {
+    LogCloudTopic {
         path: PathBuf,
         problem: CloudTopicProblem,
         cloud_topics: Vec<String>,
@@ -138,17 +144,17 @@ pub enum Error {
     #[error(
         "{path}: no pose for the clouds' frame `{frame}`: travmap needs /tf (and /tf_static) or an Odometry topic linking it to a world frame"
     )]
-    McapNoPose { path: PathBuf, frame: String },
+    LogNoPose { path: PathBuf, frame: String },
 
     #[error("{path}: no transform from `{frame}` up to the world frame `{world_frame}`")]
-    McapNotBelowWorld {
+    LogNotBelowWorld {
         path: PathBuf,
         frame: String,
         world_frame: String,
     },
 
     #[error("{path}: {topic} cloud {cloud}: {problem}")]
-    McapCloud {
+    LogCloud {
         path: PathBuf,
         topic: String,
         cloud: usize,
@@ -156,7 +162,7 @@ pub enum Error {
     },
 
     #[error("{path}: {topic} at {stamp_ns} ns: {problem}")]
-    McapImage {
+    LogImage {
         path: PathBuf,
         topic: String,
         stamp_ns: u64,
@@ -164,10 +170,10 @@ pub enum Error {
     },
 
     #[error("{path}: {problem}")]
-    McapCamera { path: PathBuf, problem: String },
+    LogCamera { path: PathBuf, problem: String },
 
     #[error("{path}: channel {topic} ({schema}), message at log time {log_time_ns} ns: {problem}")]
-    McapMessage {
+    UndecodableMessage {
         path: PathBuf,
         topic: String,
         schema: String,
@@ -176,9 +182,9 @@ pub enum Error {
     },
 
     #[error(
-        "{path}: channel {topic} ({schema}) has message encoding `{encoding}`; travmap reads `cdr` (ROS 2)"
+        "{path}: channel {topic} ({schema}) has message encoding `{encoding}`; travmap reads `cdr` (ROS 2) and `ros1`"
     )]
-    McapEncoding {
+    LogEncoding {
         path: PathBuf,
         topic: String,
         schema: String,
@@ -279,17 +285,19 @@ impl Error {
             | Error::MissingPose { path, .. }
             | Error::MissingTime { path, .. }
             | Error::Sequence { path, .. }
-            | Error::McapContainer { path, .. }
-            | Error::McapRecord { path, .. }
-            | Error::McapUnreadableFrom { path, .. }
-            | Error::McapCloudTopic { path, .. }
-            | Error::McapNoPose { path, .. }
-            | Error::McapNotBelowWorld { path, .. }
-            | Error::McapCloud { path, .. }
-            | Error::McapImage { path, .. }
-            | Error::McapCamera { path, .. }
-            | Error::McapMessage { path, .. }
-            | Error::McapEncoding { path, .. }
+            | Error::InputMissing { path }
+            | Error::UnsupportedInput { path, .. }
+            | Error::LogContainer { path, .. }
+            | Error::LogRecord { path, .. }
+            | Error::LogUnreadableFrom { path, .. }
+            | Error::LogCloudTopic { path, .. }
+            | Error::LogNoPose { path, .. }
+            | Error::LogNotBelowWorld { path, .. }
+            | Error::LogCloud { path, .. }
+            | Error::LogImage { path, .. }
+            | Error::LogCamera { path, .. }
+            | Error::UndecodableMessage { path, .. }
+            | Error::LogEncoding { path, .. }
             | Error::Transform { path, .. } => Some(path),
             Error::OutputIsInput { output, .. }
             | Error::OutputIsDirectory { output }

@@ -6,13 +6,16 @@
 use std::path::Path;
 
 use crate::Config;
+use crate::io::Source;
 use crate::io::cloud::cloud_points;
 use crate::io::image::image_pixels;
 use crate::io::kitti::{
     drop_non_finite, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
 };
-use crate::io::mcap_drive::{DriveOptions, McapDrive};
+use crate::io::ros::MessageEncoding;
 use crate::io::ros::{CameraInfo, Odometry, PointCloud2, TfMessage, Transform, decode};
+use crate::io::ros_drive::DriveOptions;
+use crate::io::ros1;
 use crate::io::transforms::isometry;
 use crate::method::classifier::SvmModel;
 use crate::outputs::dataset::reading::read_training_rows;
@@ -23,7 +26,7 @@ pub type Target = fn(&[u8]);
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 11] = [
+pub const TARGETS: [(&str, Target); 14] = [
     ("kitti_calib", kitti_calib),
     ("kitti_poses", kitti_poses),
     ("kitti_scan", kitti_scan),
@@ -33,6 +36,9 @@ pub const TARGETS: [(&str, Target); 11] = [
     ("ros_camera_info", ros_camera_info),
     ("ros_tf", ros_tf),
     ("mcap_file", mcap_file),
+    ("bag_file", bag_file),
+    ("ros1_message", ros1_message),
+    ("rosbag2_metadata", rosbag2_metadata),
     ("model", model),
     ("dataset_file", dataset_file),
 ];
@@ -82,8 +88,10 @@ pub fn ros_point_cloud(data: &[u8]) {
 
 /// A `CompressedImage` (png) and a raw `Image` message, decoded to pixels.
 pub fn ros_image(data: &[u8]) {
-    let _ = image_pixels(data, true);
-    let _ = image_pixels(data, false);
+    for encoding in [MessageEncoding::Cdr, MessageEncoding::Ros1] {
+        let _ = image_pixels(data, true, encoding);
+        let _ = image_pixels(data, false, encoding);
+    }
 }
 
 /// A `sensor_msgs/msg/CameraInfo` message and the projection it gives.
@@ -112,11 +120,45 @@ pub fn ros_tf(data: &[u8]) {
 
 /// A whole MCAP file: opened as a drive, then every frame read, images included.
 pub fn mcap_file(data: &[u8]) {
-    with_file(data, "mcap", |path| {
-        if let Ok(drive) = McapDrive::open(path, &DriveOptions::default()) {
-            drive.read(&(0..usize::MAX)).for_each(drop);
-        }
-    });
+    with_file(data, "mcap", read_drive);
+}
+
+/// A whole ROS 1 bag, read as [`mcap_file`] reads an MCAP file.
+pub fn bag_file(data: &[u8]) {
+    with_file(data, "bag", read_drive);
+}
+
+/// The ROS 1 message types travmap reads, in ROS 1's format.
+pub fn ros1_message(data: &[u8]) {
+    if let Ok(cloud) = ros1::decode::<PointCloud2>(data) {
+        let _ = cloud_points(&cloud);
+    }
+    let _ = ros1::decode::<TfMessage>(data);
+    let _ = ros1::decode::<Odometry>(data);
+    let _ = ros1::decode::<CameraInfo>(data);
+}
+
+/// A rosbag2 `metadata.yaml`, in a directory holding one empty storage file.
+pub fn rosbag2_metadata(data: &[u8]) {
+    let directory = std::env::temp_dir().join(format!(
+        "travmap-fuzz-{}-{:?}.rosbag2",
+        std::process::id(),
+        std::thread::current().id()
+    ));
+    if std::fs::create_dir_all(&directory).is_ok()
+        && std::fs::write(directory.join("metadata.yaml"), data).is_ok()
+        && std::fs::write(directory.join("drive_0.mcap"), b"").is_ok()
+    {
+        read_drive(&directory);
+    }
+    let _ = std::fs::remove_dir_all(&directory);
+}
+
+/// Opens `path` as a drive, of whatever format it is, and reads every frame.
+fn read_drive(path: &Path) {
+    if let Ok(source) = Source::open(path, &DriveOptions::default()) {
+        source.read(&(0..usize::MAX)).for_each(drop);
+    }
 }
 
 /// A cell dataset (Parquet) read back as training rows, as `train` reads it.

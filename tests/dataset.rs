@@ -11,7 +11,7 @@ use std::path::Path;
 use serde_json::Value;
 use travmap::drive::Selection;
 use travmap::io::Source;
-use travmap::io::mcap_drive::DriveOptions;
+use travmap::io::ros_drive::DriveOptions;
 use travmap::method::classifier::SvmModel;
 use travmap::method::grid::CellClass;
 use travmap::outputs::dataset::reading::read_training_rows;

@@ -6,14 +6,14 @@ mod common;
 
 use std::path::Path;
 
-use travmap::io::mcap_drive::{DriveOptions, McapDrive};
 use travmap::io::ros::{PointCloud2, TfMessage, datatype, decode};
+use travmap::io::ros_drive::{DriveOptions, RosDrive};
 use travmap::outputs::writing::{Compression, McapSink};
 
 /// Rewrites the converted drive `from` into `to` with each cloud's intensity
 /// changed by `edit` (clouds and transforms only).
 fn rewrite_clouds(from: &Path, to: &Path, edit: impl Fn(&mut PointCloud2)) {
-    let drive = McapDrive::open(from, &DriveOptions::default()).unwrap();
+    let drive = RosDrive::open(from, &DriveOptions::default()).unwrap();
     let mut sink = McapSink::create(to, Compression::None).unwrap();
     drive
         .for_each_message(|message| {

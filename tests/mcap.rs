@@ -11,8 +11,8 @@ use common::{arg, assert_contains, clean_failure, json_summary, success, travmap
 use serde_json::Value;
 use travmap::io::KittiSequence;
 use travmap::io::cloud::cloud_points;
-use travmap::io::mcap_drive::{DriveOptions, McapDrive};
 use travmap::io::ros::{OccupancyGrid, decode};
+use travmap::io::ros_drive::{DriveOptions, RosDrive};
 use travmap::outputs::writing::{Compression, McapSink};
 
 /// Every message of `topic` in an MCAP, decoded by travmap's own reader.
@@ -35,11 +35,11 @@ fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
 
     // The frames read back: same points, labels, stamps and poses, bit for bit.
     let kitti = KittiSequence::open(&seq).unwrap();
-    let mcap_drive = McapDrive::open(&drive, &DriveOptions::default()).unwrap();
-    assert_eq!(mcap_drive.frame_count(), 6);
-    assert_eq!(mcap_drive.world_frame(), "map");
+    let ros_drive = RosDrive::open(&drive, &DriveOptions::default()).unwrap();
+    assert_eq!(ros_drive.frame_count(), 6);
+    assert_eq!(ros_drive.world_frame(), "map");
     let mut index = 0;
-    for frame in mcap_drive.read(&(0..6)) {
+    for frame in ros_drive.read(&(0..6)) {
         let frame = frame.unwrap();
         let expected = kitti.read_frame(index).unwrap();
         assert_eq!(frame.index, expected.index);
@@ -375,7 +375,7 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
     let path = dir.path().join("odom.mcap");
     write_odometry_drive(&path);
     // Two cloud topics: ambiguous, and the error lists them.
-    let err = match McapDrive::open(&path, &DriveOptions::default()) {
+    let err = match RosDrive::open(&path, &DriveOptions::default()) {
         Err(e) => e.to_string(),
         Ok(_) => panic!("two cloud topics must be ambiguous"),
     };
@@ -396,7 +396,7 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
         cloud_topic: Some("/points".into()),
         ..Default::default()
     };
-    let drive = McapDrive::open(&path, &options).unwrap();
+    let drive = RosDrive::open(&path, &options).unwrap();
     assert_eq!(drive.world_frame(), "odom");
     let frames: Vec<_> = drive.read(&(0..1)).map(Result::unwrap).collect();
     let frame = &frames[0];

@@ -1,4 +1,5 @@
-//! `travmap convert`: a KITTI / SemanticKITTI sequence to a ROS 2 MCAP.
+//! `travmap convert`: a KITTI / SemanticKITTI sequence or a recorded log (ROS 1 bag,
+//! ROS 1 MCAP, rosbag2) to a ROS 2 MCAP.
 
 use std::path::PathBuf;
 
@@ -6,8 +7,9 @@ use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use travmap::io::Source;
-use travmap::io::mcap_drive::DriveOptions;
-use travmap::outputs::conversion::convert_kitti;
+use travmap::io::ros_drive::DriveOptions;
+use travmap::io::ros_drive::RosDrive;
+use travmap::outputs::conversion::{convert_kitti, convert_log};
 use travmap::outputs::preflight::InputFiles;
 use travmap::outputs::writing::Compression;
 
@@ -16,15 +18,16 @@ use super::{
     print_json_summary, print_wrote,
 };
 
-/// Convert a KITTI / SemanticKITTI sequence to a ROS 2 MCAP (clouds, poses on /tf, images).
+/// Convert a KITTI / SemanticKITTI sequence (clouds, poses on /tf, images) or a recorded
+/// log (ROS 1 bag, ROS 1 MCAP, rosbag2 directory or .db3) to a ROS 2 MCAP.
 #[derive(Args)]
 pub struct ConvertArgs {
-    /// The sequence directory.
+    /// The sequence directory, or the log.
     sequence: PathBuf,
     /// Where to write the MCAP.
     #[arg(short, long)]
     output: PathBuf,
-    /// Frames to convert: A..B (B excluded), A..=B, A.. or N. Default: all.
+    /// Frames to convert (KITTI input): A..B (B excluded), A..=B, A.. or N. Default: all.
     #[arg(long, value_parser = parse_frame_range)]
     frames: Option<std::ops::Range<usize>>,
     #[command(flatten)]
@@ -68,14 +71,8 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
     if !(start_time_s.is_finite() && start_time_s >= 0.0) {
         bail!("--start-time must be seconds >= 0, got {start_time_s}");
     }
-    if args.sequence.is_file() {
-        bail!(
-            "{}: convert takes a KITTI sequence directory (velodyne/, calib.txt, poses.txt, times.txt); this is a file",
-            args.sequence.display()
-        );
-    }
     check_output(output_path, &InputFiles::of(&[&args.sequence]))?;
-    let frames = args.frames.unwrap_or(0..usize::MAX);
+    let frames = args.frames.clone().unwrap_or(0..usize::MAX);
     let selection = open_selection(
         &args.sequence,
         &frames,
@@ -84,8 +81,14 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
         false,
     )?;
     let selections = [selection];
-    let Source::Kitti(sequence) = &selections[0].source else {
-        bail!("convert takes one KITTI sequence directory");
+    let sequence = match &selections[0].source {
+        Source::Kitti(sequence) => sequence,
+        Source::Log(drive) => {
+            if args.frames.is_some() {
+                bail!("--frames applies to KITTI input; a log is converted whole");
+            }
+            return convert_whole_log(drive, output_path, compression, &output, &selections);
+        }
     };
     let bar = output.progress(frame_count(&selections), "converting");
     let start_ns = (start_time_s * 1e9).round() as u64;
@@ -121,4 +124,44 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
         }
     }
     Ok(outcome(&selections))
+}
+
+/// `convert` of a recorded log: every message, as ROS 2 where travmap knows the type.
+fn convert_whole_log(
+    drive: &RosDrive,
+    output_path: &std::path::Path,
+    compression: Compression,
+    output: &Output,
+    selections: &[travmap::drive::Selection],
+) -> Result<Outcome> {
+    let bar = output.progress(drive.frame_count() as u64, "converting");
+    let summary = convert_log(drive, output_path, compression, &|message| {
+        if message.connection.topic == drive.cloud_topic() {
+            bar.inc(1);
+        }
+    })?;
+    let seconds = bar.finish();
+    if output.json {
+        let fields = json!({"output": output_path, "compression": compression, "summary": summary, "elapsed_ms": seconds * 1e3});
+        print_json_summary("convert", selections, fields)?;
+    } else if !output.quiet {
+        let contents = format!(
+            "{} messages, {} of them re-encoded from ROS 1",
+            summary.messages, summary.translated_messages
+        );
+        print_wrote(
+            output_path,
+            drive.frame_count(),
+            &contents,
+            summary.output_bytes,
+            seconds,
+        );
+        if !summary.topics_as_recorded.is_empty() {
+            eprintln!(
+                "copied as recorded (types travmap does not translate): {}",
+                summary.topics_as_recorded.join(", ")
+            );
+        }
+    }
+    Ok(outcome(selections))
 }

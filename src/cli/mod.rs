@@ -24,7 +24,7 @@ use serde_json::json;
 use travmap::Config;
 use travmap::drive::Selection;
 use travmap::io::Source;
-use travmap::io::mcap_drive::DriveOptions;
+use travmap::io::ros_drive::DriveOptions;
 use travmap::method::classifier::SvmModel;
 use travmap::outputs::preflight::{InputFiles, check_output_directory, check_output_file};
 use travmap::stopwatch::Stopwatch;
@@ -243,10 +243,13 @@ pub fn open_selection(
         ];
         for (flag, _) in mcap_only.iter().filter(|(_, value)| value.is_some()) {
             eprintln!(
-                "warning: {flag} applies to MCAP inputs; {} is a KITTI directory, so it is ignored there",
+                "warning: {flag} applies to recorded logs (MCAP, ROS 1 bag, rosbag2); {} is a KITTI directory, so it is ignored there",
                 path.display()
             );
         }
+    }
+    for notice in source.notices() {
+        eprintln!("notice: {notice}");
     }
     source.set_read_images(read_images);
     source.set_keep_going(keep_going);

@@ -3,7 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::frame::RgbImage;
-use crate::io::ros::decode;
+use crate::io::ros::MessageEncoding;
 
 /// The largest decoded image, 8192 x 8192 RGBA: above any camera's.
 const MAX_IMAGE_BYTES: usize = 8192 * 8192 * 4;
@@ -71,11 +71,15 @@ pub fn png_pixels(bytes: &[u8]) -> std::result::Result<RgbImage, String> {
     })
 }
 
-/// The RGB pixels of a CDR-encoded `CompressedImage` (png) or, when not
-/// `compressed`, a raw `Image`.
-pub fn image_pixels(data: &[u8], compressed: bool) -> Result<RgbImage, String> {
+/// The RGB pixels of a `CompressedImage` (png) or, when not `compressed`, a raw
+/// `Image`, in `encoding`.
+pub fn image_pixels(
+    data: &[u8],
+    compressed: bool,
+    encoding: MessageEncoding,
+) -> Result<RgbImage, String> {
     if compressed {
-        let message: crate::io::ros::CompressedImage = decode(data)?;
+        let message: crate::io::ros::CompressedImage = encoding.decode(data)?;
         if !message.format.to_ascii_lowercase().contains("png") {
             return Err(format!(
                 "image format `{}`: travmap decodes png",
@@ -84,7 +88,7 @@ pub fn image_pixels(data: &[u8], compressed: bool) -> Result<RgbImage, String> {
         }
         png_pixels(&message.data)
     } else {
-        raw_image(&decode(data)?)
+        raw_image(&encoding.decode(data)?)
     }
 }
 

@@ -1,15 +1,22 @@
 //! Stage 0, reading: a drive into [`Frame`]s (METHOD.md section 1). A [`Source`] is
-//! a KITTI odometry / SemanticKITTI sequence directory ([`kitti`]) or a ROS 2 MCAP
-//! file ([`mcap_drive`]); [`ros`] holds the ROS 2 message types, [`cloud`] and
-//! [`image`] decode their payloads. Nothing here knows the method.
+//! a KITTI odometry / SemanticKITTI sequence directory ([`kitti`]) or a recorded ROS
+//! log ([`ros_drive`] over a [`log::Log`]: MCAP, ROS 1 bag, rosbag2), told apart by
+//! content ([`format`]). [`ros`] holds the message types (CDR; [`ros1`] reads ROS 1's
+//! format into the same types), [`cloud`] and [`image`] decode their payloads.
+//! Nothing here knows the method.
 
+pub mod bag;
 pub mod cloud;
+pub mod format;
 pub mod image;
 pub mod kitti;
 mod kitti_text;
-pub mod mcap_drive;
+pub mod log;
 mod mcap_records;
 pub mod ros;
+pub mod ros1;
+pub mod ros_drive;
+pub mod rosbag2;
 pub mod transforms;
 
 use std::ops::Range;
@@ -63,21 +70,32 @@ impl SkipLog {
     }
 }
 
-/// A drive to read: a KITTI sequence directory or an MCAP file.
+/// A drive to read: a KITTI sequence directory or a recorded ROS log.
 pub enum Source {
     Kitti(Box<KittiSequence>),
-    Mcap(Box<mcap_drive::McapDrive>),
+    Log(Box<ros_drive::RosDrive>),
 }
 
 impl Source {
-    /// A directory is a KITTI sequence, a file an MCAP drive.
-    pub fn open(path: &Path, options: &mcap_drive::DriveOptions) -> Result<Self> {
-        if path.is_file() {
-            Ok(Source::Mcap(Box::new(mcap_drive::McapDrive::open(
-                path, options,
-            )?)))
-        } else {
-            Ok(Source::Kitti(Box::new(KittiSequence::open(path)?)))
+    /// The drive at `path`, of the format its content says ([`format::detect`]).
+    pub fn open(path: &Path, options: &ros_drive::DriveOptions) -> Result<Self> {
+        match format::detect(path)? {
+            format::InputFormat::Kitti => Ok(Source::Kitti(Box::new(KittiSequence::open(path)?))),
+            format => {
+                let log = log::Log::open(path, format)?;
+                Ok(Source::Log(Box::new(ros_drive::RosDrive::open(
+                    log, options,
+                )?)))
+            }
+        }
+    }
+
+    /// What the reader noticed and worked around (an unindexed bag, ...), for the
+    /// user to hear.
+    pub fn notices(&self) -> &[String] {
+        match self {
+            Source::Kitti(_) => &[],
+            Source::Log(drive) => drive.notices(),
         }
     }
 
@@ -96,7 +114,7 @@ impl Source {
         };
         match self {
             Source::Kitti(sequence) => sequence.skips = log,
-            Source::Mcap(drive) => drive.skips = log,
+            Source::Log(drive) => drive.skips = log,
         }
     }
 
@@ -104,14 +122,14 @@ impl Source {
     pub fn skipped(&self) -> Vec<Skip> {
         match self {
             Source::Kitti(sequence) => sequence.skips.skipped(),
-            Source::Mcap(drive) => drive.skips.skipped(),
+            Source::Log(drive) => drive.skips.skipped(),
         }
     }
 
     pub fn path(&self) -> &Path {
         match self {
             Source::Kitti(s) => s.dir(),
-            Source::Mcap(d) => d.path(),
+            Source::Log(d) => d.path(),
         }
     }
 
@@ -119,7 +137,7 @@ impl Source {
     pub fn frames_in(&self, range: &Range<usize>) -> Vec<usize> {
         match self {
             Source::Kitti(s) => s.frames_in(range),
-            Source::Mcap(d) => {
+            Source::Log(d) => {
                 (range.start.min(d.frame_count())..range.end.min(d.frame_count())).collect()
             }
         }
@@ -146,7 +164,7 @@ impl Source {
                     }
                 }))
             }
-            Source::Mcap(drive) => Box::new(drive.read(range)),
+            Source::Log(drive) => Box::new(drive.read(range)),
         }
     }
 }

@@ -119,7 +119,7 @@ pub struct CompressedImage {
     pub data: Vec<u8>,
 }
 
-/// `sensor_msgs/msg/Image` (read only).
+/// `sensor_msgs/msg/Image`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Image {
     pub header: Header,
@@ -340,6 +340,8 @@ ros_message!(
     "sensor_msgs/msg/PointCloud2",
     "sensor_msgs__PointCloud2.msg"
 );
+ros_message!(Image, "sensor_msgs/msg/Image", "sensor_msgs__Image.msg");
+ros_message!(Odometry, "nav_msgs/msg/Odometry", "nav_msgs__Odometry.msg");
 ros_message!(
     CompressedImage,
     "sensor_msgs/msg/CompressedImage",
@@ -365,6 +367,57 @@ ros_message!(
     "travmap_msgs/msg/FrameMetrics",
     "travmap_msgs__FrameMetrics.msg"
 );
+
+/// How a log serialises its messages: ROS 2's CDR or ROS 1's format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MessageEncoding {
+    Cdr,
+    Ros1,
+}
+
+impl MessageEncoding {
+    /// From an MCAP `message_encoding` (rosbag2's `serialization_format`); None for
+    /// encodings travmap does not read.
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "cdr" => Some(Self::Cdr),
+            "ros1" => Some(Self::Ros1),
+            _ => None,
+        }
+    }
+
+    /// Decodes a message in this encoding.
+    pub fn decode<T: DeserializeOwned>(self, bytes: &[u8]) -> Result<T, String> {
+        match self {
+            Self::Cdr => decode(bytes),
+            Self::Ros1 => super::ros1::decode(bytes),
+        }
+    }
+}
+
+/// A ROS 1 message of a type travmap knows (by its ROS 2 name, see
+/// [`super::log::Connection::type_name`]) re-encoded as ROS 2 CDR: the ROS 2 type
+/// name, its schema and the bytes. None for other types.
+pub fn ros1_to_cdr(
+    type_name: &str,
+    data: &[u8],
+) -> Option<Result<(&'static str, &'static str, Vec<u8>), String>> {
+    fn translate<T: RosMessage>(
+        data: &[u8],
+    ) -> Result<(&'static str, &'static str, Vec<u8>), String> {
+        let message: T = super::ros1::decode(data)?;
+        Ok((T::NAME, T::SCHEMA, encode(&message, data.len())))
+    }
+    Some(match type_name {
+        "sensor_msgs/msg/PointCloud2" => translate::<PointCloud2>(data),
+        "tf2_msgs/msg/TFMessage" | "tf/msg/tfMessage" => translate::<TfMessage>(data),
+        "nav_msgs/msg/Odometry" => translate::<Odometry>(data),
+        "sensor_msgs/msg/CameraInfo" => translate::<CameraInfo>(data),
+        "sensor_msgs/msg/CompressedImage" => translate::<CompressedImage>(data),
+        "sensor_msgs/msg/Image" => translate::<Image>(data),
+        _ => return None,
+    })
+}
 
 /// The CDR encapsulation header of little-endian plain CDR (big-endian: 00 00 00 00).
 const CDR_LE: [u8; 4] = [0x00, 0x01, 0x00, 0x00];

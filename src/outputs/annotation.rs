@@ -25,7 +25,7 @@ use crate::io::ros::{
 use crate::method::classifier::SvmModel;
 use crate::method::grid::CellClass;
 use crate::method::pipeline::FrameResult;
-use crate::outputs::conversion::{MAP_FRAME, write_kitti_frames};
+use crate::outputs::conversion::{MAP_FRAME, write_kitti_frames, write_log_messages};
 use crate::outputs::writing::{Compression, McapSink};
 use crate::scoring::evaluation::{Evaluation, EvaluationReport};
 use crate::scoring::metrics::Confusion;
@@ -176,34 +176,9 @@ pub fn annotate(
             }
             MAP_FRAME.to_string()
         }
-        Source::Mcap(drive) => {
+        Source::Log(drive) => {
             if options.passthrough {
-                drive.for_each_message(|message| {
-                    let channel = &message.channel;
-                    let (name, encoding, data) = match &channel.schema {
-                        Some(schema) => (
-                            schema.name.as_str(),
-                            schema.encoding.as_str(),
-                            &schema.data[..],
-                        ),
-                        None => ("", "", &[][..]),
-                    };
-                    let id = sink.channel(
-                        &channel.topic,
-                        name,
-                        encoding,
-                        data,
-                        &channel.message_encoding,
-                    )?;
-                    sink.write_raw(
-                        id,
-                        message.log_time,
-                        message.publish_time,
-                        message.data.to_vec(),
-                    )?;
-                    passthrough_messages += 1;
-                    Ok(())
-                })?;
+                passthrough_messages = write_log_messages(&mut sink, drive, &|_| {})?.messages;
             }
             drive.world_frame().to_string()
         }

@@ -1,5 +1,12 @@
-//! KITTI / SemanticKITTI sequence -> ROS 2 MCAP (`travmap convert`).
+//! KITTI / SemanticKITTI sequence or a recorded ROS log -> ROS 2 MCAP (`travmap
+//! convert`).
 //!
+//! A log ([`convert_log`]): every message in order, the types travmap knows
+//! re-encoded as ROS 2 CDR when they were recorded in ROS 1 (same topics, stamps and
+//! frames), everything else copied as recorded with its own encoding and schema (an
+//! MCAP file holds mixed encodings).
+//!
+//! A KITTI sequence:
 //! Per scan: a `sensor_msgs/msg/PointCloud2` (x, y, z, intensity float32, plus a
 //! `label` uint32 when SemanticKITTI labels exist) in frame `velodyne`, and `/tf` with
 //! the scan's pose in the z-up `map` frame (the first scan's velodyne frame,
@@ -19,10 +26,13 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::io::KittiSequence;
+use crate::io::log::LogMessage;
 use crate::io::ros::{
-    CameraInfo, CompressedImage, Header, PointCloud2, PointField, Quaternion, RegionOfInterest,
-    TfMessage, Time, Transform, TransformStamped, Vector3, datatype, encode,
+    CameraInfo, CompressedImage, Header, MessageEncoding, PointCloud2, PointField, Quaternion,
+    RegionOfInterest, TfMessage, Time, Transform, TransformStamped, Vector3, datatype, encode,
+    ros1_to_cdr,
 };
+use crate::io::ros_drive::RosDrive;
 use crate::outputs::writing::{Compression, McapSink};
 
 pub const CLOUD_TOPIC: &str = "/velodyne_points";
@@ -44,6 +54,87 @@ pub struct ConversionSummary {
     /// Scan points left out for a non-finite coordinate.
     pub dropped_points: u64,
     pub output_bytes: u64,
+}
+
+/// What [`write_log_messages`] wrote.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct LogCopySummary {
+    pub messages: usize,
+    /// ROS 1 messages of the types travmap knows, re-encoded as ROS 2 CDR.
+    pub translated_messages: usize,
+    /// Topics copied as recorded, in an encoding other than ROS 2 CDR.
+    pub topics_as_recorded: Vec<String>,
+    pub output_bytes: u64,
+}
+
+/// Every message of `drive` into `sink`, in order, as ROS 2 where travmap knows the
+/// type (see the module's comment). `on_message` is called before each is written.
+pub fn write_log_messages(
+    sink: &mut McapSink,
+    drive: &RosDrive,
+    on_message: &dyn Fn(&LogMessage),
+) -> Result<LogCopySummary> {
+    let mut summary = LogCopySummary::default();
+    for message in drive.messages() {
+        let message = message?;
+        on_message(&message);
+        let connection = &message.connection;
+        let translated = match connection.encoding() {
+            Some(MessageEncoding::Ros1) => ros1_to_cdr(&connection.type_name(), &message.data),
+            _ => None,
+        };
+        let (channel, data) = match translated {
+            Some(Ok((name, schema, data))) => {
+                summary.translated_messages += 1;
+                let id =
+                    sink.channel(&connection.topic, name, "ros2msg", schema.as_bytes(), "cdr")?;
+                (id, data)
+            }
+            Some(Err(problem)) => {
+                return Err(Error::UndecodableMessage {
+                    path: drive.path().to_path_buf(),
+                    topic: connection.topic.clone(),
+                    schema: connection.schema_name.clone(),
+                    log_time_ns: message.log_time_ns,
+                    problem,
+                });
+            }
+            None => {
+                if connection.message_encoding != "cdr"
+                    && !summary.topics_as_recorded.contains(&connection.topic)
+                {
+                    summary.topics_as_recorded.push(connection.topic.clone());
+                }
+                let id = sink.channel(
+                    &connection.topic,
+                    &connection.schema_name,
+                    &connection.schema_encoding,
+                    &connection.schema_data,
+                    &connection.message_encoding,
+                )?;
+                (id, message.data)
+            }
+        };
+        sink.write_raw(channel, message.log_time_ns, message.publish_time_ns, data)?;
+        summary.messages += 1;
+    }
+    Ok(summary)
+}
+
+/// Converts every message of `drive` into `output` (see [`write_log_messages`]).
+pub fn convert_log(
+    drive: &RosDrive,
+    output: &Path,
+    compression: Compression,
+    on_message: &dyn Fn(&LogMessage),
+) -> Result<LogCopySummary> {
+    let mut sink = McapSink::create(output, compression)?;
+    let mut summary = write_log_messages(&mut sink, drive, on_message)?;
+    sink.finish()?;
+    summary.output_bytes = std::fs::metadata(output)
+        .map_err(|e| Error::io(output, e))?
+        .len();
+    Ok(summary)
 }
 
 /// A ROS transform from a rigid pose, its quaternion as it is.

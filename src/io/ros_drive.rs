@@ -1,10 +1,11 @@
-//! Reading a recorded ROS 2 drive from MCAP: the clouds of one PointCloud2 topic,
-//! each with its pose in the world frame from `/tf` + `/tf_static` (interpolated at
-//! the cloud's stamp) or from a `nav_msgs/msg/Odometry` topic.
+//! Reading a recorded ROS drive (any [`Log`]: MCAP, ROS 1 bag, rosbag2; ROS 2 or
+//! ROS 1 messages): the clouds of one PointCloud2 topic, each with its pose in the
+//! world frame from `/tf` + `/tf_static` (interpolated at the cloud's stamp) or from a
+//! `nav_msgs/Odometry` topic.
 //!
-//! The file is memory-mapped and streamed: one pass at open collects the topics, the
-//! cloud stamps and every transform; [`McapDrive::read`] streams again and
-//! decodes only the clouds asked for. Any PointCloud2 layout is accepted: fields at any
+//! The log is streamed: one pass at open collects the topics, the cloud stamps and
+//! every transform; [`RosDrive::read`] streams again and decodes only the clouds
+//! asked for. Any PointCloud2 layout is accepted: fields at any
 //! offset and order, float32 or float64 coordinates, extra fields, big-endian data,
 //! organised clouds; points with a non-finite coordinate are dropped.
 
@@ -16,15 +17,17 @@ use nalgebra::Isometry3;
 use serde::Deserialize;
 
 use super::image::image_pixels;
-use super::mcap_records::{Messages, check_chunk_sizes};
+use super::log::{Log, LogMessage};
 use crate::error::{CloudTopicProblem, Error, Result};
 use crate::frame::{CameraImage, Frame};
 use crate::io::cloud::cloud_points;
-use crate::io::ros::{Header, Odometry, PointCloud2, TfMessage, Transform, decode};
+use crate::io::ros::{Header, MessageEncoding, Odometry, PointCloud2, TfMessage, Transform};
 use crate::io::transforms::{TransformTree, isometry};
 
 const POINT_CLOUD: &str = "sensor_msgs/msg/PointCloud2";
 const TF_MESSAGE: &str = "tf2_msgs/msg/TFMessage";
+/// ROS 1's older `tf/tfMessage`: the same fields.
+const TF1_MESSAGE: &str = "tf/msg/tfMessage";
 const ODOMETRY: &str = "nav_msgs/msg/Odometry";
 const CAMERA_INFO: &str = "sensor_msgs/msg/CameraInfo";
 const COMPRESSED_IMAGE: &str = "sensor_msgs/msg/CompressedImage";
@@ -48,18 +51,17 @@ pub struct DriveOptions {
 struct CameraSource {
     topic: String,
     compressed: bool,
+    encoding: MessageEncoding,
     frame: String,
     intrinsics: nalgebra::Matrix3<f64>,
     /// Width and height the CameraInfo gives; images must match.
     size: (u32, u32),
 }
 
-/// An opened MCAP drive.
-pub struct McapDrive {
+/// An opened drive.
+pub struct RosDrive {
     path: PathBuf,
-    map: memmap2::Mmap,
-    /// See [`check_chunk_sizes`]: no record of the file is longer.
-    longest_record: usize,
+    log: Log,
     cloud_topic: String,
     cloud_frame: String,
     world_frame: String,
@@ -85,57 +87,65 @@ struct Contents {
     transforms: TransformTree,
     /// Per camera frame: K and the image size (width, height).
     intrinsics: HashMap<String, (nalgebra::Matrix3<f64>, (u32, u32))>,
-    /// Image topic -> (compressed, frame).
-    image_topics: BTreeMap<String, (bool, String)>,
+    /// Image topic -> (compressed, encoding, frame).
+    image_topics: BTreeMap<String, (bool, MessageEncoding, String)>,
 }
 
 impl Contents {
     /// Takes note of one message of the drive at `path`.
-    fn add(&mut self, path: &Path, message: &mcap::Message) -> Result<()> {
-        let channel = &message.channel;
-        let schema = channel
-            .schema
-            .as_ref()
-            .map(|s| s.name.clone())
-            .unwrap_or_default();
+    fn add(&mut self, path: &Path, message: &LogMessage) -> Result<()> {
+        let connection = &message.connection;
+        let schema = connection.type_name();
         self.topics
-            .entry(channel.topic.clone())
-            .or_insert_with(|| schema.clone());
-        let problem = |problem: String| Error::McapMessage {
+            .entry(connection.topic.clone())
+            .or_insert_with(|| connection.schema_name.clone());
+        let problem = |problem: String| Error::UndecodableMessage {
             path: path.to_path_buf(),
-            topic: channel.topic.clone(),
-            schema: schema.clone(),
-            log_time_ns: message.log_time,
+            topic: connection.topic.clone(),
+            schema: connection.schema_name.clone(),
+            log_time_ns: message.log_time_ns,
             problem,
         };
         let known = matches!(
-            schema.as_str(),
-            POINT_CLOUD | TF_MESSAGE | ODOMETRY | CAMERA_INFO | COMPRESSED_IMAGE | RAW_IMAGE
+            schema.as_ref(),
+            POINT_CLOUD
+                | TF_MESSAGE
+                | TF1_MESSAGE
+                | ODOMETRY
+                | CAMERA_INFO
+                | COMPRESSED_IMAGE
+                | RAW_IMAGE
         );
-        if known && channel.message_encoding != "cdr" {
-            return Err(Error::McapEncoding {
-                path: path.to_path_buf(),
-                topic: channel.topic.clone(),
-                schema,
-                encoding: channel.message_encoding.clone(),
-            });
-        }
-        match schema.as_str() {
+        let encoding = match connection.encoding() {
+            Some(encoding) => encoding,
+            None if known => {
+                return Err(Error::LogEncoding {
+                    path: path.to_path_buf(),
+                    topic: connection.topic.clone(),
+                    schema: connection.schema_name.clone(),
+                    encoding: connection.message_encoding.clone(),
+                });
+            }
+            // Other channels are not the method's input.
+            None => return Ok(()),
+        };
+        let data = &message.data;
+        match schema.as_ref() {
             POINT_CLOUD => {
-                let header: HeaderOnly = decode(&message.data).map_err(problem)?;
+                let header: HeaderOnly = encoding.decode(data).map_err(problem)?;
                 let stamp = match header.header.stamp.to_ns() {
-                    0 => message.log_time,
+                    0 => message.log_time_ns,
                     ns => ns,
                 };
                 let entry = self
                     .cloud_stamps
-                    .entry(channel.topic.clone())
+                    .entry(connection.topic.clone())
                     .or_insert_with(|| (header.header.frame_id.clone(), Vec::new()));
                 entry.1.push(stamp);
             }
-            TF_MESSAGE => {
-                let tf: TfMessage = decode(&message.data).map_err(problem)?;
-                let is_static = channel.topic == "/tf_static";
+            TF_MESSAGE | TF1_MESSAGE => {
+                let tf: TfMessage = encoding.decode(data).map_err(problem)?;
+                let is_static = connection.topic == "/tf_static";
                 for t in tf.transforms {
                     let (parent, child) = (&t.header.frame_id, &t.child_frame_id);
                     let pose = isometry(&t.transform)
@@ -145,7 +155,7 @@ impl Contents {
                 }
             }
             ODOMETRY => {
-                let odometry: Odometry = decode(&message.data).map_err(problem)?;
+                let odometry: Odometry = encoding.decode(data).map_err(problem)?;
                 let pose = odometry.pose.pose;
                 let transform = Transform {
                     translation: pose.position,
@@ -161,7 +171,7 @@ impl Contents {
                 );
             }
             CAMERA_INFO => {
-                let info: crate::io::ros::CameraInfo = decode(&message.data).map_err(problem)?;
+                let info: crate::io::ros::CameraInfo = encoding.decode(data).map_err(problem)?;
                 self.intrinsics
                     .entry(info.header.frame_id.clone())
                     .or_insert_with(|| {
@@ -171,14 +181,13 @@ impl Contents {
                         )
                     });
             }
-            COMPRESSED_IMAGE | RAW_IMAGE if !self.image_topics.contains_key(&channel.topic) => {
-                let header: HeaderOnly = decode(&message.data).map_err(problem)?;
+            COMPRESSED_IMAGE | RAW_IMAGE if !self.image_topics.contains_key(&connection.topic) => {
+                let header: HeaderOnly = encoding.decode(data).map_err(problem)?;
                 self.image_topics.insert(
-                    channel.topic.clone(),
-                    (schema == COMPRESSED_IMAGE, header.header.frame_id),
+                    connection.topic.clone(),
+                    (schema == COMPRESSED_IMAGE, encoding, header.header.frame_id),
                 );
             }
-            // Other channels are not the method's input.
             _ => {}
         }
         Ok(())
@@ -195,7 +204,7 @@ impl Contents {
                 _ => CloudTopicProblem::Several,
             },
         };
-        Err(Error::McapCloudTopic {
+        Err(Error::LogCloudTopic {
             path: path.to_path_buf(),
             problem,
             cloud_topics: self
@@ -215,7 +224,7 @@ impl Contents {
     /// The camera: the image topic asked for, or the only one whose frame has a
     /// CameraInfo; None without one.
     fn camera(&self, options: &DriveOptions) -> Result<Option<CameraSource>, String> {
-        let source = |topic: &str, compressed: bool, frame: &str| {
+        let source = |topic: &str, compressed: bool, encoding: MessageEncoding, frame: &str| {
             let (k, size) = self
                 .intrinsics
                 .get(frame)
@@ -223,13 +232,14 @@ impl Contents {
             Ok(Some(CameraSource {
                 topic: topic.to_string(),
                 compressed,
+                encoding,
                 frame: frame.to_string(),
                 intrinsics: *k,
                 size: *size,
             }))
         };
         if let Some(topic) = &options.camera_topic {
-            let (compressed, frame) = self.image_topics.get(topic).ok_or_else(|| {
+            let (compressed, encoding, frame) = self.image_topics.get(topic).ok_or_else(|| {
                 format!(
                     "no Image or CompressedImage messages on {topic}; image topics: [{}]",
                     self.image_topics
@@ -239,38 +249,30 @@ impl Contents {
                         .join(", ")
                 )
             })?;
-            return source(topic, *compressed, frame);
+            return source(topic, *compressed, *encoding, frame);
         }
-        let usable: Vec<(&String, &(bool, String))> = self
+        let usable: Vec<(&String, &(bool, MessageEncoding, String))> = self
             .image_topics
             .iter()
-            .filter(|(_, (_, frame))| self.intrinsics.contains_key(frame))
+            .filter(|(_, (_, _, frame))| self.intrinsics.contains_key(frame))
             .collect();
         match usable.as_slice() {
-            [(topic, (compressed, frame))] => source(topic, *compressed, frame),
+            [(topic, (compressed, encoding, frame))] => {
+                source(topic, *compressed, *encoding, frame)
+            }
             _ => Ok(None),
         }
     }
 }
 
-impl McapDrive {
-    pub fn open(path: &Path, options: &DriveOptions) -> Result<Self> {
-        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-        // SAFETY: the file is opened read-only and not modified while mapped by travmap;
-        // another process truncating it under us is outside what any reader can guard.
-        let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
-        let longest_record = check_chunk_sizes(&map).map_err(|problem| Error::McapContainer {
-            path: path.to_path_buf(),
-            problem,
-        })?;
+impl RosDrive {
+    /// Reads `log`'s topics, cloud stamps and transforms in one pass.
+    pub fn open(log: Log, options: &DriveOptions) -> Result<Self> {
+        let path = log.path().to_path_buf();
+        let path = path.as_path();
         let mut contents = Contents::default();
-        for (ordinal, message) in Messages::new(&map, longest_record).enumerate() {
-            let message = message.map_err(|problem| Error::McapRecord {
-                path: path.to_path_buf(),
-                ordinal,
-                problem,
-            })?;
-            contents.add(path, &message)?;
+        for message in log.messages() {
+            contents.add(path, &message?)?;
         }
         contents.transforms.sort();
         let cloud_topic = contents.cloud_topic(path, options)?;
@@ -290,7 +292,7 @@ impl McapDrive {
                         problem,
                     })?;
                 if root == cloud_frame {
-                    return Err(Error::McapNoPose {
+                    return Err(Error::LogNoPose {
                         path: path.to_path_buf(),
                         frame: cloud_frame,
                     });
@@ -300,14 +302,13 @@ impl McapDrive {
         };
         let camera = contents
             .camera(options)
-            .map_err(|problem| Error::McapCamera {
+            .map_err(|problem| Error::LogCamera {
                 path: path.to_path_buf(),
                 problem,
             })?;
         Ok(Self {
             path: path.to_path_buf(),
-            map,
-            longest_record,
+            log,
             cloud_topic,
             cloud_frame,
             world_frame,
@@ -338,7 +339,7 @@ impl McapDrive {
     /// `world_from_cloud` at `stamp_ns`, composed up the transform tree.
     pub fn world_from_cloud(&self, stamp_ns: u64) -> Result<Isometry3<f64>> {
         self.ancestor_from(&self.world_frame, &self.cloud_frame, stamp_ns)?
-            .ok_or_else(|| Error::McapNotBelowWorld {
+            .ok_or_else(|| Error::LogNotBelowWorld {
                 path: self.path.clone(),
                 frame: self.cloud_frame.clone(),
                 world_frame: self.world_frame.clone(),
@@ -370,13 +371,13 @@ impl McapDrive {
         image_stamp_ns: u64,
         cloud_stamp_ns: u64,
     ) -> Result<CameraImage> {
-        let fail = |problem: String| Error::McapImage {
+        let fail = |problem: String| Error::LogImage {
             path: self.path.clone(),
             topic: camera.topic.clone(),
             stamp_ns: image_stamp_ns,
             problem,
         };
-        let image = image_pixels(data, camera.compressed).map_err(fail)?;
+        let image = image_pixels(data, camera.compressed, camera.encoding).map_err(fail)?;
         if (image.width, image.height) != camera.size {
             return Err(fail(format!(
                 "the image is {}x{} but its CameraInfo says {}x{}",
@@ -389,7 +390,7 @@ impl McapDrive {
                 None => {
                     let world_from_camera = self
                         .ancestor_from(&self.world_frame, &camera.frame, image_stamp_ns)?
-                        .ok_or_else(|| Error::McapNotBelowWorld {
+                        .ok_or_else(|| Error::LogNotBelowWorld {
                             path: self.path.clone(),
                             frame: camera.frame.clone(),
                             world_frame: self.world_frame.clone(),
@@ -404,29 +405,23 @@ impl McapDrive {
         ))
     }
 
-    /// Every message of the file in file order, undecoded (for passthrough).
-    pub fn for_each_message(
-        &self,
-        mut on_message: impl FnMut(&mcap::Message) -> Result<()>,
-    ) -> Result<()> {
-        for (ordinal, message) in Messages::new(&self.map, self.longest_record).enumerate() {
-            let message = message.map_err(|problem| Error::McapRecord {
-                path: self.path.clone(),
-                ordinal,
-                problem,
-            })?;
-            on_message(&message)?;
-        }
-        Ok(())
+    /// Every message of the log in order, undecoded (for passthrough).
+    pub fn messages(&self) -> impl Iterator<Item = Result<LogMessage>> + '_ {
+        self.log.messages()
+    }
+
+    /// What the reader noticed and worked around (an unindexed bag, ...).
+    pub fn notices(&self) -> &[String] {
+        self.log.notices()
     }
 
     /// The frames in `frames`, streamed in one pass over the file, each with the
     /// camera image nearest in time (within 50 ms) when the drive has a camera. With
     /// `--keep-going`, unreadable frames are recorded in the skip log and left out.
-    pub fn read(&self, frames: &Range<usize>) -> McapFrames<'_> {
-        McapFrames {
+    pub fn read(&self, frames: &Range<usize>) -> DriveFrames<'_> {
+        DriveFrames {
             drive: self,
-            stream: Messages::new(&self.map, self.longest_record),
+            stream: Box::new(self.log.messages()),
             frames: frames.clone(),
             pending: None,
             images: Vec::new(),
@@ -436,14 +431,25 @@ impl McapDrive {
     }
 
     /// Frame `current` from its cloud message and the candidate images.
-    fn frame(&self, current: usize, data: &[u8], images: &[(u64, Vec<u8>)]) -> Result<Frame> {
-        let fail = |problem: String| Error::McapCloud {
+    fn frame(
+        &self,
+        current: usize,
+        cloud: &LogMessage,
+        images: &[(u64, Vec<u8>)],
+    ) -> Result<Frame> {
+        let fail = |problem: String| Error::LogCloud {
             path: self.path.clone(),
             topic: self.cloud_topic.clone(),
             cloud: current,
             problem,
         };
-        let cloud: PointCloud2 = decode(data).map_err(fail)?;
+        let encoding = cloud.connection.encoding().ok_or_else(|| {
+            fail(format!(
+                "message encoding `{}`",
+                cloud.connection.message_encoding
+            ))
+        })?;
+        let cloud: PointCloud2 = encoding.decode(&cloud.data).map_err(fail)?;
         let stamp_ns = self.stamps_ns[current];
         let points = cloud_points(&cloud).map_err(fail)?;
         let nearest = images
@@ -469,25 +475,25 @@ impl McapDrive {
     }
 }
 
-/// The frames of a drive, streamed: see [`McapDrive::read`]. A cloud is handed on
+/// The frames of a drive, streamed: see [`RosDrive::read`]. A cloud is handed on
 /// when the next one arrives, so that an image written just after its cloud is
 /// found too.
-pub struct McapFrames<'a> {
-    drive: &'a McapDrive,
-    stream: Messages<'a>,
+pub struct DriveFrames<'a> {
+    drive: &'a RosDrive,
+    stream: Box<dyn Iterator<Item = Result<LogMessage>> + 'a>,
     frames: Range<usize>,
-    /// The cloud waiting for the next one: (frame number, CDR message).
-    pending: Option<(usize, Vec<u8>)>,
-    /// Images since the cloud before the pending one: (stamp, CDR message).
+    /// The cloud waiting for the next one: (frame number, message).
+    pending: Option<(usize, LogMessage)>,
+    /// Images since the cloud before the pending one: (stamp, message data).
     images: Vec<(u64, Vec<u8>)>,
     next_cloud: usize,
     stream_ended: bool,
 }
 
-impl McapFrames<'_> {
+impl DriveFrames<'_> {
     /// The frame of a cloud, or its error; None when the error was skipped.
-    fn hand_on(&mut self, index: usize, data: &[u8]) -> Option<Result<Frame>> {
-        let frame = self.drive.frame(index, data, &self.images);
+    fn hand_on(&mut self, index: usize, cloud: &LogMessage) -> Option<Result<Frame>> {
+        let frame = self.drive.frame(index, cloud, &self.images);
         let keep_after = self.drive.stamps_ns[index].saturating_sub(IMAGE_PAIRING_NS);
         self.images.retain(|(stamp, _)| *stamp >= keep_after);
         match frame {
@@ -497,22 +503,29 @@ impl McapFrames<'_> {
     }
 }
 
-impl Iterator for McapFrames<'_> {
+impl Iterator for DriveFrames<'_> {
     type Item = Result<Frame>;
 
     fn next(&mut self) -> Option<Result<Frame>> {
-        let camera_topic = self.drive.camera.as_ref().map(|c| c.topic.as_str());
+        let camera = self.drive.camera.as_ref();
         while !self.stream_ended {
             let message = match self.stream.next() {
                 Some(Ok(message)) => message,
                 None => break,
                 // A corrupt stretch of the file: with --keep-going, what came before counts.
-                Some(Err(e)) => {
+                Some(Err(error)) => {
                     self.stream_ended = true;
-                    let error = Error::McapUnreadableFrom {
-                        path: self.drive.path.clone(),
-                        cloud: self.next_cloud,
-                        problem: e,
+                    let error = match error {
+                        Error::LogRecord {
+                            path,
+                            ordinal,
+                            problem,
+                        } => Error::LogUnreadableFrom {
+                            path,
+                            cloud: self.next_cloud,
+                            problem: format!("message {ordinal}: {problem}"),
+                        },
+                        other => other,
                     };
                     if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
                         return Some(Err(error));
@@ -520,23 +533,25 @@ impl Iterator for McapFrames<'_> {
                     break;
                 }
             };
-            if Some(message.channel.topic.as_str()) == camera_topic {
-                match decode::<HeaderOnly>(&message.data) {
+            if let Some(camera) = camera
+                && message.connection.topic == camera.topic
+            {
+                match camera.encoding.decode::<HeaderOnly>(&message.data) {
                     Ok(header) => self
                         .images
-                        .push((header.header.stamp.to_ns(), message.data.to_vec())),
+                        .push((header.header.stamp.to_ns(), message.data)),
                     Err(problem) => {
-                        return Some(Err(Error::McapImage {
+                        return Some(Err(Error::LogImage {
                             path: self.drive.path.clone(),
-                            topic: message.channel.topic.clone(),
-                            stamp_ns: message.log_time,
+                            topic: message.connection.topic.clone(),
+                            stamp_ns: message.log_time_ns,
                             problem,
                         }));
                     }
                 }
                 continue;
             }
-            if message.channel.topic != self.drive.cloud_topic {
+            if message.connection.topic != self.drive.cloud_topic {
                 continue;
             }
             let finished = self.pending.take();
@@ -545,17 +560,17 @@ impl Iterator for McapFrames<'_> {
             if current >= self.frames.end {
                 self.stream_ended = true;
             } else if current >= self.frames.start {
-                self.pending = Some((current, message.data.to_vec()));
+                self.pending = Some((current, message));
             }
-            if let Some((index, data)) = finished
-                && let Some(frame) = self.hand_on(index, &data)
+            if let Some((index, cloud)) = finished
+                && let Some(frame) = self.hand_on(index, &cloud)
             {
                 return Some(frame);
             }
         }
         self.stream_ended = true;
-        let (index, data) = self.pending.take()?;
-        match self.hand_on(index, &data) {
+        let (index, cloud) = self.pending.take()?;
+        match self.hand_on(index, &cloud) {
             Some(frame) => Some(frame),
             None => self.next(),
         }

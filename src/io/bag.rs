@@ -1,0 +1,566 @@
+//! ROS 1 bag files, format 2.0 (`rosbag record`): memory-mapped and streamed chunk by
+//! chunk.
+//!
+//! A bag is the line `#ROSBAG V2.0`, then records: a `uint32` header length, header
+//! fields (`uint32` length, `name=value`), a `uint32` data length, the data. Messages
+//! live in chunk records (uncompressed, bz2 or lz4), each chunk holding the
+//! connection records of its topics before their messages. The index at the end
+//! (`index_pos` in the bag header) repeats every connection and says where each chunk
+//! starts. A bag whose recording was cut off has no index (`index_pos` 0): it is read
+//! by a linear scan over the chunks, and the reader says so. Every length is checked
+//! against the file before it is used.
+
+use std::collections::HashMap;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use super::log::{Connection, LogMessage, map_file};
+use crate::error::{Error, Result};
+
+pub const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
+
+/// Record opcodes (the `op` header field).
+mod op {
+    pub const MESSAGE_DATA: u8 = 0x02;
+    pub const BAG_HEADER: u8 = 0x03;
+    pub const CHUNK: u8 = 0x05;
+    pub const CHUNK_INFO: u8 = 0x06;
+    pub const CONNECTION: u8 = 0x07;
+}
+
+/// No real chunk is near this (rosbag's default is 768 KiB); a size above it is corrupt.
+const LARGEST_CHUNK: usize = 1 << 30;
+
+/// One record: its header fields and data, and where it starts in the file.
+struct Record<'a> {
+    offset: usize,
+    fields: Vec<(&'a [u8], &'a [u8])>,
+    data: &'a [u8],
+    /// Where the next record starts.
+    end: usize,
+}
+
+impl<'a> Record<'a> {
+    /// The record at `offset` of `bytes`, checked against their length.
+    fn at(bytes: &'a [u8], offset: usize) -> std::result::Result<Self, String> {
+        let mut at = offset;
+        let mut take = |what: &str| -> std::result::Result<&'a [u8], String> {
+            let length = read_u32(bytes, at).ok_or_else(|| {
+                format!("the record at byte {offset} is cut off in its {what} length")
+            })? as usize;
+            let start = at + 4;
+            let end = start
+                .checked_add(length)
+                .filter(|end| *end <= bytes.len())
+                .ok_or_else(|| {
+                    format!(
+                        "the record at byte {offset} claims a {length}-byte {what}, beyond the end ({} bytes)",
+                        bytes.len()
+                    )
+                })?;
+            at = end;
+            Ok(&bytes[start..end])
+        };
+        let header = take("header")?;
+        let data = take("data")?;
+        let fields = header_fields(header)
+            .map_err(|problem| format!("the record at byte {offset}: {problem}"))?;
+        Ok(Self {
+            offset,
+            fields,
+            data,
+            end: at,
+        })
+    }
+
+    fn field(&self, name: &str) -> std::result::Result<&'a [u8], String> {
+        self.fields
+            .iter()
+            .find(|(key, _)| *key == name.as_bytes())
+            .map(|(_, value)| *value)
+            .ok_or_else(|| {
+                format!(
+                    "the record at byte {} has no `{name}` header field",
+                    self.offset
+                )
+            })
+    }
+
+    fn op(&self) -> std::result::Result<u8, String> {
+        match self.field("op")? {
+            [op] => Ok(*op),
+            other => Err(format!(
+                "the record at byte {} has an `op` of {} bytes, not 1",
+                self.offset,
+                other.len()
+            )),
+        }
+    }
+
+    fn u32(&self, name: &str) -> std::result::Result<u32, String> {
+        let value = self.field(name)?;
+        value.try_into().map(u32::from_le_bytes).map_err(|_| {
+            format!(
+                "the record at byte {}: `{name}` has {} bytes, not 4",
+                self.offset,
+                value.len()
+            )
+        })
+    }
+
+    fn u64(&self, name: &str) -> std::result::Result<u64, String> {
+        let value = self.field(name)?;
+        value.try_into().map(u64::from_le_bytes).map_err(|_| {
+            format!(
+                "the record at byte {}: `{name}` has {} bytes, not 8",
+                self.offset,
+                value.len()
+            )
+        })
+    }
+
+    fn text(&self, name: &str) -> std::result::Result<String, String> {
+        Ok(String::from_utf8_lossy(self.field(name)?).into_owned())
+    }
+}
+
+fn read_u32(bytes: &[u8], at: usize) -> Option<u32> {
+    let four = bytes.get(at..at.checked_add(4)?)?;
+    Some(u32::from_le_bytes(four.try_into().ok()?))
+}
+
+/// `name=value` fields, each after its `uint32` length.
+fn header_fields(mut header: &[u8]) -> std::result::Result<Vec<(&[u8], &[u8])>, String> {
+    let mut fields = Vec::new();
+    while !header.is_empty() {
+        let length = read_u32(header, 0)
+            .ok_or("a header field length is cut off")?
+            .try_into()
+            .unwrap_or(usize::MAX);
+        let field = header
+            .get(4..)
+            .and_then(|rest| rest.get(..length))
+            .ok_or_else(|| {
+                format!(
+                    "a header field claims {length} bytes, {} are left",
+                    header.len() - 4
+                )
+            })?;
+        let split = field
+            .iter()
+            .position(|b| *b == b'=')
+            .ok_or("a header field has no `=`")?;
+        fields.push((&field[..split], &field[split + 1..]));
+        header = &header[4 + length..];
+    }
+    Ok(fields)
+}
+
+/// A connection record: `conn` and `topic` in its header, the rest in its data.
+fn connection(record: &Record) -> std::result::Result<(u32, Connection), String> {
+    let id = record.u32("conn")?;
+    let details = Record {
+        offset: record.offset,
+        fields: header_fields(record.data)
+            .map_err(|problem| format!("the connection at byte {}: {problem}", record.offset))?,
+        data: &[],
+        end: record.end,
+    };
+    let connection = Connection {
+        topic: record.text("topic")?,
+        schema_name: details.text("type")?,
+        schema_encoding: "ros1msg".into(),
+        schema_data: details
+            .field("message_definition")
+            .unwrap_or_default()
+            .to_vec(),
+        message_encoding: "ros1".into(),
+    };
+    Ok((id, connection))
+}
+
+/// An opened bag: where its chunks are and the connections its index lists.
+pub struct BagFile {
+    path: PathBuf,
+    map: memmap2::Mmap,
+    chunks: Vec<usize>,
+    connections: HashMap<u32, Arc<Connection>>,
+    notice: Option<String>,
+}
+
+impl BagFile {
+    pub fn open(path: &Path) -> Result<Self> {
+        let map = map_file(path)?;
+        let container = |problem: String| Error::LogContainer {
+            path: path.to_path_buf(),
+            problem,
+        };
+        if !map.starts_with(MAGIC) {
+            return Err(container("not a ROS 1 bag of format 2.0".into()));
+        }
+        let header = Record::at(&map, MAGIC.len()).map_err(container)?;
+        if header.op().map_err(container)? != op::BAG_HEADER {
+            return Err(container(format!(
+                "the first record (byte {}) is not the bag header",
+                MAGIC.len()
+            )));
+        }
+        let index_pos = header.u64("index_pos").map_err(container)?;
+        let chunk_count = header.u32("chunk_count").map_err(container)? as usize;
+        let header_end = header.end;
+        let mut bag = Self {
+            path: path.to_path_buf(),
+            chunks: Vec::new(),
+            connections: HashMap::new(),
+            notice: None,
+            map,
+        };
+        if index_pos == 0 {
+            bag.scan(header_end).map_err(container)?;
+            return Ok(bag);
+        }
+        let index_pos = usize::try_from(index_pos)
+            .ok()
+            .filter(|pos| *pos >= header_end && *pos <= bag.map.len())
+            .ok_or_else(|| {
+                container(format!(
+                    "its index should start at byte {index_pos} but the file ends at byte {}: the bag was cut off (copy it again, or run `rosbag reindex` on a copy)",
+                    bag.map.len()
+                ))
+            })?;
+        bag.read_index(index_pos).map_err(container)?;
+        if bag.chunks.len() != chunk_count {
+            return Err(container(format!(
+                "its header counts {chunk_count} chunks but its index lists {}",
+                bag.chunks.len()
+            )));
+        }
+        Ok(bag)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Said when the bag could not be read as written (no index).
+    pub fn notice(&self) -> Option<&str> {
+        self.notice.as_deref()
+    }
+
+    /// Connections and chunk positions from the index section at `index_pos`.
+    fn read_index(&mut self, index_pos: usize) -> std::result::Result<(), String> {
+        let mut offset = index_pos;
+        while offset < self.map.len() {
+            let record = Record::at(&self.map, offset)?;
+            match record.op()? {
+                op::CONNECTION => {
+                    let (id, connection) = connection(&record)?;
+                    self.connections.insert(id, Arc::new(connection));
+                }
+                op::CHUNK_INFO => {
+                    let position = record.u64("chunk_pos")?;
+                    let position = usize::try_from(position)
+                        .ok()
+                        .filter(|p| *p < index_pos)
+                        .ok_or_else(|| {
+                            format!(
+                                "the chunk info at byte {offset} places a chunk at byte {position}, outside the data before the index"
+                            )
+                        })?;
+                    self.chunks.push(position);
+                }
+                _ => {}
+            }
+            offset = record.end;
+        }
+        self.chunks.sort_unstable();
+        Ok(())
+    }
+
+    /// Chunk positions by walking every record after the bag header, for a bag
+    /// without an index; an incomplete last record is left out, and said.
+    fn scan(&mut self, start: usize) -> std::result::Result<(), String> {
+        let mut offset = start;
+        while offset < self.map.len() {
+            let record = match Record::at(&self.map, offset) {
+                Ok(record) => record,
+                Err(problem) => {
+                    self.notice = Some(format!(
+                        "{}: the bag has no index (its recording was cut off?): read by a linear scan, which left out the last {} bytes ({problem})",
+                        self.path.display(),
+                        self.map.len() - offset
+                    ));
+                    return Ok(());
+                }
+            };
+            if record.op()? == op::CHUNK {
+                self.chunks.push(offset);
+            }
+            offset = record.end;
+        }
+        self.notice = Some(format!(
+            "{}: the bag has no index (its recording was cut off?): read by a linear scan",
+            self.path.display()
+        ));
+        Ok(())
+    }
+
+    /// Every message in file order.
+    pub fn messages(&self) -> BagMessages<'_> {
+        BagMessages {
+            bag: self,
+            connections: self.connections.clone(),
+            next_chunk: 0,
+            chunk: Vec::new(),
+            at: 0,
+            failed: false,
+        }
+    }
+
+    /// The records of the chunk at `offset`, decompressed into `out`.
+    fn chunk(&self, offset: usize, out: &mut Vec<u8>) -> std::result::Result<(), String> {
+        let record = Record::at(&self.map, offset)?;
+        if record.op()? != op::CHUNK {
+            return Err(format!("the record at byte {offset} is not a chunk"));
+        }
+        let compression = record.text("compression")?;
+        let size = record.u32("size")? as usize;
+        if size > LARGEST_CHUNK {
+            return Err(format!(
+                "the chunk at byte {offset} claims {size} bytes decompressed, more than the {LARGEST_CHUNK} travmap reads"
+            ));
+        }
+        out.clear();
+        let limit = size as u64 + 1;
+        let read = match compression.as_str() {
+            "none" => {
+                out.extend_from_slice(record.data);
+                Ok(out.len())
+            }
+            "bz2" => bzip2::read::BzDecoder::new(record.data)
+                .take(limit)
+                .read_to_end(out),
+            "lz4" => lz4::Decoder::new(record.data)
+                .and_then(|decoder| decoder.take(limit).read_to_end(out)),
+            other => {
+                return Err(format!(
+                    "the chunk at byte {offset} is compressed with `{other}`; ROS 1 bags use none, bz2 or lz4"
+                ));
+            }
+        };
+        match read {
+            Ok(n) if n == size => Ok(()),
+            Ok(n) => Err(format!(
+                "the chunk at byte {offset} decompresses to {}{n} bytes but claims {size}",
+                if n > size { "more than " } else { "" }
+            )),
+            Err(e) => Err(format!(
+                "the {compression} chunk at byte {offset} does not decompress: {e}"
+            )),
+        }
+    }
+}
+
+/// The messages of a bag, streamed chunk by chunk: see [`BagFile::messages`].
+pub struct BagMessages<'a> {
+    bag: &'a BagFile,
+    connections: HashMap<u32, Arc<Connection>>,
+    next_chunk: usize,
+    /// The current chunk's records and where the next one starts.
+    chunk: Vec<u8>,
+    at: usize,
+    failed: bool,
+}
+
+impl BagMessages<'_> {
+    fn next_message(&mut self) -> Option<std::result::Result<LogMessage, String>> {
+        loop {
+            if self.at >= self.chunk.len() {
+                let offset = *self.bag.chunks.get(self.next_chunk)?;
+                self.next_chunk += 1;
+                self.at = 0;
+                if let Err(problem) = self.bag.chunk(offset, &mut self.chunk) {
+                    return Some(Err(problem));
+                }
+                continue;
+            }
+            let chunk_offset = self.bag.chunks[self.next_chunk - 1];
+            let in_chunk =
+                |problem: String| format!("in the chunk at byte {chunk_offset}, {problem}");
+            let record = match Record::at(&self.chunk, self.at) {
+                Ok(record) => record,
+                Err(problem) => return Some(Err(in_chunk(problem))),
+            };
+            self.at = record.end;
+            match record.op() {
+                Ok(op::CONNECTION) => match connection(&record) {
+                    Ok((id, connection)) => {
+                        self.connections
+                            .entry(id)
+                            .or_insert_with(|| Arc::new(connection));
+                    }
+                    Err(problem) => return Some(Err(in_chunk(problem))),
+                },
+                Ok(op::MESSAGE_DATA) => return Some(self.message(&record).map_err(in_chunk)),
+                Ok(_) => {}
+                Err(problem) => return Some(Err(in_chunk(problem))),
+            }
+        }
+    }
+
+    fn message(&self, record: &Record) -> std::result::Result<LogMessage, String> {
+        let id = record.u32("conn")?;
+        let connection = self.connections.get(&id).ok_or_else(|| {
+            format!(
+                "the message at byte {} is on connection {id}, which no connection record defines",
+                record.offset
+            )
+        })?;
+        let time = record.u64("time")?;
+        // `time`: uint32 seconds, then uint32 nanoseconds.
+        let stamp_ns = (time & 0xffff_ffff) * 1_000_000_000 + (time >> 32);
+        Ok(LogMessage {
+            connection: connection.clone(),
+            log_time_ns: stamp_ns,
+            publish_time_ns: stamp_ns,
+            data: record.data.to_vec(),
+        })
+    }
+}
+
+impl Iterator for BagMessages<'_> {
+    type Item = std::result::Result<LogMessage, String>;
+
+    /// Nothing after the first error.
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.failed {
+            return None;
+        }
+        let next = self.next_message();
+        self.failed = matches!(next, Some(Err(_)));
+        next
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn field(name: &str, value: &[u8]) -> Vec<u8> {
+        let mut out = ((name.len() + 1 + value.len()) as u32)
+            .to_le_bytes()
+            .to_vec();
+        out.extend_from_slice(name.as_bytes());
+        out.push(b'=');
+        out.extend_from_slice(value);
+        out
+    }
+
+    fn record(fields: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
+        let header: Vec<u8> = fields.concat();
+        let mut out = (header.len() as u32).to_le_bytes().to_vec();
+        out.extend_from_slice(&header);
+        out.extend_from_slice(&(data.len() as u32).to_le_bytes());
+        out.extend_from_slice(data);
+        out
+    }
+
+    /// A bag of one chunk holding one connection and one message, without an index.
+    fn unindexed_bag(message: &[u8]) -> Vec<u8> {
+        let connection = record(
+            &[
+                field("op", &[op::CONNECTION]),
+                field("conn", &0u32.to_le_bytes()),
+                field("topic", b"/chatter"),
+            ],
+            &[
+                field("topic", b"/chatter"),
+                field("type", b"std_msgs/String"),
+                field("md5sum", b"992ce8a1687cec8c8bd883ec73ca41d1"),
+                field("message_definition", b"string data\n"),
+            ]
+            .concat(),
+        );
+        // uint32 seconds (7), then uint32 nanoseconds (5).
+        let time = (5u64 << 32) | 7;
+        let message = record(
+            &[
+                field("op", &[op::MESSAGE_DATA]),
+                field("conn", &0u32.to_le_bytes()),
+                field("time", &time.to_le_bytes()),
+            ],
+            message,
+        );
+        let records = [connection, message].concat();
+        let chunk = record(
+            &[
+                field("op", &[op::CHUNK]),
+                field("compression", b"none"),
+                field("size", &(records.len() as u32).to_le_bytes()),
+            ],
+            &records,
+        );
+        let header = record(
+            &[
+                field("op", &[op::BAG_HEADER]),
+                field("index_pos", &0u64.to_le_bytes()),
+                field("conn_count", &0u32.to_le_bytes()),
+                field("chunk_count", &0u32.to_le_bytes()),
+            ],
+            &[],
+        );
+        [MAGIC.to_vec(), header, chunk].concat()
+    }
+
+    fn open(bytes: &[u8]) -> Result<BagFile> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x.bag");
+        std::fs::write(&path, bytes).unwrap();
+        BagFile::open(&path)
+    }
+
+    #[test]
+    fn an_unindexed_bag_is_scanned_and_says_so() {
+        let payload = b"\x02\0\0\0hi";
+        let bag = open(&unindexed_bag(payload)).unwrap();
+        assert!(bag.notice().unwrap().contains("no index"));
+        let messages: Vec<_> = bag
+            .messages()
+            .collect::<std::result::Result<_, _>>()
+            .unwrap();
+        assert_eq!(messages.len(), 1);
+        assert_eq!(messages[0].connection.topic, "/chatter");
+        assert_eq!(messages[0].connection.type_name(), "std_msgs/msg/String");
+        assert_eq!(messages[0].log_time_ns, 7_000_000_005);
+        assert_eq!(messages[0].data, payload);
+    }
+
+    #[test]
+    fn every_cut_of_a_bag_is_an_error_or_a_notice_never_a_panic() {
+        let bytes = unindexed_bag(b"\x02\0\0\0hi");
+        for cut in 0..bytes.len() {
+            if let Ok(bag) = open(&bytes[..cut]) {
+                assert!(bag.notice().is_some());
+                bag.messages().for_each(drop);
+            }
+        }
+    }
+
+    #[test]
+    fn a_chunk_that_lies_about_its_size_is_refused() {
+        let mut bytes = unindexed_bag(b"\x02\0\0\0hi");
+        let size_at = bytes
+            .windows(5)
+            .position(|w| w == b"size=")
+            .expect("the chunk's size field")
+            + 5;
+        bytes[size_at] += 1;
+        let bag = open(&bytes).unwrap();
+        let err = bag.messages().next().unwrap().unwrap_err();
+        assert!(
+            err.contains("decompresses to") && err.contains("claims"),
+            "{err}"
+        );
+    }
+}

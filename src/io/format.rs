@@ -1,0 +1,184 @@
+//! What an input is, by its content: the magic bytes of a file, the layout of a
+//! directory. Guessing from the name (or reading any file as MCAP) gave false
+//! diagnoses; this names what a file is even when travmap cannot read it.
+
+use std::io::Read;
+use std::path::Path;
+
+use crate::error::{Error, Result};
+
+/// An input format travmap reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InputFormat {
+    /// A KITTI odometry / SemanticKITTI sequence directory.
+    Kitti,
+    /// An MCAP file, ROS 2 (CDR) or ROS 1 messages.
+    Mcap,
+    /// A ROS 1 bag, format 2.0.
+    Bag,
+    /// A rosbag2 sqlite3 file (`.db3`).
+    Sqlite,
+    /// A rosbag2 directory: `metadata.yaml` and its storage files.
+    Rosbag2,
+}
+
+impl InputFormat {
+    /// How a person would name it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            InputFormat::Kitti => "a KITTI sequence directory",
+            InputFormat::Mcap => "an MCAP file",
+            InputFormat::Bag => "a ROS 1 bag",
+            InputFormat::Sqlite => "a rosbag2 sqlite3 file",
+            InputFormat::Rosbag2 => "a rosbag2 directory",
+        }
+    }
+}
+
+/// What travmap reads, for the errors that refuse something else.
+pub const READABLE: &str = "travmap reads KITTI / SemanticKITTI sequence directories, MCAP files (ROS 2 or ROS 1 messages), ROS 1 bags (format 2.0), rosbag2 directories (sqlite3 or MCAP storage) and rosbag2 .db3 files";
+
+/// Formats known by their first bytes, readable (`Ok`) or named in a refusal (`Err`).
+const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
+    (b"\x89MCAP0\r\n", Ok(InputFormat::Mcap)),
+    (super::bag::MAGIC, Ok(InputFormat::Bag)),
+    (b"SQLite format 3\0", Ok(InputFormat::Sqlite)),
+    (
+        b"#ROSBAG V1.",
+        Err(
+            "a ROS 1 bag of format 1.x (before ROS C Turtle); `rosbag fix` or `rosbag reindex` brings it to 2.0",
+        ),
+    ),
+    (b"\x89MCAP", Err("an MCAP file of a version other than 0")),
+    (b"# .PCD", Err("a PCD point cloud")),
+    (b"VERSION .", Err("a PCD point cloud")),
+    (b"ply\n", Err("a PLY point cloud")),
+    (b"ply\r\n", Err("a PLY point cloud")),
+    (
+        b"PAR1",
+        Err("a Parquet file (a travmap dataset is an output, not a drive)"),
+    ),
+    (b"\x89PNG\r\n\x1a\n", Err("a PNG image")),
+    (b"\xff\xd8\xff", Err("a JPEG image")),
+    (b"BZh", Err("a bzip2-compressed file")),
+    (
+        b"\x28\xb5\x2f\xfd",
+        Err("a zstd-compressed file (a compressed rosbag2 file? decompress it first)"),
+    ),
+    (b"\x1f\x8b", Err("a gzip-compressed file")),
+    (b"PK\x03\x04", Err("a zip archive")),
+    (b"\x7fELF", Err("an executable")),
+];
+
+/// The format of `path`, or an error that says what it is instead.
+pub fn detect(path: &Path) -> Result<InputFormat> {
+    let metadata = match std::fs::metadata(path) {
+        Ok(metadata) => metadata,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(Error::InputMissing {
+                path: path.to_path_buf(),
+            });
+        }
+        Err(e) => return Err(Error::io(path, e)),
+    };
+    if metadata.is_dir() {
+        return Ok(if path.join("metadata.yaml").is_file() {
+            InputFormat::Rosbag2
+        } else {
+            InputFormat::Kitti
+        });
+    }
+    let mut first = Vec::with_capacity(16);
+    std::fs::File::open(path)
+        .and_then(|file| file.take(16).read_to_end(&mut first))
+        .map_err(|e| Error::io(path, e))?;
+    for (magic, format) in MAGICS {
+        if first.starts_with(magic) {
+            return format.map_err(|what| unsupported(path, what.to_string()));
+        }
+    }
+    let what = if first.is_empty() {
+        "an empty file".to_string()
+    } else if path.file_name().is_some_and(|name| name == "metadata.yaml") {
+        return Err(unsupported(
+            path,
+            "the metadata of a rosbag2 directory: give the directory itself".into(),
+        ));
+    } else if path.extension().is_some_and(|e| e == "bin") {
+        "a single file (a KITTI scan? give its sequence directory)".to_string()
+    } else if first
+        .iter()
+        .all(|b| b.is_ascii_graphic() || b.is_ascii_whitespace())
+    {
+        "a text file".to_string()
+    } else {
+        let hex: Vec<String> = first.iter().take(8).map(|b| format!("{b:02x}")).collect();
+        format!(
+            "of a format travmap does not know (first bytes {})",
+            hex.join(" ")
+        )
+    };
+    Err(unsupported(path, what))
+}
+
+fn unsupported(path: &Path, what: String) -> Error {
+    Error::UnsupportedInput {
+        path: path.to_path_buf(),
+        what,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn detect_bytes(name: &str, bytes: &[u8]) -> std::result::Result<InputFormat, String> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).unwrap();
+        detect(&path).map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn formats_are_known_by_their_first_bytes_whatever_the_name() {
+        assert_eq!(
+            detect_bytes("x.bag", b"\x89MCAP0\r\nrest"),
+            Ok(InputFormat::Mcap)
+        );
+        assert_eq!(
+            detect_bytes("x.mcap", b"#ROSBAG V2.0\nrest"),
+            Ok(InputFormat::Bag)
+        );
+        assert_eq!(
+            detect_bytes("x", b"SQLite format 3\0rest"),
+            Ok(InputFormat::Sqlite)
+        );
+        for (bytes, what) in [
+            (&b"# .PCD v0.7"[..], "a PCD point cloud"),
+            (b"ply\nformat", "a PLY point cloud"),
+            (b"PAR1\x15\x04", "a Parquet file"),
+            (b"\x89PNG\r\n\x1a\n\0", "a PNG image"),
+            (b"hello world\n", "a text file"),
+            (b"", "an empty file"),
+            (b"\x01\x02\x03", "first bytes 01 02 03"),
+        ] {
+            let err = detect_bytes("x.mcap", bytes).unwrap_err();
+            assert!(err.contains(what) && err.contains("travmap reads"), "{err}");
+        }
+    }
+
+    #[test]
+    fn directories_are_rosbag2_with_metadata_else_kitti_and_missing_paths_say_so() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(detect(dir.path()).unwrap(), InputFormat::Kitti);
+        std::fs::write(dir.path().join("metadata.yaml"), "x").unwrap();
+        assert_eq!(detect(dir.path()).unwrap(), InputFormat::Rosbag2);
+        let err = detect(&dir.path().join("nope.mcap"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("nope.mcap") && err.contains("does not exist"),
+            "{err}"
+        );
+    }
+}

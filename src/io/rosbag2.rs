@@ -1,0 +1,340 @@
+//! rosbag2 logs: a directory of `metadata.yaml` and its storage files (sqlite3 `.db3`
+//! or MCAP), read in the order the metadata lists them as one drive; or a single
+//! `.db3` file given directly.
+//!
+//! SQLite is the bundled library (no system one needed), and a `.db3` is opened
+//! immutable and read-only: reading never creates a journal or `-shm` file beside an
+//! input. Messages come in the order they were written (their row ids), as they do
+//! from an MCAP file.
+
+use std::collections::{HashMap, VecDeque};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use rusqlite::{OpenFlags, params};
+use serde::Deserialize;
+
+use super::format::{InputFormat, detect};
+use super::log::{Connection, FileMessages, LogFile, LogMessage};
+use crate::error::{Error, Result};
+
+/// The part of `metadata.yaml` that says where the messages are.
+#[derive(Deserialize)]
+struct Metadata {
+    rosbag2_bagfile_information: Information,
+}
+
+#[derive(Deserialize)]
+struct Information {
+    #[serde(default)]
+    storage_identifier: String,
+    relative_file_paths: Vec<String>,
+    #[serde(default)]
+    compression_format: String,
+    #[serde(default)]
+    compression_mode: String,
+}
+
+/// A rosbag2 directory, its files opened in order.
+pub struct Rosbag2Directory {
+    pub files: Vec<LogFile>,
+    pub notices: Vec<String>,
+}
+
+impl Rosbag2Directory {
+    pub fn open(directory: &Path) -> Result<Self> {
+        let metadata_path = directory.join("metadata.yaml");
+        let problem = |problem: String| Error::LogContainer {
+            path: metadata_path.clone(),
+            problem,
+        };
+        let text =
+            std::fs::read_to_string(&metadata_path).map_err(|e| Error::io(&metadata_path, e))?;
+        let metadata: Metadata = serde_yaml_ng::from_str(&text)
+            .map_err(|e| problem(format!("not rosbag2 metadata: {e}")))?;
+        let information = metadata.rosbag2_bagfile_information;
+        let compressed = !matches!(information.compression_mode.as_str(), "" | "NONE" | "none");
+        if compressed {
+            return Err(problem(format!(
+                "the bag is compressed ({} mode, `{}`); travmap reads uncompressed rosbag2 files: run `ros2 bag decompress` (or `ros2 bag convert`) on a copy first",
+                information.compression_mode, information.compression_format
+            )));
+        }
+        if information.relative_file_paths.is_empty() {
+            return Err(problem("it lists no storage files".into()));
+        }
+        let mut files = Vec::new();
+        for relative in &information.relative_file_paths {
+            let path = directory.join(relative);
+            if !path.exists() {
+                return Err(problem(format!(
+                    "it lists the storage file `{relative}`, which is missing ({})",
+                    path.display()
+                )));
+            }
+            let format = detect(&path)?;
+            if !matches!(format, InputFormat::Sqlite | InputFormat::Mcap) {
+                return Err(problem(format!(
+                    "its storage file `{relative}` is neither sqlite3 nor MCAP (storage `{}`)",
+                    information.storage_identifier
+                )));
+            }
+            files.push(LogFile::open(&path, format)?);
+        }
+        Ok(Self {
+            files,
+            notices: Vec::new(),
+        })
+    }
+}
+
+/// Rows read from the `messages` table per query.
+const PAGE_ROWS: usize = 256;
+
+/// A rosbag2 sqlite3 file: its topics read at open, its messages streamed.
+pub struct SqliteFile {
+    path: PathBuf,
+    connections: HashMap<i64, Arc<Connection>>,
+}
+
+impl SqliteFile {
+    pub fn open(path: &Path) -> Result<Self> {
+        let database = open_database(path)?;
+        let connections = topics(&database).map_err(|problem| Error::LogContainer {
+            path: path.to_path_buf(),
+            problem,
+        })?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            connections,
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The messages in row order, a page at a time: each page is its own query, so
+    /// no statement outlives a call (the database handle is not shared between
+    /// threads either).
+    pub fn messages(&self) -> FileMessages<'_> {
+        let database = match open_database(&self.path) {
+            Ok(database) => database,
+            Err(error) => return Box::new(std::iter::once(Err(error.to_string()))),
+        };
+        let mut page: VecDeque<std::result::Result<LogMessage, String>> = VecDeque::new();
+        let mut after_id = i64::MIN;
+        let mut done = false;
+        Box::new(std::iter::from_fn(move || {
+            if page.is_empty() && !done {
+                match self.page(&database, after_id) {
+                    Ok((rows, last_id)) => {
+                        done = rows.len() < PAGE_ROWS;
+                        after_id = last_id.unwrap_or(after_id);
+                        page.extend(rows.into_iter().map(Ok));
+                    }
+                    Err(problem) => {
+                        done = true;
+                        page.push_back(Err(problem));
+                    }
+                }
+            }
+            page.pop_front()
+        }))
+    }
+
+    /// Up to [`PAGE_ROWS`] messages after row `after_id`, and the last row's id.
+    fn page(
+        &self,
+        database: &rusqlite::Connection,
+        after_id: i64,
+    ) -> std::result::Result<(Vec<LogMessage>, Option<i64>), String> {
+        let sql =
+            "SELECT id, topic_id, timestamp, data FROM messages WHERE id > ?1 ORDER BY id LIMIT ?2";
+        let mut statement = database
+            .prepare_cached(sql)
+            .map_err(|e| format!("cannot read the messages table: {e}"))?;
+        let mut rows = statement
+            .query(params![after_id, PAGE_ROWS as i64])
+            .map_err(|e| format!("cannot read the messages table: {e}"))?;
+        let mut messages = Vec::with_capacity(PAGE_ROWS);
+        let mut last_id = None;
+        while let Some(row) = rows
+            .next()
+            .map_err(|e| format!("the messages table after row {after_id}: {e}"))?
+        {
+            let read = |e: rusqlite::Error| format!("message row after {after_id}: {e}");
+            let id: i64 = row.get(0).map_err(read)?;
+            let topic_id: i64 = row.get(1).map_err(read)?;
+            let timestamp: i64 = row.get(2).map_err(read)?;
+            let data: Vec<u8> = row.get(3).map_err(read)?;
+            let connection = self.connections.get(&topic_id).ok_or_else(|| {
+                format!("message row {id} is on topic id {topic_id}, which the topics table does not list")
+            })?;
+            let stamp_ns = u64::try_from(timestamp)
+                .map_err(|_| format!("message row {id} has a negative timestamp {timestamp}"))?;
+            messages.push(LogMessage {
+                connection: connection.clone(),
+                log_time_ns: stamp_ns,
+                publish_time_ns: stamp_ns,
+                data,
+            });
+            last_id = Some(id);
+        }
+        Ok((messages, last_id))
+    }
+}
+
+/// `path` opened read-only and immutable (see the module's comment).
+fn open_database(path: &Path) -> Result<rusqlite::Connection> {
+    let uri = format!("file:{}?immutable=1", uri_path(path));
+    let flags = OpenFlags::SQLITE_OPEN_READ_ONLY
+        | OpenFlags::SQLITE_OPEN_URI
+        | OpenFlags::SQLITE_OPEN_NO_MUTEX;
+    rusqlite::Connection::open_with_flags(uri, flags).map_err(|e| Error::LogContainer {
+        path: path.to_path_buf(),
+        problem: format!("cannot open as sqlite3: {e}"),
+    })
+}
+
+/// An absolute path percent-encoded for an SQLite URI.
+fn uri_path(path: &Path) -> String {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut out = String::new();
+    for byte in absolute.as_os_str().as_encoded_bytes() {
+        match byte {
+            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'/' | b'-' | b'_' | b'.' | b'~' => {
+                out.push(*byte as char)
+            }
+            other => out.push_str(&format!("%{other:02X}")),
+        }
+    }
+    out
+}
+
+/// The topics table, with each type's definition where the file has one (rosbag2
+/// from Iron on keeps them in `message_definitions`).
+fn topics(
+    database: &rusqlite::Connection,
+) -> std::result::Result<HashMap<i64, Arc<Connection>>, String> {
+    let unreadable = |e: rusqlite::Error| format!("not a rosbag2 database: {e}");
+    let has_definitions: bool = database
+        .query_row(
+            "SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = 'message_definitions'",
+            [],
+            |row| row.get::<_, i64>(0),
+        )
+        .map_err(unreadable)?
+        > 0;
+    let mut definitions: HashMap<String, (String, Vec<u8>)> = HashMap::new();
+    if has_definitions {
+        let mut statement = database
+            .prepare(
+                "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions",
+            )
+            .map_err(unreadable)?;
+        let rows = statement
+            .query_map([], |row| {
+                Ok((
+                    row.get::<_, String>(0)?,
+                    row.get::<_, String>(1)?,
+                    row.get::<_, String>(2)?,
+                ))
+            })
+            .map_err(unreadable)?;
+        for row in rows {
+            let (topic_type, encoding, text) = row.map_err(unreadable)?;
+            if encoding != "unknown" {
+                definitions.insert(topic_type, (encoding, text.into_bytes()));
+            }
+        }
+    }
+    let mut statement = database
+        .prepare("SELECT id, name, type, serialization_format FROM topics")
+        .map_err(unreadable)?;
+    let rows = statement
+        .query_map([], |row| {
+            Ok((
+                row.get::<_, i64>(0)?,
+                row.get::<_, String>(1)?,
+                row.get::<_, String>(2)?,
+                row.get::<_, String>(3)?,
+            ))
+        })
+        .map_err(unreadable)?;
+    let mut connections = HashMap::new();
+    for row in rows {
+        let (id, topic, schema_name, message_encoding) = row.map_err(unreadable)?;
+        let (schema_encoding, schema_data) =
+            definitions.get(&schema_name).cloned().unwrap_or_default();
+        connections.insert(
+            id,
+            Arc::new(Connection {
+                topic,
+                schema_name,
+                schema_encoding,
+                schema_data,
+                message_encoding,
+            }),
+        );
+    }
+    Ok(connections)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uri_paths_escape_what_sqlite_would_read_as_syntax() {
+        assert_eq!(
+            uri_path(Path::new("/d/a b?c#d%e.db3")),
+            "/d/a%20b%3Fc%23d%25e.db3"
+        );
+    }
+
+    #[test]
+    fn a_database_is_read_without_writing_beside_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("drive.db3");
+        {
+            let database = rusqlite::Connection::open(&path).unwrap();
+            database
+                .execute_batch(
+                    "PRAGMA journal_mode=WAL;
+                     CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT, type TEXT,
+                         serialization_format TEXT, offered_qos_profiles TEXT);
+                     CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER,
+                         timestamp INTEGER, data BLOB);
+                     INSERT INTO topics VALUES (1, '/chatter', 'std_msgs/msg/String', 'cdr', '');",
+                )
+                .unwrap();
+            for i in 0..600i64 {
+                database
+                    .execute(
+                        "INSERT INTO messages (topic_id, timestamp, data) VALUES (1, ?1, ?2)",
+                        params![i * 10, vec![i as u8; 3]],
+                    )
+                    .unwrap();
+            }
+        }
+        let before: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        let file = SqliteFile::open(&path).unwrap();
+        let messages: Vec<_> = file
+            .messages()
+            .collect::<std::result::Result<_, _>>()
+            .unwrap();
+        assert_eq!(messages.len(), 600);
+        assert_eq!(messages[599].log_time_ns, 5990);
+        assert_eq!(messages[599].data, vec![87u8; 3]);
+        assert_eq!(messages[0].connection.type_name(), "std_msgs/msg/String");
+        let after: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(before, after);
+    }
+}

@@ -1,0 +1,105 @@
+"""Writes one ROS 2 MCAP drive (as `travmap convert` makes it) again in every other
+recorded-log format travmap reads, with real writers and no travmap code:
+
+  ros1-none.bag, ros1-bz2.bag, ros1-lz4.bag  rosbags' ROS 1 bag writer (chunk compression)
+  ros1.mcap                                  Python mcap's writer, ros1msg schemas, ros1 messages
+  rosbag2-sqlite3/, rosbag2-mcap/            rosbags' rosbag2 writer (storage plugins)
+  rosbag2-from-bag/                          rosbags-convert of ros1-none.bag (ROS 1 -> ROS 2)
+
+Messages become ROS 1 with rosbags' CDR -> ROS 1 conversion (which adds the Header's
+seq); ROS 1 message definitions and md5sums come from rosbags' Noetic type store.
+Every route also carries a `/chatter` std_msgs String per cloud, a type travmap does
+not read, to check that it is copied as recorded.
+
+usage: python ros_routes.py DRIVE.mcap OUT_DIR [ROSBAGS_CONVERT]
+"""
+import subprocess
+import sys
+from pathlib import Path
+
+from mcap.reader import make_reader
+from mcap.writer import Writer as McapWriter
+from rosbags.rosbag1 import Writer as Bag1Writer
+from rosbags.rosbag2 import Writer as Bag2Writer
+from rosbags.rosbag2.enums import StoragePlugin
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+ROS2 = get_typestore(Stores.ROS2_HUMBLE)
+ROS1 = get_typestore(Stores.ROS1_NOETIC)
+# Noetic's store lacks tf2_msgs; its TFMessage is one field over the Noetic types.
+ROS1.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+CHATTER = "std_msgs/msg/String"
+
+
+def recorded(path):
+    """(topic, ROS 2 type, log time, CDR bytes) of every message, plus a /chatter
+    String after every PointCloud2."""
+    out = []
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            out.append((channel.topic, schema.name, message.log_time, bytes(message.data)))
+            if schema.name == "sensor_msgs/msg/PointCloud2":
+                text = ROS2.types[CHATTER](data=f"cloud at {message.log_time}")
+                out.append(("/chatter", CHATTER, message.log_time, bytes(ROS2.serialize_cdr(text, CHATTER))))
+    return out
+
+
+def ros1_bag(messages, path, compression):
+    writer = Bag1Writer(path)
+    if compression:
+        writer.set_compression(compression)
+    with writer:
+        connections = {}
+        for topic, msgtype, stamp, cdr in messages:
+            if topic not in connections:
+                connections[topic] = writer.add_connection(topic, msgtype, typestore=ROS1)
+            writer.write(connections[topic], stamp, bytes(ROS2.cdr_to_ros1(cdr, msgtype)))
+
+
+def ros1_mcap(messages, path):
+    with open(path, "wb") as f:
+        writer = McapWriter(f)
+        writer.start(profile="ros1", library="ros_routes.py")
+        channels = {}
+        for topic, msgtype, stamp, cdr in messages:
+            if topic not in channels:
+                definition, md5sum = ROS1.generate_msgdef(msgtype)
+                schema = writer.register_schema(
+                    name=msgtype.replace("/msg/", "/"), encoding="ros1msg", data=definition.encode()
+                )
+                channels[topic] = writer.register_channel(
+                    topic=topic, message_encoding="ros1", schema_id=schema, metadata={"md5sum": md5sum}
+                )
+            data = bytes(ROS2.cdr_to_ros1(cdr, msgtype))
+            writer.add_message(channel_id=channels[topic], log_time=stamp, publish_time=stamp, data=data)
+        writer.finish()
+
+
+def rosbag2(messages, path, storage):
+    with Bag2Writer(path, version=9, storage_plugin=storage) as writer:
+        connections = {}
+        for topic, msgtype, stamp, cdr in messages:
+            if topic not in connections:
+                connections[topic] = writer.add_connection(topic, msgtype, typestore=ROS2)
+            writer.write(connections[topic], stamp, cdr)
+
+
+def main():
+    drive, out = Path(sys.argv[1]), Path(sys.argv[2])
+    out.mkdir(parents=True, exist_ok=True)
+    messages = recorded(drive)
+    ros1_bag(messages, out / "ros1-none.bag", None)
+    ros1_bag(messages, out / "ros1-bz2.bag", Bag1Writer.CompressionFormat.BZ2)
+    ros1_bag(messages, out / "ros1-lz4.bag", Bag1Writer.CompressionFormat.LZ4)
+    ros1_mcap(messages, out / "ros1.mcap")
+    rosbag2(messages, out / "rosbag2-sqlite3", StoragePlugin.SQLITE3)
+    rosbag2(messages, out / "rosbag2-mcap", StoragePlugin.MCAP)
+    if len(sys.argv) > 3:
+        subprocess.run(
+            [sys.argv[3], "--src", str(out / "ros1-none.bag"), "--dst", str(out / "rosbag2-from-bag")],
+            check=True,
+        )
+
+
+if __name__ == "__main__":
+    main()
