@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Writes the seed corpus in fuzz/seeds/ from the shared data: small, real inputs
 for every target of travmap::fuzzing. Run from the repository root after
-`cargo build --release`; needs `../shared/data` and the Python `mcap` and `pyarrow` packages.
+`cargo build --release`; needs `../shared/data` and the Python `mcap`, `pyarrow` and
+`rosbags` packages (the CI client venv has them).
 
     python3 fuzz/make_seeds.py [--travmap target/release/travmap] [--data ../shared/data]
 """
@@ -15,8 +16,11 @@ import subprocess
 import tempfile
 import zlib
 
+import sys
+
 import pyarrow.parquet as pq
 from mcap.reader import make_reader
+from rosbags.typesys import Stores, get_typestore
 
 POINTS = 64  # points per scan in the seeds: real layout, cheap to mutate
 
@@ -92,12 +96,26 @@ def main() -> None:
             )
             seed("mcap_file", drive.name, drive.read_bytes())
         messages = first_message_per_topic(tmp / "drive-none.mcap")
+        # The tiny drive in every other log format, by real writers (rosbags, mcap).
+        routes = tmp / "routes"
+        subprocess.run(
+            [sys.executable, "tests/clients/ros_routes.py", str(tmp / "drive-none.mcap"), str(routes)],
+            check=True,
+        )
+        for name in ("ros1-none.bag", "ros1-bz2.bag", "ros1-lz4.bag"):
+            seed("bag_file", name, (routes / name).read_bytes())
+        seed("mcap_file", "ros1.mcap", (routes / "ros1.mcap").read_bytes())
+        for storage in ("sqlite3", "mcap"):
+            metadata = (routes / f"rosbag2-{storage}" / "metadata.yaml").read_text()
+            # The fuzz target's directory holds one (empty) storage file, drive_0.mcap.
+            metadata = metadata.replace(f"rosbag2-{storage}.{'db3' if storage == 'sqlite3' else 'mcap'}", "drive_0.mcap")
+            seed("rosbag2_metadata", f"{storage}-metadata.yaml", metadata.encode())
         # Frame 0's cells on a 6 m grid (9 rows, every column), as travmap writes them
         # (zstd) and as pyarrow rewrites them (uncompressed, dictionary-encoded).
         cells = tmp / "cells.parquet"
         subprocess.run(
             [args.travmap, "dataset", str(seq), "-o", str(cells), "--frames", "0..1",
-             "--set", "training.grid_size_m=6", "-q"],
+             "--set", "training.grid_size_m=6", "--set", "features.groups=[]", "-q"],
             check=True,
         )
         seed("dataset_file", "travmap-zstd.parquet", cells.read_bytes())
@@ -109,6 +127,13 @@ def main() -> None:
     seed("ros_tf", "tf_static.cdr", messages["/tf_static"])
     seed("ros_camera_info", "camera_info.cdr", messages["/camera_2/camera_info"])
     seed("ros_image", "compressed_png.cdr", messages["/camera_2/image/compressed"])
+    ros2 = get_typestore(Stores.ROS2_HUMBLE)
+    for topic, msgtype, name in (
+        ("/velodyne_points", "sensor_msgs/msg/PointCloud2", "point_cloud2"),
+        ("/tf", "tf2_msgs/msg/TFMessage", "tf"),
+        ("/camera_2/camera_info", "sensor_msgs/msg/CameraInfo", "camera_info"),
+    ):
+        seed("ros1_message", f"{name}.ros1", bytes(ros2.cdr_to_ros1(messages[topic], msgtype)))
 
     # Messages of other writers (rosbags-rs), in layouts travmap does not write itself.
     others = first_message_per_topic(data / "mcap" / "rosbags_rs_all_std_types.mcap")
@@ -121,12 +146,18 @@ def main() -> None:
 
     # The embedded model cut to three support vectors and three reduced-set centres:
     # the whole structure, small enough to mutate quickly.
-    model = json.loads(pathlib.Path("src/classifier/default_model.json").read_text())
-    model["dual_coefficients"] = model["dual_coefficients"][:3]
-    model["support_vectors"] = model["support_vectors"][:3]
-    model["training"]["search"] = model["training"]["search"][:1]
-    model["reduced_set"]["centres"] = model["reduced_set"]["centres"][:3]
-    model["reduced_set"]["weights"] = model["reduced_set"]["weights"][:3]
+    model = json.loads(pathlib.Path("src/training/default_model.json").read_text())
+
+    def cut(m: dict) -> None:
+        m["dual_coefficients"] = m["dual_coefficients"][:3]
+        m["support_vectors"] = m["support_vectors"][:3]
+        m["training"]["search"] = m["training"]["search"][:1]
+        m["reduced_set"]["centres"] = m["reduced_set"]["centres"][:3]
+        m["reduced_set"]["weights"] = m["reduced_set"]["weights"][:3]
+
+    cut(model)
+    if model.get("fallback"):
+        cut(model["fallback"])
     seed("model", "small_model.json", json.dumps(model, indent=1).encode())
 
     for target in sorted(p.name for p in seeds.iterdir()):

@@ -156,7 +156,7 @@ pub fn rosbag2_metadata(data: &[u8]) {
 
 /// Opens `path` as a drive, of whatever format it is, and reads every frame.
 fn read_drive(path: &Path) {
-    if let Ok(source) = Source::open(path, &DriveOptions::default()) {
+    if let Ok(source) = Source::open(path, &DriveOptions::default(), &|_| {}) {
         source.read(&(0..usize::MAX)).for_each(drop);
     }
 }

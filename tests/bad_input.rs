@@ -221,7 +221,7 @@ fn missing_files_and_directories() {
     let err = clean_failure(eval(dir.path()));
     assert_contains(&err, &["times.txt"]);
     let err = clean_failure(eval(&dir.path().join("nowhere")));
-    assert_contains(&err, &["not a directory"]);
+    assert_contains(&err, &["nowhere does not exist"]);
 }
 
 #[test]

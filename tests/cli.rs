@@ -239,7 +239,7 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
     // The same frame through the library: every cell's colour in every panel.
     let config = travmap::Config::default();
     let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
-    let source = travmap::io::Source::open(Path::new(&seq), &Default::default()).unwrap();
+    let source = travmap::io::Source::open(Path::new(&seq), &Default::default(), &|_| {}).unwrap();
     let selection = travmap::drive::Selection::new(source, 2..3);
     let mut result = None;
     selection
@@ -302,12 +302,22 @@ fn suspicious_arguments_are_refused_or_warned_about() {
     let again = format!("{seq}/../00");
     let err = clean_failure(travmap(&["eval", &seq, &again]));
     assert_contains(&err, &["are the same input"]);
-    // convert reads KITTI directories only.
+    // convert copies a log whole: --frames is for KITTI input.
     let drive = dir.path().join("d.mcap");
     write_output("convert", &seq, &drive, &["--frames", "0..2"]);
     let other = dir.path().join("e.mcap");
-    let err = clean_failure(travmap(&["convert", arg(&drive), "-o", arg(&other)]));
-    assert_contains(&err, &["convert takes a KITTI sequence directory"]);
+    let err = clean_failure(travmap(&[
+        "convert",
+        arg(&drive),
+        "-o",
+        arg(&other),
+        "--frames",
+        "0..1",
+    ]));
+    assert_contains(
+        &err,
+        &["--frames applies to KITTI input; a log is converted whole"],
+    );
     // Unbounded or empty repeats, and --frame with --frames, are usage errors.
     for args in [
         vec!["bench", &seq, "--repeats", "0"],
@@ -326,7 +336,7 @@ fn suspicious_arguments_are_refused_or_warned_about() {
     let out = travmap(&["eval", &seq, "--frames", "0..3", "--cloud-topic", "/points"]);
     assert!(out.status.success());
     let err = common::stderr(&out);
-    assert_contains(&err, &["warning: --cloud-topic applies to MCAP inputs"]);
+    assert_contains(&err, &["warning: --cloud-topic applies to recorded logs"]);
 }
 
 #[test]

@@ -85,7 +85,7 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     // The same frame through the library, on the training grid the command uses.
     let mut config = travmap::Config::default();
     config.grid.size_m = config.training.grid_size_m;
-    let source = Source::open(&seq, &DriveOptions::default()).unwrap();
+    let source = Source::open(&seq, &DriveOptions::default(), &|_| {}).unwrap();
     let selection = Selection::new(source, frame..frame + 1);
     let mut results = Vec::new();
     selection

@@ -6,33 +6,32 @@ mod common;
 
 use std::path::Path;
 
+use travmap::io::format::InputFormat;
+use travmap::io::log::Log;
 use travmap::io::ros::{PointCloud2, TfMessage, datatype, decode};
-use travmap::io::ros_drive::{DriveOptions, RosDrive};
 use travmap::outputs::writing::{Compression, McapSink};
 
 /// Rewrites the converted drive `from` into `to` with each cloud's intensity
 /// changed by `edit` (clouds and transforms only).
 fn rewrite_clouds(from: &Path, to: &Path, edit: impl Fn(&mut PointCloud2)) {
-    let drive = RosDrive::open(from, &DriveOptions::default()).unwrap();
+    let log = Log::open(from, InputFormat::Mcap).unwrap();
     let mut sink = McapSink::create(to, Compression::None).unwrap();
-    drive
-        .for_each_message(|message| {
-            let topic = message.channel.topic.as_str();
-            let schema = message.channel.schema.as_ref().map(|s| s.name.as_str());
-            match schema {
-                Some("sensor_msgs/msg/PointCloud2") => {
-                    let mut cloud: PointCloud2 = decode(&message.data).unwrap();
-                    edit(&mut cloud);
-                    sink.write(topic, message.log_time, &cloud)
-                }
-                Some("tf2_msgs/msg/TFMessage") => {
-                    let tf: TfMessage = decode(&message.data).unwrap();
-                    sink.write(topic, message.log_time, &tf)
-                }
-                _ => Ok(()),
+    for message in log.messages() {
+        let message = message.unwrap();
+        let topic = message.connection.topic.as_str();
+        match message.connection.schema_name.as_str() {
+            "sensor_msgs/msg/PointCloud2" => {
+                let mut cloud: PointCloud2 = decode(&message.data).unwrap();
+                edit(&mut cloud);
+                sink.write(topic, message.log_time_ns, &cloud).unwrap();
             }
-        })
-        .unwrap();
+            "tf2_msgs/msg/TFMessage" => {
+                let tf: TfMessage = decode(&message.data).unwrap();
+                sink.write(topic, message.log_time_ns, &tf).unwrap();
+            }
+            _ => {}
+        }
+    }
     sink.finish().unwrap();
 }
 

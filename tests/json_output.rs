@@ -50,7 +50,7 @@ fn every_command_prints_json_that_matches_its_schema() {
     let seq = arg(&seq);
     let out = |name: &str| arg(&dir.path().join(name)).to_string();
     let (drive, model, cells) = (out("d.mcap"), out("m.json"), out("c.parquet"));
-    let (annotated, picture) = (out("a.mcap"), out("f.png"));
+    let (annotated, picture, converted) = (out("a.mcap"), out("f.png"), out("c.mcap"));
     let quick = ["training.c_values=[10]", "training.gamma_values=[0.05]"];
     let quick_crossval = [&quick[..], &["training.folds=3"]].concat();
     let runs: Vec<(&str, Vec<&str>)> = vec![
@@ -58,6 +58,8 @@ fn every_command_prints_json_that_matches_its_schema() {
             "convert",
             vec!["convert", seq, "--frames", "0..4", "-o", &drive],
         ),
+        // A recorded log converted: the other shape of the summary.
+        ("convert", vec!["convert", &drive, "-o", &converted]),
         ("run", vec!["run", seq, "--frames", "2..4"]),
         ("run", vec!["run", &drive]),
         ("eval", vec!["eval", seq, "--frames", "0..3"]),

@@ -4,13 +4,15 @@
 mod common;
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use common::{arg, assert_contains, clean_failure, json_summary, success, travmap, write_output};
 use serde_json::Value;
 use travmap::io::KittiSequence;
 use travmap::io::cloud::cloud_points;
+use travmap::io::format::InputFormat;
+use travmap::io::log::Log;
 use travmap::io::ros::{OccupancyGrid, decode};
 use travmap::io::ros_drive::{DriveOptions, RosDrive};
 use travmap::outputs::writing::{Compression, McapSink};
@@ -35,7 +37,11 @@ fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
 
     // The frames read back: same points, labels, stamps and poses, bit for bit.
     let kitti = KittiSequence::open(&seq).unwrap();
-    let ros_drive = RosDrive::open(&drive, &DriveOptions::default()).unwrap();
+    let ros_drive = RosDrive::open(
+        Log::open(&drive, InputFormat::Mcap).unwrap(),
+        &DriveOptions::default(),
+    )
+    .unwrap();
     assert_eq!(ros_drive.frame_count(), 6);
     assert_eq!(ros_drive.world_frame(), "map");
     let mut index = 0;
@@ -375,7 +381,10 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
     let path = dir.path().join("odom.mcap");
     write_odometry_drive(&path);
     // Two cloud topics: ambiguous, and the error lists them.
-    let err = match RosDrive::open(&path, &DriveOptions::default()) {
+    let err = match RosDrive::open(
+        Log::open(&path, InputFormat::Mcap).unwrap(),
+        &DriveOptions::default(),
+    ) {
         Err(e) => e.to_string(),
         Ok(_) => panic!("two cloud topics must be ambiguous"),
     };
@@ -396,7 +405,7 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
         cloud_topic: Some("/points".into()),
         ..Default::default()
     };
-    let drive = RosDrive::open(&path, &options).unwrap();
+    let drive = RosDrive::open(Log::open(&path, InputFormat::Mcap).unwrap(), &options).unwrap();
     assert_eq!(drive.world_frame(), "odom");
     let frames: Vec<_> = drive.read(&(0..1)).map(Result::unwrap).collect();
     let frame = &frames[0];
@@ -515,42 +524,9 @@ fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
 /// camera-cropped scan of kitti-object-000008 and sequence 03's calibration (the
 /// same 2011_09_26 cameras): the directory and the sequence; None without the shared
 /// data.
-fn one_frame_with_image() -> Option<(tempfile::TempDir, PathBuf)> {
-    let object = common::shared_data("kitti-object-000008/training")?;
-    let meta = common::shared_data("kitti-odometry-meta/sequences/03")?;
-    let dir = tempfile::tempdir().unwrap();
-    let seq = dir.path().join("seq");
-    for sub in ["velodyne", "image_2"] {
-        std::fs::create_dir_all(seq.join(sub)).unwrap();
-    }
-    std::fs::copy(
-        object.join("velodyne_reduced/000008.bin"),
-        seq.join("velodyne/000000.bin"),
-    )
-    .unwrap();
-    std::fs::copy(
-        object.join("image_2/000008.png"),
-        seq.join("image_2/000000.png"),
-    )
-    .unwrap();
-    std::fs::copy(meta.join("calib.txt"), seq.join("calib.txt")).unwrap();
-    let first_line = |name: &str| {
-        std::fs::read_to_string(meta.join(name))
-            .unwrap()
-            .lines()
-            .next()
-            .unwrap()
-            .to_string()
-            + "\n"
-    };
-    std::fs::write(seq.join("poses.txt"), first_line("poses.txt")).unwrap();
-    std::fs::write(seq.join("times.txt"), first_line("times.txt")).unwrap();
-    Some((dir, seq))
-}
-
 #[test]
 fn convert_passes_png_images_through_with_camera_info() {
-    let Some((dir, seq)) = one_frame_with_image() else {
+    let Some((dir, seq)) = common::one_frame_with_image() else {
         return;
     };
     let out = dir.path().join("d.mcap");
@@ -687,7 +663,7 @@ fn clouds_whose_data_disagree_with_their_layout_are_errors() {
 #[test]
 fn an_image_that_disagrees_with_its_camera_info_and_a_non_cdr_cloud_are_errors() {
     use travmap::io::ros::{CameraInfo, PointCloud2, RosMessage, encode};
-    let Some((dir, seq)) = one_frame_with_image() else {
+    let Some((dir, seq)) = common::one_frame_with_image() else {
         return;
     };
     let good = dir.path().join("good.mcap");

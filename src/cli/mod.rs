@@ -234,7 +234,7 @@ pub fn open_selection(
     keep_going: bool,
     read_images: bool,
 ) -> Result<Selection> {
-    let mut source = Source::open(path, options)?;
+    let mut source = Source::open(path, options, &|notice| eprintln!("notice: {notice}"))?;
     if let Source::Kitti(_) = source {
         let mcap_only = [
             ("--cloud-topic", &options.cloud_topic),
@@ -247,9 +247,6 @@ pub fn open_selection(
                 path.display()
             );
         }
-    }
-    for notice in source.notices() {
-        eprintln!("notice: {notice}");
     }
     source.set_read_images(read_images);
     source.set_keep_going(keep_going);

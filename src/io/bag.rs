@@ -32,10 +32,13 @@ mod op {
 /// No real chunk is near this (rosbag's default is 768 KiB); a size above it is corrupt.
 const LARGEST_CHUNK: usize = 1 << 30;
 
+/// A header field: its name and value.
+type Field<'a> = (&'a [u8], &'a [u8]);
+
 /// One record: its header fields and data, and where it starts in the file.
 struct Record<'a> {
     offset: usize,
-    fields: Vec<(&'a [u8], &'a [u8])>,
+    fields: Vec<Field<'a>>,
     data: &'a [u8],
     /// Where the next record starts.
     end: usize,
@@ -131,7 +134,7 @@ fn read_u32(bytes: &[u8], at: usize) -> Option<u32> {
 }
 
 /// `name=value` fields, each after its `uint32` length.
-fn header_fields(mut header: &[u8]) -> std::result::Result<Vec<(&[u8], &[u8])>, String> {
+fn header_fields(mut header: &[u8]) -> std::result::Result<Vec<Field<'_>>, String> {
     let mut fields = Vec::new();
     while !header.is_empty() {
         let length = read_u32(header, 0)
@@ -229,7 +232,11 @@ impl BagFile {
                     bag.map.len()
                 ))
             })?;
-        bag.read_index(index_pos).map_err(container)?;
+        bag.read_index(index_pos).map_err(|problem| {
+            container(format!(
+                "its index (from byte {index_pos}) is damaged or cut off: {problem}"
+            ))
+        })?;
         if bag.chunks.len() != chunk_count {
             return Err(container(format!(
                 "its header counts {chunk_count} chunks but its index lists {}",

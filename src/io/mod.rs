@@ -78,24 +78,22 @@ pub enum Source {
 
 impl Source {
     /// The drive at `path`, of the format its content says ([`format::detect`]).
-    pub fn open(path: &Path, options: &ros_drive::DriveOptions) -> Result<Self> {
+    /// `on_notice` hears what the reader noticed and worked around (an unindexed
+    /// bag, ...) as soon as it is known, before anything can fail later.
+    pub fn open(
+        path: &Path,
+        options: &ros_drive::DriveOptions,
+        on_notice: &dyn Fn(&str),
+    ) -> Result<Self> {
         match format::detect(path)? {
             format::InputFormat::Kitti => Ok(Source::Kitti(Box::new(KittiSequence::open(path)?))),
             format => {
                 let log = log::Log::open(path, format)?;
+                log.notices().iter().for_each(|notice| on_notice(notice));
                 Ok(Source::Log(Box::new(ros_drive::RosDrive::open(
                     log, options,
                 )?)))
             }
-        }
-    }
-
-    /// What the reader noticed and worked around (an unindexed bag, ...), for the
-    /// user to hear.
-    pub fn notices(&self) -> &[String] {
-        match self {
-            Source::Kitti(_) => &[],
-            Source::Log(drive) => drive.notices(),
         }
     }
 

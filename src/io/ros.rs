@@ -395,18 +395,24 @@ impl MessageEncoding {
     }
 }
 
+/// A message re-encoded as ROS 2: its type, schema and CDR bytes.
+pub struct Ros2Message {
+    pub name: &'static str,
+    pub schema: &'static str,
+    pub data: Vec<u8>,
+}
+
 /// A ROS 1 message of a type travmap knows (by its ROS 2 name, see
-/// [`super::log::Connection::type_name`]) re-encoded as ROS 2 CDR: the ROS 2 type
-/// name, its schema and the bytes. None for other types.
-pub fn ros1_to_cdr(
-    type_name: &str,
-    data: &[u8],
-) -> Option<Result<(&'static str, &'static str, Vec<u8>), String>> {
-    fn translate<T: RosMessage>(
-        data: &[u8],
-    ) -> Result<(&'static str, &'static str, Vec<u8>), String> {
+/// [`super::log::Connection::type_name`]) re-encoded as ROS 2 CDR; None for other
+/// types.
+pub fn ros1_to_cdr(type_name: &str, data: &[u8]) -> Option<Result<Ros2Message, String>> {
+    fn translate<T: RosMessage>(data: &[u8]) -> Result<Ros2Message, String> {
         let message: T = super::ros1::decode(data)?;
-        Ok((T::NAME, T::SCHEMA, encode(&message, data.len())))
+        Ok(Ros2Message {
+            name: T::NAME,
+            schema: T::SCHEMA,
+            data: encode(&message, data.len()),
+        })
     }
     Some(match type_name {
         "sensor_msgs/msg/PointCloud2" => translate::<PointCloud2>(data),

@@ -410,11 +410,6 @@ impl RosDrive {
         self.log.messages()
     }
 
-    /// What the reader noticed and worked around (an unindexed bag, ...).
-    pub fn notices(&self) -> &[String] {
-        self.log.notices()
-    }
-
     /// The frames in `frames`, streamed in one pass over the file, each with the
     /// camera image nearest in time (within 50 ms) when the drive has a camera. With
     /// `--keep-going`, unreadable frames are recorded in the skip log and left out.

@@ -84,11 +84,16 @@ pub fn write_log_messages(
             _ => None,
         };
         let (channel, data) = match translated {
-            Some(Ok((name, schema, data))) => {
+            Some(Ok(ros2)) => {
                 summary.translated_messages += 1;
-                let id =
-                    sink.channel(&connection.topic, name, "ros2msg", schema.as_bytes(), "cdr")?;
-                (id, data)
+                let id = sink.channel(
+                    &connection.topic,
+                    ros2.name,
+                    "ros2msg",
+                    ros2.schema.as_bytes(),
+                    "cdr",
+                )?;
+                (id, ros2.data)
             }
             Some(Err(problem)) => {
                 return Err(Error::UndecodableMessage {

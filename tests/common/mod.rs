@@ -225,3 +225,38 @@ pub fn json_records(stdout: &str) -> (Vec<serde_json::Value>, serde_json::Value)
     assert!(records.iter().all(|r| r["type"] == "frame"));
     (records, summary)
 }
+
+/// One real KITTI frame with its camera image (kitti-object 000008, calib of
+/// odometry sequence 03) as a one-frame sequence directory.
+pub fn one_frame_with_image() -> Option<(tempfile::TempDir, PathBuf)> {
+    let object = shared_data("kitti-object-000008/training")?;
+    let meta = shared_data("kitti-odometry-meta/sequences/03")?;
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
+    for sub in ["velodyne", "image_2"] {
+        std::fs::create_dir_all(seq.join(sub)).unwrap();
+    }
+    std::fs::copy(
+        object.join("velodyne_reduced/000008.bin"),
+        seq.join("velodyne/000000.bin"),
+    )
+    .unwrap();
+    std::fs::copy(
+        object.join("image_2/000008.png"),
+        seq.join("image_2/000000.png"),
+    )
+    .unwrap();
+    std::fs::copy(meta.join("calib.txt"), seq.join("calib.txt")).unwrap();
+    let first_line = |name: &str| {
+        std::fs::read_to_string(meta.join(name))
+            .unwrap()
+            .lines()
+            .next()
+            .unwrap()
+            .to_string()
+            + "\n"
+    };
+    std::fs::write(seq.join("poses.txt"), first_line("poses.txt")).unwrap();
+    std::fs::write(seq.join("times.txt"), first_line("times.txt")).unwrap();
+    Some((dir, seq))
+}

@@ -1,0 +1,306 @@
+//! Every recorded-log format travmap reads, written by real tools (rosbags, Python
+//! mcap, rosbags-convert; `tests/clients/ros_routes.py`) from the shipped drive as
+//! travmap converts it: each route must give the ROS 2 MCAP's grids cell for cell and
+//! its scores, `convert` must bring each back to ROS 2, and broken logs must be
+//! one-line errors.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::{arg, assert_contains, clean_failure, run_client, success, travmap, write_output};
+use serde_json::Value;
+use travmap::io::format::{InputFormat, detect};
+use travmap::io::log::Log;
+
+/// The routes `ros_routes.py` writes, by name.
+const ROUTES: [&str; 8] = [
+    "ros1-none.bag",
+    "ros1-bz2.bag",
+    "ros1-lz4.bag",
+    "ros1.mcap",
+    "rosbag2-sqlite3",
+    "rosbag2-mcap",
+    "rosbag2-from-bag",
+    "rosbag2-sqlite3/rosbag2-sqlite3.db3",
+];
+
+/// `drive` (a ROS 2 MCAP) written in every other format into `dir/routes`, or None
+/// without the client venv.
+fn routes(drive: &Path, dir: &Path) -> Option<PathBuf> {
+    let python = common::env_var("TRAVMAP_CLIENT_PYTHON", "the client venv's python")?;
+    let convert = Path::new(&python).with_file_name("rosbags-convert");
+    let out = dir.join("routes");
+    run_client(
+        Command::new(&python)
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/ros_routes.py"))
+            .args([drive, &out, &convert]),
+    );
+    Some(out)
+}
+
+/// Every message of `topics` in a file travmap wrote: (topic, log time, bytes).
+fn messages_on(path: &Path, topics: &[&str]) -> Vec<(String, u64, Vec<u8>)> {
+    let format = detect(path).unwrap();
+    Log::open(path, format)
+        .unwrap()
+        .messages()
+        .map(Result::unwrap)
+        .filter(|m| topics.contains(&m.connection.topic.as_str()))
+        .map(|m| (m.connection.topic.clone(), m.log_time_ns, m.data))
+        .collect()
+}
+
+/// The scores of `eval --json` on `input`: confusion and filtered / unfiltered scores.
+fn scores(input: &Path) -> Value {
+    let summary = common::json_summary(&["eval", arg(input)]);
+    let report = &summary["report"];
+    serde_json::json!([
+        report["confusion"],
+        report["scores"],
+        report["unfiltered_scores"]
+    ])
+}
+
+#[test]
+fn every_route_gives_the_ros2_grids_cell_for_cell_and_the_same_scores() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+        return;
+    };
+    let Some(routes) = routes(&drive, dir.path()) else {
+        return;
+    };
+    let grids = [
+        "/travmap/prediction",
+        "/travmap/ground_truth",
+        "/travmap/cloud",
+    ];
+    let annotated = |input: &Path, name: &str| {
+        let out = dir.path().join(format!("{name}.annotated.mcap"));
+        write_output("annotate", input, &out, &["--no-passthrough"]);
+        messages_on(&out, &grids)
+    };
+    let reference = annotated(&drive, "ros2");
+    assert_eq!(reference.len(), 6 + 3 + 6);
+    let reference_scores = scores(&drive);
+    for route in ROUTES {
+        let input = routes.join(route);
+        let name = route.replace('/', "_");
+        assert!(
+            annotated(&input, &name) == reference,
+            "{route}: other grids"
+        );
+        assert_eq!(scores(&input), reference_scores, "{route}");
+    }
+}
+
+#[test]
+fn convert_brings_every_route_back_to_the_same_ros2_messages() {
+    let Some((dir, seq)) = common::one_frame_with_image() else {
+        return;
+    };
+    let drive = dir.path().join("drive.mcap");
+    write_output("convert", &seq, &drive, &[]);
+    let Some(routes) = routes(&drive, dir.path()) else {
+        return;
+    };
+    let known = [
+        "/velodyne_points",
+        "/tf",
+        "/tf_static",
+        "/camera_2/image/compressed",
+        "/camera_2/camera_info",
+    ];
+    let original = messages_on(&drive, &known);
+    assert_eq!(original.len(), 5);
+    for route in ["ros1-lz4.bag", "ros1.mcap", "rosbag2-sqlite3"] {
+        let out = dir.path().join(format!("{route}.converted.mcap"));
+        let json = common::json_summary(&["convert", arg(&routes.join(route)), "-o", arg(&out)]);
+        // Byte for byte the messages travmap wrote from the KITTI frame.
+        assert!(messages_on(&out, &known) == original, "{route}");
+        let summary = &json["summary"];
+        assert_eq!(summary["messages"], 6, "{route}: {summary}");
+        let ros1 = route != "rosbag2-sqlite3";
+        assert_eq!(summary["translated_messages"], if ros1 { 5 } else { 0 });
+        let as_recorded: &[&str] = if ros1 { &["/chatter"] } else { &[] };
+        assert_eq!(
+            summary["topics_as_recorded"],
+            serde_json::json!(as_recorded)
+        );
+
+        // The type travmap does not read is copied with its own encoding and schema.
+        let bytes = std::fs::read(&out).unwrap();
+        let chatter = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(Result::unwrap)
+            .find(|m| m.channel.topic == "/chatter")
+            .unwrap();
+        let schema = chatter.channel.schema.as_ref().unwrap();
+        let expected = if ros1 {
+            ("ros1", "std_msgs/String", "ros1msg")
+        } else {
+            ("cdr", "std_msgs/msg/String", "ros2msg")
+        };
+        assert_eq!(
+            (
+                chatter.channel.message_encoding.as_str(),
+                schema.name.as_str(),
+                schema.encoding.as_str()
+            ),
+            expected,
+            "{route}"
+        );
+        assert!(String::from_utf8_lossy(&schema.data).contains("string data"));
+    }
+    // And the image reaches the method through a ROS 1 bag as through ROS 2.
+    let images = |input: &Path| {
+        let out = dir.path().join("images.mcap");
+        let json = common::json_summary(&["annotate", arg(input), "-o", arg(&out)]);
+        let evaluation = &json["summary"]["evaluation"];
+        (
+            evaluation["frames_with_images"].clone(),
+            evaluation["cells_with_appearance"].clone(),
+        )
+    };
+    let through_ros2 = images(&drive);
+    assert_eq!(through_ros2.0, 1);
+    assert_eq!(images(&routes.join("ros1-bz2.bag")), through_ros2);
+}
+
+/// A copy of `from` in `dir` with `edit` applied to its bytes.
+fn edited(from: &Path, dir: &Path, name: &str, edit: impl FnOnce(&mut Vec<u8>)) -> PathBuf {
+    let mut bytes = std::fs::read(from).unwrap();
+    edit(&mut bytes);
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+/// Where a bag header field's value starts.
+fn field_value(bytes: &[u8], name: &[u8]) -> usize {
+    bytes.windows(name.len()).position(|w| w == name).unwrap() + name.len()
+}
+
+#[test]
+fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &["--frames", "0..3"]) else {
+        return;
+    };
+    let Some(routes) = routes(&drive, dir.path()) else {
+        return;
+    };
+    let bag = routes.join("ros1-none.bag");
+    let length = std::fs::metadata(&bag).unwrap().len() as usize;
+
+    // Cut inside its index, and before it: the header points into or past the end.
+    let bytes = std::fs::read(&bag).unwrap();
+    let at = field_value(&bytes, b"index_pos=");
+    let index_pos = u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap()) as usize;
+    for (cut_at, expected) in [
+        (length - 100, "is damaged or cut off"),
+        (index_pos - 10, "the bag was cut off"),
+    ] {
+        let cut = edited(&bag, dir.path(), "cut.bag", |b| b.truncate(cut_at));
+        let err = clean_failure(travmap(&["run", arg(&cut)]));
+        assert_contains(&err, &["cut.bag", "its index", expected]);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+
+    // A recording that stopped before writing its index: index_pos 0, read by a scan.
+    let unindexed = edited(&bag, dir.path(), "unindexed.bag", |b| {
+        let at = field_value(b, b"index_pos=");
+        b[at..at + 8].fill(0);
+    });
+    let output = travmap(&["run", arg(&unindexed)]);
+    let stderr = common::stderr(&output);
+    success(output);
+    assert_contains(
+        &stderr,
+        &["notice:", "unindexed.bag", "no index", "linear scan"],
+    );
+    let run_frames = |input: &Path| {
+        common::json_records(&success(travmap(&["run", arg(input), "--json"])))
+            .0
+            .iter()
+            .map(|f| (f["frame"].clone(), f["cells"].clone()))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(run_frames(&unindexed), run_frames(&bag));
+    // ... and the same cut short inside a chunk: the complete chunks are read and the
+    // notice says what was left out (here the pose of the last whole cloud, too).
+    let unindexed_cut = edited(&unindexed, dir.path(), "unindexed-cut.bag", |b| {
+        b.truncate(length / 2)
+    });
+    let output = travmap(&["run", arg(&unindexed_cut), "--keep-going"]);
+    assert_contains(&common::stderr(&output), &["notice:", "left out the last"]);
+
+    // A chunk whose compressed bytes are damaged.
+    let lz4 = routes.join("ros1-lz4.bag");
+    let damaged = edited(&lz4, dir.path(), "damaged.bag", |b| {
+        let at = field_value(b, b"compression=lz4") + 200;
+        for byte in &mut b[at..at + 64] {
+            *byte ^= 0x5a;
+        }
+    });
+    let err = clean_failure(travmap(&["run", arg(&damaged)]));
+    assert_contains(&err, &["damaged.bag", "chunk at byte"]);
+
+    // A .db3 whose pages are garbage after the SQLite header.
+    let db3 = routes.join("rosbag2-sqlite3/rosbag2-sqlite3.db3");
+    let corrupt = edited(&db3, dir.path(), "corrupt.db3", |b| {
+        for (i, byte) in b[100..].iter_mut().enumerate() {
+            *byte = (i * 7 + 3) as u8;
+        }
+    });
+    let err = clean_failure(travmap(&["run", arg(&corrupt)]));
+    assert_contains(&err, &["corrupt.db3"]);
+
+    // metadata.yaml naming a file that is not there.
+    let rosbag2 = dir.path().join("missing-file");
+    std::fs::create_dir(&rosbag2).unwrap();
+    let metadata = std::fs::read_to_string(routes.join("rosbag2-sqlite3/metadata.yaml")).unwrap();
+    std::fs::write(rosbag2.join("metadata.yaml"), metadata).unwrap();
+    let err = clean_failure(travmap(&["run", arg(&rosbag2)]));
+    assert_contains(
+        &err,
+        &[
+            "metadata.yaml",
+            "lists the storage file `rosbag2-sqlite3.db3`, which is missing",
+        ],
+    );
+}
+
+#[test]
+fn files_travmap_does_not_read_are_named_not_misdiagnosed() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(sample) = common::sample() else {
+        return;
+    };
+    let Some(object) = common::shared_data("kitti-object-000008/training") else {
+        return;
+    };
+    let pcd = dir.path().join("scan.pcd");
+    std::fs::write(&pcd, "# .PCD v0.7 - Point Cloud Data\nVERSION 0.7\n").unwrap();
+    let ply = dir.path().join("scan.ply");
+    std::fs::write(&ply, "ply\nformat ascii 1.0\n").unwrap();
+    let parquet = dir.path().join("cells.parquet");
+    write_output("dataset", &sample, &parquet, &["--frames", "0..1"]);
+    let text = dir.path().join("notes.mcap");
+    std::fs::write(&text, "not a drive\n").unwrap();
+    for (input, what) in [
+        (pcd, "is a PCD point cloud"),
+        (ply, "is a PLY point cloud"),
+        (parquet, "is a Parquet file"),
+        (object.join("image_2/000008.png"), "is a PNG image"),
+        (text, "is a text file"),
+        (dir.path().join("missing.mcap"), "does not exist"),
+    ] {
+        let err = clean_failure(travmap(&["run", arg(&input)]));
+        assert_contains(&err, &[arg(&input), what]);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+    assert_eq!(detect(&sample).unwrap(), InputFormat::Kitti);
+}
