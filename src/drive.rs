@@ -3,12 +3,24 @@
 
 use std::ops::Range;
 
-use crate::config::Config;
+use nalgebra::Isometry3;
+
+use crate::config::{Config, IntegrationConfig, RegistrationConfig};
 use crate::error::{Error, Result};
-use crate::io::Source;
+use crate::io::{Posing, Source};
 use crate::method::classifier::SvmModel;
 use crate::method::pipeline::{FrameResult, Pipeline};
-use crate::stopwatch::Stopwatch;
+use crate::method::registration::Odometry;
+use crate::stopwatch::{Stopwatch, timed};
+
+/// A scan's pose as registration estimated it.
+#[derive(Clone, Debug)]
+pub struct EstimatedPose {
+    pub index: usize,
+    pub stamp_ns: u64,
+    pub world_from_velodyne: Isometry3<f64>,
+    pub register_ms: f64,
+}
 
 /// A drive and the frames of it to use.
 pub struct Selection {
@@ -37,26 +49,97 @@ impl Selection {
         model: Option<&SvmModel>,
         mut on_frame: impl FnMut(FrameResult) -> Result<(), E>,
     ) -> Result<(), E> {
+        let posing = self.source.posing();
+        let alone;
+        let config = match posing {
+            // Each scan alone: nothing to integrate it with.
+            Posing::Alone => {
+                alone = Config {
+                    integration: IntegrationConfig {
+                        scans: 1,
+                        ..config.integration.clone()
+                    },
+                    ..config.clone()
+                };
+                &alone
+            }
+            _ => config,
+        };
         let mut pipeline = Pipeline::new(config)?;
+        if posing == Posing::Registration {
+            pipeline.estimate_poses(&config.registration);
+        }
         let first = self.frames.start;
         let frames = pipeline.window().warm_up_start(first)..self.frames.end;
         // Reading time: from the end of one frame's work to the arrival of the next.
         let mut reading = Stopwatch::start();
         for frame in self.source.read(&frames) {
-            let frame = frame?;
+            let mut frame = frame?;
             let read_ms = reading.lap_ms();
+            if posing == Posing::Alone {
+                frame.world_from_velodyne = Isometry3::identity();
+            }
+            let register_ms = match pipeline.register(&mut frame) {
+                Ok(ms) => ms,
+                Err(problem) => {
+                    let error = Error::Registration {
+                        path: self.source.path().to_path_buf(),
+                        frame: frame.index,
+                        problem,
+                    };
+                    self.source.skip_log().handle(frame.index, error)?;
+                    reading.lap_ms();
+                    continue;
+                }
+            };
             if frame.index < first {
                 pipeline.warm_up(frame);
             } else {
                 let scan_sha256 = self.fingerprint_scans.then(|| frame.content_sha256());
                 let mut result = pipeline.process_frame(frame, model);
                 result.timings.read_ms = read_ms;
+                result.timings.register_ms = register_ms;
+                result.timings.latency_ms += register_ms;
                 result.scan_sha256 = scan_sha256;
                 on_frame(result)?;
             }
             reading.lap_ms();
         }
         Ok(())
+    }
+
+    /// The selected frames' poses by scan registration alone, whatever the input
+    /// records (`travmap odometry`): the first scan that registers is the world.
+    /// A scan that cannot be registered ends the run, or is skipped (`--keep-going`).
+    pub fn estimate_trajectory(
+        &self,
+        config: &RegistrationConfig,
+        mut on_frame: impl FnMut(),
+    ) -> Result<Vec<EstimatedPose>> {
+        let mut odometry = Odometry::new(config.clone());
+        let mut trajectory = Vec::new();
+        for frame in self.source.read(&self.frames) {
+            let frame = frame?;
+            let (pose, register_ms) = timed(|| odometry.register(&frame.points_in_velodyne));
+            match pose {
+                Ok(world_from_velodyne) => trajectory.push(EstimatedPose {
+                    index: frame.index,
+                    stamp_ns: frame.stamp_ns,
+                    world_from_velodyne,
+                    register_ms,
+                }),
+                Err(problem) => {
+                    let error = Error::Registration {
+                        path: self.source.path().to_path_buf(),
+                        frame: frame.index,
+                        problem,
+                    };
+                    self.source.skip_log().handle(frame.index, error)?;
+                }
+            }
+            on_frame();
+        }
+        Ok(trajectory)
     }
 
     /// The input and the frames of it, as a person reads them.

@@ -142,9 +142,13 @@ pub enum Error {
     },
 
     #[error(
-        "{path}: no pose for the clouds' frame `{frame}`: travmap needs /tf (and /tf_static) or an Odometry topic linking it to a world frame"
+        "{path}: no pose for the clouds' frame `{frame}` from --poses {pose_source}: /tf (and /tf_static) or an Odometry topic must link it to a world frame (--poses registration estimates poses from the scans)"
     )]
-    LogNoPose { path: PathBuf, frame: String },
+    LogNoPose {
+        path: PathBuf,
+        frame: String,
+        pose_source: &'static str,
+    },
 
     #[error("{path}: no transform from `{frame}` up to the world frame `{world_frame}`")]
     LogNotBelowWorld {
@@ -189,6 +193,13 @@ pub enum Error {
         topic: String,
         schema: String,
         encoding: String,
+    },
+
+    #[error("{path}: frame {frame}: {problem}")]
+    Registration {
+        path: PathBuf,
+        frame: usize,
+        problem: crate::method::registration::RegistrationError,
     },
 
     #[error("{path}: {problem}")]
@@ -298,6 +309,7 @@ impl Error {
             | Error::LogCamera { path, .. }
             | Error::UndecodableMessage { path, .. }
             | Error::LogEncoding { path, .. }
+            | Error::Registration { path, .. }
             | Error::Transform { path, .. } => Some(path),
             Error::OutputIsInput { output, .. }
             | Error::OutputIsDirectory { output }

@@ -35,6 +35,7 @@ enum Command {
     Annotate(cli::annotate::AnnotateArgs),
     Render(cli::render::RenderArgs),
     Bench(cli::bench::BenchArgs),
+    Odometry(cli::odometry::OdometryArgs),
     Config(cli::config::ConfigArgs),
 }
 
@@ -60,6 +61,7 @@ fn main() -> ExitCode {
         Command::Annotate(args) => cli::annotate::annotate(args),
         Command::Render(args) => cli::render::render(args),
         Command::Bench(args) => cli::bench::bench(args),
+        Command::Odometry(args) => cli::odometry::odometry(args),
         Command::Config(args) => cli::config::config(args),
     };
     match outcome {

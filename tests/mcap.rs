@@ -447,9 +447,22 @@ fn shared_mcap_files_give_clear_errors() {
             "/test_topic (test_msgs/msg/BasicTypes)",
         ],
     );
-    // Every TF and Odometry message of the all-types file decodes; its cloud has no pose.
+    // Every TF and Odometry message of the all-types file decodes; its cloud has no
+    // pose, and too few points to register.
     let err = clean_failure(travmap(&["eval", arg(&all_types)]));
-    assert_contains(&err, &["no pose for the clouds' frame `test_frame`"]);
+    assert_contains(
+        &err,
+        &[
+            "no recorded pose reaches the clouds' frame `test_frame`: poses estimated by scan registration",
+            "frame 0: ",
+            "points left to register after filtering, at least 100 needed",
+        ],
+    );
+    let err = clean_failure(travmap(&["eval", arg(&all_types), "--poses", "tf"]));
+    assert_contains(
+        &err,
+        &["no pose for the clouds' frame `test_frame` from --poses tf"],
+    );
     // A truncated copy is a clear error, not a panic.
     let bytes = std::fs::read(&all_types).unwrap();
     let tmp = tempfile::tempdir().unwrap();

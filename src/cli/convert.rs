@@ -82,7 +82,10 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
     )?;
     let selections = [selection];
     let sequence = match &selections[0].source {
-        Source::Kitti(sequence) => sequence,
+        Source::Kitti(sequence, _) => sequence,
+        Source::Scans(..) => bail!(
+            "convert takes a KITTI sequence directory or a recorded log, not a folder of scans"
+        ),
         Source::Log(drive) => {
             if args.frames.is_some() {
                 bail!("--frames applies to KITTI input; a log is converted whole");

@@ -9,6 +9,7 @@ pub mod convert;
 pub mod crossval;
 pub mod dataset;
 pub mod eval;
+pub mod odometry;
 pub mod render;
 pub mod run;
 pub mod train;
@@ -46,6 +47,11 @@ pub struct Settings {
     /// Override one setting, e.g. --set grid.size_m=24 (repeatable).
     #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
     sets: Vec<String>,
+    /// Where the scans' poses come from (integration.poses): the input's own (auto
+    /// falls back to registration, with a notice), only /tf, only Odometry,
+    /// estimated by registration, or none (each scan alone).
+    #[arg(long, value_parser = ["auto", "tf", "odometry", "registration", "none"])]
+    poses: Option<String>,
 }
 
 impl Settings {
@@ -57,6 +63,9 @@ impl Settings {
         };
         for assignment in &self.sets {
             config.set(assignment)?;
+        }
+        if let Some(poses) = &self.poses {
+            config.set(&format!("integration.poses=\"{poses}\""))?;
         }
         config.validate()?;
         Ok(config)
@@ -121,7 +130,8 @@ impl Progress {
 #[derive(Args)]
 pub struct Inputs {
     /// KITTI odometry / SemanticKITTI sequence directories (holding velodyne/, calib.txt,
-    /// poses.txt, times.txt) or ROS 2 MCAP drives.
+    /// poses.txt, times.txt), recorded logs (MCAP, ROS 1 bag, rosbag2 directory or
+    /// .db3) or folders of .pcd / .bin scans.
     #[arg(required = true)]
     pub sequences: Vec<PathBuf>,
     /// MCAP input: the PointCloud2 topic (needed when there are several).
@@ -138,6 +148,10 @@ pub struct Inputs {
     /// Frames to use: A..B (B excluded), A..=B, A.. or N. Default: all.
     #[arg(long, value_parser = parse_frame_range)]
     pub frames: Option<Range<usize>>,
+    /// Folder-of-scans input: the scan rate, Hz, when the file names are not times
+    /// (default 10).
+    #[arg(long, value_name = "HZ")]
+    rate: Option<f64>,
     #[command(flatten)]
     pub settings: Settings,
     #[command(flatten)]
@@ -149,12 +163,14 @@ pub struct Inputs {
 }
 
 impl Inputs {
-    fn drive_options(&self) -> DriveOptions {
-        DriveOptions {
+    fn drive_options(&self) -> Result<DriveOptions> {
+        Ok(DriveOptions {
             cloud_topic: self.cloud_topic.clone(),
             world_frame: self.world_frame.clone(),
             camera_topic: self.camera_topic.clone(),
-        }
+            poses: self.settings.load()?.integration.poses,
+            rate_hz: self.rate,
+        })
     }
 
     /// Opens every input; `read_images` decodes camera images into the frames.
@@ -166,7 +182,7 @@ impl Inputs {
     pub fn open_paths(&self, paths: &[PathBuf], read_images: bool) -> Result<Vec<Selection>> {
         refuse_repeats(paths)?;
         let frames = self.frames.clone().unwrap_or(0..usize::MAX);
-        let options = self.drive_options();
+        let options = self.drive_options()?;
         paths
             .iter()
             .map(|path| open_selection(path, &frames, &options, self.keep_going, read_images))
@@ -235,7 +251,7 @@ pub fn open_selection(
     read_images: bool,
 ) -> Result<Selection> {
     let mut source = Source::open(path, options, &|notice| eprintln!("notice: {notice}"))?;
-    if let Source::Kitti(_) = source {
+    if let Source::Kitti(..) = source {
         let mcap_only = [
             ("--cloud-topic", &options.cloud_topic),
             ("--world-frame", &options.world_frame),

@@ -13,15 +13,18 @@ pub mod kitti;
 mod kitti_text;
 pub mod log;
 mod mcap_records;
+pub mod pcd;
 pub mod ros;
 pub mod ros1;
 pub mod ros_drive;
 pub mod rosbag2;
+pub mod scan_folder;
 pub mod transforms;
 
 use std::ops::Range;
 use std::path::Path;
 
+use crate::config::PoseSource;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 pub use kitti::KittiSequence;
@@ -70,10 +73,23 @@ impl SkipLog {
     }
 }
 
-/// A drive to read: a KITTI sequence directory or a recorded ROS log.
+/// How a source's scans are posed in the world.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Posing {
+    /// By the input's own poses (`poses.txt`, /tf, Odometry).
+    Recorded,
+    /// By the method's registration stage, scan after scan.
+    Registration,
+    /// Not at all: each scan alone in its own frame.
+    Alone,
+}
+
+/// A drive to read: a KITTI sequence directory, a recorded ROS log or a folder of scans.
 pub enum Source {
-    Kitti(Box<KittiSequence>),
+    Kitti(Box<KittiSequence>, Posing),
     Log(Box<ros_drive::RosDrive>),
+    Scans(Box<scan_folder::ScanFolder>, Posing),
 }
 
 impl Source {
@@ -85,21 +101,54 @@ impl Source {
         options: &ros_drive::DriveOptions,
         on_notice: &dyn Fn(&str),
     ) -> Result<Self> {
+        let posing = match options.poses {
+            PoseSource::Registration => Posing::Registration,
+            PoseSource::None => Posing::Alone,
+            _ => Posing::Recorded,
+        };
         match format::detect(path)? {
-            format::InputFormat::Kitti => Ok(Source::Kitti(Box::new(KittiSequence::open(path)?))),
+            format::InputFormat::Kitti if scan_folder::ScanFolder::holds_scans(path) => {
+                let folder = scan_folder::ScanFolder::open(path, options.rate_hz)?;
+                let posing = match options.poses {
+                    PoseSource::Auto | PoseSource::Registration => Posing::Registration,
+                    PoseSource::None => Posing::Alone,
+                    source => {
+                        return Err(Error::Sequence {
+                            path: path.to_path_buf(),
+                            message: format!(
+                                "--poses {}: a folder of scans records no poses (--poses registration or none)",
+                                source.name()
+                            ),
+                        });
+                    }
+                };
+                on_notice(folder.notice());
+                Ok(Source::Scans(Box::new(folder), posing))
+            }
+            format::InputFormat::Kitti => {
+                Ok(Source::Kitti(Box::new(KittiSequence::open(path)?), posing))
+            }
             format => {
                 let log = log::Log::open(path, format)?;
                 log.notices().iter().for_each(|notice| on_notice(notice));
-                Ok(Source::Log(Box::new(ros_drive::RosDrive::open(
-                    log, options,
-                )?)))
+                let drive = ros_drive::RosDrive::open(log, options)?;
+                drive.notice().into_iter().for_each(on_notice);
+                Ok(Source::Log(Box::new(drive)))
             }
+        }
+    }
+
+    /// How the scans are posed.
+    pub fn posing(&self) -> Posing {
+        match self {
+            Source::Kitti(_, posing) | Source::Scans(_, posing) => *posing,
+            Source::Log(drive) => drive.posing(),
         }
     }
 
     /// See [`KittiSequence::set_read_images`].
     pub fn set_read_images(&mut self, read_images: bool) {
-        if let Source::Kitti(sequence) = self {
+        if let Source::Kitti(sequence, _) = self {
             sequence.set_read_images(read_images);
         }
     }
@@ -110,34 +159,47 @@ impl Source {
             keep_going,
             skipped: Default::default(),
         };
+        *self.skip_log_mut() = log;
+    }
+
+    fn skip_log_mut(&mut self) -> &mut SkipLog {
         match self {
-            Source::Kitti(sequence) => sequence.skips = log,
-            Source::Log(drive) => drive.skips = log,
+            Source::Kitti(sequence, _) => &mut sequence.skips,
+            Source::Log(drive) => &mut drive.skips,
+            Source::Scans(folder, _) => &mut folder.skips,
+        }
+    }
+
+    /// Where unreadable frames (and frames a later stage cannot use) are recorded.
+    pub fn skip_log(&self) -> &SkipLog {
+        match self {
+            Source::Kitti(sequence, _) => &sequence.skips,
+            Source::Log(drive) => &drive.skips,
+            Source::Scans(folder, _) => &folder.skips,
         }
     }
 
     /// The frames skipped so far.
     pub fn skipped(&self) -> Vec<Skip> {
-        match self {
-            Source::Kitti(sequence) => sequence.skips.skipped(),
-            Source::Log(drive) => drive.skips.skipped(),
-        }
+        self.skip_log().skipped()
     }
 
     pub fn path(&self) -> &Path {
         match self {
-            Source::Kitti(s) => s.dir(),
+            Source::Kitti(s, _) => s.dir(),
             Source::Log(d) => d.path(),
+            Source::Scans(f, _) => f.dir(),
         }
     }
 
     /// Frame numbers in `range`, ascending.
     pub fn frames_in(&self, range: &Range<usize>) -> Vec<usize> {
         match self {
-            Source::Kitti(s) => s.frames_in(range),
+            Source::Kitti(s, _) => s.frames_in(range),
             Source::Log(d) => {
                 (range.start.min(d.frame_count())..range.end.min(d.frame_count())).collect()
             }
+            Source::Scans(f, _) => f.frames_in(range),
         }
     }
 
@@ -154,15 +216,31 @@ impl Source {
         range: &Range<usize>,
     ) -> Box<dyn Iterator<Item = Result<Frame>> + 'a> {
         match self {
-            Source::Kitti(sequence) => {
-                Box::new(sequence.frames_in(range).into_iter().filter_map(|index| {
-                    match sequence.read_frame(index) {
-                        Ok(frame) => Some(Ok(frame)),
-                        Err(error) => sequence.skips.handle(index, error).err().map(Err),
-                    }
-                }))
-            }
+            Source::Kitti(sequence, _) => Box::new(frame_by_frame(
+                sequence.frames_in(range),
+                &sequence.skips,
+                |index| sequence.read_frame(index),
+            )),
             Source::Log(drive) => Box::new(drive.read(range)),
+            Source::Scans(folder, _) => Box::new(frame_by_frame(
+                folder.frames_in(range),
+                &folder.skips,
+                |index| folder.read_frame(index),
+            )),
         }
     }
+}
+
+/// Frames read one file at a time; unreadable ones go to `skips`.
+fn frame_by_frame<'a>(
+    frames: Vec<usize>,
+    skips: &'a SkipLog,
+    read: impl Fn(usize) -> Result<Frame> + 'a,
+) -> impl Iterator<Item = Result<Frame>> + 'a {
+    frames
+        .into_iter()
+        .filter_map(move |index| match read(index) {
+            Ok(frame) => Some(Ok(frame)),
+            Err(error) => skips.handle(index, error).err().map(Err),
+        })
 }

@@ -16,8 +16,10 @@ use std::path::{Path, PathBuf};
 use nalgebra::Isometry3;
 use serde::Deserialize;
 
+use super::Posing;
 use super::image::image_pixels;
 use super::log::{Log, LogMessage};
+use crate::config::PoseSource;
 use crate::error::{CloudTopicProblem, Error, Result};
 use crate::frame::{CameraImage, Frame};
 use crate::io::cloud::cloud_points;
@@ -44,6 +46,11 @@ pub struct DriveOptions {
     /// The image topic (Image or CompressedImage) whose frame has a CameraInfo; found
     /// by itself when there is exactly one.
     pub camera_topic: Option<String>,
+    /// Where the clouds' poses come from.
+    pub poses: PoseSource,
+    /// Folders of scans: the rate stamps are made at when the file names are not
+    /// times (10 Hz when None).
+    pub rate_hz: Option<f64>,
 }
 
 /// The camera the appearance features come from.
@@ -62,6 +69,9 @@ struct CameraSource {
 pub struct RosDrive {
     path: PathBuf,
     log: Log,
+    posing: Posing,
+    /// Said when the poses are not what was asked for by default.
+    notice: Option<String>,
     cloud_topic: String,
     cloud_frame: String,
     world_frame: String,
@@ -87,6 +97,8 @@ struct Contents {
     transforms: TransformTree,
     /// Per camera frame: K and the image size (width, height).
     intrinsics: HashMap<String, (nalgebra::Matrix3<f64>, (u32, u32))>,
+    /// Which recorded poses count (`--poses`).
+    poses: PoseSource,
     /// Image topic -> (compressed, encoding, frame).
     image_topics: BTreeMap<String, (bool, MessageEncoding, String)>,
 }
@@ -144,8 +156,13 @@ impl Contents {
                 entry.1.push(stamp);
             }
             TF_MESSAGE | TF1_MESSAGE => {
-                let tf: TfMessage = encoding.decode(data).map_err(problem)?;
                 let is_static = connection.topic == "/tf_static";
+                // The static chain (sensor mounts) counts whatever the pose source.
+                let dynamic = matches!(self.poses, PoseSource::Auto | PoseSource::Tf);
+                if !(is_static || dynamic) {
+                    return Ok(());
+                }
+                let tf: TfMessage = encoding.decode(data).map_err(problem)?;
                 for t in tf.transforms {
                     let (parent, child) = (&t.header.frame_id, &t.child_frame_id);
                     let pose = isometry(&t.transform)
@@ -154,7 +171,7 @@ impl Contents {
                         .add(parent, child, t.header.stamp.to_ns(), pose, is_static);
                 }
             }
-            ODOMETRY => {
+            ODOMETRY if matches!(self.poses, PoseSource::Auto | PoseSource::Odometry) => {
                 let odometry: Odometry = encoding.decode(data).map_err(problem)?;
                 let pose = odometry.pose.pose;
                 let transform = Transform {
@@ -270,7 +287,10 @@ impl RosDrive {
     pub fn open(log: Log, options: &DriveOptions) -> Result<Self> {
         let path = log.path().to_path_buf();
         let path = path.as_path();
-        let mut contents = Contents::default();
+        let mut contents = Contents {
+            poses: options.poses,
+            ..Default::default()
+        };
         for message in log.messages() {
             contents.add(path, &message?)?;
         }
@@ -281,24 +301,42 @@ impl RosDrive {
             .remove(&cloud_topic)
             .unwrap_or_default();
         // The world is the root of the tree above the cloud's frame, unless named.
-        let world_frame = match &options.world_frame {
-            Some(frame) => frame.clone(),
-            None => {
-                let root = contents
-                    .transforms
-                    .root_above(&cloud_frame)
-                    .map_err(|problem| Error::Transform {
-                        path: path.to_path_buf(),
-                        problem,
-                    })?;
-                if root == cloud_frame {
-                    return Err(Error::LogNoPose {
-                        path: path.to_path_buf(),
-                        frame: cloud_frame,
-                    });
-                }
-                root
+        let root = contents
+            .transforms
+            .root_above(&cloud_frame)
+            .map_err(|problem| Error::Transform {
+                path: path.to_path_buf(),
+                problem,
+            })?;
+        let recorded = options.world_frame.is_some() || root != cloud_frame;
+        let posing = match options.poses {
+            PoseSource::Registration => Posing::Registration,
+            PoseSource::None => Posing::Alone,
+            PoseSource::Auto if !recorded => Posing::Registration,
+            PoseSource::Auto | PoseSource::Tf | PoseSource::Odometry if recorded => {
+                Posing::Recorded
             }
+            source => {
+                return Err(Error::LogNoPose {
+                    path: path.to_path_buf(),
+                    frame: cloud_frame,
+                    pose_source: source.name(),
+                });
+            }
+        };
+        let notice = (options.poses == PoseSource::Auto && posing == Posing::Registration)
+            .then(|| {
+                format!(
+                    "{}: no recorded pose reaches the clouds' frame `{cloud_frame}`: poses estimated by scan registration (--poses to choose)",
+                    path.display()
+                )
+            });
+        let world_frame = match (&options.world_frame, posing) {
+            (Some(frame), _) => frame.clone(),
+            (None, Posing::Recorded) => root,
+            // Estimated poses: `map` is the first scan's frame.
+            (None, Posing::Registration) => "map".to_string(),
+            (None, _) => cloud_frame.clone(),
         };
         let camera = contents
             .camera(options)
@@ -309,6 +347,8 @@ impl RosDrive {
         Ok(Self {
             path: path.to_path_buf(),
             log,
+            posing,
+            notice,
             cloud_topic,
             cloud_frame,
             world_frame,
@@ -336,8 +376,22 @@ impl RosDrive {
         self.stamps_ns.len()
     }
 
-    /// `world_from_cloud` at `stamp_ns`, composed up the transform tree.
+    /// How the clouds are posed.
+    pub fn posing(&self) -> Posing {
+        self.posing
+    }
+
+    /// Said when the poses are estimated without being asked for.
+    pub fn notice(&self) -> Option<&str> {
+        self.notice.as_deref()
+    }
+
+    /// `world_from_cloud` at `stamp_ns`, composed up the transform tree; the
+    /// identity when the poses are not recorded (registration poses the frame).
     pub fn world_from_cloud(&self, stamp_ns: u64) -> Result<Isometry3<f64>> {
+        if self.posing != Posing::Recorded {
+            return Ok(Isometry3::identity());
+        }
         self.ancestor_from(&self.world_frame, &self.cloud_frame, stamp_ns)?
             .ok_or_else(|| Error::LogNotBelowWorld {
                 path: self.path.clone(),

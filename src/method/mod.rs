@@ -13,3 +13,4 @@ pub mod grid;
 pub mod ground_truth;
 pub mod integration;
 pub mod pipeline;
+pub mod registration;

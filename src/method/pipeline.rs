@@ -1,6 +1,8 @@
 //! The method in order. [`Pipeline::process_frames`] calls every stage, one comment
-//! per step; the [`IntegrationWindow`] and the colour memory are the only state
-//! carried from frame to frame.
+//! per step; the [`IntegrationWindow`] and the colour memory are the state carried
+//! from frame to frame, with the registration's map when poses are estimated
+//! ([`Pipeline::register`], which runs before a frame is processed: it is sequential
+//! by nature and may refuse a frame).
 //!
 //! Frames are processed in batches of consecutive frames (one frame is a batch of
 //! one): the grid, the geometric features and the image's votes of a frame need no
@@ -12,7 +14,7 @@ use nalgebra::Isometry3;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::config::Config;
+use crate::config::{Config, RegistrationConfig};
 use crate::error::Result;
 use crate::frame::{CameraImage, Frame, RemissionScale};
 use crate::method::appearance::{AppearanceVoter, ColourMemory, FrameVotes};
@@ -22,12 +24,15 @@ use crate::method::filter::OutlierFilter;
 use crate::method::grid::{CellClass, CellPoints, GridLayout, grid_points};
 use crate::method::ground_truth::GroundTruth;
 use crate::method::integration::{IntegrationWindow, WorldScan, ground_normal, scan_to_world};
+use crate::method::registration::{Odometry, RegistrationError};
 use crate::stopwatch::timed;
 
 /// Wall time of each stage for one frame, milliseconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct StageTimings {
     pub read_ms: f64,
+    /// Scan registration, when the poses are estimated (0 otherwise).
+    pub register_ms: f64,
     pub integrate_ms: f64,
     pub grid_ms: f64,
     pub features_ms: f64,
@@ -35,8 +40,8 @@ pub struct StageTimings {
     pub appearance_ms: f64,
     pub classify_ms: f64,
     pub filter_ms: f64,
-    /// Scan in to filtered grid out: integrate + grid + features + appearance +
-    /// classify + filter.
+    /// Scan in to filtered grid out: register + integrate + grid + features +
+    /// appearance + classify + filter.
     pub latency_ms: f64,
 }
 
@@ -46,6 +51,8 @@ pub struct FrameResult {
     pub index: usize,
     pub stamp_ns: u64,
     pub layout: GridLayout,
+    /// The sensor's pose in the world (estimated when registration posed the scan).
+    pub world_from_velodyne: Isometry3<f64>,
     /// The sensor's position in the world.
     pub sensor_in_world: [f64; 3],
     /// The integrated points inside the grid, by cell.
@@ -103,6 +110,8 @@ pub struct Pipeline {
     use_reduced_set: bool,
     /// Feature groups configured.
     feature_groups: usize,
+    /// Scan registration, when the poses are to be estimated.
+    registration: Option<Odometry>,
 }
 
 impl Pipeline {
@@ -129,7 +138,25 @@ impl Pipeline {
             cells_per_side: config.grid.cells_per_side(),
             use_reduced_set: config.classifier.use_reduced_set,
             feature_groups: config.features.groups.len(),
+            registration: None,
         })
+    }
+
+    /// Estimate each frame's pose by registering its scan against the ones before
+    /// ([`Self::register`]) instead of trusting the pose it comes with.
+    pub fn estimate_poses(&mut self, config: &RegistrationConfig) {
+        self.registration = Some(Odometry::new(config.clone()));
+    }
+
+    /// Stage 0b, registration: poses `frame` by its scan when poses are estimated
+    /// (frames in order, warm-up frames included). Returns the time it took, ms.
+    pub fn register(&mut self, frame: &mut Frame) -> Result<f64, RegistrationError> {
+        let Some(odometry) = &mut self.registration else {
+            return Ok(0.0);
+        };
+        let (pose, register_ms) = timed(|| odometry.register(&frame.points_in_velodyne));
+        frame.world_from_velodyne = pose?;
+        Ok(register_ms)
     }
 
     /// The scan window, to ask which frames fill it.
@@ -254,6 +281,7 @@ impl Pipeline {
                 index: current.index,
                 stamp_ns: current.stamp_ns,
                 layout,
+                world_from_velodyne: extras.world_from_velodyne,
                 sensor_in_world: current.origin_in_world,
                 cells,
                 dropped_points: extras.dropped_points,
@@ -303,7 +331,8 @@ impl Pipeline {
             result.filtered = Some(filtered);
             result.predicted = Some(labels);
         }
-        timings.latency_ms = timings.integrate_ms
+        timings.latency_ms = timings.register_ms
+            + timings.integrate_ms
             + timings.grid_ms
             + timings.features_ms
             + timings.appearance_ms

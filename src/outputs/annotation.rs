@@ -168,7 +168,7 @@ pub fn annotate(
     let mut sink = McapSink::create(output, options.compression)?;
     let mut passthrough_messages = 0;
     let world_frame = match &selection.source {
-        Source::Kitti(sequence) => {
+        Source::Kitti(sequence, _) => {
             if options.passthrough {
                 let written =
                     write_kitti_frames(&mut sink, sequence, &selection.frames, 0, &|| {})?;
@@ -182,6 +182,8 @@ pub fn annotate(
             }
             drive.world_frame().to_string()
         }
+        // A folder of scans has no messages to pass through.
+        Source::Scans(..) => MAP_FRAME.to_string(),
     };
     let mut evaluation = Evaluation::default();
     let mut frames = 0;

@@ -8,4 +8,5 @@ pub mod conversion;
 pub mod dataset;
 pub mod preflight;
 pub mod rendering;
+pub mod trajectory;
 pub mod writing;

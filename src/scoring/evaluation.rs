@@ -31,6 +31,8 @@ impl Spread {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct TimingReport {
     pub read: Spread,
+    /// Scan registration (0 when the poses are recorded).
+    pub register: Spread,
     pub integrate: Spread,
     pub grid: Spread,
     pub features: Spread,
@@ -46,6 +48,7 @@ impl TimingReport {
             |f: fn(&StageTimings) -> f64| Spread::of(&timings.iter().map(f).collect::<Vec<_>>());
         Self {
             read: spread(|t| t.read_ms),
+            register: spread(|t| t.register_ms),
             integrate: spread(|t| t.integrate_ms),
             grid: spread(|t| t.grid_ms),
             features: spread(|t| t.features_ms),

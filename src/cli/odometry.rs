@@ -1,0 +1,69 @@
+//! `travmap odometry`: the trajectory of a drive by scan registration, in KITTI or
+//! TUM format, to check against a ground truth.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::{Args, ValueEnum};
+use serde_json::json;
+use travmap::outputs::trajectory::{TrajectoryFormat, write_trajectory};
+use travmap::scoring::evaluation::Spread;
+
+use super::{Inputs, Outcome, check_output, frame_count, outcome, print_json_summary};
+
+/// Estimate a drive's trajectory by scan registration (whatever poses it records).
+#[derive(Args)]
+pub struct OdometryArgs {
+    #[command(flatten)]
+    inputs: Inputs,
+    /// Where to write the poses.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// KITTI: a 3x4 pose per line (the scan's frame in the first scan's); TUM:
+    /// `stamp tx ty tz qx qy qz qw`.
+    #[arg(long, value_enum, default_value_t = Format::Kitti)]
+    format: Format,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Format {
+    Kitti,
+    Tum,
+}
+
+pub fn odometry(args: OdometryArgs) -> Result<Outcome> {
+    let config = args.inputs.settings.load()?;
+    let (output, output_path) = (args.inputs.output, args.output.as_path());
+    check_output(output_path, &args.inputs.files(None))?;
+    let selection = args.inputs.open_one(false, "odometry takes one input")?;
+    let selections = [selection];
+    let bar = output.progress(frame_count(&selections), "registering");
+    let poses = selections[0].estimate_trajectory(&config.registration, || bar.inc(1))?;
+    let seconds = bar.finish();
+    let format = match args.format {
+        Format::Kitti => TrajectoryFormat::Kitti,
+        Format::Tum => TrajectoryFormat::Tum,
+    };
+    write_trajectory(output_path, &poses, format)?;
+    let register_ms = Spread::of(&poses.iter().map(|p| p.register_ms).collect::<Vec<_>>());
+    if output.json {
+        let fields = json!({
+            "output": output_path,
+            "format": match format { TrajectoryFormat::Kitti => "kitti", TrajectoryFormat::Tum => "tum" },
+            "frames": poses.len(),
+            "register_ms": register_ms,
+            "config": config.registration,
+            "elapsed_ms": seconds * 1e3,
+        });
+        print_json_summary("odometry", &selections, fields)?;
+    } else if !output.quiet {
+        println!(
+            "wrote {} ({} poses, registration median {:.1} ms per scan, p95 {:.1} ms)",
+            output_path.display(),
+            poses.len(),
+            register_ms.median,
+            register_ms.p95
+        );
+    }
+    Ok(outcome(&selections))
+}
