@@ -56,6 +56,26 @@ def tiny_sequence(source: pathlib.Path, out: pathlib.Path) -> None:
         (out / "image_2" / f"{stem}.png").write_bytes(png(32, 16))
 
 
+def pcd_files(scan: bytes) -> dict:
+    """A KITTI scan as PCD with each kind of DATA; binary_compressed as LZF literal runs."""
+    points = [struct.unpack("<4f", scan[i : i + 16]) for i in range(0, len(scan), 16)]
+    header = (
+        "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity\n"
+        "SIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n"
+        f"WIDTH {len(points)}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(points)}\n"
+    )
+    ascii_rows = "".join(" ".join(repr(v) for v in p) + "\n" for p in points)
+    columns = b"".join(struct.pack("<f", p[c]) for c in range(4) for p in points)
+    lzf = b"".join(bytes([len(columns[i : i + 32]) - 1]) + columns[i : i + 32] for i in range(0, len(columns), 32))
+    return {
+        "binary.pcd": (header + "DATA binary\n").encode() + scan,
+        "ascii.pcd": (header + "DATA ascii\n" + ascii_rows).encode(),
+        "binary_compressed.pcd": (header + "DATA binary_compressed\n").encode()
+        + struct.pack("<II", len(lzf), len(columns))
+        + lzf,
+    }
+
+
 def first_message_per_topic(path: pathlib.Path) -> dict:
     with path.open("rb") as f:
         found = {}
@@ -84,6 +104,9 @@ def main() -> None:
     seed("kitti_poses", "times.txt", b"\n".join((seq / "times.txt").read_bytes().splitlines()[:5]) + b"\n")
     seed("kitti_scan", "000000.bin", (seq / "velodyne" / "000000.bin").read_bytes()[: 16 * POINTS])
     seed("kitti_labels", "000000.label", (seq / "labels" / "000000.label").read_bytes()[: 4 * POINTS])
+    scan = (seq / "velodyne" / "000000.bin").read_bytes()[: 16 * POINTS]
+    for name, body in pcd_files(scan).items():
+        seed("pcd_file", name, body)
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = pathlib.Path(tmp)

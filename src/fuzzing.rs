@@ -26,7 +26,7 @@ pub type Target = fn(&[u8]);
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 14] = [
+pub const TARGETS: [(&str, Target); 15] = [
     ("kitti_calib", kitti_calib),
     ("kitti_poses", kitti_poses),
     ("kitti_scan", kitti_scan),
@@ -39,6 +39,7 @@ pub const TARGETS: [(&str, Target); 14] = [
     ("bag_file", bag_file),
     ("ros1_message", ros1_message),
     ("rosbag2_metadata", rosbag2_metadata),
+    ("pcd_file", pcd_file),
     ("model", model),
     ("dataset_file", dataset_file),
 ];
@@ -136,6 +137,13 @@ pub fn ros1_message(data: &[u8]) {
     let _ = ros1::decode::<TfMessage>(data);
     let _ = ros1::decode::<Odometry>(data);
     let _ = ros1::decode::<CameraInfo>(data);
+}
+
+/// A PCD file, read into points.
+pub fn pcd_file(data: &[u8]) {
+    if let Ok(cloud) = crate::io::pcd::parse_pcd(data, NAMED) {
+        let _ = cloud_points(&cloud);
+    }
 }
 
 /// A rosbag2 `metadata.yaml`, in a directory holding one empty storage file.

@@ -70,6 +70,10 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
     let t = &report.stages_ms;
     for (name, spread) in [
         ("read + image decode (not in latency)", t.read),
+        (
+            "registration (--poses registration)",
+            report.registration_ms,
+        ),
         ("integrate", t.integrate),
         ("grid", t.grid),
         ("geometric features", t.features),

@@ -138,6 +138,15 @@ impl Source {
         }
     }
 
+    /// The frame the scans are in, as written to MCAP (`header.frame_id`).
+    pub fn sensor_frame(&self) -> &str {
+        match self {
+            Source::Kitti(..) => "velodyne",
+            Source::Log(drive) => drive.cloud_frame(),
+            Source::Scans(..) => scan_folder::SENSOR_FRAME,
+        }
+    }
+
     /// How the scans are posed.
     pub fn posing(&self) -> Posing {
         match self {

@@ -367,6 +367,11 @@ impl RosDrive {
         &self.cloud_topic
     }
 
+    /// The clouds' frame (`header.frame_id`).
+    pub fn cloud_frame(&self) -> &str {
+        &self.cloud_frame
+    }
+
     pub fn world_frame(&self) -> &str {
         &self.world_frame
     }

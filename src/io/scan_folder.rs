@@ -15,6 +15,9 @@ use super::pcd::parse_pcd;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, RemissionScale};
 
+/// The frame of the scans, as written to MCAP.
+pub const SENSOR_FRAME: &str = "lidar";
+
 /// The rate stamps are made at when the names are not times and none is given.
 pub const DEFAULT_RATE_HZ: f64 = 10.0;
 
@@ -147,7 +150,7 @@ impl ScanFolder {
                     path: path.clone(),
                     message,
                 };
-                let cloud = parse_pcd(&bytes, "lidar").map_err(fail)?;
+                let cloud = parse_pcd(&bytes, SENSOR_FRAME).map_err(fail)?;
                 let points = cloud_points(&cloud).map_err(fail)?;
                 (points.points, points.remission, points.dropped)
             }

@@ -17,15 +17,17 @@ use serde::Serialize;
 use crate::config::Config;
 use crate::drive::Selection;
 use crate::error::{Error, Result};
-use crate::io::Source;
 use crate::io::ros::{
     FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion,
-    Time, Vector3, datatype,
+    TfMessage, Time, TransformStamped, Vector3, datatype,
 };
+use crate::io::{Posing, Source};
 use crate::method::classifier::SvmModel;
 use crate::method::grid::CellClass;
 use crate::method::pipeline::FrameResult;
-use crate::outputs::conversion::{MAP_FRAME, write_kitti_frames, write_log_messages};
+use crate::outputs::conversion::{
+    MAP_FRAME, transform_from_pose, write_kitti_frames, write_log_messages,
+};
 use crate::outputs::writing::{Compression, McapSink};
 use crate::scoring::evaluation::{Evaluation, EvaluationReport};
 use crate::scoring::metrics::Confusion;
@@ -185,11 +187,29 @@ pub fn annotate(
         // A folder of scans has no messages to pass through.
         Source::Scans(..) => MAP_FRAME.to_string(),
     };
+    let posing = selection.source.posing();
+    // Estimated poses go on /tf, unless passthrough writes KITTI's recorded ones there.
+    let kitti_tf = matches!(selection.source, Source::Kitti(..)) && options.passthrough;
+    let write_estimated_tf = posing == Posing::Registration && !kitti_tf;
+    let sensor_frame = selection.source.sensor_frame().to_string();
     let mut evaluation = Evaluation::default();
     let mut frames = 0;
     selection.run::<Error>(config, Some(model), |result| {
         let classes = result.filtered.as_deref().unwrap_or(&[]);
         let stamp = result.stamp_ns;
+        if write_estimated_tf {
+            let tf = TfMessage {
+                transforms: vec![TransformStamped {
+                    header: Header {
+                        stamp: Time::from_ns(stamp),
+                        frame_id: world_frame.clone(),
+                    },
+                    child_frame_id: sensor_frame.clone(),
+                    transform: transform_from_pose(&result.world_from_velodyne),
+                }],
+            };
+            sink.write("/tf", stamp, &tf)?;
+        }
         sink.write(
             PREDICTION_TOPIC,
             stamp,
@@ -218,6 +238,12 @@ pub fn annotate(
         Ok(())
     })?;
     let mut metadata = metadata;
+    let poses = match posing {
+        Posing::Recorded => "recorded",
+        Posing::Registration => "estimated by scan registration",
+        Posing::Alone => "none: each scan alone",
+    };
+    metadata.insert("poses".into(), poses.into());
     let skipped = selection.source.skipped();
     if !skipped.is_empty() {
         // serde_json cannot fail on a list of plain structs.

@@ -13,8 +13,9 @@ use crate::frame::Frame;
 use crate::io::Source;
 use crate::method::classifier::SvmModel;
 use crate::method::pipeline::{Pipeline, StageTimings};
+use crate::method::registration::Odometry;
 use crate::scoring::evaluation::{Spread, TimingReport};
-use crate::stopwatch::Stopwatch;
+use crate::stopwatch::{Stopwatch, timed};
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Throughput {
@@ -36,6 +37,10 @@ pub struct BenchmarkReport {
     pub support_vectors: usize,
     /// One frame at a time, one thread.
     pub stages_ms: TimingReport,
+    /// Scan registration (`--poses registration`), one thread, every frame after the
+    /// first (which only starts the map); not in `stages_ms`, which times the
+    /// input's own poses.
+    pub registration_ms: Spread,
     pub one_thread: Throughput,
     pub all_cores: Throughput,
     /// all_cores / one_thread frames per second.
@@ -99,6 +104,26 @@ pub fn benchmark(
         Ok::<(), Error>(())
     })?;
 
+    // Registration: each repeat registers the selection from scratch.
+    let mut registration_ms = Vec::new();
+    pool(1)?.install(|| {
+        for _ in 0..repeats.max(1) {
+            let mut odometry = Odometry::new(config.registration.clone());
+            for (i, frame) in loaded.iter().enumerate() {
+                let (pose, ms) = timed(|| odometry.register(&frame.points_in_velodyne));
+                pose.map_err(|problem| Error::Registration {
+                    path: source.path().to_path_buf(),
+                    frame: frame.index,
+                    problem,
+                })?;
+                if i > 0 {
+                    registration_ms.push(ms);
+                }
+            }
+        }
+        Ok::<(), Error>(())
+    })?;
+
     // Throughput: the whole selection with rayon across frames.
     let throughput = |threads: usize| -> Result<Throughput> {
         let mut rates = Vec::new();
@@ -135,6 +160,7 @@ pub fn benchmark(
         points_in_grid: Spread::of(&points).median,
         support_vectors: model.support_vector_count(),
         stages_ms: TimingReport::of(&timings),
+        registration_ms: Spread::of(&registration_ms),
         speedup: all_cores.frames_per_second / one_thread.frames_per_second,
         one_thread,
         all_cores,
