@@ -255,17 +255,18 @@ impl SvmModel {
         }
     }
 
-    /// The class of one predictable cell: by the hybrid model when the cell has
-    /// appearance values and the model has one, else by the geometric model; each
-    /// by its reduced set when it has one and `use_reduced_set` says so.
-    pub fn classify_cell(
+    /// The margin of one predictable cell, its decision value minus the model's
+    /// threshold (positive: traversable): by the hybrid model when the cell has
+    /// appearance values and the model has one, else by the geometric model; each by
+    /// its reduced set when it has one and `use_reduced_set` says so.
+    pub fn cell_margin(
         &self,
         geometric: &[f32],
         appearance: Option<&[f32]>,
         scratch: &mut PredictionScratch,
         use_reduced_set: bool,
-    ) -> CellClass {
-        let value = match (&self.hybrid, appearance) {
+    ) -> f32 {
+        match (&self.hybrid, appearance) {
             (Some(hybrid), Some(appearance)) => {
                 let mut row = std::mem::take(&mut scratch.row);
                 row.clear();
@@ -273,19 +274,21 @@ impl SvmModel {
                 row.extend_from_slice(appearance);
                 let value = hybrid.decision_value_using(&row, scratch, use_reduced_set);
                 scratch.row = row;
-                value
+                value - hybrid.threshold
             }
-            _ => self.decision_value_using(geometric, scratch, use_reduced_set),
-        };
-        let threshold = match (&self.hybrid, appearance) {
-            (Some(hybrid), Some(_)) => hybrid.threshold,
-            _ => self.threshold,
-        };
-        if value > threshold {
-            CellClass::Traversable
-        } else {
-            CellClass::NonTraversable
+            _ => self.decision_value_using(geometric, scratch, use_reduced_set) - self.threshold,
         }
+    }
+
+    /// The class of one predictable cell (see [`Self::cell_margin`]).
+    pub fn classify_cell(
+        &self,
+        geometric: &[f32],
+        appearance: Option<&[f32]>,
+        scratch: &mut PredictionScratch,
+        use_reduced_set: bool,
+    ) -> CellClass {
+        CellClass::of_margin(self.cell_margin(geometric, appearance, scratch, use_reduced_set))
     }
 
     /// The model for features computed with `groups`: this one, or its fallback
@@ -297,23 +300,32 @@ impl SvmModel {
         }
     }
 
-    /// Classifies every predictable cell of a grid; the others stay unknown.
-    pub fn classify(&self, grid: &FeatureGrid, use_reduced_set: bool) -> Vec<CellClass> {
+    /// The margin of every predictable cell of a grid (see [`Self::cell_margin`]);
+    /// NaN for the others.
+    pub fn margins(&self, grid: &FeatureGrid, use_reduced_set: bool) -> Vec<f32> {
         let model = self.model_for(&grid.groups);
         let mut scratch = model.scratch();
         (0..grid.predictable.len())
             .map(|cell| {
                 if grid.predictable[cell] {
-                    model.classify_cell(
+                    model.cell_margin(
                         grid.cell(cell),
                         grid.appearance(cell),
                         &mut scratch,
                         use_reduced_set,
                     )
                 } else {
-                    CellClass::Unknown
+                    f32::NAN
                 }
             })
+            .collect()
+    }
+
+    /// Classifies every predictable cell of a grid; the others stay unknown.
+    pub fn classify(&self, grid: &FeatureGrid, use_reduced_set: bool) -> Vec<CellClass> {
+        self.margins(grid, use_reduced_set)
+            .into_iter()
+            .map(CellClass::of_margin)
             .collect()
     }
 }

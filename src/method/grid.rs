@@ -19,6 +19,18 @@ pub enum CellClass {
 }
 
 impl CellClass {
+    /// The class a classifier margin says: traversable above 0, not traversable
+    /// at or below, unknown for NaN (no prediction).
+    pub fn of_margin(margin: f32) -> Self {
+        if margin.is_nan() {
+            CellClass::Unknown
+        } else if margin > 0.0 {
+            CellClass::Traversable
+        } else {
+            CellClass::NonTraversable
+        }
+    }
+
     /// One character per cell for text pictures of a grid.
     pub fn symbol(self) -> char {
         match self {

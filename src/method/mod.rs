@@ -9,6 +9,7 @@ pub mod classifier;
 pub mod feature_groups;
 pub mod features;
 pub mod filter;
+pub mod fusion;
 pub mod grid;
 pub mod ground_truth;
 pub mod integration;

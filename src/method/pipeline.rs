@@ -69,6 +69,9 @@ pub struct FrameResult {
     pub predicted: Option<Vec<CellClass>>,
     /// The labels after the outlier filter (None without a model).
     pub filtered: Option<Vec<CellClass>>,
+    /// The classifier's margin per cell (decision value minus threshold; NaN where
+    /// unpredictable; None without a model).
+    pub margins: Option<Vec<f32>>,
     /// Ground truth, when every scan of the window has labels.
     pub ground_truth: Option<Vec<CellClass>>,
     /// SHA-256 of the frame's scan, when the caller asked for it.
@@ -290,6 +293,7 @@ impl Pipeline {
                 features,
                 predicted: None,
                 filtered: None,
+                margins: None,
                 ground_truth,
                 scan_sha256: None,
                 timings,
@@ -322,14 +326,16 @@ impl Pipeline {
         }
         let timings = &mut result.timings;
         if let Some(model) = model {
-            let labels;
-            (labels, timings.classify_ms) =
-                timed(|| model.classify(&result.features, self.use_reduced_set));
+            let margins;
+            (margins, timings.classify_ms) =
+                timed(|| model.margins(&result.features, self.use_reduced_set));
+            let labels: Vec<CellClass> = margins.iter().map(|m| CellClass::of_margin(*m)).collect();
             let filtered;
             (filtered, timings.filter_ms) =
                 timed(|| self.filter.apply(&labels, result.layout.cells_per_side));
             result.filtered = Some(filtered);
             result.predicted = Some(labels);
+            result.margins = Some(margins);
         }
         timings.latency_ms = timings.register_ms
             + timings.integrate_ms
