@@ -36,6 +36,7 @@ enum Command {
     Render(cli::render::RenderArgs),
     Bench(cli::bench::BenchArgs),
     Odometry(cli::odometry::OdometryArgs),
+    Map(cli::map::MapArgs),
     Config(cli::config::ConfigArgs),
 }
 
@@ -62,6 +63,7 @@ fn main() -> ExitCode {
         Command::Render(args) => cli::render::render(args),
         Command::Bench(args) => cli::bench::bench(args),
         Command::Odometry(args) => cli::odometry::odometry(args),
+        Command::Map(args) => cli::map::map(args),
         Command::Config(args) => cli::config::config(args),
     };
     match outcome {

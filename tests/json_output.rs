@@ -52,6 +52,7 @@ fn every_command_prints_json_that_matches_its_schema() {
     let (drive, model, cells) = (out("d.mcap"), out("m.json"), out("c.parquet"));
     let (annotated, picture, converted) = (out("a.mcap"), out("f.png"), out("c.mcap"));
     let trajectory = out("poses.txt");
+    let (map_picture, map_cells) = (out("map.png"), out("map.parquet"));
     let quick = ["training.c_values=[10]", "training.gamma_values=[0.05]"];
     let quick_crossval = [&quick[..], &["training.folds=3"]].concat();
     let runs: Vec<(&str, Vec<&str>)> = vec![
@@ -81,6 +82,10 @@ fn every_command_prints_json_that_matches_its_schema() {
         (
             "bench",
             vec!["bench", seq, "--frames", "0..4", "--repeats", "1"],
+        ),
+        (
+            "map",
+            vec!["map", seq, "-o", &map_picture, "--cells", &map_cells],
         ),
         (
             "odometry",

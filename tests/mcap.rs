@@ -250,7 +250,8 @@ fn real_clients_decode_what_travmap_writes() {
     }
     for (client, entries) in &summaries {
         check_client_summary(client, entries, &seq, &runs);
-        assert_eq!(entries.len(), 34, "{client}: every message decoded");
+        // 6 clouds, 6 /tf, 1 /tf_static, 6 + 3 grids, 6 classified clouds, 6 metrics, 1 drive map.
+        assert_eq!(entries.len(), 35, "{client}: every message decoded");
     }
 }
 

@@ -9,7 +9,9 @@ use clap::Args;
 use serde_json::json;
 use travmap::drive::Selection;
 use travmap::method::classifier::SvmModel;
+use travmap::method::fusion::DriveMap;
 use travmap::scoring::evaluation::{Evaluation, EvaluationReport};
+use travmap::scoring::metrics::Confusion;
 use travmap::scoring::metrics::Scores;
 
 use super::{Inputs, ModelArg, Outcome, frame_count, model_json, outcome, print_json_summary};
@@ -41,10 +43,12 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     let evaluate = |model: &SvmModel,
                     message: &str,
                     training_frames: &mut usize|
-     -> Result<EvaluationReport> {
+     -> Result<(EvaluationReport, Confusion)> {
         let bar = output.progress(frame_count(&selections), message);
         let mut evaluation = Evaluation::default();
+        let mut fused = Confusion::default();
         for selection in &selections {
+            let mut drive_map = DriveMap::new(config.grid.cell_size_m);
             selection.run::<anyhow::Error>(config, Some(model), |result| {
                 bar.inc(1);
                 let seen = result
@@ -53,14 +57,19 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
                     .is_some_and(|s| trained_on.contains(s));
                 *training_frames += (seen && result.ground_truth.is_some()) as usize;
                 evaluation.add(&result);
+                drive_map.add_result(&result);
                 Ok(())
             })?;
+            fused.merge(&Confusion::of_drive_map(&drive_map.cells()));
         }
         bar.finish();
-        Ok(evaluation.report())
+        Ok((evaluation.report(), fused))
     };
     let mut training_frames = 0usize;
-    let report = evaluate(&model, "evaluating", &mut training_frames)?;
+    let (report, fused) = evaluate(&model, "evaluating", &mut training_frames)?;
+    // Each world cell once: the drive's fused map against its fused ground truth.
+    let fused_scored = fused.tp + fused.tn + fused.fp + fused.r#fn;
+    let fused_scores = (fused_scored > 0).then(|| fused.scores());
     // Training frames among the scored ones; None when the model does not say.
     let training_frames = (!trained_on.is_empty()).then_some(training_frames);
     // The ablation of the paper: the same frames without appearance features.
@@ -68,7 +77,7 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         Some(_) if report.frames_with_images > 0 => {
             let mut geometric = model.clone();
             geometric.hybrid = None;
-            Some(evaluate(&geometric, "geometry only", &mut 0)?)
+            Some(evaluate(&geometric, "geometry only", &mut 0)?.0)
         }
         _ => None,
     };
@@ -82,6 +91,7 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
                 "model": model_json(&model, &model_name),
                 "report": report,
                 "geometry_only_report": geometry_only,
+                "drive_map": {"confusion": fused, "scores": fused_scores},
                 "training_frames_scored": training_frames,
             }),
         )?;
@@ -112,6 +122,17 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         )?;
     }
     write_table(&mut out, &report, true)?;
+    if let Some(scores) = fused_scores {
+        writeln!(
+            out,
+            "fused drive map ({fused_scored} world cells, each once): Acc {:.1} mIoU {:.1} F1 {:.1} FPR {:.1} TPR {:.1}",
+            scores.accuracy * 100.0,
+            scores.miou * 100.0,
+            scores.f1 * 100.0,
+            scores.fpr * 100.0,
+            scores.tpr * 100.0
+        )?;
+    }
     if report.frames_without_remission > 0 {
         writeln!(
             out,

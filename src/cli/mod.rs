@@ -9,6 +9,7 @@ pub mod convert;
 pub mod crossval;
 pub mod dataset;
 pub mod eval;
+pub mod map;
 pub mod odometry;
 pub mod render;
 pub mod run;

@@ -25,6 +25,7 @@
 use std::collections::HashMap;
 
 use crate::method::grid::{CellClass, GridLayout};
+use crate::method::pipeline::FrameResult;
 
 /// R in the distance weight, metres.
 pub const DISTANCE_SCALE_M: f64 = 6.0;
@@ -135,6 +136,21 @@ impl DriveMap {
         (tile, local as usize)
     }
 
+    /// Fuses one result of the method; a result without a prediction (no model)
+    /// adds its ground truth only.
+    pub fn add_result(&mut self, result: &FrameResult) {
+        let cells = result.layout.cell_count();
+        let unknown = vec![CellClass::Unknown; cells];
+        let no_margins = vec![f32::NAN; cells];
+        self.add(&FrameObservation {
+            layout: &result.layout,
+            sensor_in_world: result.sensor_in_world,
+            filtered: result.filtered.as_deref().unwrap_or(&unknown),
+            margins: result.margins.as_deref().unwrap_or(&no_margins),
+            ground_truth: result.ground_truth.as_deref(),
+        });
+    }
+
     /// Fuses one frame.
     pub fn add(&mut self, frame: &FrameObservation) {
         let layout = frame.layout;
@@ -157,9 +173,13 @@ impl DriveMap {
                 let (tile_key, local) = Self::locate(key);
                 let tile = self.tiles.entry(tile_key).or_insert_with(Tile::new);
                 if class != CellClass::Unknown {
-                    let distance_m = (x - frame.sensor_in_world[0])
-                        .hypot(y - frame.sensor_in_world[1]);
-                    let sign = if class == CellClass::Traversable { 1.0 } else { -1.0 };
+                    let distance_m =
+                        (x - frame.sensor_in_world[0]).hypot(y - frame.sensor_in_world[1]);
+                    let sign = if class == CellClass::Traversable {
+                        1.0
+                    } else {
+                        -1.0
+                    };
                     let evidence = sign * Self::weight(distance_m, frame.margins[cell], class);
                     tile.evidence[local] += (evidence * UNITS).round() as i64;
                     tile.observations[local] += 1;
@@ -298,11 +318,21 @@ mod tests {
 
     #[test]
     fn the_map_is_the_same_whatever_order_the_frames_come_in() {
-        let frames: Vec<(GridLayout, [f64; 3], Vec<CellClass>, Vec<f32>)> = (0..6)
+        type Frame = (GridLayout, [f64; 3], Vec<CellClass>, Vec<f32>);
+        let frames: Vec<Frame> = (0..6)
             .map(|i| {
-                let classes = (0..4).map(|c| if (i + c) % 3 == 0 { N } else { T }).collect();
-                let margins = (0..4).map(|c| ((i * 7 + c * 3) % 11) as f32 / 7.0 - 0.7).collect();
-                (layout([i % 3 - 1, i / 2]), [i as f64 * 0.3, 0.7, 0.0], classes, margins)
+                let classes = (0..4)
+                    .map(|c| if (i + c) % 3 == 0 { N } else { T })
+                    .collect();
+                let margins = (0..4)
+                    .map(|c| ((i * 7 + c * 3) % 11) as f32 / 7.0 - 0.7)
+                    .collect();
+                (
+                    layout([i % 3 - 1, i / 2]),
+                    [i as f64 * 0.3, 0.7, 0.0],
+                    classes,
+                    margins,
+                )
             })
             .collect();
         let fuse = |order: &[usize]| {

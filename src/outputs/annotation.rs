@@ -4,7 +4,10 @@
 //! Per frame, in the world frame (`map` for KITTI input): the filtered prediction and
 //! the ground truth as `nav_msgs/msg/OccupancyGrid` (0 traversable, 100 not, -1
 //! unknown), the integrated in-grid points as a PointCloud2 with each point's cell
-//! class, and `travmap_msgs/msg/FrameMetrics`. By default the input's own messages are
+//! class, and `travmap_msgs/msg/FrameMetrics`; every [`DRIVE_MAP_EVERY`] frames and
+//! after the last, the fused map of the drive so far on `/travmap/drive_map` (an
+//! OccupancyGrid: 100 x P(not traversable), -1 unseen). With poses from registration,
+//! `/tf` carries them. By default the input's own messages are
 //! copied through (for KITTI input: what `convert` writes), so the file stands alone.
 //! A metadata record `travmap` holds the version, the effective config and the
 //! model's hash. The file is written atomically.
@@ -23,11 +26,13 @@ use crate::io::ros::{
 };
 use crate::io::{Posing, Source};
 use crate::method::classifier::SvmModel;
+use crate::method::fusion::DriveMap;
 use crate::method::grid::CellClass;
 use crate::method::pipeline::FrameResult;
 use crate::outputs::conversion::{
     MAP_FRAME, transform_from_pose, write_kitti_frames, write_log_messages,
 };
+use crate::outputs::drive_map::occupancy_grid;
 use crate::outputs::writing::{Compression, McapSink};
 use crate::scoring::evaluation::{Evaluation, EvaluationReport};
 use crate::scoring::metrics::Confusion;
@@ -36,6 +41,10 @@ pub const PREDICTION_TOPIC: &str = "/travmap/prediction";
 pub const GROUND_TRUTH_TOPIC: &str = "/travmap/ground_truth";
 pub const CLOUD_TOPIC: &str = "/travmap/cloud";
 pub const METRICS_TOPIC: &str = "/travmap/metrics";
+/// The fused map of the drive so far ([`crate::method::fusion`]).
+pub const DRIVE_MAP_TOPIC: &str = "/travmap/drive_map";
+/// The drive map is written every this many frames, and after the last.
+pub const DRIVE_MAP_EVERY: usize = 10;
 
 #[derive(Clone, Debug)]
 pub struct AnnotationOptions {
@@ -194,6 +203,8 @@ pub fn annotate(
     let sensor_frame = selection.source.sensor_frame().to_string();
     let mut evaluation = Evaluation::default();
     let mut frames = 0;
+    let mut drive_map = DriveMap::new(config.grid.cell_size_m);
+    let mut last_stamp_ns = 0;
     selection.run::<Error>(config, Some(model), |result| {
         let classes = result.filtered.as_deref().unwrap_or(&[]);
         let stamp = result.stamp_ns;
@@ -233,10 +244,32 @@ pub fn annotate(
             &metrics_message(&result, classes, &world_frame),
         )?;
         evaluation.add(&result);
+        drive_map.add_result(&result);
+        last_stamp_ns = stamp;
         frames += 1;
+        if frames % DRIVE_MAP_EVERY == 0 {
+            let grid = occupancy_grid(
+                &drive_map.cells(),
+                drive_map.cell_size_m(),
+                &world_frame,
+                stamp,
+                options.grid_height_m,
+            );
+            sink.write(DRIVE_MAP_TOPIC, stamp, &grid)?;
+        }
         on_frame();
         Ok(())
     })?;
+    if frames % DRIVE_MAP_EVERY != 0 {
+        let grid = occupancy_grid(
+            &drive_map.cells(),
+            drive_map.cell_size_m(),
+            &world_frame,
+            last_stamp_ns,
+            options.grid_height_m,
+        );
+        sink.write(DRIVE_MAP_TOPIC, last_stamp_ns, &grid)?;
+    }
     let mut metadata = metadata;
     let poses = match posing {
         Posing::Recorded => "recorded",

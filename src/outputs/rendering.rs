@@ -23,7 +23,7 @@ pub mod colour {
 /// Pixels between panels.
 pub const GAP_PX: u32 = 8;
 
-fn class_colour(class: CellClass) -> [u8; 3] {
+pub fn class_colour(class: CellClass) -> [u8; 3] {
     match class {
         CellClass::Unknown => colour::UNKNOWN,
         CellClass::Traversable => colour::TRAVERSABLE,
@@ -31,7 +31,7 @@ fn class_colour(class: CellClass) -> [u8; 3] {
     }
 }
 
-fn error_colour(predicted: CellClass, truth: CellClass) -> [u8; 3] {
+pub fn error_colour(predicted: CellClass, truth: CellClass) -> [u8; 3] {
     use CellClass::{NonTraversable as N, Traversable as T, Unknown as U};
     match (predicted, truth) {
         (U, _) | (_, U) => colour::UNKNOWN,

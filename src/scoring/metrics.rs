@@ -55,7 +55,10 @@ impl Confusion {
     /// A fused drive map against its fused ground truth, each world cell once.
     pub fn of_drive_map(cells: &[crate::method::fusion::FusedCell]) -> Self {
         let mut confusion = Confusion::default();
-        for cell in cells.iter().filter(|c| c.ground_truth != CellClass::Unknown) {
+        for cell in cells
+            .iter()
+            .filter(|c| c.ground_truth != CellClass::Unknown)
+        {
             confusion.add(cell.class, cell.ground_truth);
         }
         confusion

@@ -1,0 +1,114 @@
+//! `travmap map`: the whole drive as one fused map (PNG, and its cells as Parquet).
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use clap::Args;
+use serde_json::json;
+use travmap::method::fusion::DriveMap;
+use travmap::outputs::drive_map::{render_drive_map, write_map_cells};
+use travmap::outputs::rendering::encode_png;
+use travmap::outputs::writing::write_atomically;
+use travmap::scoring::evaluation::Evaluation;
+use travmap::scoring::metrics::Confusion;
+
+use super::{
+    Inputs, ModelArg, Outcome, check_output, frame_count, model_json, outcome, print_json_summary,
+};
+
+/// Fuse every frame's prediction (and ground truth) into one map of the drive.
+#[derive(Args)]
+pub struct MapArgs {
+    #[command(flatten)]
+    inputs: Inputs,
+    /// The PNG to write: the fused map with the trajectory (and, with ground truth,
+    /// the fused ground truth and the errors).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Also write the fused cells as a Parquet table.
+    #[arg(long, value_name = "PARQUET")]
+    cells: Option<PathBuf>,
+    #[command(flatten)]
+    model: ModelArg,
+    /// Pixels per cell side.
+    #[arg(long, default_value_t = 4)]
+    cell_pixels: u32,
+}
+
+pub fn map(args: MapArgs) -> Result<Outcome> {
+    let cell_px = args.cell_pixels;
+    if !(1..=64).contains(&cell_px) {
+        bail!("--cell-pixels must be in 1..=64, got {cell_px}");
+    }
+    let config = &args.inputs.settings.load()?;
+    let (output, output_path) = (args.inputs.output, args.output.as_path());
+    let inputs = args.inputs.files(args.model.path.as_deref());
+    check_output(output_path, &inputs)?;
+    if let Some(cells) = &args.cells {
+        check_output(cells, &inputs)?;
+    }
+    let (model, model_name) = args.model.load(config)?;
+    let selection = args
+        .inputs
+        .open_one(config.appearance.enabled, "map takes one input")?;
+    let selections = [selection];
+    let bar = output.progress(frame_count(&selections), "mapping");
+    let mut map = DriveMap::new(config.grid.cell_size_m);
+    let mut trajectory = Vec::new();
+    let mut per_frame = Evaluation::default();
+    selections[0].run::<anyhow::Error>(config, Some(&model), |result| {
+        map.add_result(&result);
+        trajectory.push([result.sensor_in_world[0], result.sensor_in_world[1]]);
+        per_frame.add(&result);
+        bar.inc(1);
+        Ok(())
+    })?;
+    let seconds = bar.finish();
+    let cells = map.cells();
+    let picture = render_drive_map(&cells, &trajectory, map.cell_size_m(), cell_px);
+    write_atomically(output_path, &encode_png(&picture))?;
+    if let Some(path) = &args.cells {
+        write_map_cells(path, &cells)?;
+    }
+    let fused = Confusion::of_drive_map(&cells);
+    let fused_scores = (fused.tp + fused.tn + fused.fp + fused.r#fn > 0).then(|| fused.scores());
+    let per_frame = per_frame.report();
+    let seen = cells.iter().filter(|c| c.observations > 0).count();
+    let area_m2 = seen as f64 * map.cell_size_m().powi(2);
+    if output.json {
+        let fields = json!({
+            "output": output_path,
+            "cells_output": args.cells,
+            "model": model_json(&model, &model_name),
+            "frames": map.frames(),
+            "cells": cells.len(),
+            "seen_cells": seen,
+            "area_m2": area_m2,
+            "memory_bytes": map.memory_bytes(),
+            "fused_confusion": fused,
+            "fused_scores": fused_scores,
+            "per_frame_scores": per_frame.scores,
+            "elapsed_ms": seconds * 1e3,
+        });
+        print_json_summary("map", &selections, fields)?;
+    } else if !output.quiet {
+        println!(
+            "wrote {} ({} frames fused into {seen} cells, {area_m2:.0} m2; map {:.1} KiB)",
+            output_path.display(),
+            map.frames(),
+            map.memory_bytes() as f64 / 1024.0
+        );
+        if let (Some(fused), Some(frames)) = (fused_scores, per_frame.scores) {
+            println!(
+                "fused map (each world cell once): Acc {:.1} mIoU {:.1} F1 {:.1}; per frame: Acc {:.1} mIoU {:.1} F1 {:.1}",
+                fused.accuracy * 100.0,
+                fused.miou * 100.0,
+                fused.f1 * 100.0,
+                frames.accuracy * 100.0,
+                frames.miou * 100.0,
+                frames.f1 * 100.0
+            );
+        }
+    }
+    Ok(outcome(&selections))
+}

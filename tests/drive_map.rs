@@ -1,0 +1,148 @@
+//! `travmap map`: the fused drive map's picture cell by cell against the library's
+//! fusion, its Parquet table, and its memory on a long drive.
+
+mod common;
+
+use std::path::Path;
+
+use common::{arg, success, travmap, write_output};
+use travmap::method::fusion::{DriveMap, FusedCell};
+use travmap::method::grid::CellClass;
+use travmap::outputs::drive_map::MapPicture;
+use travmap::outputs::rendering::{GAP_PX, colour};
+
+/// The shipped drive fused by the library, as `map` fuses it.
+fn fused(seq: &Path) -> Vec<FusedCell> {
+    let config = travmap::Config::default();
+    let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
+    let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
+    let selection = travmap::drive::Selection::new(source, 0..usize::MAX);
+    let mut map = DriveMap::new(config.grid.cell_size_m);
+    selection
+        .run::<travmap::Error>(&config, Some(&model), |result| {
+            map.add_result(&result);
+            Ok(())
+        })
+        .unwrap();
+    map.cells()
+}
+
+#[test]
+fn the_picture_shows_the_fused_map_truth_and_errors_cell_by_cell() {
+    let Some(seq) = common::sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("drive.png");
+    let cells_path = dir.path().join("cells.parquet");
+    write_output(
+        "map",
+        &seq,
+        &png,
+        &["--cell-pixels", "8", "--cells", arg(&cells_path)],
+    );
+    let image = travmap::io::image::decode_png(&std::fs::read(&png).unwrap(), &png).unwrap();
+    let cells = fused(&seq);
+    let picture = MapPicture::of(&cells, 8);
+    let panel = picture.cells[0] as u32 * 8;
+    assert_eq!(image.width, 3 * panel + 2 * GAP_PX);
+    let class = |c: CellClass| match c {
+        CellClass::Unknown => colour::UNKNOWN,
+        CellClass::Traversable => colour::TRAVERSABLE,
+        CellClass::NonTraversable => colour::NON_TRAVERSABLE,
+    };
+    // Most of a cell's 64 pixels: the trajectory and the axes are drawn over some.
+    let mostly = |x0: u32, y0: u32, expected: [u8; 3]| {
+        let mut matching = 0;
+        for y in y0..y0 + 8 {
+            for x in x0..x0 + 8 {
+                let at = 3 * (y * image.width + x) as usize;
+                matching += (image.rgb[at..at + 3] == expected) as usize;
+            }
+        }
+        matching >= 48
+    };
+    let mut errors = 0;
+    for cell in &cells {
+        let (x, y) = picture.cell_origin_px(cell.key);
+        assert!(mostly(x, y, class(cell.class)), "prediction, {cell:?}");
+        assert!(
+            mostly(x + panel + GAP_PX, y, class(cell.ground_truth)),
+            "truth, {cell:?}"
+        );
+        let error = match (cell.class, cell.ground_truth) {
+            (CellClass::Traversable, CellClass::NonTraversable) => colour::FALSE_POSITIVE,
+            (CellClass::NonTraversable, CellClass::Traversable) => colour::FALSE_NEGATIVE,
+            (CellClass::Unknown, _) | (_, CellClass::Unknown) => colour::UNKNOWN,
+            _ => colour::CORRECT,
+        };
+        errors += (error == colour::FALSE_POSITIVE || error == colour::FALSE_NEGATIVE) as usize;
+        assert!(
+            mostly(x + 2 * (panel + GAP_PX), y, error),
+            "errors, {cell:?}"
+        );
+    }
+    assert!(errors > 0, "the picture shows some errors");
+
+    // The Parquet table: one row per fused cell.
+    use parquet::file::reader::{FileReader, SerializedFileReader};
+    let reader = SerializedFileReader::new(std::fs::File::open(&cells_path).unwrap()).unwrap();
+    let metadata = reader.metadata();
+    assert_eq!(metadata.file_metadata().num_rows() as usize, cells.len());
+    let names: Vec<&str> = metadata
+        .file_metadata()
+        .schema_descr()
+        .columns()
+        .iter()
+        .map(|c| c.name())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "x_m",
+            "y_m",
+            "evidence",
+            "probability",
+            "observations",
+            "predicted_traversable",
+            "ground_truth_traversable"
+        ]
+    );
+}
+
+#[test]
+fn the_fused_map_scores_at_least_as_well_as_the_frames() {
+    let Some(seq) = common::sample() else { return };
+    let json = common::json_summary(&["eval", arg(&seq)]);
+    let per_frame = &json["report"]["scores"];
+    let fused = &json["drive_map"]["scores"];
+    eprintln!("per frame {per_frame}\nfused {fused}");
+    for score in ["accuracy", "miou"] {
+        assert!(
+            fused[score].as_f64().unwrap() >= per_frame[score].as_f64().unwrap(),
+            "{score}: fused {fused}, per frame {per_frame}"
+        );
+    }
+}
+
+#[test]
+fn a_long_drive_costs_memory_in_proportion_to_its_area() {
+    let Some(seq) = common::sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let long = common::long_sequence(Path::new(&seq), dir.path(), 600);
+    let png = dir.path().join("long.png");
+    let output = travmap(&["map", arg(&long), "-o", arg(&png), "--json"]);
+    let (_, summary) = common::json_records(&success(output));
+    let (memory, seen, area) = (
+        summary["memory_bytes"].as_f64().unwrap(),
+        summary["seen_cells"].as_f64().unwrap(),
+        summary["area_m2"].as_f64().unwrap(),
+    );
+    eprintln!("600 frames: {seen} cells seen, {area:.0} m2, map {memory:.0} bytes");
+    assert_eq!(summary["frames"], 600);
+    // A 32 x 32-cell tile costs 20 KiB: within a few tiles' fill of the area seen,
+    // and far below the bounding box of a drive that turns.
+    assert!(
+        memory / seen < 200.0,
+        "{} bytes per seen cell",
+        memory / seen
+    );
+}
