@@ -7,11 +7,20 @@ use nalgebra::Isometry3;
 
 use crate::config::{Config, IntegrationConfig, RegistrationConfig};
 use crate::error::{Error, Result};
+use crate::frame::Frame;
 use crate::io::{Posing, Source};
 use crate::method::classifier::SvmModel;
 use crate::method::pipeline::{FrameResult, Pipeline};
 use crate::method::registration::Odometry;
 use crate::stopwatch::{Stopwatch, timed};
+
+/// A frame read and posed, waiting for the pipeline.
+struct Arrival {
+    frame: Frame,
+    read_ms: f64,
+    register_ms: f64,
+    scan_sha256: Option<String>,
+}
 
 /// A scan's pose as registration estimated it.
 #[derive(Clone, Debug)]
@@ -71,39 +80,97 @@ impl Selection {
         }
         let first = self.frames.start;
         let frames = pipeline.window().warm_up_start(first)..self.frames.end;
-        // Reading time: from the end of one frame's work to the arrival of the next.
-        let mut reading = Stopwatch::start();
-        for frame in self.source.read(&frames) {
-            let mut frame = frame?;
-            let read_ms = reading.lap_ms();
-            if posing == Posing::Alone {
-                frame.world_from_velodyne = Isometry3::identity();
-            }
-            let register_ms = match pipeline.register(&mut frame) {
-                Ok(ms) => ms,
-                Err(problem) => {
-                    let error = Error::Registration {
-                        path: self.source.path().to_path_buf(),
-                        frame: frame.index,
-                        problem,
-                    };
-                    self.source.skip_log().handle(frame.index, error)?;
-                    reading.lap_ms();
-                    continue;
+        // Frames read ahead on their own thread while the pipeline works.
+        let batch_size = (2 * rayon::current_num_threads()).clamp(1, 16);
+        std::thread::scope(|scope| {
+            let (sender, receiver) = std::sync::mpsc::sync_channel(batch_size);
+            scope.spawn(move || {
+                let mut reading = Stopwatch::start();
+                for frame in self.source.read(&frames) {
+                    let read_ms = reading.lap_ms();
+                    if sender.send(frame.map(|f| (f, read_ms))).is_err() {
+                        return;
+                    }
                 }
-            };
-            if frame.index < first {
-                pipeline.warm_up(frame);
-            } else {
-                let scan_sha256 = self.fingerprint_scans.then(|| frame.content_sha256());
-                let mut result = pipeline.process_frame(frame, model);
-                result.timings.read_ms = read_ms;
-                result.timings.register_ms = register_ms;
-                result.timings.latency_ms += register_ms;
-                result.scan_sha256 = scan_sha256;
-                on_frame(result)?;
+            });
+            // Block for one frame, then take what else has arrived, up to a batch.
+            while let Ok(arrival) = receiver.recv() {
+                let mut arrived = vec![arrival];
+                while arrived.len() < batch_size {
+                    match receiver.try_recv() {
+                        Ok(arrival) => arrived.push(arrival),
+                        Err(_) => break,
+                    }
+                }
+                let mut batch: Vec<Arrival> = Vec::with_capacity(arrived.len());
+                for arrival in arrived {
+                    let (mut frame, read_ms) = arrival?;
+                    if posing == Posing::Alone {
+                        frame.world_from_velodyne = Isometry3::identity();
+                    }
+                    let register_ms = match pipeline.register(&mut frame) {
+                        Ok(ms) => ms,
+                        Err(problem) => {
+                            let error = Error::Registration {
+                                path: self.source.path().to_path_buf(),
+                                frame: frame.index,
+                                problem,
+                            };
+                            self.source.skip_log().handle(frame.index, error)?;
+                            continue;
+                        }
+                    };
+                    if frame.index < first {
+                        pipeline.warm_up(frame);
+                        continue;
+                    }
+                    // A batch is consecutive frames: a skipped one ends it.
+                    if batch
+                        .last()
+                        .is_some_and(|b| b.frame.index + 1 != frame.index)
+                    {
+                        self.process(
+                            &mut pipeline,
+                            std::mem::take(&mut batch),
+                            model,
+                            &mut on_frame,
+                        )?;
+                    }
+                    batch.push(Arrival {
+                        scan_sha256: self.fingerprint_scans.then(|| frame.content_sha256()),
+                        frame,
+                        read_ms,
+                        register_ms,
+                    });
+                }
+                self.process(&mut pipeline, batch, model, &mut on_frame)?;
             }
-            reading.lap_ms();
+            Ok(())
+        })
+    }
+
+    /// Runs the method on a batch of consecutive frames and hands on the results.
+    fn process<E: From<Error>>(
+        &self,
+        pipeline: &mut Pipeline,
+        batch: Vec<Arrival>,
+        model: Option<&SvmModel>,
+        on_frame: &mut impl FnMut(FrameResult) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let (frames, extras): (Vec<Frame>, Vec<_>) = batch
+            .into_iter()
+            .map(|a| (a.frame, (a.read_ms, a.register_ms, a.scan_sha256)))
+            .unzip();
+        for (mut result, (read_ms, register_ms, scan_sha256)) in pipeline
+            .process_frames(frames, model)
+            .into_iter()
+            .zip(extras)
+        {
+            result.timings.read_ms = read_ms;
+            result.timings.register_ms = register_ms;
+            result.timings.latency_ms += register_ms;
+            result.scan_sha256 = scan_sha256;
+            on_frame(result)?;
         }
         Ok(())
     }

@@ -25,8 +25,9 @@ What it does:
     ROS 2 OccupancyGrid importer gives GridMaps: free (0) = white, occupied (100) =
     black, unknown (-1) = RViz's grey-green #708986. The dark theme's background is
     (13, 13, 13), so all three stand out. ok = at least two of the three colours each
-    cover >= --min-pixels pixels. A blank viewer, the welcome screen or an error page
-    shows no #708986 and no pure black, so it fails. Screenshots are retried until
+    cover >= --min-pixels pixels. A blank viewer (measured: 1 colour, 0 grid pixels)
+    or rerun's error page (measured: < 110 pixels near #708986 from anti-aliased text,
+    no pure black) fails. Screenshots are retried until
     the check passes or the time is up.
  5. Prints one JSON line with what it measured and exits 0 iff ok. On failure it
     also prints (to stderr) the server log tail, Chromium's stderr tail, the page's
@@ -55,8 +56,9 @@ import urllib.parse
 import urllib.request
 import zlib
 
-# rerun's RvizMap colormap (crates/viewer/re_viewer_context/src/gpu_bridge/colormap.rs
-# follows RViz's "map" scheme): 0 -> white, 100 -> black, -1 -> 0x708986.
+# rerun's RvizMap colormap (colormap 10, which `rerun mcap convert` gives the GridMaps of
+# nav_msgs/msg/OccupancyGrid; RViz's "map" scheme), as measured on screen with rerun 0.41:
+# 0 -> white, 100 -> black, -1 -> (112, 137, 134) = #708986.
 UNKNOWN_RGB = (112, 137, 134)
 UNKNOWN_TOL = 8
 FREE_MIN = 250  # every channel >= this: free (white)
@@ -69,6 +71,10 @@ NOISY_STDERR = ("dbus", "Fontconfig", "vaapi", "InitializeSandbox", "idle_linux"
 
 
 class Failure(Exception):
+    pass
+
+
+class Interrupted(Failure):
     pass
 
 
@@ -204,21 +210,25 @@ def start_server(rerun, path, work, env, deadline):
         start_new_session=True)
     logf.close()
     url = f"http://127.0.0.1:{web_port}/"
-    while True:
-        if proc.poll() is not None:
-            raise Failure(f"rerun server exited with {proc.returncode}:\n{tail(log_path)}")
-        if time.monotonic() > deadline:
-            raise Failure(f"rerun server did not come up:\n{tail(log_path)}")
-        try:
-            with urllib.request.urlopen(url, timeout=2) as r:
-                ok_http = r.status == 200
-            with socket.create_connection(("127.0.0.1", grpc_port), timeout=2):
+    try:
+        while True:
+            if proc.poll() is not None:
+                raise Failure(f"rerun server exited with {proc.returncode}:\n{tail(log_path)}")
+            if time.monotonic() > deadline:
+                raise Failure(f"rerun server did not come up:\n{tail(log_path)}")
+            try:
+                with urllib.request.urlopen(url, timeout=2) as r:
+                    ok_http = r.status == 200
+                with socket.create_connection(("127.0.0.1", grpc_port), timeout=2):
+                    pass
+                if ok_http:
+                    break
+            except OSError:
                 pass
-            if ok_http:
-                break
-        except OSError:
-            pass
-        time.sleep(0.3)
+            time.sleep(0.3)
+    except BaseException:
+        kill_group(proc)
+        raise
     return proc, log_path, web_port, grpc_port
 
 
@@ -226,7 +236,10 @@ def start_server(rerun, path, work, env, deadline):
 
 def find_chromium(given):
     if given:
-        return given
+        path = given if os.sep in given else shutil.which(given)
+        if not path or not os.access(path, os.X_OK):
+            raise Failure(f"Chromium binary not found or not executable: {given}")
+        return path
     for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable",
                  "chrome", "headless_shell"):
         path = shutil.which(name)
@@ -524,13 +537,13 @@ def run(opts, work, result):
     env["XDG_CACHE_HOME"] = os.path.join(work, "cache")
     env.setdefault("RUST_LOG", "info")
 
+    chromium = find_chromium(opts.chromium)
+    result["chromium"] = chromium
     served = prepare_input(rerun, os.path.abspath(opts.input), work, env, deadline,
                            opts.grid_entity, opts.all_entities)
     result["served"] = "as given" if served == os.path.abspath(opts.input) else "grid only"
-    chromium = find_chromium(opts.chromium)
-    result["chromium"] = chromium
 
-    server = browser = None
+    server = browser = png = None
     try:
         server, server_log, web_port, grpc_port = start_server(rerun, served, work, env, deadline)
         result["server_up_s"] = round(time.monotonic() - t0, 1)
@@ -542,7 +555,7 @@ def run(opts, work, result):
         browser.open_page(url, width, height, deadline)
 
         state, last_bytes, stable, hidden = {}, None, 0, False
-        measured, png = None, None
+        measured = None
         while True:
             if time.monotonic() > deadline - 2:
                 raise Failure("timed out: " + describe(state, measured))
@@ -573,9 +586,9 @@ def run(opts, work, result):
             time.sleep(1.0)
         result["recording_bytes"] = last_bytes
         result.update(measured)
-    except Failure:
+    except Failure as e:
         # keep whatever the page shows, for the record
-        if browser is not None and browser.proc.poll() is None:
+        if not isinstance(e, Interrupted) and browser is not None and browser.proc.poll() is None:
             try:
                 png = browser.screenshot(min(deadline + 10, time.monotonic() + 10))
                 result.update({k: v for k, v in measure(png, opts.min_pixels).items() if k != "ok"})
@@ -634,7 +647,9 @@ def main():
     work = tempfile.mkdtemp(prefix="travmap-viewer-")
 
     def on_signal(signum, _frame):
-        raise Failure(f"interrupted by signal {signum}")
+        for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGALRM):
+            signal.signal(sig, signal.SIG_IGN)  # let the cleanup run undisturbed
+        raise Interrupted(f"interrupted by signal {signum}")
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
