@@ -11,7 +11,7 @@ use crate::frame::Frame;
 use crate::io::{Posing, Source};
 use crate::method::classifier::SvmModel;
 use crate::method::pipeline::{FrameResult, Pipeline};
-use crate::method::registration::Odometry;
+use crate::method::registration::{Odometry, RegistrationError};
 use crate::stopwatch::{Stopwatch, timed};
 
 /// A frame read and posed, waiting for the pipeline.
@@ -111,12 +111,7 @@ impl Selection {
                     let register_ms = match pipeline.register(&mut frame) {
                         Ok(ms) => ms,
                         Err(problem) => {
-                            let error = Error::Registration {
-                                path: self.source.path().to_path_buf(),
-                                frame: frame.index,
-                                problem,
-                            };
-                            self.source.skip_log().handle(frame.index, error)?;
+                            self.unregistered(frame.index, problem)?;
                             continue;
                         }
                     };
@@ -195,18 +190,22 @@ impl Selection {
                     world_from_velodyne,
                     register_ms,
                 }),
-                Err(problem) => {
-                    let error = Error::Registration {
-                        path: self.source.path().to_path_buf(),
-                        frame: frame.index,
-                        problem,
-                    };
-                    self.source.skip_log().handle(frame.index, error)?;
-                }
+                Err(problem) => self.unregistered(frame.index, problem)?,
             }
             on_frame();
         }
         Ok(trajectory)
+    }
+
+    /// A frame registration refused: the end of the run, or a skipped frame
+    /// (`--keep-going`).
+    fn unregistered(&self, frame: usize, problem: RegistrationError) -> Result<()> {
+        let error = Error::Registration {
+            path: self.source.path().to_path_buf(),
+            frame,
+            problem,
+        };
+        self.source.skip_log().handle(frame, error)
     }
 
     /// The input and the frames of it, as a person reads them.

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use travmap::method::fusion::DriveMap;
@@ -30,16 +30,13 @@ pub struct MapArgs {
     cells: Option<PathBuf>,
     #[command(flatten)]
     model: ModelArg,
-    /// Pixels per cell side.
-    #[arg(long, default_value_t = 4)]
+    /// Pixels per cell side (1 to 64).
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=64))]
     cell_pixels: u32,
 }
 
 pub fn map(args: MapArgs) -> Result<Outcome> {
     let cell_px = args.cell_pixels;
-    if !(1..=64).contains(&cell_px) {
-        bail!("--cell-pixels must be in 1..=64, got {cell_px}");
-    }
     let config = &args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
     let inputs = args.inputs.files(args.model.path.as_deref());

@@ -30,8 +30,8 @@ pub struct RenderArgs {
     all: bool,
     #[command(flatten)]
     model: ModelArg,
-    /// Pixels per cell side.
-    #[arg(long, default_value_t = 8)]
+    /// Pixels per cell side (1 to 64).
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=64))]
     cell_pixels: u32,
 }
 
@@ -42,9 +42,6 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         (None, false) => bail!("render needs --frame N or --all"),
     }
     let cell_px = args.cell_pixels;
-    if !(1..=64).contains(&cell_px) {
-        bail!("--cell-pixels must be in 1..=64, got {cell_px}");
-    }
     let config = &args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
     let inputs = args.inputs.files(args.model.path.as_deref());
