@@ -101,26 +101,24 @@ impl<'a> Record<'a> {
         }
     }
 
-    fn u32(&self, name: &str) -> std::result::Result<u32, String> {
+    /// A little-endian field of exactly `N` bytes.
+    fn bytes<const N: usize>(&self, name: &str) -> std::result::Result<[u8; N], String> {
         let value = self.field(name)?;
-        value.try_into().map(u32::from_le_bytes).map_err(|_| {
+        value.try_into().map_err(|_| {
             format!(
-                "the record at byte {}: `{name}` has {} bytes, not 4",
+                "the record at byte {}: `{name}` has {} bytes, not {N}",
                 self.offset,
                 value.len()
             )
         })
     }
 
+    fn u32(&self, name: &str) -> std::result::Result<u32, String> {
+        self.bytes(name).map(u32::from_le_bytes)
+    }
+
     fn u64(&self, name: &str) -> std::result::Result<u64, String> {
-        let value = self.field(name)?;
-        value.try_into().map(u64::from_le_bytes).map_err(|_| {
-            format!(
-                "the record at byte {}: `{name}` has {} bytes, not 8",
-                self.offset,
-                value.len()
-            )
-        })
+        self.bytes(name).map(u64::from_le_bytes)
     }
 
     fn text(&self, name: &str) -> std::result::Result<String, String> {
