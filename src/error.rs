@@ -32,13 +32,6 @@ pub enum Error {
         expected_bytes: Option<u64>,
     },
 
-    #[error("cannot write {path} as MCAP")]
-    McapWrite {
-        path: PathBuf,
-        #[source]
-        source: mcap::McapError,
-    },
-
     #[error("cannot write {path}: the writer thread stopped")]
     WriterStopped { path: PathBuf },
 
@@ -284,7 +277,6 @@ impl Error {
         match self {
             Error::Io { path, .. }
             | Error::NoSpace { path, .. }
-            | Error::McapWrite { path, .. }
             | Error::WriterStopped { path, .. }
             | Error::Write { path, .. }
             | Error::RecordSize { path, .. }

@@ -223,17 +223,54 @@ fn real_clients_decode_what_travmap_writes() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("a.mcap");
-    write_output("annotate", &seq, &out, &[]);
     let run = success(travmap(&["run", arg(&seq), "--json"]));
     let (runs, _) = common::json_records(&run);
+    for out in annotated_both_ways(dir.path(), &seq) {
+        decode_with_every_client(&out, &seq, &runs, python.as_deref(), &node_modules);
+    }
+}
+
+/// The shipped sample annotated from its directory, and from its MCAP conversion,
+/// whose messages annotate copies chunk by chunk as stored (checked here).
+fn annotated_both_ways(dir: &Path, seq: &Path) -> [std::path::PathBuf; 2] {
+    let (from_kitti, drive, from_mcap) = (
+        dir.join("from-kitti.mcap"),
+        dir.join("drive.mcap"),
+        dir.join("from-mcap.mcap"),
+    );
+    write_output("annotate", seq, &from_kitti, &[]);
+    write_output("convert", seq, &drive, &[]);
+    write_output("annotate", &drive, &from_mcap, &[]);
+    let (input, output) = (
+        std::fs::read(&drive).unwrap(),
+        std::fs::read(&from_mcap).unwrap(),
+    );
+    let summary = mcap::Summary::read(&input).unwrap().unwrap();
+    for chunk in &summary.chunk_indexes {
+        let start = chunk.chunk_start_offset as usize;
+        let stored = &input[start..start + chunk.chunk_length as usize];
+        assert!(
+            output.windows(stored.len()).any(|w| w == stored),
+            "the input's chunk at {start} is not in the annotated file as stored"
+        );
+    }
+    [from_kitti, from_mcap]
+}
+
+fn decode_with_every_client(
+    out: &Path,
+    seq: &Path,
+    runs: &[Value],
+    python: Option<&str>,
+    node_modules: &Path,
+) {
     let clients = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients");
     let decode = |program: &str, script: &str| -> Value {
-        let decoded = common::run_client(Command::new(program).arg(clients.join(script)).arg(&out));
+        let decoded = common::run_client(Command::new(program).arg(clients.join(script)).arg(out));
         serde_json::from_slice(&decoded.stdout).unwrap()
     };
     let mut summaries = Vec::new();
-    if let Some(python) = &python {
+    if let Some(python) = python {
         let doc = decode(python, "decode_mcap.py");
         summaries.push(("python mcap-ros2-support", sorted(&doc["mcap"])));
         summaries.push(("python rosbags", sorted(&doc["rosbags"])));
@@ -249,9 +286,13 @@ fn real_clients_decode_what_travmap_writes() {
         common::skip::<()>("the Node client: run npm ci in tests/clients");
     }
     for (client, entries) in &summaries {
-        check_client_summary(client, entries, &seq, &runs);
+        check_client_summary(client, entries, seq, runs);
         // 6 clouds, 6 /tf, 1 /tf_static, 6 + 3 grids, 6 classified clouds, 6 metrics, 1 drive map.
-        assert_eq!(entries.len(), 35, "{client}: every message decoded");
+        assert_eq!(
+            entries.len(),
+            35,
+            "{client}: every message decoded in {out:?}"
+        );
     }
 }
 
@@ -481,13 +522,17 @@ fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let mcap_path = dir.path().join("a.mcap");
-    let rrd = dir.path().join("a.rrd");
-    write_output("annotate", &seq, &mcap_path, &[]);
-    let rerun_mcap = ["mcap", "convert", arg(&mcap_path), "-o", arg(&rrd)];
-    common::run_client(Command::new(&rerun).args(rerun_mcap));
+    for mcap_path in annotated_both_ways(dir.path(), &seq) {
+        rerun_finds_points_and_grid_maps(&rerun, &mcap_path, &seq);
+    }
+}
+
+fn rerun_finds_points_and_grid_maps(rerun: &str, mcap_path: &Path, seq: &Path) {
+    let rrd = mcap_path.with_extension("rrd");
+    let rerun_mcap = ["mcap", "convert", arg(mcap_path), "-o", arg(&rrd)];
+    common::run_client(Command::new(rerun).args(rerun_mcap));
     // `rerun mcap convert` exits 0 even on bad input: check what the .rrd holds.
-    let printed = common::run_client(Command::new(&rerun).args(["rrd", "print", "-v"]).arg(&rrd));
+    let printed = common::run_client(Command::new(rerun).args(["rrd", "print", "-v"]).arg(&rrd));
     let text = String::from_utf8_lossy(&printed.stdout);
     // Chunk headers read "... with N rows (size) - /entity - data columns: [...]".
     let rows = |entity: &str, column: &str| -> usize {
@@ -505,12 +550,16 @@ fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
             })
             .sum()
     };
-    assert_eq!(rows("/travmap/prediction", "GridMap:data"), 6, "{text}");
+    assert_eq!(
+        rows("/travmap/prediction", "GridMap:data"),
+        6,
+        "{mcap_path:?}: {text}"
+    );
     assert_eq!(rows("/travmap/ground_truth", "GridMap:data"), 3);
     assert_eq!(rows("/travmap/cloud", "Points3D:positions"), 6);
     assert_eq!(rows("/velodyne_points", "Points3D:positions"), 6);
     // The grids' size and the first grid's corner, in the data itself.
-    let data = Command::new(&rerun)
+    let data = Command::new(rerun)
         .args(["rrd", "print", "-vvv"])
         .arg(&rrd)
         .output()
@@ -520,7 +569,7 @@ fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
         data.contains("width: 30, height: 30"),
         "no 30 x 30 GridMap in the .rrd"
     );
-    let run = success(travmap(&["run", arg(&seq), "--frames", "0", "--json"]));
+    let run = success(travmap(&["run", arg(seq), "--frames", "0", "--json"]));
     let first = common::json_records(&run).0.remove(0);
     let corner = first["min_corner_in_world"].as_array().unwrap();
     let expected = format!(

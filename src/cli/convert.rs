@@ -138,9 +138,9 @@ fn convert_whole_log(
     selections: &[travmap::drive::Selection],
 ) -> Result<Outcome> {
     let bar = output.progress(drive.frame_count() as u64, "converting");
-    let summary = convert_log(drive, output_path, compression, &|message| {
-        if message.connection.topic == drive.cloud_topic() {
-            bar.inc(1);
+    let summary = convert_log(drive, output_path, compression, &|topic, count| {
+        if topic == drive.cloud_topic() {
+            bar.inc(count);
         }
     })?;
     let seconds = bar.finish();

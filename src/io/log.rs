@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use super::bag::BagFile;
 use super::format::InputFormat;
-use super::mcap_records::{Messages, check_chunk_sizes};
+use super::mcap_records::{Messages, StoredLog, check_chunk_sizes, stored_log};
 use super::ros::MessageEncoding;
 use super::rosbag2::{Rosbag2Directory, SqliteFile};
 use crate::error::{Error, Result};
@@ -132,6 +132,14 @@ impl Log {
         &self.notices
     }
 
+    /// A one-file MCAP log's chunks as stored, when they hold every message.
+    pub fn stored(&self) -> Option<StoredLog<'_>> {
+        match self.files.as_slice() {
+            [LogFile::Mcap(file)] => file.stored(),
+            _ => None,
+        }
+    }
+
     /// Every message of every file, in order; nothing after the first error.
     pub fn messages(&self) -> impl Iterator<Item = Result<LogMessage>> + '_ {
         let mut failed = false;
@@ -174,6 +182,11 @@ impl McapFile {
             map,
             longest_record,
         })
+    }
+
+    /// Its chunks as stored, when they hold every message (see [`stored_log`]).
+    pub fn stored(&self) -> Option<StoredLog<'_>> {
+        stored_log(&self.map)
     }
 
     fn messages(&self) -> impl Iterator<Item = std::result::Result<LogMessage, String>> + '_ {

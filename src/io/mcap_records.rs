@@ -287,6 +287,157 @@ fn decompressed_len(compression: &str, records: &[u8], limit: u64) -> std::io::R
     }
 }
 
+/// One channel's part of a stored chunk.
+pub struct StoredChannel {
+    pub id: u16,
+    /// Where its message index record starts, from the end of the chunk record.
+    pub index_offset: u64,
+    pub messages: u64,
+}
+
+/// A chunk of an MCAP file as stored, with the message index records after it:
+/// what a writer needs to copy it without decompressing it.
+pub struct StoredChunk<'a> {
+    /// The whole chunk record, opcode and length included.
+    pub record: &'a [u8],
+    pub message_indexes: &'a [u8],
+    /// Log time range of its messages (None: it holds none).
+    pub time_ns: Option<(u64, u64)>,
+    pub compression: &'a str,
+    pub compressed_bytes: u64,
+    pub uncompressed_bytes: u64,
+    pub channels: Vec<StoredChannel>,
+}
+
+/// The chunks of an MCAP file and the schemas and channels their messages use.
+#[derive(Default)]
+pub struct StoredLog<'a> {
+    /// Each schema's header and data.
+    pub schemas: Vec<(mcap::records::SchemaHeader, Vec<u8>)>,
+    pub channels: Vec<mcap::records::Channel>,
+    pub chunks: Vec<StoredChunk<'a>>,
+}
+
+impl StoredLog<'_> {
+    pub fn messages(&self) -> u64 {
+        let chunks = self.chunks.iter().flat_map(|chunk| &chunk.channels);
+        chunks.map(|channel| channel.messages).sum()
+    }
+
+    /// Collects a schema or channel record (once per id: the summary repeats them).
+    fn declare(&mut self, opcode: u8, body: &[u8]) -> Option<()> {
+        check_lengths(opcode, body).ok()?;
+        match mcap::parse_record(opcode, body).ok()? {
+            Record::Schema { header, data }
+                if !self.schemas.iter().any(|(known, _)| known.id == header.id) =>
+            {
+                self.schemas.push((header, data.into_owned()));
+            }
+            Record::Channel(channel) if !self.channels.iter().any(|k| k.id == channel.id) => {
+                self.channels.push(channel);
+            }
+            _ => {}
+        }
+        Some(())
+    }
+
+    /// Whether every chunk's channels, and their schemas, are declared.
+    fn declares_all(&self) -> bool {
+        let mut used = self.chunks.iter().flat_map(|chunk| &chunk.channels);
+        used.all(|used| {
+            self.channels.iter().any(|channel| {
+                channel.id == used.id
+                    && (channel.schema_id == 0
+                        || self.schemas.iter().any(|(s, _)| s.id == channel.schema_id))
+            })
+        })
+    }
+}
+
+/// A message index record's channel and message count.
+fn message_index(body: &[u8]) -> Option<(u16, u64)> {
+    let id = u16::from_le_bytes(body.get(0..2)?.try_into().ok()?);
+    let entries = u32::from_le_bytes(body.get(2..6)?.try_into().ok()?) as usize;
+    (entries == body.len() - 6 && entries.is_multiple_of(16)).then_some((id, entries as u64 / 16))
+}
+
+/// The file's chunks as stored, when they hold every message and their message
+/// indexes say which: None for a file with messages outside chunks, a chunk
+/// without message indexes, or a channel that neither the data section nor the
+/// summary declares. Lengths are checked as [`check_chunk_sizes`] does.
+pub(crate) fn stored_log(map: &[u8]) -> Option<StoredLog<'_>> {
+    let mut log = StoredLog::default();
+    // Where the message index records after the last chunk start; None once another
+    // record came between.
+    let mut indexes_start = None;
+    for record in (RecordWalk {
+        bytes: map,
+        offset: 8,
+    }) {
+        let (offset, opcode, body) = record.ok()?;
+        let end = offset + 9 + body.len();
+        match (opcode, indexes_start) {
+            (op::DATA_END, _) => break,
+            (op::MESSAGE, _) => return None,
+            (op::SCHEMA | op::CHANNEL, _) => log.declare(opcode, body)?,
+            (op::CHUNK, _) => {
+                let (declared, compression, records) = chunk_parts(body)?;
+                let time =
+                    |at: usize| Some(u64::from_le_bytes(body.get(at..at + 8)?.try_into().ok()?));
+                log.chunks.push(StoredChunk {
+                    record: &map[offset..end],
+                    message_indexes: &map[end..end],
+                    time_ns: Some((time(0)?, time(8)?)),
+                    compression,
+                    compressed_bytes: records.len() as u64,
+                    uncompressed_bytes: declared,
+                    channels: Vec::new(),
+                });
+                indexes_start = Some(end);
+                continue;
+            }
+            (op::MESSAGE_INDEX, Some(start)) => {
+                let (id, messages) = message_index(body)?;
+                let chunk = log.chunks.last_mut()?;
+                chunk.channels.push(StoredChannel {
+                    id,
+                    index_offset: (offset - start) as u64,
+                    messages,
+                });
+                chunk.message_indexes = &map[start..end];
+                continue;
+            }
+            (op::MESSAGE_INDEX, None) => return None,
+            _ => {}
+        }
+        indexes_start = None;
+    }
+    if log.chunks.iter().any(|chunk| chunk.channels.is_empty()) {
+        return None;
+    }
+    for chunk in &mut log.chunks {
+        if chunk.channels.iter().all(|channel| channel.messages == 0) {
+            chunk.time_ns = None;
+        }
+    }
+    // The footer (29 bytes before the closing magic) says where the summary starts.
+    let footer = map.len().checked_sub(37)?;
+    let summary_start = u64::from_le_bytes(map.get(footer + 9..footer + 17)?.try_into().ok()?);
+    if summary_start != 0 {
+        let summary = map.get(usize::try_from(summary_start).ok()?..footer)?;
+        for record in (RecordWalk {
+            bytes: summary,
+            offset: 0,
+        }) {
+            let (_, opcode, body) = record.ok()?;
+            if matches!(opcode, op::SCHEMA | op::CHANNEL) {
+                log.declare(opcode, body)?;
+            }
+        }
+    }
+    log.declares_all().then_some(log)
+}
+
 /// The messages of `file` in file order, linked to their channels.
 pub(super) struct Messages<'a> {
     file: &'a [u8],

@@ -12,7 +12,7 @@ pub mod image;
 pub mod kitti;
 mod kitti_text;
 pub mod log;
-mod mcap_records;
+pub mod mcap_records;
 pub mod pcd;
 pub mod ros;
 pub mod ros1;

@@ -464,6 +464,12 @@ impl RosDrive {
         ))
     }
 
+    /// The log's chunks as stored, when it is one MCAP file whose chunks hold every
+    /// message (for passthrough without decoding).
+    pub fn stored(&self) -> Option<crate::io::mcap_records::StoredLog<'_>> {
+        self.log.stored()
+    }
+
     /// Every message of the log in order, undecoded (for passthrough).
     pub fn messages(&self) -> impl Iterator<Item = Result<LogMessage>> + '_ {
         self.log.messages()

@@ -16,6 +16,7 @@
 //! baseline in P2). Log time = header stamp = start time + times.txt. Frames are read
 //! and encoded in parallel batches, written in order.
 
+use std::collections::HashMap;
 use std::ops::Range;
 use std::path::Path;
 
@@ -26,7 +27,6 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::io::KittiSequence;
-use crate::io::log::LogMessage;
 use crate::io::ros::{
     CameraInfo, CompressedImage, Header, MessageEncoding, PointCloud2, PointField, Quaternion,
     RegionOfInterest, TfMessage, Time, Transform, TransformStamped, Vector3, datatype, encode,
@@ -68,16 +68,53 @@ pub struct LogCopySummary {
 }
 
 /// Every message of `drive` into `sink`, in order, as ROS 2 where travmap knows the
-/// type (see the module's comment). `on_message` is called before each is written.
+/// type (see the module's comment). `on_messages(topic, count)` is called before
+/// messages are written.
+///
+/// An MCAP input with nothing to translate is copied chunk by chunk as stored, when
+/// its chunks allow it ([`McapSink::copy_chunks`]): the same messages with their
+/// own sequence numbers, none decompressed.
 pub fn write_log_messages(
     sink: &mut McapSink,
     drive: &RosDrive,
-    on_message: &dyn Fn(&LogMessage),
+    on_messages: &dyn Fn(&str, u64),
 ) -> Result<LogCopySummary> {
     let mut summary = LogCopySummary::default();
+    let stored = drive.stored().filter(|stored| {
+        let encoding =
+            |c: &&mcap::records::Channel| MessageEncoding::from_name(&c.message_encoding);
+        stored
+            .channels
+            .iter()
+            .all(|c| encoding(&c) != Some(MessageEncoding::Ros1))
+    });
+    if let Some(stored) = stored {
+        let topics: HashMap<u16, &str> = stored
+            .channels
+            .iter()
+            .map(|c| (c.id, c.topic.as_str()))
+            .collect();
+        let copied = sink.copy_chunks(&stored, &|chunk| {
+            for channel in &chunk.channels {
+                on_messages(topics.get(&channel.id).unwrap_or(&""), channel.messages);
+            }
+        })?;
+        if copied {
+            summary.messages = stored.messages() as usize;
+            let used = stored.chunks.iter().flat_map(|chunk| &chunk.channels);
+            let used = |id| used.clone().any(|c| c.id == id && c.messages > 0);
+            summary.topics_as_recorded = stored
+                .channels
+                .iter()
+                .filter(|c| c.message_encoding != "cdr" && used(c.id))
+                .map(|c| c.topic.clone())
+                .collect();
+            return Ok(summary);
+        }
+    }
     for message in drive.messages() {
         let message = message?;
-        on_message(&message);
+        on_messages(&message.connection.topic, 1);
         let connection = &message.connection;
         let translated = match connection.encoding() {
             Some(MessageEncoding::Ros1) => ros1_to_cdr(&connection.type_name(), &message.data),
@@ -131,10 +168,10 @@ pub fn convert_log(
     drive: &RosDrive,
     output: &Path,
     compression: Compression,
-    on_message: &dyn Fn(&LogMessage),
+    on_messages: &dyn Fn(&str, u64),
 ) -> Result<LogCopySummary> {
     let mut sink = McapSink::create(output, compression)?;
-    let mut summary = write_log_messages(&mut sink, drive, on_message)?;
+    let mut summary = write_log_messages(&mut sink, drive, on_messages)?;
     sink.finish()?;
     summary.output_bytes = std::fs::metadata(output)
         .map_err(|e| Error::io(output, e))?

@@ -7,6 +7,7 @@ pub mod annotation;
 pub mod conversion;
 pub mod dataset;
 pub mod drive_map;
+pub mod mcap_writer;
 pub mod preflight;
 pub mod rendering;
 pub mod trajectory;

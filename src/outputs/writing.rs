@@ -1,14 +1,14 @@
 //! Writing: ROS 2 (CDR) MCAP files, atomically, with compression off the caller's
 //! thread.
 //!
-//! An [`McapSink`] hands every record to a writer thread that owns the mcap
-//! `Writer`, so chunk compression (zstd by default, itself multi-threaded by the
-//! mcap crate) overlaps with the caller reading, running the method and encoding the
-//! next frames. It writes to a temporary file beside the output and renames it over
+//! An [`McapSink`] hands every record to a writer thread that owns the
+//! [`McapWriter`], which compresses chunks on threads of its own, so compression
+//! (zstd by default) overlaps with the caller reading, running the method and
+//! encoding the next frames, and with itself. It writes to a temporary file beside the output and renames it over
 //! the output only in [`McapSink::finish`]; dropped unfinished (an error, a panic), it
 //! deletes the temporary file, so a failed run never leaves a file that looks complete.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
@@ -16,7 +16,9 @@ use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
 use crate::error::{Error, Result};
+use crate::io::mcap_records::{StoredChunk, StoredLog};
 use crate::io::ros::{RosMessage, encode};
+use crate::outputs::mcap_writer::{FinishedChunk, McapWriter};
 
 /// Temporary files being written, so that an interrupted run (SIGINT) can remove
 /// them: it leaves nothing at or beside the output.
@@ -129,24 +131,18 @@ impl Drop for AtomicFile {
 pub fn write_failure(
     path: &Path,
     output: &AtomicFile,
-    error: Option<mcap::McapError>,
+    error: Option<std::io::Error>,
     expected_bytes: Option<u64>,
 ) -> Error {
     match error {
-        Some(mcap::McapError::Io(source)) if source.raw_os_error() == Some(libc::ENOSPC) => {
-            Error::NoSpace {
-                path: path.to_path_buf(),
-                written_bytes: output.written_bytes(),
-                expected_bytes,
-            }
-        }
-        Some(mcap::McapError::Io(source)) => Error::Write {
+        Some(source) if source.raw_os_error() == Some(libc::ENOSPC) => Error::NoSpace {
+            path: path.to_path_buf(),
+            written_bytes: output.written_bytes(),
+            expected_bytes,
+        },
+        Some(source) => Error::Write {
             path: path.to_path_buf(),
             source,
-        },
-        Some(other) => Error::McapWrite {
-            path: path.to_path_buf(),
-            source: other,
         },
         None => Error::WriterStopped {
             path: path.to_path_buf(),
@@ -160,14 +156,7 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     let (guard, mut file) = AtomicFile::create(path)?;
     file.write_all(bytes)
         .and_then(|_| file.sync_all())
-        .map_err(|source| {
-            write_failure(
-                path,
-                &guard,
-                Some(mcap::McapError::Io(source)),
-                Some(bytes.len() as u64),
-            )
-        })?;
+        .map_err(|source| write_failure(path, &guard, Some(source), Some(bytes.len() as u64)))?;
     guard.commit()
 }
 
@@ -181,13 +170,20 @@ pub enum Compression {
     None,
 }
 
-/// zstd level of `Compression::Zstd`. Level 1 against the crate's default (3), on
-/// the shipped scans: 2.2-2.7x the `convert` frames/s for files 11 % larger (the
-/// README's compression table).
-const ZSTD_LEVEL: u32 = 1;
+impl Compression {
+    /// The name chunk records give it.
+    pub fn chunk_name(self) -> &'static str {
+        match self {
+            Compression::Zstd => "zstd",
+            Compression::Lz4 => "lz4",
+            Compression::None => "",
+        }
+    }
+}
 
-/// Chunks of about this many bytes (uncompressed): a few frames each.
-const CHUNK_BYTES: u64 = 8 << 20;
+/// Chunks of about this many bytes (uncompressed): a few frames each, so that
+/// several compress at once.
+const CHUNK_BYTES: usize = 8 << 20;
 
 /// Records queued for the writer thread before the caller waits (a few frames).
 const QUEUE: usize = 64;
@@ -199,12 +195,7 @@ enum Record {
         encoding: String,
         data: Vec<u8>,
     },
-    Channel {
-        id: u16,
-        schema_id: u16,
-        topic: String,
-        message_encoding: String,
-    },
+    Channel(mcap::records::Channel),
     Message {
         channel_id: u16,
         sequence: u32,
@@ -212,27 +203,35 @@ enum Record {
         publish_time_ns: u64,
         data: Vec<u8>,
     },
-    Metadata(mcap::records::Metadata),
+    CopiedChunk(FinishedChunk),
+    Metadata {
+        name: String,
+        entries: BTreeMap<String, String>,
+    },
 }
 
 /// An MCAP being written; see the module documentation.
 pub struct McapSink {
     sender: Option<SyncSender<Record>>,
-    thread: Option<JoinHandle<std::result::Result<(), mcap::McapError>>>,
+    thread: Option<JoinHandle<std::io::Result<()>>>,
     /// None once finished.
     output: Option<AtomicFile>,
     path: PathBuf,
+    compression: Compression,
+    /// Channel and schema ids by topic and schema name.
     channels: HashMap<String, u16>,
     schemas: HashMap<String, u16>,
+    /// Ids in use: copied chunks keep their input's.
+    channel_ids: BTreeSet<u16>,
+    schema_ids: BTreeSet<u16>,
     sequence: u32,
 }
 
 /// The writer thread: writes records until the queue closes, then the summary.
 fn write_records(
-    mut writer: mcap::Writer<BufWriter<File>>,
+    mut writer: McapWriter<BufWriter<File>>,
     records: Receiver<Record>,
-) -> std::result::Result<(), mcap::McapError> {
-    let fail = |e: mcap::McapError| e;
+) -> std::io::Result<()> {
     for record in records {
         match record {
             Record::Schema {
@@ -240,68 +239,40 @@ fn write_records(
                 name,
                 encoding,
                 data,
-            } => {
-                writer
-                    .add_schema_with_id(id, &name, &encoding, &data)
-                    .map_err(fail)?;
-            }
-            Record::Channel {
-                id,
-                schema_id,
-                topic,
-                message_encoding,
-            } => {
-                writer
-                    .add_channel_with_id(id, schema_id, &topic, &message_encoding, &BTreeMap::new())
-                    .map_err(fail)?;
-            }
+            } => writer.add_schema(id, &name, &encoding, &data),
+            Record::Channel(channel) => writer.add_channel(&channel),
             Record::Message {
                 channel_id,
                 sequence,
                 log_time_ns,
                 publish_time_ns,
                 data,
-            } => {
-                let header = mcap::records::MessageHeader {
-                    channel_id,
-                    sequence,
-                    log_time: log_time_ns,
-                    publish_time: publish_time_ns,
-                };
-                writer
-                    .write_to_known_channel(&header, &data)
-                    .map_err(fail)?;
-            }
-            Record::Metadata(metadata) => writer.write_metadata(&metadata).map_err(fail)?,
+            } => writer.write_message(channel_id, sequence, log_time_ns, publish_time_ns, &data)?,
+            Record::CopiedChunk(chunk) => writer.copy_chunk(chunk)?,
+            Record::Metadata { name, entries } => writer.write_metadata(&name, &entries),
         }
     }
-    writer.finish().map_err(fail)?;
-    let file = writer
-        .into_inner()
-        .into_inner()
-        .map_err(|e| mcap::McapError::Io(e.into_error()))?;
-    Ok(file.sync_all()?)
+    let file = writer.finish()?.into_inner().map_err(|e| e.into_error())?;
+    file.sync_all()
+}
+
+/// The lowest id not in `used` (ids start at 1: schema id 0 means "no schema").
+fn free_id(used: &BTreeSet<u16>) -> u16 {
+    (1..=u16::MAX).find(|id| !used.contains(id)).unwrap_or(0)
 }
 
 impl McapSink {
     pub fn create(path: &Path, compression: Compression) -> Result<Self> {
         let (output, file) = AtomicFile::create(path)?;
-        // As many compression threads as rayon workers (RAYON_NUM_THREADS caps both).
-        let threads = rayon::current_num_threads() as u32;
-        let options = mcap::WriteOptions::new()
-            .profile("ros2")
-            .library(concat!("travmap ", env!("CARGO_PKG_VERSION")))
-            .chunk_size(Some(CHUNK_BYTES))
-            .compression(match compression {
-                Compression::Zstd => Some(mcap::Compression::Zstd),
-                Compression::Lz4 => Some(mcap::Compression::Lz4),
-                Compression::None => None,
-            })
-            .compression_threads(threads)
-            .compression_level(ZSTD_LEVEL);
-        let writer = options
-            .create(BufWriter::with_capacity(1 << 20, file))
-            .map_err(|e| write_failure(path, &output, Some(e), None))?;
+        let writer = McapWriter::new(
+            BufWriter::with_capacity(1 << 20, file),
+            "ros2",
+            concat!("travmap ", env!("CARGO_PKG_VERSION")),
+            compression,
+            CHUNK_BYTES,
+            rayon::current_num_threads(),
+        )
+        .map_err(|e| write_failure(path, &output, Some(e), None))?;
         let (sender, receiver) = sync_channel(QUEUE);
         let thread = std::thread::Builder::new()
             .name("mcap-writer".into())
@@ -315,8 +286,11 @@ impl McapSink {
             thread: Some(thread),
             output: Some(output),
             path: path.to_path_buf(),
+            compression,
             channels: HashMap::new(),
             schemas: HashMap::new(),
+            channel_ids: BTreeSet::new(),
+            schema_ids: BTreeSet::new(),
             sequence: 0,
         })
     }
@@ -338,12 +312,12 @@ impl McapSink {
 
     /// Closes the queue and waits for the writer thread: its result, or None when it
     /// panicked or was already joined.
-    fn join_writer(&mut self) -> Option<std::result::Result<(), mcap::McapError>> {
+    fn join_writer(&mut self) -> Option<std::io::Result<()>> {
         self.sender = None;
         self.thread.take()?.join().ok()
     }
 
-    fn failure(&self, error: Option<mcap::McapError>) -> Error {
+    fn failure(&self, error: Option<std::io::Error>) -> Error {
         match &self.output {
             Some(output) => write_failure(&self.path, output, error, None),
             None => Error::WriterStopped {
@@ -367,26 +341,67 @@ impl McapSink {
         let schema_id = match self.schemas.get(schema_name) {
             Some(&id) => id,
             None => {
-                let id = self.schemas.len() as u16 + 1;
+                let id = free_id(&self.schema_ids);
                 self.send(Record::Schema {
                     id,
                     name: schema_name.into(),
                     encoding: schema_encoding.into(),
                     data: schema.to_vec(),
                 })?;
+                self.schema_ids.insert(id);
                 self.schemas.insert(schema_name.to_string(), id);
                 id
             }
         };
-        let id = self.channels.len() as u16;
-        self.send(Record::Channel {
+        let id = free_id(&self.channel_ids);
+        self.send(Record::Channel(mcap::records::Channel {
             id,
             schema_id,
             topic: topic.into(),
             message_encoding: message_encoding.into(),
-        })?;
+            metadata: BTreeMap::new(),
+        }))?;
+        self.channel_ids.insert(id);
         self.channels.insert(topic.to_string(), id);
         Ok(id)
+    }
+
+    /// Copies the chunks of an input as they are stored, under the input's schema
+    /// and channel ids (their records use them). Only before any channel of the
+    /// sink's own: returns false, copying nothing, when one was created.
+    /// Chunks compressed otherwise than this sink's are not copied either.
+    pub fn copy_chunks(
+        &mut self,
+        log: &StoredLog,
+        on_chunk: &dyn Fn(&StoredChunk),
+    ) -> Result<bool> {
+        let compression = self.compression.chunk_name();
+        let same_compression = log.chunks.iter().all(|c| c.compression == compression);
+        if !self.channel_ids.is_empty() || !self.schema_ids.is_empty() || !same_compression {
+            return Ok(false);
+        }
+        for (header, data) in &log.schemas {
+            self.send(Record::Schema {
+                id: header.id,
+                name: header.name.clone(),
+                encoding: header.encoding.clone(),
+                data: data.clone(),
+            })?;
+            self.schema_ids.insert(header.id);
+            self.schemas.entry(header.name.clone()).or_insert(header.id);
+        }
+        for channel in &log.channels {
+            self.send(Record::Channel(channel.clone()))?;
+            self.channel_ids.insert(channel.id);
+            self.channels
+                .entry(channel.topic.clone())
+                .or_insert(channel.id);
+        }
+        for chunk in &log.chunks {
+            on_chunk(chunk);
+            self.send(Record::CopiedChunk(FinishedChunk::copied(chunk)))?;
+        }
+        Ok(true)
     }
 
     /// Writes already-encoded bytes on a channel.
@@ -425,10 +440,10 @@ impl McapSink {
     }
 
     pub fn write_metadata(&mut self, name: &str, entries: BTreeMap<String, String>) -> Result<()> {
-        self.send(Record::Metadata(mcap::records::Metadata {
+        self.send(Record::Metadata {
             name: name.to_string(),
-            metadata: entries,
-        }))
+            entries,
+        })
     }
 
     /// Waits for the writer, then renames the temporary file over the output.
