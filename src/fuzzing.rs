@@ -19,6 +19,8 @@ use crate::io::ros1;
 use crate::io::transforms::isometry;
 use crate::method::classifier::SvmModel;
 use crate::outputs::dataset::reading::read_training_rows;
+use crate::outputs::mcap_writer::{FinishedChunk, McapWriter};
+use crate::outputs::writing::Compression;
 use crate::training::TrainingSet;
 
 /// A fuzz target: arbitrary bytes in, nothing out.
@@ -119,9 +121,30 @@ pub fn ros_tf(data: &[u8]) {
     }
 }
 
-/// A whole MCAP file: opened as a drive, then every frame read, images included.
+/// A whole MCAP file: opened as a drive, then every frame read, images included;
+/// and its chunks as stored, copied into a new file as passthrough copies them.
 pub fn mcap_file(data: &[u8]) {
     with_file(data, "mcap", read_drive);
+    let Some(stored) = crate::io::mcap_records::stored_log(&bytes::Bytes::copy_from_slice(data))
+    else {
+        return;
+    };
+    let copy = || -> std::io::Result<Vec<u8>> {
+        let mut writer =
+            McapWriter::new(Vec::new(), "ros2", "fuzz", Compression::Zstd, 1 << 20, 1)?;
+        for (header, data) in &stored.schemas {
+            writer.add_schema(header.id, &header.name, &header.encoding, data);
+        }
+        for channel in &stored.channels {
+            writer.add_channel(channel, false);
+        }
+        for chunk in &stored.chunks {
+            writer.copy_chunk(FinishedChunk::copied(chunk))?;
+        }
+        writer.finish()
+    };
+    // Every channel a chunk uses is declared (stored_log checks), so copying works.
+    copy().expect("a stored log copies");
 }
 
 /// A whole ROS 1 bag, read as [`mcap_file`] reads an MCAP file.

@@ -133,7 +133,7 @@ impl Log {
     }
 
     /// A one-file MCAP log's chunks as stored, when they hold every message.
-    pub fn stored(&self) -> Option<StoredLog<'_>> {
+    pub fn stored(&self) -> Option<StoredLog> {
         match self.files.as_slice() {
             [LogFile::Mcap(file)] => file.stored(),
             _ => None,
@@ -165,7 +165,8 @@ impl Log {
 /// An MCAP file, memory-mapped, its chunk sizes checked at open.
 pub struct McapFile {
     path: PathBuf,
-    map: memmap2::Mmap,
+    /// The memory map, shared with chunks copied from it (see [`stored_log`]).
+    map: bytes::Bytes,
     /// See [`check_chunk_sizes`]: no record of the file is longer.
     longest_record: usize,
 }
@@ -179,13 +180,13 @@ impl McapFile {
         })?;
         Ok(Self {
             path: path.to_path_buf(),
-            map,
+            map: bytes::Bytes::from_owner(map),
             longest_record,
         })
     }
 
     /// Its chunks as stored, when they hold every message (see [`stored_log`]).
-    pub fn stored(&self) -> Option<StoredLog<'_>> {
+    pub fn stored(&self) -> Option<StoredLog> {
         stored_log(&self.map)
     }
 

@@ -10,6 +10,7 @@
 
 use std::borrow::Cow;
 
+use bytes::Bytes;
 use mcap::records::{Record, op};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use mcap::{McapError, Message};
@@ -296,14 +297,15 @@ pub struct StoredChannel {
 }
 
 /// A chunk of an MCAP file as stored, with the message index records after it:
-/// what a writer needs to copy it without decompressing it.
-pub struct StoredChunk<'a> {
+/// what a writer needs to copy it without decompressing it. The bytes are slices of
+/// the file's memory map, not copies.
+pub struct StoredChunk {
     /// The whole chunk record, opcode and length included.
-    pub record: &'a [u8],
-    pub message_indexes: &'a [u8],
+    pub record: Bytes,
+    pub message_indexes: Bytes,
     /// Log time range of its messages (None: it holds none).
     pub time_ns: Option<(u64, u64)>,
-    pub compression: &'a str,
+    pub compression: String,
     pub compressed_bytes: u64,
     pub uncompressed_bytes: u64,
     pub channels: Vec<StoredChannel>,
@@ -311,14 +313,14 @@ pub struct StoredChunk<'a> {
 
 /// The chunks of an MCAP file and the schemas and channels their messages use.
 #[derive(Default)]
-pub struct StoredLog<'a> {
+pub struct StoredLog {
     /// Each schema's header and data.
     pub schemas: Vec<(mcap::records::SchemaHeader, Vec<u8>)>,
     pub channels: Vec<mcap::records::Channel>,
-    pub chunks: Vec<StoredChunk<'a>>,
+    pub chunks: Vec<StoredChunk>,
 }
 
-impl StoredLog<'_> {
+impl StoredLog {
     pub fn messages(&self) -> u64 {
         let chunks = self.chunks.iter().flat_map(|chunk| &chunk.channels);
         chunks.map(|channel| channel.messages).sum()
@@ -365,7 +367,7 @@ fn message_index(body: &[u8]) -> Option<(u16, u64)> {
 /// indexes say which: None for a file with messages outside chunks, a chunk
 /// without message indexes, or a channel that neither the data section nor the
 /// summary declares. Lengths are checked as [`check_chunk_sizes`] does.
-pub(crate) fn stored_log(map: &[u8]) -> Option<StoredLog<'_>> {
+pub(crate) fn stored_log(map: &Bytes) -> Option<StoredLog> {
     let mut log = StoredLog::default();
     // Where the message index records after the last chunk start; None once another
     // record came between.
@@ -385,10 +387,10 @@ pub(crate) fn stored_log(map: &[u8]) -> Option<StoredLog<'_>> {
                 let time =
                     |at: usize| Some(u64::from_le_bytes(body.get(at..at + 8)?.try_into().ok()?));
                 log.chunks.push(StoredChunk {
-                    record: &map[offset..end],
-                    message_indexes: &map[end..end],
+                    record: map.slice(offset..end),
+                    message_indexes: Bytes::new(),
                     time_ns: Some((time(0)?, time(8)?)),
-                    compression,
+                    compression: compression.to_string(),
                     compressed_bytes: records.len() as u64,
                     uncompressed_bytes: declared,
                     channels: Vec::new(),
@@ -404,7 +406,7 @@ pub(crate) fn stored_log(map: &[u8]) -> Option<StoredLog<'_>> {
                     index_offset: (offset - start) as u64,
                     messages,
                 });
-                chunk.message_indexes = &map[start..end];
+                chunk.message_indexes = map.slice(start..end);
                 continue;
             }
             (op::MESSAGE_INDEX, None) => return None,

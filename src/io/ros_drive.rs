@@ -466,7 +466,7 @@ impl RosDrive {
 
     /// The log's chunks as stored, when it is one MCAP file whose chunks hold every
     /// message (for passthrough without decoding).
-    pub fn stored(&self) -> Option<crate::io::mcap_records::StoredLog<'_>> {
+    pub fn stored(&self) -> Option<crate::io::mcap_records::StoredLog> {
         self.log.stored()
     }
 

@@ -13,6 +13,7 @@ use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
+use bytes::Bytes;
 use mcap::records::op;
 
 use crate::io::mcap_records::StoredChunk;
@@ -117,8 +118,8 @@ struct IndexedChannel {
 
 /// A chunk ready to be written: its record and the message index records after it.
 pub struct FinishedChunk {
-    record: Vec<u8>,
-    message_indexes: Vec<u8>,
+    record: Bytes,
+    message_indexes: Bytes,
     time_ns: Option<(u64, u64)>,
     compression: String,
     compressed_bytes: u64,
@@ -130,10 +131,10 @@ impl FinishedChunk {
     /// A stored chunk of an input, copied as it is.
     pub fn copied(stored: &StoredChunk) -> Self {
         Self {
-            record: stored.record.to_vec(),
-            message_indexes: stored.message_indexes.to_vec(),
+            record: stored.record.clone(),
+            message_indexes: stored.message_indexes.clone(),
             time_ns: stored.time_ns,
-            compression: stored.compression.to_string(),
+            compression: stored.compression.clone(),
             compressed_bytes: stored.compressed_bytes,
             uncompressed_bytes: stored.uncompressed_bytes,
             channels: stored
@@ -214,8 +215,8 @@ fn finish_chunk(open: OpenChunk, compression: Compression) -> io::Result<Finishe
         });
     }
     Ok(FinishedChunk {
-        record,
-        message_indexes,
+        record: record.into(),
+        message_indexes: message_indexes.into(),
         time_ns: open.time_ns,
         compression: name.to_string(),
         compressed_bytes,
@@ -314,7 +315,11 @@ pub struct McapWriter<W: Write> {
     chunk_bytes: usize,
     /// Chunks being compressed at most: bounds memory.
     in_flight_limit: usize,
-    open: OpenChunk,
+    /// The chunk being gathered, and the one for channels whose payload is
+    /// already compressed, which is stored uncompressed.
+    open: [OpenChunk; 2],
+    /// Channels whose messages go into the second chunk.
+    precompressed: BTreeSet<u16>,
     due: VecDeque<Due>,
     /// Records for the summary, by id.
     schemas: BTreeMap<u16, Vec<u8>>,
@@ -354,7 +359,8 @@ impl<W: Write> McapWriter<W> {
             compressors: Compressors::start(threads)?,
             chunk_bytes,
             in_flight_limit: threads + 1,
-            open: OpenChunk::default(),
+            open: Default::default(),
+            precompressed: BTreeSet::new(),
             due: VecDeque::new(),
             schemas: BTreeMap::new(),
             channels: BTreeMap::new(),
@@ -390,14 +396,19 @@ impl<W: Write> McapWriter<W> {
     }
 
     /// Declares a channel; its record goes into the file before its first message.
-    pub fn add_channel(&mut self, channel: &mcap::records::Channel) {
+    /// The messages of one whose payload is already compressed (`precompressed`:
+    /// images, video) go into chunks of their own, stored uncompressed.
+    pub fn add_channel(&mut self, channel: &mcap::records::Channel, precompressed: bool) {
         self.channels
             .insert(channel.id, (channel.schema_id, channel_record(channel)));
+        if precompressed {
+            self.precompressed.insert(channel.id);
+        }
     }
 
     /// Puts the records of channel `id` and its schema, unless the file has them, in
-    /// the open chunk or (`top_level`) outside chunks.
-    fn define(&mut self, id: u16, top_level: bool) -> io::Result<()> {
+    /// open chunk `chunk`, or outside chunks (None).
+    fn define(&mut self, id: u16, chunk: Option<usize>) -> io::Result<()> {
         if !self.channels_written.insert(id) {
             return Ok(());
         }
@@ -414,10 +425,9 @@ impl<W: Write> McapWriter<W> {
             records.extend_from_slice(schema);
         }
         records.extend_from_slice(&channel);
-        if top_level {
-            self.due.push_back(Due::Record(records, None));
-        } else {
-            self.open.records.extend_from_slice(&records);
+        match chunk {
+            Some(chunk) => self.open[chunk].records.extend_from_slice(&records),
+            None => self.due.push_back(Due::Record(records, None)),
         }
         Ok(())
     }
@@ -430,8 +440,9 @@ impl<W: Write> McapWriter<W> {
         publish_time_ns: u64,
         data: &[u8],
     ) -> io::Result<()> {
-        self.define(channel_id, false)?;
-        let open = &mut self.open;
+        let chunk = usize::from(self.precompressed.contains(&channel_id));
+        self.define(channel_id, Some(chunk))?;
+        let open = &mut self.open[chunk];
         open.index
             .entry(channel_id)
             .or_default()
@@ -445,7 +456,7 @@ impl<W: Write> McapWriter<W> {
             out.extend_from_slice(data);
         });
         if open.records.len() >= self.chunk_bytes {
-            self.close_chunk();
+            self.close_chunk(chunk);
             self.write_due(false)?;
         }
         Ok(())
@@ -456,7 +467,7 @@ impl<W: Write> McapWriter<W> {
     /// input held them outside chunks too.
     pub fn copy_chunk(&mut self, chunk: FinishedChunk) -> io::Result<()> {
         for channel in &chunk.channels {
-            self.define(channel.id, true)?;
+            self.define(channel.id, None)?;
         }
         self.due.push_back(Due::Chunk(chunk));
         self.write_due(false)
@@ -472,13 +483,18 @@ impl<W: Write> McapWriter<W> {
             .push_back(Due::Record(record, Some(name.to_string())));
     }
 
-    /// Hands the open chunk to the compressors.
-    fn close_chunk(&mut self) {
-        if self.open.records.is_empty() {
+    /// Hands open chunk `chunk` to the compressors.
+    fn close_chunk(&mut self, chunk: usize) {
+        if self.open[chunk].records.is_empty() {
             return;
         }
-        let open = std::mem::take(&mut self.open);
-        let compressing = self.compressors.compress(open, self.compression);
+        let open = std::mem::take(&mut self.open[chunk]);
+        let compression = if chunk == 0 {
+            self.compression
+        } else {
+            Compression::None
+        };
+        let compressing = self.compressors.compress(open, compression);
         self.due.push_back(Due::Compressing(compressing));
     }
 
@@ -565,7 +581,8 @@ impl<W: Write> McapWriter<W> {
 
     /// Writes the rest, the summary and the footer; returns the output.
     pub fn finish(mut self) -> io::Result<W> {
-        self.close_chunk();
+        self.close_chunk(0);
+        self.close_chunk(1);
         self.write_due(true)?;
         let mut data_end = Vec::new();
         let crc = self.data_crc.clone().finalize();
@@ -710,8 +727,9 @@ mod tests {
         let mut writer =
             McapWriter::new(Vec::new(), "ros2", "test", compression, chunk_bytes, 2).unwrap();
         writer.add_schema(1, "pkg/msg/A", "ros2msg", b"int32 a");
-        writer.add_channel(&channel(3, 1, "/a"));
-        writer.add_channel(&channel(4, 1, "/b"));
+        writer.add_channel(&channel(3, 1, "/a"), false);
+        // Its messages go into uncompressed chunks of their own.
+        writer.add_channel(&channel(4, 1, "/b"), true);
         for i in 0..50u32 {
             // Out of order within channel /b, as recorded logs can be.
             let (id, time) = if i.is_multiple_of(2) {
@@ -731,7 +749,9 @@ mod tests {
     fn the_mcap_crate_reads_every_message_in_order_with_every_crc_right() {
         for compression in [Compression::Zstd, Compression::Lz4, Compression::None] {
             let file = write_file(compression, 2000);
-            let messages = read_linearly(&file);
+            let mut messages = read_linearly(&file);
+            // /b's chunks come apart from /a's: file order interleaves the two.
+            messages.sort_by_key(|m| m.1);
             assert_eq!(messages.len(), 50);
             for (i, (id, sequence, time, data)) in messages.iter().enumerate() {
                 let i = i as u32;
@@ -761,6 +781,9 @@ mod tests {
             assert!(summary.chunk_indexes.len() > 3, "several chunks");
             assert_eq!(stats.chunk_count as usize, summary.chunk_indexes.len());
             assert_eq!(summary.channels[&4].topic, "/b");
+            let stored_as =
+                |name: &str| summary.chunk_indexes.iter().any(|c| c.compression == name);
+            assert!(stored_as(compression.chunk_name()) && stored_as(""));
             assert_eq!(
                 summary.channels[&4].schema.as_ref().unwrap().name,
                 "pkg/msg/A"
@@ -778,7 +801,7 @@ mod tests {
 
     #[test]
     fn copied_chunks_are_indexed_beside_new_ones() {
-        let input = write_file(Compression::Zstd, 2000);
+        let input = Bytes::from(write_file(Compression::Zstd, 2000));
         let stored = crate::io::mcap_records::stored_log(&input).expect("copyable");
         assert_eq!(stored.messages(), 50);
         let mut writer =
@@ -787,16 +810,17 @@ mod tests {
             writer.add_schema(header.id, &header.name, &header.encoding, data);
         }
         for channel in &stored.channels {
-            writer.add_channel(channel);
+            writer.add_channel(channel, false);
         }
         for chunk in &stored.chunks {
             writer.copy_chunk(FinishedChunk::copied(chunk)).unwrap();
         }
-        writer.add_channel(&channel(5, 1, "/c"));
+        writer.add_channel(&channel(5, 1, "/c"), false);
         writer.write_message(5, 0, 150, 150, b"new").unwrap();
         let file = writer.finish().unwrap();
         let messages = read_linearly(&file);
         assert_eq!(messages.len(), 51);
+        // Copied chunks keep their order in the file.
         assert_eq!(&messages[..50], &read_linearly(&input)[..]);
         assert_eq!(messages[50], (5, 0, 150, b"new".to_vec()));
         let mut times: Vec<u64> = messages.iter().map(|m| m.2).collect();
