@@ -296,6 +296,51 @@ fn decode_with_every_client(
     }
 }
 
+/// Every message of an MCAP file in log-time order: (topic, log time, sequence-free
+/// content), read through its index by the mcap crate.
+fn decoded(path: &Path) -> Vec<(String, u64, Vec<u8>)> {
+    let bytes = std::fs::read(path).unwrap();
+    let mut messages: Vec<_> = mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| {
+            let m = m.unwrap();
+            (m.channel.topic.clone(), m.log_time, m.data.to_vec())
+        })
+        .collect();
+    messages.sort_by(|a, b| (&a.0, a.1).cmp(&(&b.0, b.1)));
+    messages
+}
+
+#[test]
+fn convert_copies_a_ros2_mcap_chunk_by_chunk_unless_asked_for_another_compression() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+        return;
+    };
+    let (same, none) = (dir.path().join("same.mcap"), dir.path().join("none.mcap"));
+    write_output("convert", &drive, &same, &[]);
+    write_output("convert", &drive, &none, &["--compression", "none"]);
+    let chunks = |path: &Path| {
+        let bytes = std::fs::read(path).unwrap();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let chunks: Vec<Vec<u8>> = summary
+            .chunk_indexes
+            .iter()
+            .map(|c| {
+                let start = c.chunk_start_offset as usize;
+                bytes[start..start + c.chunk_length as usize].to_vec()
+            })
+            .collect();
+        let compressions = summary.chunk_indexes.iter().map(|c| c.compression.clone());
+        (chunks, compressions.collect::<Vec<_>>())
+    };
+    let (input_chunks, _) = chunks(&drive);
+    assert_eq!(chunks(&same).0, input_chunks, "copied as stored");
+    assert!(chunks(&none).1.iter().all(String::is_empty), "re-chunked uncompressed");
+    assert_eq!(decoded(&same), decoded(&drive));
+    assert_eq!(decoded(&none), decoded(&drive));
+}
+
 #[test]
 fn compression_options_all_round_trip() {
     let Some(seq) = common::sample() else { return };
