@@ -225,6 +225,51 @@ fn bench_prints_every_stage_and_throughput() {
 }
 
 #[test]
+fn bench_tools_times_every_subcommand_as_a_child_process() {
+    let Some(seq) = sample() else { return };
+    let args = [
+        "bench",
+        &seq,
+        "--repeats",
+        "1",
+        "--tools",
+        "--tool-repeats",
+        "1",
+    ];
+    let doc = json_summary(&args);
+    let rows = doc["tools"].as_array().unwrap();
+    // KITTI input: convert, then annotate of the input and of convert's MCAP.
+    let kinds: Vec<String> = rows
+        .iter()
+        .map(|row| format!("{} {} {}", row["tool"], row["input"], row["passthrough"]))
+        .collect();
+    let expected = [
+        r#""convert" "kitti" null"#,
+        r#""annotate" "kitti" true"#,
+        r#""annotate" "kitti" false"#,
+        r#""annotate" "mcap" true"#,
+        r#""annotate" "mcap" false"#,
+        r#""dataset" "kitti" null"#,
+    ];
+    assert_eq!(kinds, expected, "{doc}");
+    for row in rows {
+        assert_eq!(row["frames"], 6, "{row}");
+        assert!(row.get("skipped").is_none(), "{row}");
+        for (timing, threads) in [(&row["one_thread"], Some(1)), (&row["all_cores"], None)] {
+            let rate = |key: &str| timing[key].as_f64().unwrap();
+            assert!(rate("frames_per_second") > 0.0, "{row}");
+            assert!(rate("megabytes_per_second") > 0.0, "{row}");
+            if let Some(threads) = threads {
+                assert_eq!(timing["threads"], threads, "{row}");
+            }
+            if cfg!(target_os = "linux") {
+                assert!(rate("peak_rss_mib") > 0.0, "{row}");
+            }
+        }
+    }
+}
+
+#[test]
 fn render_draws_truth_prediction_and_errors_cell_by_cell() {
     use travmap::method::grid::CellClass;
     use travmap::outputs::rendering::{GAP_PX, cell_origin_px, colour};
@@ -322,15 +367,14 @@ fn suspicious_arguments_are_refused_or_warned_about() {
     for args in [
         vec!["bench", &seq, "--repeats", "0"],
         vec!["bench", &seq, "--repeats", "4000000000"],
+        vec!["bench", &seq, "--tools", "--tool-repeats", "0"],
+        vec!["bench", &seq, "--tool-repeats", "2"],
         vec![
             "render", &seq, "--frame", "1", "--frames", "0..2", "-o", "x.png",
         ],
     ] {
         let err = common::usage_error(travmap(&args));
-        assert!(
-            err.contains("--repeats") || err.contains("--frames"),
-            "{err}"
-        );
+        assert!(err.contains("repeats") || err.contains("--frames"), "{err}");
     }
     // MCAP-only flags on a KITTI directory are said to be ignored.
     let out = travmap(&["eval", &seq, "--frames", "0..3", "--cloud-topic", "/points"]);

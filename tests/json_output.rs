@@ -84,6 +84,33 @@ fn every_command_prints_json_that_matches_its_schema() {
             vec!["bench", seq, "--frames", "0..4", "--repeats", "1"],
         ),
         (
+            "bench",
+            vec![
+                "bench",
+                seq,
+                "--frames",
+                "0..4",
+                "--repeats",
+                "1",
+                "--tools",
+                "--tool-repeats",
+                "1",
+            ],
+        ),
+        // A recorded log: the convert and MCAP rows are skipped, with a reason.
+        (
+            "bench",
+            vec![
+                "bench",
+                &drive,
+                "--repeats",
+                "1",
+                "--tools",
+                "--tool-repeats",
+                "1",
+            ],
+        ),
+        (
             "map",
             vec!["map", seq, "-o", &map_picture, "--cells", &map_cells],
         ),

@@ -1,5 +1,5 @@
 //! `travmap bench`: per-stage latency (median, p95) and throughput on 1 thread and
-//! all cores.
+//! all cores; with `--tools`, the subcommands' own throughput (`bench_tools.rs`).
 
 use std::io::Write;
 
@@ -8,6 +8,7 @@ use clap::Args;
 use serde_json::json;
 use travmap::scoring::benchmark::benchmark;
 
+use super::bench_tools::{bench_tools, print_tools_table};
 use super::{Inputs, ModelArg, Outcome, model_json, outcome, print_json_summary};
 
 /// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
@@ -20,6 +21,13 @@ pub struct BenchArgs {
     /// Times each measurement is repeated.
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u16).range(1..=1000))]
     repeats: u16,
+    /// Also time the subcommands (convert, annotate, dataset) on this input, each
+    /// as a child process on 1 thread and on all cores: frames/s, MB/s, peak RSS.
+    #[arg(long)]
+    tools: bool,
+    /// With --tools: runs of each tool per thread count (the median is reported).
+    #[arg(long, default_value_t = 3, requires = "tools", value_parser = clap::value_parser!(u16).range(1..=100))]
+    tool_repeats: u16,
 }
 
 pub fn bench(args: BenchArgs) -> Result<Outcome> {
@@ -31,6 +39,25 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
         config.appearance.enabled,
         "bench takes one sequence directory",
     )?;
+    // The tools first, while this process is small (a child starts with its
+    // parent's peak memory as its own: `bench_tools::wait_with_peak_rss`); their
+    // table at once, so that minutes of runs survive the method's bench failing.
+    let tool_repeats = usize::from(args.tool_repeats);
+    let tools = args
+        .tools
+        .then(|| {
+            bench_tools(
+                &args.inputs,
+                &selection,
+                args.model.path.as_deref(),
+                tool_repeats,
+            )
+        })
+        .transpose()?;
+    if let (Some(tools), false) = (&tools, output.json) {
+        let out = &mut std::io::stdout().lock();
+        print_tools_table(out, &selection.describe(), tools, tool_repeats)?;
+    }
     let report = benchmark(
         &selection.source,
         &selection.frames,
@@ -39,11 +66,12 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
         repeats,
     )?;
     if output.json {
-        print_json_summary(
-            "bench",
-            std::slice::from_ref(&selection),
-            json!({"config": config, "model": model_json(&model, &model_name), "report": report}),
-        )?;
+        let mut fields =
+            json!({"config": config, "model": model_json(&model, &model_name), "report": report});
+        if let Some(tools) = &tools {
+            fields["tools"] = serde_json::to_value(tools)?;
+        }
+        print_json_summary("bench", std::slice::from_ref(&selection), fields)?;
         return Ok(outcome(std::slice::from_ref(&selection)));
     }
     let mut out = std::io::stdout().lock();

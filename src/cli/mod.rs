@@ -4,6 +4,7 @@
 
 pub mod annotate;
 pub mod bench;
+pub mod bench_tools;
 pub mod config;
 pub mod convert;
 pub mod crossval;
@@ -15,6 +16,7 @@ pub mod render;
 pub mod run;
 pub mod train;
 
+use std::ffi::OsString;
 use std::io::IsTerminal;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -71,6 +73,28 @@ impl Settings {
         config.validate()?;
         Ok(config)
     }
+
+    /// The flags that give a child travmap this configuration (`bench --tools`).
+    pub fn as_arguments(&self) -> Vec<OsString> {
+        let sets = self.sets.iter().map(|set| ("--set", Some(set.into())));
+        flags(
+            [
+                ("--config", self.config.clone().map(OsString::from)),
+                ("--poses", self.poses.clone().map(OsString::from)),
+            ]
+            .into_iter()
+            .chain(sets),
+        )
+    }
+}
+
+/// `--flag value` for every flag that has a value.
+fn flags<'a>(pairs: impl IntoIterator<Item = (&'a str, Option<OsString>)>) -> Vec<OsString> {
+    pairs
+        .into_iter()
+        .filter_map(|(flag, value)| Some([OsString::from(flag), value?]))
+        .flatten()
+        .collect()
 }
 
 /// How a command reports.
@@ -172,6 +196,29 @@ impl Inputs {
             poses: self.settings.load()?.integration.poses,
             rate_hz: self.rate,
         })
+    }
+
+    /// The flags that make a child travmap read an input as this command does
+    /// (`bench --tools`): the log's topics and world frame, the scan rate and the
+    /// configuration; not `--frames`, which the caller adds where it applies.
+    pub fn reading_arguments(&self) -> Vec<OsString> {
+        let mut arguments = flags([
+            (
+                "--cloud-topic",
+                self.cloud_topic.clone().map(OsString::from),
+            ),
+            (
+                "--world-frame",
+                self.world_frame.clone().map(OsString::from),
+            ),
+            (
+                "--camera-topic",
+                self.camera_topic.clone().map(OsString::from),
+            ),
+            ("--rate", self.rate.map(|hz| hz.to_string().into())),
+        ]);
+        arguments.extend(self.settings.as_arguments());
+        arguments
     }
 
     /// Opens every input; `read_images` decodes camera images into the frames.

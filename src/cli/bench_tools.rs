@@ -1,0 +1,527 @@
+//! `travmap bench --tools`: the subcommands themselves (`convert`, `annotate`,
+//! `dataset`) run as child processes of this executable on the bench's input, on one
+//! thread and on all cores; frames/s, MB/s written and the child's peak memory.
+//! Unlike the method table these include the disk, decoding, compression and writing.
+
+use std::ffi::OsString;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+
+use anyhow::{Context, Result, bail};
+use serde::Serialize;
+use travmap::drive::Selection;
+use travmap::io::Source;
+use travmap::scoring::evaluation::Spread;
+use travmap::stopwatch::Stopwatch;
+
+use super::Inputs;
+
+/// Which file a row's tool reads.
+#[derive(Clone, Copy)]
+enum ToolInput {
+    /// The bench's input, with its `--frames`.
+    Given,
+    /// The MCAP the `convert` row wrote from the bench's input.
+    Converted,
+}
+
+/// One row of the tools table: a subcommand, what it reads and what it writes.
+struct ToolSpec {
+    tool: &'static str,
+    input: ToolInput,
+    /// `annotate`: whether the input's messages are copied through
+    /// (`--no-passthrough` when not).
+    passthrough: Option<bool>,
+    /// The file it writes, in the temporary directory.
+    output_name: &'static str,
+}
+
+/// The file the `convert` row writes and the `Converted` rows read.
+const CONVERTED: &str = "converted.mcap";
+
+/// The rows, in order: `convert` first, since the MCAP-input rows read what it wrote.
+const ROWS: [ToolSpec; 6] = [
+    ToolSpec {
+        tool: "convert",
+        input: ToolInput::Given,
+        passthrough: None,
+        output_name: CONVERTED,
+    },
+    ToolSpec {
+        tool: "annotate",
+        input: ToolInput::Given,
+        passthrough: Some(true),
+        output_name: "annotated.mcap",
+    },
+    ToolSpec {
+        tool: "annotate",
+        input: ToolInput::Given,
+        passthrough: Some(false),
+        output_name: "annotated.mcap",
+    },
+    ToolSpec {
+        tool: "annotate",
+        input: ToolInput::Converted,
+        passthrough: Some(true),
+        output_name: "annotated.mcap",
+    },
+    ToolSpec {
+        tool: "annotate",
+        input: ToolInput::Converted,
+        passthrough: Some(false),
+        output_name: "annotated.mcap",
+    },
+    ToolSpec {
+        tool: "dataset",
+        input: ToolInput::Given,
+        passthrough: None,
+        output_name: "cells.parquet",
+    },
+];
+
+impl ToolSpec {
+    /// The file this row's tool reads (`given` of `given_kind`, or the MCAP the
+    /// convert row wrote), or why the row is skipped.
+    fn input<'a>(
+        &self,
+        given: &'a Path,
+        given_kind: &str,
+        converted: Option<&'a Path>,
+    ) -> std::result::Result<&'a Path, String> {
+        match self.input {
+            ToolInput::Given if self.tool == "convert" && given_kind != "kitti" => Err(format!(
+                "convert is timed on KITTI input only, not on {given_kind} input"
+            )),
+            ToolInput::Given => Ok(given),
+            ToolInput::Converted => converted
+                .ok_or_else(|| "needs the MCAP the convert row writes (KITTI input)".into()),
+        }
+    }
+
+    /// The command line of this row's tool reading `input` into `output`, quiet:
+    /// the bench's `--frames` for its own input; the configuration and how to read
+    /// logs for every tool that takes them (`convert` takes none); the model for
+    /// `annotate`.
+    fn arguments(
+        &self,
+        input: &Path,
+        output: &Path,
+        inputs: &Inputs,
+        model: Option<&Path>,
+    ) -> Vec<OsString> {
+        let mut arguments: Vec<OsString> = vec![
+            self.tool.into(),
+            input.into(),
+            "-o".into(),
+            output.into(),
+            "-q".into(),
+        ];
+        if let (ToolInput::Given, Some(frames)) = (self.input, &inputs.frames) {
+            let end = match frames.end {
+                usize::MAX => String::new(),
+                end => end.to_string(),
+            };
+            let range = format!("{}..{end}", frames.start);
+            arguments.extend(["--frames".into(), range.into()]);
+        }
+        match (self.tool, self.input) {
+            ("convert", _) => {}
+            (_, ToolInput::Given) => arguments.extend(inputs.reading_arguments()),
+            (_, ToolInput::Converted) => arguments.extend(inputs.settings.as_arguments()),
+        }
+        if let ("annotate", Some(model)) = (self.tool, model) {
+            arguments.extend(["--model".into(), model.into()]);
+        }
+        if self.passthrough == Some(false) {
+            arguments.push("--no-passthrough".into());
+        }
+        arguments
+    }
+}
+
+/// A tool on one thread count: medians over the repeats.
+#[derive(Serialize)]
+pub struct ToolTiming {
+    /// `RAYON_NUM_THREADS` of the child.
+    threads: usize,
+    wall_s: f64,
+    /// Selected frames per second of wall time (the child's start to its exit).
+    frames_per_second: f64,
+    /// Bytes of the output file (1 MB = 10^6 bytes) per second of wall time.
+    megabytes_per_second: f64,
+    /// The child's peak resident set (`ru_maxrss`), MiB; None where the platform
+    /// does not report it.
+    peak_rss_mib: Option<f64>,
+}
+
+/// A row's measurement, or why it was not taken.
+#[derive(Serialize)]
+#[serde(untagged)]
+pub enum ToolOutcome {
+    Timed {
+        one_thread: ToolTiming,
+        all_cores: ToolTiming,
+        /// all_cores / one_thread frames per second.
+        speedup: f64,
+    },
+    Skipped {
+        skipped: String,
+    },
+}
+
+/// One row of the tools table, as `--json` reports it.
+#[derive(Serialize)]
+pub struct ToolRow {
+    tool: &'static str,
+    /// What the tool read: `kitti`, `log` or `scans` (the bench's input), or `mcap`
+    /// (the file the convert row wrote from it).
+    input: &'static str,
+    /// `annotate`: whether the input's messages were copied through.
+    passthrough: Option<bool>,
+    /// Frames the tool read: the bench's selection.
+    frames: usize,
+    #[serde(flatten)]
+    outcome: ToolOutcome,
+}
+
+impl ToolRow {
+    /// How the table names the row: the command, less its paths.
+    fn label(&self) -> String {
+        let flag = match self.passthrough {
+            Some(false) => " --no-passthrough",
+            _ => "",
+        };
+        format!("{} {}{flag}", self.tool, self.input)
+    }
+}
+
+/// Every row of [`ROWS`] on `selection` (the one input of `inputs`), each run
+/// `repeats` times on one thread and on all cores; `model` goes to `annotate`.
+pub fn bench_tools(
+    inputs: &Inputs,
+    selection: &Selection,
+    model: Option<&Path>,
+    repeats: usize,
+) -> Result<Vec<ToolRow>> {
+    let executable = std::env::current_exe().context("cannot find travmap's own executable")?;
+    let all_cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let directory = TemporaryDirectory::create()?;
+    let given = selection.source.path();
+    let given_kind = match selection.source {
+        Source::Kitti(..) => "kitti",
+        Source::Log(..) => "log",
+        Source::Scans(..) => "scans",
+    };
+    let frames = selection.source.frames_in(&selection.frames).len();
+    let mut converted: Option<PathBuf> = None;
+    let mut rows = Vec::new();
+    for spec in &ROWS {
+        let output = directory.0.join(spec.output_name);
+        let outcome = match spec.input(given, given_kind, converted.as_deref()) {
+            Err(skipped) => ToolOutcome::Skipped { skipped },
+            Ok(input) => {
+                let arguments = spec.arguments(input, &output, inputs, model);
+                let time = |threads| -> Result<ToolTiming> {
+                    let runs = (0..repeats.max(1))
+                        .map(|_| run_child(&executable, &arguments, threads, &output))
+                        .collect::<Result<Vec<_>>>()?;
+                    Ok(ToolTiming::of(&runs, threads, frames))
+                };
+                let (one_thread, all_cores) = (time(1)?, time(all_cores)?);
+                ToolOutcome::Timed {
+                    speedup: all_cores.frames_per_second / one_thread.frames_per_second,
+                    one_thread,
+                    all_cores,
+                }
+            }
+        };
+        let input_kind = match spec.input {
+            ToolInput::Given => given_kind,
+            ToolInput::Converted => "mcap",
+        };
+        if spec.tool == "convert" && matches!(outcome, ToolOutcome::Timed { .. }) {
+            converted = Some(output);
+        }
+        rows.push(ToolRow {
+            tool: spec.tool,
+            input: input_kind,
+            passthrough: spec.passthrough,
+            frames,
+            outcome,
+        });
+    }
+    Ok(rows)
+}
+
+/// The tools table of `rows` on `input` (as a person reads it): one line per row, 1
+/// thread and all cores side by side.
+pub fn print_tools_table(
+    out: &mut impl Write,
+    input: &str,
+    rows: &[ToolRow],
+    repeats: usize,
+) -> Result<()> {
+    let all_cores = rows
+        .iter()
+        .find_map(|row| match &row.outcome {
+            ToolOutcome::Timed { all_cores, .. } => Some(format!("{} thr", all_cores.threads)),
+            ToolOutcome::Skipped { .. } => None,
+        })
+        .unwrap_or_else(|| "all".into());
+    let frames = rows.first().map_or(0, |row| row.frames);
+    writeln!(
+        out,
+        "tools on {input} ({frames} frames; each a child process; median of {repeats} runs; wall time from start to exit; the child's peak RSS):"
+    )?;
+    writeln!(
+        out,
+        "{:<34} {:>17} {:>17} {:>17} {:>7}",
+        "tool input", "frames/s", "MB/s written", "peak RSS MiB", "speedup"
+    )?;
+    writeln!(
+        out,
+        "{:<34} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7}",
+        "", "1 thr", all_cores, "1 thr", all_cores, "1 thr", all_cores, ""
+    )?;
+    let rss = |timing: &ToolTiming| {
+        timing
+            .peak_rss_mib
+            .map_or("-".to_string(), |mib| format!("{mib:.0}"))
+    };
+    for row in rows {
+        let label = row.label();
+        match &row.outcome {
+            ToolOutcome::Timed {
+                one_thread,
+                all_cores,
+                speedup,
+            } => writeln!(
+                out,
+                "{label:<34} {:>8.1} {:>8.1} {:>8.1} {:>8.1} {:>8} {:>8} {:>6.2}x",
+                one_thread.frames_per_second,
+                all_cores.frames_per_second,
+                one_thread.megabytes_per_second,
+                all_cores.megabytes_per_second,
+                rss(one_thread),
+                rss(all_cores),
+                speedup
+            )?,
+            ToolOutcome::Skipped { skipped } => writeln!(out, "{label:<34} skipped: {skipped}")?,
+        }
+    }
+    Ok(())
+}
+
+/// One run of a child: its wall time, output size and peak memory.
+#[derive(Debug)]
+struct ChildRun {
+    wall_s: f64,
+    output_bytes: u64,
+    peak_rss_mib: Option<f64>,
+}
+
+impl ToolTiming {
+    /// Medians of `runs` on `threads` threads, each over `frames` frames.
+    fn of(runs: &[ChildRun], threads: usize, frames: usize) -> Self {
+        let median = |values: Vec<f64>| Spread::of(&values).median;
+        let wall_s = median(runs.iter().map(|r| r.wall_s).collect());
+        let output_bytes = median(runs.iter().map(|r| r.output_bytes as f64).collect());
+        let rss: Vec<f64> = runs.iter().filter_map(|r| r.peak_rss_mib).collect();
+        Self {
+            threads,
+            wall_s,
+            frames_per_second: frames as f64 / wall_s,
+            megabytes_per_second: output_bytes * 1e-6 / wall_s,
+            peak_rss_mib: (!rss.is_empty()).then(|| median(rss)),
+        }
+    }
+}
+
+/// Runs `executable arguments` on `threads` rayon threads and times it; a child
+/// that fails is an error naming the command, its exit status and the end of its
+/// stderr.
+fn run_child(
+    executable: &Path,
+    arguments: &[OsString],
+    threads: usize,
+    output: &Path,
+) -> Result<ChildRun> {
+    let mut command = Command::new(executable);
+    command
+        .args(arguments)
+        .env("RAYON_NUM_THREADS", threads.to_string())
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    let watch = Stopwatch::start();
+    let mut child = command
+        .spawn()
+        .with_context(|| format!("cannot start {command:?}"))?;
+    // Read stderr until the child closes it, so a full pipe cannot stall it.
+    let mut stderr = Vec::new();
+    if let Some(mut pipe) = child.stderr.take() {
+        pipe.read_to_end(&mut stderr)
+            .with_context(|| format!("cannot read the stderr of {command:?}"))?;
+    }
+    let (status, peak_rss_mib) =
+        wait_with_peak_rss(child).with_context(|| format!("cannot wait for {command:?}"))?;
+    let wall_s = watch.elapsed_ms() * 1e-3;
+    if !status.success() {
+        let text = String::from_utf8_lossy(&stderr);
+        let lines: Vec<&str> = text.lines().collect();
+        let last = lines[lines.len().saturating_sub(5)..].join("\n");
+        bail!("{command:?} failed ({status}); the end of its stderr:\n{last}");
+    }
+    let output_bytes = std::fs::metadata(output)
+        .with_context(|| format!("{command:?} wrote no {}", output.display()))?
+        .len();
+    Ok(ChildRun {
+        wall_s,
+        output_bytes,
+        peak_rss_mib,
+    })
+}
+
+/// Waits for `child`; its exit status and its own peak resident set, MiB, from
+/// `wait4`'s resource usage (`ru_maxrss`, KiB on Linux). None when that peak is no
+/// higher than this process's own: std spawns with vfork (`posix_spawn`), and Linux
+/// carries the parent's high-water mark into the child at `exec`, so such a figure
+/// may be ours, not the child's.
+#[cfg(target_os = "linux")]
+fn wait_with_peak_rss(child: Child) -> std::io::Result<(ExitStatus, Option<f64>)> {
+    use std::os::unix::process::ExitStatusExt;
+    let pid = libc::pid_t::try_from(child.id()).map_err(std::io::Error::other)?;
+    loop {
+        let mut status = 0;
+        // SAFETY: `pid` is a child of this process that nobody has waited for
+        // (`child` is only dropped, never waited on, so std does not reap it);
+        // `status` and `usage` are valid for writes, and all zeroes is a valid
+        // `rusage` (a C struct of integers).
+        let (reaped, usage) = unsafe {
+            let mut usage: libc::rusage = std::mem::zeroed();
+            (libc::wait4(pid, &mut status, 0, &mut usage), usage)
+        };
+        if reaped == pid {
+            let child_kib = usage.ru_maxrss;
+            let peak_rss_mib = own_peak_rss_kib()
+                .is_none_or(|own_kib| child_kib > own_kib)
+                .then(|| child_kib as f64 / 1024.0);
+            return Ok((ExitStatus::from_raw(status), peak_rss_mib));
+        }
+        let error = std::io::Error::last_os_error();
+        if error.kind() != std::io::ErrorKind::Interrupted {
+            return Err(error);
+        }
+    }
+}
+
+/// This process's peak resident set so far, KiB (`VmHWM` of /proc/self/status).
+#[cfg(target_os = "linux")]
+fn own_peak_rss_kib() -> Option<libc::c_long> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find_map(|l| l.strip_prefix("VmHWM:"))?;
+    line.trim().strip_suffix("kB")?.trim().parse().ok()
+}
+
+/// Waits for `child`; no peak resident set where `wait4` does not report one.
+#[cfg(not(target_os = "linux"))]
+fn wait_with_peak_rss(mut child: Child) -> std::io::Result<(ExitStatus, Option<f64>)> {
+    Ok((child.wait()?, None))
+}
+
+/// A directory under the system's temporary directory, named with this process's
+/// id, removed with everything in it when dropped.
+struct TemporaryDirectory(PathBuf);
+
+impl TemporaryDirectory {
+    fn create() -> Result<Self> {
+        let path = std::env::temp_dir().join(format!("travmap-bench-{}", std::process::id()));
+        // Left by an earlier process with this id that was killed: nobody else's.
+        let _ = std::fs::remove_dir_all(&path);
+        std::fs::create_dir(&path)
+            .with_context(|| format!("cannot create the directory {}", path.display()))?;
+        Ok(Self(path))
+    }
+}
+
+impl Drop for TemporaryDirectory {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    /// Bench's input arguments, as the command line gives them.
+    #[derive(Parser)]
+    struct Line {
+        #[command(flatten)]
+        inputs: Inputs,
+    }
+
+    #[test]
+    fn each_row_gets_the_flags_its_tool_takes() {
+        let line = Line::parse_from([
+            "bench",
+            "seq",
+            "--frames",
+            "2..=4",
+            "--set",
+            "grid.size_m=16",
+            "--cloud-topic",
+            "/points",
+        ]);
+        let command = |row: usize, input: &str| {
+            ROWS[row]
+                .arguments(
+                    Path::new(input),
+                    Path::new("out"),
+                    &line.inputs,
+                    Some(Path::new("m.json")),
+                )
+                .iter()
+                .map(|a| a.to_string_lossy().into_owned())
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        assert_eq!(command(0, "seq"), "convert seq -o out -q --frames 2..5");
+        let open_ended = Line::parse_from(["bench", "seq", "--frames", "3.."]);
+        let arguments =
+            ROWS[0].arguments(Path::new("seq"), Path::new("out"), &open_ended.inputs, None);
+        assert_eq!(arguments[5..], ["--frames", "3.."]);
+        assert_eq!(
+            command(2, "seq"),
+            "annotate seq -o out -q --frames 2..5 --cloud-topic /points --set grid.size_m=16 --model m.json --no-passthrough"
+        );
+        // convert wrote only the selected frames.
+        assert_eq!(
+            command(3, "c.mcap"),
+            "annotate c.mcap -o out -q --set grid.size_m=16 --model m.json"
+        );
+        assert_eq!(
+            command(5, "seq"),
+            "dataset seq -o out -q --frames 2..5 --cloud-topic /points --set grid.size_m=16"
+        );
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_failing_tool_is_named_with_its_exit_status_and_last_words() {
+        let script = ["-c", "echo first >&2; echo last words >&2; exit 3"].map(OsString::from);
+        let error = run_child(Path::new("/bin/sh"), &script, 1, Path::new("out")).unwrap_err();
+        let message = format!("{error:#}");
+        for part in [
+            "/bin/sh",
+            "RAYON_NUM_THREADS",
+            "exit status: 3",
+            "last words",
+        ] {
+            assert!(message.contains(part), "{part:?} not in {message}");
+        }
+    }
+}
