@@ -80,78 +80,106 @@ impl Selection {
         }
         let first = self.frames.start;
         let frames = pipeline.window().warm_up_start(first)..self.frames.end;
-        // Frames read ahead on their own thread while the pipeline works.
+        // Three stages on their own threads, joined by bounded queues: frames read
+        // ahead; the method on batches of them (each batch in parallel on rayon);
+        // and here `on_frame` (encoding, writing) while the next batch runs.
         let batch_size = (2 * rayon::current_num_threads()).clamp(1, 16);
         std::thread::scope(|scope| {
-            let (sender, receiver) = std::sync::mpsc::sync_channel(batch_size);
+            let (read_frames, arrivals) = std::sync::mpsc::sync_channel(batch_size);
             scope.spawn(move || {
                 let mut reading = Stopwatch::start();
                 for frame in self.source.read(&frames) {
                     let read_ms = reading.lap_ms();
-                    if sender.send(frame.map(|f| (f, read_ms))).is_err() {
+                    if read_frames.send(frame.map(|f| (f, read_ms))).is_err() {
                         return;
                     }
                 }
             });
-            // Block for one frame, then take what else has arrived, up to a batch.
-            while let Ok(arrival) = receiver.recv() {
-                let mut arrived = vec![arrival];
-                while arrived.len() < batch_size {
-                    match receiver.try_recv() {
-                        Ok(arrival) => arrived.push(arrival),
-                        Err(_) => break,
-                    }
+            let (results, processed) = std::sync::mpsc::sync_channel(batch_size);
+            scope.spawn(move || {
+                let mut emit = |result| results.send(Ok(result)).is_ok();
+                let method = self.run_method(&mut pipeline, arrivals, model, batch_size, &mut emit);
+                if let Err(error) = method {
+                    let _ = results.send(Err(error));
                 }
-                let mut batch: Vec<Arrival> = Vec::with_capacity(arrived.len());
-                for arrival in arrived {
-                    let (mut frame, read_ms) = arrival?;
-                    if posing == Posing::Alone {
-                        frame.world_from_velodyne = Isometry3::identity();
-                    }
-                    let register_ms = match pipeline.register(&mut frame) {
-                        Ok(ms) => ms,
-                        Err(problem) => {
-                            self.unregistered(frame.index, problem)?;
-                            continue;
-                        }
-                    };
-                    if frame.index < first {
-                        pipeline.warm_up(frame);
-                        continue;
-                    }
-                    // A batch is consecutive frames: a skipped one ends it.
-                    if batch
-                        .last()
-                        .is_some_and(|b| b.frame.index + 1 != frame.index)
-                    {
-                        self.process(
-                            &mut pipeline,
-                            std::mem::take(&mut batch),
-                            model,
-                            &mut on_frame,
-                        )?;
-                    }
-                    batch.push(Arrival {
-                        scan_sha256: self.fingerprint_scans.then(|| frame.content_sha256()),
-                        frame,
-                        read_ms,
-                        register_ms,
-                    });
-                }
-                self.process(&mut pipeline, batch, model, &mut on_frame)?;
+            });
+            // A failing `on_frame` drops `processed`, which stops the stages above.
+            for result in processed {
+                on_frame(result?)?;
             }
             Ok(())
         })
     }
 
-    /// Runs the method on a batch of consecutive frames and hands on the results.
-    fn process<E: From<Error>>(
+    /// The method stage of [`Selection::run`]: registers the frames that arrive,
+    /// warms the window up, and processes the selected ones in batches of
+    /// consecutive frames, handing each result to `emit` until it returns false.
+    fn run_method(
         &self,
+        pipeline: &mut Pipeline,
+        arrivals: std::sync::mpsc::Receiver<Result<(Frame, f64)>>,
+        model: Option<&SvmModel>,
+        batch_size: usize,
+        emit: &mut dyn FnMut(FrameResult) -> bool,
+    ) -> Result<()> {
+        let posing = self.source.posing();
+        let first = self.frames.start;
+        // Block for one frame, then take what else has arrived, up to a batch.
+        while let Ok(arrival) = arrivals.recv() {
+            let mut arrived = vec![arrival];
+            while arrived.len() < batch_size {
+                match arrivals.try_recv() {
+                    Ok(arrival) => arrived.push(arrival),
+                    Err(_) => break,
+                }
+            }
+            let mut batch: Vec<Arrival> = Vec::with_capacity(arrived.len());
+            for arrival in arrived {
+                let (mut frame, read_ms) = arrival?;
+                if posing == Posing::Alone {
+                    frame.world_from_velodyne = Isometry3::identity();
+                }
+                let register_ms = match pipeline.register(&mut frame) {
+                    Ok(ms) => ms,
+                    Err(problem) => {
+                        self.unregistered(frame.index, problem)?;
+                        continue;
+                    }
+                };
+                if frame.index < first {
+                    pipeline.warm_up(frame);
+                    continue;
+                }
+                // A batch is consecutive frames: a skipped one ends it.
+                if batch
+                    .last()
+                    .is_some_and(|b| b.frame.index + 1 != frame.index)
+                    && !Self::process(pipeline, std::mem::take(&mut batch), model, emit)
+                {
+                    return Ok(());
+                }
+                batch.push(Arrival {
+                    scan_sha256: self.fingerprint_scans.then(|| frame.content_sha256()),
+                    frame,
+                    read_ms,
+                    register_ms,
+                });
+            }
+            if !Self::process(pipeline, batch, model, emit) {
+                return Ok(());
+            }
+        }
+        Ok(())
+    }
+
+    /// Runs the method on a batch of consecutive frames and hands on the results;
+    /// false once `emit` wants no more.
+    fn process(
         pipeline: &mut Pipeline,
         batch: Vec<Arrival>,
         model: Option<&SvmModel>,
-        on_frame: &mut impl FnMut(FrameResult) -> Result<(), E>,
-    ) -> Result<(), E> {
+        emit: &mut dyn FnMut(FrameResult) -> bool,
+    ) -> bool {
         let (frames, extras): (Vec<Frame>, Vec<_>) = batch
             .into_iter()
             .map(|a| (a.frame, (a.read_ms, a.register_ms, a.scan_sha256)))
@@ -165,9 +193,11 @@ impl Selection {
             result.timings.register_ms = register_ms;
             result.timings.latency_ms += register_ms;
             result.scan_sha256 = scan_sha256;
-            on_frame(result)?;
+            if !emit(result) {
+                return false;
+            }
         }
-        Ok(())
+        true
     }
 
     /// The selected frames' poses by scan registration alone, whatever the input

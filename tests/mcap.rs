@@ -336,7 +336,10 @@ fn convert_copies_a_ros2_mcap_chunk_by_chunk_unless_asked_for_another_compressio
     };
     let (input_chunks, _) = chunks(&drive);
     assert_eq!(chunks(&same).0, input_chunks, "copied as stored");
-    assert!(chunks(&none).1.iter().all(String::is_empty), "re-chunked uncompressed");
+    assert!(
+        chunks(&none).1.iter().all(String::is_empty),
+        "re-chunked uncompressed"
+    );
     assert_eq!(decoded(&same), decoded(&drive));
     assert_eq!(decoded(&none), decoded(&drive));
 }

@@ -112,10 +112,17 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
     ] {
         writeln!(out, "{name:<34} {:>9.3} {:>9.3}", spread.median, spread.p95)?;
     }
+    if report.registration_lost > 0 {
+        writeln!(
+            out,
+            "  ({} scans over the repeats did not register; the map started again from each)",
+            report.registration_lost
+        )?;
+    }
     writeln!(
         out,
         "{:<34} {:>9}",
-        "write", "not in this table: see `annotate` frames/s"
+        "write", "not in this table: see `bench --tools`"
     )?;
     writeln!(
         out,

@@ -354,6 +354,7 @@ fn run_child(
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::piped());
+    pin_to_cpus(&mut command, threads);
     let watch = Stopwatch::start();
     let mut child = command
         .spawn()
@@ -382,6 +383,42 @@ fn run_child(
         peak_rss_mib,
     })
 }
+
+/// Pins `command` to the first `threads` CPUs this process may use, so that a
+/// one-thread row runs on one core: reading, writing and compressing have threads
+/// of their own, which rayon's thread count alone would let spread.
+#[cfg(target_os = "linux")]
+fn pin_to_cpus(command: &mut Command, threads: usize) {
+    use std::os::unix::process::CommandExt;
+    let set_bytes = std::mem::size_of::<libc::cpu_set_t>();
+    // SAFETY: all zeroes is an empty CPU set (a C array of integers), which
+    // `sched_getaffinity` fills in; CPU_ISSET / CPU_SET index CPUs below
+    // CPU_SETSIZE only.
+    let pinned = unsafe {
+        let mut allowed: libc::cpu_set_t = std::mem::zeroed();
+        if libc::sched_getaffinity(0, set_bytes, &mut allowed) != 0 {
+            return;
+        }
+        let mut pinned: libc::cpu_set_t = std::mem::zeroed();
+        let allowed_cpus =
+            (0..libc::CPU_SETSIZE as usize).filter(|&cpu| libc::CPU_ISSET(cpu, &allowed));
+        for cpu in allowed_cpus.take(threads) {
+            libc::CPU_SET(cpu, &mut pinned);
+        }
+        pinned
+    };
+    // SAFETY: between fork and exec the closure makes one system call on a set
+    // built beforehand: no allocation, no lock.
+    unsafe {
+        command.pre_exec(move || {
+            libc::sched_setaffinity(0, set_bytes, &pinned);
+            Ok(())
+        });
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn pin_to_cpus(_command: &mut Command, _threads: usize) {}
 
 /// Waits for `child`; its exit status and its own peak resident set, MiB, from
 /// `wait4`'s resource usage (`ru_maxrss`, KiB on Linux). None when that peak is no

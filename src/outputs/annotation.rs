@@ -189,7 +189,8 @@ pub fn annotate(
         }
         Source::Log(drive) => {
             if options.passthrough {
-                passthrough_messages = write_log_messages(&mut sink, drive, &|_, _| {})?.messages;
+                passthrough_messages =
+                    write_log_messages(&mut sink, drive, true, &|_, _| {})?.messages;
             }
             drive.world_frame().to_string()
         }

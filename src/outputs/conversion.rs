@@ -72,11 +72,13 @@ pub struct LogCopySummary {
 /// messages are written.
 ///
 /// An MCAP input with nothing to translate is copied chunk by chunk as stored, when
-/// its chunks allow it ([`McapSink::copy_chunks`]): the same messages with their
+/// its chunks allow it ([`McapSink::copy_chunks`]; with their own compression when
+/// `as_recorded`, else only when it is the sink's): the same messages with their
 /// own sequence numbers, none decompressed.
 pub fn write_log_messages(
     sink: &mut McapSink,
     drive: &RosDrive,
+    as_recorded: bool,
     on_messages: &dyn Fn(&str, u64),
 ) -> Result<LogCopySummary> {
     let mut summary = LogCopySummary::default();
@@ -94,7 +96,7 @@ pub fn write_log_messages(
             .iter()
             .map(|c| (c.id, c.topic.as_str()))
             .collect();
-        let copied = sink.copy_chunks(&stored, &|chunk| {
+        let copied = sink.copy_chunks(&stored, as_recorded, &|chunk| {
             for channel in &chunk.channels {
                 on_messages(topics.get(&channel.id).unwrap_or(&""), channel.messages);
             }
@@ -171,7 +173,8 @@ pub fn convert_log(
     on_messages: &dyn Fn(&str, u64),
 ) -> Result<LogCopySummary> {
     let mut sink = McapSink::create(output, compression)?;
-    let mut summary = write_log_messages(&mut sink, drive, on_messages)?;
+    // Converting is asked for a compression; passing through is not.
+    let mut summary = write_log_messages(&mut sink, drive, false, on_messages)?;
     sink.finish()?;
     summary.output_bytes = std::fs::metadata(output)
         .map_err(|e| Error::io(output, e))?

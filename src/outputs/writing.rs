@@ -389,16 +389,19 @@ impl McapSink {
 
     /// Copies the chunks of an input as they are stored, under the input's schema
     /// and channel ids (their records use them). Only before any channel of the
-    /// sink's own: returns false, copying nothing, when one was created.
-    /// Chunks compressed otherwise than this sink's are not copied either.
+    /// sink's own: returns false, copying nothing, when one was created, and when
+    /// some chunk is compressed otherwise than this sink's chunks unless
+    /// `any_compression`.
     pub fn copy_chunks(
         &mut self,
         log: &StoredLog,
+        any_compression: bool,
         on_chunk: &dyn Fn(&StoredChunk),
     ) -> Result<bool> {
         let compression = self.compression.chunk_name();
         let same_compression = log.chunks.iter().all(|c| c.compression == compression);
-        if !self.channel_ids.is_empty() || !self.schema_ids.is_empty() || !same_compression {
+        let fresh = self.channel_ids.is_empty() && self.schema_ids.is_empty();
+        if !fresh || !(same_compression || any_compression) {
             return Ok(false);
         }
         for (header, data) in &log.schemas {
