@@ -125,11 +125,12 @@ pub fn ros_tf(data: &[u8]) {
 /// and its chunks as stored, copied into a new file as passthrough copies them.
 pub fn mcap_file(data: &[u8]) {
     with_file(data, "mcap", read_drive);
-    let Some(stored) = crate::io::mcap_records::stored_log(&bytes::Bytes::copy_from_slice(data))
+    let Some(mut stored) =
+        crate::io::mcap_records::stored_log(&bytes::Bytes::copy_from_slice(data))
     else {
         return;
     };
-    let copy = || -> std::io::Result<Vec<u8>> {
+    let mut copy = || -> std::io::Result<Vec<u8>> {
         let mut writer =
             McapWriter::new(Vec::new(), "ros2", "fuzz", Compression::Zstd, 1 << 20, 1)?;
         for (header, data) in &stored.schemas {
@@ -138,7 +139,7 @@ pub fn mcap_file(data: &[u8]) {
         for channel in &stored.channels {
             writer.add_channel(channel, false);
         }
-        for chunk in &stored.chunks {
+        for chunk in &mut stored.chunks {
             writer.copy_chunk(FinishedChunk::copied(chunk))?;
         }
         writer.finish()

@@ -6,12 +6,13 @@
 
 use std::borrow::Cow;
 use std::collections::HashMap;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use super::bag::BagFile;
 use super::format::InputFormat;
-use super::mcap_records::{Messages, StoredLog, check_chunk_sizes, stored_log};
+use super::mcap_records::{Messages, Release, StoredLog, check_chunk_sizes, stored_log};
 use super::ros::MessageEncoding;
 use super::rosbag2::{Rosbag2Directory, SqliteFile};
 use crate::error::{Error, Result};
@@ -162,9 +163,53 @@ impl Log {
     }
 }
 
+/// A file memory-mapped read-only and shared (chunks copied from it are slices of
+/// it), whose pages a pass over it gives back once past them: they stay in the page
+/// cache but leave travmap's resident set, which so stays flat over a log of any
+/// length (measured: a 1 GB MCAP input otherwise adds 1 GB to it).
+#[derive(Clone)]
+pub struct FileMap(Arc<memmap2::Mmap>);
+
+impl FileMap {
+    pub fn open(path: &Path) -> Result<Self> {
+        Ok(Self(Arc::new(map_file(path)?)))
+    }
+
+    /// The whole file, sharing the map.
+    pub fn bytes(&self) -> bytes::Bytes {
+        bytes::Bytes::from_owner(self.clone())
+    }
+
+    /// Gives back the pages wholly inside `range`.
+    pub fn release(&self, range: Range<usize>) {
+        const PAGE: usize = 4096;
+        let start = range.start.next_multiple_of(PAGE);
+        let end = range.end.min(self.0.len()) / PAGE * PAGE;
+        if end > start {
+            // SAFETY: the map is of a file, read-only: dropping its pages loses
+            // nothing, and a later access reads them again from the file. A failure
+            // only leaves the pages resident.
+            let _ = unsafe {
+                self.0.unchecked_advise_range(
+                    memmap2::UncheckedAdvice::DontNeed,
+                    start,
+                    end - start,
+                )
+            };
+        }
+    }
+}
+
+impl AsRef<[u8]> for FileMap {
+    fn as_ref(&self) -> &[u8] {
+        &self.0
+    }
+}
+
 /// An MCAP file, memory-mapped, its chunk sizes checked at open.
 pub struct McapFile {
     path: PathBuf,
+    file: FileMap,
     /// The memory map, shared with chunks copied from it (see [`stored_log`]).
     map: bytes::Bytes,
     /// See [`check_chunk_sizes`]: no record of the file is longer.
@@ -173,26 +218,34 @@ pub struct McapFile {
 
 impl McapFile {
     pub fn open(path: &Path) -> Result<Self> {
-        let map = map_file(path)?;
+        let file = FileMap::open(path)?;
+        let map = file.bytes();
         let longest_record = check_chunk_sizes(&map).map_err(|problem| Error::LogContainer {
             path: path.to_path_buf(),
             problem,
         })?;
+        file.release(0..map.len());
         Ok(Self {
             path: path.to_path_buf(),
-            map: bytes::Bytes::from_owner(map),
+            file,
+            map,
             longest_record,
         })
     }
 
     /// Its chunks as stored, when they hold every message (see [`stored_log`]).
     pub fn stored(&self) -> Option<StoredLog> {
-        stored_log(&self.map)
+        let mut log = stored_log(&self.map)?;
+        for chunk in &mut log.chunks {
+            let end = chunk.offset + chunk.record.len() + chunk.message_indexes.len();
+            chunk.release = Some(Release(self.file.clone(), chunk.offset..end));
+        }
+        Some(log)
     }
 
     fn messages(&self) -> impl Iterator<Item = std::result::Result<LogMessage, String>> + '_ {
         let mut connections: HashMap<u16, Arc<Connection>> = HashMap::new();
-        Messages::new(&self.map, self.longest_record).map(move |message| {
+        Messages::new(&self.map, self.longest_record, Some(&self.file)).map(move |message| {
             let message = message?;
             let channel = &message.channel;
             let connection = connections.entry(channel.id).or_insert_with(|| {
@@ -233,6 +286,19 @@ pub fn map_file(path: &Path) -> Result<memmap2::Mmap> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn released_pages_read_back_the_same() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f");
+        let content: Vec<u8> = (0..100_000u32).map(|i| (i * 7 % 251) as u8).collect();
+        std::fs::write(&path, &content).unwrap();
+        let map = FileMap::open(&path).unwrap();
+        let bytes = map.bytes();
+        map.release(0..content.len());
+        map.release(5000..70_000);
+        assert_eq!(&bytes[..], &content[..]);
+    }
 
     #[test]
     fn ros1_type_names_read_as_ros2_ones() {

@@ -10,10 +10,14 @@
 
 use std::borrow::Cow;
 
+use std::ops::Range;
+
 use bytes::Bytes;
 use mcap::records::{Record, op};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use mcap::{McapError, Message};
+
+use super::log::FileMap;
 
 /// One field of a record, in the MCAP specification's order.
 #[derive(Clone, Copy)]
@@ -296,10 +300,24 @@ pub struct StoredChannel {
     pub messages: u64,
 }
 
+/// Gives a stored chunk's pages back to the page cache ([`FileMap::release`]) once
+/// it has been copied.
+pub struct Release(pub(super) FileMap, pub(super) Range<usize>);
+
+impl Release {
+    pub fn run(self) {
+        self.0.release(self.1);
+    }
+}
+
 /// A chunk of an MCAP file as stored, with the message index records after it:
 /// what a writer needs to copy it without decompressing it. The bytes are slices of
 /// the file's memory map, not copies.
 pub struct StoredChunk {
+    /// Where the chunk record starts in the file.
+    pub offset: usize,
+    /// For a memory-mapped file.
+    pub release: Option<Release>,
     /// The whole chunk record, opcode and length included.
     pub record: Bytes,
     pub message_indexes: Bytes,
@@ -387,6 +405,8 @@ pub(crate) fn stored_log(map: &Bytes) -> Option<StoredLog> {
                 let time =
                     |at: usize| Some(u64::from_le_bytes(body.get(at..at + 8)?.try_into().ok()?));
                 log.chunks.push(StoredChunk {
+                    offset,
+                    release: None,
                     record: map.slice(offset..end),
                     message_indexes: Bytes::new(),
                     time_ns: Some((time(0)?, time(8)?)),
@@ -440,10 +460,17 @@ pub(crate) fn stored_log(map: &Bytes) -> Option<StoredLog> {
     log.declares_all().then_some(log)
 }
 
+/// Bytes a pass reads before it gives the pages behind it back.
+const RELEASE_BYTES: usize = 32 << 20;
+
 /// The messages of `file` in file order, linked to their channels.
 pub(super) struct Messages<'a> {
     file: &'a [u8],
     read: usize,
+    /// The map `file` is, if it is one, and how far its pages were given back: the
+    /// reader copies what it reads, so what lies before `read` is not read again.
+    map: Option<&'a FileMap>,
+    released: usize,
     reader: LinearReader,
     channels: mcap::read::ChannelAccumulator<'static>,
     past_data_end: bool,
@@ -451,7 +478,7 @@ pub(super) struct Messages<'a> {
 }
 
 impl<'a> Messages<'a> {
-    pub(super) fn new(file: &'a [u8], longest_record: usize) -> Self {
+    pub(super) fn new(file: &'a [u8], longest_record: usize, map: Option<&'a FileMap>) -> Self {
         let options = LinearReaderOptions::default()
             .with_validate_chunk_crcs(true)
             .with_record_length_limit(longest_record)
@@ -459,6 +486,8 @@ impl<'a> Messages<'a> {
         Self {
             file,
             read: 0,
+            map,
+            released: 0,
             reader: LinearReader::new_with_options(options),
             channels: Default::default(),
             past_data_end: false,
@@ -477,6 +506,12 @@ impl<'a> Messages<'a> {
                         .copy_from_slice(&self.file[self.read..self.read + n]);
                     self.reader.notify_read(n);
                     self.read += n;
+                    if let Some(map) = self.map
+                        && self.read - self.released >= RELEASE_BYTES
+                    {
+                        map.release(self.released..self.read);
+                        self.released = self.read;
+                    }
                     continue;
                 }
                 Ok(LinearReadEvent::Record { opcode, data }) => (opcode, data),
@@ -625,7 +660,7 @@ mod tests {
             // The records may be as long as the chunk, and the message is read whole.
             let longest_record = check_chunk_sizes(&file).unwrap();
             assert!(longest_record > 80 << 20, "{longest_record}");
-            let message = Messages::new(&file, longest_record)
+            let message = Messages::new(&file, longest_record, None)
                 .next()
                 .unwrap()
                 .unwrap();

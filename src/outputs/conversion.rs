@@ -91,26 +91,29 @@ pub fn write_log_messages(
             .all(|c| encoding(&c) != Some(MessageEncoding::Ros1))
     });
     if let Some(stored) = stored {
-        let topics: HashMap<u16, &str> = stored
+        let topics: HashMap<u16, String> = stored
             .channels
             .iter()
-            .map(|c| (c.id, c.topic.as_str()))
+            .map(|c| (c.id, c.topic.clone()))
             .collect();
-        let copied = sink.copy_chunks(&stored, as_recorded, &|chunk| {
+        let used = stored.chunks.iter().flat_map(|chunk| &chunk.channels);
+        let used = |id| used.clone().any(|c| c.id == id && c.messages > 0);
+        let as_recorded_topics = stored
+            .channels
+            .iter()
+            .filter(|c| c.message_encoding != "cdr" && used(c.id))
+            .map(|c| c.topic.clone())
+            .collect();
+        let messages = stored.messages() as usize;
+        let copied = sink.copy_chunks(stored, as_recorded, &|chunk| {
             for channel in &chunk.channels {
-                on_messages(topics.get(&channel.id).unwrap_or(&""), channel.messages);
+                let topic = topics.get(&channel.id).map_or("", String::as_str);
+                on_messages(topic, channel.messages);
             }
         })?;
         if copied {
-            summary.messages = stored.messages() as usize;
-            let used = stored.chunks.iter().flat_map(|chunk| &chunk.channels);
-            let used = |id| used.clone().any(|c| c.id == id && c.messages > 0);
-            summary.topics_as_recorded = stored
-                .channels
-                .iter()
-                .filter(|c| c.message_encoding != "cdr" && used(c.id))
-                .map(|c| c.topic.clone())
-                .collect();
+            summary.messages = messages;
+            summary.topics_as_recorded = as_recorded_topics;
             return Ok(summary);
         }
     }

@@ -16,7 +16,7 @@ use std::thread::JoinHandle;
 use bytes::Bytes;
 use mcap::records::op;
 
-use crate::io::mcap_records::StoredChunk;
+use crate::io::mcap_records::{Release, StoredChunk};
 use crate::outputs::writing::Compression;
 
 const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
@@ -118,6 +118,8 @@ struct IndexedChannel {
 
 /// A chunk ready to be written: its record and the message index records after it.
 pub struct FinishedChunk {
+    /// For a copied chunk: what gives its input's pages back once written.
+    release: Option<Release>,
     record: Bytes,
     message_indexes: Bytes,
     time_ns: Option<(u64, u64)>,
@@ -129,8 +131,9 @@ pub struct FinishedChunk {
 
 impl FinishedChunk {
     /// A stored chunk of an input, copied as it is.
-    pub fn copied(stored: &StoredChunk) -> Self {
+    pub fn copied(stored: &mut StoredChunk) -> Self {
         Self {
+            release: stored.release.take(),
             record: stored.record.clone(),
             message_indexes: stored.message_indexes.clone(),
             time_ns: stored.time_ns,
@@ -219,6 +222,7 @@ fn finish_chunk(open: OpenChunk, compression: Compression) -> io::Result<Finishe
         });
     }
     Ok(FinishedChunk {
+        release: None,
         record: record.into(),
         message_indexes: message_indexes.into(),
         time_ns: open.time_ns,
@@ -559,11 +563,14 @@ impl<W: Write> McapWriter<W> {
         Ok(())
     }
 
-    fn write_chunk(&mut self, chunk: FinishedChunk) -> io::Result<()> {
+    fn write_chunk(&mut self, mut chunk: FinishedChunk) -> io::Result<()> {
         let start = self.position;
         self.emit(&chunk.record)?;
         let indexes_start = self.position;
         self.emit(&chunk.message_indexes)?;
+        if let Some(release) = chunk.release.take() {
+            release.run();
+        }
         let (start_ns, end_ns) = chunk.time_ns.unwrap_or((0, 0));
         put_record(&mut self.chunk_indexes, op::CHUNK_INDEX, |out| {
             put_u64(out, start_ns);
@@ -813,7 +820,7 @@ mod tests {
     #[test]
     fn copied_chunks_are_indexed_beside_new_ones() {
         let input = Bytes::from(write_file(Compression::Zstd, 2000));
-        let stored = crate::io::mcap_records::stored_log(&input).expect("copyable");
+        let mut stored = crate::io::mcap_records::stored_log(&input).expect("copyable");
         assert_eq!(stored.messages(), 50);
         let mut writer =
             McapWriter::new(Vec::new(), "ros2", "test", Compression::Zstd, 2000, 1).unwrap();
@@ -823,7 +830,7 @@ mod tests {
         for channel in &stored.channels {
             writer.add_channel(channel, false);
         }
-        for chunk in &stored.chunks {
+        for chunk in &mut stored.chunks {
             writer.copy_chunk(FinishedChunk::copied(chunk)).unwrap();
         }
         writer.add_channel(&channel(5, 1, "/c"), false);

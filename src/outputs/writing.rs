@@ -185,8 +185,9 @@ impl Compression {
 /// several compress at once.
 const CHUNK_BYTES: usize = 8 << 20;
 
-/// Records queued for the writer thread before the caller waits (a few frames).
-const QUEUE: usize = 64;
+/// Records queued for the writer thread before the caller waits: about three
+/// frames of `annotate`, so that a busy writer holds back the caller, not memory.
+const QUEUE: usize = 16;
 
 enum Record {
     Schema {
@@ -394,7 +395,7 @@ impl McapSink {
     /// `any_compression`.
     pub fn copy_chunks(
         &mut self,
-        log: &StoredLog,
+        log: StoredLog,
         any_compression: bool,
         on_chunk: &dyn Fn(&StoredChunk),
     ) -> Result<bool> {
@@ -424,9 +425,9 @@ impl McapSink {
                 .entry(channel.topic.clone())
                 .or_insert(channel.id);
         }
-        for chunk in &log.chunks {
-            on_chunk(chunk);
-            self.send(Record::CopiedChunk(FinishedChunk::copied(chunk)))?;
+        for mut chunk in log.chunks {
+            on_chunk(&chunk);
+            self.send(Record::CopiedChunk(FinishedChunk::copied(&mut chunk)))?;
         }
         Ok(true)
     }
