@@ -120,11 +120,53 @@ struct IndexedChannel {
     messages: u64,
 }
 
+/// Chunk-sized buffers for reuse. Fresh ones cost a page fault every 4 KB: in
+/// `convert`, twice the system time of the mcap crate's writer, which reuses its own.
+#[derive(Clone, Default)]
+struct Buffers(Arc<Mutex<Vec<Vec<u8>>>>);
+
+/// Buffers kept for reuse at most: the chunks in flight and the open ones.
+const KEPT_BUFFERS: usize = 8;
+
+impl Buffers {
+    /// An empty buffer with room for `bytes`.
+    fn take(&self, bytes: usize) -> Vec<u8> {
+        let kept = self.0.lock().ok().and_then(|mut kept| kept.pop());
+        let mut buffer = kept.unwrap_or_default();
+        buffer.clear();
+        buffer.reserve(bytes);
+        buffer
+    }
+
+    fn give(&self, buffer: Vec<u8>) {
+        if let Ok(mut kept) = self.0.lock()
+            && kept.len() < KEPT_BUFFERS
+        {
+            kept.push(buffer);
+        }
+    }
+}
+
+/// A chunk record: built here, in a buffer to reuse, or copied from an input.
+enum ChunkRecord {
+    Built(Vec<u8>),
+    Copied(Bytes),
+}
+
+impl ChunkRecord {
+    fn bytes(&self) -> &[u8] {
+        match self {
+            ChunkRecord::Built(bytes) => bytes,
+            ChunkRecord::Copied(bytes) => bytes,
+        }
+    }
+}
+
 /// A chunk ready to be written: its record and the message index records after it.
 pub struct FinishedChunk {
     /// For a copied chunk: what gives its input's pages back once written.
     release: Option<Release>,
-    record: Bytes,
+    record: ChunkRecord,
     message_indexes: Bytes,
     time_ns: Option<(u64, u64)>,
     compression: String,
@@ -138,7 +180,7 @@ impl FinishedChunk {
     pub fn copied(stored: &mut StoredChunk) -> Self {
         Self {
             release: stored.release.take(),
-            record: stored.record.clone(),
+            record: ChunkRecord::Copied(stored.record.clone()),
             message_indexes: stored.message_indexes.clone(),
             time_ns: stored.time_ns,
             compression: stored.compression.clone(),
@@ -186,10 +228,15 @@ fn compress_into(out: Vec<u8>, records: &[u8], compression: Compression) -> io::
 }
 
 /// Compresses an open chunk into its chunk record and message index records.
-fn finish_chunk(open: OpenChunk, compression: Compression) -> io::Result<FinishedChunk> {
+fn finish_chunk(
+    open: OpenChunk,
+    compression: Compression,
+    buffers: &Buffers,
+) -> io::Result<FinishedChunk> {
     let name = compression.chunk_name();
     let (start_ns, end_ns) = open.time_ns.unwrap_or((0, 0));
-    let mut record = Vec::with_capacity(open.records.len() / 2 + 64);
+    let bound = zstd::zstd_safe::compress_bound(open.records.len());
+    let mut record = buffers.take(bound + 64);
     record.push(op::CHUNK);
     put_u64(&mut record, 0);
     put_u64(&mut record, start_ns);
@@ -225,14 +272,16 @@ fn finish_chunk(open: OpenChunk, compression: Compression) -> io::Result<Finishe
             });
         });
     }
+    let uncompressed_bytes = open.records.len() as u64;
+    buffers.give(open.records);
     Ok(FinishedChunk {
         release: None,
-        record: record.into(),
+        record: ChunkRecord::Built(record),
         message_indexes: message_indexes.into(),
         time_ns: open.time_ns,
         compression: name.to_string(),
         compressed_bytes,
-        uncompressed_bytes: open.records.len() as u64,
+        uncompressed_bytes,
         channels,
     })
 }
@@ -252,12 +301,13 @@ struct Compressors {
 }
 
 impl Compressors {
-    fn start(count: usize) -> io::Result<Self> {
+    fn start(count: usize, buffers: &Buffers) -> io::Result<Self> {
         let (jobs, queue) = channel::<Job>();
         let queue = Arc::new(Mutex::new(queue));
         let threads = (0..count)
             .map(|i| {
                 let queue = Arc::clone(&queue);
+                let buffers = buffers.clone();
                 std::thread::Builder::new()
                     .name(format!("mcap-compress-{i}"))
                     .spawn(move || {
@@ -268,7 +318,8 @@ impl Compressors {
                                 Err(_) => return,
                             };
                             let Ok(job) = job else { return };
-                            let _ = job.done.send(finish_chunk(job.chunk, job.compression));
+                            let finished = finish_chunk(job.chunk, job.compression, &buffers);
+                            let _ = job.done.send(finished);
                         }
                     })
             })
@@ -323,6 +374,7 @@ pub struct McapWriter<W: Write> {
     data_crc: crc32fast::Hasher,
     compression: Compression,
     compressors: Compressors,
+    buffers: Buffers,
     /// A chunk is closed once its records reach this many bytes.
     chunk_bytes: usize,
     /// Chunks being compressed at most: bounds memory.
@@ -363,12 +415,14 @@ impl<W: Write> McapWriter<W> {
         threads: usize,
     ) -> io::Result<Self> {
         let threads = threads.max(1);
+        let buffers = Buffers::default();
         let mut writer = Self {
             out,
             position: 0,
             data_crc: crc32fast::Hasher::new(),
             compression,
-            compressors: Compressors::start(threads)?,
+            compressors: Compressors::start(threads, &buffers)?,
+            buffers,
             chunk_bytes,
             in_flight_limit: threads + 1,
             open: Default::default(),
@@ -440,10 +494,19 @@ impl<W: Write> McapWriter<W> {
         }
         records.extend_from_slice(&channel);
         match chunk {
-            Some(chunk) => self.open[chunk].records.extend_from_slice(&records),
+            Some(chunk) => self.open_chunk(chunk).records.extend_from_slice(&records),
             None => self.due.push_back(Due::Record(records, None)),
         }
         Ok(())
+    }
+
+    /// Open chunk `chunk`, its records in a buffer with room for a whole chunk.
+    fn open_chunk(&mut self, chunk: usize) -> &mut OpenChunk {
+        let open = &mut self.open[chunk];
+        if open.records.capacity() == 0 {
+            open.records = self.buffers.take(self.chunk_bytes + self.chunk_bytes / 4);
+        }
+        open
     }
 
     pub fn write_message(
@@ -456,7 +519,7 @@ impl<W: Write> McapWriter<W> {
     ) -> io::Result<()> {
         let chunk = usize::from(self.precompressed.contains(&channel_id));
         self.define(channel_id, Some(chunk))?;
-        let open = &mut self.open[chunk];
+        let open = self.open_chunk(chunk);
         open.index
             .entry(channel_id)
             .or_default()
@@ -571,18 +634,24 @@ impl<W: Write> McapWriter<W> {
 
     fn write_chunk(&mut self, mut chunk: FinishedChunk) -> io::Result<()> {
         let start = self.position;
-        self.emit(&chunk.record)?;
+        self.emit(chunk.record.bytes())?;
         let indexes_start = self.position;
         self.emit(&chunk.message_indexes)?;
         if let Some(release) = chunk.release.take() {
             release.run();
+        }
+        let record_bytes = chunk.record.bytes().len() as u64;
+        if let ChunkRecord::Built(buffer) =
+            std::mem::replace(&mut chunk.record, ChunkRecord::Copied(Bytes::new()))
+        {
+            self.buffers.give(buffer);
         }
         let (start_ns, end_ns) = chunk.time_ns.unwrap_or((0, 0));
         put_record(&mut self.chunk_indexes, op::CHUNK_INDEX, |out| {
             put_u64(out, start_ns);
             put_u64(out, end_ns);
             put_u64(out, start);
-            put_u64(out, chunk.record.len() as u64);
+            put_u64(out, record_bytes);
             put_sized(out, |out| {
                 for channel in &chunk.channels {
                     put_u16(out, channel.id);
