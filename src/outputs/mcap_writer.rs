@@ -79,7 +79,7 @@ fn put_string_map(out: &mut Vec<u8>, map: &BTreeMap<String, String>) {
 }
 
 /// A schema record, as written in chunks and in the summary.
-pub fn schema_record(id: u16, name: &str, encoding: &str, data: &[u8]) -> Vec<u8> {
+fn schema_record(id: u16, name: &str, encoding: &str, data: &[u8]) -> Vec<u8> {
     let mut out = Vec::with_capacity(data.len() + name.len() + 32);
     put_record(&mut out, op::SCHEMA, |out| {
         put_u16(out, id);
@@ -91,7 +91,7 @@ pub fn schema_record(id: u16, name: &str, encoding: &str, data: &[u8]) -> Vec<u8
 }
 
 /// A channel record, as written in chunks and in the summary.
-pub fn channel_record(channel: &mcap::records::Channel) -> Vec<u8> {
+fn channel_record(channel: &mcap::records::Channel) -> Vec<u8> {
     let mut out = Vec::new();
     put_record(&mut out, op::CHANNEL, |out| {
         put_u16(out, channel.id);
@@ -642,11 +642,6 @@ impl<W: Write> McapWriter<W> {
             release.run();
         }
         let record_bytes = chunk.record.bytes().len() as u64;
-        if let ChunkRecord::Built(buffer) =
-            std::mem::replace(&mut chunk.record, ChunkRecord::Copied(Bytes::new()))
-        {
-            self.buffers.give(buffer);
-        }
         let (start_ns, end_ns) = chunk.time_ns.unwrap_or((0, 0));
         put_record(&mut self.chunk_indexes, op::CHUNK_INDEX, |out| {
             put_u64(out, start_ns);
@@ -670,6 +665,9 @@ impl<W: Write> McapWriter<W> {
         }
         if let Some(range) = chunk.time_ns {
             self.time_ns = widen(self.time_ns, range);
+        }
+        if let ChunkRecord::Built(buffer) = chunk.record {
+            self.buffers.give(buffer);
         }
         Ok(())
     }
