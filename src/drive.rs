@@ -1,24 +1,31 @@
 //! Where reading meets the method: a [`Selection`] is a [`Source`] and the frames
-//! of it to use, and [`Selection::run`] feeds them through a [`Pipeline`].
+//! of it to use. [`Selection::run`] feeds them through a [`Pipeline`] built for the
+//! source's posing, and [`Selection::run_mapped`] also fuses every result into the
+//! drive map, the one place that map is fed. Every command goes through here, the
+//! benchmark included ([`Selection::load`], [`Selection::run_loaded`]).
 
 use std::ops::Range;
 
 use nalgebra::Isometry3;
 
-use crate::config::{Config, IntegrationConfig, RegistrationConfig};
+use crate::config::Config;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
-use crate::io::{Posing, Source};
+use crate::io::Source;
 use crate::method::classifier::SvmModel;
-use crate::method::pipeline::{FrameResult, Pipeline};
-use crate::method::registration::{Odometry, RegistrationError};
-use crate::stopwatch::{Stopwatch, timed};
+use crate::method::fusion::DriveMap;
+use crate::method::pipeline::{FrameResult, Pipeline, Posed};
+use crate::method::registration::RegistrationError;
+use crate::posing::Posing;
+use crate::stopwatch::Stopwatch;
 
-/// A frame read and posed, waiting for the pipeline.
+/// A frame read, and how long reading it took, ms.
+pub type ReadFrame = (Frame, f64);
+
+/// A frame posed, waiting for the rest of the pipeline.
 struct Arrival {
-    frame: Frame,
+    posed: Posed,
     read_ms: f64,
-    register_ms: f64,
     scan_sha256: Option<String>,
 }
 
@@ -49,6 +56,11 @@ impl Selection {
         }
     }
 
+    /// The pipeline for this source's scans, as its posing asks.
+    pub fn pipeline(&self, config: &Config) -> Result<Pipeline> {
+        Pipeline::new(config, self.source.posing())
+    }
+
     /// Runs the pipeline over the selected frames, reading the n - 1 frames before
     /// the first one to fill the window, and hands each result to `on_frame`, which
     /// may return its own error type (the binary's, say).
@@ -58,28 +70,32 @@ impl Selection {
         model: Option<&SvmModel>,
         mut on_frame: impl FnMut(FrameResult) -> Result<(), E>,
     ) -> Result<(), E> {
-        let posing = self.source.posing();
-        let alone;
-        let config = match posing {
-            // Each scan alone: nothing to integrate it with.
-            Posing::Alone => {
-                alone = Config {
-                    integration: IntegrationConfig {
-                        scans: 1,
-                        ..config.integration.clone()
-                    },
-                    ..config.clone()
-                };
-                &alone
-            }
-            _ => config,
-        };
-        let mut pipeline = Pipeline::new(config)?;
-        if posing == Posing::Registration {
-            pipeline.estimate_poses(&config.registration);
-        }
-        let first = self.frames.start;
-        let frames = pipeline.window().warm_up_start(first)..self.frames.end;
+        self.run_fusing(config, model, false, |result, _| on_frame(result))?;
+        Ok(())
+    }
+
+    /// [`Self::run`], with every result fused into the drive map before `on_frame`
+    /// sees it with the map so far; returns the map of the whole selection.
+    pub fn run_mapped<E: From<Error>>(
+        &self,
+        config: &Config,
+        model: Option<&SvmModel>,
+        on_frame: impl FnMut(FrameResult, &DriveMap) -> Result<(), E>,
+    ) -> Result<DriveMap, E> {
+        self.run_fusing(config, model, true, on_frame)
+    }
+
+    /// [`Self::run`], fusing the results into the drive map when `fuse` says so.
+    fn run_fusing<E: From<Error>>(
+        &self,
+        config: &Config,
+        model: Option<&SvmModel>,
+        fuse: bool,
+        mut on_frame: impl FnMut(FrameResult, &DriveMap) -> Result<(), E>,
+    ) -> Result<DriveMap, E> {
+        let mut drive_map = DriveMap::new(config.grid.cell_size_m);
+        let mut pipeline = self.pipeline(config)?;
+        let frames = pipeline.window().warm_up_start(self.frames.start)..self.frames.end;
         // Three stages on their own threads, joined by bounded queues: frames read
         // ahead; the method on batches of them (each batch in parallel on rayon);
         // and here `on_frame` (encoding, writing) while the next batch runs.
@@ -97,72 +113,127 @@ impl Selection {
             });
             let (results, processed) = std::sync::mpsc::sync_channel(batch_size);
             scope.spawn(move || {
+                let mut next = |block: bool| match block {
+                    true => arrivals.recv().ok(),
+                    false => arrivals.try_recv().ok(),
+                };
                 let mut emit = |result| results.send(Ok(result)).is_ok();
-                let method = self.run_method(&mut pipeline, arrivals, model, batch_size, &mut emit);
+                let first = self.frames.start;
+                let method = self.run_method(
+                    &mut pipeline,
+                    first,
+                    &mut next,
+                    model,
+                    batch_size,
+                    &mut emit,
+                );
                 if let Err(error) = method {
                     let _ = results.send(Err(error));
                 }
             });
             // A failing `on_frame` drops `processed`, which stops the stages above.
             for result in processed {
-                on_frame(result?)?;
+                let result = result?;
+                if fuse {
+                    drive_map.add_result(&result);
+                }
+                on_frame(result, &drive_map)?;
             }
-            Ok(())
+            Ok(drive_map)
         })
     }
 
-    /// The method stage of [`Selection::run`]: registers the frames that arrive,
-    /// warms the window up, and processes the selected ones in batches of
+    /// Every frame [`Self::run`] reads (those that fill the window first), into
+    /// memory, each with the time reading it took.
+    pub fn load(&self, config: &Config) -> Result<Vec<ReadFrame>> {
+        let warm_up_start = self
+            .pipeline(config)?
+            .window()
+            .warm_up_start(self.frames.start);
+        let mut reading = Stopwatch::start();
+        self.source
+            .read(&(warm_up_start..self.frames.end))
+            .map(|frame| frame.map(|f| (f, reading.lap_ms())))
+            .collect()
+    }
+
+    /// The method over frames from [`Self::load`], on this thread, as [`Self::run`]
+    /// runs it, in batches of at most `batch_size` consecutive frames: frames
+    /// before `first` only fill the window.
+    pub fn run_loaded(
+        &self,
+        loaded: &[ReadFrame],
+        first: usize,
+        config: &Config,
+        model: Option<&SvmModel>,
+        batch_size: usize,
+        mut on_frame: impl FnMut(FrameResult),
+    ) -> Result<()> {
+        let mut pipeline = self.pipeline(config)?;
+        let mut frames = loaded.iter().cloned().map(Ok);
+        let mut next = |_block: bool| frames.next();
+        let mut emit = |result| {
+            on_frame(result);
+            true
+        };
+        self.run_method(
+            &mut pipeline,
+            first,
+            &mut next,
+            model,
+            batch_size,
+            &mut emit,
+        )
+    }
+
+    /// The method stage of [`Self::run`]: poses the frames that `next` hands on
+    /// (blocking for one when asked, else only what has arrived), warms the window
+    /// up with those before `first`, and processes the others in batches of
     /// consecutive frames, handing each result to `emit` until it returns false.
     fn run_method(
         &self,
         pipeline: &mut Pipeline,
-        arrivals: std::sync::mpsc::Receiver<Result<(Frame, f64)>>,
+        first: usize,
+        next: &mut dyn FnMut(bool) -> Option<Result<ReadFrame>>,
         model: Option<&SvmModel>,
         batch_size: usize,
         emit: &mut dyn FnMut(FrameResult) -> bool,
     ) -> Result<()> {
-        let posing = self.source.posing();
-        let first = self.frames.start;
         // Block for one frame, then take what else has arrived, up to a batch.
-        while let Ok(arrival) = arrivals.recv() {
+        while let Some(arrival) = next(true) {
             let mut arrived = vec![arrival];
             while arrived.len() < batch_size {
-                match arrivals.try_recv() {
-                    Ok(arrival) => arrived.push(arrival),
-                    Err(_) => break,
+                match next(false) {
+                    Some(arrival) => arrived.push(arrival),
+                    None => break,
                 }
             }
             let mut batch: Vec<Arrival> = Vec::with_capacity(arrived.len());
             for arrival in arrived {
-                let (mut frame, read_ms) = arrival?;
-                if posing == Posing::Alone {
-                    frame.world_from_velodyne = Isometry3::identity();
-                }
-                let register_ms = match pipeline.register(&mut frame) {
-                    Ok(ms) => ms,
+                let (frame, read_ms) = arrival?;
+                let index = frame.index;
+                let scan_sha256 = self.fingerprint_scans.then(|| frame.content_sha256());
+                let posed = match pipeline.pose(frame) {
+                    Ok(posed) => posed,
                     Err(problem) => {
-                        self.unregistered(frame.index, problem)?;
+                        self.unregistered(index, problem)?;
                         continue;
                     }
                 };
-                if frame.index < first {
-                    pipeline.warm_up(frame);
+                if index < first {
+                    pipeline.warm_up(posed);
                     continue;
                 }
                 // A batch is consecutive frames: a skipped one ends it.
-                if batch
-                    .last()
-                    .is_some_and(|b| b.frame.index + 1 != frame.index)
+                if batch.last().is_some_and(|b| b.posed.index() + 1 != index)
                     && !Self::process(pipeline, std::mem::take(&mut batch), model, emit)
                 {
                     return Ok(());
                 }
                 batch.push(Arrival {
-                    scan_sha256: self.fingerprint_scans.then(|| frame.content_sha256()),
-                    frame,
+                    posed,
                     read_ms,
-                    register_ms,
+                    scan_sha256,
                 });
             }
             if !Self::process(pipeline, batch, model, emit) {
@@ -180,18 +251,16 @@ impl Selection {
         model: Option<&SvmModel>,
         emit: &mut dyn FnMut(FrameResult) -> bool,
     ) -> bool {
-        let (frames, extras): (Vec<Frame>, Vec<_>) = batch
+        let (frames, extras): (Vec<Posed>, Vec<_>) = batch
             .into_iter()
-            .map(|a| (a.frame, (a.read_ms, a.register_ms, a.scan_sha256)))
+            .map(|a| (a.posed, (a.read_ms, a.scan_sha256)))
             .unzip();
-        for (mut result, (read_ms, register_ms, scan_sha256)) in pipeline
+        for (mut result, (read_ms, scan_sha256)) in pipeline
             .process_frames(frames, model)
             .into_iter()
             .zip(extras)
         {
             result.timings.read_ms = read_ms;
-            result.timings.register_ms = register_ms;
-            result.timings.latency_ms += register_ms;
             result.scan_sha256 = scan_sha256;
             if !emit(result) {
                 return false;
@@ -205,22 +274,22 @@ impl Selection {
     /// A scan that cannot be registered ends the run, or is skipped (`--keep-going`).
     pub fn estimate_trajectory(
         &self,
-        config: &RegistrationConfig,
+        config: &Config,
         mut on_frame: impl FnMut(),
     ) -> Result<Vec<EstimatedPose>> {
-        let mut odometry = Odometry::new(config.clone());
+        let mut pipeline = Pipeline::new(config, Posing::Registration)?;
         let mut trajectory = Vec::new();
         for frame in self.source.read(&self.frames) {
             let frame = frame?;
-            let (pose, register_ms) = timed(|| odometry.register(&frame.points_in_velodyne));
-            match pose {
-                Ok(world_from_velodyne) => trajectory.push(EstimatedPose {
-                    index: frame.index,
-                    stamp_ns: frame.stamp_ns,
-                    world_from_velodyne,
-                    register_ms,
+            let (index, stamp_ns) = (frame.index, frame.stamp_ns);
+            match pipeline.pose(frame) {
+                Ok(posed) => trajectory.push(EstimatedPose {
+                    index,
+                    stamp_ns,
+                    world_from_velodyne: posed.world_from_velodyne(),
+                    register_ms: posed.register_ms(),
                 }),
-                Err(problem) => self.unregistered(frame.index, problem)?,
+                Err(problem) => self.unregistered(index, problem)?,
             }
             on_frame();
         }

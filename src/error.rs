@@ -102,8 +102,13 @@ pub enum Error {
     #[error("{path} does not exist")]
     InputMissing { path: PathBuf },
 
-    #[error("{path} is {what}; {}", crate::io::format::READABLE)]
-    UnsupportedInput { path: PathBuf, what: String },
+    #[error("{path} is {what}; {readable}")]
+    UnsupportedInput {
+        path: PathBuf,
+        what: String,
+        /// What travmap reads instead, as the format detection says it.
+        readable: &'static str,
+    },
 
     /// The container itself (MCAP, bag, sqlite, rosbag2 metadata): magic, records, chunks, CRCs, lengths (the text
     /// comes from the record checks in `io/mcap_records.rs`, the mcap crate,
@@ -135,12 +140,12 @@ pub enum Error {
     },
 
     #[error(
-        "{path}: no pose for the clouds' frame `{frame}` from --poses {pose_source}: /tf (and /tf_static) or an Odometry topic must link it to a world frame (--poses registration estimates poses from the scans)"
+        "{path}: --poses {requested}: {why}; --poses registration estimates poses from the scans, --poses none takes each scan alone"
     )]
-    LogNoPose {
+    NoPose {
         path: PathBuf,
-        frame: String,
-        pose_source: &'static str,
+        requested: &'static str,
+        why: String,
     },
 
     #[error("{path}: no transform from `{frame}` up to the world frame `{world_frame}`")]
@@ -192,13 +197,13 @@ pub enum Error {
     Registration {
         path: PathBuf,
         frame: usize,
-        problem: crate::method::registration::RegistrationError,
+        problem: RegistrationError,
     },
 
     #[error("{path}: {problem}")]
     Transform {
         path: PathBuf,
-        problem: crate::io::transforms::TransformError,
+        problem: TransformError,
     },
 
     #[error("invalid configuration: {0}")]
@@ -211,14 +216,14 @@ pub enum Error {
     },
 
     #[error(
-        "model {source_name}: format `{format}` version {version}; this travmap reads `{}` version {}",
-        crate::training::model_file::MODEL_FORMAT,
-        crate::training::model_file::MODEL_VERSION
+        "model {source_name}: format `{format}` version {version}; this travmap reads `{expected_format}` version {expected_version}"
     )]
     ModelVersion {
         source_name: String,
         format: String,
         version: String,
+        expected_format: &'static str,
+        expected_version: u32,
     },
 
     #[error(
@@ -241,6 +246,88 @@ pub enum Error {
         "{selected} frames selected; the benchmark needs at least {needed} consecutive ones (a full integration window)"
     )]
     TooFewFrames { selected: usize, needed: usize },
+}
+
+/// Why a registration was rejected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum Divergence {
+    #[error("ICP did not converge")]
+    NotConverged,
+    /// The scan is not where the prediction put it, or not of this place.
+    #[error("too few points match the map")]
+    LostMap,
+    /// No correspondence within the gate at the start supports a walk that long.
+    #[error("the estimate moved the points farther than the gate")]
+    JumpTooLarge,
+    /// The correspondences do not fix all six degrees of freedom.
+    #[error("the correspondences do not fix the pose")]
+    Degenerate,
+}
+
+/// What one registration saw.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RegistrationStats {
+    /// Points registered, after range filtering and downsampling.
+    pub points: usize,
+    /// Of those, with a map point within the gate at the last iteration.
+    pub matched: usize,
+    pub iterations: usize,
+    /// The correspondence gate, three times the adaptive threshold, metres.
+    pub gate_m: f64,
+    /// RMS distance the points moved from the predicted pose to the estimate, metres.
+    pub shift_m: f64,
+}
+
+impl std::fmt::Display for RegistrationStats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} of {} points within the {:.2} m gate of a map point after {} ICP iterations; the estimate is {:.2} m from the prediction",
+            self.matched, self.points, self.gate_m, self.iterations, self.shift_m
+        )
+    }
+}
+
+/// A scan that could not be registered: the odometry is as it was, but for the next
+/// prediction, which spans the refused scan.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum RegistrationError {
+    #[error("{points} points left to register after filtering, at least {needed} needed")]
+    TooFewPoints { points: usize, needed: usize },
+    #[error("scan registration diverged: {cause} ({seen})")]
+    Diverged {
+        cause: Divergence,
+        seen: RegistrationStats,
+    },
+}
+
+/// Why a pose could not be had from the tree.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TransformError {
+    #[error(
+        "no transform {parent} -> {child} near {stamp_ns} ns (recorded {first_ns}..{last_ns} ns)"
+    )]
+    NoSample {
+        parent: String,
+        child: String,
+        stamp_ns: u64,
+        first_ns: u64,
+        last_ns: u64,
+    },
+    #[error("the transform tree above {frame} has a cycle")]
+    Cycle { frame: String },
+    #[error(
+        "transform ({x}, {y}, {z}), rotation (w {qw}, x {qx}, y {qy}, z {qz}): expected finite values and a unit quaternion"
+    )]
+    NotRigid {
+        x: f64,
+        y: f64,
+        z: f64,
+        qw: f64,
+        qx: f64,
+        qy: f64,
+        qz: f64,
+    },
 }
 
 /// Why no PointCloud2 topic could be chosen.
@@ -294,7 +381,7 @@ impl Error {
             | Error::LogRecord { path, .. }
             | Error::LogUnreadableFrom { path, .. }
             | Error::LogCloudTopic { path, .. }
-            | Error::LogNoPose { path, .. }
+            | Error::NoPose { path, .. }
             | Error::LogNotBelowWorld { path, .. }
             | Error::LogCloud { path, .. }
             | Error::LogImage { path, .. }

@@ -125,8 +125,7 @@ pub fn ros_tf(data: &[u8]) {
 /// and its chunks as stored, copied into a new file as passthrough copies them.
 pub fn mcap_file(data: &[u8]) {
     with_file(data, "mcap", read_drive);
-    let Some(mut stored) =
-        crate::io::mcap_records::stored_log(&bytes::Bytes::copy_from_slice(data))
+    let Some(mut stored) = crate::io::mcap_stored::stored_log(&bytes::Bytes::copy_from_slice(data))
     else {
         return;
     };

@@ -3,8 +3,9 @@
 //! Driving on CPU" (specified in METHOD.md).
 //!
 //! Layers, each importing only those above it (ARCHITECTURE.md):
-//! - shared: [`config`], [`error`], [`geometry`], [`random`], [`stopwatch`] and
-//!   [`frame`], what readers produce and the method consumes;
+//! - shared: [`config`], [`error`], [`geometry`], [`random`], [`stopwatch`],
+//!   [`frame`] (what readers produce and the method consumes) and [`posing`] (how a
+//!   source's scans are posed, decided once);
 //! - [`io`]: drives (KITTI directories, ROS 2 MCAP) into [`frame::Frame`]s;
 //! - [`method`]: the stages in the order [`method::pipeline::Pipeline`] calls them;
 //! - [`drive`]: where the two meet: a source's selected frames run through the method;
@@ -21,6 +22,7 @@ pub mod geometry;
 pub mod io;
 pub mod method;
 pub mod outputs;
+pub mod posing;
 pub mod random;
 pub mod scoring;
 pub mod stopwatch;

@@ -254,9 +254,12 @@ fn a_cell_keeps_its_colour_five_frames_later_after_the_grid_moved() {
     let mut config = travmap::Config::default();
     config.grid.size_m = 24.0;
     let sequence = travmap::io::KittiSequence::open(&seq).unwrap();
-    let mut pipeline = Pipeline::new(&config).unwrap();
+    let mut pipeline = Pipeline::new(&config, travmap::posing::Posing::Recorded).unwrap();
     let results: Vec<_> = (0..6)
-        .map(|i| pipeline.process_frame(sequence.read_frame(i).unwrap(), None))
+        .map(|i| {
+            let frame = sequence.read_frame(i).unwrap();
+            pipeline.process_frame(frame, None).unwrap()
+        })
         .collect();
     let (first, last) = (&results[0], &results[5]);
     assert_ne!(first.layout, last.layout, "the grid moved (2 m, 5 cells)");

@@ -543,7 +543,8 @@ fn shared_mcap_files_give_clear_errors() {
     assert_contains(
         &err,
         &[
-            "no recorded pose reaches the clouds' frame `test_frame`: poses estimated by scan registration",
+            "no recorded pose reaches the clouds' frame `test_frame`",
+            "poses estimated by scan registration",
             "frame 0: ",
             "points left to register after filtering, at least 100 needed",
         ],
@@ -551,7 +552,10 @@ fn shared_mcap_files_give_clear_errors() {
     let err = clean_failure(travmap(&["eval", arg(&all_types), "--poses", "tf"]));
     assert_contains(
         &err,
-        &["no pose for the clouds' frame `test_frame` from --poses tf"],
+        &[
+            "--poses tf: no recorded pose reaches the clouds' frame `test_frame`",
+            "--poses registration estimates poses from the scans",
+        ],
     );
     // A truncated copy is a clear error, not a panic.
     let bytes = std::fs::read(&all_types).unwrap();

@@ -218,7 +218,7 @@ fn pose_less_drives_map_with_no_flag_and_the_grids_of_registration() {
     let err = clean_failure(travmap(&["run", arg(&no_tf), "--poses", "tf"]));
     assert_contains(
         &err,
-        &["no pose for the clouds' frame `velodyne` from --poses tf"],
+        &["--poses tf: no recorded pose reaches the clouds' frame `velodyne`"],
     );
 
     // A single cloud.
@@ -232,8 +232,8 @@ fn pose_less_drives_map_with_no_flag_and_the_grids_of_registration() {
     assert_contains(
         &common::stderr(&output),
         &[
-            "a folder of PCD scans with no poses",
-            "stamps from the file names",
+            "a folder of PCD scans; stamps from the file names",
+            "a folder of scans records no poses: poses estimated by scan registration",
         ],
     );
     success(output);

@@ -195,31 +195,43 @@ fn labels_join_the_right_points() {
 
 #[test]
 fn frames_in_batches_equal_frames_one_by_one() {
+    use travmap::frame::Frame;
     use travmap::method::classifier::SvmModel;
     use travmap::method::pipeline::Pipeline;
+    use travmap::posing::Posing;
     let Some(dir) = common::sample() else { return };
     let sequence = KittiSequence::open(&dir).unwrap();
     let model = SvmModel::embedded_default().unwrap();
     let config = travmap::Config::default();
     let frames: Vec<_> = (0..6).map(|i| sequence.read_frame(i).unwrap()).collect();
-    let mut pipeline = Pipeline::new(&config).unwrap();
+    let pipeline = || Pipeline::new(&config, Posing::Recorded).unwrap();
+    let posed = |pipeline: &mut Pipeline, frames: &[Frame]| -> Vec<_> {
+        let pose = |f: &Frame| pipeline.pose(f.clone()).unwrap();
+        frames.iter().map(pose).collect()
+    };
+    let mut sequential = pipeline();
     let one_by_one: Vec<_> = frames
         .iter()
-        .map(|f| pipeline.process_frame(f.clone(), Some(&model)))
+        .map(|f| sequential.process_frame(f.clone(), Some(&model)).unwrap())
         .collect();
-    let whole = Pipeline::new(&config)
-        .unwrap()
-        .process_frames(frames.clone(), Some(&model));
+    let mut whole = pipeline();
+    let all = posed(&mut whole, &frames);
+    let whole = whole.process_frames(all, Some(&model));
     // Two batches, the second starting with a window the first filled.
-    let mut batched = Pipeline::new(&config).unwrap();
-    let mut halves = batched.process_frames(frames[..2].to_vec(), Some(&model));
-    halves.extend(batched.process_frames(frames[2..].to_vec(), Some(&model)));
+    let mut batched = pipeline();
+    let (first, second) = (
+        posed(&mut batched, &frames[..2]),
+        posed(&mut batched, &frames[2..]),
+    );
+    let mut halves = batched.process_frames(first, Some(&model));
+    halves.extend(batched.process_frames(second, Some(&model)));
     // Warm-up frames fill the window without results.
-    let mut warmed = Pipeline::new(&config).unwrap();
-    for frame in &frames[..3] {
-        warmed.warm_up(frame.clone());
+    let mut warmed = pipeline();
+    for frame in posed(&mut warmed, &frames[..3]) {
+        warmed.warm_up(frame);
     }
-    let after_warm_up = warmed.process_frames(frames[3..].to_vec(), Some(&model));
+    let rest = posed(&mut warmed, &frames[3..]);
+    let after_warm_up = warmed.process_frames(rest, Some(&model));
     assert_eq!(whole.len(), 6);
     assert_eq!(halves.len(), 6);
     let pairs = one_by_one

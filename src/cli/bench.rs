@@ -58,13 +58,7 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
         let out = &mut std::io::stdout().lock();
         print_tools_table(out, &selection.describe(), tools, tool_repeats)?;
     }
-    let report = benchmark(
-        &selection.source,
-        &selection.frames,
-        config,
-        &model,
-        repeats,
-    )?;
+    let report = benchmark(&selection, config, &model, repeats)?;
     if output.json {
         let mut fields =
             json!({"config": config, "model": model_json(&model, &model_name), "report": report});

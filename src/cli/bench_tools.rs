@@ -11,7 +11,7 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use travmap::drive::Selection;
-use travmap::io::Source;
+use travmap::io::Recording;
 use travmap::scoring::evaluation::Spread;
 use travmap::stopwatch::Stopwatch;
 
@@ -208,10 +208,10 @@ pub fn bench_tools(
     let all_cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let directory = TemporaryDirectory::create()?;
     let given = selection.source.path();
-    let given_kind = match selection.source {
-        Source::Kitti(..) => "kitti",
-        Source::Log(..) => "log",
-        Source::Scans(..) => "scans",
+    let given_kind = match selection.source.recording {
+        Recording::Kitti(..) => "kitti",
+        Recording::Log(..) => "log",
+        Recording::Scans(..) => "scans",
     };
     let frames = selection.source.frames_in(&selection.frames).len();
     let mut converted: Option<PathBuf> = None;

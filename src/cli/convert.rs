@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use travmap::io::Source;
+use travmap::io::Recording;
 use travmap::io::ros_drive::DriveOptions;
 use travmap::io::ros_drive::RosDrive;
 use travmap::outputs::conversion::{convert_kitti, convert_log};
@@ -81,12 +81,12 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
         false,
     )?;
     let selections = [selection];
-    let sequence = match &selections[0].source {
-        Source::Kitti(sequence, _) => sequence,
-        Source::Scans(..) => bail!(
+    let sequence = match &selections[0].source.recording {
+        Recording::Kitti(sequence) => sequence,
+        Recording::Scans(..) => bail!(
             "convert takes a KITTI sequence directory or a recorded log, not a folder of scans"
         ),
-        Source::Log(drive) => {
+        Recording::Log(drive) => {
             if args.frames.is_some() {
                 bail!("--frames applies to KITTI input; a log is converted whole");
             }

@@ -9,7 +9,6 @@ use clap::Args;
 use serde_json::json;
 use travmap::drive::Selection;
 use travmap::method::classifier::SvmModel;
-use travmap::method::fusion::DriveMap;
 use travmap::scoring::evaluation::{Evaluation, EvaluationReport};
 use travmap::scoring::metrics::Confusion;
 use travmap::scoring::metrics::Scores;
@@ -48,18 +47,17 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         let mut evaluation = Evaluation::default();
         let mut fused = Confusion::default();
         for selection in &selections {
-            let mut drive_map = DriveMap::new(config.grid.cell_size_m);
-            selection.run::<anyhow::Error>(config, Some(model), |result| {
-                bar.inc(1);
-                let seen = result
-                    .scan_sha256
-                    .as_deref()
-                    .is_some_and(|s| trained_on.contains(s));
-                *training_frames += (seen && result.ground_truth.is_some()) as usize;
-                evaluation.add(&result);
-                drive_map.add_result(&result);
-                Ok(())
-            })?;
+            let drive_map =
+                selection.run_mapped::<anyhow::Error>(config, Some(model), |result, _| {
+                    bar.inc(1);
+                    let seen = result
+                        .scan_sha256
+                        .as_deref()
+                        .is_some_and(|s| trained_on.contains(s));
+                    *training_frames += (seen && result.ground_truth.is_some()) as usize;
+                    evaluation.add(&result);
+                    Ok(())
+                })?;
             fused.merge(&Confusion::of_drive_map(&drive_map.cells()));
         }
         bar.finish();

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap::method::fusion::DriveMap;
 use travmap::outputs::drive_map::{render_drive_map, write_map_cells};
 use travmap::outputs::rendering::encode_png;
 use travmap::outputs::writing::write_atomically;
@@ -50,11 +49,9 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
         .open_one(config.appearance.enabled, "map takes one input")?;
     let selections = [selection];
     let bar = output.progress(frame_count(&selections), "mapping");
-    let mut map = DriveMap::new(config.grid.cell_size_m);
     let mut trajectory = Vec::new();
     let mut per_frame = Evaluation::default();
-    selections[0].run::<anyhow::Error>(config, Some(&model), |result| {
-        map.add_result(&result);
+    let map = selections[0].run_mapped::<anyhow::Error>(config, Some(&model), |result, _| {
         trajectory.push([result.sensor_in_world[0], result.sensor_in_world[1]]);
         per_frame.add(&result);
         bar.inc(1);

@@ -27,8 +27,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use travmap::Config;
 use travmap::drive::Selection;
-use travmap::io::Source;
 use travmap::io::ros_drive::DriveOptions;
+use travmap::io::{Recording, Source};
 use travmap::method::classifier::SvmModel;
 use travmap::outputs::preflight::{InputFiles, check_output_directory, check_output_file};
 use travmap::stopwatch::Stopwatch;
@@ -299,7 +299,7 @@ pub fn open_selection(
     read_images: bool,
 ) -> Result<Selection> {
     let mut source = Source::open(path, options, &|notice| eprintln!("notice: {notice}"))?;
-    if let Source::Kitti(..) = source {
+    if let Recording::Kitti(..) = source.recording {
         let mcap_only = [
             ("--cloud-topic", &options.cloud_topic),
             ("--world-frame", &options.world_frame),

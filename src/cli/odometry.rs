@@ -38,7 +38,7 @@ pub fn odometry(args: OdometryArgs) -> Result<Outcome> {
     let selection = args.inputs.open_one(false, "odometry takes one input")?;
     let selections = [selection];
     let bar = output.progress(frame_count(&selections), "registering");
-    let poses = selections[0].estimate_trajectory(&config.registration, || bar.inc(1))?;
+    let poses = selections[0].estimate_trajectory(&config, || bar.inc(1))?;
     let seconds = bar.finish();
     let format = match args.format {
         Format::Kitti => TrajectoryFormat::Kitti,

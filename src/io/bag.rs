@@ -15,10 +15,9 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use super::log::{Connection, LogMessage, map_file};
+use super::format::BAG_MAGIC;
+use super::log_message::{Connection, LogMessage, map_file};
 use crate::error::{Error, Result};
-
-pub const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
 
 /// Record opcodes (the `op` header field).
 mod op {
@@ -197,14 +196,14 @@ impl BagFile {
             path: path.to_path_buf(),
             problem,
         };
-        if !map.starts_with(MAGIC) {
+        if !map.starts_with(BAG_MAGIC) {
             return Err(container("not a ROS 1 bag of format 2.0".into()));
         }
-        let header = Record::at(&map, MAGIC.len()).map_err(container)?;
+        let header = Record::at(&map, BAG_MAGIC.len()).map_err(container)?;
         if header.op().map_err(container)? != op::BAG_HEADER {
             return Err(container(format!(
                 "the first record (byte {}) is not the bag header",
-                MAGIC.len()
+                BAG_MAGIC.len()
             )));
         }
         let index_pos = header.u64("index_pos").map_err(container)?;
@@ -515,7 +514,7 @@ mod tests {
             ],
             &[],
         );
-        [MAGIC.to_vec(), header, chunk].concat()
+        [BAG_MAGIC.to_vec(), header, chunk].concat()
     }
 
     fn open(bytes: &[u8]) -> Result<BagFile> {

@@ -38,10 +38,13 @@ impl InputFormat {
 /// What travmap reads, for the errors that refuse something else.
 pub const READABLE: &str = "travmap reads KITTI / SemanticKITTI sequence directories, MCAP files (ROS 2 or ROS 1 messages), ROS 1 bags (format 2.0), rosbag2 directories (sqlite3 or MCAP storage) and rosbag2 .db3 files";
 
+/// The first bytes of a ROS 1 bag of format 2.0.
+pub const BAG_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
+
 /// Formats known by their first bytes, readable (`Ok`) or named in a refusal (`Err`).
 const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
     (b"\x89MCAP0\r\n", Ok(InputFormat::Mcap)),
-    (super::bag::MAGIC, Ok(InputFormat::Bag)),
+    (BAG_MAGIC, Ok(InputFormat::Bag)),
     (b"SQLite format 3\0", Ok(InputFormat::Sqlite)),
     (
         b"#ROSBAG V1.",
@@ -125,6 +128,7 @@ fn unsupported(path: &Path, what: String) -> Error {
     Error::UnsupportedInput {
         path: path.to_path_buf(),
         what,
+        readable: READABLE,
     }
 }
 

@@ -10,12 +10,12 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Matrix4};
 
-use super::SkipLog;
 use super::image::decode_png;
 pub use super::kitti_text::{
     Calibration, parse_calibration, parse_poses, parse_times, read_calibration, read_poses,
     read_times,
 };
+use super::skips::SkipLog;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, RemissionScale};
 use crate::geometry::rigid;

@@ -9,61 +9,26 @@
 //! offset and order, float32 or float64 coordinates, extra fields, big-endian data,
 //! organised clouds; points with a non-finite coordinate are dropped.
 
-use std::collections::{BTreeMap, HashMap};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
-use serde::Deserialize;
 
-use super::Posing;
+use super::cloud::cloud_points;
 use super::image::image_pixels;
-use super::log::{Log, LogMessage};
-use crate::config::PoseSource;
-use crate::error::{CloudTopicProblem, Error, Result};
+use super::log::Log;
+pub use super::log_index::DriveOptions;
+use super::log_index::{CameraSource, HeaderOnly, LogIndex};
+use super::log_message::LogMessage;
+use super::ros::PointCloud2;
+use super::skips::SkipLog;
+use super::transforms::TransformTree;
+use crate::error::{Error, Result};
 use crate::frame::{CameraImage, Frame};
-use crate::io::cloud::cloud_points;
-use crate::io::ros::{Header, MessageEncoding, Odometry, PointCloud2, TfMessage, Transform};
-use crate::io::transforms::{TransformTree, isometry};
-
-const POINT_CLOUD: &str = "sensor_msgs/msg/PointCloud2";
-const TF_MESSAGE: &str = "tf2_msgs/msg/TFMessage";
-/// ROS 1's older `tf/tfMessage`: the same fields.
-const TF1_MESSAGE: &str = "tf/msg/tfMessage";
-const ODOMETRY: &str = "nav_msgs/msg/Odometry";
-const CAMERA_INFO: &str = "sensor_msgs/msg/CameraInfo";
-const COMPRESSED_IMAGE: &str = "sensor_msgs/msg/CompressedImage";
-const RAW_IMAGE: &str = "sensor_msgs/msg/Image";
+use crate::posing::{Posing, decide};
 
 /// An image is paired with a cloud when their stamps are at most this far apart.
 const IMAGE_PAIRING_NS: u64 = 50_000_000;
-
-/// What to read from the drive; everything found by itself when None.
-#[derive(Clone, Debug, Default)]
-pub struct DriveOptions {
-    pub cloud_topic: Option<String>,
-    pub world_frame: Option<String>,
-    /// The image topic (Image or CompressedImage) whose frame has a CameraInfo; found
-    /// by itself when there is exactly one.
-    pub camera_topic: Option<String>,
-    /// Where the clouds' poses come from.
-    pub poses: PoseSource,
-    /// Folders of scans: the rate stamps are made at when the file names are not
-    /// times (10 Hz when None).
-    pub rate_hz: Option<f64>,
-}
-
-/// The camera the appearance features come from.
-#[derive(Clone, Debug)]
-struct CameraSource {
-    topic: String,
-    compressed: bool,
-    encoding: MessageEncoding,
-    frame: String,
-    intrinsics: nalgebra::Matrix3<f64>,
-    /// Width and height the CameraInfo gives; images must match.
-    size: (u32, u32),
-}
 
 /// An opened drive.
 pub struct RosDrive {
@@ -78,284 +43,34 @@ pub struct RosDrive {
     stamps_ns: Vec<u64>,
     transforms: TransformTree,
     camera: Option<CameraSource>,
-    pub(super) skips: super::SkipLog,
-}
-
-/// Only the header of a message, decoded without the rest.
-#[derive(Deserialize)]
-struct HeaderOnly {
-    header: Header,
-}
-
-/// What one pass over a drive finds: topics, cloud stamps, transforms, cameras.
-#[derive(Default)]
-struct Contents {
-    /// Topic -> schema name, of every channel.
-    topics: BTreeMap<String, String>,
-    /// Cloud topic -> (frame, stamps).
-    cloud_stamps: HashMap<String, (String, Vec<u64>)>,
-    transforms: TransformTree,
-    /// Per camera frame: K and the image size (width, height).
-    intrinsics: HashMap<String, (nalgebra::Matrix3<f64>, (u32, u32))>,
-    /// Which recorded poses count (`--poses`).
-    poses: PoseSource,
-    /// Image topic -> (compressed, encoding, frame).
-    image_topics: BTreeMap<String, (bool, MessageEncoding, String)>,
-}
-
-impl Contents {
-    /// Takes note of one message of the drive at `path`.
-    fn add(&mut self, path: &Path, message: &LogMessage) -> Result<()> {
-        let connection = &message.connection;
-        let schema = connection.type_name();
-        self.topics
-            .entry(connection.topic.clone())
-            .or_insert_with(|| connection.schema_name.clone());
-        let problem = |problem: String| Error::UndecodableMessage {
-            path: path.to_path_buf(),
-            topic: connection.topic.clone(),
-            schema: connection.schema_name.clone(),
-            log_time_ns: message.log_time_ns,
-            problem,
-        };
-        let known = matches!(
-            schema.as_ref(),
-            POINT_CLOUD
-                | TF_MESSAGE
-                | TF1_MESSAGE
-                | ODOMETRY
-                | CAMERA_INFO
-                | COMPRESSED_IMAGE
-                | RAW_IMAGE
-        );
-        let encoding = match connection.encoding() {
-            Some(encoding) => encoding,
-            None if known => {
-                return Err(Error::LogEncoding {
-                    path: path.to_path_buf(),
-                    topic: connection.topic.clone(),
-                    schema: connection.schema_name.clone(),
-                    encoding: connection.message_encoding.clone(),
-                });
-            }
-            // Other channels are not the method's input.
-            None => return Ok(()),
-        };
-        let data = &message.data;
-        match schema.as_ref() {
-            POINT_CLOUD => {
-                let header: HeaderOnly = encoding.decode(data).map_err(problem)?;
-                let stamp = match header.header.stamp.to_ns() {
-                    0 => message.log_time_ns,
-                    ns => ns,
-                };
-                let entry = self
-                    .cloud_stamps
-                    .entry(connection.topic.clone())
-                    .or_insert_with(|| (header.header.frame_id.clone(), Vec::new()));
-                entry.1.push(stamp);
-            }
-            TF_MESSAGE | TF1_MESSAGE => {
-                let is_static = connection.topic == "/tf_static";
-                // The static chain (sensor mounts) counts whatever the pose source.
-                let dynamic = matches!(self.poses, PoseSource::Auto | PoseSource::Tf);
-                if !(is_static || dynamic) {
-                    return Ok(());
-                }
-                let tf: TfMessage = encoding.decode(data).map_err(problem)?;
-                for t in tf.transforms {
-                    let (parent, child) = (&t.header.frame_id, &t.child_frame_id);
-                    let pose = isometry(&t.transform)
-                        .map_err(|e| problem(format!("{parent} -> {child}: {e}")))?;
-                    self.transforms
-                        .add(parent, child, t.header.stamp.to_ns(), pose, is_static);
-                }
-            }
-            ODOMETRY if matches!(self.poses, PoseSource::Auto | PoseSource::Odometry) => {
-                let odometry: Odometry = encoding.decode(data).map_err(problem)?;
-                let pose = odometry.pose.pose;
-                let transform = Transform {
-                    translation: pose.position,
-                    rotation: pose.orientation,
-                };
-                let pose = isometry(&transform).map_err(|e| problem(e.to_string()))?;
-                self.transforms.add(
-                    &odometry.header.frame_id,
-                    &odometry.child_frame_id,
-                    odometry.header.stamp.to_ns(),
-                    pose,
-                    false,
-                );
-            }
-            CAMERA_INFO => {
-                let info: crate::io::ros::CameraInfo = encoding.decode(data).map_err(problem)?;
-                self.intrinsics
-                    .entry(info.header.frame_id.clone())
-                    .or_insert_with(|| {
-                        (
-                            nalgebra::Matrix3::from_row_slice(&info.k),
-                            (info.width, info.height),
-                        )
-                    });
-            }
-            COMPRESSED_IMAGE | RAW_IMAGE if !self.image_topics.contains_key(&connection.topic) => {
-                let header: HeaderOnly = encoding.decode(data).map_err(problem)?;
-                self.image_topics.insert(
-                    connection.topic.clone(),
-                    (schema == COMPRESSED_IMAGE, encoding, header.header.frame_id),
-                );
-            }
-            _ => {}
-        }
-        Ok(())
-    }
-
-    /// The PointCloud2 topic asked for, or the only one.
-    fn cloud_topic(&self, path: &Path, options: &DriveOptions) -> Result<String> {
-        let problem = match &options.cloud_topic {
-            Some(topic) if self.cloud_stamps.contains_key(topic) => return Ok(topic.clone()),
-            Some(topic) => CloudTopicProblem::NotFound(topic.clone()),
-            None => match self.cloud_stamps.keys().collect::<Vec<_>>().as_slice() {
-                [only] => return Ok((*only).clone()),
-                [] => CloudTopicProblem::None,
-                _ => CloudTopicProblem::Several,
-            },
-        };
-        Err(Error::LogCloudTopic {
-            path: path.to_path_buf(),
-            problem,
-            cloud_topics: self
-                .topics
-                .iter()
-                .filter(|(_, s)| *s == POINT_CLOUD)
-                .map(|(t, _)| t.clone())
-                .collect(),
-            all_topics: self
-                .topics
-                .iter()
-                .map(|(t, s)| format!("{t} ({s})"))
-                .collect(),
-        })
-    }
-
-    /// The camera: the image topic asked for, or the only one whose frame has a
-    /// CameraInfo; None without one.
-    fn camera(&self, options: &DriveOptions) -> Result<Option<CameraSource>, String> {
-        let source = |topic: &str, compressed: bool, encoding: MessageEncoding, frame: &str| {
-            let (k, size) = self
-                .intrinsics
-                .get(frame)
-                .ok_or_else(|| format!("no CameraInfo for frame `{frame}` of {topic}"))?;
-            Ok(Some(CameraSource {
-                topic: topic.to_string(),
-                compressed,
-                encoding,
-                frame: frame.to_string(),
-                intrinsics: *k,
-                size: *size,
-            }))
-        };
-        if let Some(topic) = &options.camera_topic {
-            let (compressed, encoding, frame) = self.image_topics.get(topic).ok_or_else(|| {
-                format!(
-                    "no Image or CompressedImage messages on {topic}; image topics: [{}]",
-                    self.image_topics
-                        .keys()
-                        .cloned()
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                )
-            })?;
-            return source(topic, *compressed, *encoding, frame);
-        }
-        let usable: Vec<(&String, &(bool, MessageEncoding, String))> = self
-            .image_topics
-            .iter()
-            .filter(|(_, (_, _, frame))| self.intrinsics.contains_key(frame))
-            .collect();
-        match usable.as_slice() {
-            [(topic, (compressed, encoding, frame))] => {
-                source(topic, *compressed, *encoding, frame)
-            }
-            _ => Ok(None),
-        }
-    }
+    pub(super) skips: SkipLog,
 }
 
 impl RosDrive {
-    /// Reads `log`'s topics, cloud stamps and transforms in one pass.
+    /// Reads `log`'s topics, cloud stamps and transforms in one pass
+    /// ([`LogIndex`]), and poses the clouds as [`decide`] says.
     pub fn open(log: Log, options: &DriveOptions) -> Result<Self> {
-        let path = log.path().to_path_buf();
-        let path = path.as_path();
-        let mut contents = Contents {
-            poses: options.poses,
-            ..Default::default()
-        };
-        for message in log.messages() {
-            contents.add(path, &message?)?;
-        }
-        contents.transforms.sort();
-        let cloud_topic = contents.cloud_topic(path, options)?;
-        let (cloud_frame, stamps_ns) = contents
-            .cloud_stamps
-            .remove(&cloud_topic)
-            .unwrap_or_default();
-        // The world is the root of the tree above the cloud's frame, unless named.
-        let root = contents
-            .transforms
-            .root_above(&cloud_frame)
-            .map_err(|problem| Error::Transform {
-                path: path.to_path_buf(),
-                problem,
-            })?;
-        let recorded = options.world_frame.is_some() || root != cloud_frame;
-        let posing = match options.poses {
-            PoseSource::Registration => Posing::Registration,
-            PoseSource::None => Posing::Alone,
-            PoseSource::Auto if !recorded => Posing::Registration,
-            PoseSource::Auto | PoseSource::Tf | PoseSource::Odometry if recorded => {
-                Posing::Recorded
-            }
-            source => {
-                return Err(Error::LogNoPose {
-                    path: path.to_path_buf(),
-                    frame: cloud_frame,
-                    pose_source: source.name(),
-                });
-            }
-        };
-        let notice = (options.poses == PoseSource::Auto && posing == Posing::Registration)
-            .then(|| {
-                format!(
-                    "{}: no recorded pose reaches the clouds' frame `{cloud_frame}`: poses estimated by scan registration (--poses to choose)",
-                    path.display()
-                )
-            });
-        let world_frame = match (&options.world_frame, posing) {
+        let index = LogIndex::read(&log, options)?;
+        let decision = decide(log.path(), options.poses, &index.pose_record(options))?;
+        let world_frame = match (&options.world_frame, decision.posing) {
             (Some(frame), _) => frame.clone(),
-            (None, Posing::Recorded) => root,
+            (None, Posing::Recorded) => index.root_frame,
             // Estimated poses: `map` is the first scan's frame.
             (None, Posing::Registration) => "map".to_string(),
-            (None, _) => cloud_frame.clone(),
+            (None, Posing::Alone) => index.cloud_frame.clone(),
         };
-        let camera = contents
-            .camera(options)
-            .map_err(|problem| Error::LogCamera {
-                path: path.to_path_buf(),
-                problem,
-            })?;
         Ok(Self {
-            path: path.to_path_buf(),
+            path: log.path().to_path_buf(),
             log,
-            posing,
-            notice,
-            cloud_topic,
-            cloud_frame,
+            posing: decision.posing,
+            notice: decision.notice,
+            cloud_topic: index.cloud_topic,
+            cloud_frame: index.cloud_frame,
             world_frame,
-            stamps_ns,
-            transforms: contents.transforms,
-            camera,
-            skips: super::SkipLog::default(),
+            stamps_ns: index.stamps_ns,
+            transforms: index.transforms,
+            camera: index.camera,
+            skips: SkipLog::default(),
         })
     }
 
@@ -466,7 +181,7 @@ impl RosDrive {
 
     /// The log's chunks as stored, when it is one MCAP file whose chunks hold every
     /// message (for passthrough without decoding).
-    pub fn stored(&self) -> Option<crate::io::mcap_records::StoredLog> {
+    pub fn stored(&self) -> Option<crate::io::mcap_stored::StoredLog> {
         self.log.stored()
     }
 

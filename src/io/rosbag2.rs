@@ -15,7 +15,7 @@ use rusqlite::{OpenFlags, params};
 use serde::Deserialize;
 
 use super::format::{InputFormat, detect};
-use super::log::{Connection, FileMessages, LogFile, LogMessage};
+use super::log_message::{Connection, FileMessages, LogMessage};
 use crate::error::{Error, Result};
 
 /// The part of `metadata.yaml` that says where the messages are.
@@ -35,10 +35,10 @@ struct Information {
     compression_mode: String,
 }
 
-/// A rosbag2 directory, its files opened in order.
+/// A rosbag2 directory: its storage files in order, each with its format (sqlite3
+/// or MCAP), for [`super::log`] to open.
 pub struct Rosbag2Directory {
-    pub files: Vec<LogFile>,
-    pub notices: Vec<String>,
+    pub storage: Vec<(PathBuf, InputFormat)>,
 }
 
 impl Rosbag2Directory {
@@ -63,7 +63,7 @@ impl Rosbag2Directory {
         if information.relative_file_paths.is_empty() {
             return Err(problem("it lists no storage files".into()));
         }
-        let mut files = Vec::new();
+        let mut storage = Vec::new();
         for relative in &information.relative_file_paths {
             let path = directory.join(relative);
             if !path.exists() {
@@ -79,12 +79,9 @@ impl Rosbag2Directory {
                     information.storage_identifier
                 )));
             }
-            files.push(LogFile::open(&path, format)?);
+            storage.push((path, format));
         }
-        Ok(Self {
-            files,
-            notices: Vec::new(),
-        })
+        Ok(Self { storage })
     }
 }
 

@@ -8,10 +8,10 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
 
-use super::SkipLog;
 use super::cloud::cloud_points;
 use super::kitti::{drop_non_finite, parse_scan};
 use super::pcd::parse_pcd;
+use super::skips::SkipLog;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, RemissionScale};
 
@@ -107,7 +107,7 @@ impl ScanFolder {
             files,
             stamps_ns,
             notice: format!(
-                "{}: a folder of {} scans with no poses; {notice}",
+                "{}: a folder of {} scans; {notice}",
                 dir.display(),
                 match format {
                     ScanFormat::Pcd => "PCD",

@@ -6,6 +6,7 @@ use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
+pub use crate::error::TransformError;
 use crate::io::ros::Transform;
 
 /// A transform sample is used up to this far past either end of its edge's record.
@@ -13,35 +14,6 @@ const EXTRAPOLATION_NS: u64 = 100_000_000;
 
 /// More frames than any real transform tree stacks: a longer chain is a cycle.
 const MAX_DEPTH: usize = 64;
-
-/// Why a pose could not be had from the tree.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum TransformError {
-    #[error(
-        "no transform {parent} -> {child} near {stamp_ns} ns (recorded {first_ns}..{last_ns} ns)"
-    )]
-    NoSample {
-        parent: String,
-        child: String,
-        stamp_ns: u64,
-        first_ns: u64,
-        last_ns: u64,
-    },
-    #[error("the transform tree above {frame} has a cycle")]
-    Cycle { frame: String },
-    #[error(
-        "transform ({x}, {y}, {z}), rotation (w {qw}, x {qx}, y {qy}, z {qz}): expected finite values and a unit quaternion"
-    )]
-    NotRigid {
-        x: f64,
-        y: f64,
-        z: f64,
-        qw: f64,
-        qx: f64,
-        qy: f64,
-        qz: f64,
-    },
-}
 
 /// Parent and transform samples of one frame in the transform tree.
 #[derive(Clone, Debug, Default)]

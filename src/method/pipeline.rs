@@ -1,8 +1,8 @@
 //! The method in order. [`Pipeline::process_frames`] calls every stage, one comment
 //! per step; the [`IntegrationWindow`] and the colour memory are the state carried
-//! from frame to frame, with the registration's map when poses are estimated
-//! ([`Pipeline::register`], which runs before a frame is processed: it is sequential
-//! by nature and may refuse a frame).
+//! from frame to frame, with the registration's map when poses are estimated. Stage
+//! 0, posing ([`Pipeline::pose`]), runs on each frame in order before it is
+//! processed: registration is sequential by nature and may refuse a frame.
 //!
 //! Frames are processed in batches of consecutive frames (one frame is a batch of
 //! one): the grid, the geometric features and the image's votes of a frame need no
@@ -14,7 +14,7 @@ use nalgebra::Isometry3;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::config::{Config, RegistrationConfig};
+use crate::config::Config;
 use crate::error::Result;
 use crate::frame::{CameraImage, Frame, RemissionScale};
 use crate::method::appearance::{AppearanceVoter, ColourMemory, FrameVotes};
@@ -25,6 +25,7 @@ use crate::method::grid::{CellClass, CellPoints, GridLayout, grid_points};
 use crate::method::ground_truth::GroundTruth;
 use crate::method::integration::{IntegrationWindow, WorldScan, ground_normal, scan_to_world};
 use crate::method::registration::{Odometry, RegistrationError};
+use crate::posing::Posing;
 use crate::stopwatch::timed;
 
 /// Wall time of each stage for one frame, milliseconds.
@@ -90,18 +91,43 @@ impl FrameResult {
     }
 }
 
+/// A frame posed by the pipeline's posing stage ([`Pipeline::pose`]), ready for the
+/// others.
+pub struct Posed {
+    frame: Frame,
+    register_ms: f64,
+}
+
+impl Posed {
+    pub fn index(&self) -> usize {
+        self.frame.index
+    }
+
+    pub fn world_from_velodyne(&self) -> Isometry3<f64> {
+        self.frame.world_from_velodyne
+    }
+
+    /// The registration's time, ms (0 when the pose was not estimated).
+    pub fn register_ms(&self) -> f64 {
+        self.register_ms
+    }
+}
+
 /// What a frame brings besides its scan, set aside while the scan is integrated.
 struct FrameExtras {
     world_from_velodyne: Isometry3<f64>,
+    register_ms: f64,
     remission: RemissionScale,
     camera: Option<CameraImage>,
     dropped_points: usize,
     integrate_ms: f64,
 }
 
-/// The stages, built once from a validated configuration, and the state carried
-/// from frame to frame: the scan window and the colour memory.
+/// The stages, built once from a validated configuration and the source's posing,
+/// and the state carried from frame to frame: the scan window, the colour memory and
+/// the registration's map.
 pub struct Pipeline {
+    posing: Posing,
     window: IntegrationWindow,
     colours: ColourMemory,
     features: FeatureExtractor,
@@ -113,15 +139,22 @@ pub struct Pipeline {
     use_reduced_set: bool,
     /// Feature groups configured.
     feature_groups: usize,
-    /// Scan registration, when the poses are to be estimated.
+    /// Scan registration, when the poses are estimated.
     registration: Option<Odometry>,
 }
 
 impl Pipeline {
-    pub fn new(config: &Config) -> Result<Self> {
+    /// The pipeline for scans posed as `posing` says: each scan alone has nothing to
+    /// be integrated with (a window of one), estimated poses need the registration.
+    pub fn new(config: &Config, posing: Posing) -> Result<Self> {
         config.validate()?;
+        let scans = match posing {
+            Posing::Alone => 1,
+            Posing::Recorded | Posing::Registration => config.integration.scans,
+        };
         Ok(Self {
-            window: IntegrationWindow::new(config.integration.scans),
+            posing,
+            window: IntegrationWindow::new(scans),
             colours: ColourMemory::default(),
             features: FeatureExtractor {
                 config: config.features.clone(),
@@ -141,25 +174,26 @@ impl Pipeline {
             cells_per_side: config.grid.cells_per_side(),
             use_reduced_set: config.classifier.use_reduced_set,
             feature_groups: config.features.groups.len(),
-            registration: None,
+            registration: (posing == Posing::Registration)
+                .then(|| Odometry::new(config.registration.clone())),
         })
     }
 
-    /// Estimate each frame's pose by registering its scan against the ones before
-    /// ([`Self::register`]) instead of trusting the pose it comes with.
-    pub fn estimate_poses(&mut self, config: &RegistrationConfig) {
-        self.registration = Some(Odometry::new(config.clone()));
-    }
-
-    /// Stage 0b, registration: poses `frame` by its scan when poses are estimated
-    /// (frames in order, warm-up frames included). Returns the time it took, ms.
-    pub fn register(&mut self, frame: &mut Frame) -> Result<f64, RegistrationError> {
-        let Some(odometry) = &mut self.registration else {
-            return Ok(0.0);
-        };
-        let (pose, register_ms) = timed(|| odometry.register(&frame.points_in_velodyne));
-        frame.world_from_velodyne = pose?;
-        Ok(register_ms)
+    /// Stage 0, posing: the frame's pose as the source's posing says: its own, the
+    /// registration's estimate (frames in order, warm-up frames included; a scan
+    /// that does not register is refused), or none (each scan in its own frame).
+    pub fn pose(&mut self, mut frame: Frame) -> Result<Posed, RegistrationError> {
+        let mut register_ms = 0.0;
+        match (self.posing, &mut self.registration) {
+            (Posing::Alone, _) => frame.world_from_velodyne = Isometry3::identity(),
+            (Posing::Registration, Some(odometry)) => {
+                let pose;
+                (pose, register_ms) = timed(|| odometry.register(&frame.points_in_velodyne));
+                frame.world_from_velodyne = pose?;
+            }
+            _ => {}
+        }
+        Ok(Posed { frame, register_ms })
     }
 
     /// The scan window, to ask which frames fill it.
@@ -169,35 +203,45 @@ impl Pipeline {
 
     /// Stage 1 alone, for a frame before the first one wanted: its scan joins the
     /// window so that the next frames integrate it. Returns the time it took, ms.
-    pub fn warm_up(&mut self, frame: Frame) -> f64 {
-        self.start_afresh_before(frame.index);
-        let (scan, integrate_ms) = timed(|| scan_to_world(frame));
+    pub fn warm_up(&mut self, posed: Posed) -> f64 {
+        self.start_afresh_before(posed.frame.index);
+        let (scan, integrate_ms) = timed(|| scan_to_world(posed.frame));
         self.window.extend([scan]);
         self.window.forget_old();
         integrate_ms
     }
 
-    /// Runs the method on one frame; `model` None skips classification and filter.
-    pub fn process_frame(&mut self, frame: Frame, model: Option<&SvmModel>) -> FrameResult {
-        let mut results = self.process_frames(vec![frame], model);
-        results.pop().expect("one result per frame")
+    /// Runs the method on one frame, posing it first; `model` None skips
+    /// classification and filter.
+    pub fn process_frame(
+        &mut self,
+        frame: Frame,
+        model: Option<&SvmModel>,
+    ) -> Result<FrameResult, RegistrationError> {
+        let posed = self.pose(frame)?;
+        let mut results = self.process_frames(vec![posed], model);
+        Ok(results.pop().expect("one result per frame"))
     }
 
     /// Runs the method on consecutive frames (ascending indices), in parallel where
     /// the method allows; the results are those of [`Self::process_frame`] frame by frame.
     pub fn process_frames(
         &mut self,
-        mut frames: Vec<Frame>,
+        posed: Vec<Posed>,
         model: Option<&SvmModel>,
     ) -> Vec<FrameResult> {
-        let Some(first) = frames.first() else {
+        let Some(first) = posed.first() else {
             return Vec::new();
         };
-        self.start_afresh_before(first.index);
+        self.start_afresh_before(first.index());
+        let (mut frames, register_ms): (Vec<Frame>, Vec<f64>) =
+            posed.into_iter().map(|p| (p.frame, p.register_ms)).unzip();
         let extras: Vec<FrameExtras> = frames
             .iter_mut()
-            .map(|f| FrameExtras {
+            .zip(register_ms)
+            .map(|(f, register_ms)| FrameExtras {
                 world_from_velodyne: f.world_from_velodyne,
+                register_ms,
                 remission: f.remission,
                 camera: f.camera.take(),
                 dropped_points: f.dropped_points,
@@ -257,6 +301,7 @@ impl Pipeline {
     fn observe(&self, window: &[WorldScan], extras: FrameExtras) -> Observation {
         let current = &window[window.len() - 1];
         let mut timings = StageTimings {
+            register_ms: extras.register_ms,
             integrate_ms: extras.integrate_ms,
             ..StageTimings::default()
         };

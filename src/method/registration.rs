@@ -24,6 +24,7 @@ use std::hash::{BuildHasherDefault, Hasher};
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, UnitQuaternion, Vector3, Vector6};
 
 pub use crate::config::RegistrationConfig;
+pub use crate::error::{Divergence, RegistrationError, RegistrationStats};
 
 /// Fewest points a scan must keep for registration after range filtering and
 /// downsampling. Six fix a pose in theory; a hundred keep a lone wall from trying.
@@ -31,49 +32,6 @@ pub const MIN_POINTS: usize = 100;
 /// Fewest registered points that must end with a map point within the gate, as a
 /// fraction. Consecutive KITTI scans match 97%; a scan 100 m off 12%, noise 11%.
 const MIN_MATCHED_FRACTION: f64 = 0.25;
-
-/// Why a registration was rejected.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
-pub enum Divergence {
-    #[error("ICP did not converge")]
-    NotConverged,
-    /// The scan is not where the prediction put it, or not of this place.
-    #[error("too few points match the map")]
-    LostMap,
-    /// No correspondence within the gate at the start supports a walk that long.
-    #[error("the estimate moved the points farther than the gate")]
-    JumpTooLarge,
-    /// The correspondences do not fix all six degrees of freedom.
-    #[error("the correspondences do not fix the pose")]
-    Degenerate,
-}
-
-/// What one registration saw.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct RegistrationStats {
-    /// Points registered, after range filtering and downsampling.
-    pub points: usize,
-    /// Of those, with a map point within the gate at the last iteration.
-    pub matched: usize,
-    pub iterations: usize,
-    /// The correspondence gate, three times the adaptive threshold, metres.
-    pub gate_m: f64,
-    /// RMS distance the points moved from the predicted pose to the estimate, metres.
-    pub shift_m: f64,
-}
-
-/// A scan that could not be registered: the odometry is as it was, but for the next
-/// prediction, which spans the refused scan.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum RegistrationError {
-    #[error("{points} points left to register after filtering, at least {needed} needed")]
-    TooFewPoints { points: usize, needed: usize },
-    #[error("scan registration diverged: {cause} ({seen:?})")]
-    Diverged {
-        cause: Divergence,
-        seen: RegistrationStats,
-    },
-}
 
 /// Scan-to-map odometry over a sequence of scans.
 pub struct Odometry {

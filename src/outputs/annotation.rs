@@ -20,13 +20,12 @@ use serde::Serialize;
 use crate::config::Config;
 use crate::drive::Selection;
 use crate::error::{Error, Result};
+use crate::io::Recording;
 use crate::io::ros::{
     FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion,
     TfMessage, Time, TransformStamped, Vector3, datatype,
 };
-use crate::io::{Posing, Source};
 use crate::method::classifier::SvmModel;
-use crate::method::fusion::DriveMap;
 use crate::method::grid::CellClass;
 use crate::method::pipeline::FrameResult;
 use crate::outputs::conversion::{
@@ -34,6 +33,7 @@ use crate::outputs::conversion::{
 };
 use crate::outputs::drive_map::occupancy_grid;
 use crate::outputs::writing::{Compression, McapSink};
+use crate::posing::Posing;
 use crate::scoring::evaluation::{Evaluation, EvaluationReport};
 use crate::scoring::metrics::Confusion;
 
@@ -178,8 +178,8 @@ pub fn annotate(
 ) -> Result<AnnotationSummary> {
     let mut sink = McapSink::create(output, options.compression)?;
     let mut passthrough_messages = 0;
-    let world_frame = match &selection.source {
-        Source::Kitti(sequence, _) => {
+    let world_frame = match &selection.source.recording {
+        Recording::Kitti(sequence) => {
             if options.passthrough {
                 let written =
                     write_kitti_frames(&mut sink, sequence, &selection.frames, 0, &|| {})?;
@@ -187,7 +187,7 @@ pub fn annotate(
             }
             MAP_FRAME.to_string()
         }
-        Source::Log(drive) => {
+        Recording::Log(drive) => {
             if options.passthrough {
                 passthrough_messages =
                     write_log_messages(&mut sink, drive, true, &|_, _| {})?.messages;
@@ -195,18 +195,18 @@ pub fn annotate(
             drive.world_frame().to_string()
         }
         // A folder of scans has no messages to pass through.
-        Source::Scans(..) => MAP_FRAME.to_string(),
+        Recording::Scans(..) => MAP_FRAME.to_string(),
     };
     let posing = selection.source.posing();
     // Estimated poses go on /tf, unless passthrough writes KITTI's recorded ones there.
-    let kitti_tf = matches!(selection.source, Source::Kitti(..)) && options.passthrough;
+    let kitti_tf =
+        matches!(selection.source.recording, Recording::Kitti(..)) && options.passthrough;
     let write_estimated_tf = posing == Posing::Registration && !kitti_tf;
     let sensor_frame = selection.source.sensor_frame().to_string();
     let mut evaluation = Evaluation::default();
     let mut frames = 0;
-    let mut drive_map = DriveMap::new(config.grid.cell_size_m);
     let mut last_stamp_ns = 0;
-    selection.run::<Error>(config, Some(model), |result| {
+    let drive_map = selection.run_mapped::<Error>(config, Some(model), |result, drive_map| {
         let classes = result.filtered.as_deref().unwrap_or(&[]);
         let stamp = result.stamp_ns;
         if write_estimated_tf {
@@ -245,7 +245,6 @@ pub fn annotate(
             &metrics_message(&result, classes, &world_frame),
         )?;
         evaluation.add(&result);
-        drive_map.add_result(&result);
         last_stamp_ns = stamp;
         frames += 1;
         if frames % DRIVE_MAP_EVERY == 0 {
@@ -272,12 +271,7 @@ pub fn annotate(
         sink.write(DRIVE_MAP_TOPIC, last_stamp_ns, &grid)?;
     }
     let mut metadata = metadata;
-    let poses = match posing {
-        Posing::Recorded => "recorded",
-        Posing::Registration => "estimated by scan registration",
-        Posing::Alone => "none: each scan alone",
-    };
-    metadata.insert("poses".into(), poses.into());
+    metadata.insert("poses".into(), posing.describe().into());
     let skipped = selection.source.skipped();
     if !skipped.is_empty() {
         // serde_json cannot fail on a list of plain structs.

@@ -16,7 +16,7 @@ use std::thread::JoinHandle;
 use bytes::Bytes;
 use mcap::records::op;
 
-use crate::io::mcap_records::{Release, StoredChunk};
+use crate::io::mcap_stored::{Release, StoredChunk};
 use crate::outputs::writing::Compression;
 
 const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
@@ -894,7 +894,7 @@ mod tests {
     #[test]
     fn copied_chunks_are_indexed_beside_new_ones() {
         let input = Bytes::from(write_file(Compression::Zstd, 2000));
-        let mut stored = crate::io::mcap_records::stored_log(&input).expect("copyable");
+        let mut stored = crate::io::mcap_stored::stored_log(&input).expect("copyable");
         assert_eq!(stored.messages(), 50);
         let mut writer =
             McapWriter::new(Vec::new(), "ros2", "test", Compression::Zstd, 2000, 1).unwrap();

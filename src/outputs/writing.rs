@@ -16,7 +16,7 @@ use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
 use crate::error::{Error, Result};
-use crate::io::mcap_records::{StoredChunk, StoredLog};
+use crate::io::mcap_stored::{StoredChunk, StoredLog};
 use crate::io::ros::{RosMessage, encode};
 use crate::outputs::mcap_writer::{FinishedChunk, McapWriter};
 

@@ -3,16 +3,12 @@
 //! into memory first, so the stage figures measure the method, not the disk.
 //! Everything is repeated and reported as medians: shared machines are noisy.
 
-use std::ops::Range;
-
 use serde::Serialize;
 
 use crate::config::Config;
+use crate::drive::Selection;
 use crate::error::{Error, Result};
-use crate::frame::Frame;
-use crate::io::Source;
 use crate::method::classifier::SvmModel;
-use crate::method::pipeline::{Pipeline, StageTimings};
 use crate::method::registration::Odometry;
 use crate::scoring::evaluation::{Spread, TimingReport};
 use crate::stopwatch::{Stopwatch, timed};
@@ -60,25 +56,21 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool> {
         })
 }
 
-/// Benchmarks `frames` of `sequence`, each measurement repeated `repeats` times.
+/// Benchmarks the selected frames, each measurement repeated `repeats` times. The
+/// frames are read once; every run then goes through the selection as every command
+/// does ([`Selection::run_loaded`]), posed as its source says.
 pub fn benchmark(
-    source: &Source,
-    frames: &Range<usize>,
+    selection: &Selection,
     config: &Config,
     model: &SvmModel,
     repeats: usize,
 ) -> Result<BenchmarkReport> {
-    let indices = source.frames_in(frames);
-    let first_timed = Pipeline::new(config)?
+    let indices = selection.source.frames_in(&selection.frames);
+    let first_timed = selection
+        .pipeline(config)?
         .window()
         .first_full(indices.first().copied().unwrap_or(0));
-    let mut read_ms = Vec::new();
-    let mut loaded: Vec<Frame> = Vec::new();
-    let mut reading = Stopwatch::start();
-    for frame in source.read(frames) {
-        loaded.push(frame?);
-        read_ms.push(reading.lap_ms());
-    }
+    let loaded = selection.load(config)?;
     let timed_frames = indices.iter().filter(|&&i| i >= first_timed).count();
     if timed_frames == 0 {
         return Err(Error::TooFewFrames {
@@ -86,23 +78,19 @@ pub fn benchmark(
             needed: config.integration.scans,
         });
     }
+    let first = selection.frames.start;
 
     // Stage latency: one frame at a time on one thread.
     let (mut timings, mut cells, mut points) = (Vec::new(), Vec::new(), Vec::new());
     pool(1)?.install(|| {
         for _ in 0..repeats.max(1) {
-            let mut sequential = Pipeline::new(config)?;
-            for (frame, &read) in loaded.iter().zip(&read_ms) {
-                let result = sequential.process_frame(frame.clone(), Some(model));
+            selection.run_loaded(&loaded, first, config, Some(model), 1, |result| {
                 if result.index >= first_timed {
-                    timings.push(StageTimings {
-                        read_ms: read,
-                        ..result.timings
-                    });
+                    timings.push(result.timings);
                     cells.push(result.features.predictable.iter().filter(|p| **p).count() as f64);
                     points.push(result.cells.points_in_grid.len() as f64);
                 }
-            }
+            })?;
         }
         Ok::<(), Error>(())
     })?;
@@ -115,7 +103,7 @@ pub fn benchmark(
     pool(1)?.install(|| {
         for _ in 0..repeats.max(1) {
             let mut odometry = Odometry::new(config.registration.clone());
-            for (i, frame) in loaded.iter().enumerate() {
+            for (i, (frame, _)) in loaded.iter().enumerate() {
                 let (pose, ms) = timed(|| odometry.register(&frame.points_in_velodyne));
                 if pose.is_err() {
                     registration_lost += 1;
@@ -128,20 +116,23 @@ pub fn benchmark(
         }
     });
 
-    // Throughput: the whole selection with rayon across frames.
+    // Throughput: the timed frames in batches, with rayon across frames.
+    let batch_size = |threads: usize| (2 * threads).clamp(1, 16);
     let throughput = |threads: usize| -> Result<Throughput> {
         let mut rates = Vec::new();
         pool(threads)?.install(|| {
             for _ in 0..repeats.max(1) {
-                let (warm_up, timed): (Vec<Frame>, Vec<Frame>) =
-                    loaded.iter().cloned().partition(|f| f.index < first_timed);
                 let watch = Stopwatch::start();
-                let mut pipeline = Pipeline::new(config)?;
-                for frame in warm_up {
-                    pipeline.warm_up(frame);
-                }
-                let results = pipeline.process_frames(timed, Some(model));
-                rates.push(results.len() as f64 / (watch.elapsed_ms() * 1e-3));
+                let mut frames = 0;
+                selection.run_loaded(
+                    &loaded,
+                    first_timed,
+                    config,
+                    Some(model),
+                    batch_size(threads),
+                    |_| frames += 1,
+                )?;
+                rates.push(frames as f64 / (watch.elapsed_ms() * 1e-3));
             }
             Ok::<(), Error>(())
         })?;
@@ -157,7 +148,7 @@ pub fn benchmark(
         repeats: repeats.max(1),
         mean_points_per_scan: loaded
             .iter()
-            .map(|f| f.points_in_velodyne.len() as f64)
+            .map(|(f, _)| f.points_in_velodyne.len() as f64)
             .sum::<f64>()
             / loaded.len() as f64,
         predictable_cells: Spread::of(&cells).median,

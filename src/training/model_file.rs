@@ -94,6 +94,8 @@ impl SvmModel {
                 source_name: source_name.to_string(),
                 format: format.unwrap_or("none").to_string(),
                 version: version.map_or("none".into(), |v| v.to_string()),
+                expected_format: MODEL_FORMAT,
+                expected_version: MODEL_VERSION,
             });
         }
         let mut header = header;

@@ -1,0 +1,176 @@
+//! A drive to read, whatever holds it, told apart by content ([`super::format`]), and
+//! posed once by [`crate::posing::decide`].
+
+use std::ops::Range;
+use std::path::Path;
+
+use super::format;
+use super::kitti::KittiSequence;
+use super::log::Log;
+use super::ros_drive::{DriveOptions, RosDrive};
+use super::scan_folder::ScanFolder;
+use super::skips::{Skip, SkipLog};
+use crate::error::Result;
+use crate::frame::Frame;
+use crate::posing::{PoseRecord, Posing, decide};
+
+/// What holds a drive: a KITTI sequence directory, a recorded ROS log or a folder of
+/// scans.
+pub enum Recording {
+    Kitti(Box<KittiSequence>),
+    Log(Box<RosDrive>),
+    Scans(Box<ScanFolder>),
+}
+
+/// A drive to read, and how its scans are posed.
+pub struct Source {
+    pub recording: Recording,
+    posing: Posing,
+}
+
+impl Source {
+    /// The drive at `path`, of the format its content says ([`format::detect`]),
+    /// posed as [`decide`] says. `on_notice` hears what the reader noticed and worked
+    /// around (an unindexed bag, poses estimated, ...) as soon as it is known, before
+    /// anything can fail later.
+    pub fn open(path: &Path, options: &DriveOptions, on_notice: &dyn Fn(&str)) -> Result<Self> {
+        let (recording, record) = match format::detect(path)? {
+            format::InputFormat::Kitti if ScanFolder::holds_scans(path) => {
+                let folder = ScanFolder::open(path, options.rate_hz)?;
+                on_notice(folder.notice());
+                let record = PoseRecord::Missing("a folder of scans records no poses".into());
+                (Recording::Scans(Box::new(folder)), record)
+            }
+            format::InputFormat::Kitti => {
+                let sequence = KittiSequence::open(path)?;
+                (Recording::Kitti(Box::new(sequence)), PoseRecord::Reaches)
+            }
+            format => {
+                let log = Log::open(path, format)?;
+                log.notices().iter().for_each(|notice| on_notice(notice));
+                // A log's poses depend on its transform tree: the drive decides as it opens.
+                let drive = RosDrive::open(log, options)?;
+                drive.notice().into_iter().for_each(on_notice);
+                let posing = drive.posing();
+                return Ok(Self {
+                    recording: Recording::Log(Box::new(drive)),
+                    posing,
+                });
+            }
+        };
+        let decision = decide(path, options.poses, &record)?;
+        decision.notice.as_deref().into_iter().for_each(on_notice);
+        Ok(Self {
+            recording,
+            posing: decision.posing,
+        })
+    }
+
+    /// The frame the scans are in, as written to MCAP (`header.frame_id`).
+    pub fn sensor_frame(&self) -> &str {
+        match &self.recording {
+            Recording::Kitti(..) => "velodyne",
+            Recording::Log(drive) => drive.cloud_frame(),
+            Recording::Scans(..) => super::scan_folder::SENSOR_FRAME,
+        }
+    }
+
+    /// How the scans are posed.
+    pub fn posing(&self) -> Posing {
+        self.posing
+    }
+
+    /// See [`KittiSequence::set_read_images`].
+    pub fn set_read_images(&mut self, read_images: bool) {
+        if let Recording::Kitti(sequence) = &mut self.recording {
+            sequence.set_read_images(read_images);
+        }
+    }
+
+    /// Skip (and record) frames whose input is unreadable instead of stopping.
+    pub fn set_keep_going(&mut self, keep_going: bool) {
+        *self.skip_log_mut() = SkipLog::new(keep_going);
+    }
+
+    fn skip_log_mut(&mut self) -> &mut SkipLog {
+        match &mut self.recording {
+            Recording::Kitti(sequence) => &mut sequence.skips,
+            Recording::Log(drive) => &mut drive.skips,
+            Recording::Scans(folder) => &mut folder.skips,
+        }
+    }
+
+    /// Where unreadable frames (and frames a later stage cannot use) are recorded.
+    pub fn skip_log(&self) -> &SkipLog {
+        match &self.recording {
+            Recording::Kitti(sequence) => &sequence.skips,
+            Recording::Log(drive) => &drive.skips,
+            Recording::Scans(folder) => &folder.skips,
+        }
+    }
+
+    /// The frames skipped so far.
+    pub fn skipped(&self) -> Vec<Skip> {
+        self.skip_log().skipped()
+    }
+
+    pub fn path(&self) -> &Path {
+        match &self.recording {
+            Recording::Kitti(s) => s.dir(),
+            Recording::Log(d) => d.path(),
+            Recording::Scans(f) => f.dir(),
+        }
+    }
+
+    /// Frame numbers in `range`, ascending.
+    pub fn frames_in(&self, range: &Range<usize>) -> Vec<usize> {
+        match &self.recording {
+            Recording::Kitti(s) => s.frames_in(range),
+            Recording::Log(d) => {
+                (range.start.min(d.frame_count())..range.end.min(d.frame_count())).collect()
+            }
+            Recording::Scans(f) => f.frames_in(range),
+        }
+    }
+
+    /// All frame numbers, ascending.
+    pub fn frames(&self) -> Vec<usize> {
+        self.frames_in(&(0..usize::MAX))
+    }
+
+    /// The frames in `range`, in order. With `--keep-going` (see
+    /// [`Source::set_keep_going`]) an unreadable frame is recorded and left out;
+    /// otherwise its error ends the run.
+    pub fn read<'a>(
+        &'a self,
+        range: &Range<usize>,
+    ) -> Box<dyn Iterator<Item = Result<Frame>> + 'a> {
+        match &self.recording {
+            Recording::Kitti(sequence) => Box::new(frame_by_frame(
+                sequence.frames_in(range),
+                &sequence.skips,
+                |index| sequence.read_frame(index),
+            )),
+            Recording::Log(drive) => Box::new(drive.read(range)),
+            Recording::Scans(folder) => Box::new(frame_by_frame(
+                folder.frames_in(range),
+                &folder.skips,
+                |index| folder.read_frame(index),
+            )),
+        }
+    }
+}
+
+/// Frames read one file at a time; unreadable ones go to `skips`.
+fn frame_by_frame<'a>(
+    frames: Vec<usize>,
+    skips: &'a SkipLog,
+    read: impl Fn(usize) -> Result<Frame> + 'a,
+) -> impl Iterator<Item = Result<Frame>> + 'a {
+    frames
+        .into_iter()
+        .filter_map(move |index| match read(index) {
+            Ok(frame) => Some(Ok(frame)),
+            Err(error) => skips.handle(index, error).err().map(Err),
+        })
+}
