@@ -9,6 +9,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 
+mod registration;
+mod training;
+
+pub use registration::{PoseSource, RegistrationConfig};
+pub use training::{ClassWeights, Criterion, TrainingConfig};
+
 /// Every tunable of the method, one section per stage.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -56,107 +62,6 @@ pub struct IntegrationConfig {
     pub scans: usize,
     /// Where each scan's pose comes from (default `auto`).
     pub poses: PoseSource,
-}
-
-/// Where the scans' poses come from.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum PoseSource {
-    /// The input's recorded poses (KITTI `poses.txt`, a log's /tf or Odometry) when
-    /// they reach the scans' frame, else registration, said in a notice.
-    #[default]
-    Auto,
-    /// A log's /tf and /tf_static only (KITTI: `poses.txt`).
-    Tf,
-    /// A log's `nav_msgs/Odometry` (with /tf_static) only (KITTI: `poses.txt`).
-    Odometry,
-    /// Estimated by scan registration, whatever the input records.
-    Registration,
-    /// None: each scan alone (integration of 1 scan).
-    None,
-}
-
-impl PoseSource {
-    pub fn name(self) -> &'static str {
-        match self {
-            PoseSource::Auto => "auto",
-            PoseSource::Tf => "tf",
-            PoseSource::Odometry => "odometry",
-            PoseSource::Registration => "registration",
-            PoseSource::None => "none",
-        }
-    }
-}
-
-/// Scan registration (`--poses registration`, `method/registration.rs`); the
-/// defaults are KISS-ICP 1.3's.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct RegistrationConfig {
-    /// Farther points are dropped, and map voxels farther from the sensor, metres
-    /// (default 100).
-    pub max_range_m: f64,
-    /// Nearer points are dropped, metres (default 0).
-    pub min_range_m: f64,
-    /// Side of a map voxel, metres; 0 means max_range_m / 100 (default 0).
-    pub voxel_size_m: f64,
-    /// Points kept per map voxel (default 20).
-    pub max_points_per_voxel: usize,
-    /// Adaptive threshold before any motion has been seen, metres (default 2).
-    pub initial_threshold_m: f64,
-    /// Deviations from the prediction below this leave the threshold alone, metres
-    /// (default 0.1).
-    pub min_motion_m: f64,
-    /// ICP stops when its update, metres and radians as one 6-vector, is shorter
-    /// (default 1e-4).
-    pub convergence: f64,
-    /// ICP iterations after which the registration counts as diverged (default 500).
-    pub max_iterations: usize,
-}
-
-impl Default for RegistrationConfig {
-    fn default() -> Self {
-        Self {
-            max_range_m: 100.0,
-            min_range_m: 0.0,
-            voxel_size_m: 0.0,
-            max_points_per_voxel: 20,
-            initial_threshold_m: 2.0,
-            min_motion_m: 0.1,
-            convergence: 1e-4,
-            max_iterations: 500,
-        }
-    }
-}
-
-impl RegistrationConfig {
-    /// The map voxel side, metres, with 0 resolved.
-    pub fn effective_voxel_size_m(&self) -> f64 {
-        match self.voxel_size_m > 0.0 {
-            true => self.voxel_size_m,
-            false => self.max_range_m / 100.0,
-        }
-    }
-
-    /// Checks what `Odometry` relies on.
-    pub fn validate(&self) -> Result<(), String> {
-        let check = |holds: bool, rule: &str| match holds {
-            true => Ok(()),
-            false => Err(format!("registration needs finite {rule}, got {self:?}")),
-        };
-        let (c, positive) = (self, |v: f64| v.is_finite() && v > 0.0);
-        check(positive(c.max_range_m), "max_range_m > 0")?;
-        let in_range = (0.0..c.max_range_m).contains(&c.min_range_m);
-        check(in_range, "0 <= min_range_m < max_range_m")?;
-        let voxel = c.voxel_size_m == 0.0 || positive(c.voxel_size_m);
-        check(voxel, "voxel_size_m >= 0")?;
-        check(c.max_points_per_voxel > 0, "max_points_per_voxel > 0")?;
-        check(positive(c.initial_threshold_m), "initial_threshold_m > 0")?;
-        let motion = c.min_motion_m == 0.0 || positive(c.min_motion_m);
-        check(motion, "min_motion_m >= 0")?;
-        check(positive(c.convergence), "convergence > 0")?;
-        check(c.max_iterations > 0, "max_iterations > 0")
-    }
 }
 
 /// METHOD.md section 3.
@@ -220,70 +125,6 @@ pub struct GroundTruthConfig {
     pub traversable_classes: Vec<u16>,
     /// Classes that do not vote (default unlabeled 0 and outlier 1).
     pub ignored_classes: Vec<u16>,
-}
-
-/// METHOD.md section 6, and the spatially-blocked validation of this project.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct TrainingConfig {
-    /// Grid side used to collect training cells, metres (default 36). Features do not
-    /// depend on the grid size, so a larger grid only adds cells.
-    pub grid_size_m: f64,
-    /// Candidate SVM penalties C of the grid search.
-    pub c_values: Vec<f64>,
-    /// Candidate RBF widths gamma of the grid search (on standardised features).
-    pub gamma_values: Vec<f64>,
-    /// Folds of the cross-validation (default 5).
-    pub folds: usize,
-    /// Side of the square world blocks that make up the folds, metres (default 4):
-    /// a world cell and its copies in other frames are always in one fold.
-    pub block_size_m: f64,
-    /// The grid search uses a seeded random subset of at most this many cells
-    /// (default 6000).
-    pub max_search_samples: usize,
-    /// The final model is fitted on a seeded random subset of at most this many
-    /// cells (default 50,000), a superset of the search's: the solver's time grows
-    /// faster than the cell count, and a training set gathered from a fleet's logs
-    /// can hold millions.
-    pub max_fit_samples: usize,
-    /// Stopping tolerance of the SMO solver on the KKT gap (default 1e-3, libsvm's).
-    pub tolerance: f64,
-    /// Kernel row cache per solver, MiB (default 200).
-    pub cache_mib: usize,
-    /// Seed of the fold assignment, the search subset and the reduced set.
-    pub seed: u64,
-    /// Kernel centres of the reduced set fitted after training (default 384); 0: none.
-    pub reduced_set_size: usize,
-    /// Training cells the reduced set is fitted on, at most (default 20,000).
-    pub reduced_set_samples: usize,
-    /// Per-class weights on C (libsvm's `-w`): `"balanced"` (default), each class
-    /// weighted by cells / (2 x its cells) so the rarer class counts as much, or
-    /// `"none"` (the paper's).
-    pub class_weights: ClassWeights,
-    /// What the grid search maximises over the held-out folds: `"miou"` (default:
-    /// accuracy rewards calling everything road) or `"accuracy"`.
-    pub criterion: Criterion,
-    /// Choose the decision threshold (0 otherwise) that maximises the criterion over
-    /// the held-out folds' decision values of the chosen (C, gamma) (default false:
-    /// on the shipped scenes it lowered every held-out score, README "Features beyond
-    /// the paper").
-    pub tune_threshold: bool,
-}
-
-/// Per-class weights on the SVM's C.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ClassWeights {
-    None,
-    Balanced,
-}
-
-/// The score the grid search maximises.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Criterion {
-    Accuracy,
-    Miou,
 }
 
 impl Default for IntegrationConfig {
@@ -352,28 +193,6 @@ impl Default for GroundTruthConfig {
             min_non_traversable_points: 2,
             traversable_classes: vec![40, 44, 48, 49, 60],
             ignored_classes: vec![0, 1],
-        }
-    }
-}
-
-impl Default for TrainingConfig {
-    fn default() -> Self {
-        Self {
-            grid_size_m: 36.0,
-            c_values: vec![1.0, 10.0, 100.0],
-            gamma_values: vec![0.01, 0.05, 0.2],
-            folds: 5,
-            block_size_m: 4.0,
-            max_search_samples: 6000,
-            max_fit_samples: 50_000,
-            tolerance: 1e-3,
-            cache_mib: 200,
-            seed: 0,
-            reduced_set_size: 384,
-            reduced_set_samples: 20_000,
-            class_weights: ClassWeights::Balanced,
-            criterion: Criterion::Miou,
-            tune_threshold: false,
         }
     }
 }

@@ -19,8 +19,8 @@ use crate::io::ros1;
 use crate::io::transforms::isometry;
 use crate::method::classifier::SvmModel;
 use crate::outputs::dataset::reading::read_training_rows;
+use crate::outputs::mcap_writer::Compression;
 use crate::outputs::mcap_writer::{FinishedChunk, McapWriter};
-use crate::outputs::writing::Compression;
 use crate::training::TrainingSet;
 
 /// A fuzz target: arbitrary bytes in, nothing out.

@@ -9,7 +9,8 @@ use std::path::Path;
 use travmap::io::format::InputFormat;
 use travmap::io::log::Log;
 use travmap::io::ros::{PointCloud2, TfMessage, datatype, decode};
-use travmap::outputs::writing::{Compression, McapSink};
+use travmap::outputs::mcap_writer::Compression;
+use travmap::outputs::writing::McapSink;
 
 /// Rewrites the converted drive `from` into `to` with each cloud's intensity
 /// changed by `edit` (clouds and transforms only).

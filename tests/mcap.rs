@@ -15,7 +15,8 @@ use travmap::io::format::InputFormat;
 use travmap::io::log::Log;
 use travmap::io::ros::{OccupancyGrid, decode};
 use travmap::io::ros_drive::{DriveOptions, RosDrive};
-use travmap::outputs::writing::{Compression, McapSink};
+use travmap::outputs::mcap_writer::Compression;
+use travmap::outputs::writing::McapSink;
 
 /// Every message of `topic` in an MCAP, decoded by travmap's own reader.
 fn messages<T: serde::de::DeserializeOwned>(path: &Path, topic: &str) -> Vec<(u64, T)> {

@@ -10,8 +10,8 @@ use travmap::io::Recording;
 use travmap::io::ros_drive::DriveOptions;
 use travmap::io::ros_drive::RosDrive;
 use travmap::outputs::conversion::{convert_kitti, convert_log};
+use travmap::outputs::mcap_writer::Compression;
 use travmap::outputs::preflight::InputFiles;
-use travmap::outputs::writing::Compression;
 
 use super::{
     Outcome, Output, check_output, frame_count, open_selection, outcome, parse_frame_range,
@@ -104,29 +104,62 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
         &|| bar.inc(1),
     )?;
     let seconds = bar.finish();
-    if output.json {
-        let fields = json!({"output": output_path, "compression": compression, "summary": summary, "elapsed_ms": seconds * 1e3});
-        print_json_summary("convert", &selections, fields)?;
-    } else if !output.quiet {
-        let contents = format!(
+    let written = Written {
+        frames: summary.frames,
+        contents: format!(
             "{} with labels, {} images",
             summary.labelled_frames, summary.images
-        );
-        print_wrote(
-            output_path,
-            summary.frames,
-            &contents,
-            summary.output_bytes,
-            seconds,
-        );
-        if summary.dropped_points > 0 {
-            eprintln!(
+        ),
+        output_bytes: summary.output_bytes,
+        note: (summary.dropped_points > 0).then(|| {
+            format!(
                 "{} points with a non-finite coordinate were left out",
                 summary.dropped_points
+            )
+        }),
+        summary: serde_json::to_value(&summary)?,
+    };
+    written.report(output_path, compression, &output, seconds, &selections)
+}
+
+/// What a conversion wrote, for its report.
+struct Written {
+    summary: serde_json::Value,
+    frames: usize,
+    /// What the frames hold, as a person reads it.
+    contents: String,
+    output_bytes: u64,
+    /// Said on stderr after the report.
+    note: Option<String>,
+}
+
+impl Written {
+    /// The `wrote ...` line (or the `--json` summary) and the note.
+    fn report(
+        self,
+        output_path: &std::path::Path,
+        compression: Compression,
+        output: &Output,
+        seconds: f64,
+        selections: &[travmap::drive::Selection],
+    ) -> Result<Outcome> {
+        if output.json {
+            let fields = json!({"output": output_path, "compression": compression, "summary": self.summary, "elapsed_ms": seconds * 1e3});
+            print_json_summary("convert", selections, fields)?;
+        } else if !output.quiet {
+            print_wrote(
+                output_path,
+                self.frames,
+                &self.contents,
+                self.output_bytes,
+                seconds,
             );
+            if let Some(note) = &self.note {
+                eprintln!("{note}");
+            }
         }
+        Ok(outcome(selections))
     }
-    Ok(outcome(&selections))
 }
 
 /// `convert` of a recorded log: every message, as ROS 2 where travmap knows the type.
@@ -144,27 +177,20 @@ fn convert_whole_log(
         }
     })?;
     let seconds = bar.finish();
-    if output.json {
-        let fields = json!({"output": output_path, "compression": compression, "summary": summary, "elapsed_ms": seconds * 1e3});
-        print_json_summary("convert", selections, fields)?;
-    } else if !output.quiet {
-        let contents = format!(
+    let written = Written {
+        frames: drive.frame_count(),
+        contents: format!(
             "{} messages, {} of them re-encoded from ROS 1",
             summary.messages, summary.translated_messages
-        );
-        print_wrote(
-            output_path,
-            drive.frame_count(),
-            &contents,
-            summary.output_bytes,
-            seconds,
-        );
-        if !summary.topics_as_recorded.is_empty() {
-            eprintln!(
+        ),
+        output_bytes: summary.output_bytes,
+        note: (!summary.topics_as_recorded.is_empty()).then(|| {
+            format!(
                 "copied as recorded (types travmap does not translate): {}",
                 summary.topics_as_recorded.join(", ")
-            );
-        }
-    }
-    Ok(outcome(selections))
+            )
+        }),
+        summary: serde_json::to_value(&summary)?,
+    };
+    written.report(output_path, compression, output, seconds, selections)
 }

@@ -1,7 +1,9 @@
 //! The method of METHOD.md, one module per stage, in the order
-//! [`pipeline::Pipeline::process_frame`] calls them: [`integration`] (1), [`grid`] (2),
-//! [`features`] (3), [`appearance`] (3b), [`classifier`] (4), [`filter`] (5); beside
-//! them [`ground_truth`]. Stages see flat arrays and [`crate::frame::Frame`]s only:
+//! [`pipeline::Pipeline`] calls them: posing (0: the input's poses, or
+//! [`registration`] over a [`voxel_map`]), [`integration`] (1), [`grid`] (2),
+//! [`features`] (3, and [`feature_groups`]), [`appearance`] (3b), [`classifier`] (4),
+//! [`filter`] (5); beside them [`ground_truth`], and [`fusion`] of the results into
+//! one map of the drive. Stages see flat arrays and [`crate::frame::Frame`]s only:
 //! no file, no MCAP, no CLI.
 
 pub mod appearance;
@@ -15,3 +17,4 @@ pub mod ground_truth;
 pub mod integration;
 pub mod pipeline;
 pub mod registration;
+pub mod voxel_map;

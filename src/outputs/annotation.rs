@@ -32,7 +32,8 @@ use crate::outputs::conversion::{
     MAP_FRAME, transform_from_pose, write_kitti_frames, write_log_messages,
 };
 use crate::outputs::drive_map::occupancy_grid;
-use crate::outputs::writing::{Compression, McapSink};
+use crate::outputs::mcap_writer::Compression;
+use crate::outputs::writing::McapSink;
 use crate::posing::Posing;
 use crate::scoring::evaluation::{Evaluation, EvaluationReport};
 use crate::scoring::metrics::Confusion;

@@ -33,7 +33,8 @@ use crate::io::ros::{
     ros1_to_cdr,
 };
 use crate::io::ros_drive::RosDrive;
-use crate::outputs::writing::{Compression, McapSink};
+use crate::outputs::mcap_writer::Compression;
+use crate::outputs::writing::McapSink;
 
 pub const CLOUD_TOPIC: &str = "/velodyne_points";
 pub const IMAGE_TOPIC: &str = "/camera_2/image/compressed";

@@ -7,6 +7,8 @@ pub mod annotation;
 pub mod conversion;
 pub mod dataset;
 pub mod drive_map;
+mod mcap_chunks;
+mod mcap_encoding;
 pub mod mcap_writer;
 pub mod preflight;
 pub mod rendering;

@@ -18,7 +18,7 @@ use std::thread::JoinHandle;
 use crate::error::{Error, Result};
 use crate::io::mcap_stored::{StoredChunk, StoredLog};
 use crate::io::ros::{RosMessage, encode};
-use crate::outputs::mcap_writer::{FinishedChunk, McapWriter};
+use crate::outputs::mcap_writer::{Compression, FinishedChunk, McapWriter};
 
 /// Temporary files being written, so that an interrupted run (SIGINT) can remove
 /// them: it leaves nothing at or beside the output.
@@ -158,27 +158,6 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
         .and_then(|_| file.sync_all())
         .map_err(|source| write_failure(path, &guard, Some(source), Some(bytes.len() as u64)))?;
     guard.commit()
-}
-
-/// Chunk compression of the written MCAP.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Compression {
-    #[default]
-    Zstd,
-    Lz4,
-    None,
-}
-
-impl Compression {
-    /// The name chunk records give it.
-    pub fn chunk_name(self) -> &'static str {
-        match self {
-            Compression::Zstd => "zstd",
-            Compression::Lz4 => "lz4",
-            Compression::None => "",
-        }
-    }
 }
 
 /// Chunks of about this many bytes (uncompressed): a few frames each, so that

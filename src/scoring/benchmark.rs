@@ -31,11 +31,12 @@ pub struct BenchmarkReport {
     /// Median over timed frames of integrated points inside the grid.
     pub points_in_grid: f64,
     pub support_vectors: usize,
-    /// One frame at a time, one thread.
+    /// One frame at a time, one thread, posed as the source is (`register` holds
+    /// the registration when its poses are estimated).
     pub stages_ms: TimingReport,
     /// Scan registration (`--poses registration`), one thread, every frame after the
-    /// first (which only starts the map); not in `stages_ms`, which times the
-    /// input's own poses.
+    /// first (which only starts the map), whatever the source's posing: what
+    /// estimating the poses would cost.
     pub registration_ms: Spread,
     /// Scans (over all repeats) that did not register, after which the map started
     /// again.

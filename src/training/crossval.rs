@@ -4,7 +4,8 @@
 
 use serde::Serialize;
 
-use super::{TrainingSet, spatial_folds, train};
+use super::set::{TrainingSet, spatial_folds};
+use super::train;
 use crate::config::Config;
 use crate::drive::Selection;
 use crate::error::{Error, Result};

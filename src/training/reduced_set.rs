@@ -2,7 +2,7 @@
 //! the support vectors with weights fitted by least squares to the exact decision
 //! function, so prediction costs the centres' count instead of the support vectors'.
 
-use super::TrainingSet;
+use super::set::TrainingSet;
 use crate::config::Config;
 use crate::method::classifier::{PredictionScratch, ReducedSet, SvmModel};
 use crate::random::SplitMix64;
