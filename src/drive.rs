@@ -22,6 +22,13 @@ use crate::stopwatch::Stopwatch;
 /// A frame read, and how long reading it took, ms.
 pub type ReadFrame = (Frame, f64);
 
+/// How the method stage takes frames: those before `first` only fill the window,
+/// the others go in batches of at most `size`.
+struct Batches {
+    first: usize,
+    size: usize,
+}
+
 /// A frame posed, waiting for the rest of the pipeline.
 struct Arrival {
     posed: Posed,
@@ -118,15 +125,11 @@ impl Selection {
                     false => arrivals.try_recv().ok(),
                 };
                 let mut emit = |result| results.send(Ok(result)).is_ok();
-                let first = self.frames.start;
-                let method = self.run_method(
-                    &mut pipeline,
-                    first,
-                    &mut next,
-                    model,
-                    batch_size,
-                    &mut emit,
-                );
+                let batches = Batches {
+                    first: self.frames.start,
+                    size: batch_size,
+                };
+                let method = self.run_method(&mut pipeline, batches, &mut next, model, &mut emit);
                 if let Err(error) = method {
                     let _ = results.send(Err(error));
                 }
@@ -176,33 +179,30 @@ impl Selection {
             on_frame(result);
             true
         };
-        self.run_method(
-            &mut pipeline,
+        let batches = Batches {
             first,
-            &mut next,
-            model,
-            batch_size,
-            &mut emit,
-        )
+            size: batch_size,
+        };
+        self.run_method(&mut pipeline, batches, &mut next, model, &mut emit)
     }
 
     /// The method stage of [`Self::run`]: poses the frames that `next` hands on
     /// (blocking for one when asked, else only what has arrived), warms the window
-    /// up with those before `first`, and processes the others in batches of
-    /// consecutive frames, handing each result to `emit` until it returns false.
+    /// up with those before `first`, and processes the others in batches of at most
+    /// `size` consecutive frames, handing each result to `emit` until it returns
+    /// false.
     fn run_method(
         &self,
         pipeline: &mut Pipeline,
-        first: usize,
+        Batches { first, size }: Batches,
         next: &mut dyn FnMut(bool) -> Option<Result<ReadFrame>>,
         model: Option<&SvmModel>,
-        batch_size: usize,
         emit: &mut dyn FnMut(FrameResult) -> bool,
     ) -> Result<()> {
         // Block for one frame, then take what else has arrived, up to a batch.
         while let Some(arrival) = next(true) {
             let mut arrived = vec![arrival];
-            while arrived.len() < batch_size {
+            while arrived.len() < size {
                 match next(false) {
                     Some(arrival) => arrived.push(arrival),
                     None => break,
