@@ -9,9 +9,13 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 
+mod adaptation;
+mod labels;
 mod registration;
 mod training;
 
+pub use adaptation::{AdaptConfig, Learner, VehicleConfig};
+pub use labels::{ClassRule, LabelRule, LabelSet, parse_label_map};
 pub use registration::{PoseSource, RegistrationConfig};
 pub use training::{ClassWeights, Criterion, TrainingConfig};
 
@@ -28,6 +32,8 @@ pub struct Config {
     pub ground_truth: GroundTruthConfig,
     pub training: TrainingConfig,
     pub registration: RegistrationConfig,
+    pub vehicle: VehicleConfig,
+    pub adapt: AdaptConfig,
 }
 
 /// METHOD.md section 5.
@@ -112,7 +118,8 @@ pub struct FilterConfig {
     pub self_weight: u32,
 }
 
-/// METHOD.md section 8.
+/// METHOD.md section 8, with label presets for other datasets (README "Ground
+/// truth of other datasets").
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GroundTruthConfig {
@@ -120,11 +127,45 @@ pub struct GroundTruthConfig {
     pub min_points: usize,
     /// Non-traversable points that make a cell non-traversable (default 2).
     pub min_non_traversable_points: usize,
-    /// SemanticKITTI classes that are traversable (default road, parking, sidewalk,
-    /// other-ground, lane-marking).
-    pub traversable_classes: Vec<u16>,
-    /// Classes that do not vote (default unlabeled 0 and outlier 1).
-    pub ignored_classes: Vec<u16>,
+    /// Whose label ids: `"semantickitti"` (default) or `"rellis3d"`.
+    pub labels: LabelSet,
+    /// `"road"` (the seed paper's classes, default) or `"offroad"` (also terrain,
+    /// grass, dirt, mud, puddles).
+    pub rule: LabelRule,
+    /// A TOML file of `[ids]` id = "traversable" | "not_traversable" | "ignored",
+    /// for any other ontology; replaces `labels` and `rule` (unset by default).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub label_map: Option<std::path::PathBuf>,
+    /// The traversable classes, replacing the preset's (unset by default).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub traversable_classes: Option<Vec<u16>>,
+    /// The classes that do not vote, replacing the preset's (unset by default).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ignored_classes: Option<Vec<u16>>,
+    /// The label map's classes, once read ([`Config::load_label_map`]).
+    #[serde(skip)]
+    pub label_map_classes: Option<ClassRule>,
+}
+
+impl GroundTruthConfig {
+    /// The classes in force: the preset of `labels` and `rule`, with the explicit
+    /// lists in their place where given (a label map gives both, see
+    /// [`Config::load_label_map`]).
+    pub fn classes(&self) -> ClassRule {
+        let mut rule = match &self.label_map_classes {
+            Some(map) => map.clone(),
+            None => self.labels.classes(self.rule),
+        };
+        if let Some(traversable) = &self.traversable_classes {
+            rule.traversable = traversable.clone();
+            rule.known = None;
+        }
+        if let Some(ignored) = &self.ignored_classes {
+            rule.ignored = ignored.clone();
+            rule.known = None;
+        }
+        rule
+    }
 }
 
 impl Default for IntegrationConfig {
@@ -191,8 +232,12 @@ impl Default for GroundTruthConfig {
         Self {
             min_points: 2,
             min_non_traversable_points: 2,
-            traversable_classes: vec![40, 44, 48, 49, 60],
-            ignored_classes: vec![0, 1],
+            labels: LabelSet::Semantickitti,
+            rule: LabelRule::Road,
+            label_map: None,
+            traversable_classes: None,
+            ignored_classes: None,
+            label_map_classes: None,
         }
     }
 }
@@ -235,6 +280,13 @@ pub fn written_before_groups(config: &mut serde_json::Value) {
     }
 }
 
+/// Fields that are unset by default, so absent from a serialised configuration.
+const OPTIONAL_FIELDS: &[(&str, &str)] = &[
+    ("ground_truth", "label_map"),
+    ("ground_truth", "traversable_classes"),
+    ("ground_truth", "ignored_classes"),
+];
+
 impl Config {
     /// The configuration training cells are computed with: this one on the training
     /// grid (`training.grid_size_m`), so `train`, `dataset` and `crossval` see the
@@ -243,6 +295,18 @@ impl Config {
         let mut config = self.clone();
         config.grid.size_m = self.training.grid_size_m;
         config
+    }
+
+    /// Reads the label map `ground_truth.label_map` names, if any.
+    pub fn load_label_map(&mut self) -> Result<()> {
+        let Some(path) = &self.ground_truth.label_map else {
+            return Ok(());
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let classes = parse_label_map(&text)
+            .map_err(|problem| Error::Config(format!("label map {}: {problem}", path.display())))?;
+        self.ground_truth.label_map_classes = Some(classes);
+        Ok(())
     }
 
     /// Reads a TOML file; fields it does not name keep their defaults.
@@ -268,7 +332,7 @@ impl Config {
             .get_mut(section)
             .and_then(|s| s.as_table_mut())
             .ok_or_else(|| Error::Config(format!("`{key}`: no section `{section}`")))?;
-        if !section_table.contains_key(field) {
+        if !section_table.contains_key(field) && !OPTIONAL_FIELDS.contains(&(section, field)) {
             let known: Vec<&str> = section_table.keys().map(String::as_str).collect();
             return Err(Error::Config(format!(
                 "`{key}`: section `{section}` has no field `{field}` (fields: {})",
@@ -299,6 +363,18 @@ impl Config {
             ));
         }
         self.registration.validate().map_err(Error::Config)?;
+        self.adapt.validate(&self.vehicle).map_err(Error::Config)?;
+        let ground_truth = &self.ground_truth;
+        if ground_truth
+            .traversable_classes
+            .as_ref()
+            .is_some_and(Vec::is_empty)
+        {
+            return fail("ground_truth.traversable_classes is empty: nothing could be traversable (leave it unset for the preset of ground_truth.labels and rule)".into());
+        }
+        if ground_truth.label_map.is_some() && ground_truth.label_map_classes.is_none() {
+            return fail("ground_truth.label_map is set but was not read".into());
+        }
         positive("grid.size_m", self.grid.size_m)?;
         positive("grid.cell_size_m", self.grid.cell_size_m)?;
         positive("features.subcell_size_m", self.features.subcell_size_m)?;

@@ -5,6 +5,7 @@
 //! benchmark included ([`Selection::load`], [`Selection::run_loaded`]).
 
 use std::ops::Range;
+use std::sync::Arc;
 
 use nalgebra::Isometry3;
 
@@ -13,6 +14,7 @@ use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::io::Source;
 use crate::method::classifier::SvmModel;
+use crate::method::footprint::Trajectory;
 use crate::method::fusion::DriveMap;
 use crate::method::pipeline::{FrameResult, Pipeline, Posed};
 use crate::method::registration::RegistrationError;
@@ -52,6 +54,8 @@ pub struct Selection {
     /// Give each result its scan's SHA-256 (`FrameResult::scan_sha256`): costs a
     /// few milliseconds a frame, so only where a frame's identity matters.
     pub fingerprint_scans: bool,
+    /// The drive's trajectory, once followed ([`Selection::follow_trajectory`]).
+    trajectory: Option<Arc<Trajectory>>,
 }
 
 impl Selection {
@@ -60,12 +64,44 @@ impl Selection {
             source,
             frames,
             fingerprint_scans: false,
+            trajectory: None,
         }
     }
 
-    /// The pipeline for this source's scans, as its posing asks.
+    /// The pipeline for this source's scans, as its posing asks (following the
+    /// trajectory once it is followed).
     pub fn pipeline(&self, config: &Config) -> Result<Pipeline> {
-        Pipeline::new(config, self.source.posing())
+        let mut pipeline = Pipeline::new(config, self.source.posing())?;
+        if let Some(trajectory) = &self.trajectory {
+            pipeline.follow(trajectory.clone(), config);
+        }
+        Ok(pipeline)
+    }
+
+    /// From now on every result carries its footprint and self-labels (stages 6a,
+    /// 6b) along the drive's trajectory: every pose the input records, also past the
+    /// selected frames; the registration's estimates from the first frame read on
+    /// when poses are estimated; none when each scan is alone (each footprint then
+    /// runs straight along its scan's x axis).
+    pub fn follow_trajectory(&mut self, config: &Config) -> Result<Arc<Trajectory>> {
+        let poses = match self.source.posing() {
+            Posing::Recorded => self.source.recorded_poses()?,
+            Posing::Registration => {
+                let first = self
+                    .pipeline(config)?
+                    .window()
+                    .warm_up_start(self.frames.start);
+                let poses = self.registered_poses(config, &(first..usize::MAX), || {})?;
+                poses
+                    .iter()
+                    .map(|p| (p.index, p.world_from_velodyne))
+                    .collect()
+            }
+            Posing::Alone => Vec::new(),
+        };
+        let trajectory = Arc::new(Trajectory::new(&poses));
+        self.trajectory = Some(trajectory.clone());
+        Ok(trajectory)
     }
 
     /// Runs the pipeline over the selected frames, reading the n - 1 frames before
@@ -275,11 +311,21 @@ impl Selection {
     pub fn estimate_trajectory(
         &self,
         config: &Config,
+        on_frame: impl FnMut(),
+    ) -> Result<Vec<EstimatedPose>> {
+        self.registered_poses(config, &self.frames, on_frame)
+    }
+
+    /// The poses of the frames in `frames` by registration alone.
+    fn registered_poses(
+        &self,
+        config: &Config,
+        frames: &Range<usize>,
         mut on_frame: impl FnMut(),
     ) -> Result<Vec<EstimatedPose>> {
         let mut pipeline = Pipeline::new(config, Posing::Registration)?;
         let mut trajectory = Vec::new();
-        for frame in self.source.read(&self.frames) {
+        for frame in self.source.read(frames) {
             let frame = frame?;
             let (index, stamp_ns) = (frame.index, frame.stamp_ns);
             match pipeline.pose(frame) {

@@ -239,6 +239,9 @@ pub enum Error {
     #[error("training set: {0}")]
     Training(String),
 
+    #[error("{path}: cannot adapt to this drive: {problem}")]
+    Adaptation { path: PathBuf, problem: String },
+
     #[error("cannot start {threads} worker threads: {message}")]
     ThreadPool { threads: usize, message: String },
 
@@ -389,7 +392,8 @@ impl Error {
             | Error::UndecodableMessage { path, .. }
             | Error::LogEncoding { path, .. }
             | Error::Registration { path, .. }
-            | Error::Transform { path, .. } => Some(path),
+            | Error::Transform { path, .. }
+            | Error::Adaptation { path, .. } => Some(path),
             Error::OutputIsInput { output, .. }
             | Error::OutputIsDirectory { output }
             | Error::NoOutputDirectory { output, .. } => Some(output),

@@ -18,7 +18,7 @@ use crate::io::ros_drive::DriveOptions;
 use crate::io::ros1;
 use crate::io::transforms::isometry;
 use crate::method::classifier::SvmModel;
-use crate::outputs::dataset::reading::read_training_rows;
+use crate::outputs::dataset::reading::{Labels, read_training_rows};
 use crate::outputs::mcap_writer::Compression;
 use crate::outputs::mcap_writer::{FinishedChunk, McapWriter};
 use crate::training::TrainingSet;
@@ -200,7 +200,7 @@ pub fn dataset_file(data: &[u8]) {
         // lets the fuzzer past the settings check into the column readers.
         let mut config = Config::default();
         config.features.groups.clear();
-        let _ = read_training_rows(path, &config, &mut set);
+        let _ = read_training_rows(path, &config, &mut set, Labels::GroundTruth);
     });
 }
 

@@ -14,7 +14,7 @@ use travmap::io::Source;
 use travmap::io::ros_drive::DriveOptions;
 use travmap::method::classifier::SvmModel;
 use travmap::method::grid::CellClass;
-use travmap::outputs::dataset::reading::read_training_rows;
+use travmap::outputs::dataset::reading::{Labels, read_training_rows};
 use travmap::training::TrainingSet;
 
 use common::{arg, assert_contains, clean_failure, json_summary, travmap};
@@ -131,7 +131,7 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     // What other writers make of the file trains on the same rows.
     let training_rows = |path: &Path| {
         let mut set = TrainingSet::default();
-        read_training_rows(path, &config, &mut set).map(|_| set)
+        read_training_rows(path, &config, &mut set, Labels::GroundTruth).map(|_| set)
     };
     let ours = training_rows(&cells).unwrap();
     assert!(ours.len() > 10_000, "{} labelled rows", ours.len());

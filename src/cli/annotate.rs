@@ -9,6 +9,7 @@ use clap::Args;
 use serde_json::json;
 use travmap::outputs::annotation::{self, AnnotationOptions};
 
+use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;
 use super::{
     Inputs, ModelArg, Outcome, check_output, frame_count, model_json, outcome, print_json_summary,
@@ -25,6 +26,8 @@ pub struct AnnotateArgs {
     output: PathBuf,
     #[command(flatten)]
     model: ModelArg,
+    #[command(flatten)]
+    adapt: AdaptFlag,
     #[command(flatten)]
     compression: CompressionArg,
     /// Do not copy the input's messages into the output.
@@ -44,12 +47,13 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
         passthrough: !args.no_passthrough,
         grid_height_m: args.grid_height,
     };
-    let (model, model_name) = args.model.load(config)?;
+    let (model, model_name) =
+        (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;
     let selection = args.inputs.open_one(
         config.appearance.enabled,
         "annotate takes one input (a KITTI sequence directory or an MCAP file)",
     )?;
-    let metadata = BTreeMap::from([
+    let mut metadata = BTreeMap::from([
         (
             "travmap_version".to_string(),
             env!("CARGO_PKG_VERSION").to_string(),
@@ -59,6 +63,10 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
         ("model_sha256".to_string(), model.sha256_hex()),
         ("input".to_string(), selection.describe()),
     ]);
+    // An adapted model says how: self-supervised, from which prior and cells.
+    if let Some(adaptation) = &model.training.adaptation {
+        metadata.insert("adaptation".into(), serde_json::to_string(adaptation)?);
+    }
     let selections = [selection];
     let bar = output.progress(frame_count(&selections), "annotating");
     let summary = annotation::annotate(

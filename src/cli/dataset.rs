@@ -29,12 +29,16 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     let output = args.inputs.output;
     let output_path = args.output.as_path();
     check_output(output_path, &args.inputs.files(args.model.as_deref()))?;
-    let selections = args.inputs.open(config.appearance.enabled)?;
+    let mut selections = args.inputs.open(config.appearance.enabled)?;
     let model = match args.model.as_deref() {
         Some(path) => Some(load_model(Some(path), config)?.0),
         None => None,
     };
     let grid_config = config.for_training_cells();
+    // The footprint and pseudo_label columns follow each drive's trajectory.
+    for selection in &mut selections {
+        selection.follow_trajectory(&grid_config)?;
+    }
     let bar = output.progress(frame_count(&selections), "extracting cells");
     let mut writer = DatasetWriter::create(output_path, config)?;
     for selection in &selections {

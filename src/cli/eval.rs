@@ -13,6 +13,7 @@ use travmap::scoring::evaluation::{Evaluation, EvaluationReport};
 use travmap::scoring::metrics::Confusion;
 use travmap::scoring::metrics::Scores;
 
+use super::adapt::AdaptFlag;
 use super::{Inputs, ModelArg, Outcome, frame_count, model_json, outcome, print_json_summary};
 
 /// Score predictions against SemanticKITTI ground truth (the paper's table).
@@ -22,12 +23,15 @@ pub struct EvalArgs {
     inputs: Inputs,
     #[command(flatten)]
     model: ModelArg,
+    #[command(flatten)]
+    adapt: AdaptFlag,
 }
 
 pub fn eval(args: EvalArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = args.inputs.output;
-    let (model, model_name) = args.model.load(config)?;
+    let (model, model_name) =
+        (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;
     let mut selections = args.inputs.open(config.appearance.enabled)?;
     // Training scans are recognised by content, not by the path as typed.
     let trained_on: HashSet<&str> = model

@@ -2,6 +2,7 @@
 //! configuration and the model, opening the inputs, progress bars and how a command
 //! ends. One file per subcommand beside this one; `main.rs` dispatches to them.
 
+pub mod adapt;
 pub mod annotate;
 pub mod bench;
 pub mod bench_tools;
@@ -70,6 +71,7 @@ impl Settings {
         if let Some(poses) = &self.poses {
             config.set(&format!("integration.poses=\"{poses}\""))?;
         }
+        config.load_label_map()?;
         config.validate()?;
         Ok(config)
     }

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::Args;
 use serde_json::json;
-use travmap::outputs::dataset::reading::read_training_rows;
+use travmap::outputs::dataset::reading::{Labels, read_training_rows};
 use travmap::outputs::writing::write_atomically;
 use travmap::training::crossval::collect_training_set;
 use travmap::training::{TrainingSet, train as train_model};
@@ -21,6 +21,18 @@ pub struct TrainArgs {
     /// Where to write the model (JSON).
     #[arg(short, long)]
     output: PathBuf,
+    /// Which labels to learn: `ground-truth` (annotations, default) or `pseudo` (the
+    /// self-labels of Parquet datasets' `pseudo_label` column: unlabelled fleet logs as
+    /// training sets).
+    #[arg(long, value_enum, default_value_t = LabelArg::GroundTruth)]
+    labels: LabelArg,
+}
+
+/// `--labels`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum LabelArg {
+    GroundTruth,
+    Pseudo,
 }
 
 pub fn train(args: TrainArgs) -> Result<Outcome> {
@@ -35,6 +47,16 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
         .iter()
         .cloned()
         .partition(|path| path.extension().is_some_and(|e| e == "parquet"));
+    if args.labels == LabelArg::Pseudo && !drives.is_empty() {
+        bail!(
+            "--labels pseudo learns from Parquet datasets (`travmap dataset` writes their pseudo_label column); {} is a drive: extract it with `travmap dataset` first, or adapt to it with `travmap adapt`",
+            drives[0].display()
+        );
+    }
+    let labels = match args.labels {
+        LabelArg::GroundTruth => Labels::GroundTruth,
+        LabelArg::Pseudo => Labels::Pseudo,
+    };
     let mut selections = if drives.is_empty() {
         Vec::new()
     } else {
@@ -53,9 +75,13 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
         set
     };
     for path in &datasets {
-        let rows = read_training_rows(path, config, &mut set)?;
+        let rows = read_training_rows(path, config, &mut set, labels)?;
+        let kind = match labels {
+            Labels::GroundTruth => "labelled",
+            Labels::Pseudo => "self-labelled",
+        };
         set.sources
-            .push(format!("{} ({rows} labelled cells)", path.display()));
+            .push(format!("{} ({rows} {kind} cells)", path.display()));
     }
     if set.is_empty() {
         bail!(

@@ -32,6 +32,8 @@ pub struct KittiSequence {
     frames: Vec<usize>,
     /// Decode `image_2` PNGs into frames (when P2 is known).
     read_images: bool,
+    /// Read `labels/` (false: the frames come without labels, as unlabelled drives).
+    read_labels: bool,
     pub(super) skips: SkipLog,
 }
 
@@ -57,6 +59,7 @@ impl KittiSequence {
             stamps_ns,
             frames,
             read_images: true,
+            read_labels: true,
             skips: SkipLog::default(),
         })
     }
@@ -70,6 +73,11 @@ impl KittiSequence {
     /// more than the rest of the method, so it is skipped when appearance is off.
     pub fn set_read_images(&mut self, read_images: bool) {
         self.read_images = read_images;
+    }
+
+    /// Whether [`Self::read_frame`] reads `labels/` (default true).
+    pub fn set_read_labels(&mut self, read_labels: bool) {
+        self.read_labels = read_labels;
     }
 
     pub fn dir(&self) -> &Path {
@@ -120,6 +128,14 @@ impl KittiSequence {
         Ok(rigid(&(velodyne_from_cam0 * pose * tr)))
     }
 
+    /// Every pose poses.txt holds, frame number and `world_from_velodyne`: also
+    /// those of frames past the last scan here.
+    pub fn recorded_poses(&self) -> Result<Vec<(usize, Isometry3<f64>)>> {
+        (0..self.first_cam0_from_cam0.len())
+            .map(|index| Ok((index, self.world_from_velodyne(index)?)))
+            .collect()
+    }
+
     pub fn stamp_ns(&self, index: usize) -> Result<u64> {
         self.stamps_ns
             .get(index)
@@ -136,7 +152,7 @@ impl KittiSequence {
         let scan_path = self.scan_path(index);
         let mut points_in_velodyne = read_scan(&scan_path)?;
         let label_path = self.label_path(index);
-        let mut labels = if label_path.is_file() {
+        let mut labels = if self.read_labels && label_path.is_file() {
             Some(read_labels(
                 &label_path,
                 &scan_path,

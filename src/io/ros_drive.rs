@@ -120,6 +120,18 @@ impl RosDrive {
             })
     }
 
+    /// The pose of every cloud of the log, in order (none when the poses are not
+    /// recorded); clouds whose pose the transforms do not give are left out.
+    pub fn recorded_poses(&self) -> Vec<(usize, Isometry3<f64>)> {
+        if self.posing != Posing::Recorded {
+            return Vec::new();
+        }
+        let pose = |(index, stamp_ns): (usize, &u64)| {
+            Some((index, self.world_from_cloud(*stamp_ns).ok()?))
+        };
+        self.stamps_ns.iter().enumerate().filter_map(pose).collect()
+    }
+
     /// `ancestor_from_frame` at `stamp_ns`; None when `ancestor` is not above `frame`.
     fn ancestor_from(
         &self,

@@ -26,6 +26,8 @@ pub enum Recording {
 pub struct Source {
     pub recording: Recording,
     posing: Posing,
+    /// Frames carry their points' labels (false: read as if unlabelled).
+    read_labels: bool,
 }
 
 impl Source {
@@ -55,6 +57,7 @@ impl Source {
                 return Ok(Self {
                     recording: Recording::Log(Box::new(drive)),
                     posing,
+                    read_labels: true,
                 });
             }
         };
@@ -63,6 +66,7 @@ impl Source {
         Ok(Self {
             recording,
             posing: decision.posing,
+            read_labels: true,
         })
     }
 
@@ -80,10 +84,33 @@ impl Source {
         self.posing
     }
 
+    /// Every pose the input records for its scans (frame number and
+    /// `world_from_velodyne`), also past the selected frames; none when its scans
+    /// are not posed by recorded poses.
+    pub fn recorded_poses(&self) -> Result<Vec<(usize, nalgebra::Isometry3<f64>)>> {
+        if self.posing != Posing::Recorded {
+            return Ok(Vec::new());
+        }
+        match &self.recording {
+            Recording::Kitti(sequence) => sequence.recorded_poses(),
+            Recording::Log(drive) => Ok(drive.recorded_poses()),
+            Recording::Scans(..) => Ok(Vec::new()),
+        }
+    }
+
     /// See [`KittiSequence::set_read_images`].
     pub fn set_read_images(&mut self, read_images: bool) {
         if let Recording::Kitti(sequence) = &mut self.recording {
             sequence.set_read_images(read_images);
+        }
+    }
+
+    /// Whether frames carry their points' labels (default true). Without, nothing
+    /// downstream can see them: KITTI label files are not even opened.
+    pub fn set_read_labels(&mut self, read_labels: bool) {
+        self.read_labels = read_labels;
+        if let Recording::Kitti(sequence) = &mut self.recording {
+            sequence.set_read_labels(read_labels);
         }
     }
 
@@ -142,6 +169,17 @@ impl Source {
     /// [`Source::set_keep_going`]) an unreadable frame is recorded and left out;
     /// otherwise its error ends the run.
     pub fn read<'a>(
+        &'a self,
+        range: &Range<usize>,
+    ) -> Box<dyn Iterator<Item = Result<Frame>> + 'a> {
+        let frames = self.read_recording(range);
+        if self.read_labels {
+            return frames;
+        }
+        Box::new(frames.map(|frame| frame.map(|f| Frame { labels: None, ..f })))
+    }
+
+    fn read_recording<'a>(
         &'a self,
         range: &Range<usize>,
     ) -> Box<dyn Iterator<Item = Result<Frame>> + 'a> {

@@ -34,6 +34,43 @@ pub struct TrainingSummary {
     /// training frames from unseen ones by content.
     #[serde(default)]
     pub frame_sha256: Vec<String>,
+    /// For a model adapted to drives (`travmap adapt`): how, and from what.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adaptation: Option<AdaptationSummary>,
+}
+
+/// How a model was adapted to drives without annotations, kept in its file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AdaptationSummary {
+    /// Its labels came from the drives themselves (footprint, obstacles, the
+    /// prior's confident rejections), never from annotations.
+    pub self_supervised: bool,
+    pub learner: crate::config::Learner,
+    /// The model adapted from, and the SHA-256 of its file.
+    pub prior: String,
+    pub prior_sha256: String,
+    pub inputs: Vec<AdaptedInput>,
+    /// Distinct world cells of each self-label, over every frame.
+    pub footprint_cells: usize,
+    pub negative_cells: usize,
+    pub unknown_cells: usize,
+    /// Self-labelled cells the SVM was fitted on (a seeded subset when many),
+    /// self-training's included.
+    pub fitted_cells: usize,
+    /// Frames whose footprint ran straight along the sensor's x axis (no
+    /// trajectory beyond one pose).
+    pub straight_path_frames: usize,
+}
+
+/// A drive a model was adapted to.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AdaptedInput {
+    /// The input and the frames of it, as a person reads them.
+    pub input: String,
+    pub frames: usize,
+    /// SHA-256 of its scans' contents in order (each scan's points, as
+    /// `Frame::content_sha256`): the same drive however stored.
+    pub scans_sha256: String,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -122,6 +159,13 @@ pub struct SvmModel {
     /// The same model without remission features, for clouds without usable
     /// intensity; present exactly when this model uses remission.
     pub fallback: Option<Box<SvmModel>>,
+    /// A model this one adapts (`adapt.learner = "sum"`): its margins, times
+    /// `prior_weight`, add to this one's.
+    pub prior: Option<Box<SvmModel>>,
+    pub prior_weight: f32,
+    /// The reduced set stands for this model's margin plus the prior's (fitted to
+    /// their sum), so the prior is not asked again where it is used.
+    pub reduced_set_includes_prior: bool,
 }
 
 impl SvmModel {
@@ -154,7 +198,25 @@ impl SvmModel {
             reduced_set: None,
             hybrid: None,
             fallback: None,
+            prior: None,
+            prior_weight: 0.0,
+            reduced_set_includes_prior: false,
         }
+    }
+
+    /// The support vectors with their standardisation undone: the cells (or their
+    /// like) the model was fitted on, row-major.
+    pub fn support_vectors_raw(&self) -> Vec<f32> {
+        let d = self.dimension();
+        self.support_vectors
+            .chunks_exact(d)
+            .flat_map(|z| {
+                z.iter()
+                    .zip(&self.feature_mean)
+                    .zip(&self.feature_inverse_std)
+                    .map(|((&z, &m), &s)| z / s + m)
+            })
+            .collect()
     }
 
     pub fn dimension(&self) -> usize {
@@ -303,6 +365,35 @@ impl SvmModel {
     /// The margin of every predictable cell of a grid (see [`Self::cell_margin`]);
     /// NaN for the others.
     pub fn margins(&self, grid: &FeatureGrid, use_reduced_set: bool) -> Vec<f32> {
+        let mut margins = self.own_margins(grid, use_reduced_set);
+        let Some(prior) = &self.prior else {
+            return margins;
+        };
+        // Cells whose margin came from a reduced set fitted to the sum already hold
+        // the prior's: this model's own (not its fallback's), outside the hybrid's cells.
+        let folded = use_reduced_set
+            && self.reduced_set_includes_prior
+            && self.reduced_set.is_some()
+            && std::ptr::eq(self.model_for(&grid.groups), self);
+        let by_hybrid = |cell: usize| self.hybrid.is_some() && grid.appearance(cell).is_some();
+        if folded && !(0..margins.len()).any(by_hybrid) {
+            return margins;
+        }
+        let weight = self.prior_weight;
+        for (cell, (m, p)) in margins
+            .iter_mut()
+            .zip(prior.margins(grid, use_reduced_set))
+            .enumerate()
+        {
+            if !folded || by_hybrid(cell) {
+                *m += weight * p;
+            }
+        }
+        margins
+    }
+
+    /// [`Self::margins`] of this model alone, without its prior's.
+    fn own_margins(&self, grid: &FeatureGrid, use_reduced_set: bool) -> Vec<f32> {
         let model = self.model_for(&grid.groups);
         let mut scratch = model.scratch();
         (0..grid.predictable.len())

@@ -3,16 +3,25 @@
 //!
 //! Input: [`CellPoints`] with labels. Output: one [`CellClass`] per cell.
 
-use crate::config::GroundTruthConfig;
+use crate::config::{ClassRule, GroundTruthConfig};
 use crate::method::grid::{CellClass, CellPoints};
 
 /// Labels cells from per-point semantic classes.
 #[derive(Clone, Debug)]
 pub struct GroundTruth {
     pub config: GroundTruthConfig,
+    /// The classes of `config` in force.
+    classes: ClassRule,
 }
 
 impl GroundTruth {
+    pub fn new(config: GroundTruthConfig) -> Self {
+        Self {
+            classes: config.classes(),
+            config,
+        }
+    }
+
     /// None when the points carry no labels.
     pub fn label(&self, cells: &CellPoints) -> Option<Vec<CellClass>> {
         let labels = cells.labels.as_ref()?;
@@ -30,11 +39,11 @@ impl GroundTruth {
         let (mut voting, mut non_traversable) = (0usize, 0usize);
         for &label in point_labels {
             let class = (label & 0xFFFF) as u16;
-            if self.config.ignored_classes.contains(&class) {
+            if self.classes.ignored.contains(&class) {
                 continue;
             }
             voting += 1;
-            if !self.config.traversable_classes.contains(&class) {
+            if !self.classes.traversable.contains(&class) {
                 non_traversable += 1;
             }
         }
@@ -53,9 +62,7 @@ mod tests {
     use super::*;
 
     fn gt() -> GroundTruth {
-        GroundTruth {
-            config: GroundTruthConfig::default(),
-        }
+        GroundTruth::new(GroundTruthConfig::default())
     }
 
     #[test]

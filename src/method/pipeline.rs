@@ -21,10 +21,12 @@ use crate::method::appearance::{AppearanceVoter, ColourMemory, FrameVotes};
 use crate::method::classifier::SvmModel;
 use crate::method::features::{FeatureExtractor, FeatureGrid};
 use crate::method::filter::OutlierFilter;
+use crate::method::footprint::{Footprint, PathKind, Trajectory};
 use crate::method::grid::{CellClass, CellPoints, GridLayout, grid_points};
 use crate::method::ground_truth::GroundTruth;
 use crate::method::integration::{IntegrationWindow, WorldScan, ground_normal, scan_to_world};
 use crate::method::registration::{Odometry, RegistrationError};
+use crate::method::self_labels::SelfLabeller;
 use crate::posing::Posing;
 use crate::stopwatch::timed;
 
@@ -75,6 +77,12 @@ pub struct FrameResult {
     pub margins: Option<Vec<f32>>,
     /// Ground truth, when every scan of the window has labels.
     pub ground_truth: Option<Vec<CellClass>>,
+    /// The cells the vehicle drove over and where its path came from, when the
+    /// pipeline follows a trajectory ([`Pipeline::follow`]).
+    pub footprint: Option<(Vec<bool>, PathKind)>,
+    /// The drive's own labels of its cells (stage 6b), when it follows a trajectory:
+    /// traversable, not, or unknown.
+    pub self_labels: Option<Vec<Option<bool>>>,
     /// SHA-256 of the frame's scan, when the caller asked for it.
     pub scan_sha256: Option<String>,
     pub timings: StageTimings,
@@ -141,6 +149,15 @@ pub struct Pipeline {
     feature_groups: usize,
     /// Scan registration, when the poses are estimated.
     registration: Option<Odometry>,
+    /// Footprint and self-labels (stages 6a, 6b), when following a trajectory.
+    adaptation: Option<Adaptation>,
+}
+
+/// What the adaptation stages need: the drive's trajectory and the vehicle.
+struct Adaptation {
+    trajectory: std::sync::Arc<Trajectory>,
+    footprint: Footprint,
+    labeller: SelfLabeller,
 }
 
 impl Pipeline {
@@ -167,16 +184,32 @@ impl Pipeline {
             filter: OutlierFilter {
                 config: config.filter.clone(),
             },
-            ground_truth: GroundTruth {
-                config: config.ground_truth.clone(),
-            },
+            ground_truth: GroundTruth::new(config.ground_truth.clone()),
             cell_size_m: config.grid.cell_size_m,
             cells_per_side: config.grid.cells_per_side(),
             use_reduced_set: config.classifier.use_reduced_set,
             feature_groups: config.features.groups.len(),
             registration: (posing == Posing::Registration)
                 .then(|| Odometry::new(config.registration.clone())),
+            adaptation: None,
         })
+    }
+
+    /// Adds stages 6a and 6b: each frame's footprint along `trajectory` (the whole
+    /// drive's poses) and its self-labels, by the prior's margins when a model is
+    /// given.
+    pub fn follow(&mut self, trajectory: std::sync::Arc<Trajectory>, config: &Config) {
+        self.adaptation = Some(Adaptation {
+            trajectory,
+            footprint: Footprint {
+                vehicle: config.vehicle.clone(),
+                horizon_m: config.adapt.horizon_m,
+            },
+            labeller: SelfLabeller {
+                vehicle: config.vehicle.clone(),
+                adapt: config.adapt.clone(),
+            },
+        });
     }
 
     /// Stage 0, posing: the frame's pose as the source's posing says: its own, the
@@ -324,6 +357,15 @@ impl Pipeline {
         });
         // Ground truth from the same cloud, outside the latency.
         let ground_truth = self.ground_truth.label(&cells);
+        // 6a. Footprint: the cells the vehicle drove over.
+        let footprint = self.adaptation.as_ref().map(|a| {
+            a.footprint.cells(
+                &layout,
+                &a.trajectory,
+                current.index,
+                &extras.world_from_velodyne,
+            )
+        });
         Observation {
             result: FrameResult {
                 index: current.index,
@@ -340,6 +382,8 @@ impl Pipeline {
                 filtered: None,
                 margins: None,
                 ground_truth,
+                footprint,
+                self_labels: None,
                 scan_sha256: None,
                 timings,
             },
@@ -382,6 +426,16 @@ impl Pipeline {
             result.predicted = Some(labels);
             result.margins = Some(margins);
         }
+        // 6b. Self-labels: footprint, confident rejections and obstacles.
+        if let (Some(adaptation), Some((footprint, _))) = (&self.adaptation, &result.footprint) {
+            let margins = result.margins.as_deref();
+            result.self_labels = Some(adaptation.labeller.label(
+                &result.features,
+                footprint,
+                margins,
+            ));
+        }
+        let timings = &mut result.timings;
         timings.latency_ms = timings.register_ms
             + timings.integrate_ms
             + timings.grid_ms

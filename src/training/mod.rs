@@ -8,6 +8,7 @@
 
 use rayon::prelude::*;
 
+pub mod adaptation;
 pub mod crossval;
 pub mod model_file;
 mod reduced_set;
@@ -77,6 +78,7 @@ fn fit(set: &TrainingSet, c: f64, gamma: f64, config: &Config) -> SvmModel {
         samples: &standardised,
         dimension: d,
         labels: &labels,
+        weights: &set.weight,
     };
     let (positive_weight, negative_weight) = class_weights(set, config.training.class_weights);
     let parameters = Parameters {
@@ -104,6 +106,7 @@ fn fit(set: &TrainingSet, c: f64, gamma: f64, config: &Config) -> SvmModel {
         solver_converged: solution.converged,
         seconds: 0.0,
         frame_sha256: set.frame_sha256.clone(),
+        adaptation: None,
     };
     SvmModel::new(
         mean,
@@ -205,6 +208,16 @@ fn best_threshold(values: &[(f32, bool)], criterion: Criterion) -> f32 {
     best
 }
 
+/// How a model's C and gamma are chosen.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Search {
+    /// By the grid search over `training.c_values` and `gamma_values` with
+    /// spatially-blocked cross-validation.
+    Grid,
+    /// As given (self-labelled cells have no labels to choose them by).
+    Fixed { c: f64, gamma: f64 },
+}
+
 /// Trains the geometric model on every cell and, when cameras saw some, the hybrid
 /// model on those (METHOD.md section 5's Decision). A hybrid set that cannot be
 /// trained (one class, too few blocks) leaves the model geometric-only.
@@ -213,9 +226,19 @@ pub fn train(
     config: &Config,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SvmModel> {
-    let mut model = train_one(set, config, progress)?;
+    train_by(set, config, Search::Grid, progress)
+}
+
+/// [`train`] with C and gamma chosen as `search` says.
+pub fn train_by(
+    set: &TrainingSet,
+    config: &Config,
+    search: Search,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<SvmModel> {
+    let mut model = train_one(set, config, search, progress)?;
     if let Some(hybrid) = set.hybrid() {
-        match train_one(&hybrid, config, progress) {
+        match train_one(&hybrid, config, search, progress) {
             Ok(hybrid) => model.hybrid = Some(Box::new(hybrid)),
             Err(Error::Training(_)) => {}
             Err(e) => return Err(e),
@@ -234,7 +257,7 @@ pub fn train(
                 feature_count(&config.features.groups)
             )));
         }
-        let fallback = train(&set.without_columns(columns), &without, progress)?;
+        let fallback = train_by(&set.without_columns(columns), &without, search, progress)?;
         model.fallback = Some(Box::new(fallback));
     }
     Ok(model)
@@ -245,6 +268,7 @@ pub fn train(
 fn train_one(
     set: &TrainingSet,
     config: &Config,
+    search: Search,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SvmModel> {
     let started = std::time::Instant::now();
@@ -266,8 +290,15 @@ fn train_one(
         indices.sort_unstable();
         set.subset(&indices)
     };
-    let search_set = subset(t.max_search_samples.max(t.folds));
     let fit_set = subset(t.max_fit_samples);
+    if let Search::Fixed { c, gamma } = search {
+        let mut model = fit(&fit_set, c, gamma, config);
+        model.reduced_set = fit_reduced_set(&model, &fit_set, config);
+        progress(1, 1);
+        model.training.seconds = started.elapsed().as_secs_f64();
+        return Ok(model);
+    }
+    let search_set = subset(t.max_search_samples.max(t.folds));
     let folds = spatial_folds(&search_set.centre_in_world, t.block_size_m, t.folds, t.seed);
     let used_folds: Vec<usize> = (0..t.folds).filter(|f| folds.contains(f)).collect();
     if used_folds.len() < 2 {

@@ -48,6 +48,19 @@ struct ModelFile {
     /// present exactly when this one uses remission.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     fallback: Option<Box<ModelFile>>,
+    /// The model this one adapts, whose margins add to its own times `prior_weight`
+    /// (adaptation's `sum` learner).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    prior: Option<Box<ModelFile>>,
+    #[serde(default, skip_serializing_if = "is_zero")]
+    prior_weight: f32,
+    /// The reduced set is fitted to this model's margin plus the prior's.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    reduced_set_includes_prior: bool,
+}
+
+fn is_zero(value: &f32) -> bool {
+    *value == 0.0
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -66,7 +79,7 @@ fn older_configs(model: &mut serde_json::Value) {
     if let Some(config) = model.get_mut("config") {
         written_before_groups(config);
     }
-    for part in ["hybrid", "fallback"] {
+    for part in ["hybrid", "fallback", "prior"] {
         if let Some(inner) = model.get_mut(part).filter(|p| p.is_object()) {
             older_configs(inner);
         }
@@ -192,6 +205,22 @@ impl SvmModel {
             }
             None => None,
         };
+        let prior = match file.prior {
+            Some(prior) => {
+                let source = format!("{source_name} (prior model)");
+                let names = feature_names(&prior.config.features.groups);
+                if names != expected_names {
+                    return Err(fail(format!(
+                        "prior model: features {names:?}, expected {expected_names:?}"
+                    )));
+                }
+                Some(Box::new(Self::from_file(*prior, &source, &names)?))
+            }
+            None => None,
+        };
+        if !(file.prior_weight.is_finite() && file.prior_weight >= 0.0) {
+            return Err(fail(format!("prior_weight {}", file.prior_weight)));
+        }
         let reduced_set = match file.reduced_set {
             None => None,
             Some(r) => {
@@ -234,6 +263,14 @@ impl SvmModel {
         model.reduced_set = reduced_set;
         model.hybrid = hybrid;
         model.fallback = fallback;
+        if file.reduced_set_includes_prior && prior.is_none() {
+            return Err(fail(
+                "a reduced set that includes a prior, without the prior".into(),
+            ));
+        }
+        model.prior = prior;
+        model.prior_weight = file.prior_weight;
+        model.reduced_set_includes_prior = file.reduced_set_includes_prior;
         Ok(model)
     }
 
@@ -265,6 +302,9 @@ impl SvmModel {
             }),
             hybrid: self.hybrid.as_ref().map(|h| Box::new(h.to_file())),
             fallback: self.fallback.as_ref().map(|f| Box::new(f.to_file())),
+            prior: self.prior.as_ref().map(|p| Box::new(p.to_file())),
+            prior_weight: self.prior_weight,
+            reduced_set_includes_prior: self.reduced_set_includes_prior,
         }
     }
 

@@ -61,27 +61,78 @@ pub(super) fn fit_reduced_set(
     set: &TrainingSet,
     config: &Config,
 ) -> Option<ReducedSet> {
+    let mut scratch = PredictionScratch::default();
+    fit_expansion(
+        model,
+        &model.support_vectors,
+        &set.features,
+        config,
+        |row| model.exact_decision_value(row, &mut scratch),
+    )
+}
+
+/// A reduced set of the adapted model `model` that stands for its sum with its
+/// prior (`margin + prior_weight x prior margin`, README "Adaptation"), so that
+/// classifying costs one expansion, not two: centres from both models' support
+/// vectors (the prior's brought into `model`'s standardisation), fitted on `rows`
+/// (raw features: the drive's cells) and the prior's support vectors.
+pub(super) fn fit_folded_reduced_set(
+    model: &SvmModel,
+    prior: &SvmModel,
+    rows: &[f32],
+    config: &Config,
+) -> Option<ReducedSet> {
+    let d = model.dimension();
+    // A prior with a prior of its own is not one expansion: it stays as it is.
+    if prior.dimension() != d || prior.prior.is_some() {
+        return None;
+    }
+    let prior_raw: Vec<f32> = prior.support_vectors_raw();
+    let mut candidates = model.support_vectors.clone();
+    let mut scratch = PredictionScratch::default();
+    for row in prior_raw.chunks_exact(d) {
+        candidates.extend_from_slice(model.standardise(row, &mut scratch));
+    }
+    let all_rows = [rows, &prior_raw].concat();
+    let (mut own, mut other) = (PredictionScratch::default(), PredictionScratch::default());
+    let weight = model.prior_weight;
+    fit_expansion(model, &candidates, &all_rows, config, |row| {
+        model.exact_decision_value(row, &mut own)
+            + weight * (prior.exact_decision_value(row, &mut other) - prior.threshold)
+    })
+}
+
+/// `training.reduced_set_size` k-means centres of `candidates` (standardised as
+/// `model` does) with weights and bias by weighted ridge least squares to `target`
+/// on at most `training.reduced_set_samples` of `rows` (raw features, row-major),
+/// in `model`'s kernel. None when there are no more candidates than centres.
+fn fit_expansion(
+    model: &SvmModel,
+    candidates: &[f32],
+    rows: &[f32],
+    config: &Config,
+    mut target_of: impl FnMut(&[f32]) -> f32,
+) -> Option<ReducedSet> {
     let t = &config.training;
     let d = model.dimension();
-    let sv_count = model.support_vector_count();
-    if t.reduced_set_size == 0 || sv_count <= t.reduced_set_size {
+    if t.reduced_set_size == 0 || candidates.len() / d <= t.reduced_set_size {
         return None;
     }
     let mut rng = SplitMix64(t.seed ^ 0x5EED);
-    let centres = k_means(&model.support_vectors, d, t.reduced_set_size, 10, &mut rng);
-    let mut rows: Vec<usize> = (0..set.len()).collect();
-    rng.shuffle(&mut rows);
-    rows.truncate(t.reduced_set_samples.max(1));
+    let centres = k_means(candidates, d, t.reduced_set_size, 10, &mut rng);
+    let mut chosen: Vec<usize> = (0..rows.len() / d).collect();
+    rng.shuffle(&mut chosen);
+    chosen.truncate(t.reduced_set_samples.max(1));
 
     // Design matrix: the kernel to every centre plus a column of ones for the bias.
     let m = t.reduced_set_size;
     let gamma = model.gamma;
     let mut scratch = PredictionScratch::default();
-    let mut design = nalgebra::DMatrix::<f64>::zeros(rows.len(), m + 1);
-    let mut target = nalgebra::DVector::<f64>::zeros(rows.len());
-    for (r, &i) in rows.iter().enumerate() {
-        let features = &set.features[i * d..(i + 1) * d];
-        target[r] = model.exact_decision_value(features, &mut scratch) as f64;
+    let mut design = nalgebra::DMatrix::<f64>::zeros(chosen.len(), m + 1);
+    let mut target = nalgebra::DVector::<f64>::zeros(chosen.len());
+    for (r, &i) in chosen.iter().enumerate() {
+        let features = &rows[i * d..(i + 1) * d];
+        target[r] = target_of(features) as f64;
         let z = model.standardise(features, &mut scratch);
         for (j, c) in centres.chunks_exact(d).enumerate() {
             let distance: f64 = c.iter().zip(z).map(|(a, b)| ((a - b) as f64).powi(2)).sum();
@@ -92,7 +143,7 @@ pub(super) fn fit_reduced_set(
     // Rows near the decision boundary decide signs: weight them up, w = 1 / (1 + f^2).
     let mut weighted = design.clone();
     let mut weighted_target = target.clone();
-    for r in 0..rows.len() {
+    for r in 0..chosen.len() {
         let w = (1.0 / (1.0 + target[r] * target[r])).sqrt();
         weighted.row_mut(r).scale_mut(w);
         weighted_target[r] *= w;
@@ -115,7 +166,7 @@ pub(super) fn fit_reduced_set(
         centres,
         solution.iter().take(m).map(|&w| w as f32).collect(),
         solution[m] as f32,
-        agreeing as f64 / rows.len() as f64,
+        agreeing as f64 / chosen.len() as f64,
     ))
 }
 

@@ -13,6 +13,9 @@ pub struct TrainingSet {
     pub features: Vec<f32>,
     pub dimension: usize,
     pub traversable: Vec<bool>,
+    /// Each cell's weight on C (1 unless the cell counts more or less, as the
+    /// prior's cells in adaptation).
+    pub weight: Vec<f32>,
     /// World x, y of each cell's centre, metres.
     pub centre_in_world: Vec<[f64; 2]>,
     /// Where the cells came from, for the model's record.
@@ -66,8 +69,21 @@ impl TrainingSet {
         traversable: bool,
         centre_in_world: [f64; 2],
     ) {
+        self.push_weighted(features, appearance, traversable, centre_in_world, 1.0);
+    }
+
+    /// [`Self::push`] with a weight on C.
+    pub fn push_weighted(
+        &mut self,
+        features: &[f32],
+        appearance: Option<&[f32]>,
+        traversable: bool,
+        centre_in_world: [f64; 2],
+        weight: f32,
+    ) {
         self.features.extend_from_slice(features);
         self.traversable.push(traversable);
+        self.weight.push(weight);
         self.centre_in_world.push(centre_in_world);
         let row = appearance.map(|values| {
             self.appearance_len = values.len();
@@ -96,7 +112,13 @@ impl TrainingSet {
             if let Some(appearance) = self.appearance_of(i) {
                 let mut row = self.features[i * d..(i + 1) * d].to_vec();
                 row.extend_from_slice(appearance);
-                out.push(&row, None, self.traversable[i], self.centre_in_world[i]);
+                out.push_weighted(
+                    &row,
+                    None,
+                    self.traversable[i],
+                    self.centre_in_world[i],
+                    self.weight[i],
+                );
             }
         }
         (!out.is_empty()).then_some(out)
@@ -113,11 +135,12 @@ impl TrainingSet {
             ..Default::default()
         };
         for &i in indices {
-            out.push(
+            out.push_weighted(
                 &self.features[i * d..(i + 1) * d],
                 self.appearance_of(i),
                 self.traversable[i],
                 self.centre_in_world[i],
+                self.weight[i],
             );
         }
         out

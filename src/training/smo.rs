@@ -17,6 +17,8 @@ pub struct Problem<'a> {
     pub samples: &'a [f32],
     pub dimension: usize,
     pub labels: &'a [f32],
+    /// Per-sample weights on C (empty: all 1).
+    pub weights: &'a [f32],
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -109,7 +111,7 @@ impl<'a> KernelRows<'a> {
 }
 
 /// Solves `min 1/2 a'Qa - e'a` subject to `0 <= a_i <= C_i`, `y'a = 0`, with `C_i`
-/// the class-weighted C of sample i.
+/// C times sample i's class weight and its own weight.
 pub fn solve(problem: &Problem, parameters: &Parameters) -> Solution {
     let n = problem.labels.len();
     let y: Vec<f64> = problem.labels.iter().map(|&v| v as f64).collect();
@@ -118,9 +120,11 @@ pub fn solve(problem: &Problem, parameters: &Parameters) -> Solution {
         parameters.c * parameters.positive_weight,
         parameters.c * parameters.negative_weight,
     );
+    let weight = |i: usize| problem.weights.get(i).map_or(1.0, |&w| w as f64);
     let c: Vec<f64> = y
         .iter()
-        .map(|&y| if y > 0.0 { c_positive } else { c_negative })
+        .enumerate()
+        .map(|(i, &y)| weight(i) * if y > 0.0 { c_positive } else { c_negative })
         .collect();
     let mut kernel = KernelRows::new(problem, parameters.gamma, parameters.cache_bytes);
     let mut alpha = vec![0.0f64; n];
@@ -340,6 +344,7 @@ mod tests {
             samples: &samples,
             dimension: 2,
             labels: &labels,
+            weights: &[],
         };
         let s = solve(&problem, &parameters(1.0, 0.5, 1e-3, 1 << 20));
         assert!(s.converged);
@@ -370,6 +375,7 @@ mod tests {
             samples: &samples,
             dimension: 2,
             labels: &labels,
+            weights: &[],
         };
         let s = solve(&problem, &parameters(10.0, 1.0, 1e-6, 16));
         for (x, y) in points.iter().zip(labels) {
@@ -402,6 +408,7 @@ mod tests {
             samples: &samples,
             dimension: 3,
             labels: &labels,
+            weights: &[],
         };
         let big = parameters(5.0, 0.3, 1e-3, 1 << 20);
         let tiny = parameters(5.0, 0.3, 1e-3, 0);

@@ -8,8 +8,11 @@
 //! geometric features by name (float), the appearance values `hue_0..`,
 //! `saturation_0..`, `value_0..` (float, null where no camera ever saw the cell),
 //! `ground_truth_traversable` and `predicted_traversable` (boolean, null without
-//! labels / without a model). The key-value metadata `travmap.config` holds the
-//! configuration the rows were computed with, as JSON; reading checks it.
+//! labels / without a model), `footprint` (boolean: the vehicle drove over the cell)
+//! and `pseudo_label` (boolean, null where the drive says nothing: the self-label of
+//! adaptation, `method/self_labels.rs`). The key-value metadata `travmap.config`
+//! holds the configuration the rows were computed with, as JSON; reading checks it.
+//! Files of format 1 (before the last two columns) are read too.
 
 pub mod reading;
 
@@ -40,7 +43,14 @@ const MAX_READ_GROUP_ROWS: usize = 1 << 22;
 
 const CONFIG_KEY: &str = "travmap.config";
 const FORMAT_KEY: &str = "travmap.format";
-const FORMAT: &str = "travmap-cells 1";
+const FORMAT: &str = "travmap-cells 2";
+/// The format before `footprint` and `pseudo_label`, still read.
+const FORMAT_1: &str = "travmap-cells 1";
+/// Columns format 2 added after `predicted_traversable`.
+const SELF_LABEL_COLUMNS: [&str; 2] = [
+    "REQUIRED BOOLEAN footprint",
+    "OPTIONAL BOOLEAN pseudo_label",
+];
 
 /// Names of the appearance columns for `config`'s buckets.
 pub fn appearance_columns(config: &Config) -> Vec<String> {
@@ -52,10 +62,9 @@ pub fn appearance_columns(config: &Config) -> Vec<String> {
         .collect()
 }
 
-/// The Parquet schema of the cell rows.
 /// The message type of the cell table: `features` and `appearance` are the value
-/// columns' names.
-fn schema(features: &[String], appearance: &[String]) -> String {
+/// columns' names; `self_labels` false for format 1.
+fn schema(features: &[String], appearance: &[String], self_labels: bool) -> String {
     let mut fields = vec![
         "REQUIRED BYTE_ARRAY source (STRING)".to_string(),
         "REQUIRED INT64 frame".into(),
@@ -70,6 +79,9 @@ fn schema(features: &[String], appearance: &[String]) -> String {
     fields.extend(appearance.iter().map(|n| format!("OPTIONAL FLOAT {n}")));
     fields.push("OPTIONAL BOOLEAN ground_truth_traversable".into());
     fields.push("OPTIONAL BOOLEAN predicted_traversable".into());
+    if self_labels {
+        fields.extend(SELF_LABEL_COLUMNS.map(String::from));
+    }
     format!("message travmap_cells {{ {}; }}", fields.join("; "))
 }
 
@@ -104,6 +116,8 @@ struct Columns {
     appearance_defined: Vec<i16>,
     ground_truth: Nullable<bool>,
     predicted: Nullable<bool>,
+    footprint: Vec<bool>,
+    pseudo_label: Nullable<bool>,
 }
 
 impl Columns {
@@ -136,14 +150,18 @@ pub struct DatasetSummary {
     pub frames: u64,
     pub labelled_rows: u64,
     pub rows_with_appearance: u64,
+    /// Rows the vehicle drove over, and rows with a self-label.
+    pub footprint_rows: u64,
+    pub pseudo_labelled_rows: u64,
 }
 
 impl DatasetWriter {
     pub fn create(path: &Path, config: &Config) -> Result<Self> {
         let appearance = appearance_columns(config);
         let features = feature_names(&config.features.groups);
-        let schema = parquet::schema::parser::parse_message_type(&schema(&features, &appearance))
-            .expect("the cell schema parses");
+        let schema =
+            parquet::schema::parser::parse_message_type(&schema(&features, &appearance, true))
+                .expect("the cell schema parses");
         let config_json = serde_json::to_string(config).expect("config serialises");
         let properties = WriterProperties::builder()
             .set_compression(Compression::ZSTD(ZstdLevel::default()))
@@ -220,6 +238,12 @@ impl DatasetWriter {
             summary.rows += 1;
             c.ground_truth.push(truth);
             c.predicted.push(classes(&result.filtered, cell));
+            let footprint = result.footprint.as_ref().is_some_and(|(f, _)| f[cell]);
+            let pseudo = result.self_labels.as_ref().and_then(|l| l[cell]);
+            summary.footprint_rows += footprint as u64;
+            summary.pseudo_labelled_rows += pseudo.is_some() as u64;
+            c.footprint.push(footprint);
+            c.pseudo_label.push(pseudo);
         }
         if self.columns.len() >= ROW_GROUP_ROWS {
             self.flush()?;
@@ -309,14 +333,24 @@ fn write_column(
             Some(&columns.appearance_defined),
             None,
         ),
-        ColumnWriter::BoolColumnWriter(w) => {
-            let column = if index == appearance.end {
-                &columns.ground_truth
-            } else {
-                &columns.predicted
-            };
-            w.write_batch(&column.values, Some(&column.defined), None)
-        }
+        ColumnWriter::BoolColumnWriter(w) => match index - appearance.end {
+            0 => w.write_batch(
+                &columns.ground_truth.values,
+                Some(&columns.ground_truth.defined),
+                None,
+            ),
+            1 => w.write_batch(
+                &columns.predicted.values,
+                Some(&columns.predicted.defined),
+                None,
+            ),
+            2 => w.write_batch(&columns.footprint, None, None),
+            _ => w.write_batch(
+                &columns.pseudo_label.values,
+                Some(&columns.pseudo_label.defined),
+                None,
+            ),
+        },
         _ => unreachable!("column {index} is not in the cell schema"),
     };
     written.map(|_| ())
@@ -331,7 +365,14 @@ fn feature_settings(config: &Config) -> serde_json::Value {
         "grid.min_points": config.grid.min_points,
         "features": config.features,
         "appearance": config.appearance,
-        "ground_truth": config.ground_truth,
+        // What the ground truth counts, however the configuration names it (a
+        // preset, explicit lists, a label map).
+        "ground_truth": {
+            "min_points": config.ground_truth.min_points,
+            "min_non_traversable_points": config.ground_truth.min_non_traversable_points,
+            "traversable_classes": config.ground_truth.classes().traversable,
+            "ignored_classes": config.ground_truth.classes().ignored,
+        },
     })
 }
 
@@ -344,7 +385,7 @@ mod tests {
     /// A file with the cell schema as `edit` changes it and travmap's metadata.
     fn write_with_schema(path: &Path, config: &Config, edit: impl Fn(String) -> String) {
         let features = feature_names(&config.features.groups);
-        let schema = edit(schema(&features, &appearance_columns(config)));
+        let schema = edit(schema(&features, &appearance_columns(config), true));
         let schema = parquet::schema::parser::parse_message_type(&schema).unwrap();
         let properties = WriterProperties::builder()
             .set_key_value_metadata(Some(vec![
@@ -365,8 +406,13 @@ mod tests {
         let path = dir.path().join("cells.parquet");
         let config = Config::default();
         let read = |path: &Path| {
-            read_training_rows(path, &config, &mut TrainingSet::default())
-                .map_err(|e| e.to_string())
+            read_training_rows(
+                path,
+                &config,
+                &mut TrainingSet::default(),
+                reading::Labels::GroundTruth,
+            )
+            .map_err(|e| e.to_string())
         };
         write_with_schema(&path, &config, |s| s);
         assert_eq!(read(&path), Ok(0));
@@ -380,9 +426,9 @@ mod tests {
             "{err}"
         );
         write_with_schema(&path, &config, |s| {
-            s.replace("; OPTIONAL BOOLEAN predicted_traversable", "")
+            s.replace("; OPTIONAL BOOLEAN pseudo_label", "")
         });
         let err = read(&path).unwrap_err();
-        assert!(err.contains("column 120 is `(none)`; expected `predicted_traversable BOOLEAN` (120 columns, expected 121)"), "{err}");
+        assert!(err.contains("column 122 is `(none)`; expected `pseudo_label BOOLEAN` (122 columns, expected 123)"), "{err}");
     }
 }

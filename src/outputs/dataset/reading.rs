@@ -14,8 +14,8 @@ use parquet::file::serialized_reader::SerializedFileReader;
 use parquet::schema::types::SchemaDescriptor;
 
 use super::{
-    CONFIG_KEY, FORMAT, FORMAT_KEY, MAX_READ_GROUP_ROWS, ROW_GROUP_ROWS, appearance_columns,
-    feature_settings, schema,
+    CONFIG_KEY, FORMAT, FORMAT_1, FORMAT_KEY, MAX_READ_GROUP_ROWS, ROW_GROUP_ROWS,
+    appearance_columns, feature_settings, schema,
 };
 use crate::Config;
 use crate::config::written_before_groups;
@@ -104,10 +104,24 @@ where
     }
 }
 
-/// Appends the labelled rows of the dataset at `path` to `set`, after checking
-/// that its cells were computed with `config`'s feature settings. Returns the
-/// number of rows added.
-pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -> Result<usize> {
+/// Which labels a training set takes from a dataset.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Labels {
+    /// `ground_truth_traversable`: the annotations.
+    GroundTruth,
+    /// `pseudo_label`: the drive's self-labels (`train --labels pseudo`).
+    Pseudo,
+}
+
+/// Appends the rows of the dataset at `path` that have `labels` to `set`, after
+/// checking that its cells were computed with `config`'s feature settings. Returns
+/// the number of rows added.
+pub fn read_training_rows(
+    path: &Path,
+    config: &Config,
+    set: &mut TrainingSet,
+    labels: Labels,
+) -> Result<usize> {
     // In memory: the parquet crate reads a `File` with many small unbuffered reads,
     // millions of them on some corrupt page headers (15 s for a 26 kB file). The
     // rows take more memory than the compressed file does anyway.
@@ -130,12 +144,23 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
             .and_then(|kv| kv.iter().find(|e| e.key == key))
             .and_then(|e| e.value.clone())
     };
-    if value_of(FORMAT_KEY).as_deref() != Some(FORMAT) {
+    let self_labels = match value_of(FORMAT_KEY).as_deref() {
+        Some(FORMAT) => true,
+        Some(FORMAT_1) => false,
+        other => {
+            return Err(read_error(
+                path,
+                format!(
+                    "not a travmap cell dataset (metadata {FORMAT_KEY} is {other:?}; expected {FORMAT:?})"
+                ),
+            ));
+        }
+    };
+    if labels == Labels::Pseudo && !self_labels {
         return Err(read_error(
             path,
             format!(
-                "not a travmap cell dataset (metadata {FORMAT_KEY} is {:?}; expected {FORMAT:?})",
-                value_of(FORMAT_KEY)
+                "a dataset of format {FORMAT_1:?} has no pseudo_label column; extract it again with this travmap"
             ),
         ));
     }
@@ -157,7 +182,7 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
     }
     let feature_columns = feature_names(&config.features.groups);
     let feature_count = feature_columns.len();
-    let expected = schema(&feature_columns, &appearance_columns(config));
+    let expected = schema(&feature_columns, &appearance_columns(config), self_labels);
     let expected = parquet::schema::parser::parse_message_type(&expected).expect("schema parses");
     let expected = SchemaDescriptor::new(Arc::new(expected));
     // Name and physical type of every column. Other writers may annotate columns
@@ -198,7 +223,8 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
     }
 
     use parquet::data_type::{BoolType, DoubleType, FloatType};
-    let appearance_len = wanted.len() - 10 - feature_count;
+    let label_columns = if self_labels { 4 } else { 2 };
+    let appearance_len = wanted.len() - 8 - label_columns - feature_count;
     let mut added = 0;
     for g in 0..reader.num_row_groups() {
         let group = contained(|| reader.get_row_group(g)).map_err(fail)?;
@@ -239,7 +265,14 @@ pub fn read_training_rows(path: &Path, config: &Config, set: &mut TrainingSet) -
             }
             appearance.push(spread);
         }
-        let truth_column = 8 + feature_count + appearance_len;
+        let truth_column = 8
+            + feature_count
+            + appearance_len
+            + match labels {
+                Labels::GroundTruth => 0,
+                // After the ground truth, the prediction and the footprint.
+                Labels::Pseudo => 3,
+            };
         let (truth, labelled) =
             read_column::<BoolType>(group.as_ref(), truth_column, rows).map_err(fail)?;
         let mut truth = truth.into_iter();

@@ -1,0 +1,122 @@
+//! `travmap adapt`: a model adapted to the ground of the given drives, learnt from
+//! the drives themselves (no labels read); `annotate --adapt` and `eval --adapt`
+//! adapt in memory first ([`adapted_model`]).
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::Args;
+use serde_json::json;
+use travmap::Config;
+use travmap::method::classifier::SvmModel;
+use travmap::outputs::writing::write_atomically;
+use travmap::training::adaptation::{Adapted, adapt as adapt_model};
+
+use super::{
+    Inputs, ModelArg, Outcome, Output, check_output, frame_count, model_json, outcome,
+    print_json_summary,
+};
+
+/// Adapt a model to the ground the given drives cover, from the drives alone: the
+/// cells the vehicle drove over are traversable, obstacles and what the prior (--model)
+/// confidently rejects are not; labels in the inputs are never read.
+#[derive(Args)]
+pub struct AdaptArgs {
+    #[command(flatten)]
+    inputs: Inputs,
+    /// Where to write the adapted model (JSON), which every command's --model takes.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// The prior model to adapt (default: the embedded model).
+    #[command(flatten)]
+    model: ModelArg,
+}
+
+pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
+    let config = &args.inputs.settings.load()?;
+    let output = &args.inputs.output;
+    let model_path = args.output.as_path();
+    check_output(model_path, &args.inputs.files(args.model.path.as_deref()))?;
+    let (prior, prior_name) = args.model.load(config)?;
+    let adapted = adapted_model(&args.inputs, config, &prior, &prior_name, output)?;
+    write_atomically(model_path, &adapted.model.to_json())?;
+    let selections = args.inputs.open(false)?;
+    let model = &adapted.model;
+    let summary = model.training.adaptation.as_ref();
+    if output.json {
+        let fields = json!({
+            "output": model_path,
+            "model": model_json(model, &model_path.display().to_string()),
+            "prior": {"name": prior_name, "sha256": prior.sha256_hex()},
+            "counts": adapted.counts,
+            "adaptation": summary,
+            "support_vectors": model.support_vector_count(),
+            "seconds": model.training.seconds,
+            "config": {"vehicle": config.vehicle, "adapt": config.adapt},
+        });
+        print_json_summary("adapt", &selections, fields)?;
+    } else if !output.quiet {
+        let counts = &adapted.counts;
+        println!(
+            "self-labelled {} frames: {} footprint cells, {} negative cells, {} unknown (distinct world cells); no labels read",
+            counts.frames, counts.footprint_cells, counts.negative_cells, counts.unknown_cells
+        );
+        println!(
+            "adapted {prior_name} ({:?} learner, C {} gamma {}): {} support vectors on {} cells",
+            config.adapt.learner,
+            model.c,
+            model.gamma,
+            model.support_vector_count(),
+            summary.map_or(0, |s| s.fitted_cells)
+        );
+        println!("wrote {}", model_path.display());
+    }
+    Ok(outcome(&selections))
+}
+
+/// The prior adapted to the drives of `inputs` (opened afresh, without labels),
+/// with a progress bar and the notices on stderr.
+pub fn adapted_model(
+    inputs: &Inputs,
+    config: &Config,
+    prior: &SvmModel,
+    prior_name: &str,
+    output: &Output,
+) -> Result<Adapted> {
+    let mut selections = inputs.open(config.appearance.enabled)?;
+    let bar = output.progress(frame_count(&selections), "adapting");
+    let adapted = adapt_model(&mut selections, config, prior, prior_name, &mut || {
+        bar.inc(1)
+    })?;
+    bar.finish();
+    for notice in &adapted.notices {
+        eprintln!("notice: {notice}");
+    }
+    Ok(adapted)
+}
+
+/// `--adapt` of the commands that classify drives.
+#[derive(Args)]
+pub struct AdaptFlag {
+    /// Adapt the model (--model, or the embedded one) to these drives first, from the
+    /// drives alone (as `travmap adapt` does; labels, if any, are read only to score).
+    #[arg(long)]
+    pub adapt: bool,
+}
+
+impl AdaptFlag {
+    /// `model` (named `name`), adapted to the drives of `inputs` when asked.
+    pub fn apply(
+        &self,
+        inputs: &Inputs,
+        config: &Config,
+        (model, name): (SvmModel, String),
+        output: &Output,
+    ) -> Result<(SvmModel, String)> {
+        if !self.adapt {
+            return Ok((model, name));
+        }
+        let adapted = adapted_model(inputs, config, &model, &name, output)?;
+        Ok((adapted.model, format!("{name}, adapted to these drives")))
+    }
+}

@@ -1,0 +1,131 @@
+//! The vehicle whose drives adaptation learns from, and the settings of adaptation
+//! (`travmap adapt`, README "Adaptation").
+
+use serde::{Deserialize, Serialize};
+
+/// The vehicle that recorded the drive.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VehicleConfig {
+    /// Width of the ground the vehicle covers, metres (default 1.6).
+    pub width_m: f64,
+    /// Length, metres: the footprint reaches half of it ahead of the first pose and
+    /// behind the last (default 4.0).
+    pub length_m: f64,
+    /// Height range within a cell that the vehicle cannot drive over, metres: such
+    /// cells are obstacles, never footprint (default 0.3).
+    pub clearance_m: f64,
+}
+
+impl Default for VehicleConfig {
+    fn default() -> Self {
+        Self {
+            width_m: 1.6,
+            length_m: 4.0,
+            clearance_m: 0.3,
+        }
+    }
+}
+
+/// How the adapted model learns from the prior and the drive.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Learner {
+    /// An SVM of the drive's self-labelled cells alone.
+    Drive,
+    /// One SVM of the drive's cells and the prior's support vectors (labelled by
+    /// their side), the latter weighted by `prior_weight`.
+    DriveAndPrior,
+    /// The drive's SVM and the prior together: the sum of their decision values,
+    /// the prior's weighted by `prior_weight`.
+    Sum,
+}
+
+/// Self-supervised adaptation to the ground a drive covers.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AdaptConfig {
+    /// How far along the trajectory, ahead of and behind each scan, the ground the
+    /// vehicle drove over is footprint, metres (default 20).
+    pub horizon_m: f64,
+    /// How the adapted model learns (default `sum`).
+    pub learner: Learner,
+    /// Cells the prior calls not traversable with a margin at or below minus this
+    /// are negatives (default 1).
+    pub negative_margin: f64,
+    /// Cells over the vehicle's clearance are negatives too (default true).
+    pub geometric_negatives: bool,
+    /// Weight of the prior's cells (`drive_and_prior`) or decision value (`sum`)
+    /// against the drive's (default 0.75).
+    pub prior_weight: f64,
+    /// The adapted SVM's C and gamma: a drive has no labels to choose them by
+    /// (default 1 and 0.02).
+    pub c: f64,
+    pub gamma: f64,
+    /// Self-training rounds: cells left unknown that the adapted model calls with a
+    /// margin of at least `self_training_margin` join its training cells, and it is
+    /// fitted again (default 0).
+    pub rounds: usize,
+    pub self_training_margin: f64,
+    /// A drive with fewer distinct footprint cells is refused (default 50).
+    pub min_footprint_cells: usize,
+    /// Self-labelled cells the SVM is fitted on at most, a seeded random subset
+    /// (default 20,000).
+    pub max_cells: usize,
+}
+
+impl Default for AdaptConfig {
+    fn default() -> Self {
+        Self {
+            horizon_m: 20.0,
+            // The study's choice (README "Adaptation"): the sum, on a plateau of
+            // C 0.3-1, gamma 0.02-0.03, prior weight 0.5-1.
+            learner: Learner::Sum,
+            negative_margin: 1.0,
+            geometric_negatives: true,
+            prior_weight: 0.75,
+            c: 1.0,
+            gamma: 0.02,
+            rounds: 0,
+            self_training_margin: 1.0,
+            min_footprint_cells: 50,
+            max_cells: 20_000,
+        }
+    }
+}
+
+impl AdaptConfig {
+    /// Checks what adaptation relies on.
+    pub fn validate(&self, vehicle: &VehicleConfig) -> Result<(), String> {
+        let positive = |name: &str, v: f64| match v.is_finite() && v > 0.0 {
+            true => Ok(()),
+            false => Err(format!("{name} must be > 0, got {v}")),
+        };
+        positive("vehicle.width_m", vehicle.width_m)?;
+        positive("vehicle.length_m", vehicle.length_m)?;
+        positive("vehicle.clearance_m", vehicle.clearance_m)?;
+        positive("adapt.horizon_m", self.horizon_m)?;
+        positive("adapt.c", self.c)?;
+        positive("adapt.gamma", self.gamma)?;
+        positive("adapt.self_training_margin", self.self_training_margin)?;
+        if !(self.negative_margin.is_finite() && self.negative_margin >= 0.0) {
+            return Err(format!(
+                "adapt.negative_margin must be >= 0, got {}",
+                self.negative_margin
+            ));
+        }
+        if !(self.prior_weight.is_finite() && self.prior_weight >= 0.0) {
+            return Err(format!(
+                "adapt.prior_weight must be >= 0, got {}",
+                self.prior_weight
+            ));
+        }
+        if self.max_cells < 2 {
+            return Err(format!(
+                "adapt.max_cells must be >= 2, got {}",
+                self.max_cells
+            ));
+        }
+        Ok(())
+    }
+}
