@@ -52,6 +52,7 @@ fn every_command_prints_json_that_matches_its_schema() {
     let (drive, model, cells) = (out("d.mcap"), out("m.json"), out("c.parquet"));
     let (annotated, picture, converted) = (out("a.mcap"), out("f.png"), out("c.mcap"));
     let trajectory = out("poses.txt");
+    let adapted = out("adapted.json");
     let (map_picture, map_cells) = (out("map.png"), out("map.parquet"));
     let quick = ["training.c_values=[10]", "training.gamma_values=[0.05]"];
     let quick_crossval = [&quick[..], &["training.folds=3"]].concat();
@@ -74,6 +75,7 @@ fn every_command_prints_json_that_matches_its_schema() {
             with_settings(&["crossval", seq, "--frames", "0..3"], &quick_crossval),
         ),
         ("dataset", vec!["dataset", &drive, "-o", &cells]),
+        ("adapt", vec!["adapt", seq, "-o", &adapted]),
         ("annotate", vec!["annotate", &drive, "-o", &annotated]),
         (
             "render",

@@ -1,0 +1,331 @@
+//! Self-supervised adaptation (`travmap adapt`, `eval --adapt`, `annotate --adapt`,
+//! the dataset's self-label columns, `train --labels pseudo`) on the shipped drives:
+//! determinism, the model's record of how it was adapted, labels never read, the
+//! refusals, and the study's default against its targets (README "Adaptation").
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{
+    arg, assert_contains, clean_failure, json_summary, shared_data, stderr, success, travmap,
+    travmap_metadata, write_output,
+};
+use serde_json::Value;
+use travmap::outputs::dataset::reading::{Labels, read_training_rows};
+use travmap::training::TrainingSet;
+
+fn read_json(path: &Path) -> Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+}
+
+/// A copy of the sample in `dir`: its scans linked, its text files copied, with
+/// `labels/` as `labels` makes it (None: no labels) and poses.txt as `poses` writes
+/// it (None: the sample's).
+fn sample_copy(
+    sample: &Path,
+    dir: &Path,
+    labels: Option<&dyn Fn(&Path, &Path)>,
+    poses: Option<String>,
+) -> PathBuf {
+    let copy = dir.join("copy");
+    std::fs::create_dir_all(copy.join("velodyne")).unwrap();
+    for entry in std::fs::read_dir(sample.join("velodyne")).unwrap() {
+        let path = entry.unwrap().path();
+        std::os::unix::fs::symlink(&path, copy.join("velodyne").join(path.file_name().unwrap()))
+            .unwrap();
+    }
+    for file in ["calib.txt", "times.txt", "poses.txt"] {
+        std::fs::copy(sample.join(file), copy.join(file)).unwrap();
+    }
+    if let Some(poses) = poses {
+        std::fs::write(copy.join("poses.txt"), poses).unwrap();
+    }
+    if let Some(make) = labels {
+        std::fs::create_dir_all(copy.join("labels")).unwrap();
+        for entry in std::fs::read_dir(sample.join("labels")).unwrap() {
+            let path = entry.unwrap().path();
+            make(&path, &copy.join("labels").join(path.file_name().unwrap()));
+        }
+    }
+    copy
+}
+
+/// What an adapted model learnt, without where its inputs were or how long it took:
+/// the SVM, its reduced set and the self-label counts.
+fn learnt(model: &Value) -> Value {
+    let mut model = model.clone();
+    model["training"]["sources"] = Value::Null;
+    model["training"]["seconds"] = Value::Null;
+    for part in ["hybrid", "fallback"] {
+        if model[part].is_object() {
+            model[part]["training"]["sources"] = Value::Null;
+            model[part]["training"]["seconds"] = Value::Null;
+        }
+    }
+    if let Some(inputs) = model["training"]["adaptation"]["inputs"].as_array_mut() {
+        for input in inputs {
+            input["input"] = Value::Null;
+        }
+    }
+    model
+}
+
+#[test]
+fn adapt_is_deterministic_records_its_provenance_and_never_reads_labels() {
+    let Some(sample) = common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (first, second) = (dir.path().join("a.json"), dir.path().join("b.json"));
+    let summary = json_summary(&["adapt", arg(&sample), "-o", arg(&first)]);
+    write_output("adapt", &sample, &second, &[]);
+    // The same model but for the seconds it took.
+    assert!(
+        learnt(&read_json(&first)) == learnt(&read_json(&second)),
+        "two runs, two different models"
+    );
+
+    let model = read_json(&first);
+    let adaptation = &model["training"]["adaptation"];
+    assert_eq!(adaptation["self_supervised"], true);
+    assert_eq!(adaptation["learner"], "sum");
+    assert_eq!(adaptation["prior"], "embedded default model");
+    assert_eq!(adaptation["inputs"][0]["frames"], 6);
+    assert_eq!(summary["prior"]["sha256"], adaptation["prior_sha256"]);
+    for count in ["footprint_cells", "negative_cells", "unknown_cells"] {
+        assert!(
+            adaptation[count].as_u64().unwrap() > 50,
+            "{count}: {adaptation}"
+        );
+        assert_eq!(summary["counts"][count], adaptation[count]);
+    }
+    // The settings it was adapted with are the model's configuration.
+    assert_eq!(model["config"]["vehicle"]["width_m"], 1.6);
+    assert_eq!(model["config"]["adapt"]["learner"], "sum");
+    // The prior rides along, and one reduced set stands for both.
+    assert!(model["prior"].is_object());
+    assert_eq!(model["reduced_set_includes_prior"], true);
+
+    // The same scans with garbage for labels, or none: the same model.
+    let garbage = |_: &Path, to: &Path| std::fs::write(to, b"not a label file").unwrap();
+    for labels in [Some(&garbage as &dyn Fn(&Path, &Path)), None] {
+        let copy_dir = tempfile::tempdir().unwrap();
+        let copy = sample_copy(&sample, copy_dir.path(), labels, None);
+        let model = copy_dir.path().join("m.json");
+        write_output("adapt", &copy, &model, &[]);
+        assert!(
+            learnt(&read_json(&model)) == learnt(&read_json(&first)),
+            "labels changed the adapted model"
+        );
+    }
+}
+
+#[test]
+fn drives_that_show_too_little_are_refused_with_the_reason() {
+    let Some(sample) = common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    // Standing still: every pose the same, for as many lines as the sample has.
+    let lines = std::fs::read_to_string(sample.join("poses.txt"))
+        .unwrap()
+        .lines()
+        .count();
+    let still = "1 0 0 0 0 1 0 0 0 0 1 0\n".repeat(lines);
+    let copy = sample_copy(&sample, dir.path(), None, Some(still));
+    let model = dir.path().join("m.json");
+    let err = clean_failure(travmap(&["adapt", arg(&copy), "-o", arg(&model)]));
+    assert_contains(
+        &err,
+        &[
+            "cannot adapt to this drive",
+            "footprint cells",
+            "the vehicle moved 0.0 m",
+            "longer drive",
+        ],
+    );
+    assert!(!model.exists());
+    // Nothing the drive calls not traversable: one class.
+    let err = clean_failure(travmap(&[
+        "adapt",
+        arg(&sample),
+        "-o",
+        arg(&model),
+        "--set",
+        "adapt.negative_margin=1000",
+        "--set",
+        "adapt.geometric_negatives=false",
+    ]));
+    assert_contains(
+        &err,
+        &["every self-label says traversable", "adapt.negative_margin"],
+    );
+    assert!(!model.exists());
+}
+
+#[test]
+fn eval_and_annotate_adapt_in_one_call() {
+    let Some(sample) = common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = success(travmap(&["eval", arg(&sample), "--adapt", "-q"]));
+    assert_contains(&out, &["adapted to these drives", "travmap (filtered)"]);
+    let annotated = dir.path().join("a.mcap");
+    write_output(
+        "annotate",
+        &sample,
+        &annotated,
+        &["--frames", "0..3", "--adapt"],
+    );
+    let metadata = travmap_metadata(&std::fs::read(&annotated).unwrap());
+    let adaptation: Value = serde_json::from_str(&metadata["adaptation"]).unwrap();
+    assert_eq!(adaptation["self_supervised"], true);
+    assert_contains(&metadata["model"], &["adapted to these drives"]);
+}
+
+#[test]
+fn one_scan_gets_a_straight_footprint_with_a_notice() {
+    let Some(rellis) = shared_data("rellis3d-000104/sequences/00") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("m.json");
+    let output = travmap(&["adapt", arg(&rellis), "-o", arg(&model), "--json"]);
+    assert_contains(
+        &stderr(&output),
+        &[
+            "no trajectory beyond one pose",
+            "straight along the sensor's x axis",
+        ],
+    );
+    let (_, summary) = common::json_records(&success(output));
+    assert_eq!(summary["counts"]["straight_path_frames"], 1);
+}
+
+#[test]
+fn datasets_carry_self_labels_that_train_learns_from() {
+    let Some(sample) = common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let cells = dir.path().join("cells.parquet");
+    let summary = json_summary(&["dataset", arg(&sample), "-o", arg(&cells)]);
+    let (footprint, pseudo) = (
+        summary["summary"]["footprint_rows"].as_u64().unwrap(),
+        summary["summary"]["pseudo_labelled_rows"].as_u64().unwrap(),
+    );
+    assert!(footprint > 100 && pseudo > footprint, "{summary}");
+    let mut set = TrainingSet::default();
+    let config = travmap::Config::default();
+    let rows = read_training_rows(&cells, &config, &mut set, Labels::Pseudo).unwrap();
+    assert_eq!(rows as u64, pseudo);
+    assert!(set.traversable.iter().any(|t| *t) && set.traversable.iter().any(|t| !t));
+    let model = dir.path().join("m.json");
+    let quick = [
+        "--set",
+        "training.c_values=[10]",
+        "--set",
+        "training.gamma_values=[0.05]",
+    ];
+    let doc = json_summary(
+        &[
+            &[
+                "train",
+                arg(&cells),
+                "--labels",
+                "pseudo",
+                "-o",
+                arg(&model),
+            ],
+            &quick[..],
+        ]
+        .concat(),
+    );
+    assert_contains(&doc["inputs"][0].to_string(), &["self-labelled cells"]);
+    // A drive is not a dataset of self-labels.
+    let err = clean_failure(travmap(&[
+        "train",
+        arg(&sample),
+        "--labels",
+        "pseudo",
+        "-o",
+        arg(&model),
+    ]));
+    assert_contains(
+        &err,
+        &[
+            "--labels pseudo learns from Parquet datasets",
+            "travmap adapt",
+        ],
+    );
+}
+
+/// The README's study, its default row: on every column no more than 1 point of
+/// mIoU below the prior, +3 or more on the mean, and on RELLIS-3D (off-road rule) not
+/// below the embedded model.
+#[test]
+fn the_default_adaptation_meets_the_study_targets() {
+    let Some(seq00) = common::sample() else {
+        return;
+    };
+    let Some(seq07) = shared_data("semantickitti-07-000964/sequences/07") else {
+        return;
+    };
+    let Some(rellis) = shared_data("rellis3d-000104/sequences/00") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (prior00, prior07) = (
+        dir.path().join("prior00.json"),
+        dir.path().join("prior07.json"),
+    );
+    write_output("train", &seq00, &prior00, &[]);
+    write_output("train", &seq07, &prior07, &[]);
+    let miou = |args: &[&str]| -> f64 {
+        let doc = json_summary(&[&["eval"], args].concat());
+        100.0 * doc["report"]["scores"]["miou"].as_f64().unwrap()
+    };
+    let rellis_rule = |rule: &str| format!("ground_truth.rule=\"{rule}\"");
+    let (offroad, road) = (rellis_rule("offroad"), rellis_rule("road"));
+    let mut gains = Vec::new();
+    for grid in ["grid.size_m=12", "grid.size_m=40"] {
+        let columns: [Vec<&str>; 4] = [
+            vec![arg(&seq00), "--frames", "0..3", "--model", arg(&prior07)],
+            vec![arg(&seq07), "--model", arg(&prior00)],
+            vec![
+                arg(&rellis),
+                "--set",
+                "ground_truth.labels=\"rellis3d\"",
+                "--set",
+                &offroad,
+            ],
+            vec![
+                arg(&rellis),
+                "--set",
+                "ground_truth.labels=\"rellis3d\"",
+                "--set",
+                &road,
+            ],
+        ];
+        for (k, column) in columns.iter().enumerate() {
+            let column = [&column[..], &["--set", grid]].concat();
+            let prior = miou(&column);
+            let adapted = miou(&[&column[..], &["--adapt"]].concat());
+            assert!(
+                adapted >= prior - 1.0,
+                "column {k} at {grid}: {prior:.1} -> {adapted:.1}"
+            );
+            if k == 2 {
+                assert!(
+                    adapted >= prior,
+                    "RELLIS-3D off-road at {grid}: {prior:.1} -> {adapted:.1}"
+                );
+            }
+            gains.push(adapted - prior);
+        }
+    }
+    let mean = gains.iter().sum::<f64>() / gains.len() as f64;
+    assert!(mean >= 3.0, "mean mIoU gain {mean:.2}: {gains:?}");
+}
