@@ -19,13 +19,16 @@ fn read_json(path: &Path) -> Value {
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
 }
 
+/// Makes a label file (second path) from the sample's (first path).
+type MakeLabels<'a> = &'a dyn Fn(&Path, &Path);
+
 /// A copy of the sample in `dir`: its scans linked, its text files copied, with
 /// `labels/` as `labels` makes it (None: no labels) and poses.txt as `poses` writes
 /// it (None: the sample's).
 fn sample_copy(
     sample: &Path,
     dir: &Path,
-    labels: Option<&dyn Fn(&Path, &Path)>,
+    labels: Option<MakeLabels>,
     poses: Option<String>,
 ) -> PathBuf {
     let copy = dir.join("copy");
@@ -109,7 +112,7 @@ fn adapt_is_deterministic_records_its_provenance_and_never_reads_labels() {
 
     // The same scans with garbage for labels, or none: the same model.
     let garbage = |_: &Path, to: &Path| std::fs::write(to, b"not a label file").unwrap();
-    for labels in [Some(&garbage as &dyn Fn(&Path, &Path)), None] {
+    for labels in [Some(&garbage as MakeLabels), None] {
         let copy_dir = tempfile::tempdir().unwrap();
         let copy = sample_copy(&sample, copy_dir.path(), labels, None);
         let model = copy_dir.path().join("m.json");
