@@ -89,6 +89,25 @@ def test_extracts_datasets_that_pyarrow_reads(local_ray, drives, tmp_path):
     assert rows > 0
 
 
+def test_annotate_adapts_to_each_drive(local_ray, tmp_path):
+    drive = tmp_path / "drive.mcap"
+    subprocess.run([TRAVMAP, "convert", str(SEQUENCE), "-o", str(drive), "-q"], check=True)
+    out = tmp_path / "annotated"
+    # Six scans cover 3.6 m: fewer footprint cells than adapt asks by default.
+    extra = ["--adapt", "--set", "adapt.min_footprint_cells=20"]
+    summary = travmap_fleet.run_fleet("annotate", [str(drive)], str(out), TRAVMAP, extra=extra)
+    assert (summary.done, summary.failed, summary.frames) == (1, 0, 6)
+    from mcap.reader import make_reader
+
+    with open(travmap_fleet.output_path(str(drive), str(out), "annotate"), "rb") as f:
+        metadata = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    adaptation = json.loads(metadata["travmap"]["adaptation"])
+    assert adaptation["self_supervised"] and adaptation["footprint_cells"] > 0
+    # The flag of the command line goes with annotate only.
+    with pytest.raises(SystemExit):
+        travmap_fleet.main(["dataset", str(drive), "--out-dir", str(out), "--adapt"])
+
+
 def test_a_killed_travmap_is_retried_and_a_rejected_input_is_not(tmp_path):
     # A stand-in binary that dies by a signal on its first two runs, then fails cleanly.
     counter = tmp_path / "runs"

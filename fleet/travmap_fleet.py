@@ -11,6 +11,10 @@ written to OUT_DIR/fleet-summary.json.
 
     python travmap_fleet.py annotate 'logs/**/*.mcap' --out-dir annotated/
     python travmap_fleet.py dataset 'logs/**/*.mcap' --out-dir cells/ -- --set training.grid_size_m=24
+    python travmap_fleet.py annotate 'logs/**/*.mcap' --out-dir annotated/ --adapt
+
+`--adapt` adapts the model to each drive before annotating it (`travmap annotate
+--adapt`: self-supervised, from the drive itself; README "Adaptation").
 
 On a cluster, start Ray there and pass `--address auto` (or set RAY_ADDRESS); the
 travmap binary must be at `--travmap` on every node.
@@ -164,7 +168,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--address", default=None, help="Ray cluster address (default: RAY_ADDRESS or a local Ray)")
     parser.add_argument("--num-cpus", type=int, default=None, help="CPUs of a local Ray")
     parser.add_argument("--retries", type=int, default=2, help="re-runs of a travmap that was killed")
+    parser.add_argument("--adapt", action="store_true", help="annotate: adapt the model to each drive first")
     args = parser.parse_args(argv)
+    if args.adapt:
+        if args.command != "annotate":
+            parser.error("--adapt goes with annotate")
+        extra = ["--adapt", *extra]
     inputs = [path for pattern in args.inputs for path in (glob.glob(pattern, recursive=True) or [pattern])]
     ray.init(address=args.address, num_cpus=args.num_cpus if args.address is None else None)
     summary = run_fleet(args.command, inputs, args.out_dir, args.travmap, extra, args.retries)

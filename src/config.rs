@@ -58,6 +58,21 @@ pub struct ClassifierConfig {
     /// the exact decision function) when it has one; false: all support vectors
     /// (default true).
     pub use_reduced_set: bool,
+    /// A frame whose remission lies far outside a model's training range (another
+    /// sensor's scale) is said in a notice and classified as read (`"notice"`,
+    /// default: it won the README's study), or classified without remission by the
+    /// model's fallback (`"fallback"`).
+    #[serde(default)]
+    pub foreign_remission: ForeignRemissionPolicy,
+}
+
+/// What a model does with remission far outside its training range.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ForeignRemissionPolicy {
+    #[default]
+    Notice,
+    Fallback,
 }
 
 /// METHOD.md section 2.
@@ -96,6 +111,20 @@ pub struct FeatureConfig {
     /// `"remission"` and `"context"` (default `["remission"]`); `[]` is the paper's
     /// method.
     pub groups: Vec<FeatureGroup>,
+    /// What remission features see: `"as_read"` (the reader's 0..1 scale, default)
+    /// or `"scan_p95"` (each scan scaled so that its 95th percentile is KITTI's,
+    /// for sensors whose remission comes on another scale).
+    #[serde(default)]
+    pub remission_scale: RemissionScaling,
+}
+
+/// How each scan's remission is scaled before the remission features.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RemissionScaling {
+    #[default]
+    AsRead,
+    ScanP95,
 }
 
 /// A group of features beyond the paper's 20, in the order they follow them.
@@ -195,6 +224,7 @@ impl Default for FeatureConfig {
             unevenness_min_points: 3,
             // Remission wins the cross-scene numbers (README "Features beyond the paper").
             groups: vec![FeatureGroup::Remission],
+            remission_scale: RemissionScaling::AsRead,
         }
     }
 }
@@ -214,6 +244,7 @@ impl Default for ClassifierConfig {
     fn default() -> Self {
         Self {
             use_reduced_set: true,
+            foreign_remission: ForeignRemissionPolicy::Notice,
         }
     }
 }

@@ -1075,6 +1075,7 @@ fn every_feature_matches_a_direct_computation_from_method_md() {
                     curvity_bins,
                     unevenness_min_points,
                     groups: Vec::new(),
+                    ..FeatureConfig::default()
                 },
                 min_points,
             };

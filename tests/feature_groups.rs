@@ -122,3 +122,32 @@ fn intensity_scales_and_a_cloud_without_intensity() {
         "{err}"
     );
 }
+
+/// RELLIS-3D's Ouster remission (0.0002-0.0115 in KITTI's layout) is named as foreign
+/// to the embedded model; classified as read by default, by the fallback on request.
+#[test]
+fn remission_on_another_sensors_scale_is_named_and_the_fallback_is_a_setting() {
+    let Some(rellis) = common::shared_data("rellis3d-000104/sequences/00") else {
+        return;
+    };
+    let eval = |extra: &[&str]| {
+        let args = [&["eval", common::arg(&rellis)], extra].concat();
+        common::json_summary(&args)["report"].clone()
+    };
+    let as_read = eval(&[]);
+    assert_eq!(as_read["frames_foreign_remission"], 1);
+    let foreign = &as_read["foreign_remission"];
+    assert!(foreign["median"].as_f64().unwrap() < 0.02, "{foreign}");
+    assert!((foreign["trained_mean"].as_f64().unwrap() - 0.27).abs() < 0.05);
+    let fallback = eval(&["--set", "classifier.foreign_remission=\"fallback\""]);
+    assert_eq!(fallback["frames_foreign_remission"], 1);
+    assert_ne!(fallback["confusion"], as_read["confusion"]);
+    let text = common::success(common::travmap(&["eval", common::arg(&rellis)]));
+    common::assert_contains(&text, &["remission far outside the model's training range"]);
+    // KITTI's own scans are not foreign to the model trained on them.
+    let Some(sample) = common::sample() else {
+        return;
+    };
+    let kitti = common::json_summary(&["eval", common::arg(&sample)]);
+    assert_eq!(kitti["report"]["frames_foreign_remission"], 0);
+}

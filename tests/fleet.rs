@@ -35,5 +35,5 @@ fn the_ray_fleet_script_passes_its_tests() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(out.status.success(), "{report}");
-    assert!(report.contains("4 passed"), "{report}");
+    assert!(report.contains("5 passed"), "{report}");
 }

@@ -77,6 +77,26 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
         )?;
     }
     write_table(&mut out, &report.evaluation, false)?;
+    if let Some(first) = report.camera_ablation.first() {
+        let c = &first.evaluation.confusion;
+        writeln!(
+            out,
+            "camera ablation (the paper's), the same cross-validation scored on the {} labelled cells a camera saw:",
+            c.tp + c.tn + c.fp + c.r#fn + c.unknown
+        )?;
+        for row in &report.camera_ablation {
+            let scores = row.evaluation.scores.map_or("n/a".into(), |s| {
+                format!(
+                    "Acc {:.1} mIoU {:.1} F1 {:.1} TNR {:.1}",
+                    100.0 * s.accuracy,
+                    100.0 * s.miou,
+                    100.0 * s.f1,
+                    100.0 * s.tnr
+                )
+            });
+            writeln!(out, "  {:<6} {scores}", row.features)?;
+        }
+    }
     Ok(outcome(&selections))
 }
 

@@ -7,6 +7,7 @@ use std::io::Write;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
+use travmap::config::ForeignRemissionPolicy;
 use travmap::drive::Selection;
 use travmap::method::classifier::SvmModel;
 use travmap::scoring::evaluation::{Evaluation, EvaluationReport};
@@ -140,6 +141,22 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
             out,
             "{} frames had no usable remission (intensity): the model's fallback without remission features classified them",
             report.frames_without_remission
+        )?;
+    }
+    if let Some(foreign) = report.foreign_remission {
+        writeln!(
+            out,
+            "{} frames had remission far outside the model's training range (median cell {:.4}, the model learnt {:.2} +- {:.2}: another sensor's scale?): {}",
+            report.frames_foreign_remission,
+            foreign.median,
+            foreign.trained_mean,
+            foreign.trained_std,
+            match config.classifier.foreign_remission {
+                ForeignRemissionPolicy::Notice =>
+                    "classified as read (--set classifier.foreign_remission=\"fallback\" classifies them without remission)",
+                ForeignRemissionPolicy::Fallback =>
+                    "the model's fallback without remission classified them",
+            }
         )?;
     }
     if report.dropped_points > 0 {

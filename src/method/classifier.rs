@@ -10,8 +10,7 @@ pub mod kernel;
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::Config;
-use crate::config::FeatureGroup;
+use crate::config::{ClassifierConfig, Config, FeatureGroup, ForeignRemissionPolicy};
 use crate::error::{Error, Result};
 use crate::method::features::{FeatureGrid, feature_names};
 use crate::method::grid::CellClass;
@@ -362,9 +361,49 @@ impl SvmModel {
         }
     }
 
+    /// The grid's remission when it lies far outside this model's training range
+    /// ([`FOREIGN_REMISSION_DEVIATIONS`]): the model then classifies the grid without
+    /// remission, by its fallback.
+    pub fn foreign_remission(&self, grid: &FeatureGrid) -> Option<ForeignRemission> {
+        if !grid.groups.contains(&FeatureGroup::Remission) {
+            return None;
+        }
+        let column = crate::method::features::FEATURE_COUNT;
+        let cells = (0..grid.predictable.len()).filter(|&cell| grid.predictable[cell]);
+        self.foreign_remission_of(cells.map(|cell| grid.cell(cell)[column]).collect())
+    }
+
+    /// [`Self::foreign_remission`] of cells' `remission_mean` values.
+    pub fn foreign_remission_of(&self, mut values: Vec<f32>) -> Option<ForeignRemission> {
+        let column = crate::method::features::FEATURE_COUNT;
+        if self.fallback.is_none() || values.is_empty() {
+            return None;
+        }
+        let middle = values.len() / 2;
+        let median = *values.select_nth_unstable_by(middle, f32::total_cmp).1;
+        let (mean, std) = (
+            *self.feature_mean.get(column)?,
+            1.0 / *self.feature_inverse_std.get(column)?,
+        );
+        ((median - mean).abs() > FOREIGN_REMISSION_DEVIATIONS * std).then_some(ForeignRemission {
+            median,
+            trained_mean: mean,
+            trained_std: std,
+        })
+    }
+
     /// The margin of every predictable cell of a grid (see [`Self::cell_margin`]);
-    /// NaN for the others.
-    pub fn margins(&self, grid: &FeatureGrid, use_reduced_set: bool) -> Vec<f32> {
+    /// NaN for the others. With `foreign_remission = "fallback"`, a grid whose
+    /// remission is foreign to the model ([`Self::foreign_remission`]) is classified
+    /// without it.
+    pub fn margins(&self, grid: &FeatureGrid, settings: &ClassifierConfig) -> Vec<f32> {
+        if settings.foreign_remission == ForeignRemissionPolicy::Fallback
+            && self.foreign_remission(grid).is_some()
+            && let Some(without) = grid.without_remission()
+        {
+            return self.margins(&without, settings);
+        }
+        let use_reduced_set = settings.use_reduced_set;
         let mut margins = self.own_margins(grid, use_reduced_set);
         let Some(prior) = &self.prior else {
             return margins;
@@ -382,7 +421,7 @@ impl SvmModel {
         let weight = self.prior_weight;
         for (cell, (m, p)) in margins
             .iter_mut()
-            .zip(prior.margins(grid, use_reduced_set))
+            .zip(prior.margins(grid, settings))
             .enumerate()
         {
             if !folded || by_hybrid(cell) {
@@ -413,12 +452,28 @@ impl SvmModel {
     }
 
     /// Classifies every predictable cell of a grid; the others stay unknown.
-    pub fn classify(&self, grid: &FeatureGrid, use_reduced_set: bool) -> Vec<CellClass> {
-        self.margins(grid, use_reduced_set)
+    pub fn classify(&self, grid: &FeatureGrid, settings: &ClassifierConfig) -> Vec<CellClass> {
+        self.margins(grid, settings)
             .into_iter()
             .map(CellClass::of_margin)
             .collect()
     }
+}
+
+/// Deviations (of its training cells' `remission_mean`) from a model's training mean
+/// beyond which a frame's median cell says the sensor's remission is on a scale the
+/// model never saw. KITTI frames sit within 0.3 of the embedded model's mean;
+/// RELLIS-3D's Ouster scan at 2.8 below it.
+pub const FOREIGN_REMISSION_DEVIATIONS: f32 = 2.0;
+
+/// A grid's remission, far from what a model learnt from.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ForeignRemission {
+    /// The median over predictable cells of `remission_mean`.
+    pub median: f32,
+    /// The model's training mean and deviation of `remission_mean`.
+    pub trained_mean: f32,
+    pub trained_std: f32,
 }
 
 /// The first key (dotted, below `prefix`) where two configuration values differ,

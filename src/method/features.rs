@@ -91,6 +91,33 @@ impl FeatureGrid {
         (self.seen.get(cell) == Some(&true)).then(|| &self.appearance[cell * n..(cell + 1) * n])
     }
 
+    /// The same grid without the remission values (as a cloud without usable
+    /// intensity has it); None when it has none.
+    pub fn without_remission(&self) -> Option<FeatureGrid> {
+        if !self.groups.contains(&FeatureGroup::Remission) {
+            return None;
+        }
+        // Remission follows the paper's 20 (`feature_groups::ordered`).
+        let columns = FEATURE_COUNT..FEATURE_COUNT + feature_groups::REMISSION_NAMES.len();
+        let values = self
+            .values
+            .chunks_exact(self.dimension)
+            .flat_map(|row| row[..columns.start].iter().chain(&row[columns.end..]))
+            .copied()
+            .collect();
+        Some(FeatureGrid {
+            values,
+            dimension: self.dimension - columns.len(),
+            groups: self
+                .groups
+                .iter()
+                .copied()
+                .filter(|g| *g != FeatureGroup::Remission)
+                .collect(),
+            ..self.clone()
+        })
+    }
+
     pub fn set_appearance(&mut self, values: Vec<f32>, seen: Vec<bool>) {
         self.appearance_len = if seen.is_empty() {
             0

@@ -55,6 +55,29 @@ pub fn scan_to_world(frame: Frame) -> WorldScan {
     }
 }
 
+/// KITTI's HDL-64E remission at the 95th percentile of a scan (0.52-0.55 on the
+/// shipped scans): where `features.remission_scale = "scan_p95"` brings every scan.
+pub const REFERENCE_REMISSION_P95: f32 = 0.54;
+
+/// Scales a scan's remission so that its 95th percentile is
+/// [`REFERENCE_REMISSION_P95`] (a scan without remission, or with none above 0, is
+/// left as it is).
+pub fn scale_remission_to_reference(scan: &mut WorldScan) {
+    let Some(remission) = scan.remission.as_mut() else {
+        return;
+    };
+    if remission.is_empty() {
+        return;
+    }
+    let mut sorted = remission.clone();
+    let at = (sorted.len() * 95 / 100).min(sorted.len() - 1);
+    let p95 = *sorted.select_nth_unstable_by(at, f32::total_cmp).1;
+    if p95 > 0.0 {
+        let factor = REFERENCE_REMISSION_P95 / p95;
+        remission.iter_mut().for_each(|r| *r *= factor);
+    }
+}
+
 /// The scans a frame integrates: its own and those of the n - 1 frames before it
 /// (METHOD.md section 2). The one place that says which scans those are, which frame
 /// to start reading at to fill the window, and when a window starts afresh.

@@ -14,17 +14,19 @@ use nalgebra::Isometry3;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::config::Config;
+use crate::config::{ClassifierConfig, Config, RemissionScaling};
 use crate::error::Result;
 use crate::frame::{CameraImage, Frame, RemissionScale};
 use crate::method::appearance::{AppearanceVoter, ColourMemory, FrameVotes};
-use crate::method::classifier::SvmModel;
+use crate::method::classifier::{ForeignRemission, SvmModel};
 use crate::method::features::{FeatureExtractor, FeatureGrid};
 use crate::method::filter::OutlierFilter;
 use crate::method::footprint::{Footprint, PathKind, Trajectory};
 use crate::method::grid::{CellClass, CellPoints, GridLayout, grid_points};
 use crate::method::ground_truth::GroundTruth;
-use crate::method::integration::{IntegrationWindow, WorldScan, ground_normal, scan_to_world};
+use crate::method::integration::{
+    IntegrationWindow, WorldScan, ground_normal, scale_remission_to_reference, scan_to_world,
+};
 use crate::method::registration::{Odometry, RegistrationError};
 use crate::method::self_labels::SelfLabeller;
 use crate::posing::Posing;
@@ -67,6 +69,9 @@ pub struct FrameResult {
     /// Remission features were configured but the window had no usable remission,
     /// so they were left out and the model's fallback classified the frame.
     pub without_remission: bool,
+    /// The frame's remission lay far outside the model's training range: the
+    /// model's fallback classified it without remission.
+    pub foreign_remission: Option<ForeignRemission>,
     pub features: FeatureGrid,
     /// The classifier's labels before filtering (None without a model).
     pub predicted: Option<Vec<CellClass>>,
@@ -144,7 +149,7 @@ pub struct Pipeline {
     ground_truth: GroundTruth,
     cell_size_m: f64,
     cells_per_side: usize,
-    use_reduced_set: bool,
+    classifier: ClassifierConfig,
     /// Feature groups configured.
     feature_groups: usize,
     /// Scan registration, when the poses are estimated.
@@ -187,7 +192,7 @@ impl Pipeline {
             ground_truth: GroundTruth::new(config.ground_truth.clone()),
             cell_size_m: config.grid.cell_size_m,
             cells_per_side: config.grid.cells_per_side(),
-            use_reduced_set: config.classifier.use_reduced_set,
+            classifier: config.classifier.clone(),
             feature_groups: config.features.groups.len(),
             registration: (posing == Posing::Registration)
                 .then(|| Odometry::new(config.registration.clone())),
@@ -238,7 +243,7 @@ impl Pipeline {
     /// window so that the next frames integrate it. Returns the time it took, ms.
     pub fn warm_up(&mut self, posed: Posed) -> f64 {
         self.start_afresh_before(posed.frame.index);
-        let (scan, integrate_ms) = timed(|| scan_to_world(posed.frame));
+        let (scan, integrate_ms) = timed(|| self.integrate(posed.frame));
         self.window.extend([scan]);
         self.window.forget_old();
         integrate_ms
@@ -285,7 +290,7 @@ impl Pipeline {
         // 1. Integration: each scan into the world, joined with the previous n - 1.
         let held = self.window.scans().len();
         let (scans, integrate_ms): (Vec<WorldScan>, Vec<f64>) =
-            map_frames(frames, |frame| timed(|| scan_to_world(frame)))
+            map_frames(frames, |frame| timed(|| self.integrate(frame)))
                 .into_iter()
                 .unzip();
         self.window.extend(scans);
@@ -320,6 +325,15 @@ impl Pipeline {
         let results = map_frames(observations, |observation| self.decide(observation, model));
         self.window.forget_old();
         results
+    }
+
+    /// Stage 1 for one scan: into the world, its remission scaled as configured.
+    fn integrate(&self, frame: Frame) -> WorldScan {
+        let mut scan = scan_to_world(frame);
+        if self.features.config.remission_scale == RemissionScaling::ScanP95 {
+            scale_remission_to_reference(&mut scan);
+        }
+        scan
     }
 
     /// A frame from the past (a new pass over the sequence) starts afresh.
@@ -377,6 +391,7 @@ impl Pipeline {
                 dropped_points: extras.dropped_points,
                 remission: extras.remission,
                 without_remission: features.groups.len() < self.feature_groups,
+                foreign_remission: None,
                 features,
                 predicted: None,
                 filtered: None,
@@ -415,9 +430,10 @@ impl Pipeline {
         }
         let timings = &mut result.timings;
         if let Some(model) = model {
+            result.foreign_remission = model.foreign_remission(&result.features);
             let margins;
             (margins, timings.classify_ms) =
-                timed(|| model.margins(&result.features, self.use_reduced_set));
+                timed(|| model.margins(&result.features, &self.classifier));
             let labels: Vec<CellClass> = margins.iter().map(|m| CellClass::of_margin(*m)).collect();
             let filtered;
             (filtered, timings.filter_ms) =

@@ -2,6 +2,7 @@
 
 use serde::Serialize;
 
+use crate::method::classifier::ForeignRemission;
 use crate::method::pipeline::{FrameResult, StageTimings};
 use crate::scoring::metrics::{Confusion, Scores};
 
@@ -79,6 +80,10 @@ pub struct EvaluationReport {
     /// Frames classified by the fallback model: remission features configured, but
     /// the input had no usable remission (missing, or on an unknown scale).
     pub frames_without_remission: usize,
+    /// Frames whose remission lay far outside the model's training range (another
+    /// sensor's scale), classified by the fallback model; the first one's figures.
+    pub frames_foreign_remission: usize,
+    pub foreign_remission: Option<ForeignRemission>,
     pub timings_ms: TimingReport,
 }
 
@@ -90,6 +95,8 @@ pub struct Evaluation {
     cells_with_appearance: u64,
     dropped_points: u64,
     frames_without_remission: usize,
+    frames_foreign_remission: usize,
+    foreign_remission: Option<ForeignRemission>,
     filtered: Confusion,
     unfiltered: Confusion,
     timings: Vec<StageTimings>,
@@ -101,6 +108,10 @@ impl Evaluation {
         self.timings.push(result.timings);
         self.dropped_points += result.dropped_points as u64;
         self.frames_without_remission += result.without_remission as usize;
+        if let Some(foreign) = result.foreign_remission {
+            self.frames_foreign_remission += 1;
+            self.foreign_remission.get_or_insert(foreign);
+        }
         let features = &result.features;
         let seen = (0..features.predictable.len())
             .filter(|&c| features.predictable[c] && features.appearance(c).is_some())
@@ -129,6 +140,8 @@ impl Evaluation {
             cells_with_appearance: self.cells_with_appearance,
             dropped_points: self.dropped_points,
             frames_without_remission: self.frames_without_remission,
+            frames_foreign_remission: self.frames_foreign_remission,
+            foreign_remission: self.foreign_remission,
             timings_ms: TimingReport::of(&self.timings),
         }
     }

@@ -91,8 +91,12 @@ pub fn adapt(
 ) -> Result<Adapted> {
     let grid_config = config.for_training_cells();
     let a = &config.adapt;
-    let mut labelled = Reservoir::new(a.max_cells, config.training.seed);
-    let mut unknown = Reservoir::new(a.max_cells, config.training.seed.wrapping_add(1));
+    // Each label keeps half the cells: footprint cells are few on a long drive, and
+    // a sample of all labelled cells would keep fewer still.
+    let seed = config.training.seed;
+    let mut positives = Reservoir::new(a.max_cells / 2, seed);
+    let mut negatives = Reservoir::new(a.max_cells / 2, seed.wrapping_add(1));
+    let mut unknown = Reservoir::new(a.max_cells, seed.wrapping_add(2));
     let mut counts = SelfLabelCounts::default();
     let (mut footprint, mut negative, mut neither) =
         (HashSet::new(), HashSet::new(), HashSet::new());
@@ -130,7 +134,8 @@ pub fn adapt(
                     centre_in_world: result.layout.cell_centre_in_world(cell),
                 };
                 match label {
-                    Some(_) => labelled.offer(cell_of),
+                    Some(true) => positives.offer(cell_of),
+                    Some(false) => negatives.offer(cell_of),
                     None => unknown.offer(cell_of),
                 }
             }
@@ -178,7 +183,8 @@ pub fn adapt(
         )));
     }
 
-    let mut drive = cells_to_set(&labelled.cells, config);
+    let labelled = [positives.cells, negatives.cells].concat();
+    let mut drive = cells_to_set(&labelled, config);
     let unknown_features: Vec<f32> = unknown
         .cells
         .iter()
@@ -222,7 +228,7 @@ pub fn adapt(
         if confident.is_empty() {
             break;
         }
-        drive = cells_to_set(&[labelled.cells.clone(), confident].concat(), config);
+        drive = cells_to_set(&[labelled.clone(), confident].concat(), config);
         model = fit(&drive)?;
     }
     model.training.adaptation = Some(AdaptationSummary {

@@ -6,7 +6,7 @@ use serde::Serialize;
 
 use super::set::{TrainingSet, spatial_folds};
 use super::train;
-use crate::config::Config;
+use crate::config::{Config, FeatureGroup};
 use crate::drive::Selection;
 use crate::error::{Error, Result};
 use crate::method::classifier::{PredictionScratch, SvmModel};
@@ -74,7 +74,26 @@ pub struct CrossValidationReport {
     pub block_size_m: f64,
     pub folds: Vec<FoldReport>,
     pub evaluation: EvaluationReport,
+    /// When a camera saw cells: the paper's ablation on those cells alone.
+    pub camera_ablation: Vec<AblationRow>,
 }
+
+/// One row of the camera ablation: the same blocked cross-validation with some
+/// features, scored on the cells a camera saw.
+#[derive(Clone, Debug, Serialize)]
+pub struct AblationRow {
+    /// G: the paper's 20 geometric features; R: remission; C: colour (appearance).
+    pub features: &'static str,
+    pub evaluation: EvaluationReport,
+}
+
+/// The ablation's feature sets: name, remission, colour.
+const ABLATION: [(&str, bool, bool); 4] = [
+    ("G", false, false),
+    ("G+R", true, false),
+    ("G+C", false, true),
+    ("G+R+C", true, true),
+];
 
 /// Spatially-blocked cross-validation: the world plane is cut into blocks of
 /// `training.block_size_m`, blocks are dealt into `training.folds` folds, and each
@@ -87,6 +106,80 @@ pub fn cross_validate(
     config: &Config,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<CrossValidationReport> {
+    let (folds, frames) = out_of_fold(selections, config, progress)?;
+    let mut evaluation = Evaluation::default();
+    frames.iter().for_each(|result| evaluation.add(result));
+    let seen = seen_cells(&frames);
+    let camera_ablation = match seen.iter().flatten().any(|s| *s) {
+        true => camera_ablation(selections, config, &seen, progress)?,
+        false => Vec::new(),
+    };
+    Ok(CrossValidationReport {
+        block_size_m: config.training.block_size_m,
+        folds,
+        evaluation: evaluation.report(),
+        camera_ablation,
+    })
+}
+
+/// Per frame, the cells a camera saw.
+fn seen_cells(frames: &[FrameResult]) -> Vec<Vec<bool>> {
+    frames
+        .iter()
+        .map(|result| {
+            let features = &result.features;
+            (0..features.predictable.len())
+                .map(|cell| features.appearance(cell).is_some())
+                .collect()
+        })
+        .collect()
+}
+
+/// The cross-validation again with each feature set of [`ABLATION`], scored on the
+/// cells of `seen` (per frame, as the full run saw them).
+fn camera_ablation(
+    selections: &[Selection],
+    config: &Config,
+    seen: &[Vec<bool>],
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<Vec<AblationRow>> {
+    let mut rows = Vec::new();
+    for (name, remission, colour) in ABLATION {
+        progress(&format!("camera ablation: {name}"));
+        let mut variant = config.clone();
+        variant.appearance.enabled = colour;
+        variant.features.groups = match remission {
+            true => vec![FeatureGroup::Remission],
+            false => Vec::new(),
+        };
+        let (_, frames) = out_of_fold(selections, &variant, progress)?;
+        let mut evaluation = Evaluation::default();
+        for (mut result, seen) in frames.into_iter().zip(seen) {
+            // Only the cells a camera saw are scored.
+            if let Some(truth) = result.ground_truth.as_mut() {
+                truth
+                    .iter_mut()
+                    .zip(seen)
+                    .filter(|(_, seen)| !**seen)
+                    .for_each(|(t, _)| *t = CellClass::Unknown);
+            }
+            evaluation.add(&result);
+        }
+        rows.push(AblationRow {
+            features: name,
+            evaluation: evaluation.report(),
+        });
+    }
+    Ok(rows)
+}
+
+/// The folds' models and every labelled frame predicted by the model of the fold
+/// each of its cells is in (filtered as a run filters).
+fn out_of_fold(
+    selections: &[Selection],
+    config: &Config,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<(Vec<FoldReport>, Vec<FrameResult>)> {
     let pool = collect_training_set(selections, config, &mut || {})?;
     let mut frames: Vec<FrameResult> = Vec::new();
     for selection in selections {
@@ -138,8 +231,8 @@ pub fn cross_validate(
     let filter = OutlierFilter {
         config: config.filter.clone(),
     };
-    let mut evaluation = Evaluation::default();
     let mut scratch = PredictionScratch::default();
+    let mut predicted_frames = Vec::with_capacity(frames.len());
     for mut result in frames {
         let (folds_here, rest) = frame_folds.split_at(result.layout.cell_count());
         frame_folds = rest;
@@ -156,13 +249,9 @@ pub fn cross_validate(
             .collect();
         result.filtered = Some(filter.apply(&predicted, result.layout.cells_per_side));
         result.predicted = Some(predicted);
-        evaluation.add(&result);
+        predicted_frames.push(result);
     }
-    Ok(CrossValidationReport {
-        block_size_m: t.block_size_m,
-        folds: fold_reports,
-        evaluation: evaluation.report(),
-    })
+    Ok((fold_reports, predicted_frames))
 }
 
 /// One input held out: trained on the others, scored on it.

@@ -3,7 +3,7 @@
 //! function, so prediction costs the centres' count instead of the support vectors'.
 
 use super::set::TrainingSet;
-use crate::config::Config;
+use crate::config::{Config, ForeignRemissionPolicy};
 use crate::method::classifier::{PredictionScratch, ReducedSet, SvmModel};
 use crate::random::SplitMix64;
 
@@ -85,6 +85,19 @@ pub(super) fn fit_folded_reduced_set(
     let d = model.dimension();
     // A prior with a prior of its own is not one expansion: it stays as it is.
     if prior.dimension() != d || prior.prior.is_some() {
+        return None;
+    }
+    // Rows whose remission is foreign to the prior, where it classifies them by
+    // its fallback: this expansion would not follow.
+    let remission = crate::method::features::FEATURE_COUNT;
+    let uses_remission = config.classifier.foreign_remission == ForeignRemissionPolicy::Fallback
+        && prior.fallback.is_some()
+        && d > remission;
+    if uses_remission
+        && prior
+            .foreign_remission_of(rows.chunks_exact(d).map(|r| r[remission]).collect())
+            .is_some()
+    {
         return None;
     }
     let prior_raw: Vec<f32> = prior.support_vectors_raw();
