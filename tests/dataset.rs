@@ -73,7 +73,11 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
         serde_json::json!(["travmap.config", "travmap.format"])
     );
     let columns = read["columns"].as_array().unwrap();
-    assert_eq!(columns.len(), 8 + 20 + 3 + 88 + 2, "+ 3 remission columns");
+    assert_eq!(
+        columns.len(),
+        8 + 20 + 3 + 88 + 4,
+        "+ 3 remission columns, the labels, footprint and pseudo_label"
+    );
     assert_eq!(columns[8], serde_json::json!(["linearity", "float"]));
     assert_eq!(columns[2], serde_json::json!(["stamp_ns", "int64"]));
     // The script has checked that DuckDB and Polars read every row as pyarrow does.
@@ -86,7 +90,8 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     let mut config = travmap::Config::default();
     config.grid.size_m = config.training.grid_size_m;
     let source = Source::open(&seq, &DriveOptions::default(), &|_| {}).unwrap();
-    let selection = Selection::new(source, frame..frame + 1);
+    let mut selection = Selection::new(source, frame..frame + 1);
+    selection.follow_trajectory(&config).unwrap();
     let mut results = Vec::new();
     selection
         .run::<travmap::Error>(&config, Some(&model), |r| {
@@ -126,6 +131,10 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
         assert_eq!(row["ground_truth_traversable"], as_bool(truth));
         let predicted = result.filtered.as_ref().unwrap()[cell];
         assert_eq!(row["predicted_traversable"], as_bool(predicted));
+        let (footprint, _) = result.footprint.as_ref().unwrap();
+        assert_eq!(row["footprint"], footprint[cell]);
+        let pseudo = result.self_labels.as_ref().unwrap()[cell];
+        assert_eq!(row["pseudo_label"], pseudo.map_or(Value::Null, Value::Bool));
     }
 
     // What other writers make of the file trains on the same rows.
