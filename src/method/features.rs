@@ -105,15 +105,14 @@ impl FeatureGrid {
             .flat_map(|row| row[..columns.start].iter().chain(&row[columns.end..]))
             .copied()
             .collect();
+        let groups = FeatureConfig {
+            groups: self.groups.clone(),
+            ..FeatureConfig::default()
+        };
         Some(FeatureGrid {
             values,
             dimension: self.dimension - columns.len(),
-            groups: self
-                .groups
-                .iter()
-                .copied()
-                .filter(|g| *g != FeatureGroup::Remission)
-                .collect(),
+            groups: groups.without_remission().groups,
             ..self.clone()
         })
     }

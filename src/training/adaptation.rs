@@ -191,26 +191,15 @@ pub fn adapt(
         .flat_map(|c| c.features.iter().copied())
         .collect();
     let fit = |set: &TrainingSet| -> Result<SvmModel> {
-        let mut model = match a.learner {
-            Learner::DriveAndPrior => train_by(
-                &with_prior_cells(set, prior, a.prior_weight),
-                config,
-                Search::Fixed {
-                    c: a.c,
-                    gamma: a.gamma,
-                },
-                &|_, _| {},
-            )?,
-            Learner::Drive | Learner::Sum => train_by(
-                set,
-                config,
-                Search::Fixed {
-                    c: a.c,
-                    gamma: a.gamma,
-                },
-                &|_, _| {},
-            )?,
+        let cells = match a.learner {
+            Learner::DriveAndPrior => &with_prior_cells(set, prior, a.prior_weight),
+            Learner::Drive | Learner::Sum => set,
         };
+        let search = Search::Fixed {
+            c: a.c,
+            gamma: a.gamma,
+        };
+        let mut model = train_by(cells, config, search, &|_, _| {})?;
         if a.learner == Learner::Sum {
             model.prior = Some(Box::new(prior.clone()));
             model.prior_weight = a.prior_weight as f32;
