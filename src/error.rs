@@ -25,6 +25,24 @@ pub enum Error {
     #[error("{output} is a directory; -o names the file to write")]
     OutputIsDirectory { output: PathBuf },
 
+    #[error(
+        "{output} is {what}; travmap writes regular files, character devices (/dev/null) and FIFOs"
+    )]
+    OutputIsSpecial { output: PathBuf, what: &'static str },
+
+    #[error(
+        "{output} is write-protected (mode {mode:o}): travmap does not replace it; remove it first or choose another -o"
+    )]
+    OutputWriteProtected { output: PathBuf, mode: u32 },
+
+    #[error(
+        "{output} is inside the input directory {input}: travmap never writes into what it reads (the next run would read it); choose another -o"
+    )]
+    OutputInsideInput { output: PathBuf, input: PathBuf },
+
+    #[error("{first} and {second} name the same file; give each output its own")]
+    SameOutputTwice { first: PathBuf, second: PathBuf },
+
     #[error("{path}: no space left on device (wrote {written_bytes}{} bytes); nothing was left behind", expected_bytes.map(|b| format!(" of {b}")).unwrap_or_default())]
     NoSpace {
         path: PathBuf,
@@ -396,6 +414,10 @@ impl Error {
             | Error::Adaptation { path, .. } => Some(path),
             Error::OutputIsInput { output, .. }
             | Error::OutputIsDirectory { output }
+            | Error::OutputIsSpecial { output, .. }
+            | Error::OutputWriteProtected { output, .. }
+            | Error::OutputInsideInput { output, .. }
+            | Error::SameOutputTwice { first: output, .. }
             | Error::NoOutputDirectory { output, .. } => Some(output),
             _ => None,
         }

@@ -330,3 +330,97 @@ fn a_closed_stdout_ends_quietly() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// `-o` at a character device or a FIFO writes straight through, as `> /dev/null`
+/// does: the device stays a device (it was once replaced by a 15 MB regular file).
+#[test]
+fn devices_and_fifos_are_written_through_not_replaced() {
+    use std::os::unix::fs::FileTypeExt;
+    let Some(sample) = common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    // A private null device (mknod needs root; elsewhere the system's /dev/null).
+    let null = dir.path().join("null");
+    let made = Command::new("mknod")
+        .args([arg(&null), "c", "1", "3"])
+        .status()
+        .is_ok_and(|s| s.success());
+    let null = if made {
+        null
+    } else {
+        PathBuf::from("/dev/null")
+    };
+    for command in ["annotate", "convert", "map", "dataset"] {
+        common::write_output(command, &sample, &null, &[]);
+        let kind = std::fs::metadata(&null).unwrap().file_type();
+        assert!(
+            kind.is_char_device(),
+            "{command} replaced {}",
+            null.display()
+        );
+    }
+    // A FIFO: the reader gets the whole file.
+    let fifo = dir.path().join("fifo");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read(fifo).unwrap())
+    };
+    common::write_output("convert", &sample, &fifo, &[]);
+    let bytes = reader.join().unwrap();
+    assert!(bytes.starts_with(b"\x89MCAP0\r\n") && bytes.ends_with(b"\x89MCAP0\r\n"));
+    assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        2,
+        "nothing beside them"
+    );
+}
+
+/// Outputs that would lose something are refused before any work: two outputs of
+/// one command naming one file, an output inside an input's folders, a
+/// write-protected file.
+#[test]
+fn outputs_that_would_lose_something_are_refused() {
+    use std::os::unix::fs::PermissionsExt;
+    let Some(sample) = common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let picture = dir.path().join("m.png");
+    let same = dir.path().join(".").join("m.png");
+    let err = clean_failure(travmap(&[
+        "map",
+        arg(&sample),
+        "-o",
+        arg(&picture),
+        "--cells",
+        arg(&same),
+    ]));
+    common::assert_contains(&err, &["name the same file"]);
+    assert!(!picture.exists());
+
+    let copy = common::long_sequence(&sample, dir.path(), 6);
+    let inside = copy.join("velodyne").join("m.png");
+    let err = clean_failure(travmap(&["map", arg(&copy), "-o", arg(&inside)]));
+    common::assert_contains(
+        &err,
+        &["is inside the input directory", "choose another -o"],
+    );
+    // Beside the input's own files is fine.
+    common::write_output("map", &copy, &copy.join("m.png"), &[]);
+
+    let protected = dir.path().join("protected.png");
+    std::fs::write(&protected, b"keep me").unwrap();
+    std::fs::set_permissions(&protected, std::fs::Permissions::from_mode(0o444)).unwrap();
+    let err = clean_failure(travmap(&["map", arg(&sample), "-o", arg(&protected)]));
+    common::assert_contains(&err, &["write-protected (mode 444)"]);
+    assert_eq!(std::fs::read(&protected).unwrap(), b"keep me");
+}

@@ -6,6 +6,7 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use travmap::outputs::drive_map::{render_drive_map, write_map_cells};
+use travmap::outputs::preflight::check_distinct_outputs;
 use travmap::outputs::rendering::encode_png;
 use travmap::outputs::writing::write_atomically;
 use travmap::scoring::evaluation::Evaluation;
@@ -41,6 +42,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let inputs = args.inputs.files(args.model.path.as_deref());
     check_output(output_path, &inputs)?;
     if let Some(cells) = &args.cells {
+        check_distinct_outputs(&[output_path, cells])?;
         check_output(cells, &inputs)?;
     }
     let (model, model_name) = args.model.load(config)?;

@@ -59,6 +59,27 @@ fn read_text(path: &Path) -> Result<String> {
     std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
 }
 
+/// The numbered lines of a text input, blank ones at the end left out; a blank line
+/// before another is an error: in poses.txt and times.txt line N+1 is frame N, so it
+/// would shift every later frame.
+fn lines_of<'a>(text: &'a str, path: &Path, what: &str) -> Result<Vec<(usize, &'a str)>> {
+    let lines: Vec<(usize, &str)> = text.lines().enumerate().map(|(i, l)| (i + 1, l)).collect();
+    let end = lines
+        .iter()
+        .rposition(|(_, line)| !line.trim().is_empty())
+        .map_or(0, |last| last + 1);
+    if let Some((line_no, _)) = lines[..end].iter().find(|(_, line)| line.trim().is_empty()) {
+        return Err(Error::parse(
+            path,
+            *line_no,
+            format!(
+                "a blank line; every line holds {what} (a blank one would shift every later line's meaning)"
+            ),
+        ));
+    }
+    Ok(lines[..end].to_vec())
+}
+
 /// Parses whitespace-separated numbers of one line, naming the file and line on failure.
 fn parse_numbers(path: &Path, line_no: usize, text: &str) -> Result<Vec<f64>> {
     text.split_whitespace()
@@ -135,11 +156,7 @@ pub fn read_calibration(path: &Path) -> Result<Calibration> {
 pub fn parse_calibration(text: &str, path: &Path) -> Result<Calibration> {
     let mut projections = [None; 4];
     let (mut tr, mut rectification, mut velo_to_cam) = (None, None, None);
-    for (i, line) in text.lines().enumerate() {
-        let line_no = i + 1;
-        if line.trim().is_empty() {
-            continue;
-        }
+    for (line_no, line) in lines_of(text, path, "`KEY: numbers`")? {
         let (key, rest) = line
             .split_once(':')
             .ok_or_else(|| Error::parse(path, line_no, "expected `KEY: numbers`"))?;
@@ -187,13 +204,12 @@ pub fn read_poses(path: &Path) -> Result<Vec<Matrix4<f64>>> {
 
 /// [`read_poses`] on the file's text; `path` names it in errors.
 pub fn parse_poses(text: &str, path: &Path) -> Result<Vec<Matrix4<f64>>> {
-    text.lines()
-        .enumerate()
-        .filter(|(_, line)| !line.trim().is_empty())
-        .map(|(i, line)| {
-            let values = parse_numbers(path, i + 1, line)?;
-            let pose = matrix_3x4(path, i + 1, &values)?;
-            check_rigid(path, i + 1, "the pose", &pose)?;
+    lines_of(text, path, "a frame's pose")?
+        .into_iter()
+        .map(|(line_no, line)| {
+            let values = parse_numbers(path, line_no, line)?;
+            let pose = matrix_3x4(path, line_no, &values)?;
+            check_rigid(path, line_no, "the pose", &pose)?;
             Ok(pose)
         })
         .collect()
@@ -207,11 +223,9 @@ pub fn read_times(path: &Path) -> Result<Vec<u64>> {
 /// [`read_times`] on the file's text; `path` names it in errors.
 pub fn parse_times(text: &str, path: &Path) -> Result<Vec<u64>> {
     let mut stamps_ns: Vec<u64> = Vec::new();
-    for (i, line) in text.lines().enumerate() {
+    for (line_no, line) in lines_of(text, path, "a frame's time")? {
+        let i = line_no - 1;
         let line = line.trim();
-        if line.is_empty() {
-            continue;
-        }
         let seconds: f64 = line
             .parse()
             .map_err(|_| Error::parse(path, i + 1, format!("`{line}` is not a number")))?;
@@ -233,4 +247,34 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Vec<u64>> {
         stamps_ns.push(stamp_ns);
     }
     Ok(stamps_ns)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_blank_line_inside_a_text_input_is_an_error_naming_it() {
+        let pose = "1 0 0 0 0 1 0 0 0 0 1 0";
+        let path = Path::new("poses.txt");
+        let err = parse_poses(&format!("{pose}\n\n{pose}\n"), path).unwrap_err();
+        assert!(
+            err.to_string().starts_with("poses.txt:2: a blank line"),
+            "{err}"
+        );
+        // Blank lines at the end are no frame's.
+        let poses = parse_poses(&format!("{pose}\n{pose}\n\n\n"), path).unwrap();
+        assert_eq!(poses.len(), 2);
+        let err = parse_times("0.0\n\n0.1\n", Path::new("times.txt")).unwrap_err();
+        assert!(
+            err.to_string().starts_with("times.txt:2: a blank line"),
+            "{err}"
+        );
+        let calib = format!("P0: {pose}\n\nTr: {pose}\n");
+        let err = parse_calibration(&calib, Path::new("calib.txt")).unwrap_err();
+        assert!(
+            err.to_string().starts_with("calib.txt:2: a blank line"),
+            "{err}"
+        );
+    }
 }

@@ -245,7 +245,7 @@ pub fn write_map_cells(path: &Path, cells: &[FusedCell]) -> Result<()> {
         .map_err(fail)?
         .into_inner()
         .map_err(|e| fail(e.into_error().into()))?;
-    file.sync_all().map_err(|source| Error::Write {
+    crate::outputs::writing::sync_output(&file).map_err(|source| Error::Write {
         path: path.to_path_buf(),
         source,
     })?;

@@ -99,7 +99,10 @@ pub struct Preflight {
     pub removed_stale: Vec<PathBuf>,
 }
 
-/// Checks that the file `output` can be written and replaces none of `inputs`.
+/// Checks that the file `output` can be written and replaces none of `inputs`: not
+/// an input, nor inside an input directory's folders, nor a directory, a block
+/// device or a write-protected file. A character device or FIFO is written straight
+/// through, with nothing beside it.
 pub fn check_output_file(output: &Path, inputs: &InputFiles) -> Result<Preflight> {
     if let Some(input) = inputs.aliased_by(output) {
         return Err(Error::OutputIsInput {
@@ -112,11 +115,47 @@ pub fn check_output_file(output: &Path, inputs: &InputFiles) -> Result<Preflight
             output: output.to_path_buf(),
         });
     }
+    if let Ok(metadata) = std::fs::metadata(output) {
+        use std::os::unix::fs::{FileTypeExt, PermissionsExt};
+        let kind = metadata.file_type();
+        if kind.is_char_device() || kind.is_fifo() {
+            return Ok(Preflight::default());
+        }
+        let special = match () {
+            _ if kind.is_block_device() => Some("a block device"),
+            _ if kind.is_socket() => Some("a socket"),
+            _ => None,
+        };
+        if let Some(what) = special {
+            return Err(Error::OutputIsSpecial {
+                output: output.to_path_buf(),
+                what,
+            });
+        }
+        let mode = metadata.permissions().mode() & 0o777;
+        if mode & 0o222 == 0 {
+            return Err(Error::OutputWriteProtected {
+                output: output.to_path_buf(),
+                mode,
+            });
+        }
+    }
+    // Beside an input's own files is fine (a map next to calib.txt); in its folders
+    // (velodyne/, labels/) the next run would read the output as data.
+    let dir = parent_dir(output);
+    if let (Some(input), Ok(canonical_dir)) =
+        (inputs.directory_holding(dir), std::fs::canonicalize(dir))
+        && canonical_dir != input
+    {
+        return Err(Error::OutputInsideInput {
+            output: output.to_path_buf(),
+            input,
+        });
+    }
     let write_error = |source| Error::Write {
         path: output.to_path_buf(),
         source,
     };
-    let dir = parent_dir(output);
     if !dir.is_dir() {
         return Err(Error::NoOutputDirectory {
             output: output.to_path_buf(),
@@ -129,6 +168,20 @@ pub fn check_output_file(output: &Path, inputs: &InputFiles) -> Result<Preflight
     std::fs::File::create(&probe).map_err(write_error)?;
     let _ = std::fs::remove_file(&probe);
     Ok(Preflight { removed_stale })
+}
+
+/// Checks that no two of `outputs` name the same file, however spelled.
+pub fn check_distinct_outputs(outputs: &[&Path]) -> Result<()> {
+    let key = |path: &Path| canonical_output(path).unwrap_or_else(|| path.to_path_buf());
+    for (i, first) in outputs.iter().enumerate() {
+        if let Some(second) = outputs[i + 1..].iter().find(|o| key(o) == key(first)) {
+            return Err(Error::SameOutputTwice {
+                first: first.to_path_buf(),
+                second: second.to_path_buf(),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Checks a directory that will receive one file per frame (`render --all`): it is

@@ -71,10 +71,27 @@ pub fn temporary_path(path: &Path) -> std::io::Result<PathBuf> {
 
 /// An output being written under a temporary name beside it: [`AtomicFile::commit`]
 /// renames it over the output; dropped uncommitted, it deletes the temporary file.
+/// A character device or FIFO (`-o /dev/null`, a pipe) is written straight through,
+/// as every Unix tool does: nothing is ever renamed over it.
 pub struct AtomicFile {
     path: PathBuf,
-    temporary_path: PathBuf,
+    /// None when writing straight through to a device or FIFO.
+    temporary_path: Option<PathBuf>,
     committed: bool,
+}
+
+/// Whether `path` is a character device or a FIFO, written straight through.
+pub fn is_stream(path: &Path) -> bool {
+    use std::os::unix::fs::FileTypeExt;
+    std::fs::metadata(path).is_ok_and(|m| m.file_type().is_char_device() || m.file_type().is_fifo())
+}
+
+/// Flushes a written output to the disk; a device or FIFO has nothing to sync.
+pub fn sync_output(file: &File) -> std::io::Result<()> {
+    match file.metadata()?.file_type().is_file() {
+        true => file.sync_all(),
+        false => Ok(()),
+    }
 }
 
 impl AtomicFile {
@@ -84,12 +101,24 @@ impl AtomicFile {
             path: path.to_path_buf(),
             source,
         };
+        if is_stream(path) {
+            let file = std::fs::OpenOptions::new()
+                .write(true)
+                .open(path)
+                .map_err(write_error)?;
+            let guard = Self {
+                path: path.to_path_buf(),
+                temporary_path: None,
+                committed: false,
+            };
+            return Ok((guard, file));
+        }
         let temporary_path = temporary_path(path).map_err(write_error)?;
         let file = File::create(&temporary_path).map_err(write_error)?;
         track_temporary(&temporary_path);
         let guard = Self {
             path: path.to_path_buf(),
-            temporary_path,
+            temporary_path: Some(temporary_path),
             committed: false,
         };
         Ok((guard, file))
@@ -103,25 +132,28 @@ impl AtomicFile {
     /// Renames the written file over the output (the caller has flushed and synced it).
     /// Bytes in the temporary file so far.
     pub fn written_bytes(&self) -> u64 {
-        std::fs::metadata(&self.temporary_path).map_or(0, |m| m.len())
+        let written = self.temporary_path.as_ref().map(std::fs::metadata);
+        written.and_then(|m| m.ok()).map_or(0, |m| m.len())
     }
 
     pub fn commit(mut self) -> Result<()> {
-        std::fs::rename(&self.temporary_path, &self.path).map_err(|source| Error::Write {
-            path: self.path.clone(),
-            source,
-        })?;
+        if let Some(temporary_path) = &self.temporary_path {
+            std::fs::rename(temporary_path, &self.path).map_err(|source| Error::Write {
+                path: self.path.clone(),
+                source,
+            })?;
+            forget_temporary(temporary_path);
+        }
         self.committed = true;
-        forget_temporary(&self.temporary_path);
         Ok(())
     }
 }
 
 impl Drop for AtomicFile {
     fn drop(&mut self) {
-        if !self.committed {
-            let _ = std::fs::remove_file(&self.temporary_path);
-            forget_temporary(&self.temporary_path);
+        if let (false, Some(temporary_path)) = (self.committed, &self.temporary_path) {
+            let _ = std::fs::remove_file(temporary_path);
+            forget_temporary(temporary_path);
         }
     }
 }
@@ -155,7 +187,7 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     use std::io::Write;
     let (guard, mut file) = AtomicFile::create(path)?;
     file.write_all(bytes)
-        .and_then(|_| file.sync_all())
+        .and_then(|_| sync_output(&file))
         .map_err(|source| write_failure(path, &guard, Some(source), Some(bytes.len() as u64)))?;
     guard.commit()
 }
@@ -239,7 +271,7 @@ fn write_records(
         }
     }
     let file = writer.finish()?.into_inner().map_err(|e| e.into_error())?;
-    file.sync_all()
+    sync_output(&file)
 }
 
 /// Whether messages of type `schema_name` carry an already compressed payload

@@ -285,7 +285,7 @@ impl DatasetWriter {
             .map_err(|e| write_error(&path, e))?
             .into_inner()
             .map_err(|e| write_error(&path, e.into_error().into()))?;
-        file.sync_all()
+        crate::outputs::writing::sync_output(&file)
             .map_err(|source| Error::Write { path, source })?;
         self.output.commit()?;
         Ok(self.summary)
