@@ -211,7 +211,9 @@ pub enum Error {
         encoding: String,
     },
 
-    #[error("{path}: frame {frame}: {problem}")]
+    #[error(
+        "{path}: frame {frame}: {problem}; scans that are not one continuous drive take --poses none (each scan alone), --keep-going skips the scans that do not register"
+    )]
     Registration {
         path: PathBuf,
         frame: usize,

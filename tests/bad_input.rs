@@ -324,3 +324,91 @@ fn an_empty_scan_file_is_an_error_not_an_empty_scan() {
     let err = clean_failure(eval(dir.path()));
     assert_contains(&err, &["000001.bin: 0 bytes, no points", "--keep-going"]);
 }
+
+/// A blank line inside poses.txt shifted every later pose by one frame; now it is
+/// an error naming the line (times.txt and calib.txt likewise).
+#[test]
+fn a_blank_line_in_a_text_input_is_an_error() {
+    let err = error_with("poses.txt", format!("{IDENTITY_3X4}\n\n{IDENTITY_3X4}\n"));
+    assert_contains(&err, &["poses.txt:2: a blank line"]);
+    let err = error_with("times.txt", "0.0\n\n0.1\n");
+    assert_contains(&err, &["times.txt:2: a blank line"]);
+    let err = error_with("calib.txt", format!("P0: {IDENTITY_3X4}\n\nTr: {TR}\n"));
+    assert_contains(&err, &["calib.txt:2: a blank line"]);
+}
+
+/// Pointing next to a drive says where to point instead.
+#[test]
+fn a_folder_that_is_no_drive_says_where_to_point() {
+    let root = tempfile::tempdir().unwrap();
+    let sequence = root.path().join("sequences").join("00");
+    write_sequence(&sequence);
+    let err = clean_failure(eval(root.path()));
+    assert_contains(
+        &err,
+        &["a dataset root: point at one sequence", "sequences/00"],
+    );
+    let err = clean_failure(eval(&root.path().join("sequences")));
+    assert_contains(&err, &["a folder of sequences, not one", "sequences/00"]);
+    let velodyne = sequence.join("velodyne");
+    let err = clean_failure(eval(&velodyne));
+    assert_contains(&err, &["not its velodyne/ folder", "--poses registration"]);
+    let bag = root.path().join("bag");
+    std::fs::create_dir(&bag).unwrap();
+    std::fs::write(bag.join("bag_0.db3"), b"SQLite format 3\0").unwrap();
+    let err = clean_failure(eval(&bag));
+    assert_contains(&err, &["without metadata.yaml", "ros2 bag reindex"]);
+    let pcd = root.path().join("one.pcd");
+    std::fs::write(&pcd, b"# .PCD v0.7\n").unwrap();
+    let err = clean_failure(eval(&pcd));
+    assert_contains(
+        &err,
+        &["a single PCD point cloud", "folders of .pcd / .bin scans"],
+    );
+}
+
+/// A start time in milliseconds (or beyond ROS 2's stamps) is a usage error with
+/// the likely fix.
+#[test]
+fn a_start_time_in_milliseconds_is_refused_with_the_fix() {
+    let dir = sequence();
+    let out = dir.path().join("out.mcap");
+    let convert = |start: &str| {
+        travmap(&[
+            "convert",
+            arg(dir.path()),
+            "-o",
+            arg(&out),
+            "--start-time",
+            start,
+        ])
+    };
+    let err = usage_error(convert("1700000000000"));
+    assert_contains(
+        &err,
+        &["it looks like milliseconds: --start-time 1700000000"],
+    );
+    let err = usage_error(convert("1e30"));
+    assert_contains(&err, &["ROS 2 stamps end in 2038"]);
+    assert!(!out.exists());
+    success(convert("1700000000"));
+}
+
+/// `run` and `odometry` need no labels: a label file one short does not stop them;
+/// `eval`, which scores with them, names it.
+#[test]
+fn commands_that_need_no_labels_ignore_a_broken_label_file() {
+    let dir = sequence();
+    cut_short(&dir.path().join("labels/000001.label"), 4);
+    success(travmap(&["run", arg(dir.path()), "-q"]));
+    let poses = dir.path().join("poses.out.txt");
+    let output = travmap(&["odometry", arg(dir.path()), "-o", arg(&poses), "-q"]);
+    // The synthetic scans may not register; what matters is that labels did not stop it.
+    assert!(
+        !common::stderr(&output).contains("labels for"),
+        "{}",
+        common::stderr(&output)
+    );
+    let err = clean_failure(eval(dir.path()));
+    assert_contains(&err, &["000001.label", "labels for"]);
+}

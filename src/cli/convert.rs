@@ -33,7 +33,7 @@ pub struct ConvertArgs {
     #[command(flatten)]
     compression: CompressionArg,
     /// Seconds since the Unix epoch added to times.txt for every stamp.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = parse_start_time)]
     start_time: f64,
     #[command(flatten)]
     report: Output,
@@ -68,9 +68,6 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
     let (output, output_path) = (args.report, args.output.as_path());
     let compression = args.compression.compression();
     let start_time_s = args.start_time;
-    if !(start_time_s.is_finite() && start_time_s >= 0.0) {
-        bail!("--start-time must be seconds >= 0, got {start_time_s}");
-    }
     check_output(output_path, &InputFiles::of(&[&args.sequence]))?;
     let frames = args.frames.clone().unwrap_or(0..usize::MAX);
     let selection = open_selection(
@@ -120,6 +117,41 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
         summary: serde_json::to_value(&summary)?,
     };
     written.report(output_path, compression, &output, seconds, &selections)
+}
+
+/// The last start ROS 2's `int32` seconds can stamp (2038-01-19), a day before the
+/// end so that a drive fits after it.
+const LATEST_START_S: f64 = (i32::MAX - 86_400) as f64;
+
+/// `--start-time` as seconds since the epoch, with a hint when it looks like a
+/// finer unit (a usage error otherwise).
+fn parse_start_time(text: &str) -> Result<f64, String> {
+    let seconds: f64 = text
+        .parse()
+        .map_err(|_| format!("`{text}` is not a number"))?;
+    if seconds.is_finite() && (0.0..=LATEST_START_S).contains(&seconds) {
+        return Ok(seconds);
+    }
+    // A time since 1973 in a finer unit: the user's clock's, read as seconds.
+    let unit = [
+        ("milliseconds", 1e3),
+        ("microseconds", 1e6),
+        ("nanoseconds", 1e9),
+    ]
+    .into_iter()
+    .find(|(_, per_second)| (1e8..=LATEST_START_S).contains(&(seconds / per_second)));
+    let hint = match unit {
+        Some((name, per_second)) => {
+            format!(
+                "; it looks like {name}: --start-time {}",
+                seconds / per_second
+            )
+        }
+        None => String::new(),
+    };
+    Err(format!(
+        "seconds since the epoch, 0 to {LATEST_START_S} (ROS 2 stamps end in 2038), got {seconds}{hint}"
+    ))
 }
 
 /// What a conversion wrote, for its report.

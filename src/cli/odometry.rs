@@ -35,7 +35,9 @@ pub fn odometry(args: OdometryArgs) -> Result<Outcome> {
     let config = args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
     check_output(output_path, &args.inputs.files(None))?;
-    let selection = args.inputs.open_one(false, "odometry takes one input")?;
+    let mut selection = args.inputs.open_one(false, "odometry takes one input")?;
+    // Registration needs no labels: one short cannot stop it.
+    selection.source.set_read_labels(false);
     let selections = [selection];
     let bar = output.progress(frame_count(&selections), "registering");
     let poses = selections[0].estimate_trajectory(&config, || bar.inc(1))?;

@@ -30,7 +30,11 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let config = args.inputs.settings.load()?;
     let output = args.inputs.output;
     let (model, model_name) = args.model.load(&config)?;
-    let selections = args.inputs.open(config.appearance.enabled)?;
+    let mut selections = args.inputs.open(config.appearance.enabled)?;
+    // `run` prints no scores: labels it does not need cannot stop it.
+    for selection in &mut selections {
+        selection.source.set_read_labels(false);
+    }
     let bar = output.progress(frame_count(&selections), "predicting");
     let mut stdout = std::io::stdout().lock();
     if !output.json && !output.quiet {

@@ -36,7 +36,7 @@ impl InputFormat {
 }
 
 /// What travmap reads, for the errors that refuse something else.
-pub const READABLE: &str = "travmap reads KITTI / SemanticKITTI sequence directories, MCAP files (ROS 2 or ROS 1 messages), ROS 1 bags (format 2.0), rosbag2 directories (sqlite3 or MCAP storage) and rosbag2 .db3 files";
+pub const READABLE: &str = "travmap reads KITTI / SemanticKITTI sequence directories, MCAP files (ROS 2 or ROS 1 messages), ROS 1 bags (format 2.0), rosbag2 directories (sqlite3 or MCAP storage), rosbag2 .db3 files and folders of .pcd / .bin scans";
 
 /// The first bytes of a ROS 1 bag of format 2.0.
 pub const BAG_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
@@ -53,8 +53,14 @@ const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
         ),
     ),
     (b"\x89MCAP", Err("an MCAP file of a version other than 0")),
-    (b"# .PCD", Err("a PCD point cloud")),
-    (b"VERSION .", Err("a PCD point cloud")),
+    (
+        b"# .PCD",
+        Err("a single PCD point cloud (a folder of .pcd scans is a drive: put it in one)"),
+    ),
+    (
+        b"VERSION .",
+        Err("a single PCD point cloud (a folder of .pcd scans is a drive: put it in one)"),
+    ),
     (b"ply\n", Err("a PLY point cloud")),
     (b"ply\r\n", Err("a PLY point cloud")),
     (

@@ -10,7 +10,7 @@ use super::log::Log;
 use super::ros_drive::{DriveOptions, RosDrive};
 use super::scan_folder::ScanFolder;
 use super::skips::{Skip, SkipLog};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::posing::{PoseRecord, Posing, decide};
 
@@ -37,6 +37,12 @@ impl Source {
     /// anything can fail later.
     pub fn open(path: &Path, options: &DriveOptions, on_notice: &dyn Fn(&str)) -> Result<Self> {
         let (recording, record) = match format::detect(path)? {
+            format::InputFormat::Kitti if let Some(problem) = misplaced(path, options) => {
+                return Err(Error::Sequence {
+                    path: path.to_path_buf(),
+                    message: problem,
+                });
+            }
             format::InputFormat::Kitti if ScanFolder::holds_scans(path) => {
                 let folder = ScanFolder::open(path, options.rate_hz)?;
                 on_notice(folder.notice());
@@ -211,4 +217,59 @@ fn frame_by_frame<'a>(
             Ok(frame) => Some(Ok(frame)),
             Err(error) => skips.handle(index, error).err().map(Err),
         })
+}
+
+/// What a directory that is no drive is instead, and where to point: a dataset root,
+/// its `sequences/`, a sequence's `velodyne/` (a folder of scans only when asked), a
+/// rosbag2 directory without its metadata.
+fn misplaced(path: &Path, options: &DriveOptions) -> Option<String> {
+    let is_sequence = |dir: &Path| dir.join("velodyne").is_dir() && dir.join("calib.txt").is_file();
+    let subdirs = || -> Vec<std::path::PathBuf> {
+        let entries = std::fs::read_dir(path).into_iter().flatten().flatten();
+        let mut dirs: Vec<_> = entries.map(|e| e.path()).filter(|p| p.is_dir()).collect();
+        dirs.sort();
+        dirs
+    };
+    if is_sequence(path) {
+        return None;
+    }
+    if let Some(first) = subdirs().into_iter().find(|d| is_sequence(d)) {
+        return Some(format!(
+            "a folder of sequences, not one: point at one of them, e.g. {}",
+            first.display()
+        ));
+    }
+    let sequences = path.join("sequences");
+    if sequences.is_dir() {
+        let first = std::fs::read_dir(&sequences)
+            .into_iter()
+            .flatten()
+            .flatten();
+        let example = first.map(|e| e.path()).filter(|p| is_sequence(p)).min();
+        return Some(format!(
+            "a dataset root: point at one sequence, e.g. {}",
+            example.unwrap_or_else(|| sequences.join("00")).display()
+        ));
+    }
+    let parent = path.parent().filter(|p| is_sequence(p));
+    if let Some(sequence) = parent
+        && path.file_name().is_some_and(|n| n == "velodyne")
+        && options.poses != crate::config::PoseSource::Registration
+    {
+        return Some(format!(
+            "the velodyne/ folder of the sequence {}: point at the sequence, not its velodyne/ folder (or pass --poses registration to treat it as a folder of scans)",
+            sequence.display()
+        ));
+    }
+    let storage = std::fs::read_dir(path)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .any(|e| {
+            let p = e.path();
+            p.extension().is_some_and(|x| x == "db3" || x == "mcap")
+        });
+    storage.then(|| {
+        "a rosbag2 directory without metadata.yaml: pass its .db3 or .mcap file itself, or restore the metadata with `ros2 bag reindex`".into()
+    })
 }
