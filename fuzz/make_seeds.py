@@ -118,6 +118,15 @@ def main() -> None:
                 check=True,
             )
             seed("mcap_file", drive.name, drive.read_bytes())
+        # Damaged files: a recorder killed before the summary, or inside a chunk, and
+        # a chunk whose bytes were flipped.
+        whole = (tmp / "drive-zstd.mcap").read_bytes()
+        summary_start = int.from_bytes(whole[-8 - 29 + 9 : -8 - 29 + 17], "little")
+        seed("mcap_file", "cut-before-summary.mcap", whole[:summary_start])
+        seed("mcap_file", "cut-inside-chunk.mcap", whole[: len(whole) * 2 // 3])
+        flipped = bytearray(whole)
+        flipped[len(whole) // 2] ^= 0xFF
+        seed("mcap_file", "corrupt-chunk.mcap", bytes(flipped))
         messages = first_message_per_topic(tmp / "drive-none.mcap")
         # The tiny drive in every other log format, by real writers (rosbags, mcap).
         routes = tmp / "routes"

@@ -714,20 +714,26 @@ fn corrupt_mcap_files_are_clear_errors() {
     flipped[middle] ^= 0x55;
     let err = clean_failure(travmap(&["eval", &write("crc.mcap", &flipped)]));
     assert_contains(&err, &["crc.mcap", "Chunk CRC failed"]);
-    // Cut a few bytes into the first chunk.
-    let err = clean_failure(travmap(&["eval", &write("cut.mcap", &bytes[..100])]));
-    assert_contains(
-        &err,
-        &[
-            "cut.mcap: truncated: the record at byte 42 (opcode 0x06) is",
-            "the file ends 58 bytes after its start",
-        ],
-    );
-    // Cut inside a record's opcode and length, at the start and in the summary.
-    for (name, end) in [("head.mcap", 12), ("tail.mcap", bytes.len() - 30)] {
+    // Cut a few bytes into the first chunk, or inside the first record's opcode and
+    // length: its complete records hold no cloud, and it says so.
+    for (name, end, complete) in [("cut.mcap", 100, 42), ("head.mcap", 12, 8)] {
         let err = clean_failure(travmap(&["eval", &write(name, &bytes[..end])]));
-        assert_contains(&err, &[name, "ended in the middle of a record"]);
+        let read_to = format!("up to byte {complete}");
+        assert_contains(
+            &err,
+            &[
+                name,
+                "without its summary",
+                &read_to,
+                "no PointCloud2 topic",
+            ],
+        );
     }
+    // Cut inside the summary: the data section is whole, and every frame is read.
+    let tail = write("tail.mcap", &bytes[..bytes.len() - 30]);
+    let output = travmap(&["run", &tail, "-q"]);
+    assert_contains(&common::stderr(&output), &["without its summary"]);
+    success(output);
     // A chunk claiming a terabyte uncompressed: refused before anything is reserved.
     let mut chunk = 8;
     while bytes[chunk] != 0x06 {
@@ -837,4 +843,36 @@ fn an_image_that_disagrees_with_its_camera_info_and_a_non_cdr_cloud_are_errors()
         &err,
         &["channel /points (sensor_msgs/msg/PointCloud2) has message encoding `json`"],
     );
+}
+
+/// An MCAP whose recorder was killed is read as far as it goes, with a notice that
+/// says where it ends and that `mcap recover` rewrites it: before the summary, every
+/// frame; inside a chunk, the frames of the complete chunks.
+#[test]
+fn a_recording_cut_short_is_read_as_far_as_it_goes() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+        return;
+    };
+    let whole = std::fs::read(&drive).unwrap();
+    let footer = whole.len() - 8 - 29;
+    let summary_start = u64::from_le_bytes(whole[footer + 9..footer + 17].try_into().unwrap());
+    let frames_of = |name: &str, bytes: &[u8]| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let output = travmap(&["run", arg(&path), "--json"]);
+        let err = common::stderr(&output);
+        assert_contains(
+            &err,
+            &["without its summary and closing magic", "mcap recover"],
+        );
+        let (frames, _) = common::json_records(&success(output));
+        frames.len()
+    };
+    assert_eq!(
+        frames_of("no-summary.mcap", &whole[..summary_start as usize]),
+        6
+    );
+    let cut = frames_of("cut.mcap", &whole[..whole.len() * 2 / 3]);
+    assert!((1..6).contains(&cut), "{cut} frames");
 }

@@ -164,7 +164,7 @@ mod tests {
             Ok(InputFormat::Sqlite)
         );
         for (bytes, what) in [
-            (&b"# .PCD v0.7"[..], "a PCD point cloud"),
+            (&b"# .PCD v0.7"[..], "PCD point cloud"),
             (b"ply\nformat", "a PLY point cloud"),
             (b"PAR1\x15\x04", "a Parquet file"),
             (b"\x89PNG\r\n\x1a\n\0", "a PNG image"),

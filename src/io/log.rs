@@ -71,8 +71,10 @@ impl Log {
         };
         let mut notices = Vec::new();
         for file in &files {
-            if let LogFile::Bag(bag) = file {
-                notices.extend(bag.notice().map(str::to_string));
+            match file {
+                LogFile::Bag(bag) => notices.extend(bag.notice().map(str::to_string)),
+                LogFile::Mcap(mcap) => notices.extend(mcap.notice()),
+                LogFile::Sqlite(_) => {}
             }
         }
         Ok(Self {
@@ -88,6 +90,13 @@ impl Log {
 
     pub fn notices(&self) -> &[String] {
         &self.notices
+    }
+
+    /// Whether a file of the log was cut short (read as far as it goes).
+    pub fn is_cut(&self) -> bool {
+        self.files
+            .iter()
+            .any(|file| matches!(file, LogFile::Mcap(mcap) if mcap.cut_at.is_some()))
     }
 
     /// A one-file MCAP log's chunks as stored, when they hold every message.
@@ -128,13 +137,15 @@ pub struct McapFile {
     map: bytes::Bytes,
     /// See [`check_chunk_sizes`]: no record of the file is longer.
     longest_record: usize,
+    /// For a file cut short: where its last complete record ends.
+    cut_at: Option<usize>,
 }
 
 impl McapFile {
     pub fn open(path: &Path) -> Result<Self> {
         let file = FileMap::open(path)?;
         let map = file.bytes();
-        let longest_record = check_chunk_sizes(&map).map_err(|problem| Error::LogContainer {
+        let layout = check_chunk_sizes(&map).map_err(|problem| Error::LogContainer {
             path: path.to_path_buf(),
             problem,
         })?;
@@ -143,12 +154,27 @@ impl McapFile {
             path: path.to_path_buf(),
             file,
             map,
-            longest_record,
+            longest_record: layout.longest_record,
+            cut_at: layout.cut_at,
         })
     }
 
-    /// Its chunks as stored, when they hold every message (see [`stored_log`]).
+    /// What a file cut short holds, for a notice: None for a whole file.
+    pub fn notice(&self) -> Option<String> {
+        let cut_at = self.cut_at?;
+        Some(format!(
+            "{}: the file ends at byte {} without its summary and closing magic (a recording cut short?): reading its complete records, up to byte {cut_at}; `mcap recover` rewrites such a file whole",
+            self.path.display(),
+            self.map.len()
+        ))
+    }
+
+    /// Its chunks as stored, when they hold every message (see [`stored_log`]); a
+    /// file cut short has no summary to check them by.
     pub fn stored(&self) -> Option<StoredLog> {
+        if self.cut_at.is_some() {
+            return None;
+        }
         let mut log = stored_log(&self.map)?;
         for chunk in &mut log.chunks {
             let end = chunk.offset + chunk.record.len() + chunk.message_indexes.len();
@@ -159,7 +185,9 @@ impl McapFile {
 
     fn messages(&self) -> impl Iterator<Item = std::result::Result<LogMessage, String>> + '_ {
         let mut connections: HashMap<u16, Arc<Connection>> = HashMap::new();
-        Messages::new(&self.map, self.longest_record, Some(&self.file)).map(move |message| {
+        let readable = &self.map[..self.cut_at.unwrap_or(self.map.len())];
+        let cut = self.cut_at.is_some();
+        Messages::new(readable, self.longest_record, Some(&self.file), cut).map(move |message| {
             let message = message?;
             let channel = &message.channel;
             let connection = connections.entry(channel.id).or_insert_with(|| {

@@ -176,30 +176,40 @@ impl<'a> Iterator for RecordWalk<'a> {
     }
 }
 
+/// What [`check_chunk_sizes`] found of a file's layout.
+#[derive(Debug)]
+pub(super) struct Layout {
+    /// The longest record the file can hold: its own length or its largest chunk's.
+    pub(super) longest_record: usize,
+    /// For a file cut short (a recorder killed before it wrote the summary, or in the
+    /// middle of a record): where its last complete record ends.
+    pub(super) cut_at: Option<usize>,
+}
+
 /// Checks every chunk's declared uncompressed size before the mcap crate, which
 /// reserves that size up front, sees it: an uncompressed chunk must declare its own
 /// length, and a compressed one claiming more than `TRUSTED_CHUNK_RATIO` times its
 /// bytes is decompressed into a counter (no buffer) to confirm the claim. So
-/// allocation follows the data a file holds, not what its header says. Returns the
-/// longest record the file can hold: its own length or its largest chunk's.
-pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<usize, String> {
+/// allocation follows the data a file holds, not what its header says. A file that
+/// ends before its data section does (no DataEnd record) is cut: its complete
+/// records are what can be read.
+pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
     let mut longest = map.len();
-    // After the 8-byte magic. A malformed chunk header ends the walk, as does a
-    // record header cut short; the mcap crate then reports it with its own message.
-    for record in (RecordWalk {
+    let mut walk = RecordWalk {
         bytes: map,
         offset: 8,
-    }) {
-        let (offset, opcode, body) = record.map_err(|o| {
-            format!(
-                "truncated: the record at byte {} (opcode {:#04x}) is {} bytes long, but the file ends {} bytes after its start",
-                o.offset,
-                o.opcode,
-                o.length,
-                o.available + 9
-            )
-        })?;
+    };
+    let mut complete = walk.offset;
+    let mut data_end = false;
+    // After the 8-byte magic. A malformed chunk header ends the walk, as does a
+    // record header cut short.
+    while let Some(record) = walk.next() {
+        let Ok((offset, opcode, body)) = record else {
+            break;
+        };
+        complete = walk.offset;
         if opcode == op::DATA_END {
+            data_end = true;
             break;
         }
         if opcode != op::CHUNK {
@@ -234,7 +244,15 @@ pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<usize, String> {
         }
         longest = longest.max(usize::try_from(declared).unwrap_or(usize::MAX));
     }
-    Ok(longest)
+    // A whole file ends with the footer and the closing magic; a recorder killed
+    // after the data section leaves neither.
+    let magic = b"\x89MCAP0\r\n";
+    let footer = map.len().checked_sub(magic.len() + 29);
+    let whole = map.ends_with(magic) && footer.is_some_and(|at| map[at] == op::FOOTER);
+    Ok(Layout {
+        longest_record: longest,
+        cut_at: (!(data_end && whole)).then_some(complete),
+    })
 }
 
 /// A chunk's declared uncompressed size, compression and records: after the start
@@ -307,10 +325,18 @@ pub(super) struct Messages<'a> {
 }
 
 impl<'a> Messages<'a> {
-    pub(super) fn new(file: &'a [u8], longest_record: usize, map: Option<&'a FileMap>) -> Self {
+    /// The messages of `file` (the complete records of a cut file: `cut` true reads
+    /// to its end without the summary and closing magic).
+    pub(super) fn new(
+        file: &'a [u8],
+        longest_record: usize,
+        map: Option<&'a FileMap>,
+        cut: bool,
+    ) -> Self {
         let options = LinearReaderOptions::default()
             .with_validate_chunk_crcs(true)
             .with_record_length_limit(longest_record)
+            .with_skip_end_magic(cut)
             .with_emit_chunks(false);
         Self {
             file,
@@ -487,9 +513,9 @@ mod tests {
             let file = one_message_file(&zeros, Some(compression));
             assert!(file.len() < 1 << 20, "{}", file.len());
             // The records may be as long as the chunk, and the message is read whole.
-            let longest_record = check_chunk_sizes(&file).unwrap();
+            let longest_record = check_chunk_sizes(&file).unwrap().longest_record;
             assert!(longest_record > 80 << 20, "{longest_record}");
-            let message = Messages::new(&file, longest_record, None)
+            let message = Messages::new(&file, longest_record, None, false)
                 .next()
                 .unwrap()
                 .unwrap();

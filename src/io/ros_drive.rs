@@ -59,7 +59,7 @@ impl RosDrive {
             (None, Posing::Registration) => "map".to_string(),
             (None, Posing::Alone) => index.cloud_frame.clone(),
         };
-        Ok(Self {
+        let mut drive = Self {
             path: log.path().to_path_buf(),
             log,
             posing: decision.posing,
@@ -71,7 +71,35 @@ impl RosDrive {
             transforms: index.transforms,
             camera: index.camera,
             skips: SkipLog::default(),
-        })
+        };
+        drive.trim_cut_end();
+        Ok(drive)
+    }
+
+    /// In a file cut short, the last clouds may have lost their poses with the rest
+    /// of the file: they are left out, and said so.
+    fn trim_cut_end(&mut self) {
+        if !self.log.is_cut() || self.posing != Posing::Recorded {
+            return;
+        }
+        let mut dropped = 0;
+        while let Some(&stamp_ns) = self.stamps_ns.last()
+            && self.world_from_cloud(stamp_ns).is_err()
+        {
+            self.stamps_ns.pop();
+            dropped += 1;
+        }
+        if dropped > 0 {
+            let said = self
+                .notice
+                .take()
+                .map(|n| format!("{n}; "))
+                .unwrap_or_default();
+            self.notice = Some(format!(
+                "{said}{}: the last {dropped} clouds have no pose before the file ends: left out",
+                self.path.display()
+            ));
+        }
     }
 
     pub fn path(&self) -> &Path {
@@ -209,7 +237,8 @@ impl RosDrive {
         DriveFrames {
             drive: self,
             stream: Box::new(self.log.messages()),
-            frames: frames.clone(),
+            // Clouds the index left out (past a cut end) are not frames.
+            frames: frames.start..frames.end.min(self.frame_count()),
             pending: None,
             images: Vec::new(),
             next_cloud: 0,
