@@ -291,7 +291,7 @@ fn files_travmap_does_not_read_are_named_not_misdiagnosed() {
     let text = dir.path().join("notes.mcap");
     std::fs::write(&text, "not a drive\n").unwrap();
     for (input, what) in [
-        (pcd, "is a PCD point cloud"),
+        (pcd, "is a single PCD point cloud"),
         (ply, "is a PLY point cloud"),
         (parquet, "is a Parquet file"),
         (object.join("image_2/000008.png"), "is a PNG image"),
