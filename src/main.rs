@@ -76,16 +76,21 @@ fn main() -> ExitCode {
             }
             ExitCode::from(3)
         }
-        Err(error) if json => {
-            let file = error
-                .chain()
-                .find_map(|e| e.downcast_ref::<travmap::Error>()?.path());
-            cli::print_json_error(&format!("{error:#}"), file, 1);
-            ExitCode::FAILURE
-        }
         Err(error) => {
-            eprintln!("error: {error:#}");
-            ExitCode::FAILURE
+            let code = if error.downcast_ref::<cli::UsageError>().is_some() {
+                2
+            } else {
+                1
+            };
+            if json {
+                let file = error
+                    .chain()
+                    .find_map(|e| e.downcast_ref::<travmap::Error>()?.path());
+                cli::print_json_error(&format!("{error:#}"), file, code);
+            } else {
+                eprintln!("error: {error:#}");
+            }
+            ExitCode::from(code as u8)
         }
     }
 }
@@ -105,6 +110,12 @@ fn remove_outputs_on_signals() {
         std::thread::spawn(move || {
             if let Some(signal) = signals.forever().next() {
                 travmap::outputs::writing::remove_temporary_files();
+                let name = match signal {
+                    SIGINT => "SIGINT",
+                    SIGTERM => "SIGTERM",
+                    _ => "SIGHUP",
+                };
+                eprintln!("interrupted by {name}: unfinished outputs removed");
                 std::process::exit(128 + signal);
             }
         });

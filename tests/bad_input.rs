@@ -229,10 +229,40 @@ fn bad_frame_range_and_model_file() {
     let dir = sequence();
     let seq = arg(dir.path());
     let err = clean_failure(travmap(&["eval", seq, "--frames", "5..9"]));
-    assert_contains(&err, &["no scans in frames 5..9", "0..=1"]);
+    assert_contains(&err, &["no scans in frames 5..=8", "0..=1"]);
+    let err = clean_failure(travmap(&["eval", seq, "--frames", "6.."]));
+    assert_contains(
+        &err,
+        &["no scans in frames 6.. (the input has frames 0..=1)"],
+    );
     // A malformed range is a usage error, refused before anything is read.
     let err = usage_error(travmap(&["eval", seq, "--frames", "3..1"]));
-    assert_contains(&err, &["is empty"]);
+    assert_contains(&err, &["ends before it starts"]);
+    let err = usage_error(travmap(&["eval", seq, "--frames", "2..=1"]));
+    assert_contains(&err, &["A..=B is A to B"]);
+    // Numbers that are no scan rate or height.
+    let err = usage_error(travmap(&["eval", seq, "--rate", "1e-300"]));
+    assert_contains(&err, &["a scan rate of 0.01 to 1000 Hz, got 1e-300"]);
+    let out = dir.path().join("a.mcap");
+    let err = usage_error(travmap(&[
+        "annotate",
+        seq,
+        "-o",
+        arg(&out),
+        "--grid-height",
+        "nan",
+    ]));
+    assert_contains(&err, &["a finite number, got nan"]);
+    // Usage mistakes clap cannot see exit 2 as well.
+    let err = usage_error(travmap(&["eval", seq, "--set", "grid.no_such=1"]));
+    assert_contains(&err, &["--set grid.no_such=1"]);
+    let err = usage_error(travmap(&["odometry", seq, seq, "-o", arg(&out)]));
+    assert_contains(&err, &["odometry takes one input, got 2"]);
+    let err = usage_error(travmap(&["render", seq, "-o", arg(&out)]));
+    assert_contains(&err, &["required arguments were not provided"]);
+    let err = usage_error(travmap(&["render", seq, "--all", "-o", "pictures.png"]));
+    assert_contains(&err, &["names a PNG file"]);
+    assert!(!Path::new("pictures.png").exists());
     let model = dir.path().join("broken.json");
     std::fs::write(&model, b"{\"format\": \"travmap-svm\", \"version\": 1, ").unwrap();
     let err = clean_failure(travmap(&["eval", seq, "--model", arg(&model)]));

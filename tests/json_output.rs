@@ -53,7 +53,7 @@ fn every_command_prints_json_that_matches_its_schema() {
     let (annotated, picture, converted) = (out("a.mcap"), out("f.png"), out("c.mcap"));
     let trajectory = out("poses.txt");
     let adapted = out("adapted.json");
-    let (map_picture, map_cells) = (out("map.png"), out("map.parquet"));
+    let (map_picture, map_cells, nav2) = (out("map.png"), out("map.parquet"), out("site.yaml"));
     let quick = ["training.c_values=[10]", "training.gamma_values=[0.05]"];
     let quick_crossval = [&quick[..], &["training.folds=3"]].concat();
     let runs: Vec<(&str, Vec<&str>)> = vec![
@@ -114,7 +114,16 @@ fn every_command_prints_json_that_matches_its_schema() {
         ),
         (
             "map",
-            vec!["map", seq, "-o", &map_picture, "--cells", &map_cells],
+            vec![
+                "map",
+                seq,
+                "-o",
+                &map_picture,
+                "--cells",
+                &map_cells,
+                "--nav2",
+                &nav2,
+            ],
         ),
         (
             "odometry",

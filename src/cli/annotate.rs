@@ -34,7 +34,7 @@ pub struct AnnotateArgs {
     #[arg(long)]
     no_passthrough: bool,
     /// Height of the drawn grids relative to the sensor, metres.
-    #[arg(long, default_value_t = -1.73, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = -1.73, allow_negative_numbers = true, value_parser = super::parse_finite)]
     grid_height: f64,
 }
 

@@ -54,7 +54,7 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
             )
         })
         .transpose()?;
-    if let (Some(tools), false) = (&tools, output.json) {
+    if let (Some(tools), false) = (&tools, output.json || output.quiet) {
         let out = &mut std::io::stdout().lock();
         print_tools_table(out, &selection.describe(), tools, tool_repeats)?;
     }
@@ -66,6 +66,9 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
             fields["tools"] = serde_json::to_value(tools)?;
         }
         print_json_summary("bench", std::slice::from_ref(&selection), fields)?;
+        return Ok(outcome(std::slice::from_ref(&selection)));
+    }
+    if output.quiet {
         return Ok(outcome(std::slice::from_ref(&selection)));
     }
     let mut out = std::io::stdout().lock();

@@ -38,7 +38,9 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
             bar.inc(1);
         })?;
         bar.finish();
-        print_leave_one_out(&report, &selections, config, output.json)?;
+        if !output.quiet || output.json {
+            print_leave_one_out(&report, &selections, config, output.json)?;
+        }
         return Ok(outcome(&selections));
     }
     let bar = output.progress(config.training.folds as u64, "cross-validating");
@@ -54,6 +56,9 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
             &selections,
             json!({"config": config, "report": report}),
         )?;
+        return Ok(outcome(&selections));
+    }
+    if output.quiet {
         return Ok(outcome(&selections));
     }
     let mut out = std::io::stdout().lock();

@@ -100,6 +100,9 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         )?;
         return Ok(outcome(&selections));
     }
+    if output.quiet {
+        return Ok(outcome(&selections));
+    }
     let mut out = std::io::stdout().lock();
     writeln!(out, "inputs: {}", sources.join("; "))?;
     let hybrid = match &model.hybrid {

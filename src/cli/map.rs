@@ -1,11 +1,12 @@
 //! `travmap map`: the whole drive as one fused map (PNG, and its cells as Parquet).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
-use clap::Args;
+use clap::{Args, ValueEnum};
 use serde_json::json;
 use travmap::outputs::drive_map::{render_drive_map, write_map_cells};
+use travmap::outputs::nav2_map::{Nav2Mode, image_path, write_nav2_map};
 use travmap::outputs::preflight::check_distinct_outputs;
 use travmap::outputs::rendering::encode_png;
 use travmap::outputs::writing::write_atomically;
@@ -28,6 +29,14 @@ pub struct MapArgs {
     /// Also write the fused cells as a Parquet table.
     #[arg(long, value_name = "PARQUET")]
     cells: Option<PathBuf>,
+    /// Also write a nav2 map_server map: this YAML and the image it names beside it
+    /// (site.yaml -> site.pgm; site.png with --nav2-mode scale).
+    #[arg(long, value_name = "YAML")]
+    nav2: Option<PathBuf>,
+    /// trinary: free / occupied / unknown as map_saver writes them; scale:
+    /// P(not traversable) as grey levels for costmaps that read costs.
+    #[arg(long, value_enum, default_value_t = Nav2ModeArg::Trinary, requires = "nav2")]
+    nav2_mode: Nav2ModeArg,
     #[command(flatten)]
     model: ModelArg,
     /// Pixels per cell side (1 to 64).
@@ -35,15 +44,36 @@ pub struct MapArgs {
     cell_pixels: u32,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum Nav2ModeArg {
+    Trinary,
+    Scale,
+}
+
+impl Nav2ModeArg {
+    fn mode(self) -> Nav2Mode {
+        match self {
+            Self::Trinary => Nav2Mode::Trinary,
+            Self::Scale => Nav2Mode::Scale,
+        }
+    }
+}
+
 pub fn map(args: MapArgs) -> Result<Outcome> {
     let cell_px = args.cell_pixels;
     let config = &args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
     let inputs = args.inputs.files(args.model.path.as_deref());
-    check_output(output_path, &inputs)?;
-    if let Some(cells) = &args.cells {
-        check_distinct_outputs(&[output_path, cells])?;
-        check_output(cells, &inputs)?;
+    let nav2_mode = args.nav2_mode.mode();
+    let nav2_image = args.nav2.as_deref().map(|yaml| image_path(yaml, nav2_mode));
+    let outputs: Vec<&Path> = [Some(output_path), args.cells.as_deref()]
+        .into_iter()
+        .chain([args.nav2.as_deref(), nav2_image.as_deref()])
+        .flatten()
+        .collect();
+    check_distinct_outputs(&outputs)?;
+    for path in &outputs {
+        check_output(path, &inputs)?;
     }
     let (model, model_name) = args.model.load(config)?;
     let selection = args
@@ -66,6 +96,12 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     if let Some(path) = &args.cells {
         write_map_cells(path, &cells)?;
     }
+    let world_frame = selections[0].source.world_frame();
+    let nav2 = args
+        .nav2
+        .as_deref()
+        .map(|yaml| write_nav2_map(yaml, &cells, map.cell_size_m(), world_frame, nav2_mode))
+        .transpose()?;
     let fused = Confusion::of_drive_map(&cells);
     let fused_scores = (fused.tp + fused.tn + fused.fp + fused.r#fn > 0).then(|| fused.scores());
     let per_frame = per_frame.report();
@@ -75,6 +111,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
         let fields = json!({
             "output": output_path,
             "cells_output": args.cells,
+            "nav2": nav2,
             "model": model_json(&model, &model_name),
             "frames": map.frames(),
             "cells": cells.len(),
@@ -94,6 +131,22 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
             map.frames(),
             map.memory_bytes() as f64 / 1024.0
         );
+        if let Some(nav2) = &nav2 {
+            println!(
+                "wrote {} and {} (nav2 map_server, {}: {} x {} cells of {} m, origin ({:.2}, {:.2}) in frame {})",
+                nav2.yaml.display(),
+                nav2.image.display(),
+                serde_json::to_value(nav2.mode)?
+                    .as_str()
+                    .unwrap_or_default(),
+                nav2.width,
+                nav2.height,
+                nav2.resolution_m,
+                nav2.origin[0],
+                nav2.origin[1],
+                nav2.frame
+            );
+        }
         if let (Some(fused), Some(frames)) = (fused_scores, per_frame.scores) {
             println!(
                 "fused map (each world cell once): Acc {:.1} mIoU {:.1} F1 {:.1}; per frame: Acc {:.1} mIoU {:.1} F1 {:.1}",

@@ -66,7 +66,9 @@ impl Settings {
             None => Config::default(),
         };
         for assignment in &self.sets {
-            config.set(assignment)?;
+            config
+                .set(assignment)
+                .map_err(|e| usage(format!("--set {assignment}: {e}")))?;
         }
         if let Some(poses) = &self.poses {
             config.set(&format!("integration.poses=\"{poses}\""))?;
@@ -99,13 +101,30 @@ fn flags<'a>(pairs: impl IntoIterator<Item = (&'a str, Option<OsString>)>) -> Ve
         .collect()
 }
 
+/// A mistake in the command line that clap's grammar cannot see (a `--set` typo,
+/// two inputs where one is taken): exits 2, as clap's own usage errors do.
+#[derive(Debug)]
+pub struct UsageError(String);
+
+impl std::fmt::Display for UsageError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for UsageError {}
+
+pub fn usage(message: String) -> anyhow::Error {
+    UsageError(message).into()
+}
+
 /// How a command reports.
 #[derive(Args, Clone, Copy)]
 pub struct Output {
     /// Machine-readable output.
     #[arg(long)]
     pub json: bool,
-    /// No progress bars, no tables.
+    /// Print nothing but errors and notices (no progress bars, tables or summaries).
     #[arg(short, long)]
     pub quiet: bool,
 }
@@ -177,7 +196,7 @@ pub struct Inputs {
     pub frames: Option<Range<usize>>,
     /// Folder-of-scans input: the scan rate, Hz, when the file names are not times
     /// (default 10).
-    #[arg(long, value_name = "HZ")]
+    #[arg(long, value_name = "HZ", value_parser = parse_rate_hz)]
     rate: Option<f64>,
     #[command(flatten)]
     pub settings: Settings,
@@ -249,11 +268,10 @@ impl Inputs {
 
     /// Opens the one input of a command that takes one; `what` says what it takes.
     pub fn open_one(&self, read_images: bool, what: &str) -> Result<Selection> {
-        let mut selections = self.open(read_images)?;
-        if selections.len() != 1 {
-            bail!("{what}, got {}", selections.len());
+        if self.sequences.len() != 1 {
+            return Err(usage(format!("{what}, got {}", self.sequences.len())));
         }
-        Ok(selections.remove(0))
+        Ok(self.open(read_images)?.remove(0))
     }
 }
 
@@ -323,10 +341,9 @@ pub fn open_selection(
             _ => "no frames".into(),
         };
         bail!(
-            "{}: no scans in frames {}..{} (the input has {has})",
+            "{}: no scans in {} (the input has {has})",
             path.display(),
-            frames.start,
-            frames.end,
+            describe_frames(frames),
         );
     }
     Ok(Selection::new(source, frames.clone()))
@@ -351,9 +368,39 @@ pub fn parse_frame_range(text: &str) -> Result<Range<usize>> {
         n..n + 1
     };
     if range.is_empty() {
-        bail!("frame range `{text}` is empty (A..B excludes B)");
+        bail!(
+            "frame range `{text}` selects no frame: it ends before it starts (A..B is A to B-1, A..=B is A to B)"
+        );
     }
     Ok(range)
+}
+
+/// A scan rate in Hz: LiDARs spin at about 1 to 100 Hz; far outside that is a typo.
+fn parse_rate_hz(text: &str) -> Result<f64, String> {
+    let hz = parse_finite(text)?;
+    if (0.01..=1000.0).contains(&hz) {
+        Ok(hz)
+    } else {
+        Err(format!("a scan rate of 0.01 to 1000 Hz, got {text}"))
+    }
+}
+
+/// A number that is not NaN or infinite.
+pub fn parse_finite(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(value) if value.is_finite() => Ok(value),
+        Ok(_) => Err(format!("a finite number, got {text}")),
+        Err(_) => Err(format!("`{text}` is not a number")),
+    }
+}
+
+/// A frame range as a person writes it: `frames 6..` (to the end), `frames 2..=5`.
+pub fn describe_frames(frames: &Range<usize>) -> String {
+    match frames.end {
+        usize::MAX => format!("frames {}..", frames.start),
+        end if end == frames.start + 1 => format!("frame {}", frames.start),
+        end => format!("frames {}..={}", frames.start, end - 1),
+    }
 }
 
 /// The model a command predicts with.
@@ -510,5 +557,14 @@ mod tests {
         assert_eq!(parse_frame_range("5..").unwrap(), 5..usize::MAX);
         assert!(parse_frame_range("3..3").is_err());
         assert!(parse_frame_range("a..3").is_err());
+        let reversed = parse_frame_range("2..=1").unwrap_err().to_string();
+        assert!(reversed.contains("ends before it starts"), "{reversed}");
+    }
+
+    #[test]
+    fn frame_ranges_read_as_written() {
+        assert_eq!(describe_frames(&(6..usize::MAX)), "frames 6..");
+        assert_eq!(describe_frames(&(2..6)), "frames 2..=5");
+        assert_eq!(describe_frames(&(964..965)), "frame 964");
     }
 }

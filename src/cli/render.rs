@@ -11,7 +11,7 @@ use travmap::outputs::writing::write_atomically;
 
 use super::{
     Inputs, ModelArg, Outcome, check_output, check_output_dir, frame_count, outcome,
-    print_json_summary,
+    print_json_summary, usage,
 };
 
 /// Draw ground truth, prediction and errors of a frame side by side as PNG.
@@ -23,7 +23,7 @@ pub struct RenderArgs {
     #[arg(short, long)]
     output: PathBuf,
     /// The frame to draw.
-    #[arg(long, conflicts_with_all = ["all", "frames"])]
+    #[arg(long, conflicts_with_all = ["all", "frames"], required_unless_present = "all")]
     frame: Option<usize>,
     /// Draw every selected frame (see --frames) into the output directory.
     #[arg(long)]
@@ -39,7 +39,7 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
     match (args.frame, args.all) {
         (Some(frame), _) => args.inputs.frames = Some(frame..frame + 1),
         (None, true) => {}
-        (None, false) => bail!("render needs --frame N or --all"),
+        (None, false) => unreachable!("clap requires --frame unless --all"),
     }
     let cell_px = args.cell_pixels;
     let config = &args.inputs.settings.load()?;
@@ -54,6 +54,16 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
     let selection = args
         .inputs
         .open_one(config.appearance.enabled, "render takes one input")?;
+    if args.all
+        && output_path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        return Err(usage(format!(
+            "--all writes one PNG per frame into a directory; {} names a PNG file (give a directory, or --frame N for one picture)",
+            output_path.display()
+        )));
+    }
     if args.all {
         std::fs::create_dir_all(output_path)
             .with_context(|| format!("cannot create {}", output_path.display()))?;

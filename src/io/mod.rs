@@ -28,4 +28,4 @@ pub mod transforms;
 
 pub use kitti::KittiSequence;
 pub use skips::{Skip, SkipLog};
-pub use source::{Recording, Source};
+pub use source::{Recording, Source, WORLD_FRAME};

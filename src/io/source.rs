@@ -22,6 +22,9 @@ pub enum Recording {
     Scans(Box<ScanFolder>),
 }
 
+/// The world frame of inputs that do not name one (KITTI, folders of scans).
+pub const WORLD_FRAME: &str = "map";
+
 /// A drive to read, and how its scans are posed.
 pub struct Source {
     pub recording: Recording,
@@ -82,6 +85,14 @@ impl Source {
             Recording::Kitti(..) => "velodyne",
             Recording::Log(drive) => drive.cloud_frame(),
             Recording::Scans(..) => super::scan_folder::SENSOR_FRAME,
+        }
+    }
+
+    /// The frame the poses put the scans in: the log's world frame, else `map`.
+    pub fn world_frame(&self) -> &str {
+        match &self.recording {
+            Recording::Log(drive) => drive.world_frame(),
+            Recording::Kitti(..) | Recording::Scans(..) => WORLD_FRAME,
         }
     }
 

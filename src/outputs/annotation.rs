@@ -28,9 +28,7 @@ use crate::io::ros::{
 use crate::method::classifier::SvmModel;
 use crate::method::grid::CellClass;
 use crate::method::pipeline::FrameResult;
-use crate::outputs::conversion::{
-    MAP_FRAME, transform_from_pose, write_kitti_frames, write_log_messages,
-};
+use crate::outputs::conversion::{transform_from_pose, write_kitti_frames, write_log_messages};
 use crate::outputs::drive_map::occupancy_grid;
 use crate::outputs::mcap_writer::Compression;
 use crate::outputs::writing::McapSink;
@@ -179,25 +177,24 @@ pub fn annotate(
 ) -> Result<AnnotationSummary> {
     let mut sink = McapSink::create(output, options.compression)?;
     let mut passthrough_messages = 0;
-    let world_frame = match &selection.source.recording {
+    match &selection.source.recording {
         Recording::Kitti(sequence) => {
             if options.passthrough {
                 let written =
                     write_kitti_frames(&mut sink, sequence, &selection.frames, 0, &|| {})?;
                 passthrough_messages = written.frames * 2 + written.images * 2 + 1;
             }
-            MAP_FRAME.to_string()
         }
         Recording::Log(drive) => {
             if options.passthrough {
                 passthrough_messages =
                     write_log_messages(&mut sink, drive, true, &|_, _| {})?.messages;
             }
-            drive.world_frame().to_string()
         }
         // A folder of scans has no messages to pass through.
-        Recording::Scans(..) => MAP_FRAME.to_string(),
-    };
+        Recording::Scans(..) => {}
+    }
+    let world_frame = selection.source.world_frame().to_string();
     let posing = selection.source.posing();
     // Estimated poses go on /tf, unless passthrough writes KITTI's recorded ones there.
     let kitti_tf =

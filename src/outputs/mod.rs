@@ -1,5 +1,6 @@
 //! What travmap writes: MCAP ([`writing`], used by [`conversion`] and
-//! [`annotation`]), Parquet cell tables ([`dataset`]) and pictures ([`rendering`]).
+//! [`annotation`]), Parquet cell tables ([`dataset`]), pictures ([`rendering`]) and
+//! nav2 maps ([`nav2_map`]).
 //! Every file goes through [`writing::AtomicFile`]: a temporary beside the output,
 //! renamed when complete.
 
@@ -10,6 +11,7 @@ pub mod drive_map;
 mod mcap_chunks;
 mod mcap_encoding;
 pub mod mcap_writer;
+pub mod nav2_map;
 pub mod preflight;
 pub mod rendering;
 pub mod trajectory;

@@ -1,0 +1,272 @@
+//! `travmap map --nav2`: the YAML and image loaded as nav2's map_server loads them
+//! (`nav2_map_server/src/map_io.cpp`, `loadMapYaml` and `loadMapFromFile`, read at
+//! ros-navigation/navigation2 a3a9704), and every fused cell found on its pixel with
+//! its value.
+
+mod common;
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use common::{arg, json_summary};
+use travmap::method::fusion::{DriveMap, FusedCell};
+use travmap::method::grid::CellClass;
+
+/// map_server's OccupancyGrid values.
+const FREE: i8 = 0;
+const OCCUPIED: i8 = 100;
+const UNKNOWN: i8 = -1;
+
+/// What map_server makes of a map YAML and its image.
+struct LoadedMap {
+    width: usize,
+    height: usize,
+    resolution: f64,
+    origin: [f64; 3],
+    /// Row-major from the bottom row up (OccupancyGrid order).
+    data: Vec<i8>,
+}
+
+/// The flat `key: value` YAML map_server reads (comments and `[a, b, c]` lists).
+fn parse_yaml(text: &str) -> HashMap<String, String> {
+    text.lines()
+        .map(|line| line.split('#').next().unwrap().trim())
+        .filter(|line| !line.is_empty())
+        .map(|line| {
+            let (key, value) = line.split_once(':').expect("key: value");
+            let value = value.trim().trim_matches('\'').to_string();
+            (key.trim().to_string(), value)
+        })
+        .collect()
+}
+
+/// Width, height and the 8-bit grey (and alpha) of each pixel, top row first.
+fn read_image(path: &Path) -> (usize, usize, Vec<(u8, u8)>) {
+    let bytes = std::fs::read(path).unwrap();
+    if bytes.starts_with(b"P5") {
+        // P5, whitespace-separated width, height, maxval, one whitespace byte, pixels.
+        let mut fields = Vec::new();
+        let mut at = 2;
+        while fields.len() < 3 {
+            while bytes[at].is_ascii_whitespace() {
+                at += 1;
+            }
+            let start = at;
+            while bytes[at].is_ascii_digit() {
+                at += 1;
+            }
+            fields.push(
+                std::str::from_utf8(&bytes[start..at])
+                    .unwrap()
+                    .parse::<usize>()
+                    .unwrap(),
+            );
+        }
+        assert_eq!(fields[2], 255, "maxval");
+        let pixels = &bytes[at + 1..];
+        assert_eq!(pixels.len(), fields[0] * fields[1], "one byte per pixel");
+        return (
+            fields[0],
+            fields[1],
+            pixels.iter().map(|&g| (g, 255)).collect(),
+        );
+    }
+    let mut reader = png::Decoder::new(std::io::Cursor::new(bytes))
+        .read_info()
+        .unwrap();
+    let mut buffer = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buffer).unwrap();
+    assert_eq!(info.color_type, png::ColorType::GrayscaleAlpha);
+    let pixels = buffer[..info.buffer_size()]
+        .chunks(2)
+        .map(|ga| (ga[0], ga[1]))
+        .collect();
+    (info.width as usize, info.height as usize, pixels)
+}
+
+/// `loadMapYaml` + `loadMapFromFile`: the image relative to the YAML's folder; each
+/// pixel's occupancy `p = 1 - g / 255` in float32 (negate 0); occupied if
+/// `p >= occupied_thresh`, free if `p <= free_thresh` (free wins), scale mode spreads
+/// the values between over 0..100 with `rint`; a pixel less than opaque is unknown in
+/// scale mode; image row 0 becomes the grid's top row.
+fn load_like_map_server(yaml: &Path) -> LoadedMap {
+    let doc = parse_yaml(&std::fs::read_to_string(yaml).unwrap());
+    let number = |key: &str| doc[key].parse::<f64>().unwrap();
+    assert_eq!(doc["negate"], "0");
+    let mode = doc
+        .get("mode")
+        .map_or("trinary", String::as_str)
+        .to_string();
+    let origin: Vec<f64> = doc["origin"]
+        .trim_matches(['[', ']'])
+        .split(',')
+        .map(|v| v.trim().parse().unwrap())
+        .collect();
+    let image = yaml.parent().unwrap().join(&doc["image"]);
+    let (width, height, pixels) = read_image(&image);
+    let (free_thresh, occupied_thresh) = (number("free_thresh"), number("occupied_thresh"));
+    let (free, occupied) = (free_thresh as f32, occupied_thresh as f32);
+    let mut data = vec![0i8; width * height];
+    for row in 0..height {
+        for col in 0..width {
+            let (grey, alpha) = pixels[row * width + col];
+            let p = 1.0f32 - grey as f32 / 255.0f32;
+            let mut value = UNKNOWN;
+            if p >= occupied {
+                value = OCCUPIED;
+            }
+            if p <= free {
+                value = FREE;
+            }
+            if mode == "scale" {
+                if free < p && p < occupied {
+                    let span = (occupied_thresh - free_thresh) as f32;
+                    value = ((p - free) / span * 100.0).round() as i8;
+                }
+                if alpha < 255 {
+                    value = UNKNOWN;
+                }
+            }
+            data[(height - 1 - row) * width + col] = value;
+        }
+    }
+    LoadedMap {
+        width,
+        height,
+        resolution: number("resolution"),
+        origin: [origin[0], origin[1], origin[2]],
+        data,
+    }
+}
+
+impl LoadedMap {
+    /// The grid cell of a world point (nav2's `worldToMap`).
+    fn at(&self, x_m: f64, y_m: f64) -> Option<i8> {
+        let mx = ((x_m - self.origin[0]) / self.resolution).floor();
+        let my = ((y_m - self.origin[1]) / self.resolution).floor();
+        let inside =
+            mx >= 0.0 && my >= 0.0 && (mx as usize) < self.width && (my as usize) < self.height;
+        inside.then(|| self.data[my as usize * self.width + mx as usize])
+    }
+}
+
+/// The shipped drive fused by the library, as `map` fuses it.
+fn fused(seq: &Path) -> Vec<FusedCell> {
+    let config = travmap::Config::default();
+    let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
+    let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
+    let selection = travmap::drive::Selection::new(source, 0..usize::MAX);
+    let mut map = DriveMap::new(config.grid.cell_size_m);
+    selection
+        .run::<travmap::Error>(&config, Some(&model), |result| {
+            map.add_result(&result);
+            Ok(())
+        })
+        .unwrap();
+    map.cells()
+}
+
+fn write_nav2(seq: &Path, dir: &Path, mode: &str) -> (PathBuf, serde_json::Value) {
+    let yaml = dir.join(format!("site-{mode}.yaml"));
+    let png = dir.join(format!("map-{mode}.png"));
+    let summary = json_summary(&[
+        "map",
+        arg(seq),
+        "-o",
+        arg(&png),
+        "--nav2",
+        arg(&yaml),
+        "--nav2-mode",
+        mode,
+    ]);
+    (yaml, summary)
+}
+
+#[test]
+fn map_server_loads_every_fused_cell_on_its_pixel_with_its_value() {
+    let Some(seq) = common::sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let cells = fused(&seq);
+    let seen: Vec<&FusedCell> = cells.iter().filter(|c| c.observations > 0).collect();
+    assert!(seen.len() > 1000, "{} cells seen", seen.len());
+
+    let (yaml, summary) = write_nav2(&seq, dir.path(), "trinary");
+    assert_eq!(
+        summary["nav2"]["image"],
+        arg(&dir.path().join("site-trinary.pgm"))
+    );
+    assert_eq!(summary["nav2"]["frame"], "map");
+    let map = load_like_map_server(&yaml);
+    assert_eq!(map.resolution, 0.4);
+    assert_eq!(map.origin[2], 0.0);
+    let expected = |cell: &FusedCell| match cell.class {
+        CellClass::Traversable => FREE,
+        CellClass::NonTraversable => OCCUPIED,
+        CellClass::Unknown => UNKNOWN,
+    };
+    let mut on_pixel = 0;
+    for cell in &seen {
+        assert_eq!(map.at(cell.x_m, cell.y_m), Some(expected(cell)), "{cell:?}");
+        on_pixel += 1;
+    }
+    assert_eq!(on_pixel, seen.len());
+    // The lower-left pixel is the lowest seen cell in x and in y; the rest unknown.
+    let low = |axis: usize| seen.iter().map(|c| c.key[axis]).min().unwrap() as f64 * 0.4;
+    assert!((map.origin[0] - low(0)).abs() < 1e-9 && (map.origin[1] - low(1)).abs() < 1e-9);
+    let unknown = map.data.iter().filter(|&&v| v == UNKNOWN).count();
+    let seen_unknown = seen
+        .iter()
+        .filter(|c| c.class == CellClass::Unknown)
+        .count();
+    assert_eq!(unknown, map.width * map.height - seen.len() + seen_unknown);
+    assert!(map.data.contains(&FREE) && map.data.contains(&OCCUPIED));
+
+    // Scale mode: P(not traversable) spread over the thresholds, unseen transparent.
+    let (yaml, summary) = write_nav2(&seq, dir.path(), "scale");
+    assert_eq!(summary["nav2"]["mode"], "scale");
+    let scale = load_like_map_server(&yaml);
+    assert_eq!(
+        (scale.width, scale.height, scale.origin),
+        (map.width, map.height, map.origin)
+    );
+    for cell in &seen {
+        let p_not = 1.0 - (255.0 * cell.probability).round() / 255.0;
+        let value = scale.at(cell.x_m, cell.y_m).unwrap();
+        let want = if p_not >= 0.65 {
+            100.0
+        } else if p_not <= 0.196 {
+            0.0
+        } else {
+            (p_not - 0.196) / (0.65 - 0.196) * 100.0
+        };
+        assert!(
+            (value as f64 - want).abs() <= 1.0,
+            "{cell:?}: {value} against {want}"
+        );
+    }
+    assert_eq!(
+        scale.data.iter().filter(|&&v| v == UNKNOWN).count(),
+        scale.width * scale.height - seen.len()
+    );
+}
+
+#[test]
+fn a_nav2_map_beside_an_input_or_twice_named_is_refused() {
+    let Some(seq) = common::sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("site.png");
+    let yaml = dir.path().join("site.yaml");
+    // --nav2-mode scale would write site.png: the picture's own name.
+    let err = common::clean_failure(common::travmap(&[
+        "map",
+        arg(&seq),
+        "-o",
+        arg(&png),
+        "--nav2",
+        arg(&yaml),
+        "--nav2-mode",
+        "scale",
+    ]));
+    common::assert_contains(&err, &["site.png"]);
+    assert!(!yaml.exists() && !png.exists());
+}
