@@ -141,6 +141,17 @@ pub enum Error {
         problem: String,
     },
 
+    #[error(
+        "{path}: the chunk at byte {offset} (log time {start_s:.3} to {end_s:.3} s) is damaged ({problem}): its messages are lost (--keep-going reads on past it; `mcap recover` rewrites what can be read)"
+    )]
+    LogChunk {
+        path: PathBuf,
+        offset: usize,
+        start_s: f64,
+        end_s: f64,
+        problem: String,
+    },
+
     #[error("{path}: unreadable from cloud {cloud} on: {problem}")]
     LogUnreadableFrom {
         path: PathBuf,
@@ -402,6 +413,7 @@ impl Error {
             | Error::UnsupportedInput { path, .. }
             | Error::LogContainer { path, .. }
             | Error::LogRecord { path, .. }
+            | Error::LogChunk { path, .. }
             | Error::LogUnreadableFrom { path, .. }
             | Error::LogCloudTopic { path, .. }
             | Error::NoPose { path, .. }

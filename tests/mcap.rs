@@ -4,7 +4,7 @@
 mod common;
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use common::{arg, assert_contains, clean_failure, json_summary, success, travmap, write_output};
@@ -522,6 +522,92 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
     ]));
     let line: Value = serde_json::from_str(run.lines().nth(1).unwrap()).unwrap();
     assert_eq!(line["dropped_points"], 1);
+    // convert takes the flag its error asks for, and converts every topic.
+    let out = dir.path().join("converted.mcap");
+    let err = clean_failure(travmap(&["convert", arg(&path), "-o", arg(&out)]));
+    assert_contains(&err, &["several PointCloud2 topics", "--cloud-topic"]);
+    let doc = json_summary(&[
+        "convert",
+        arg(&path),
+        "-o",
+        arg(&out),
+        "--cloud-topic",
+        "/points",
+    ]);
+    assert!(doc["summary"]["messages"].as_u64().unwrap() > 2);
+    for topic in ["/points", "/other_points"] {
+        let clouds = messages::<travmap::io::ros::PointCloud2>(&out, topic);
+        assert_eq!(clouds.len(), 1, "{topic}");
+    }
+}
+
+/// A zstd MCAP of the shipped drive whose second chunk (frames 4 and 5, and frame
+/// 3's pose) has one byte flipped: the chunk at `offset`.
+fn drive_with_a_damaged_chunk(dir: &Path) -> Option<(PathBuf, usize)> {
+    let (_, good) = common::sample_as_mcap(dir, &[])?;
+    let mut bytes = std::fs::read(&good).unwrap();
+    let mut chunks = Vec::new();
+    let mut at = 8;
+    while bytes[at] != 0x0F {
+        let length = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap()) as usize;
+        if bytes[at] == 0x06 {
+            chunks.push((at, length));
+        }
+        at += 9 + length;
+    }
+    assert_eq!(chunks.len(), 2, "the drive fills two 8 MB chunks");
+    let (offset, length) = chunks[1];
+    bytes[offset + 9 + length / 2] ^= 0x55;
+    let path = dir.join("damaged.mcap");
+    std::fs::write(&path, bytes).unwrap();
+    Some((path, offset))
+}
+
+#[test]
+fn a_damaged_chunk_stops_with_its_offset_or_is_stepped_over_with_keep_going() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((damaged, offset)) = drive_with_a_damaged_chunk(dir.path()) else {
+        return;
+    };
+    let chunk = format!("the chunk at byte {offset} (log time 0.311 to 0.518 s) is damaged");
+    let err = clean_failure(travmap(&["eval", arg(&damaged)]));
+    assert_contains(
+        &err,
+        &[&chunk, "Chunk CRC failed", "--keep-going", "mcap recover"],
+    );
+    // --keep-going: the intact chunk's frames are read and scored, the damage named.
+    let output = travmap(&["eval", arg(&damaged), "--keep-going", "--json"]);
+    assert_eq!(output.status.code(), Some(3), "{}", common::stderr(&output));
+    let doc: Value = serde_json::from_str(common::stdout(&output).lines().last().unwrap()).unwrap();
+    assert_eq!(doc["report"]["frames"], 3, "frames 0-2 carry ground truth");
+    let reasons: Vec<&str> = doc["skipped"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["reason"].as_str().unwrap())
+        .collect();
+    assert!(reasons.iter().any(|r| r.contains(&chunk)), "{reasons:?}");
+    // Frame 3's cloud is whole, but its pose was in the damaged chunk.
+    assert!(
+        reasons.iter().any(|r| r.contains("no transform")),
+        "{reasons:?}"
+    );
+    // annotate and convert read on past it too, and write a whole file.
+    for command in ["annotate", "convert"] {
+        let out = dir.path().join(format!("{command}.mcap"));
+        let output = travmap(&[
+            command,
+            arg(&damaged),
+            "-o",
+            arg(&out),
+            "--keep-going",
+            "-q",
+        ]);
+        assert_eq!(output.status.code(), Some(3), "{}", common::stderr(&output));
+        assert_contains(&common::stderr(&output), &[&chunk]);
+        let topic = ["--cloud-topic", "/velodyne_points", "--poses", "none"];
+        success(travmap(&[&["run", arg(&out), "-q"][..], &topic].concat()));
+    }
 }
 
 #[test]

@@ -35,6 +35,14 @@ pub struct ConvertArgs {
     /// Seconds since the Unix epoch added to times.txt for every stamp.
     #[arg(long, default_value_t = 0.0, value_parser = parse_start_time)]
     start_time: f64,
+    /// Log input with several PointCloud2 topics: the one whose clouds are counted
+    /// as frames (every topic is converted either way).
+    #[arg(long)]
+    cloud_topic: Option<String>,
+    /// Log input: leave out the messages of damaged chunks (named on stderr, exit
+    /// code 3) instead of stopping at the first.
+    #[arg(long)]
+    keep_going: bool,
     #[command(flatten)]
     report: Output,
 }
@@ -70,13 +78,11 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
     let start_time_s = args.start_time;
     check_output(output_path, &InputFiles::of(&[&args.sequence]))?;
     let frames = args.frames.clone().unwrap_or(0..usize::MAX);
-    let selection = open_selection(
-        &args.sequence,
-        &frames,
-        &DriveOptions::default(),
-        false,
-        false,
-    )?;
+    let options = DriveOptions {
+        cloud_topic: args.cloud_topic.clone(),
+        ..Default::default()
+    };
+    let selection = open_selection(&args.sequence, &frames, &options, args.keep_going, false)?;
     let selections = [selection];
     let sequence = match &selections[0].source.recording {
         Recording::Kitti(sequence) => sequence,

@@ -11,7 +11,7 @@ use std::sync::Arc;
 use super::bag::BagFile;
 use super::format::InputFormat;
 pub use super::log_message::{Connection, FileMap, FileMessages, LogMessage};
-use super::mcap_records::{Messages, check_chunk_sizes};
+use super::mcap_records::{ChunkSpan, Damage, Messages, check_chunk_sizes};
 use super::mcap_stored::{Release, StoredLog, stored_log};
 use super::rosbag2::{Rosbag2Directory, SqliteFile};
 use crate::error::{Error, Result};
@@ -41,13 +41,23 @@ impl LogFile {
         }
     }
 
-    fn messages(&self) -> FileMessages<'_> {
+    fn messages(&self) -> Box<dyn Iterator<Item = std::result::Result<LogMessage, Damage>> + '_> {
         match self {
             LogFile::Mcap(file) => Box::new(file.messages()),
-            LogFile::Bag(file) => Box::new(file.messages()),
-            LogFile::Sqlite(file) => file.messages(),
+            LogFile::Bag(file) => Box::new(file.messages().map(whole_file_damage)),
+            LogFile::Sqlite(file) => Box::new(file.messages().map(whole_file_damage)),
         }
     }
+}
+
+/// A failure of a container read without chunks to step over: the end of it.
+fn whole_file_damage(
+    message: std::result::Result<LogMessage, String>,
+) -> std::result::Result<LogMessage, Damage> {
+    message.map_err(|problem| Damage {
+        problem,
+        chunk: None,
+    })
 }
 
 /// A recorded log: one file, or the files of a rosbag2 directory in order.
@@ -107,23 +117,37 @@ impl Log {
         }
     }
 
-    /// Every message of every file, in order; nothing after the first error.
+    /// Every message of every file, in order; nothing after the first error but
+    /// [`Error::LogChunk`] (a damaged chunk), after which the messages that follow it.
     pub fn messages(&self) -> impl Iterator<Item = Result<LogMessage>> + '_ {
         let mut failed = false;
         self.files
             .iter()
             .flat_map(|file| {
-                file.messages().enumerate().map(move |(ordinal, message)| {
-                    message.map_err(|problem| Error::LogRecord {
-                        path: file.path().to_path_buf(),
-                        ordinal,
-                        problem,
+                file.messages()
+                    .enumerate()
+                    .map(move |(ordinal, message)| match message {
+                        Ok(message) => Ok(message),
+                        Err(Damage {
+                            problem,
+                            chunk: Some(chunk),
+                        }) => Err(Error::LogChunk {
+                            path: file.path().to_path_buf(),
+                            offset: chunk.bytes.start,
+                            start_s: chunk.start_ns as f64 * 1e-9,
+                            end_s: chunk.end_ns as f64 * 1e-9,
+                            problem,
+                        }),
+                        Err(Damage { problem, .. }) => Err(Error::LogRecord {
+                            path: file.path().to_path_buf(),
+                            ordinal,
+                            problem,
+                        }),
                     })
-                })
             })
             .take_while(move |message| {
                 let go_on = !failed;
-                failed |= message.is_err();
+                failed |= matches!(message, Err(error) if !matches!(error, Error::LogChunk { .. }));
                 go_on
             })
     }
@@ -139,6 +163,7 @@ pub struct McapFile {
     longest_record: usize,
     /// For a file cut short: where its last complete record ends.
     cut_at: Option<usize>,
+    chunks: Vec<ChunkSpan>,
 }
 
 impl McapFile {
@@ -156,6 +181,7 @@ impl McapFile {
             map,
             longest_record: layout.longest_record,
             cut_at: layout.cut_at,
+            chunks: layout.chunks,
         })
     }
 
@@ -183,11 +209,18 @@ impl McapFile {
         Some(log)
     }
 
-    fn messages(&self) -> impl Iterator<Item = std::result::Result<LogMessage, String>> + '_ {
+    fn messages(&self) -> impl Iterator<Item = std::result::Result<LogMessage, Damage>> + '_ {
         let mut connections: HashMap<u16, Arc<Connection>> = HashMap::new();
         let readable = &self.map[..self.cut_at.unwrap_or(self.map.len())];
         let cut = self.cut_at.is_some();
-        Messages::new(readable, self.longest_record, Some(&self.file), cut).map(move |message| {
+        Messages::new(
+            readable,
+            self.longest_record,
+            Some(&self.file),
+            cut,
+            &self.chunks,
+        )
+        .map(move |message| {
             let message = message?;
             let channel = &message.channel;
             let connection = connections.entry(channel.id).or_insert_with(|| {

@@ -262,6 +262,8 @@ pub(super) struct LogIndex {
     pub(super) camera: Option<CameraSource>,
     /// The root of the transform tree above the clouds' frame.
     pub(super) root_frame: String,
+    /// Chunks whose messages could not be read (see [`Error::LogChunk`]).
+    pub(super) damaged_chunks: usize,
 }
 
 impl LogIndex {
@@ -273,11 +275,23 @@ impl LogIndex {
             poses: options.poses,
             ..Default::default()
         };
+        let (mut damaged_chunks, mut first_damage) = (0, None);
         for message in log.messages() {
-            contents.add(path, &message?)?;
+            match message {
+                Ok(message) => contents.add(path, &message)?,
+                // Its clouds are not indexed; reading the frames says so (or stops).
+                Err(error @ Error::LogChunk { .. }) => {
+                    damaged_chunks += 1;
+                    first_damage.get_or_insert(error);
+                }
+                Err(error) => return Err(error),
+            }
         }
         contents.transforms.sort();
-        let cloud_topic = contents.cloud_topic(path, options)?;
+        // Without the clouds the damage took, the damage is the error to report.
+        let cloud_topic = contents
+            .cloud_topic(path, options)
+            .map_err(|error| first_damage.unwrap_or(error))?;
         let (cloud_frame, stamps_ns) = contents
             .cloud_stamps
             .remove(&cloud_topic)
@@ -302,6 +316,7 @@ impl LogIndex {
             transforms: contents.transforms,
             camera,
             root_frame,
+            damaged_chunks,
         })
     }
 

@@ -184,6 +184,17 @@ pub(super) struct Layout {
     /// For a file cut short (a recorder killed before it wrote the summary, or in the
     /// middle of a record): where its last complete record ends.
     pub(super) cut_at: Option<usize>,
+    /// Every chunk of the data section, in file order.
+    pub(super) chunks: Vec<ChunkSpan>,
+}
+
+/// Where a chunk lies in the file and the log times of its messages: what a reader
+/// needs to step over a damaged one and name it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChunkSpan {
+    pub bytes: std::ops::Range<usize>,
+    pub start_ns: u64,
+    pub end_ns: u64,
 }
 
 /// Checks every chunk's declared uncompressed size before the mcap crate, which
@@ -201,6 +212,7 @@ pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
     };
     let mut complete = walk.offset;
     let mut data_end = false;
+    let mut chunks = Vec::new();
     // After the 8-byte magic. A malformed chunk header ends the walk, as does a
     // record header cut short.
     while let Some(record) = walk.next() {
@@ -218,6 +230,13 @@ pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
         let Some((declared, compression, records)) = chunk_parts(body) else {
             break;
         };
+        let time_at =
+            |at: usize| u64::from_le_bytes(body[at..at + 8].try_into().unwrap_or_default());
+        chunks.push(ChunkSpan {
+            bytes: offset..walk.offset,
+            start_ns: time_at(0),
+            end_ns: time_at(8),
+        });
         let present = records.len() as u64;
         let plausible = declared <= TRUSTED_CHUNK_BYTES.max(present * TRUSTED_CHUNK_RATIO);
         let actual = match compression {
@@ -252,6 +271,7 @@ pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
     Ok(Layout {
         longest_record: longest,
         cut_at: (!(data_end && whole)).then_some(complete),
+        chunks,
     })
 }
 
@@ -319,22 +339,40 @@ pub(super) struct Messages<'a> {
     map: Option<&'a FileMap>,
     released: usize,
     reader: LinearReader,
+    options: LinearReaderOptions,
+    /// The file's chunks: a damaged one is stepped over, not the end of the file.
+    chunks: &'a [ChunkSpan],
+    /// Where reading last resumed after a damaged chunk.
+    resumed_at: usize,
     channels: mcap::read::ChannelAccumulator<'static>,
     past_data_end: bool,
     done: bool,
 }
 
+/// Why a message could not be read; with `chunk`, only that chunk's messages are
+/// lost and reading goes on after it.
+#[derive(Debug)]
+pub(super) struct Damage {
+    pub(super) problem: String,
+    pub(super) chunk: Option<ChunkSpan>,
+}
+
 impl<'a> Messages<'a> {
     /// The messages of `file` (the complete records of a cut file: `cut` true reads
-    /// to its end without the summary and closing magic).
+    /// to its end without the summary and closing magic); `chunks` as
+    /// [`check_chunk_sizes`] found them.
     pub(super) fn new(
         file: &'a [u8],
         longest_record: usize,
         map: Option<&'a FileMap>,
         cut: bool,
+        chunks: &'a [ChunkSpan],
     ) -> Self {
+        // CRCs checked before a chunk's records are handed on: a damaged chunk gives
+        // no made-up messages.
         let options = LinearReaderOptions::default()
             .with_validate_chunk_crcs(true)
+            .with_prevalidate_chunk_crcs(true)
             .with_record_length_limit(longest_record)
             .with_skip_end_magic(cut)
             .with_emit_chunks(false);
@@ -343,11 +381,36 @@ impl<'a> Messages<'a> {
             read: 0,
             map,
             released: 0,
-            reader: LinearReader::new_with_options(options),
+            reader: LinearReader::new_with_options(options.clone()),
+            options,
+            chunks,
+            resumed_at: 0,
             channels: Default::default(),
             past_data_end: false,
             done: false,
         }
+    }
+
+    /// The damage of a failed read: the chunk being read when it failed, if any, is
+    /// stepped over; reading goes on after it with a fresh reader.
+    fn damage(&mut self, problem: String) -> Damage {
+        let read = self.read;
+        // Only forwards: a chunk that ends where reading resumed is not the culprit.
+        let resumed_at = self.resumed_at;
+        let chunk = self
+            .chunks
+            .iter()
+            .find(|chunk| {
+                chunk.bytes.start < read && read <= chunk.bytes.end && chunk.bytes.end > resumed_at
+            })
+            .cloned();
+        if let Some(chunk) = &chunk {
+            self.read = chunk.bytes.end;
+            self.resumed_at = chunk.bytes.end;
+            self.reader =
+                LinearReader::new_with_options(self.options.clone().with_skip_start_magic(true));
+        }
+        Damage { problem, chunk }
     }
 
     fn next_message(&mut self) -> Option<Result<Message<'static>, String>> {
@@ -413,16 +476,22 @@ impl<'a> Messages<'a> {
 }
 
 impl Iterator for Messages<'_> {
-    type Item = Result<Message<'static>, String>;
+    type Item = Result<Message<'static>, Damage>;
 
-    /// Nothing after the first error.
+    /// Nothing after an error outside a chunk; after a damaged chunk, the messages
+    /// that follow it.
     fn next(&mut self) -> Option<Self::Item> {
         if self.done {
             return None;
         }
-        let next = self.next_message();
-        self.done = !matches!(next, Some(Ok(_)));
-        next
+        match self.next_message()? {
+            Ok(message) => Some(Ok(message)),
+            Err(problem) => {
+                let damage = self.damage(problem);
+                self.done = damage.chunk.is_none();
+                Some(Err(damage))
+            }
+        }
     }
 }
 
@@ -513,9 +582,10 @@ mod tests {
             let file = one_message_file(&zeros, Some(compression));
             assert!(file.len() < 1 << 20, "{}", file.len());
             // The records may be as long as the chunk, and the message is read whole.
-            let longest_record = check_chunk_sizes(&file).unwrap().longest_record;
+            let layout = check_chunk_sizes(&file).unwrap();
+            let longest_record = layout.longest_record;
             assert!(longest_record > 80 << 20, "{longest_record}");
-            let message = Messages::new(&file, longest_record, None, false)
+            let message = Messages::new(&file, longest_record, None, false, &layout.chunks)
                 .next()
                 .unwrap()
                 .unwrap();

@@ -43,6 +43,8 @@ pub struct RosDrive {
     stamps_ns: Vec<u64>,
     transforms: TransformTree,
     camera: Option<CameraSource>,
+    /// Chunks the index pass could not read: their messages are lost.
+    damaged_chunks: usize,
     pub(super) skips: SkipLog,
 }
 
@@ -70,6 +72,7 @@ impl RosDrive {
             stamps_ns: index.stamps_ns,
             transforms: index.transforms,
             camera: index.camera,
+            damaged_chunks: index.damaged_chunks,
             skips: SkipLog::default(),
         };
         drive.trim_cut_end();
@@ -220,14 +223,29 @@ impl RosDrive {
     }
 
     /// The log's chunks as stored, when it is one MCAP file whose chunks hold every
-    /// message (for passthrough without decoding).
+    /// message and none is damaged (for passthrough without decoding).
     pub fn stored(&self) -> Option<crate::io::mcap_stored::StoredLog> {
-        self.log.stored()
+        (self.damaged_chunks == 0).then(|| self.log.stored())?
     }
 
-    /// Every message of the log in order, undecoded (for passthrough).
+    /// Every message of the log in order, undecoded (for passthrough); with
+    /// `--keep-going` the messages of damaged chunks are left out (reading the
+    /// frames records them), else the first is an error.
     pub fn messages(&self) -> impl Iterator<Item = Result<LogMessage>> + '_ {
-        self.log.messages()
+        let mut clouds = 0;
+        self.log
+            .messages()
+            .filter_map(move |message| match message {
+                Ok(message) => {
+                    clouds += (message.connection.topic == self.cloud_topic) as usize;
+                    Some(Ok(message))
+                }
+                // Recorded as reading the frames records it: at the cloud that follows.
+                Err(error @ Error::LogChunk { .. }) => {
+                    self.skips.handle(clouds, error).err().map(Err)
+                }
+                Err(error) => Some(Err(error)),
+            })
     }
 
     /// The frames in `frames`, streamed in one pass over the file, each with the
@@ -329,6 +347,14 @@ impl Iterator for DriveFrames<'_> {
                 Some(Ok(message)) => message,
                 None => break,
                 // A corrupt stretch of the file: with --keep-going, what came before counts.
+                // A damaged chunk: its clouds were never indexed, the rest follows.
+                Some(Err(error @ Error::LogChunk { .. })) => {
+                    if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
+                        self.stream_ended = true;
+                        return Some(Err(error));
+                    }
+                    continue;
+                }
                 Some(Err(error)) => {
                     self.stream_ended = true;
                     let error = match error {

@@ -50,6 +50,10 @@ impl SkipLog {
         Ok(())
     }
 
+    pub fn keeps_going(&self) -> bool {
+        self.keep_going
+    }
+
     pub fn skipped(&self) -> Vec<Skip> {
         self.skipped.lock().map(|s| s.clone()).unwrap_or_default()
     }
