@@ -25,6 +25,7 @@ pub mod scan_folder;
 mod skips;
 mod source;
 pub mod transforms;
+pub mod velodyne;
 
 pub use kitti::KittiSequence;
 pub use skips::{Skip, SkipLog};
