@@ -159,3 +159,82 @@ fn the_packets_name_their_model() {
         Ok(VelodyneModel::Vlp32c)
     );
 }
+
+#[test]
+fn a_packet_log_is_a_drive_for_every_command() {
+    use common::{arg, assert_contains, clean_failure, json_records, success, travmap};
+    let bag = fixture("vlp32/1713492677464078412");
+    // The scans run cuts are the scans the library assembles (cut angle 0).
+    let calibration = Calibration::builtin(VelodyneModel::Vlp32c).unwrap();
+    let decoder = Decoder::new(
+        VelodyneModel::Vlp32c,
+        calibration,
+        DecoderSettings::default(),
+    );
+    let mut assembler = ScanAssembler::new(decoder.unwrap());
+    let mut scans = Vec::new();
+    let log = Log::open(&bag, InputFormat::Rosbag2).unwrap();
+    for message in log.messages() {
+        let message = message.unwrap();
+        let scan = scan_message(&message.data, message.connection.encoding().unwrap()).unwrap();
+        for (stamp_ns, packet) in scan.packets {
+            scans.extend(assembler.push(packet, stamp_ns).unwrap());
+        }
+    }
+    let (frames, summary) = json_records(&success(travmap(&["run", arg(&bag), "--json"])));
+    assert_eq!(frames.len(), scans.len());
+    assert_eq!(summary["frames"], scans.len());
+    for (frame, scan) in frames.iter().zip(&scans) {
+        assert_eq!(frame["stamp_ns"], scan.stamp_ns);
+    }
+    // A whole turn of a front-mounted sensor: its rear half sees the vehicle.
+    let whole = &scans[2];
+    assert!(whole.points.len() > 25_000, "{}", whole.points.len());
+    let times: Vec<u64> = whole
+        .points
+        .iter()
+        .map(|p| p.time_ns - whole.stamp_ns)
+        .collect();
+    assert!(
+        *times.iter().max().unwrap() < 110_000_000,
+        "a turn takes 0.1 s"
+    );
+
+    // map and annotate read it too.
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("map.png");
+    success(travmap(&["map", arg(&bag), "-o", arg(&png), "-q"]));
+    let annotated = dir.path().join("a.mcap");
+    success(travmap(&[
+        "annotate",
+        arg(&bag),
+        "-o",
+        arg(&annotated),
+        "-q",
+    ]));
+
+    // A calibration of another sensor is refused, naming both.
+    let other = dir.path().join("vlp16.yaml");
+    let lasers: String = (0..16)
+        .map(|i| format!("- {{laser_id: {i}, rot_correction: 0.0, vert_correction: 0.0}}\n"))
+        .collect();
+    std::fs::write(
+        &other,
+        format!("lasers:\n{lasers}distance_resolution: 0.002\n"),
+    )
+    .unwrap();
+    let err = clean_failure(travmap(&[
+        "run",
+        arg(&bag),
+        "--lidar-calibration",
+        arg(&other),
+    ]));
+    assert_contains(
+        &err,
+        &[
+            "velodyne_packets (VLP-32C packets)",
+            "32 lasers",
+            "the calibration has 16 lasers",
+        ],
+    );
+}

@@ -194,6 +194,10 @@ pub struct Inputs {
     /// Frames to use: A..B (B excluded), A..=B, A.. or N. Default: all.
     #[arg(long, value_parser = parse_frame_range)]
     pub frames: Option<Range<usize>>,
+    /// Velodyne packet input: the sensor's calibration YAML (velodyne_pointcloud /
+    /// nebula format); the VLP-16 and VLP-32C have built-in tables.
+    #[arg(long, value_name = "YAML")]
+    lidar_calibration: Option<PathBuf>,
     /// Folder-of-scans input: the scan rate, Hz, when the file names are not times
     /// (default 10).
     #[arg(long, value_name = "HZ", value_parser = parse_rate_hz)]
@@ -216,6 +220,7 @@ impl Inputs {
             camera_topic: self.camera_topic.clone(),
             poses: self.settings.load()?.integration.poses,
             rate_hz: self.rate,
+            lidar_calibration: self.lidar_calibration.clone(),
         })
     }
 
@@ -237,6 +242,10 @@ impl Inputs {
                 self.camera_topic.clone().map(OsString::from),
             ),
             ("--rate", self.rate.map(|hz| hz.to_string().into())),
+            (
+                "--lidar-calibration",
+                self.lidar_calibration.clone().map(OsString::from),
+            ),
         ]);
         arguments.extend(self.settings.as_arguments());
         arguments

@@ -11,6 +11,7 @@ use super::log::Log;
 use super::log_message::LogMessage;
 use super::ros::{Header, MessageEncoding, Odometry, TfMessage, Transform};
 use super::transforms::{TransformTree, isometry};
+use super::velodyne::{DecoderSettings, ScanCutter, VELODYNE_SCAN, VelodyneModel, scan_message};
 use crate::config::PoseSource;
 use crate::error::{CloudTopicProblem, Error, Result};
 use crate::posing::PoseRecord;
@@ -37,6 +38,9 @@ pub struct DriveOptions {
     /// Folders of scans: the rate stamps are made at when the file names are not
     /// times (10 Hz when None).
     pub rate_hz: Option<f64>,
+    /// Velodyne packet topics: the calibration YAML (the model's own table when
+    /// None, for the models that have one).
+    pub lidar_calibration: Option<std::path::PathBuf>,
 }
 
 /// The camera the appearance features come from.
@@ -71,6 +75,10 @@ pub(super) struct Contents {
     poses: PoseSource,
     /// Image topic -> (compressed, encoding, frame).
     image_topics: BTreeMap<String, (bool, MessageEncoding, String)>,
+    /// Velodyne packet topic -> the model and where its scans are cut.
+    packet_topics: HashMap<String, (VelodyneModel, ScanCutter)>,
+    /// Velodyne packet topic -> the stamp of the scan being cut.
+    packet_scan_start: HashMap<String, u64>,
 }
 
 impl Contents {
@@ -91,6 +99,7 @@ impl Contents {
         let known = matches!(
             schema.as_ref(),
             POINT_CLOUD
+                | VELODYNE_SCAN
                 | TF_MESSAGE
                 | TF1_MESSAGE
                 | ODOMETRY
@@ -124,6 +133,45 @@ impl Contents {
                     .entry(connection.topic.clone())
                     .or_insert_with(|| (header.header.frame_id.clone(), Vec::new()));
                 entry.1.push(stamp);
+            }
+            VELODYNE_SCAN => {
+                let scan = scan_message(data, encoding).map_err(problem)?;
+                let Some(first) = scan.packets.first() else {
+                    return Ok(());
+                };
+                let first_model = VelodyneModel::of_packet(first.1).map_err(problem)?;
+                let (model, cutter) = self
+                    .packet_topics
+                    .entry(connection.topic.clone())
+                    .or_insert_with(|| {
+                        let cut_angle_deg = DecoderSettings::default().cut_angle_deg;
+                        (first_model, ScanCutter::new(cut_angle_deg))
+                    });
+                let stamps = &mut self
+                    .cloud_stamps
+                    .entry(connection.topic.clone())
+                    .or_insert_with(|| (scan.frame_id.clone(), Vec::new()))
+                    .1;
+                for (stamp_ns, packet) in &scan.packets {
+                    let packet_model = VelodyneModel::of_packet(packet).map_err(problem)?;
+                    if packet_model != *model {
+                        return Err(problem(format!(
+                            "a {} packet on a topic of {} packets",
+                            packet_model.name(),
+                            model.name()
+                        )));
+                    }
+                    // A scan is stamped as ScanAssembler stamps it: the first scan
+                    // with its first packet, the others with the packet that cut the
+                    // scan before (it carries points past the cut into them).
+                    let scan_start = self.packet_scan_start.entry(connection.topic.clone());
+                    let start = *scan_start.or_insert(*stamp_ns);
+                    if cutter.completes(packet) {
+                        stamps.push(start);
+                        self.packet_scan_start
+                            .insert(connection.topic.clone(), *stamp_ns);
+                    }
+                }
             }
             TF_MESSAGE | TF1_MESSAGE => {
                 let is_static = connection.topic == "/tf_static";
@@ -197,7 +245,7 @@ impl Contents {
             cloud_topics: self
                 .topics
                 .iter()
-                .filter(|(_, s)| *s == POINT_CLOUD)
+                .filter(|(_, s)| *s == POINT_CLOUD || *s == VELODYNE_SCAN)
                 .map(|(t, _)| t.clone())
                 .collect(),
             all_topics: self
@@ -262,6 +310,8 @@ pub(super) struct LogIndex {
     pub(super) camera: Option<CameraSource>,
     /// The root of the transform tree above the clouds' frame.
     pub(super) root_frame: String,
+    /// The model, when the cloud topic carries Velodyne packets.
+    pub(super) packets: Option<VelodyneModel>,
     /// Chunks whose messages could not be read (see [`Error::LogChunk`]).
     pub(super) damaged_chunks: usize,
 }
@@ -309,6 +359,10 @@ impl LogIndex {
                 path: path.to_path_buf(),
                 problem,
             })?;
+        let packets = contents
+            .packet_topics
+            .get(&cloud_topic)
+            .map(|(model, _)| *model);
         Ok(Self {
             cloud_topic,
             cloud_frame,
@@ -316,6 +370,7 @@ impl LogIndex {
             transforms: contents.transforms,
             camera,
             root_frame,
+            packets,
             damaged_chunks,
         })
     }

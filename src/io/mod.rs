@@ -14,6 +14,7 @@ mod kitti_text;
 pub mod log;
 pub mod log_index;
 pub mod log_message;
+pub mod mcap_messages;
 pub mod mcap_records;
 pub mod mcap_stored;
 pub mod pcd;

@@ -9,12 +9,13 @@
 //! offset and order, float32 or float64 coordinates, extra fields, big-endian data,
 //! organised clouds; points with a non-finite coordinate are dropped.
 
+use std::collections::VecDeque;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
 
-use super::cloud::cloud_points;
+use super::cloud::{CloudPoints, cloud_points};
 use super::image::image_pixels;
 use super::log::Log;
 pub use super::log_index::DriveOptions;
@@ -23,8 +24,12 @@ use super::log_message::LogMessage;
 use super::ros::PointCloud2;
 use super::skips::SkipLog;
 use super::transforms::TransformTree;
+use super::velodyne::{
+    Calibration, Decoder, DecoderSettings, ScanAssembler, VelodyneModel, VelodynePoint,
+    scan_message,
+};
 use crate::error::{Error, Result};
-use crate::frame::{CameraImage, Frame};
+use crate::frame::{CameraImage, Frame, RemissionScale};
 use crate::posing::{Posing, decide};
 
 /// An image is paired with a cloud when their stamps are at most this far apart.
@@ -45,6 +50,8 @@ pub struct RosDrive {
     camera: Option<CameraSource>,
     /// Chunks the index pass could not read: their messages are lost.
     damaged_chunks: usize,
+    /// When the cloud topic carries Velodyne packets: their model and calibration.
+    packets: Option<(VelodyneModel, Calibration)>,
     pub(super) skips: SkipLog,
 }
 
@@ -53,6 +60,14 @@ impl RosDrive {
     /// ([`LogIndex`]), and poses the clouds as [`decide`] says.
     pub fn open(log: Log, options: &DriveOptions) -> Result<Self> {
         let index = LogIndex::read(&log, options)?;
+        let packets = index
+            .packets
+            .map(|model| {
+                let file = options.lidar_calibration.as_deref();
+                packet_calibration(log.path(), &index.cloud_topic, model, file)
+                    .map(|calibration| (model, calibration))
+            })
+            .transpose()?;
         let decision = decide(log.path(), options.poses, &index.pose_record(options))?;
         let world_frame = match (&options.world_frame, decision.posing) {
             (Some(frame), _) => frame.clone(),
@@ -73,6 +88,7 @@ impl RosDrive {
             transforms: index.transforms,
             camera: index.camera,
             damaged_chunks: index.damaged_chunks,
+            packets,
             skips: SkipLog::default(),
         };
         drive.trim_cut_end();
@@ -258,6 +274,12 @@ impl RosDrive {
             // Clouds the index left out (past a cut end) are not frames.
             frames: frames.start..frames.end.min(self.frame_count()),
             pending: None,
+            ready: VecDeque::new(),
+            assembler: self.packets.as_ref().map(|(model, calibration)| {
+                let decoder = Decoder::new(*model, calibration.clone(), DecoderSettings::default());
+                // The calibration was checked against the model at open.
+                ScanAssembler::new(decoder.expect("a calibration of the model"))
+            }),
             images: Vec::new(),
             next_cloud: 0,
             stream_ended: false,
@@ -265,27 +287,33 @@ impl RosDrive {
     }
 
     /// Frame `current` from its cloud message and the candidate images.
-    fn frame(
-        &self,
-        current: usize,
-        cloud: &LogMessage,
-        images: &[(u64, Vec<u8>)],
-    ) -> Result<Frame> {
-        let fail = |problem: String| Error::LogCloud {
-            path: self.path.clone(),
-            topic: self.cloud_topic.clone(),
-            cloud: current,
-            problem,
+    fn frame(&self, current: usize, cloud: &Cloud, images: &[(u64, Vec<u8>)]) -> Result<Frame> {
+        let fail = |problem: String| self.cloud_error(current, problem);
+        let points = match cloud {
+            Cloud::Message(message) => {
+                let encoding = message.connection.encoding().ok_or_else(|| {
+                    fail(format!(
+                        "message encoding `{}`",
+                        message.connection.message_encoding
+                    ))
+                })?;
+                let cloud: PointCloud2 = encoding.decode(&message.data).map_err(fail)?;
+                cloud_points(&cloud).map_err(fail)?
+            }
+            Cloud::Packets(points) => CloudPoints {
+                points: points
+                    .iter()
+                    .map(|p| {
+                        let [x, y, z] = p.xyz_m;
+                        [x, y, z, p.intensity as f32 / 255.0]
+                    })
+                    .collect(),
+                remission: RemissionScale::Byte,
+                labels: None,
+                dropped: 0,
+            },
         };
-        let encoding = cloud.connection.encoding().ok_or_else(|| {
-            fail(format!(
-                "message encoding `{}`",
-                cloud.connection.message_encoding
-            ))
-        })?;
-        let cloud: PointCloud2 = encoding.decode(&cloud.data).map_err(fail)?;
         let stamp_ns = self.stamps_ns[current];
-        let points = cloud_points(&cloud).map_err(fail)?;
         let nearest = images
             .iter()
             .min_by_key(|(stamp, _)| stamp.abs_diff(stamp_ns))
@@ -309,6 +337,59 @@ impl RosDrive {
     }
 }
 
+impl RosDrive {
+    fn cloud_error(&self, cloud: usize, problem: String) -> Error {
+        Error::LogCloud {
+            path: self.path.clone(),
+            topic: self.cloud_topic.clone(),
+            cloud,
+            problem,
+        }
+    }
+}
+
+/// The calibration of a packet topic's `model`: the file given, else the model's
+/// own table.
+fn packet_calibration(
+    path: &Path,
+    topic: &str,
+    model: VelodyneModel,
+    file: Option<&Path>,
+) -> Result<Calibration> {
+    let fail = |problem: String| Error::LogContainer {
+        path: path.to_path_buf(),
+        problem: format!("{topic} ({} packets): {problem}", model.name()),
+    };
+    let calibration = match file {
+        Some(file) => {
+            let text = std::fs::read_to_string(file).map_err(|e| Error::io(file, e))?;
+            Calibration::from_yaml(&text)
+                .map_err(|e| fail(format!("--lidar-calibration {}: {e}", file.display())))?
+        }
+        None => Calibration::builtin(model).ok_or_else(|| {
+            fail(format!(
+                "the {} has no built-in angle table: pass its calibration with --lidar-calibration FILE (velodyne_pointcloud / nebula YAML)",
+                model.name()
+            ))
+        })?,
+    };
+    if calibration.lasers() != model.lasers() {
+        return Err(fail(format!(
+            "the packets are from a {} ({} lasers), the calibration has {} lasers",
+            model.name(),
+            model.lasers(),
+            calibration.lasers()
+        )));
+    }
+    Ok(calibration)
+}
+
+/// A cloud as the log holds it: a PointCloud2 message, or a scan cut from packets.
+enum Cloud {
+    Message(LogMessage),
+    Packets(Vec<VelodynePoint>),
+}
+
 /// The frames of a drive, streamed: see [`RosDrive::read`]. A cloud is handed on
 /// when the next one arrives, so that an image written just after its cloud is
 /// found too.
@@ -316,8 +397,12 @@ pub struct DriveFrames<'a> {
     drive: &'a RosDrive,
     stream: Box<dyn Iterator<Item = Result<LogMessage>> + 'a>,
     frames: Range<usize>,
-    /// The cloud waiting for the next one: (frame number, message).
-    pending: Option<(usize, LogMessage)>,
+    /// The cloud waiting for the next one: (frame number, cloud).
+    pending: Option<(usize, Cloud)>,
+    /// Clouds to hand on, in order (a packet message can complete several scans).
+    ready: VecDeque<(usize, Cloud)>,
+    /// Packets into scans, for a packet topic.
+    assembler: Option<ScanAssembler>,
     /// Images since the cloud before the pending one: (stamp, message data).
     images: Vec<(u64, Vec<u8>)>,
     next_cloud: usize,
@@ -326,7 +411,7 @@ pub struct DriveFrames<'a> {
 
 impl DriveFrames<'_> {
     /// The frame of a cloud, or its error; None when the error was skipped.
-    fn hand_on(&mut self, index: usize, cloud: &LogMessage) -> Option<Result<Frame>> {
+    fn hand_on(&mut self, index: usize, cloud: &Cloud) -> Option<Result<Frame>> {
         let frame = self.drive.frame(index, cloud, &self.images);
         let keep_after = self.drive.stamps_ns[index].saturating_sub(IMAGE_PAIRING_NS);
         self.images.retain(|(stamp, _)| *stamp >= keep_after);
@@ -342,6 +427,11 @@ impl Iterator for DriveFrames<'_> {
 
     fn next(&mut self) -> Option<Result<Frame>> {
         let camera = self.drive.camera.as_ref();
+        while let Some((index, cloud)) = self.ready.pop_front() {
+            if let Some(frame) = self.hand_on(index, &cloud) {
+                return Some(frame);
+            }
+        }
         while !self.stream_ended {
             let message = match self.stream.next() {
                 Some(Ok(message)) => message,
@@ -396,25 +486,62 @@ impl Iterator for DriveFrames<'_> {
             if message.connection.topic != self.drive.cloud_topic {
                 continue;
             }
-            let finished = self.pending.take();
-            let current = self.next_cloud;
-            self.next_cloud += 1;
-            if current >= self.frames.end {
-                self.stream_ended = true;
-            } else if current >= self.frames.start {
-                self.pending = Some((current, message));
+            let clouds = match &mut self.assembler {
+                None => vec![Cloud::Message(message)],
+                Some(assembler) => match scans_of(assembler, &message) {
+                    Ok(scans) => scans.into_iter().map(Cloud::Packets).collect(),
+                    Err(problem) => {
+                        let error = self.drive.cloud_error(self.next_cloud, problem);
+                        if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
+                            self.stream_ended = true;
+                            return Some(Err(error));
+                        }
+                        continue;
+                    }
+                },
+            };
+            for cloud in clouds {
+                let finished = self.pending.take();
+                let current = self.next_cloud;
+                self.next_cloud += 1;
+                if current >= self.frames.end {
+                    self.stream_ended = true;
+                } else if current >= self.frames.start {
+                    self.pending = Some((current, cloud));
+                }
+                self.ready.extend(finished);
             }
-            if let Some((index, cloud)) = finished
-                && let Some(frame) = self.hand_on(index, &cloud)
-            {
-                return Some(frame);
+            while let Some((index, cloud)) = self.ready.pop_front() {
+                if let Some(frame) = self.hand_on(index, &cloud) {
+                    return Some(frame);
+                }
             }
         }
         self.stream_ended = true;
-        let (index, cloud) = self.pending.take()?;
-        match self.hand_on(index, &cloud) {
-            Some(frame) => Some(frame),
-            None => self.next(),
+        let pending = self.pending.take();
+        self.ready.extend(pending);
+        while let Some((index, cloud)) = self.ready.pop_front() {
+            if let Some(frame) = self.hand_on(index, &cloud) {
+                return Some(frame);
+            }
         }
+        None
     }
+}
+
+/// The scans a packet message completes.
+fn scans_of(
+    assembler: &mut ScanAssembler,
+    message: &LogMessage,
+) -> std::result::Result<Vec<Vec<VelodynePoint>>, String> {
+    let encoding = message
+        .connection
+        .encoding()
+        .ok_or_else(|| format!("message encoding `{}`", message.connection.message_encoding))?;
+    let scan = scan_message(&message.data, encoding)?;
+    let mut scans = Vec::new();
+    for (stamp_ns, packet) in scan.packets {
+        scans.extend(assembler.push(packet, stamp_ns)?.map(|scan| scan.points));
+    }
+    Ok(scans)
 }
