@@ -213,6 +213,40 @@ fn a_packet_log_is_a_drive_for_every_command() {
         "-q",
     ]));
 
+    // convert writes the scans as PointCloud2 beside the packets, and they are the
+    // same frames.
+    let converted = dir.path().join("converted.mcap");
+    let doc = common::json_summary(&["convert", arg(&bag), "-o", arg(&converted)]);
+    let points_topic = "/sensing/lidar/front/velodyne_points";
+    assert_eq!(doc["summary"]["decoded_topic"], points_topic);
+    assert_eq!(doc["summary"]["decoded_scans"], scans.len());
+    let run = travmap(&[
+        "run",
+        arg(&converted),
+        "--cloud-topic",
+        points_topic,
+        "--json",
+    ]);
+    let (again, _) = json_records(&success(run));
+    let stamps = |frames: &[serde_json::Value]| -> Vec<u64> {
+        frames
+            .iter()
+            .map(|f| f["stamp_ns"].as_u64().unwrap())
+            .collect()
+    };
+    assert_eq!(stamps(&again), stamps(&frames));
+    let log = Log::open(&converted, InputFormat::Mcap).unwrap();
+    let cloud = log
+        .messages()
+        .map(Result::unwrap)
+        .find(|m| m.connection.topic == points_topic)
+        .unwrap();
+    let cloud: travmap::io::ros::PointCloud2 = travmap::io::ros::decode(&cloud.data).unwrap();
+    let names: Vec<&str> = cloud.fields.iter().map(|f| f.name.as_str()).collect();
+    assert_eq!(names, ["x", "y", "z", "intensity", "ring", "t"]);
+    assert_eq!(cloud.width as usize, scans[0].points.len());
+    assert_eq!(cloud.header.frame_id, "velodyne_front");
+
     // A calibration of another sensor is refused, naming both.
     let other = dir.path().join("vlp16.yaml");
     let lasers: String = (0..16)

@@ -25,7 +25,7 @@ use super::ros::PointCloud2;
 use super::skips::SkipLog;
 use super::transforms::TransformTree;
 use super::velodyne::{
-    Calibration, Decoder, DecoderSettings, ScanAssembler, VelodyneModel, VelodynePoint,
+    Calibration, Decoder, DecoderSettings, PacketScan, ScanAssembler, VelodyneModel, VelodynePoint,
     scan_message,
 };
 use crate::error::{Error, Result};
@@ -264,6 +264,45 @@ impl RosDrive {
             })
     }
 
+    /// When the cloud topic carries Velodyne packets: its scans, cut and decoded in
+    /// one pass (no poses), each with the stamp the index gave it.
+    pub fn packet_scans(&self) -> Option<impl Iterator<Item = Result<PacketScan>> + '_> {
+        let mut assembler = self.assembler()?;
+        let mut next = 0;
+        let scans = self
+            .messages()
+            .filter(|message| !matches!(message, Ok(m) if m.connection.topic != self.cloud_topic))
+            .flat_map(move |message| {
+                let scans = message.and_then(|message| {
+                    scans_of(&mut assembler, &message)
+                        .map_err(|problem| self.cloud_error(next, problem))
+                });
+                let scans: Vec<Result<PacketScan>> = match scans {
+                    Ok(scans) => scans
+                        .into_iter()
+                        .map(|points| {
+                            let stamp_ns = self.stamps_ns.get(next).copied().unwrap_or_default();
+                            next += 1;
+                            Ok(PacketScan { stamp_ns, points })
+                        })
+                        .collect(),
+                    Err(error) => vec![Err(error)],
+                };
+                scans
+            });
+        Some(scans)
+    }
+
+    /// A fresh scan assembler for a packet topic.
+    fn assembler(&self) -> Option<ScanAssembler> {
+        let (model, calibration) = self.packets.as_ref()?;
+        let decoder = Decoder::new(*model, calibration.clone(), DecoderSettings::default());
+        // The calibration was checked against the model at open.
+        Some(ScanAssembler::new(
+            decoder.expect("a calibration of the model"),
+        ))
+    }
+
     /// The frames in `frames`, streamed in one pass over the file, each with the
     /// camera image nearest in time (within 50 ms) when the drive has a camera. With
     /// `--keep-going`, unreadable frames are recorded in the skip log and left out.
@@ -275,11 +314,7 @@ impl RosDrive {
             frames: frames.start..frames.end.min(self.frame_count()),
             pending: None,
             ready: VecDeque::new(),
-            assembler: self.packets.as_ref().map(|(model, calibration)| {
-                let decoder = Decoder::new(*model, calibration.clone(), DecoderSettings::default());
-                // The calibration was checked against the model at open.
-                ScanAssembler::new(decoder.expect("a calibration of the model"))
-            }),
+            assembler: self.assembler(),
             images: Vec::new(),
             next_cloud: 0,
             stream_ended: false,

@@ -33,6 +33,7 @@ use crate::io::ros::{
     ros1_to_cdr,
 };
 use crate::io::ros_drive::RosDrive;
+use crate::io::velodyne::PacketScan;
 use crate::outputs::mcap_writer::Compression;
 use crate::outputs::writing::McapSink;
 
@@ -65,6 +66,10 @@ pub struct LogCopySummary {
     pub translated_messages: usize,
     /// Topics copied as recorded, in an encoding other than ROS 2 CDR.
     pub topics_as_recorded: Vec<String>,
+    /// Velodyne packet input: the topic its scans were written to as PointCloud2,
+    /// and how many.
+    pub decoded_topic: Option<String>,
+    pub decoded_scans: usize,
     pub output_bytes: u64,
 }
 
@@ -179,11 +184,65 @@ pub fn convert_log(
     let mut sink = McapSink::create(output, compression)?;
     // Converting is asked for a compression; passing through is not.
     let mut summary = write_log_messages(&mut sink, drive, false, on_messages)?;
+    if let Some(scans) = drive.packet_scans() {
+        let topic = decoded_topic(drive.cloud_topic());
+        for scan in scans {
+            let scan = scan?;
+            let cloud = packet_cloud(&scan, drive.cloud_frame());
+            sink.write(&topic, scan.stamp_ns, &cloud)?;
+            summary.decoded_scans += 1;
+        }
+        summary.decoded_topic = Some(topic);
+    }
     sink.finish()?;
     summary.output_bytes = std::fs::metadata(output)
         .map_err(|e| Error::io(output, e))?
         .len();
     Ok(summary)
+}
+
+/// Where a packet topic's scans go: `.../velodyne_packets` -> `.../velodyne_points`
+/// (nebula's and velodyne_pointcloud's names), else `<topic>/points`.
+fn decoded_topic(packet_topic: &str) -> String {
+    match packet_topic.strip_suffix("_packets") {
+        Some(stem) => format!("{stem}_points"),
+        None => format!("{packet_topic}/points"),
+    }
+}
+
+/// A decoded scan as PointCloud2: x, y, z float32, intensity uint8 (0-255 as the
+/// sensor reports it), ring uint16 (0 the lowest beam), t uint32 (ns from the
+/// header stamp: for deskewing).
+fn packet_cloud(scan: &PacketScan, frame_id: &str) -> PointCloud2 {
+    const STEP: usize = 20;
+    let mut data = Vec::with_capacity(scan.points.len() * STEP);
+    for point in &scan.points {
+        for v in point.xyz_m {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+        data.push(point.intensity);
+        data.push(0);
+        data.extend_from_slice(&point.ring.to_le_bytes());
+        let t_ns = point.time_ns.saturating_sub(scan.stamp_ns);
+        data.extend_from_slice(&(t_ns.min(u32::MAX as u64) as u32).to_le_bytes());
+    }
+    let mut fields = PointField::xyz_float32();
+    fields.extend([
+        PointField::scalar("intensity", 12, datatype::UINT8),
+        PointField::scalar("ring", 14, datatype::UINT16),
+        PointField::scalar("t", 16, datatype::UINT32),
+    ]);
+    PointCloud2 {
+        header: header(scan.stamp_ns, frame_id),
+        height: 1,
+        width: scan.points.len() as u32,
+        fields,
+        is_bigendian: false,
+        point_step: STEP as u32,
+        row_step: (scan.points.len() * STEP) as u32,
+        data,
+        is_dense: true,
+    }
 }
 
 /// A ROS transform from a rigid pose, its quaternion as it is.
