@@ -382,7 +382,7 @@ impl std::fmt::Display for CloudTopicProblem {
             CloudTopicProblem::Several => {
                 write!(
                     f,
-                    "several PointCloud2 topics, choose one with --cloud-topic"
+                    "several PointCloud2 topics, choose one with --cloud-topic (or merge several LiDARs: --cloud-topic all, or the topics one by one)"
                 )
             }
         }

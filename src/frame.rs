@@ -24,6 +24,9 @@ pub struct Frame {
     /// Points the reader dropped for a non-finite coordinate (MCAP clouds with
     /// `is_dense` false; a KITTI scan with one is an error instead).
     pub dropped_points: usize,
+    /// The cloud topics whose points the frame holds, when several sensors are
+    /// merged (`--cloud-topic all`); empty for an input of one sensor.
+    pub sensors: Vec<String>,
 }
 
 impl Frame {

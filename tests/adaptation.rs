@@ -173,7 +173,7 @@ fn eval_and_annotate_adapt_in_one_call() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let out = success(travmap(&["eval", arg(&sample), "--adapt", "-q"]));
+    let out = success(travmap(&["eval", arg(&sample), "--adapt"]));
     assert_contains(&out, &["adapted to these drives", "travmap (filtered)"]);
     let annotated = dir.path().join("a.mcap");
     write_output(

@@ -28,7 +28,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use travmap::Config;
 use travmap::drive::Selection;
-use travmap::io::ros_drive::DriveOptions;
+use travmap::io::ros_drive::{DriveOptions, MergedTopics};
 use travmap::io::{Recording, Source};
 use travmap::method::classifier::SvmModel;
 use travmap::outputs::preflight::{InputFiles, check_output_directory, check_output_file};
@@ -180,9 +180,11 @@ pub struct Inputs {
     /// .db3) or folders of .pcd / .bin scans.
     #[arg(required = true)]
     pub sequences: Vec<PathBuf>,
-    /// MCAP input: the PointCloud2 topic (needed when there are several).
+    /// Log input: the PointCloud2 or Velodyne packet topic (needed when there are
+    /// several). Repeated, the first topic's scans with the other sensors' clouds
+    /// merged in (through /tf_static); `all` merges every PointCloud2 topic.
     #[arg(long)]
-    cloud_topic: Option<String>,
+    cloud_topic: Vec<String>,
     /// MCAP input: the world frame poses are taken in (default: the root of the
     /// transform tree above the clouds' frame).
     #[arg(long)]
@@ -214,8 +216,15 @@ pub struct Inputs {
 
 impl Inputs {
     fn drive_options(&self) -> Result<DriveOptions> {
+        let (cloud_topic, merged_topics) = match self.cloud_topic.as_slice() {
+            [] => (None, MergedTopics::None),
+            [all] if all == "all" => (None, MergedTopics::All),
+            [one] => (Some(one.clone()), MergedTopics::None),
+            [first, more @ ..] => (Some(first.clone()), MergedTopics::Topics(more.to_vec())),
+        };
         Ok(DriveOptions {
-            cloud_topic: self.cloud_topic.clone(),
+            cloud_topic,
+            merged_topics,
             world_frame: self.world_frame.clone(),
             camera_topic: self.camera_topic.clone(),
             poses: self.settings.load()?.integration.poses,
@@ -228,11 +237,8 @@ impl Inputs {
     /// (`bench --tools`): the log's topics and world frame, the scan rate and the
     /// configuration; not `--frames`, which the caller adds where it applies.
     pub fn reading_arguments(&self) -> Vec<OsString> {
-        let mut arguments = flags([
-            (
-                "--cloud-topic",
-                self.cloud_topic.clone().map(OsString::from),
-            ),
+        let topics = (self.cloud_topic.iter()).map(|t| ("--cloud-topic", Some(t.into())));
+        let mut arguments = flags(topics.chain([
             (
                 "--world-frame",
                 self.world_frame.clone().map(OsString::from),
@@ -246,7 +252,7 @@ impl Inputs {
                 "--lidar-calibration",
                 self.lidar_calibration.clone().map(OsString::from),
             ),
-        ]);
+        ]));
         arguments.extend(self.settings.as_arguments());
         arguments
     }

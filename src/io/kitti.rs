@@ -186,6 +186,7 @@ impl KittiSequence {
             labels,
             camera,
             dropped_points,
+            sensors: Vec::new(),
         })
     }
 

@@ -29,6 +29,8 @@ const RAW_IMAGE: &str = "sensor_msgs/msg/Image";
 #[derive(Clone, Debug, Default)]
 pub struct DriveOptions {
     pub cloud_topic: Option<String>,
+    /// Cloud topics merged into `cloud_topic`'s scans (several LiDARs).
+    pub merged_topics: MergedTopics,
     pub world_frame: Option<String>,
     /// The image topic (Image or CompressedImage) whose frame has a CameraInfo; found
     /// by itself when there is exactly one.
@@ -41,6 +43,18 @@ pub struct DriveOptions {
     /// Velodyne packet topics: the calibration YAML (the model's own table when
     /// None, for the models that have one).
     pub lidar_calibration: Option<std::path::PathBuf>,
+}
+
+/// Which other cloud topics are merged into the frames' scans.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum MergedTopics {
+    /// One sensor.
+    #[default]
+    None,
+    /// These PointCloud2 topics.
+    Topics(Vec<String>),
+    /// Every PointCloud2 topic but the frames' own.
+    All,
 }
 
 /// The camera the appearance features come from.
@@ -228,18 +242,66 @@ impl Contents {
         Ok(())
     }
 
-    /// The PointCloud2 topic asked for, or the only one.
+    /// The PointCloud2 topic asked for, or the only one; merging every topic
+    /// (`--cloud-topic all`), the one with the most clouds (then by name).
     fn cloud_topic(&self, path: &Path, options: &DriveOptions) -> Result<String> {
+        let most_clouds = || {
+            self.cloud_stamps
+                .iter()
+                .max_by(|a, b| a.1.1.len().cmp(&b.1.1.len()).then(b.0.cmp(a.0)))
+                .map(|(topic, _)| topic.clone())
+        };
         let problem = match &options.cloud_topic {
             Some(topic) if self.cloud_stamps.contains_key(topic) => return Ok(topic.clone()),
             Some(topic) => CloudTopicProblem::NotFound(topic.clone()),
             None => match self.cloud_stamps.keys().collect::<Vec<_>>().as_slice() {
                 [only] => return Ok((*only).clone()),
                 [] => CloudTopicProblem::None,
+                _ if options.merged_topics == MergedTopics::All => {
+                    return Ok(most_clouds().unwrap_or_default());
+                }
                 _ => CloudTopicProblem::Several,
             },
         };
-        Err(Error::LogCloudTopic {
+        Err(self.topic_error(path, problem))
+    }
+
+    /// The PointCloud2 topics merged into `cloud_topic`'s scans, with their frames.
+    fn merged_topics(
+        &self,
+        path: &Path,
+        options: &DriveOptions,
+        cloud_topic: &str,
+    ) -> Result<Vec<(String, String)>> {
+        let topics: Vec<String> = match &options.merged_topics {
+            MergedTopics::None => return Ok(Vec::new()),
+            MergedTopics::All => {
+                let mut all: Vec<String> = self.cloud_stamps.keys().cloned().collect();
+                all.sort();
+                all
+            }
+            MergedTopics::Topics(topics) => topics.clone(),
+        };
+        let mut merged = Vec::new();
+        for topic in topics.into_iter().filter(|t| t != cloud_topic) {
+            let Some((frame, _)) = self.cloud_stamps.get(&topic) else {
+                return Err(self.topic_error(path, CloudTopicProblem::NotFound(topic)));
+            };
+            if self.packet_topics.contains_key(&topic) {
+                return Err(Error::LogContainer {
+                    path: path.to_path_buf(),
+                    problem: format!(
+                        "{topic} carries Velodyne packets: only PointCloud2 topics are merged into another sensor's scans (`travmap convert` writes its scans as PointCloud2)"
+                    ),
+                });
+            }
+            merged.push((topic.clone(), frame.clone()));
+        }
+        Ok(merged)
+    }
+
+    fn topic_error(&self, path: &Path, problem: CloudTopicProblem) -> Error {
+        Error::LogCloudTopic {
             path: path.to_path_buf(),
             problem,
             cloud_topics: self
@@ -253,7 +315,7 @@ impl Contents {
                 .iter()
                 .map(|(t, s)| format!("{t} ({s})"))
                 .collect(),
-        })
+        }
     }
 
     /// The camera: the image topic asked for, or the only one whose frame has a
@@ -312,6 +374,8 @@ pub(super) struct LogIndex {
     pub(super) root_frame: String,
     /// The model, when the cloud topic carries Velodyne packets.
     pub(super) packets: Option<VelodyneModel>,
+    /// Other sensors' PointCloud2 topics merged into each scan, with their frames.
+    pub(super) merged: Vec<(String, String)>,
     /// Chunks whose messages could not be read (see [`Error::LogChunk`]).
     pub(super) damaged_chunks: usize,
 }
@@ -342,6 +406,7 @@ impl LogIndex {
         let cloud_topic = contents
             .cloud_topic(path, options)
             .map_err(|error| first_damage.unwrap_or(error))?;
+        let merged = contents.merged_topics(path, options, &cloud_topic)?;
         let (cloud_frame, stamps_ns) = contents
             .cloud_stamps
             .remove(&cloud_topic)
@@ -364,6 +429,7 @@ impl LogIndex {
             .get(&cloud_topic)
             .map(|(model, _)| *model);
         Ok(Self {
+            merged,
             cloud_topic,
             cloud_frame,
             stamps_ns,

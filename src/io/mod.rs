@@ -7,6 +7,7 @@
 
 pub mod bag;
 pub mod cloud;
+pub mod drive_frames;
 pub mod format;
 pub mod image;
 pub mod kitti;
@@ -17,6 +18,7 @@ pub mod log_message;
 pub mod mcap_messages;
 pub mod mcap_records;
 pub mod mcap_stored;
+mod merged_clouds;
 pub mod pcd;
 pub mod ros;
 pub mod ros1;

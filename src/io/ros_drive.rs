@@ -4,54 +4,52 @@
 //! `nav_msgs/Odometry` topic.
 //!
 //! The log is streamed: one pass at open collects the topics, the cloud stamps and
-//! every transform; [`RosDrive::read`] streams again and decodes only the clouds
-//! asked for. Any PointCloud2 layout is accepted: fields at any
+//! every transform; [`RosDrive::read`] (`drive_frames.rs`) streams again and decodes
+//! only the clouds asked for. Any PointCloud2 layout is accepted: fields at any
 //! offset and order, float32 or float64 coordinates, extra fields, big-endian data,
 //! organised clouds; points with a non-finite coordinate are dropped.
 
-use std::collections::VecDeque;
-use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
 
-use super::cloud::{CloudPoints, cloud_points};
 use super::image::image_pixels;
 use super::log::Log;
-pub use super::log_index::DriveOptions;
-use super::log_index::{CameraSource, HeaderOnly, LogIndex};
+use super::log_index::{CameraSource, LogIndex};
+pub use super::log_index::{DriveOptions, MergedTopics};
 use super::log_message::LogMessage;
-use super::ros::PointCloud2;
+use super::merged_clouds::median_period_ns;
 use super::skips::SkipLog;
 use super::transforms::TransformTree;
-use super::velodyne::{
-    Calibration, Decoder, DecoderSettings, PacketScan, ScanAssembler, VelodyneModel, VelodynePoint,
-    scan_message,
-};
+use super::velodyne::{Calibration, VelodyneModel};
 use crate::error::{Error, Result};
-use crate::frame::{CameraImage, Frame, RemissionScale};
+use crate::frame::CameraImage;
 use crate::posing::{Posing, decide};
 
 /// An image is paired with a cloud when their stamps are at most this far apart.
-const IMAGE_PAIRING_NS: u64 = 50_000_000;
+pub(super) const IMAGE_PAIRING_NS: u64 = 50_000_000;
 
 /// An opened drive.
 pub struct RosDrive {
-    path: PathBuf,
-    log: Log,
+    pub(super) path: PathBuf,
+    pub(super) log: Log,
     posing: Posing,
     /// Said when the poses are not what was asked for by default.
     notice: Option<String>,
-    cloud_topic: String,
+    pub(super) cloud_topic: String,
     cloud_frame: String,
     world_frame: String,
-    stamps_ns: Vec<u64>,
+    pub(super) stamps_ns: Vec<u64>,
     transforms: TransformTree,
-    camera: Option<CameraSource>,
+    pub(super) camera: Option<CameraSource>,
     /// Chunks the index pass could not read: their messages are lost.
     damaged_chunks: usize,
     /// When the cloud topic carries Velodyne packets: their model and calibration.
-    packets: Option<(VelodyneModel, Calibration)>,
+    pub(super) packets: Option<(VelodyneModel, Calibration)>,
+    /// Other sensors' PointCloud2 topics merged into each scan, with their frames.
+    pub(super) merged: Vec<(String, String)>,
+    /// The clouds' median period: a merged cloud within half of it joins a scan.
+    pub(super) period_ns: u64,
     pub(super) skips: SkipLog,
 }
 
@@ -76,6 +74,7 @@ impl RosDrive {
             (None, Posing::Registration) => "map".to_string(),
             (None, Posing::Alone) => index.cloud_frame.clone(),
         };
+        let period_ns = median_period_ns(&index.stamps_ns);
         let mut drive = Self {
             path: log.path().to_path_buf(),
             log,
@@ -89,6 +88,8 @@ impl RosDrive {
             camera: index.camera,
             damaged_chunks: index.damaged_chunks,
             packets,
+            period_ns,
+            merged: index.merged,
             skips: SkipLog::default(),
         };
         drive.trim_cut_end();
@@ -179,6 +180,38 @@ impl RosDrive {
         self.stamps_ns.iter().enumerate().filter_map(pose).collect()
     }
 
+    /// The pose of another sensor's `frame` (at `frame_stamp_ns`) in the clouds' frame
+    /// (at `cloud_stamp_ns`), through the root of the tree above both: a static mount,
+    /// or the vehicle's motion between the two stamps as well.
+    pub(super) fn cloud_from_frame(
+        &self,
+        frame: &str,
+        frame_stamp_ns: u64,
+        cloud_stamp_ns: u64,
+    ) -> Result<Isometry3<f64>> {
+        let root = self
+            .transforms
+            .root_above(&self.cloud_frame)
+            .map_err(|problem| Error::Transform {
+                path: self.path.clone(),
+                problem,
+            })?;
+        let unlinked = || Error::LogContainer {
+            path: self.path.clone(),
+            problem: format!(
+                "merging clouds: no transform links `{frame}` to the clouds' frame `{}` (the sensors' mounts belong on /tf_static)",
+                self.cloud_frame
+            ),
+        };
+        let root_from_cloud = self
+            .ancestor_from(&root, &self.cloud_frame, cloud_stamp_ns)?
+            .ok_or_else(unlinked)?;
+        let root_from_frame = self
+            .ancestor_from(&root, frame, frame_stamp_ns)?
+            .ok_or_else(unlinked)?;
+        Ok(root_from_cloud.inverse() * root_from_frame)
+    }
+
     /// `ancestor_from_frame` at `stamp_ns`; None when `ancestor` is not above `frame`.
     fn ancestor_from(
         &self,
@@ -197,7 +230,7 @@ impl RosDrive {
     /// The camera image of a cloud from a raw message, posed for the cloud's frame:
     /// through the static chain when the camera hangs below the cloud's frame, else
     /// through the world at each one's stamp.
-    fn camera_image(
+    pub(super) fn camera_image(
         &self,
         camera: &CameraSource,
         data: &[u8],
@@ -263,320 +296,17 @@ impl RosDrive {
                 Err(error) => Some(Err(error)),
             })
     }
-
-    /// When the cloud topic carries Velodyne packets: its scans, cut and decoded in
-    /// one pass (no poses), each with the stamp the index gave it.
-    pub fn packet_scans(&self) -> Option<impl Iterator<Item = Result<PacketScan>> + '_> {
-        let mut assembler = self.assembler()?;
-        let mut next = 0;
-        let scans = self
-            .messages()
-            .filter(|message| !matches!(message, Ok(m) if m.connection.topic != self.cloud_topic))
-            .flat_map(move |message| {
-                let scans = message.and_then(|message| {
-                    scans_of(&mut assembler, &message)
-                        .map_err(|problem| self.cloud_error(next, problem))
-                });
-                let scans: Vec<Result<PacketScan>> = match scans {
-                    Ok(scans) => scans
-                        .into_iter()
-                        .map(|points| {
-                            let stamp_ns = self.stamps_ns.get(next).copied().unwrap_or_default();
-                            next += 1;
-                            Ok(PacketScan { stamp_ns, points })
-                        })
-                        .collect(),
-                    Err(error) => vec![Err(error)],
-                };
-                scans
-            });
-        Some(scans)
-    }
-
-    /// A fresh scan assembler for a packet topic.
-    fn assembler(&self) -> Option<ScanAssembler> {
-        let (model, calibration) = self.packets.as_ref()?;
-        let decoder = Decoder::new(*model, calibration.clone(), DecoderSettings::default());
-        // The calibration was checked against the model at open.
-        Some(ScanAssembler::new(
-            decoder.expect("a calibration of the model"),
-        ))
-    }
-
-    /// The frames in `frames`, streamed in one pass over the file, each with the
-    /// camera image nearest in time (within 50 ms) when the drive has a camera. With
-    /// `--keep-going`, unreadable frames are recorded in the skip log and left out.
-    pub fn read(&self, frames: &Range<usize>) -> DriveFrames<'_> {
-        DriveFrames {
-            drive: self,
-            stream: Box::new(self.log.messages()),
-            // Clouds the index left out (past a cut end) are not frames.
-            frames: frames.start..frames.end.min(self.frame_count()),
-            pending: None,
-            ready: VecDeque::new(),
-            assembler: self.assembler(),
-            images: Vec::new(),
-            next_cloud: 0,
-            stream_ended: false,
-        }
-    }
-
-    /// Frame `current` from its cloud message and the candidate images.
-    fn frame(&self, current: usize, cloud: &Cloud, images: &[(u64, Vec<u8>)]) -> Result<Frame> {
-        let fail = |problem: String| self.cloud_error(current, problem);
-        let points = match cloud {
-            Cloud::Message(message) => {
-                let encoding = message.connection.encoding().ok_or_else(|| {
-                    fail(format!(
-                        "message encoding `{}`",
-                        message.connection.message_encoding
-                    ))
-                })?;
-                let cloud: PointCloud2 = encoding.decode(&message.data).map_err(fail)?;
-                cloud_points(&cloud).map_err(fail)?
-            }
-            Cloud::Packets(points) => CloudPoints {
-                points: points
-                    .iter()
-                    .map(|p| {
-                        let [x, y, z] = p.xyz_m;
-                        [x, y, z, p.intensity as f32 / 255.0]
-                    })
-                    .collect(),
-                remission: RemissionScale::Byte,
-                labels: None,
-                dropped: 0,
-            },
-        };
-        let stamp_ns = self.stamps_ns[current];
-        let nearest = images
-            .iter()
-            .min_by_key(|(stamp, _)| stamp.abs_diff(stamp_ns))
-            .filter(|(stamp, _)| stamp.abs_diff(stamp_ns) <= IMAGE_PAIRING_NS);
-        let camera = match (&self.camera, nearest) {
-            (Some(camera), Some((image_stamp, image))) => {
-                Some(self.camera_image(camera, image, *image_stamp, stamp_ns)?)
-            }
-            _ => None,
-        };
-        Ok(Frame {
-            index: current,
-            stamp_ns,
-            world_from_velodyne: self.world_from_cloud(stamp_ns)?,
-            points_in_velodyne: points.points,
-            labels: points.labels,
-            remission: points.remission,
-            dropped_points: points.dropped,
-            camera,
-        })
-    }
 }
 
-impl RosDrive {
-    fn cloud_error(&self, cloud: usize, problem: String) -> Error {
-        Error::LogCloud {
-            path: self.path.clone(),
-            topic: self.cloud_topic.clone(),
-            cloud,
-            problem,
-        }
-    }
-}
-
-/// The calibration of a packet topic's `model`: the file given, else the model's
-/// own table.
+/// The calibration of a packet topic's `model` (see [`Calibration::for_model`]).
 fn packet_calibration(
     path: &Path,
     topic: &str,
     model: VelodyneModel,
     file: Option<&Path>,
 ) -> Result<Calibration> {
-    let fail = |problem: String| Error::LogContainer {
+    Calibration::for_model(model, file).map_err(|problem| Error::LogContainer {
         path: path.to_path_buf(),
         problem: format!("{topic} ({} packets): {problem}", model.name()),
-    };
-    let calibration = match file {
-        Some(file) => {
-            let text = std::fs::read_to_string(file).map_err(|e| Error::io(file, e))?;
-            Calibration::from_yaml(&text)
-                .map_err(|e| fail(format!("--lidar-calibration {}: {e}", file.display())))?
-        }
-        None => Calibration::builtin(model).ok_or_else(|| {
-            fail(format!(
-                "the {} has no built-in angle table: pass its calibration with --lidar-calibration FILE (velodyne_pointcloud / nebula YAML)",
-                model.name()
-            ))
-        })?,
-    };
-    if calibration.lasers() != model.lasers() {
-        return Err(fail(format!(
-            "the packets are from a {} ({} lasers), the calibration has {} lasers",
-            model.name(),
-            model.lasers(),
-            calibration.lasers()
-        )));
-    }
-    Ok(calibration)
-}
-
-/// A cloud as the log holds it: a PointCloud2 message, or a scan cut from packets.
-enum Cloud {
-    Message(LogMessage),
-    Packets(Vec<VelodynePoint>),
-}
-
-/// The frames of a drive, streamed: see [`RosDrive::read`]. A cloud is handed on
-/// when the next one arrives, so that an image written just after its cloud is
-/// found too.
-pub struct DriveFrames<'a> {
-    drive: &'a RosDrive,
-    stream: Box<dyn Iterator<Item = Result<LogMessage>> + 'a>,
-    frames: Range<usize>,
-    /// The cloud waiting for the next one: (frame number, cloud).
-    pending: Option<(usize, Cloud)>,
-    /// Clouds to hand on, in order (a packet message can complete several scans).
-    ready: VecDeque<(usize, Cloud)>,
-    /// Packets into scans, for a packet topic.
-    assembler: Option<ScanAssembler>,
-    /// Images since the cloud before the pending one: (stamp, message data).
-    images: Vec<(u64, Vec<u8>)>,
-    next_cloud: usize,
-    stream_ended: bool,
-}
-
-impl DriveFrames<'_> {
-    /// The frame of a cloud, or its error; None when the error was skipped.
-    fn hand_on(&mut self, index: usize, cloud: &Cloud) -> Option<Result<Frame>> {
-        let frame = self.drive.frame(index, cloud, &self.images);
-        let keep_after = self.drive.stamps_ns[index].saturating_sub(IMAGE_PAIRING_NS);
-        self.images.retain(|(stamp, _)| *stamp >= keep_after);
-        match frame {
-            Ok(frame) => Some(Ok(frame)),
-            Err(error) => self.drive.skips.handle(index, error).err().map(Err),
-        }
-    }
-}
-
-impl Iterator for DriveFrames<'_> {
-    type Item = Result<Frame>;
-
-    fn next(&mut self) -> Option<Result<Frame>> {
-        let camera = self.drive.camera.as_ref();
-        while let Some((index, cloud)) = self.ready.pop_front() {
-            if let Some(frame) = self.hand_on(index, &cloud) {
-                return Some(frame);
-            }
-        }
-        while !self.stream_ended {
-            let message = match self.stream.next() {
-                Some(Ok(message)) => message,
-                None => break,
-                // A corrupt stretch of the file: with --keep-going, what came before counts.
-                // A damaged chunk: its clouds were never indexed, the rest follows.
-                Some(Err(error @ Error::LogChunk { .. })) => {
-                    if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
-                        self.stream_ended = true;
-                        return Some(Err(error));
-                    }
-                    continue;
-                }
-                Some(Err(error)) => {
-                    self.stream_ended = true;
-                    let error = match error {
-                        Error::LogRecord {
-                            path,
-                            ordinal,
-                            problem,
-                        } => Error::LogUnreadableFrom {
-                            path,
-                            cloud: self.next_cloud,
-                            problem: format!("message {ordinal}: {problem}"),
-                        },
-                        other => other,
-                    };
-                    if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
-                        return Some(Err(error));
-                    }
-                    break;
-                }
-            };
-            if let Some(camera) = camera
-                && message.connection.topic == camera.topic
-            {
-                match camera.encoding.decode::<HeaderOnly>(&message.data) {
-                    Ok(header) => self
-                        .images
-                        .push((header.header.stamp.to_ns(), message.data)),
-                    Err(problem) => {
-                        return Some(Err(Error::LogImage {
-                            path: self.drive.path.clone(),
-                            topic: message.connection.topic.clone(),
-                            stamp_ns: message.log_time_ns,
-                            problem,
-                        }));
-                    }
-                }
-                continue;
-            }
-            if message.connection.topic != self.drive.cloud_topic {
-                continue;
-            }
-            let clouds = match &mut self.assembler {
-                None => vec![Cloud::Message(message)],
-                Some(assembler) => match scans_of(assembler, &message) {
-                    Ok(scans) => scans.into_iter().map(Cloud::Packets).collect(),
-                    Err(problem) => {
-                        let error = self.drive.cloud_error(self.next_cloud, problem);
-                        if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
-                            self.stream_ended = true;
-                            return Some(Err(error));
-                        }
-                        continue;
-                    }
-                },
-            };
-            for cloud in clouds {
-                let finished = self.pending.take();
-                let current = self.next_cloud;
-                self.next_cloud += 1;
-                if current >= self.frames.end {
-                    self.stream_ended = true;
-                } else if current >= self.frames.start {
-                    self.pending = Some((current, cloud));
-                }
-                self.ready.extend(finished);
-            }
-            while let Some((index, cloud)) = self.ready.pop_front() {
-                if let Some(frame) = self.hand_on(index, &cloud) {
-                    return Some(frame);
-                }
-            }
-        }
-        self.stream_ended = true;
-        let pending = self.pending.take();
-        self.ready.extend(pending);
-        while let Some((index, cloud)) = self.ready.pop_front() {
-            if let Some(frame) = self.hand_on(index, &cloud) {
-                return Some(frame);
-            }
-        }
-        None
-    }
-}
-
-/// The scans a packet message completes.
-fn scans_of(
-    assembler: &mut ScanAssembler,
-    message: &LogMessage,
-) -> std::result::Result<Vec<Vec<VelodynePoint>>, String> {
-    let encoding = message
-        .connection
-        .encoding()
-        .ok_or_else(|| format!("message encoding `{}`", message.connection.message_encoding))?;
-    let scan = scan_message(&message.data, encoding)?;
-    let mut scans = Vec::new();
-    for (stamp_ns, packet) in scan.packets {
-        scans.extend(assembler.push(packet, stamp_ns)?.map(|scan| scan.points));
-    }
-    Ok(scans)
+    })
 }

@@ -164,6 +164,7 @@ impl ScanFolder {
             labels: None,
             camera: None,
             dropped_points,
+            sensors: Vec::new(),
         })
     }
 }

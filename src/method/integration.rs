@@ -177,6 +177,7 @@ mod tests {
             labels: None,
             camera: None,
             dropped_points: 0,
+            sensors: Vec::new(),
         };
         let scan = scan_to_world(frame);
         let expected = [[10.0, 1.0, 2.0], [9.0, 0.0, 0.0]];

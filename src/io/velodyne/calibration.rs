@@ -140,6 +140,34 @@ impl Calibration {
         })
     }
 
+    /// The calibration of `model`: the YAML `file` when given, else the model's own
+    /// table; refused when its laser count is not the model's.
+    pub fn for_model(model: VelodyneModel, file: Option<&std::path::Path>) -> Result<Self, String> {
+        let calibration = match file {
+            Some(file) => {
+                let text = std::fs::read_to_string(file)
+                    .map_err(|e| format!("cannot read --lidar-calibration {}: {e}", file.display()))?;
+                Self::from_yaml(&text)
+                    .map_err(|e| format!("--lidar-calibration {}: {e}", file.display()))?
+            }
+            None => Self::builtin(model).ok_or_else(|| {
+                format!(
+                    "the {} has no built-in angle table: pass its calibration with --lidar-calibration FILE (velodyne_pointcloud / nebula YAML)",
+                    model.name()
+                )
+            })?,
+        };
+        if calibration.lasers() != model.lasers() {
+            return Err(format!(
+                "the packets are from a {} ({} lasers), the calibration has {} lasers",
+                model.name(),
+                model.lasers(),
+                calibration.lasers()
+            ));
+        }
+        Ok(calibration)
+    }
+
     pub fn lasers(&self) -> usize {
         self.lasers.len()
     }

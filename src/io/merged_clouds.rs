@@ -1,0 +1,74 @@
+//! Several LiDARs in one scan: the clouds of the other sensors' topics, held until
+//! the scan they belong to (the nearest in time, within half a period) is read, and
+//! moved into the scan's frame through the transform tree.
+
+use nalgebra::{Isometry3, Point3};
+
+use super::cloud::{CloudPoints, cloud_points};
+use super::log_message::LogMessage;
+use super::ros::PointCloud2;
+use crate::error::{Error, Result};
+
+/// A cloud of a merged topic waiting for its scan: its stamp, the topic's place in
+/// [`RosDrive`]'s `merged`, and the message.
+pub(super) struct MergedCloud {
+    pub(super) stamp_ns: u64,
+    pub(super) topic: usize,
+    pub(super) message: LogMessage,
+}
+
+/// The median time between clouds (100 ms with fewer than two).
+pub(super) fn median_period_ns(stamps_ns: &[u64]) -> u64 {
+    let mut periods: Vec<u64> = stamps_ns
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]))
+        .collect();
+    periods.sort_unstable();
+    periods
+        .get(periods.len() / 2)
+        .copied()
+        .unwrap_or(100_000_000)
+}
+
+/// `points` with every merged topic's nearest cloud (within half a period of
+/// `stamp_ns`) moved into the clouds' frame by `cloud_from_frame(frame, its
+/// stamp)`, and the merged topics the scan holds; a topic with no cloud near is left
+/// out of this scan only. Labels stay only when every cloud has them.
+pub(super) fn merge(
+    mut points: CloudPoints,
+    stamp_ns: u64,
+    period_ns: u64,
+    topics: &[(String, String)],
+    clouds: &[MergedCloud],
+    cloud_error: &dyn Fn(&str, String) -> Error,
+    cloud_from_frame: &dyn Fn(&str, u64) -> Result<Isometry3<f64>>,
+) -> Result<(CloudPoints, Vec<String>)> {
+    let mut merged = Vec::new();
+    for (at, (topic, frame)) in topics.iter().enumerate() {
+        let nearest = clouds
+            .iter()
+            .filter(|c| c.topic == at && c.stamp_ns.abs_diff(stamp_ns) <= period_ns / 2)
+            .min_by_key(|c| c.stamp_ns.abs_diff(stamp_ns));
+        let Some(other) = nearest else { continue };
+        let fail = |problem: String| cloud_error(topic, problem);
+        let encoding = (other.message.connection.encoding())
+            .ok_or_else(|| fail("an encoding travmap does not read".into()))?;
+        let cloud: PointCloud2 = encoding.decode(&other.message.data).map_err(fail)?;
+        let other_points = cloud_points(&cloud).map_err(fail)?;
+        let pose = cloud_from_frame(frame, other.stamp_ns)?;
+        points.points.extend(other_points.points.iter().map(|p| {
+            let q = pose * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            [q.x as f32, q.y as f32, q.z as f32, p[3]]
+        }));
+        points.labels = match (points.labels.take(), other_points.labels) {
+            (Some(mut labels), Some(more)) => {
+                labels.extend(more);
+                Some(labels)
+            }
+            _ => None,
+        };
+        points.dropped += other_points.dropped;
+        merged.push(topic.clone());
+    }
+    Ok((points, merged))
+}

@@ -1,0 +1,181 @@
+//! Several LiDARs merged into one scan per period (`--cloud-topic all`): a log made
+//! from the shipped real scans, each split into two sensors' clouds (the first half
+//! of its points as `/front_points` in the scanner's frame, the second half as
+//! `/rear_points` in a rear sensor's frame, turned around and mounted 1.5 m back
+//! and 0.25 m up on /tf_static), must give the same scans and grids as the scans
+//! themselves.
+
+mod common;
+
+use std::path::Path;
+
+use common::{arg, assert_contains, clean_failure, json_records, success, travmap};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use travmap::io::format::InputFormat;
+use travmap::io::log::Log;
+use travmap::io::ros::{Header, TfMessage, Time, TransformStamped};
+use travmap::io::ros_drive::{DriveOptions, MergedTopics, RosDrive};
+use travmap::outputs::conversion::{scan_to_cloud, transform_from_pose};
+use travmap::outputs::mcap_writer::Compression;
+use travmap::outputs::writing::McapSink;
+
+fn rear_from_velodyne() -> Isometry3<f64> {
+    let velodyne_from_rear = Isometry3::from_parts(
+        Translation3::new(-1.5, 0.0, 0.25),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::PI),
+    );
+    velodyne_from_rear.inverse()
+}
+
+fn tf(stamp_ns: u64, parent: &str, child: &str, pose: &Isometry3<f64>) -> TfMessage {
+    TfMessage {
+        transforms: vec![TransformStamped {
+            header: Header {
+                stamp: Time::from_ns(stamp_ns),
+                frame_id: parent.into(),
+            },
+            child_frame_id: child.into(),
+            transform: transform_from_pose(pose),
+        }],
+    }
+}
+
+/// The shipped drive as a two-sensor log; the rear sensor falls silent for the
+/// last scan. Returns the number of points of each scan.
+fn write_two_sensor_log(seq: &Path, path: &Path) -> Vec<usize> {
+    let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
+    let mut sink = McapSink::create(path, Compression::Zstd).unwrap();
+    sink.write(
+        "/tf_static",
+        0,
+        &tf(0, "velodyne", "rear", &rear_from_velodyne().inverse()),
+    )
+    .unwrap();
+    let frames: Vec<_> = source.read(&(0..usize::MAX)).map(Result::unwrap).collect();
+    let mut sizes = Vec::new();
+    for (i, frame) in frames.iter().enumerate() {
+        let stamp = 1_600_000_000_000_000_000 + frame.stamp_ns;
+        sink.write(
+            "/tf",
+            stamp,
+            &tf(stamp, "map", "velodyne", &frame.world_from_velodyne),
+        )
+        .unwrap();
+        let half = frame.points_in_velodyne.len() / 2;
+        let front = travmap::frame::Frame {
+            points_in_velodyne: frame.points_in_velodyne[..half].to_vec(),
+            labels: frame.labels.as_ref().map(|l| l[..half].to_vec()),
+            ..frame.clone()
+        };
+        let rear_pose = rear_from_velodyne();
+        let rear = travmap::frame::Frame {
+            points_in_velodyne: frame.points_in_velodyne[half..]
+                .iter()
+                .map(|p| {
+                    let q =
+                        rear_pose * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                    [q.x as f32, q.y as f32, q.z as f32, p[3]]
+                })
+                .collect(),
+            labels: frame.labels.as_ref().map(|l| l[half..].to_vec()),
+            ..frame.clone()
+        };
+        sink.write("/front_points", stamp, &scan_to_cloud(&front, stamp))
+            .unwrap();
+        let mut rear_cloud = scan_to_cloud(&rear, stamp);
+        rear_cloud.header.frame_id = "rear".into();
+        // 20 ms after the front: within half a period.
+        if i + 1 < frames.len() {
+            sink.write("/rear_points", stamp + 20_000_000, &rear_cloud)
+                .unwrap();
+        }
+        sizes.push(frame.points_in_velodyne.len());
+    }
+    sink.finish().unwrap();
+    sizes
+}
+
+#[test]
+fn two_sensors_merge_into_the_scans_they_were_cut_from() {
+    let Some(seq) = common::sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let log_path = dir.path().join("two.mcap");
+    let sizes = write_two_sensor_log(&seq, &log_path);
+
+    // Without a choice: the two topics are named, with the hint for `all`.
+    let err = clean_failure(travmap(&["run", arg(&log_path)]));
+    assert_contains(
+        &err,
+        &[
+            "several PointCloud2 topics",
+            "--cloud-topic all",
+            "/rear_points",
+        ],
+    );
+
+    // The library: every scan holds both sensors but the last, all points in the
+    // front sensor's frame, back where they were.
+    let options = DriveOptions {
+        merged_topics: MergedTopics::All,
+        ..Default::default()
+    };
+    let drive = RosDrive::open(Log::open(&log_path, InputFormat::Mcap).unwrap(), &options).unwrap();
+    assert_eq!(drive.cloud_topic(), "/front_points");
+    let source = travmap::io::Source::open(&seq, &Default::default(), &|_| {}).unwrap();
+    let originals: Vec<_> = source.read(&(0..usize::MAX)).map(Result::unwrap).collect();
+    let frames: Vec<_> = drive.read(&(0..usize::MAX)).map(Result::unwrap).collect();
+    assert_eq!(frames.len(), sizes.len());
+    for (i, (frame, original)) in frames.iter().zip(&originals).enumerate() {
+        let last = i + 1 == frames.len();
+        let sensors: Vec<&str> = frame.sensors.iter().map(String::as_str).collect();
+        if last {
+            assert_eq!(sensors, ["/front_points"], "the rear fell silent");
+            assert_eq!(frame.points_in_velodyne.len(), sizes[i] / 2);
+            continue;
+        }
+        assert_eq!(sensors, ["/front_points", "/rear_points"]);
+        assert_eq!(frame.points_in_velodyne.len(), sizes[i]);
+        let worst = frame
+            .points_in_velodyne
+            .iter()
+            .zip(&original.points_in_velodyne)
+            .map(|(a, b)| (0..3).map(|k| (a[k] - b[k]).abs()).fold(0.0f32, f32::max))
+            .fold(0.0f32, f32::max);
+        assert!(worst < 1e-4, "frame {i}: a point moved {worst} m");
+        assert_eq!(frame.labels, original.labels, "labels follow their points");
+    }
+
+    // The command line: the merged drive's grids are the scans' own.
+    let merged = success(travmap(&[
+        "run",
+        arg(&log_path),
+        "--cloud-topic",
+        "all",
+        "--json",
+    ]));
+    let (merged, _) = json_records(&merged);
+    let (own, _) = json_records(&success(travmap(&["run", arg(&seq), "--json"])));
+    let cells = |f: &serde_json::Value| f["cells"].as_array().unwrap().clone();
+    for i in 0..own.len() - 1 {
+        let (a, b) = (cells(&merged[i]), cells(&own[i]));
+        let same = a.iter().zip(&b).filter(|(x, y)| x == y).count();
+        println!("frame {i}: {same} of {} cells as the scan's own", a.len());
+        assert!(
+            same * 1000 >= a.len() * 998,
+            "frame {i}: {same} of {} cells",
+            a.len()
+        );
+    }
+    // Naming the topics does the same as `all`.
+    let named = travmap(&[
+        "run",
+        arg(&log_path),
+        "--cloud-topic",
+        "/front_points",
+        "--cloud-topic",
+        "/rear_points",
+        "--json",
+    ]);
+    let (named, _) = json_records(&success(named));
+    assert_eq!(cells(&named[0]), cells(&merged[0]));
+}
