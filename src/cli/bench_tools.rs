@@ -212,6 +212,7 @@ pub fn bench_tools(
         Recording::Kitti(..) => "kitti",
         Recording::Log(..) => "log",
         Recording::Scans(..) => "scans",
+        Recording::Site(..) => "site",
     };
     let frames = selection.source.frames_in(&selection.frames).len();
     let mut converted: Option<PathBuf> = None;

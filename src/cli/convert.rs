@@ -86,7 +86,7 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
     let selections = [selection];
     let sequence = match &selections[0].source.recording {
         Recording::Kitti(sequence) => sequence,
-        Recording::Scans(..) => bail!(
+        Recording::Scans(..) | Recording::Site(..) => bail!(
             "convert takes a KITTI sequence directory or a recorded log, not a folder of scans"
         ),
         Recording::Log(drive) => {

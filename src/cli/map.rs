@@ -5,6 +5,9 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
+use travmap::drive::Selection;
+use travmap::io::format::is_pcd_file;
+use travmap::io::{Recording, Source};
 use travmap::outputs::drive_map::{render_drive_map, write_map_cells};
 use travmap::outputs::nav2_map::{Nav2Mode, image_path, write_nav2_map};
 use travmap::outputs::preflight::check_distinct_outputs;
@@ -61,7 +64,7 @@ impl Nav2ModeArg {
 
 pub fn map(args: MapArgs) -> Result<Outcome> {
     let cell_px = args.cell_pixels;
-    let config = &args.inputs.settings.load()?;
+    let mut config = args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
     let inputs = args.inputs.files(args.model.path.as_deref());
     let nav2_mode = args.nav2_mode.mode();
@@ -75,10 +78,22 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     for path in &outputs {
         check_output(path, &inputs)?;
     }
-    let (model, model_name) = args.model.load(config)?;
-    let selection = args
-        .inputs
-        .open_one(config.appearance.enabled, "map takes one input")?;
+    let (model, model_name) = args.model.load(&config)?;
+    let selection = match args.inputs.sequences.as_slice() {
+        [path] if is_pcd_file(path) => {
+            // A tile is the whole window: its neighbours' points are its own.
+            config.integration.scans = 1;
+            let source = Source::site_cloud(path, config.grid.size_m)?;
+            if let (Recording::Site(site), false) = (&source.recording, output.quiet) {
+                eprintln!("notice: {}", site.notice());
+            }
+            Selection::new(source, args.inputs.frames.clone().unwrap_or(0..usize::MAX))
+        }
+        _ => args
+            .inputs
+            .open_one(config.appearance.enabled, "map takes one input")?,
+    };
+    let config = &config;
     let selections = [selection];
     let bar = output.progress(frame_count(&selections), "mapping");
     let mut trajectory = Vec::new();

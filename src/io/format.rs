@@ -42,6 +42,20 @@ pub const READABLE: &str = "travmap reads KITTI / SemanticKITTI sequence directo
 pub const BAG_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
 
 /// Formats known by their first bytes, readable (`Ok`) or named in a refusal (`Err`).
+/// How a PCD file begins: with its comment line, or straight with its version.
+const PCD_MAGICS: [&[u8]; 2] = [b"# .PCD", b"VERSION ."];
+const SINGLE_PCD: &str = "a single PCD point cloud (`travmap map` reads one as a site map; a folder of .pcd scans is a drive: put them in one)";
+
+/// Whether `path` is one PCD file (a site cloud for `travmap map`).
+pub fn is_pcd_file(path: &Path) -> bool {
+    let mut head = [0u8; 9];
+    let read = std::fs::File::open(path).and_then(|mut file| {
+        use std::io::Read;
+        file.read(&mut head)
+    });
+    path.is_file() && read.is_ok_and(|n| PCD_MAGICS.iter().any(|m| head[..n].starts_with(m)))
+}
+
 const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
     (b"\x89MCAP0\r\n", Ok(InputFormat::Mcap)),
     (BAG_MAGIC, Ok(InputFormat::Bag)),
@@ -53,14 +67,8 @@ const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
         ),
     ),
     (b"\x89MCAP", Err("an MCAP file of a version other than 0")),
-    (
-        b"# .PCD",
-        Err("a single PCD point cloud (a folder of .pcd scans is a drive: put it in one)"),
-    ),
-    (
-        b"VERSION .",
-        Err("a single PCD point cloud (a folder of .pcd scans is a drive: put it in one)"),
-    ),
+    (PCD_MAGICS[0], Err(SINGLE_PCD)),
+    (PCD_MAGICS[1], Err(SINGLE_PCD)),
     (b"ply\n", Err("a PLY point cloud")),
     (b"ply\r\n", Err("a PLY point cloud")),
     (

@@ -25,6 +25,7 @@ pub mod ros1;
 pub mod ros_drive;
 pub mod rosbag2;
 pub mod scan_folder;
+pub mod site_cloud;
 mod skips;
 mod source;
 pub mod transforms;

@@ -9,6 +9,7 @@ use super::kitti::KittiSequence;
 use super::log::Log;
 use super::ros_drive::{DriveOptions, RosDrive};
 use super::scan_folder::ScanFolder;
+use super::site_cloud::SiteCloud;
 use super::skips::{Skip, SkipLog};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
@@ -20,6 +21,8 @@ pub enum Recording {
     Kitti(Box<KittiSequence>),
     Log(Box<RosDrive>),
     Scans(Box<ScanFolder>),
+    /// One saved point cloud read as tiles (site maps).
+    Site(Box<SiteCloud>),
 }
 
 /// The world frame of inputs that do not name one (KITTI, folders of scans).
@@ -79,12 +82,23 @@ impl Source {
         })
     }
 
+    /// One saved point cloud (a PCD file) as a site: tiles of `grid_size_m` read
+    /// as frames posed by their virtual sensors (see [`SiteCloud`]).
+    pub fn site_cloud(path: &Path, grid_size_m: f64) -> Result<Self> {
+        Ok(Self {
+            recording: Recording::Site(Box::new(SiteCloud::open(path, grid_size_m)?)),
+            posing: Posing::Recorded,
+            read_labels: true,
+        })
+    }
+
     /// The frame the scans are in, as written to MCAP (`header.frame_id`).
     pub fn sensor_frame(&self) -> &str {
         match &self.recording {
             Recording::Kitti(..) => "velodyne",
             Recording::Log(drive) => drive.cloud_frame(),
             Recording::Scans(..) => super::scan_folder::SENSOR_FRAME,
+            Recording::Site(..) => super::site_cloud::SENSOR_FRAME,
         }
     }
 
@@ -92,7 +106,7 @@ impl Source {
     pub fn world_frame(&self) -> &str {
         match &self.recording {
             Recording::Log(drive) => drive.world_frame(),
-            Recording::Kitti(..) | Recording::Scans(..) => WORLD_FRAME,
+            Recording::Kitti(..) | Recording::Scans(..) | Recording::Site(..) => WORLD_FRAME,
         }
     }
 
@@ -112,6 +126,7 @@ impl Source {
             Recording::Kitti(sequence) => sequence.recorded_poses(),
             Recording::Log(drive) => Ok(drive.recorded_poses()),
             Recording::Scans(..) => Ok(Vec::new()),
+            Recording::Site(site) => Ok(site.poses()),
         }
     }
 
@@ -141,6 +156,7 @@ impl Source {
             Recording::Kitti(sequence) => &mut sequence.skips,
             Recording::Log(drive) => &mut drive.skips,
             Recording::Scans(folder) => &mut folder.skips,
+            Recording::Site(site) => &mut site.skips,
         }
     }
 
@@ -150,6 +166,7 @@ impl Source {
             Recording::Kitti(sequence) => &sequence.skips,
             Recording::Log(drive) => &drive.skips,
             Recording::Scans(folder) => &folder.skips,
+            Recording::Site(site) => &site.skips,
         }
     }
 
@@ -163,6 +180,7 @@ impl Source {
             Recording::Kitti(s) => s.dir(),
             Recording::Log(d) => d.path(),
             Recording::Scans(f) => f.dir(),
+            Recording::Site(site) => site.path(),
         }
     }
 
@@ -174,6 +192,7 @@ impl Source {
                 (range.start.min(d.frame_count())..range.end.min(d.frame_count())).collect()
             }
             Recording::Scans(f) => f.frames_in(range),
+            Recording::Site(site) => site.frames_in(range),
         }
     }
 
@@ -211,6 +230,11 @@ impl Source {
                 folder.frames_in(range),
                 &folder.skips,
                 |index| folder.read_frame(index),
+            )),
+            Recording::Site(site) => Box::new(frame_by_frame(
+                site.frames_in(range),
+                &site.skips,
+                |index| site.read_frame(index),
             )),
         }
     }

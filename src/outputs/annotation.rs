@@ -191,8 +191,8 @@ pub fn annotate(
                     write_log_messages(&mut sink, drive, true, &|_, _| {})?.messages;
             }
         }
-        // A folder of scans has no messages to pass through.
-        Recording::Scans(..) => {}
+        // A folder of scans or a site cloud has no messages to pass through.
+        Recording::Scans(..) | Recording::Site(..) => {}
     }
     let world_frame = selection.source.world_frame().to_string();
     let posing = selection.source.posing();

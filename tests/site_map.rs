@@ -1,0 +1,115 @@
+//! `travmap map site.pcd`: a site map from one saved point cloud with no trajectory.
+//! The six shipped scans merged into one world-frame PCD (with their labels) against
+//! the drive map of the same scans.
+
+mod common;
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use common::{arg, json_summary};
+use parquet::file::reader::{FileReader, SerializedFileReader};
+
+/// The shipped drive's scans in the world frame, as one binary PCD with labels.
+fn write_site_pcd(seq: &Path, path: &Path) -> usize {
+    let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
+    let mut data = Vec::new();
+    let mut points = 0;
+    for frame in source.read(&(0..usize::MAX)) {
+        let frame = frame.unwrap();
+        // Frames 3-5 have no labels: 0 is SemanticKITTI's "unlabeled", never scored.
+        let n = frame.points_in_velodyne.len();
+        let labels = frame.labels.clone().unwrap_or_else(|| vec![0; n]);
+        for (p, label) in frame.points_in_velodyne.iter().zip(labels) {
+            let q = frame.world_from_velodyne
+                * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            for v in [q.x as f32, q.y as f32, q.z as f32, p[3]] {
+                data.extend_from_slice(&v.to_le_bytes());
+            }
+            data.extend_from_slice(&label.to_le_bytes());
+            points += 1;
+        }
+    }
+    let header = format!(
+        "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity label\nSIZE 4 4 4 4 4\nTYPE F F F F U\nCOUNT 1 1 1 1 1\nWIDTH {points}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {points}\nDATA binary\n"
+    );
+    let mut bytes = header.into_bytes();
+    bytes.extend_from_slice(&data);
+    std::fs::write(path, bytes).unwrap();
+    points
+}
+
+/// Seen cells of a map's Parquet table: world cell -> (predicted traversable, truth).
+fn seen_cells(path: &Path) -> HashMap<[i64; 2], (Option<bool>, Option<bool>)> {
+    let reader = SerializedFileReader::new(std::fs::File::open(path).unwrap()).unwrap();
+    let mut cells = HashMap::new();
+    for row in reader.get_row_iter(None).unwrap() {
+        let row = row.unwrap();
+        let values: Vec<String> = row.get_column_iter().map(|(_, v)| v.to_string()).collect();
+        let number = |i: usize| values[i].parse::<f64>().unwrap();
+        let flag = |i: usize| values[i].parse::<bool>().ok();
+        if number(4) <= 0.0 {
+            continue;
+        }
+        let key = [
+            (number(0) / 0.4).floor() as i64,
+            (number(1) / 0.4).floor() as i64,
+        ];
+        cells.insert(key, (flag(5), flag(6)));
+    }
+    cells
+}
+
+#[test]
+fn a_site_cloud_maps_the_drive_it_was_merged_from() {
+    let Some(seq) = common::sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let site = dir.path().join("site.pcd");
+    let points = write_site_pcd(&seq, &site);
+    let drive_cells = dir.path().join("drive.parquet");
+    let site_cells = dir.path().join("site.parquet");
+    let out = |name: &str| dir.path().join(name);
+    let drive = json_summary(&[
+        "map",
+        arg(&seq),
+        "-o",
+        arg(&out("drive.png")),
+        "--cells",
+        arg(&drive_cells),
+    ]);
+    let site_map = json_summary(&[
+        "map",
+        arg(&site),
+        "-o",
+        arg(&out("site.png")),
+        "--cells",
+        arg(&site_cells),
+        "--nav2",
+        arg(&out("site.yaml")),
+    ]);
+    assert!(out("site.pgm").exists());
+    let (drive_seen, site_seen) = (seen_cells(&drive_cells), seen_cells(&site_cells));
+    let covered = drive_seen
+        .keys()
+        .filter(|k| site_seen.contains_key(*k))
+        .count();
+    let coverage = covered as f64 / drive_seen.len() as f64;
+    let common: Vec<_> = drive_seen
+        .iter()
+        .filter_map(|(k, d)| Some((d.0?, site_seen.get(k)?.0?)))
+        .collect();
+    let agree = common.iter().filter(|(a, b)| a == b).count() as f64 / common.len() as f64;
+    println!(
+        "{points} points, {} tiles; drive map {} seen cells, site map {}; {:.1} % of the drive map's cells covered, {:.1} % of the {} common cells agree; fused mIoU drive {:.1}, site {:.1}",
+        site_map["frames"],
+        drive_seen.len(),
+        site_seen.len(),
+        100.0 * coverage,
+        100.0 * agree,
+        common.len(),
+        100.0 * drive["fused_scores"]["miou"].as_f64().unwrap(),
+        100.0 * site_map["fused_scores"]["miou"].as_f64().unwrap(),
+    );
+    assert!(coverage >= 0.9, "{:.1} % covered", 100.0 * coverage);
+    assert!(agree >= 0.8, "{:.1} % agree", 100.0 * agree);
+}
