@@ -42,6 +42,16 @@ impl Column {
 
 /// Parses a PCD file into a cloud in frame `frame_id`; the error says what is wrong.
 pub fn parse_pcd(bytes: &[u8], frame_id: &str) -> Result<PointCloud2, String> {
+    parse_pcd_up_to(bytes, frame_id, LARGEST_CLOUD_BYTES)
+}
+
+/// [`parse_pcd`] for a cloud of up to `largest_bytes` of point data (a site map is
+/// bigger than any scan).
+pub fn parse_pcd_up_to(
+    bytes: &[u8],
+    frame_id: &str,
+    largest_bytes: usize,
+) -> Result<PointCloud2, String> {
     let mut columns: Vec<Column> = Vec::new();
     let (mut width, mut height, mut points) = (None, 1usize, None);
     let mut at = 0;
@@ -128,9 +138,9 @@ pub fn parse_pcd(bytes: &[u8], frame_id: &str) -> Result<PointCloud2, String> {
     }
     let total = points
         .checked_mul(point_step)
-        .filter(|total| *total <= LARGEST_CLOUD_BYTES)
+        .filter(|total| *total <= largest_bytes)
         .ok_or_else(|| {
-            format!("{points} points of {point_step} bytes: more than the {LARGEST_CLOUD_BYTES} bytes travmap reads")
+            format!("{points} points of {point_step} bytes: more than the {largest_bytes} bytes travmap reads")
         })?;
     let body = &bytes[at..];
     let data = match data_kind.as_str() {

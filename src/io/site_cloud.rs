@@ -11,15 +11,17 @@
 //! of many passes is denser than the 3-scan window the model was trained on, and
 //! `integration.scans` is 1 (the tile is the whole window).
 //!
-//! The cloud is read whole into memory (16 bytes a point, 4 more with labels).
+//! The cloud is read whole into memory: 16 bytes a point (4 more with labels) and 4
+//! for its bucket, after the file and its decoded copy are let go.
 
+use std::collections::HashMap;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 use super::cloud::cloud_points;
-use super::pcd::parse_pcd;
+use super::pcd::parse_pcd_up_to;
 use super::skips::SkipLog;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, RemissionScale};
@@ -38,7 +40,8 @@ const TILE_PERIOD_NS: u64 = 100_000_000;
 
 struct Tile {
     sensor_in_world: [f64; 3],
-    points: Vec<u32>,
+    /// The 2 x 2 buckets (half a tile square each) the tile covers.
+    buckets: [[i64; 2]; 4],
 }
 
 /// An opened site cloud and its tiles.
@@ -47,6 +50,8 @@ pub struct SiteCloud {
     points: Vec<[f32; 4]>,
     labels: Option<Vec<u32>>,
     remission: RemissionScale,
+    /// Point indices by bucket of half a tile.
+    buckets: HashMap<[i64; 2], Vec<u32>>,
     tiles: Vec<Tile>,
     tile_m: f64,
     pub(super) skips: SkipLog,
@@ -59,16 +64,21 @@ impl SiteCloud {
             path: path.to_path_buf(),
             message,
         };
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        let cloud = parse_pcd(&bytes, SENSOR_FRAME).map_err(fail)?;
-        let read = cloud_points(&cloud).map_err(fail)?;
+        // The file and its decoded cloud are let go before the tiles are made.
+        let read = {
+            let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+            // A compressed file may hold more than it measures; not a thousandfold.
+            let largest = (bytes.len().saturating_mul(8)).max(1 << 30);
+            let cloud = parse_pcd_up_to(&bytes, SENSOR_FRAME, largest).map_err(fail)?;
+            cloud_points(&cloud).map_err(fail)?
+        };
         if read.points.is_empty() {
             return Err(fail("the cloud holds no point".into()));
         }
         let step = grid_size_m / 2.0;
         let key = |v: f32| (v as f64 / step).floor() as i64;
         // Buckets of step x step metres; a tile is the 2 x 2 buckets around a corner.
-        let mut buckets: std::collections::HashMap<[i64; 2], Vec<u32>> = Default::default();
+        let mut buckets: HashMap<[i64; 2], Vec<u32>> = HashMap::new();
         for (i, p) in read.points.iter().enumerate() {
             buckets
                 .entry([key(p[0]), key(p[1])])
@@ -82,23 +92,25 @@ impl SiteCloud {
         corners.sort_unstable();
         corners.dedup();
         let mut tiles = Vec::new();
+        let mut heights = Vec::new();
         for [cx, cy] in corners {
-            let points: Vec<u32> = [[cx - 1, cy - 1], [cx, cy - 1], [cx - 1, cy], [cx, cy]]
-                .iter()
-                .filter_map(|b| buckets.get(b))
-                .flatten()
-                .copied()
-                .collect();
-            if points.len() < MIN_TILE_POINTS {
+            let tile_buckets = [[cx - 1, cy - 1], [cx, cy - 1], [cx - 1, cy], [cx, cy]];
+            heights.clear();
+            heights.extend(
+                tile_buckets
+                    .iter()
+                    .filter_map(|b| buckets.get(b))
+                    .flatten()
+                    .map(|&i| read.points[i as usize][2]),
+            );
+            if heights.len() < MIN_TILE_POINTS {
                 continue;
             }
-            let mut heights: Vec<f32> =
-                points.iter().map(|&i| read.points[i as usize][2]).collect();
             let at = ((heights.len() - 1) as f64 * GROUND_QUANTILE) as usize;
             let ground = *heights.select_nth_unstable_by(at, f32::total_cmp).1 as f64;
             tiles.push(Tile {
                 sensor_in_world: [cx as f64 * step, cy as f64 * step, ground + SENSOR_HEIGHT_M],
-                points,
+                buckets: tile_buckets,
             });
         }
         Ok(Self {
@@ -106,10 +118,21 @@ impl SiteCloud {
             points: read.points,
             labels: read.labels,
             remission: read.remission,
+            buckets,
             tiles,
             tile_m: grid_size_m,
             skips: SkipLog::default(),
         })
+    }
+
+    /// The points of tile `index`, by their place in the cloud.
+    fn tile_points(&self, index: usize) -> impl Iterator<Item = usize> + '_ {
+        self.tiles[index]
+            .buckets
+            .iter()
+            .filter_map(|b| self.buckets.get(b))
+            .flatten()
+            .map(|&i| i as usize)
     }
 
     pub fn path(&self) -> &Path {
@@ -143,13 +166,11 @@ impl SiteCloud {
 
     /// Tile `index` as a frame: its points relative to its sensor.
     pub fn read_frame(&self, index: usize) -> Result<Frame> {
-        let tile = &self.tiles[index];
-        let [x, y, z] = tile.sensor_in_world;
-        let points_in_velodyne = tile
-            .points
-            .iter()
-            .map(|&i| {
-                let p = self.points[i as usize];
+        let [x, y, z] = self.tiles[index].sensor_in_world;
+        let points_in_velodyne = self
+            .tile_points(index)
+            .map(|i| {
+                let p = self.points[i];
                 let relative = |v: f32, origin: f64| (v as f64 - origin) as f32;
                 [
                     relative(p[0], x),
@@ -162,7 +183,7 @@ impl SiteCloud {
         let labels = self
             .labels
             .as_ref()
-            .map(|labels| tile.points.iter().map(|&i| labels[i as usize]).collect());
+            .map(|labels| self.tile_points(index).map(|i| labels[i]).collect());
         Ok(Frame {
             index,
             stamp_ns: index as u64 * TILE_PERIOD_NS,
