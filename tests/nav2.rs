@@ -270,3 +270,47 @@ fn a_nav2_map_beside_an_input_or_twice_named_is_refused() {
     common::assert_contains(&err, &["site.png"]);
     assert!(!yaml.exists() && !png.exists());
 }
+
+#[test]
+fn annotate_writes_the_final_map_once_on_a_latched_map_topic() {
+    let Some(seq) = common::sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("a.mcap");
+    common::write_output(
+        "annotate",
+        &seq,
+        &out,
+        &["--static-map", "--no-passthrough"],
+    );
+    let bytes = std::fs::read(&out).unwrap();
+    let maps: Vec<_> = mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(Result::unwrap)
+        .filter(|m| m.channel.topic == "/map")
+        .collect();
+    assert_eq!(maps.len(), 1, "the map is written once, at the end");
+    let qos = &maps[0].channel.metadata["offered_qos_profiles"];
+    assert!(
+        qos.contains("durability: 1") && qos.contains("reliability: 1"),
+        "{qos}"
+    );
+    let grid: travmap::io::ros::OccupancyGrid = travmap::io::ros::decode(&maps[0].data).unwrap();
+    assert_eq!(grid.header.frame_id, "map");
+    assert_eq!(grid.info.resolution, 0.4);
+    let cells = fused(&seq);
+    let (ox, oy) = (grid.info.origin.position.x, grid.info.origin.position.y);
+    let width = grid.info.width as usize;
+    for cell in cells.iter().filter(|c| c.observations > 0) {
+        let col = ((cell.x_m - ox) / 0.4).floor() as usize;
+        let row = ((cell.y_m - oy) / 0.4).floor() as usize;
+        let expected = match cell.class {
+            CellClass::Traversable => FREE,
+            CellClass::NonTraversable => OCCUPIED,
+            CellClass::Unknown => UNKNOWN,
+        };
+        assert_eq!(grid.data[row * width + col], expected, "{cell:?}");
+    }
+    let unseen = grid.data.iter().filter(|&&v| v == UNKNOWN).count();
+    let seen = cells.iter().filter(|c| c.observations > 0).count();
+    assert!(unseen >= grid.data.len() - seen);
+}

@@ -33,6 +33,11 @@ pub struct AnnotateArgs {
     /// Do not copy the input's messages into the output.
     #[arg(long)]
     no_passthrough: bool,
+    /// Also write the final fused map once, at the end, on /map: an OccupancyGrid as
+    /// nav2's map_server serves it (0 traversable, 100 not, -1 unseen), offered
+    /// transient-local so that a replayed bag feeds a static map layer.
+    #[arg(long)]
+    static_map: bool,
     /// Height of the drawn grids relative to the sensor, metres.
     #[arg(long, default_value_t = -1.73, allow_negative_numbers = true, value_parser = super::parse_finite)]
     grid_height: f64,
@@ -46,6 +51,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
         compression: args.compression.compression(),
         passthrough: !args.no_passthrough,
         grid_height_m: args.grid_height,
+        static_map: args.static_map,
     };
     let (model, model_name) =
         (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;

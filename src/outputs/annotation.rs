@@ -29,7 +29,7 @@ use crate::method::classifier::SvmModel;
 use crate::method::grid::CellClass;
 use crate::method::pipeline::FrameResult;
 use crate::outputs::conversion::{transform_from_pose, write_kitti_frames, write_log_messages};
-use crate::outputs::drive_map::occupancy_grid;
+use crate::outputs::drive_map::{GridValues, occupancy_grid};
 use crate::outputs::mcap_writer::Compression;
 use crate::outputs::writing::McapSink;
 use crate::posing::Posing;
@@ -42,6 +42,8 @@ pub const CLOUD_TOPIC: &str = "/travmap/cloud";
 pub const METRICS_TOPIC: &str = "/travmap/metrics";
 /// The fused map of the drive so far ([`crate::method::fusion`]).
 pub const DRIVE_MAP_TOPIC: &str = "/travmap/drive_map";
+/// With [`AnnotationOptions::static_map`]: the final map once, as map_server serves it.
+pub const STATIC_MAP_TOPIC: &str = "/map";
 /// The drive map is written every this many frames, and after the last.
 pub const DRIVE_MAP_EVERY: usize = 10;
 
@@ -53,6 +55,8 @@ pub struct AnnotationOptions {
     /// Height of the drawn grids relative to the sensor, metres (KITTI's HDL-64E sits
     /// 1.73 m above the road).
     pub grid_height_m: f64,
+    /// Also write the final fused map once, at the end, on [`STATIC_MAP_TOPIC`].
+    pub static_map: bool,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -252,6 +256,7 @@ pub fn annotate(
                 &world_frame,
                 stamp,
                 options.grid_height_m,
+                GridValues::Probability,
             );
             sink.write(DRIVE_MAP_TOPIC, stamp, &grid)?;
         }
@@ -265,8 +270,22 @@ pub fn annotate(
             &world_frame,
             last_stamp_ns,
             options.grid_height_m,
+            GridValues::Probability,
         );
         sink.write(DRIVE_MAP_TOPIC, last_stamp_ns, &grid)?;
+    }
+    if options.static_map {
+        // At z 0 in the world frame, as a map layer expects; offered transient-local so
+        // that a replayed bag hands it to subscribers that join late, as map_server does.
+        let map = occupancy_grid(
+            &drive_map.cells(),
+            drive_map.cell_size_m(),
+            &world_frame,
+            last_stamp_ns,
+            0.0,
+            GridValues::Trinary,
+        );
+        sink.write_latched(STATIC_MAP_TOPIC, last_stamp_ns, &map)?;
     }
     let mut metadata = metadata;
     metadata.insert("poses".into(), posing.describe().into());

@@ -252,14 +252,24 @@ pub fn write_map_cells(path: &Path, cells: &[FusedCell]) -> Result<()> {
     output.commit()
 }
 
+/// How a fused cell becomes an OccupancyGrid value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GridValues {
+    /// 100 x P(not traversable), rounded: a costmap's view.
+    Probability,
+    /// 0 traversable, 100 not, -1 undecided: what nav2's map_server serves.
+    Trinary,
+}
+
 /// The fused map as an OccupancyGrid in `frame_id` at height `height_m`: -1 where no
-/// frame saw a cell, else 100 x P(not traversable), rounded.
+/// frame saw a cell, else the cell's value as `values` says.
 pub fn occupancy_grid(
     cells: &[FusedCell],
     cell_size_m: f64,
     frame_id: &str,
     stamp_ns: u64,
     height_m: f64,
+    values: GridValues,
 ) -> OccupancyGrid {
     let seen: Vec<FusedCell> = cells
         .iter()
@@ -271,7 +281,12 @@ pub fn occupancy_grid(
     for cell in &seen {
         let col = (cell.key[0] - low[0]) as usize;
         let row = (cell.key[1] - low[1]) as usize;
-        data[row * size[0] + col] = (100.0 * (1.0 - cell.probability)).round() as i8;
+        data[row * size[0] + col] = match (values, cell.class) {
+            (GridValues::Probability, _) => (100.0 * (1.0 - cell.probability)).round() as i8,
+            (GridValues::Trinary, CellClass::Traversable) => 0,
+            (GridValues::Trinary, CellClass::NonTraversable) => 100,
+            (GridValues::Trinary, CellClass::Unknown) => -1,
+        };
     }
     let stamp = Time::from_ns(stamp_ns);
     OccupancyGrid {

@@ -196,6 +196,25 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
 /// several compress at once.
 const CHUNK_BYTES: usize = 8 << 20;
 
+/// rosbag2's `offered_qos_profiles` for one publisher: reliable, transient local,
+/// keep last 1, the durations unset (rmw's "infinite"): how map_server offers `/map`.
+const TRANSIENT_LOCAL_QOS: &str = "- history: 1
+  depth: 1
+  reliability: 1
+  durability: 1
+  deadline:
+    sec: 2147483647
+    nsec: 4294967295
+  lifespan:
+    sec: 2147483647
+    nsec: 4294967295
+  liveliness: 1
+  liveliness_lease_duration:
+    sec: 2147483647
+    nsec: 4294967295
+  avoid_ros_namespace_conventions: false
+";
+
 /// Records queued for the writer thread before the caller waits: about three
 /// frames of `annotate`, so that a busy writer holds back the caller, not memory.
 const QUEUE: usize = 16;
@@ -365,6 +384,27 @@ impl McapSink {
         schema: &[u8],
         message_encoding: &str,
     ) -> Result<u16> {
+        let metadata = BTreeMap::new();
+        self.channel_with(
+            topic,
+            schema_name,
+            schema_encoding,
+            schema,
+            message_encoding,
+            metadata,
+        )
+    }
+
+    /// [`Self::channel`], created with `metadata` (rosbag2's QoS profiles, say).
+    fn channel_with(
+        &mut self,
+        topic: &str,
+        schema_name: &str,
+        schema_encoding: &str,
+        schema: &[u8],
+        message_encoding: &str,
+        metadata: BTreeMap<String, String>,
+    ) -> Result<u16> {
         if let Some(&id) = self.channels.get(topic) {
             return Ok(id);
         }
@@ -390,7 +430,7 @@ impl McapSink {
                 schema_id,
                 topic: topic.into(),
                 message_encoding: message_encoding.into(),
-                metadata: BTreeMap::new(),
+                metadata,
             },
             precompressed: precompressed_payload(schema_name),
         })?;
@@ -476,6 +516,24 @@ impl McapSink {
         let channel = self.channel(topic, T::NAME, "ros2msg", T::SCHEMA.as_bytes(), "cdr")?;
         // Log time = header stamp: tools that order by log time then show sensor time.
         self.write_raw(channel, stamp_ns, stamp_ns, bytes)
+    }
+
+    /// Writes a ROS 2 message on `topic`, whose channel offers rosbag2's
+    /// transient-local QoS (a latched topic: `ros2 bag play` republishes it so, and a
+    /// late subscriber such as nav2's static layer still receives it).
+    pub fn write_latched<T: RosMessage>(
+        &mut self,
+        topic: &str,
+        stamp_ns: u64,
+        message: &T,
+    ) -> Result<()> {
+        let metadata = BTreeMap::from([(
+            "offered_qos_profiles".to_string(),
+            TRANSIENT_LOCAL_QOS.to_string(),
+        )]);
+        let schema = T::SCHEMA.as_bytes();
+        let channel = self.channel_with(topic, T::NAME, "ros2msg", schema, "cdr", metadata)?;
+        self.write_raw(channel, stamp_ns, stamp_ns, encode(message, 0))
     }
 
     pub fn write_metadata(&mut self, name: &str, entries: BTreeMap<String, String>) -> Result<()> {
