@@ -442,3 +442,36 @@ fn commands_that_need_no_labels_ignore_a_broken_label_file() {
     let err = clean_failure(eval(dir.path()));
     assert_contains(&err, &["000001.label", "labels for"]);
 }
+
+#[test]
+fn a_pipe_as_input_is_refused_at_once_not_waited_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("drive.mcap");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    assert!(made.unwrap().success());
+    // No writer ever comes: opening the pipe would block for good.
+    for command in [
+        vec!["run", arg(&fifo)],
+        vec!["map", arg(&fifo), "-o", "never.png"],
+    ] {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_travmap"))
+            .args(&command)
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+        while child.try_wait().unwrap().is_none() {
+            if std::time::Instant::now() > deadline {
+                child.kill().unwrap();
+                panic!("{command:?} waited on a pipe with no writer");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        let output = child.wait_with_output().unwrap();
+        let err = clean_failure(output);
+        assert_contains(
+            &err,
+            &["drive.mcap", "a pipe", "save the stream to a file first"],
+        );
+    }
+}

@@ -48,12 +48,16 @@ const SINGLE_PCD: &str = "a single PCD point cloud (`travmap map` reads one as a
 
 /// Whether `path` is one PCD file (a site cloud for `travmap map`).
 pub fn is_pcd_file(path: &Path) -> bool {
+    // A regular file first: opening a pipe with no writer would block.
+    if !path.is_file() {
+        return false;
+    }
     let mut head = [0u8; 9];
     let read = std::fs::File::open(path).and_then(|mut file| {
         use std::io::Read;
         file.read(&mut head)
     });
-    path.is_file() && read.is_ok_and(|n| PCD_MAGICS.iter().any(|m| head[..n].starts_with(m)))
+    read.is_ok_and(|n| PCD_MAGICS.iter().any(|m| head[..n].starts_with(m)))
 }
 
 const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
@@ -88,6 +92,20 @@ const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
 ];
 
 /// The format of `path`, or an error that says what it is instead.
+/// What a file that is neither a regular file nor a folder is, in words.
+fn special_file(file_type: &std::fs::FileType) -> Option<&'static str> {
+    use std::os::unix::fs::FileTypeExt;
+    if file_type.is_fifo() {
+        Some("a pipe (a FIFO, or a shell's <(...) or /dev/stdin)")
+    } else if file_type.is_char_device() || file_type.is_block_device() {
+        Some("a device")
+    } else if file_type.is_socket() {
+        Some("a socket")
+    } else {
+        None
+    }
+}
+
 pub fn detect(path: &Path) -> Result<InputFormat> {
     let metadata = match std::fs::metadata(path) {
         Ok(metadata) => metadata,
@@ -98,6 +116,16 @@ pub fn detect(path: &Path) -> Result<InputFormat> {
         }
         Err(e) => return Err(Error::io(path, e)),
     };
+    // Opening a pipe with no writer blocks, and a stream cannot be memory-mapped:
+    // what is not a file or a folder is refused before it is opened.
+    if let Some(what) = special_file(&metadata.file_type()) {
+        return Err(unsupported(
+            path,
+            format!(
+                "{what}: travmap reads a log by memory-mapping it and reads it more than once; save the stream to a file first (e.g. `cat > drive.mcap`)"
+            ),
+        ));
+    }
     if metadata.is_dir() {
         return Ok(if path.join("metadata.yaml").is_file() {
             InputFormat::Rosbag2
