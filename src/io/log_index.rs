@@ -8,7 +8,7 @@ use std::path::Path;
 use serde::Deserialize;
 
 use super::log::Log;
-use super::log_message::LogMessage;
+use super::log_message::{LogMessage, ros2_type_name};
 use super::ros::{Header, MessageEncoding, Odometry, TfMessage, Transform};
 use super::transforms::{TransformTree, isometry};
 use super::velodyne::{DecoderSettings, ScanCutter, VELODYNE_SCAN, VelodyneModel, scan_message};
@@ -307,7 +307,7 @@ impl Contents {
             cloud_topics: self
                 .topics
                 .iter()
-                .filter(|(_, s)| *s == POINT_CLOUD || *s == VELODYNE_SCAN)
+                .filter(|(_, s)| matches!(ros2_type_name(s).as_ref(), POINT_CLOUD | VELODYNE_SCAN))
                 .map(|(t, _)| t.clone())
                 .collect(),
             all_topics: self

@@ -29,17 +29,20 @@ pub struct Connection {
 impl Connection {
     /// The ROS 2 name of the type (`pkg/msg/Type`), whichever ROS wrote it.
     pub fn type_name(&self) -> Cow<'_, str> {
-        match self.schema_name.split_once('/') {
-            Some((package, name)) if !name.contains('/') => {
-                Cow::Owned(format!("{package}/msg/{name}"))
-            }
-            _ => Cow::Borrowed(&self.schema_name),
-        }
+        ros2_type_name(&self.schema_name)
     }
 
     /// The encoding, when travmap reads it.
     pub fn encoding(&self) -> Option<MessageEncoding> {
         MessageEncoding::from_name(&self.message_encoding)
+    }
+}
+
+/// A message type's ROS 2 name: ROS 1's `package/Type` as `package/msg/Type`.
+pub fn ros2_type_name(schema_name: &str) -> Cow<'_, str> {
+    match schema_name.split_once('/') {
+        Some((package, name)) if !name.contains('/') => Cow::Owned(format!("{package}/msg/{name}")),
+        _ => Cow::Borrowed(schema_name),
     }
 }
 
