@@ -84,6 +84,34 @@ def first_message_per_topic(path: pathlib.Path) -> dict:
         return found
 
 
+def velodyne_scans(db: pathlib.Path, packets: int = 3) -> dict:
+    """The first VelodyneScan message of a rosbag2 .db3 cut to its first packets, as
+    CDR and as ROS 1."""
+    import sqlite3
+    import struct
+
+    buf = sqlite3.connect(db).execute("select data from messages order by timestamp limit 1").fetchone()[0]
+    at = 4 + 8
+    name_len = struct.unpack_from("<I", buf, at)[0]
+    at = (at + 4 + name_len + 3) & ~3
+    header, frame = buf[:at], buf[16 : 16 + name_len - 1]
+    at += 4
+    cut = []
+    for _ in range(packets):
+        at = (at + 3) & ~3
+        sec, nsec = struct.unpack_from("<iI", buf, at)
+        cut.append((sec, nsec, buf[at + 8 : at + 8 + 1206]))
+        at += 8 + 1206
+    cdr = bytearray(header) + struct.pack("<I", len(cut))
+    for sec, nsec, data in cut:
+        cdr += b"\0" * ((4 - (len(cdr) - 4) % 4) % 4) + struct.pack("<iI", sec, nsec) + data
+    sec, nsec = struct.unpack_from("<iI", header, 4)
+    ros1 = struct.pack("<III", 0, sec, nsec) + struct.pack("<I", len(frame)) + frame + struct.pack("<I", len(cut))
+    for sec, nsec, data in cut:
+        ros1 += struct.pack("<II", sec, nsec) + data
+    return {"cdr": bytes(cdr), "ros1": ros1}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--travmap", default="target/release/travmap")
@@ -107,6 +135,13 @@ def main() -> None:
     scan = (seq / "velodyne" / "000000.bin").read_bytes()[: 16 * POINTS]
     for name, body in pcd_files(scan).items():
         seed("pcd_file", name, body)
+    nebula = pathlib.Path("fixtures/nebula")
+    for name, db in [
+        ("vlp32c", nebula / "vlp32/1713492677464078412/1713492677464078412_0.db3"),
+        ("vlp16_dual", nebula / "vlp16/1673400471837873222/1673400471837873222_0.db3"),
+    ]:
+        for encoding, body in velodyne_scans(db).items():
+            seed("velodyne_scan", f"{name}.{encoding}", body)
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = pathlib.Path(tmp)

@@ -28,7 +28,7 @@ pub type Target = fn(&[u8]);
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 15] = [
+pub const TARGETS: [(&str, Target); 16] = [
     ("kitti_calib", kitti_calib),
     ("kitti_poses", kitti_poses),
     ("kitti_scan", kitti_scan),
@@ -44,6 +44,7 @@ pub const TARGETS: [(&str, Target); 15] = [
     ("pcd_file", pcd_file),
     ("model", model),
     ("dataset_file", dataset_file),
+    ("velodyne_scan", velodyne_scan),
 ];
 
 const NAMED: &str = "fuzzed";
@@ -160,6 +161,48 @@ pub fn ros1_message(data: &[u8]) {
     let _ = ros1::decode::<TfMessage>(data);
     let _ = ros1::decode::<Odometry>(data);
     let _ = ros1::decode::<CameraInfo>(data);
+}
+
+/// A `velodyne_msgs/msg/VelodyneScan` message, CDR and then ROS 1: its packets
+/// decoded and cut into scans as the model they name (a flat table of its laser
+/// count, read as YAML, for the models without a built-in one).
+pub fn velodyne_scan(data: &[u8]) {
+    use crate::io::ros::MessageEncoding;
+    use crate::io::velodyne::{
+        Calibration, Decoder, DecoderSettings, ScanAssembler, VelodyneModel, scan_message,
+    };
+    for encoding in [MessageEncoding::Cdr, MessageEncoding::Ros1] {
+        let Ok(message) = scan_message(data, encoding) else {
+            continue;
+        };
+        let Some(Ok(model)) = message
+            .packets
+            .first()
+            .map(|(_, p)| VelodyneModel::of_packet(p))
+        else {
+            continue;
+        };
+        let calibration = Calibration::builtin(model).or_else(|| {
+            let lasers: String = (0..model.lasers())
+                .map(|i| {
+                    let elevation = (i as f64 - 64.0) * 0.005;
+                    format!(
+                        "- {{laser_id: {i}, rot_correction: 0.01, vert_correction: {elevation}}}\n"
+                    )
+                })
+                .collect();
+            Calibration::from_yaml(&format!("lasers:\n{lasers}")).ok()
+        });
+        let Some(Ok(decoder)) =
+            calibration.map(|c| Decoder::new(model, c, DecoderSettings::default()))
+        else {
+            continue;
+        };
+        let mut assembler = ScanAssembler::new(decoder);
+        for (stamp_ns, packet) in message.packets {
+            let _ = assembler.push(packet, stamp_ns);
+        }
+    }
 }
 
 /// A PCD file, read into points.

@@ -272,3 +272,27 @@ fn a_packet_log_is_a_drive_for_every_command() {
         ],
     );
 }
+
+#[test]
+fn ros1_and_ros2_scan_messages_carry_the_same_packets() {
+    use travmap::io::ros::MessageEncoding;
+    let seeds = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/velodyne_scan");
+    let cdr = std::fs::read(seeds.join("vlp32c.cdr")).unwrap();
+    let ros1 = std::fs::read(seeds.join("vlp32c.ros1")).unwrap();
+    let (a, b) = (
+        scan_message(&cdr, MessageEncoding::Cdr).unwrap(),
+        scan_message(&ros1, MessageEncoding::Ros1).unwrap(),
+    );
+    assert_eq!(
+        (a.frame_id.as_str(), b.frame_id.as_str()),
+        ("velodyne_front", "velodyne_front")
+    );
+    assert_eq!(a.stamp_ns, b.stamp_ns);
+    assert_eq!(a.packets, b.packets);
+    assert_eq!(a.packets.len(), 3);
+    // A message cut inside a packet is an error, not a shorter packet.
+    let err = scan_message(&cdr[..cdr.len() - 10], MessageEncoding::Cdr)
+        .err()
+        .unwrap();
+    assert!(err.contains("the message ends"), "{err}");
+}

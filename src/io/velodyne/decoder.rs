@@ -141,7 +141,8 @@ impl Decoder {
         }
         let dual = packet[RETURN_MODE_AT] == DUAL_RETURN;
         let u16_at = |at: usize| u16::from_le_bytes([packet[at], packet[at + 1]]);
-        let rotation = |block: usize| u32::from(u16_at(block * BLOCK_BYTES + 2));
+        // A corrupt azimuth past 359.99 degrees wraps like a real one.
+        let rotation = |block: usize| u32::from(u16_at(block * BLOCK_BYTES + 2)) % CENTIDEGREES;
         let step = 1 + dual as usize;
         let blocks = match self.model {
             VelodyneModel::Vls128 => BLOCKS - 4 * dual as usize,
