@@ -6,26 +6,9 @@ mod common;
 use std::path::Path;
 
 use common::{arg, success, travmap, write_output};
-use travmap::method::fusion::{DriveMap, FusedCell};
 use travmap::method::grid::CellClass;
 use travmap::outputs::drive_map::MapPicture;
 use travmap::outputs::rendering::{GAP_PX, colour};
-
-/// The shipped drive fused by the library, as `map` fuses it.
-fn fused(seq: &Path) -> Vec<FusedCell> {
-    let config = travmap::Config::default();
-    let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
-    let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
-    let selection = travmap::drive::Selection::new(source, 0..usize::MAX);
-    let mut map = DriveMap::new(config.grid.cell_size_m);
-    selection
-        .run::<travmap::Error>(&config, Some(&model), |result| {
-            map.add_result(&result);
-            Ok(())
-        })
-        .unwrap();
-    map.cells()
-}
 
 #[test]
 fn the_picture_shows_the_fused_map_truth_and_errors_cell_by_cell() {
@@ -40,7 +23,7 @@ fn the_picture_shows_the_fused_map_truth_and_errors_cell_by_cell() {
         &["--cell-pixels", "8", "--cells", arg(&cells_path)],
     );
     let image = travmap::io::image::decode_png(&std::fs::read(&png).unwrap(), &png).unwrap();
-    let cells = fused(&seq);
+    let cells = common::fused_drive(&seq);
     let picture = MapPicture::of(&cells, 8);
     let panel = picture.cells[0] as u32 * 8;
     assert_eq!(image.width, 3 * panel + 2 * GAP_PX);

@@ -9,7 +9,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use common::{arg, json_summary};
-use travmap::method::fusion::{DriveMap, FusedCell};
+use travmap::method::fusion::FusedCell;
 use travmap::method::grid::CellClass;
 
 /// map_server's OccupancyGrid values.
@@ -150,22 +150,6 @@ impl LoadedMap {
     }
 }
 
-/// The shipped drive fused by the library, as `map` fuses it.
-fn fused(seq: &Path) -> Vec<FusedCell> {
-    let config = travmap::Config::default();
-    let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
-    let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
-    let selection = travmap::drive::Selection::new(source, 0..usize::MAX);
-    let mut map = DriveMap::new(config.grid.cell_size_m);
-    selection
-        .run::<travmap::Error>(&config, Some(&model), |result| {
-            map.add_result(&result);
-            Ok(())
-        })
-        .unwrap();
-    map.cells()
-}
-
 fn write_nav2(seq: &Path, dir: &Path, mode: &str) -> (PathBuf, serde_json::Value) {
     let yaml = dir.join(format!("site-{mode}.yaml"));
     let png = dir.join(format!("map-{mode}.png"));
@@ -186,7 +170,7 @@ fn write_nav2(seq: &Path, dir: &Path, mode: &str) -> (PathBuf, serde_json::Value
 fn map_server_loads_every_fused_cell_on_its_pixel_with_its_value() {
     let Some(seq) = common::sample() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let cells = fused(&seq);
+    let cells = common::fused_drive(&seq);
     let seen: Vec<&FusedCell> = cells.iter().filter(|c| c.observations > 0).collect();
     assert!(seen.len() > 1000, "{} cells seen", seen.len());
 
@@ -297,7 +281,7 @@ fn annotate_writes_the_final_map_once_on_a_latched_map_topic() {
     let grid: travmap::io::ros::OccupancyGrid = travmap::io::ros::decode(&maps[0].data).unwrap();
     assert_eq!(grid.header.frame_id, "map");
     assert_eq!(grid.info.resolution, 0.4);
-    let cells = fused(&seq);
+    let cells = common::fused_drive(&seq);
     let (ox, oy) = (grid.info.origin.position.x, grid.info.origin.position.y);
     let width = grid.info.width as usize;
     for cell in cells.iter().filter(|c| c.observations > 0) {

@@ -266,3 +266,19 @@ pub fn one_frame_with_image() -> Option<(tempfile::TempDir, PathBuf)> {
     std::fs::write(seq.join("times.txt"), first_line("times.txt")).unwrap();
     Some((dir, seq))
 }
+
+/// The drive at `seq` fused by the library with the embedded model, as `map` fuses it.
+pub fn fused_drive(seq: &Path) -> Vec<travmap::method::fusion::FusedCell> {
+    let config = travmap::Config::default();
+    let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
+    let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
+    let selection = travmap::drive::Selection::new(source, 0..usize::MAX);
+    let mut map = travmap::method::fusion::DriveMap::new(config.grid.cell_size_m);
+    selection
+        .run::<travmap::Error>(&config, Some(&model), |result| {
+            map.add_result(&result);
+            Ok(())
+        })
+        .unwrap();
+    map.cells()
+}

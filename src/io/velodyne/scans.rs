@@ -2,7 +2,7 @@
 
 use super::decoder::{Decoder, VelodynePoint};
 use super::message::scan_message;
-use super::packet::{BLOCK_BYTES, BLOCKS, CENTIDEGREES, PACKET_BYTES};
+use super::packet::{BLOCK_BYTES, BLOCKS, CENTIDEGREES, VelodyneModel};
 use crate::io::ros::MessageEncoding;
 
 /// Where a stream of packets is cut into scans: nebula's rule, on the azimuths of
@@ -84,12 +84,8 @@ impl ScanAssembler {
 
     /// Adds a packet; the scan it completes, if it does.
     pub fn push(&mut self, packet: &[u8], stamp_ns: u64) -> Result<Option<PacketScan>, String> {
-        if packet.len() != PACKET_BYTES {
-            return Err(format!(
-                "a Velodyne data packet is {PACKET_BYTES} bytes, this one {}",
-                packet.len()
-            ));
-        }
+        // The cut reads the packet's azimuths: its length is checked first.
+        VelodyneModel::of_packet(packet)?;
         let completes = self.cutter.completes(packet);
         self.stamp_ns.get_or_insert(stamp_ns);
         self.decoder.decode(packet, stamp_ns, &mut self.points)?;
