@@ -302,6 +302,69 @@ fn a_full_disk_is_named_and_leaves_nothing() {
 }
 
 #[test]
+fn a_full_disk_leaves_nothing_of_any_command_with_several_outputs() {
+    let Some(sample) = common::sample() else {
+        return;
+    };
+    // 16 KiB: two or three of render's 2 KB pictures and the map's PNG fit, the
+    // rest does not.
+    let small = tempfile::tempdir().unwrap();
+    let mounted = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=16k", "tmpfs", arg(small.path())])
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        eprintln!("skipping: cannot mount a small tmpfs here (not root?)");
+        return;
+    }
+    let at = |name: &str| small.path().join(name);
+    let runs: [Vec<String>; 3] = [
+        vec![
+            "render".into(),
+            "--all".into(),
+            "-o".into(),
+            arg(&at("pictures")).into(),
+        ],
+        vec![
+            "map".into(),
+            "-o".into(),
+            arg(&at("m.png")).into(),
+            "--cells".into(),
+            arg(&at("m.parquet")).into(),
+        ],
+        vec![
+            "dataset".into(),
+            "-o".into(),
+            arg(&at("cells.parquet")).into(),
+        ],
+    ];
+    let mut failures = Vec::new();
+    for run in &runs {
+        let mut args: Vec<&str> = vec![run[0].as_str(), arg(&sample)];
+        args.extend(run[1..].iter().map(String::as_str));
+        args.push("-q");
+        let out = travmap(&args);
+        let left: Vec<_> = std::fs::read_dir(small.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        failures.push((run[0].clone(), out, left));
+    }
+    let _ = Command::new("umount").arg(small.path()).status();
+    for (command, out, left) in failures {
+        let err = clean_failure(out);
+        assert!(
+            err.contains("no space left on device (wrote")
+                && err.contains("nothing was left behind"),
+            "{command}: {err}"
+        );
+        assert!(!err.contains("External"), "{command}: {err}");
+        assert!(left.is_empty(), "{command} left {left:?}");
+    }
+}
+
+#[test]
 fn a_closed_stdout_ends_quietly() {
     let Some(sample) = common::sample() else {
         return;

@@ -12,7 +12,7 @@ use travmap::outputs::drive_map::{render_drive_map, write_map_cells};
 use travmap::outputs::nav2_map::{Nav2Mode, image_path, write_nav2_map};
 use travmap::outputs::preflight::check_distinct_outputs;
 use travmap::outputs::rendering::encode_png;
-use travmap::outputs::writing::write_atomically;
+use travmap::outputs::writing::Staged;
 use travmap::scoring::evaluation::Evaluation;
 use travmap::scoring::metrics::Confusion;
 
@@ -107,16 +107,27 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let seconds = bar.finish();
     let cells = map.cells();
     let picture = render_drive_map(&cells, &trajectory, map.cell_size_m(), cell_px);
-    write_atomically(output_path, &encode_png(&picture))?;
+    let mut staged = Staged::default();
+    staged.write(output_path, &encode_png(&picture))?;
     if let Some(path) = &args.cells {
-        write_map_cells(path, &cells)?;
+        write_map_cells(&mut staged, path, &cells)?;
     }
     let world_frame = selections[0].source.world_frame();
     let nav2 = args
         .nav2
         .as_deref()
-        .map(|yaml| write_nav2_map(yaml, &cells, map.cell_size_m(), world_frame, nav2_mode))
+        .map(|yaml| {
+            write_nav2_map(
+                &mut staged,
+                yaml,
+                &cells,
+                map.cell_size_m(),
+                world_frame,
+                nav2_mode,
+            )
+        })
         .transpose()?;
+    staged.commit()?;
     let fused = Confusion::of_drive_map(&cells);
     let fused_scores = (fused.tp + fused.tn + fused.fp + fused.r#fn > 0).then(|| fused.scores());
     let per_frame = per_frame.report();

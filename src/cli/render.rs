@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use serde_json::json;
 use travmap::outputs::rendering;
-use travmap::outputs::writing::write_atomically;
+use travmap::outputs::writing::Staged;
 
 use super::{
     Inputs, ModelArg, Outcome, check_output, check_output_dir, frame_count, outcome,
@@ -64,6 +64,7 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
             output_path.display()
         )));
     }
+    let created_dir = args.all && !output_path.exists();
     if args.all {
         std::fs::create_dir_all(output_path)
             .with_context(|| format!("cannot create {}", output_path.display()))?;
@@ -71,24 +72,33 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
     let selections = [selection];
     let bar = output.progress(frame_count(&selections), "rendering");
     let mut written = Vec::new();
-    selections[0].run::<anyhow::Error>(config, Some(&model), |result| {
+    let mut staged = Staged::default();
+    let rendered = selections[0].run::<anyhow::Error>(config, Some(&model), |result| {
         let path = if args.all {
             output_path.join(format!("{:06}.png", result.index))
         } else {
             output_path.to_path_buf()
         };
-        write_atomically(
+        staged.write(
             &path,
             &rendering::encode_png(&rendering::render(&result, cell_px)),
         )?;
         written.push(path);
         bar.inc(1);
         Ok(())
-    })?;
+    });
+    if let Err(error) = rendered {
+        drop(staged);
+        if created_dir {
+            let _ = std::fs::remove_dir(output_path);
+        }
+        return Err(error);
+    }
     bar.finish();
     if written.is_empty() {
         bail!("no frame was rendered");
     }
+    staged.commit()?;
     if output.json {
         print_json_summary("render", &selections, json!({"pictures": written}))?;
     } else if !output.quiet {

@@ -12,13 +12,13 @@ use parquet::column::writer::ColumnWriter;
 use parquet::file::properties::WriterProperties;
 use parquet::file::writer::SerializedFileWriter;
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::frame::RgbImage;
 use crate::io::ros::{Header, MapMetaData, OccupancyGrid, Pose, Quaternion, Time, Vector3};
 use crate::method::fusion::FusedCell;
 use crate::method::grid::CellClass;
 use crate::outputs::rendering::{GAP_PX, class_colour, colour, error_colour};
-use crate::outputs::writing::AtomicFile;
+use crate::outputs::writing::{AtomicFile, Staged, parquet_failure, sync_output, write_failure};
 
 /// Cells of empty border around the map in the picture.
 const BORDER_CELLS: i64 = 2;
@@ -182,8 +182,9 @@ pub fn render_drive_map(
     image
 }
 
-/// The fused cells as a Parquet table: one row per cell some frame saw or labelled.
-pub fn write_map_cells(path: &Path, cells: &[FusedCell]) -> Result<()> {
+/// The fused cells as a Parquet table: one row per cell some frame saw or labelled,
+/// staged to appear with the command's other outputs.
+pub fn write_map_cells(staged: &mut Staged, path: &Path, cells: &[FusedCell]) -> Result<()> {
     let schema = parquet::schema::parser::parse_message_type(
         "message travmap_drive_map { REQUIRED DOUBLE x_m; REQUIRED DOUBLE y_m; \
          REQUIRED DOUBLE evidence; REQUIRED DOUBLE probability; REQUIRED INT32 observations; \
@@ -195,10 +196,7 @@ pub fn write_map_cells(path: &Path, cells: &[FusedCell]) -> Result<()> {
         .set_created_by(concat!("travmap ", env!("CARGO_PKG_VERSION")).into())
         .build();
     let (output, file) = AtomicFile::create(path)?;
-    let fail = |e: parquet::errors::ParquetError| Error::Write {
-        path: path.to_path_buf(),
-        source: std::io::Error::other(e),
-    };
+    let fail = |e| parquet_failure(path, &output, e);
     let mut writer =
         SerializedFileWriter::new(BufWriter::new(file), Arc::new(schema), Arc::new(properties))
             .map_err(fail)?;
@@ -244,12 +242,10 @@ pub fn write_map_cells(path: &Path, cells: &[FusedCell]) -> Result<()> {
         .into_inner()
         .map_err(fail)?
         .into_inner()
-        .map_err(|e| fail(e.into_error().into()))?;
-    crate::outputs::writing::sync_output(&file).map_err(|source| Error::Write {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    output.commit()
+        .map_err(|e| write_failure(path, &output, Some(e.into_error()), None))?;
+    sync_output(&file).map_err(|source| write_failure(path, &output, Some(source), None))?;
+    staged.add(output);
+    Ok(())
 }
 
 /// How a fused cell becomes an OccupancyGrid value.

@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 use crate::error::{Error, Result};
 use crate::method::fusion::FusedCell;
 use crate::method::grid::CellClass;
-use crate::outputs::writing::write_atomically;
+use crate::outputs::writing::Staged;
 
 /// How cells become grey levels (`mode` in the YAML).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -111,8 +111,9 @@ pub fn image_path(yaml: &Path, mode: Nav2Mode) -> PathBuf {
 }
 
 /// Writes the map of the seen `cells` (world cells of `resolution_m`, in `frame`) as
-/// `yaml` and its image; each file is complete or absent.
+/// `yaml` and its image, staged to appear with the command's other outputs.
 pub fn write_nav2_map(
+    staged: &mut Staged,
     yaml: &Path,
     cells: &[FusedCell],
     resolution_m: f64,
@@ -164,8 +165,8 @@ pub fn write_nav2_map(
         origin,
         frame: frame.to_string(),
     };
-    write_atomically(&map.image, &bytes)?;
-    write_atomically(yaml, map.yaml_text().as_bytes())?;
+    staged.write(&map.image, &bytes)?;
+    staged.write(yaml, map.yaml_text().as_bytes())?;
     Ok(map)
 }
 

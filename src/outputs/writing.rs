@@ -15,6 +15,8 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
+use parquet::errors::ParquetError;
+
 use crate::error::{Error, Result};
 use crate::io::mcap_stored::{StoredChunk, StoredLog};
 use crate::io::ros::{RosMessage, encode};
@@ -182,14 +184,54 @@ pub fn write_failure(
     }
 }
 
+/// The error of a Parquet writer over `output`'s temporary file: the I/O error
+/// inside it (a full disk among them) is reported as [`write_failure`] reports it.
+pub fn parquet_failure(path: &Path, output: &AtomicFile, error: ParquetError) -> Error {
+    match error {
+        ParquetError::External(inner) => match inner.downcast::<std::io::Error>() {
+            Ok(io) => write_failure(path, output, Some(*io), None),
+            Err(other) => write_failure(path, output, Some(std::io::Error::other(other)), None),
+        },
+        other => write_failure(path, output, Some(std::io::Error::other(other)), None),
+    }
+}
+
+/// Outputs written and synced under their temporary names, not yet in place: one
+/// command's outputs appear together at [`Staged::commit`], or, if any of them
+/// fails, none does.
+#[derive(Default)]
+pub struct Staged(Vec<AtomicFile>);
+
+impl Staged {
+    /// Writes `bytes` as `path`'s temporary file and syncs it.
+    pub fn write(&mut self, path: &Path, bytes: &[u8]) -> Result<()> {
+        use std::io::Write;
+        let (guard, mut file) = AtomicFile::create(path)?;
+        file.write_all(bytes)
+            .and_then(|_| sync_output(&file))
+            .map_err(|source| {
+                write_failure(path, &guard, Some(source), Some(bytes.len() as u64))
+            })?;
+        self.0.push(guard);
+        Ok(())
+    }
+
+    /// Adds an output its writer has flushed and synced.
+    pub fn add(&mut self, output: AtomicFile) {
+        self.0.push(output);
+    }
+
+    /// Renames every output into place.
+    pub fn commit(self) -> Result<()> {
+        self.0.into_iter().try_for_each(AtomicFile::commit)
+    }
+}
+
 /// Writes `bytes` to `path` atomically.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    use std::io::Write;
-    let (guard, mut file) = AtomicFile::create(path)?;
-    file.write_all(bytes)
-        .and_then(|_| sync_output(&file))
-        .map_err(|source| write_failure(path, &guard, Some(source), Some(bytes.len() as u64)))?;
-    guard.commit()
+    let mut staged = Staged::default();
+    staged.write(path, bytes)?;
+    staged.commit()
 }
 
 /// Chunks of about this many bytes (uncompressed): a few frames each, so that

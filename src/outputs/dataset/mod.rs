@@ -33,7 +33,7 @@ use crate::error::{Error, Result};
 use crate::method::features::feature_names;
 use crate::method::grid::CellClass;
 use crate::method::pipeline::FrameResult;
-use crate::outputs::writing::AtomicFile;
+use crate::outputs::writing::{AtomicFile, parquet_failure, sync_output, write_failure};
 
 /// Rows per row group: about 60 MB of columns in memory at a time.
 const ROW_GROUP_ROWS: usize = 1 << 17;
@@ -177,7 +177,7 @@ impl DatasetWriter {
             Arc::new(schema),
             Arc::new(properties),
         )
-        .map_err(|e| write_error(path, e))?;
+        .map_err(|e| parquet_failure(path, &output, e))?;
         Ok(Self {
             writer,
             output,
@@ -259,7 +259,8 @@ impl DatasetWriter {
         let empty = Columns::new(self.columns.features.len(), self.appearance_len);
         let columns = std::mem::replace(&mut self.columns, empty);
         let path = self.output_path();
-        let fail = |e| write_error(&path, e);
+        let output = &self.output;
+        let fail = |e| parquet_failure(&path, output, e);
         let mut group = self.writer.next_row_group().map_err(fail)?;
         let mut index = 0;
         while let Some(mut column) = group.next_column().map_err(fail)? {
@@ -279,23 +280,16 @@ impl DatasetWriter {
     pub fn finish(mut self) -> Result<DatasetSummary> {
         self.flush()?;
         let path = self.output_path();
+        let output = &self.output;
         let file = self
             .writer
             .into_inner()
-            .map_err(|e| write_error(&path, e))?
+            .map_err(|e| parquet_failure(&path, output, e))?
             .into_inner()
-            .map_err(|e| write_error(&path, e.into_error().into()))?;
-        crate::outputs::writing::sync_output(&file)
-            .map_err(|source| Error::Write { path, source })?;
+            .map_err(|e| write_failure(&path, output, Some(e.into_error()), None))?;
+        sync_output(&file).map_err(|source| write_failure(&path, output, Some(source), None))?;
         self.output.commit()?;
         Ok(self.summary)
-    }
-}
-
-fn write_error(path: &Path, e: parquet::errors::ParquetError) -> Error {
-    Error::Write {
-        path: path.to_path_buf(),
-        source: std::io::Error::other(e),
     }
 }
 
