@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{arg, assert_contains, clean_failure, success, travmap, usage_error};
+use common::{arg, assert_contains, clean_failure, stderr, success, travmap, usage_error};
 
 const IDENTITY_3X4: &str = "1 0 0 0 0 1 0 0 0 0 1 0";
 /// Sequence 00's velodyne -> cam0.
@@ -180,6 +180,55 @@ fn non_finite_points_are_dropped_and_counted() {
     let mut without = run_json(clean.path());
     without[1]["dropped_points"] = 2.into();
     assert_eq!(with_bad_points, without);
+}
+
+#[test]
+fn an_all_nan_scan_is_an_error_that_keep_going_skips() {
+    let dir = sequence();
+    let points = vec![[f32::NAN, 0.0, 0.0, 0.5]; scene_points().len()];
+    write_scan(&dir.path().join("velodyne/000001.bin"), &points);
+    let err = clean_failure(eval(dir.path()));
+    assert_contains(
+        &err,
+        &[
+            "000001.bin",
+            "every one of its",
+            "NaN or infinite",
+            "--keep-going",
+        ],
+    );
+    let out = travmap(&["eval", arg(dir.path()), "--keep-going", "-q"]);
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
+    assert_contains(&stderr(&out), &["skipped frame 1", "000001.bin"]);
+}
+
+#[test]
+fn labels_of_ids_the_label_set_does_not_define_get_a_notice() {
+    let dir = sequence();
+    // Ids no SemanticKITTI class has (another ontology's, or noise).
+    let labels: Vec<u8> = (0..scene_points().len() as u32)
+        .flat_map(|i| (1000 + i % 7).to_le_bytes())
+        .collect();
+    std::fs::write(dir.path().join("labels/000001.label"), labels).unwrap();
+    let out_dir = tempfile::tempdir().unwrap();
+    let map = out_dir.path().join("map.png");
+    for command in [vec!["eval"], vec!["map", "-o", arg(&map)]] {
+        let out = travmap(&[&command[..], &[arg(dir.path()), "-q"]].concat());
+        let command = command[0];
+        let err = stderr(&out);
+        assert!(out.status.success(), "{command}: {err}");
+        assert_contains(
+            &err,
+            &[
+                "notice:",
+                "in 1 frame(s) carry ids the semantickitti label set does not define",
+                "e.g. 1000, 1001, 1002, 1003, 1004",
+            ],
+        );
+    }
+    // The valid labels: no notice.
+    let out = travmap(&["eval", arg(sequence().path()), "-q"]);
+    assert_eq!(stderr(&out), "");
 }
 
 #[test]

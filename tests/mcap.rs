@@ -10,7 +10,7 @@ use std::process::Command;
 use common::{arg, assert_contains, clean_failure, json_summary, success, travmap, write_output};
 use serde_json::Value;
 use travmap::io::KittiSequence;
-use travmap::io::cloud::cloud_points;
+use travmap::io::cloud::{check_some_finite, cloud_points};
 use travmap::io::format::InputFormat;
 use travmap::io::log::Log;
 use travmap::io::ros::{OccupancyGrid, decode};
@@ -866,6 +866,26 @@ fn clouds_whose_data_disagree_with_their_layout_are_errors() {
     (huge.width, huge.height, huge.row_step) = (1 << 31, 1 << 31, 12 << 31);
     let err = cloud_points(&huge).err().unwrap();
     assert!(err.contains("data holds 72 bytes"), "{err}");
+    // A header that claims no points over 72 bytes of them: the driver did not
+    // fill it in; reading zero points would map an empty scene.
+    let mut unfilled = cloud(72, PointField::xyz_float32());
+    unfilled.width = 0;
+    let err = cloud_points(&unfilled).err().unwrap();
+    assert_contains(
+        &err,
+        &["width 0 x height 2", "data holds 72 bytes (6 points"],
+    );
+    // Every point NaN: nothing to map, said rather than scored as empty.
+    let nan = f32::NAN.to_le_bytes().repeat(18);
+    let points = cloud_points(&PointCloud2 {
+        data: nan,
+        ..cloud(72, PointField::xyz_float32())
+    })
+    .unwrap();
+    let err = check_some_finite(points.points.len(), points.dropped)
+        .err()
+        .unwrap();
+    assert_contains(&err, &["every one of its 6 points has a NaN"]);
 }
 
 #[test]

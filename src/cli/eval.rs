@@ -15,7 +15,10 @@ use travmap::scoring::metrics::Confusion;
 use travmap::scoring::metrics::Scores;
 
 use super::adapt::AdaptFlag;
-use super::{Inputs, ModelArg, Outcome, frame_count, model_json, outcome, print_json_summary};
+use super::{
+    Inputs, ModelArg, Outcome, frame_count, model_json, notice_unknown_labels, outcome,
+    print_json_summary,
+};
 
 /// Score predictions against SemanticKITTI ground truth (the paper's table).
 #[derive(Args)]
@@ -84,6 +87,7 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         }
         _ => None,
     };
+    notice_unknown_labels(&report, config);
     let sources: Vec<String> = selections.iter().map(Selection::describe).collect();
     if output.json {
         print_json_summary(

@@ -17,7 +17,8 @@ use travmap::scoring::evaluation::Evaluation;
 use travmap::scoring::metrics::Confusion;
 
 use super::{
-    Inputs, ModelArg, Outcome, check_output, frame_count, model_json, outcome, print_json_summary,
+    Inputs, ModelArg, Outcome, check_output, frame_count, model_json, notice_unknown_labels,
+    outcome, print_json_summary,
 };
 
 /// Fuse every frame's prediction (and ground truth) into one map of the drive.
@@ -131,6 +132,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let fused = Confusion::of_drive_map(&cells);
     let fused_scores = (fused.tp + fused.tn + fused.fp + fused.r#fn > 0).then(|| fused.scores());
     let per_frame = per_frame.report();
+    notice_unknown_labels(&per_frame, config);
     let seen = cells.iter().filter(|c| c.observations > 0).count();
     let area_m2 = seen as f64 * map.cell_size_m().powi(2);
     if output.json {

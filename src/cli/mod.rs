@@ -32,6 +32,7 @@ use travmap::io::ros_drive::{DriveOptions, MergedTopics};
 use travmap::io::{Recording, Source};
 use travmap::method::classifier::SvmModel;
 use travmap::outputs::preflight::{InputFiles, check_output_directory, check_output_file};
+use travmap::scoring::evaluation::EvaluationReport;
 use travmap::stopwatch::Stopwatch;
 
 /// How a command ended: exit code 0, or 3 when it completed but skipped frames
@@ -532,6 +533,27 @@ fn print_json_line(value: &serde_json::Value) -> Result<()> {
 }
 
 /// Frames the selections will hand on, for progress bars.
+/// Says on stderr (even with -q) when labels carried ids the label set does not
+/// define: a run scored against another dataset's labels looks like a bad model.
+pub fn notice_unknown_labels(report: &EvaluationReport, config: &Config) {
+    let unknown = &report.unknown_labels;
+    if unknown.points == 0 {
+        return;
+    }
+    let ids: Vec<String> = unknown.examples.iter().map(u16::to_string).collect();
+    let truth = &config.ground_truth;
+    let label_set = match &truth.label_map {
+        Some(path) => format!("label map {}", path.display()),
+        None => format!("{} label set", truth.labels.name()),
+    };
+    eprintln!(
+        "notice: {} labelled points in {} frame(s) carry ids the {label_set} does not define (e.g. {}): they count as not traversable; are these another dataset's labels (--set ground_truth.labels=..., or a label_map)?",
+        unknown.points,
+        report.frames_with_unknown_labels,
+        ids.join(", ")
+    );
+}
+
 pub fn frame_count(selections: &[Selection]) -> u64 {
     selections
         .iter()

@@ -42,6 +42,17 @@ pub struct CloudPoints {
     pub dropped: usize,
 }
 
+/// The problem of a scan whose every point had a NaN or infinite coordinate:
+/// mapping it would score an empty grid as if the scene were empty.
+pub fn check_some_finite(kept: usize, dropped: usize) -> Result<(), String> {
+    if kept == 0 && dropped > 0 {
+        return Err(format!(
+            "every one of its {dropped} points has a NaN or infinite coordinate: nothing to map (a covered or failed sensor?); --keep-going skips the frame"
+        ));
+    }
+    Ok(())
+}
+
 /// Reads x, y, z, intensity and label; points with a non-finite coordinate are dropped.
 pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
     let field = |names: &[&str]| {
@@ -84,6 +95,13 @@ pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
     } else {
         (height as u128 - 1) * row_step as u128 + row_bytes
     };
+    if needed == 0 && !cloud.data.is_empty() {
+        return Err(format!(
+            "width {width} x height {height} describes no points, yet data holds {} bytes ({} points of point_step {step}): the driver left the header unfilled",
+            cloud.data.len(),
+            cloud.data.len().checked_div(step).unwrap_or(0)
+        ));
+    }
     if (row_step as u128) < row_bytes || (cloud.data.len() as u128) < needed {
         return Err(format!(
             "data holds {} bytes; width {width} x height {height} with point_step {step} and row_step {row_step} need {needed}",

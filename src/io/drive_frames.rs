@@ -5,7 +5,7 @@
 use std::collections::VecDeque;
 use std::ops::Range;
 
-use super::cloud::{CloudPoints, cloud_points};
+use super::cloud::{CloudPoints, check_some_finite, cloud_points};
 use super::log_index::HeaderOnly;
 use super::log_message::LogMessage;
 use super::merged_clouds::{MergedCloud, merge};
@@ -92,7 +92,9 @@ impl RosDrive {
                     ))
                 })?;
                 let cloud: PointCloud2 = encoding.decode(&message.data).map_err(fail)?;
-                cloud_points(&cloud).map_err(fail)?
+                let points = cloud_points(&cloud).map_err(fail)?;
+                check_some_finite(points.points.len(), points.dropped).map_err(fail)?;
+                points
             }
             Cloud::Packets(points) => CloudPoints {
                 points: points

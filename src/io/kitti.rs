@@ -19,6 +19,7 @@ use super::skips::SkipLog;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, RemissionScale};
 use crate::geometry::rigid;
+use crate::io::cloud::check_some_finite;
 
 /// An opened sequence: calibration, poses and times are read at once, scans on demand.
 #[derive(Clone, Debug)]
@@ -162,6 +163,12 @@ impl KittiSequence {
             None
         };
         let dropped_points = drop_non_finite(&mut points_in_velodyne, labels.as_mut());
+        check_some_finite(points_in_velodyne.len(), dropped_points).map_err(|message| {
+            Error::Sequence {
+                path: scan_path.clone(),
+                message,
+            }
+        })?;
         let camera = match (self.read_images, self.image_path(index)) {
             (true, Some(_)) if self.calibration.projections[2].is_none() => {
                 return Err(Error::MissingCalibration {

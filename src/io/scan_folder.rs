@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
 
-use super::cloud::cloud_points;
+use super::cloud::{check_some_finite, cloud_points};
 use super::kitti::{drop_non_finite, parse_scan};
 use super::pcd::parse_pcd;
 use super::skips::SkipLog;
@@ -155,6 +155,10 @@ impl ScanFolder {
                 (points.points, points.remission, points.dropped)
             }
         };
+        check_some_finite(points.len(), dropped_points).map_err(|message| Error::Sequence {
+            path: path.clone(),
+            message,
+        })?;
         Ok(Frame {
             index,
             stamp_ns: self.stamps_ns[index],

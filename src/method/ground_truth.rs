@@ -12,14 +12,67 @@ pub struct GroundTruth {
     pub config: GroundTruthConfig,
     /// The classes of `config` in force.
     classes: ClassRule,
+    /// The ids the label set defines, one bit per id; None: any id is accepted.
+    known: Option<Box<[u64; 1024]>>,
+}
+
+/// Points of a scan whose label id the label set does not define: random ids, or
+/// another dataset's labels read under the wrong set.
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct UnknownLabels {
+    pub points: usize,
+    /// A few such ids, ascending.
+    pub examples: Vec<u16>,
+}
+
+/// How many unknown ids a notice names.
+const EXAMPLE_IDS: usize = 5;
+
+impl UnknownLabels {
+    /// Adds `other`'s points and ids.
+    pub fn merge(&mut self, other: &UnknownLabels) {
+        self.points += other.points;
+        self.examples.extend(&other.examples);
+        self.examples.sort_unstable();
+        self.examples.dedup();
+        self.examples.truncate(EXAMPLE_IDS);
+    }
 }
 
 impl GroundTruth {
     pub fn new(config: GroundTruthConfig) -> Self {
+        let classes = config.classes();
+        let known = classes.known.as_ref().map(|ids| {
+            let mut bits = Box::new([0u64; 1024]);
+            for &id in ids {
+                bits[id as usize / 64] |= 1 << (id % 64);
+            }
+            bits
+        });
         Self {
-            classes: config.classes(),
+            classes,
+            known,
             config,
         }
+    }
+
+    /// The points of one scan's `labels` whose id the label set does not define.
+    pub fn unknown_labels(&self, labels: &[u32]) -> UnknownLabels {
+        let Some(known) = &self.known else {
+            return UnknownLabels::default();
+        };
+        let mut unknown = UnknownLabels::default();
+        for &label in labels {
+            let id = (label & 0xFFFF) as u16;
+            if known[id as usize / 64] & (1 << (id % 64)) == 0 {
+                unknown.points += 1;
+                if unknown.examples.len() < EXAMPLE_IDS && !unknown.examples.contains(&id) {
+                    unknown.examples.push(id);
+                }
+            }
+        }
+        unknown.examples.sort_unstable();
+        unknown
     }
 
     /// None when the points carry no labels.
@@ -83,5 +136,20 @@ mod tests {
         assert_eq!(g.cell_class(&[0, 1, road]), CellClass::Unknown);
         assert_eq!(g.cell_class(&[0, 0, 0, car, 70]), CellClass::NonTraversable);
         assert_eq!(g.cell_class(&[60, 44, 49]), CellClass::Traversable);
+    }
+
+    #[test]
+    fn ids_the_label_set_does_not_define_are_counted() {
+        let g = gt();
+        let with_instance = (3u32 << 16) | 40;
+        let unknown = g.unknown_labels(&[40, with_instance, 2, 4000, 2, 65535, 72]);
+        assert_eq!(unknown.points, 4);
+        assert_eq!(unknown.examples, [2, 4000, 65535]);
+        // Explicit class lists accept any id.
+        let listed = GroundTruth::new(GroundTruthConfig {
+            traversable_classes: Some(vec![7]),
+            ..GroundTruthConfig::default()
+        });
+        assert_eq!(listed.unknown_labels(&[4000]), UnknownLabels::default());
     }
 }

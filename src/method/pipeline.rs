@@ -23,7 +23,7 @@ use crate::method::features::{FeatureExtractor, FeatureGrid};
 use crate::method::filter::OutlierFilter;
 use crate::method::footprint::{Footprint, PathKind, Trajectory};
 use crate::method::grid::{CellClass, CellPoints, GridLayout, grid_points};
-use crate::method::ground_truth::GroundTruth;
+use crate::method::ground_truth::{GroundTruth, UnknownLabels};
 use crate::method::integration::{
     IntegrationWindow, WorldScan, ground_normal, scale_remission_to_reference, scan_to_world,
 };
@@ -64,6 +64,8 @@ pub struct FrameResult {
     pub cells: CellPoints,
     /// Points of this frame's scan that the reader dropped (non-finite coordinates).
     pub dropped_points: usize,
+    /// Points of this frame's scan whose label id the label set does not define.
+    pub unknown_labels: UnknownLabels,
     /// The scale of the scan's remission, as the reader found it.
     pub remission: RemissionScale,
     /// Remission features were configured but the window had no usable remission,
@@ -133,6 +135,7 @@ struct FrameExtras {
     remission: RemissionScale,
     camera: Option<CameraImage>,
     dropped_points: usize,
+    unknown_labels: UnknownLabels,
     integrate_ms: f64,
 }
 
@@ -283,6 +286,11 @@ impl Pipeline {
                 remission: f.remission,
                 camera: f.camera.take(),
                 dropped_points: f.dropped_points,
+                unknown_labels: f
+                    .labels
+                    .as_deref()
+                    .map(|labels| self.ground_truth.unknown_labels(labels))
+                    .unwrap_or_default(),
                 integrate_ms: 0.0,
             })
             .collect();
@@ -389,6 +397,7 @@ impl Pipeline {
                 sensor_in_world: current.origin_in_world,
                 cells,
                 dropped_points: extras.dropped_points,
+                unknown_labels: extras.unknown_labels,
                 remission: extras.remission,
                 without_remission: features.groups.len() < self.feature_groups,
                 foreign_remission: None,

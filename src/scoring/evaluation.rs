@@ -3,6 +3,7 @@
 use serde::Serialize;
 
 use crate::method::classifier::ForeignRemission;
+use crate::method::ground_truth::UnknownLabels;
 use crate::method::pipeline::{FrameResult, StageTimings};
 use crate::scoring::metrics::{Confusion, Scores};
 
@@ -77,6 +78,10 @@ pub struct EvaluationReport {
     pub cells_with_appearance: u64,
     /// Points the readers dropped for a non-finite coordinate, over all frames.
     pub dropped_points: u64,
+    /// Labelled points whose id the label set does not define, over all frames,
+    /// and how many frames held them.
+    pub unknown_labels: UnknownLabels,
+    pub frames_with_unknown_labels: usize,
     /// Frames classified by the fallback model: remission features configured, but
     /// the input had no usable remission (missing, or on an unknown scale).
     pub frames_without_remission: usize,
@@ -94,6 +99,8 @@ pub struct Evaluation {
     frames_with_images: usize,
     cells_with_appearance: u64,
     dropped_points: u64,
+    unknown_labels: UnknownLabels,
+    frames_with_unknown_labels: usize,
     frames_without_remission: usize,
     frames_foreign_remission: usize,
     foreign_remission: Option<ForeignRemission>,
@@ -107,6 +114,10 @@ impl Evaluation {
     pub fn add(&mut self, result: &FrameResult) {
         self.timings.push(result.timings);
         self.dropped_points += result.dropped_points as u64;
+        if result.unknown_labels.points > 0 {
+            self.unknown_labels.merge(&result.unknown_labels);
+            self.frames_with_unknown_labels += 1;
+        }
         self.frames_without_remission += result.without_remission as usize;
         if let Some(foreign) = result.foreign_remission {
             self.frames_foreign_remission += 1;
@@ -139,6 +150,8 @@ impl Evaluation {
             frames_with_images: self.frames_with_images,
             cells_with_appearance: self.cells_with_appearance,
             dropped_points: self.dropped_points,
+            unknown_labels: self.unknown_labels.clone(),
+            frames_with_unknown_labels: self.frames_with_unknown_labels,
             frames_without_remission: self.frames_without_remission,
             frames_foreign_remission: self.frames_foreign_remission,
             foreign_remission: self.foreign_remission,
