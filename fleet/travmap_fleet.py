@@ -92,7 +92,7 @@ def run_travmap(travmap: str, command: str, input_path: str, output: str, extra:
         if process.returncode in (COMPLETE, COMPLETED_WITH_SKIPS):
             report = json.loads(process.stdout)
             result.status = "done"
-            result.frames = int(report["summary"]["frames"])
+            result.frames = int(report["frames"])
             skipped = re.search(r"completed with (\d+) skipped frame", process.stderr)
             result.skipped_frames = int(skipped.group(1)) if skipped else 0
             break

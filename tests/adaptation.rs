@@ -216,8 +216,8 @@ fn datasets_carry_self_labels_that_train_learns_from() {
     let cells = dir.path().join("cells.parquet");
     let summary = json_summary(&["dataset", arg(&sample), "-o", arg(&cells)]);
     let (footprint, pseudo) = (
-        summary["summary"]["footprint_rows"].as_u64().unwrap(),
-        summary["summary"]["pseudo_labelled_rows"].as_u64().unwrap(),
+        summary["footprint_rows"].as_u64().unwrap(),
+        summary["pseudo_labelled_rows"].as_u64().unwrap(),
     );
     assert!(footprint > 100 && pseudo > footprint, "{summary}");
     let mut set = TrainingSet::default();
@@ -246,7 +246,9 @@ fn datasets_carry_self_labels_that_train_learns_from() {
         ]
         .concat(),
     );
-    assert_contains(&doc["inputs"][0].to_string(), &["self-labelled cells"]);
+    assert_eq!(doc["inputs"][0]["path"], arg(&cells));
+    assert!(doc["inputs"][0]["cells"].as_u64().unwrap() > 0, "{doc}");
+    assert_eq!(doc["outputs"][0], arg(&model));
     // A drive is not a dataset of self-labels.
     let err = clean_failure(travmap(&[
         "train",

@@ -53,7 +53,7 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     std::fs::write(&model_path, model.to_json()).unwrap();
     let cells = dir.path().join("cells.parquet");
     let summary = dataset(&seq, &cells, &["--model", arg(&model_path)]);
-    assert_eq!(summary["summary"]["frames"], 6);
+    assert_eq!(summary["frames"], 6);
 
     let frame = 1;
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/read_parquet.py");
@@ -67,7 +67,7 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
             .arg(&rewrites),
     );
     let read: Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(read["rows"], summary["summary"]["rows"]);
+    assert_eq!(read["rows"], summary["rows"]);
     assert_eq!(
         read["metadata_keys"],
         serde_json::json!(["travmap.config", "travmap.format"])

@@ -120,7 +120,7 @@ fn convert_brings_every_route_back_to_the_same_ros2_messages() {
         let json = common::json_summary(&["convert", arg(&routes.join(route)), "-o", arg(&out)]);
         // Byte for byte the messages travmap wrote from the KITTI frame.
         assert!(messages_on(&out, &known) == original, "{route}");
-        let summary = &json["summary"];
+        let summary = &json;
         assert_eq!(summary["messages"], 6, "{route}: {summary}");
         let ros1 = route != "rosbag2-sqlite3";
         assert_eq!(summary["translated_messages"], if ros1 { 5 } else { 0 });
@@ -158,7 +158,7 @@ fn convert_brings_every_route_back_to_the_same_ros2_messages() {
     let images = |input: &Path| {
         let out = dir.path().join("images.mcap");
         let json = common::json_summary(&["annotate", arg(input), "-o", arg(&out)]);
-        let evaluation = &json["summary"]["evaluation"];
+        let evaluation = &json["evaluation"];
         (
             evaluation["frames_with_images"].clone(),
             evaluation["cells_with_appearance"].clone(),

@@ -15,7 +15,7 @@ use travmap::outputs::preflight::InputFiles;
 
 use super::{
     Outcome, Output, check_output, frame_count, open_selection, outcome, parse_frame_range,
-    print_json_summary, print_wrote,
+    print_json_summary, print_wrote, with_summary,
 };
 
 /// Convert a KITTI / SemanticKITTI sequence (clouds, poses on /tf, images) or a recorded
@@ -182,7 +182,8 @@ impl Written {
         selections: &[travmap::drive::Selection],
     ) -> Result<Outcome> {
         if output.json {
-            let fields = json!({"output": output_path, "compression": compression, "summary": self.summary, "elapsed_ms": seconds * 1e3});
+            let fields = json!({"output": output_path, "compression": compression, "elapsed_ms": seconds * 1e3});
+            let fields = with_summary(fields, &self.summary)?;
             print_json_summary("convert", selections, fields)?;
         } else if !output.quiet {
             print_wrote(

@@ -8,7 +8,10 @@ use clap::Args;
 use serde_json::json;
 use travmap::outputs::dataset::DatasetWriter;
 
-use super::{Inputs, Outcome, check_output, frame_count, load_model, outcome, print_json_summary};
+use super::{
+    Inputs, Outcome, check_output, frame_count, load_model, outcome, print_json_summary,
+    with_summary,
+};
 
 /// One Parquet row per predictable cell per frame: features, appearance, ground
 /// truth and (with --model) the prediction, on the training grid.
@@ -53,7 +56,8 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     let seconds = bar.finish();
     if output.json {
         let cells_per_s = summary.rows as f64 / seconds;
-        let fields = json!({"output": output_path, "config": config, "summary": summary, "elapsed_ms": seconds * 1e3, "cells_per_s": cells_per_s});
+        let fields = json!({"output": output_path, "config": config, "elapsed_ms": seconds * 1e3, "cells_per_s": cells_per_s});
+        let fields = with_summary(fields, &summary)?;
         print_json_summary("dataset", &selections, fields)?;
     } else if !output.quiet {
         println!(

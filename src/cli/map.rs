@@ -138,6 +138,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     if output.json {
         let fields = json!({
             "output": output_path,
+            "outputs": outputs,
             "cells_output": args.cells,
             "nav2": nav2,
             "model": model_json(&model, &model_name),

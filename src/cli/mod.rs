@@ -467,8 +467,10 @@ pub fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {
 
 /// `--json` output, one convention for every command (README "Machine-readable
 /// output", schemas in `schemas/json/`): JSON Lines on stdout, a `frame` record per
-/// frame where a command streams frames, then one `summary` record naming the
-/// command, its `inputs` (always a list) and the frames it `skipped`.
+/// frame where a command streams frames, then one flat `summary` record naming the
+/// command, its `inputs` (always a list of {path, frames, first_frame, last_frame}),
+/// the frames it `skipped` and, for a command that writes, its `output` (what -o
+/// named) and `outputs` (every file written).
 pub fn print_json_frame(mut fields: serde_json::Value) -> Result<()> {
     fields["type"] = "frame".into();
     print_json_line(&fields)
@@ -484,11 +486,10 @@ pub fn print_json_summary(
     fields["type"] = "summary".into();
     fields["command"] = command.into();
     if fields.get("inputs").is_none() {
-        fields["inputs"] = selections
-            .iter()
-            .map(Selection::describe)
-            .collect::<Vec<_>>()
-            .into();
+        fields["inputs"] = selections.iter().map(input_json).collect::<Vec<_>>().into();
+    }
+    if let (Some(output), None) = (fields.get("output"), fields.get("outputs")) {
+        fields["outputs"] = json!([output]);
     }
     fields["skipped"] = selections
         .iter()
@@ -501,6 +502,35 @@ pub fn print_json_summary(
         .collect::<Vec<_>>()
         .into();
     print_json_line(&fields)
+}
+
+/// One input of a `--json` summary: its path and the frames read from it.
+pub fn input_json(selection: &Selection) -> serde_json::Value {
+    let frames = selection.source.frames_in(&selection.frames);
+    json!({
+        "path": selection.source.path(),
+        "frames": frames.len(),
+        "first_frame": frames.first(),
+        "last_frame": frames.last(),
+    })
+}
+
+/// `fields` with the command's own summary (a struct) merged in at the top level:
+/// a summary record is flat, whatever type holds its numbers.
+pub fn with_summary(
+    mut fields: serde_json::Value,
+    summary: &impl serde::Serialize,
+) -> Result<serde_json::Value> {
+    if let serde_json::Value::Object(summary) = serde_json::to_value(summary)? {
+        for (key, value) in summary {
+            debug_assert!(
+                fields.get(&key).is_none(),
+                "summary field {key} named twice"
+            );
+            fields[key] = value;
+        }
+    }
+    Ok(fields)
 }
 
 /// The line a command that wrote an MCAP ends with:
@@ -532,7 +562,6 @@ fn print_json_line(value: &serde_json::Value) -> Result<()> {
     Ok(())
 }
 
-/// Frames the selections will hand on, for progress bars.
 /// Says on stderr (even with -q) when labels carried ids the label set does not
 /// define: a run scored against another dataset's labels looks like a bad model.
 pub fn notice_unknown_labels(report: &EvaluationReport, config: &Config) {
@@ -554,6 +583,7 @@ pub fn notice_unknown_labels(report: &EvaluationReport, config: &Config) {
     );
 }
 
+/// Frames the selections will hand on, for progress bars.
 pub fn frame_count(selections: &[Selection]) -> u64 {
     selections
         .iter()

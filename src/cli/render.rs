@@ -100,7 +100,8 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
     }
     staged.commit()?;
     if output.json {
-        print_json_summary("render", &selections, json!({"pictures": written}))?;
+        let fields = json!({"output": output_path, "outputs": written});
+        print_json_summary("render", &selections, fields)?;
     } else if !output.quiet {
         println!(
             "wrote {} picture(s): ground truth | prediction | errors (orange false positive, blue false negative)",

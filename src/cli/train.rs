@@ -11,7 +11,9 @@ use travmap::outputs::writing::write_atomically;
 use travmap::training::crossval::collect_training_set;
 use travmap::training::{TrainingSet, train as train_model};
 
-use super::{Inputs, Outcome, check_output, frame_count, model_json, outcome, print_json_summary};
+use super::{
+    Inputs, Outcome, check_output, frame_count, input_json, model_json, outcome, print_json_summary,
+};
 
 /// Train the SVM (grid search over C and gamma, spatially-blocked CV).
 #[derive(Args)]
@@ -74,8 +76,10 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
         bar.finish();
         set
     };
+    let mut inputs: Vec<serde_json::Value> = selections.iter().map(input_json).collect();
     for path in &datasets {
         let rows = read_training_rows(path, config, &mut set, labels)?;
+        inputs.push(json!({"path": path, "frames": null, "first_frame": null, "last_frame": null, "cells": rows}));
         let kind = match labels {
             Labels::GroundTruth => "labelled",
             Labels::Pseudo => "self-labelled",
@@ -113,8 +117,7 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
         let doc = json!({
             "output": model_path,
             "model": model_json(&model, &model_path.display().to_string()),
-            // Training sets can come from datasets too: their descriptions.
-            "inputs": model.training.sources,
+            "inputs": inputs,
             "config": config,
             "cells": set.len(),
             "training": model.training,
