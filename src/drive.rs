@@ -355,15 +355,12 @@ impl Selection {
 
     /// The input and the frames of it, as a person reads them.
     pub fn describe(&self) -> String {
-        let last = self.source.frames_in(&self.frames).last().copied();
-        match last {
-            Some(last) => format!(
-                "{} frames {}..={}",
-                self.source.path().display(),
-                self.frames.start,
-                last
-            ),
-            None => format!("{} (no frames in range)", self.source.path().display()),
+        let frames = self.source.frames_in(&self.frames);
+        match (frames.first(), frames.last()) {
+            (Some(first), Some(last)) => {
+                format!("{} frames {first}..={last}", self.source.path().display(),)
+            }
+            _ => format!("{} (no frames in range)", self.source.path().display()),
         }
     }
 }

@@ -134,7 +134,7 @@ pub enum Error {
     #[error("{path}: {problem}")]
     LogContainer { path: PathBuf, problem: String },
 
-    #[error("{path}: message {ordinal}: {problem}")]
+    #[error("{path}: {}{problem}", messages_before(*ordinal))]
     LogRecord {
         path: PathBuf,
         ordinal: usize,
@@ -498,4 +498,14 @@ pub(crate) fn contain_panics<T>(f: impl FnOnce() -> T) -> std::result::Result<T,
         let at = CONTAINED_AT.with(|c| std::mem::take(&mut *c.borrow_mut()));
         format!("{message}, at {at}")
     })
+}
+
+/// Where in a log reading stopped, in words a user can check against `mcap cat`:
+/// the count of messages read before the problem (none: nothing to say).
+fn messages_before(ordinal: usize) -> String {
+    match ordinal {
+        0 => String::new(),
+        1 => "after 1 message: ".into(),
+        n => format!("after {n} messages: "),
+    }
 }

@@ -72,7 +72,7 @@ fn main() -> ExitCode {
         Ok(Outcome::Complete) => ExitCode::SUCCESS,
         Ok(Outcome::Skipped(frames)) => {
             if !json {
-                eprintln!("completed with {frames} skipped frame(s)");
+                eprintln!("completed with {}", cli::counted(frames, "skipped frame"));
             }
             ExitCode::from(3)
         }

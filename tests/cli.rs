@@ -111,7 +111,7 @@ fn train_writes_a_model_that_eval_uses() {
     assert_eq!(file["format"], "travmap-svm");
     assert_eq!(file["version"], 1);
     let out = success(travmap(&["eval", &seq, "--model", model, "--frames", "2"]));
-    assert_contains(&out, &["over 1 frames", "m.json"]);
+    assert_contains(&out, &["over 1 frame\n", "m.json"]);
     // No temporary file is left beside the model.
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }

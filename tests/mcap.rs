@@ -209,6 +209,7 @@ fn sorted(entries: &Value) -> Vec<Value> {
 }
 
 #[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn real_clients_decode_what_travmap_writes() {
     let Some(seq) = common::sample() else { return };
     let python = std::env::var("TRAVMAP_CLIENT_PYTHON").ok();
@@ -648,6 +649,7 @@ fn shared_mcap_files_give_clear_errors() {
 }
 
 #[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
     let Some(seq) = common::sample() else { return };
     let Some(rerun) = common::env_var("TRAVMAP_RERUN", ".ci/run points it at rerun-sdk's `rerun`")

@@ -64,6 +64,7 @@ fn scores(input: &Path) -> Value {
 }
 
 #[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn every_route_gives_the_ros2_grids_cell_for_cell_and_the_same_scores() {
     let dir = tempfile::tempdir().unwrap();
     let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
@@ -97,6 +98,7 @@ fn every_route_gives_the_ros2_grids_cell_for_cell_and_the_same_scores() {
 }
 
 #[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn convert_brings_every_route_back_to_the_same_ros2_messages() {
     let Some((dir, seq)) = common::one_frame_with_image() else {
         return;
@@ -184,6 +186,7 @@ fn field_value(bytes: &[u8], name: &[u8]) -> usize {
 }
 
 #[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() {
     let dir = tempfile::tempdir().unwrap();
     let Some((_, drive)) = common::sample_as_mcap(dir.path(), &["--frames", "0..3"]) else {

@@ -13,8 +13,8 @@ use travmap::outputs::writing::write_atomically;
 use travmap::training::adaptation::{Adapted, adapt as adapt_model};
 
 use super::{
-    Inputs, ModelArg, Outcome, Output, check_output, frame_count, model_json, outcome,
-    print_json_summary,
+    Inputs, ModelArg, Outcome, Output, check_output, counted, frame_count, model_json, outcome,
+    print_json_summary, setting_word,
 };
 
 /// Adapt a model to the ground the given drives cover, from the drives alone: the
@@ -58,12 +58,15 @@ pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
     } else if !output.quiet {
         let counts = &adapted.counts;
         println!(
-            "self-labelled {} frames: {} footprint cells, {} negative cells, {} unknown (distinct world cells); no labels read",
-            counts.frames, counts.footprint_cells, counts.negative_cells, counts.unknown_cells
+            "self-labelled {}: {} footprint cells, {} negative cells, {} unknown (distinct world cells); no labels read",
+            counted(counts.frames, "frame"),
+            counts.footprint_cells,
+            counts.negative_cells,
+            counts.unknown_cells
         );
         println!(
-            "adapted {prior_name} ({:?} learner, C {} gamma {}): {} support vectors on {} cells",
-            config.adapt.learner,
+            "adapted {prior_name} (adapt.learner {}, C {} gamma {}): {} support vectors on {} cells",
+            setting_word(&config.adapt.learner),
             model.c,
             model.gamma,
             model.support_vector_count(),

@@ -12,12 +12,13 @@ use travmap::outputs::annotation::{self, AnnotationOptions};
 use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;
 use super::{
-    Inputs, ModelArg, Outcome, check_output, frame_count, model_json, outcome, print_json_summary,
-    print_wrote, with_summary,
+    Inputs, ModelArg, Outcome, check_output, counted, frame_count, model_json, outcome,
+    print_json_summary, print_wrote, with_summary,
 };
 
 /// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
 #[derive(Args)]
+#[command(mut_arg("sequences", super::one_input))]
 pub struct AnnotateArgs {
     #[command(flatten)]
     inputs: Inputs,
@@ -55,10 +56,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     };
     let (model, model_name) =
         (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;
-    let selection = args.inputs.open_one(
-        config.appearance.enabled,
-        "annotate takes one input (a KITTI sequence directory or an MCAP file)",
-    )?;
+    let selection = args.inputs.open_one(config.appearance.enabled)?;
     let mut metadata = BTreeMap::from([
         (
             "travmap_version".to_string(),
@@ -101,8 +99,8 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
         );
         if let Some(s) = summary.evaluation.scores {
             println!(
-                "{} frames with ground truth: Acc {:.1} mIoU {:.1} F1 {:.1} (filtered)",
-                summary.evaluation.frames,
+                "{} with ground truth: Acc {:.1} mIoU {:.1} F1 {:.1} (filtered)",
+                counted(summary.evaluation.frames, "frame"),
                 100.0 * s.accuracy,
                 100.0 * s.miou,
                 100.0 * s.f1

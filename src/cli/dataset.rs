@@ -9,7 +9,7 @@ use serde_json::json;
 use travmap::outputs::dataset::DatasetWriter;
 
 use super::{
-    Inputs, Outcome, check_output, frame_count, load_model, outcome, print_json_summary,
+    Inputs, Outcome, check_output, counted, frame_count, load_model, outcome, print_json_summary,
     with_summary,
 };
 
@@ -61,10 +61,10 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
         print_json_summary("dataset", &selections, fields)?;
     } else if !output.quiet {
         println!(
-            "wrote {}: {} cells from {} frames ({} labelled, {} with appearance), {:.0} cells/s",
+            "wrote {}: {} from {} ({} labelled, {} with appearance), {:.0} cells/s",
             output_path.display(),
-            summary.rows,
-            summary.frames,
+            counted(summary.rows, "cell"),
+            counted(summary.frames, "frame"),
             summary.labelled_rows,
             summary.rows_with_appearance,
             summary.rows as f64 / seconds

@@ -16,7 +16,7 @@ use travmap::scoring::metrics::Scores;
 
 use super::adapt::AdaptFlag;
 use super::{
-    Inputs, ModelArg, Outcome, frame_count, model_json, notice_unknown_labels, outcome,
+    Inputs, ModelArg, Outcome, counted, frame_count, model_json, notice_unknown_labels, outcome,
     print_json_summary,
 };
 
@@ -146,15 +146,15 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     if report.frames_without_remission > 0 {
         writeln!(
             out,
-            "{} frames had no usable remission (intensity): the model's fallback without remission features classified them",
-            report.frames_without_remission
+            "{} had no usable remission (intensity): the model's fallback without remission features classified them",
+            counted(report.frames_without_remission, "frame")
         )?;
     }
     if let Some(foreign) = report.foreign_remission {
         writeln!(
             out,
-            "{} frames had remission far outside the model's training range (median cell {:.4}, the model learnt {:.2} +- {:.2}: another sensor's scale?): {}",
-            report.frames_foreign_remission,
+            "{} had remission far outside the model's training range (median cell {:.4}, the model learnt {:.2} +- {:.2}: another sensor's scale?): {}",
+            counted(report.frames_foreign_remission, "frame"),
             foreign.median,
             foreign.trained_mean,
             foreign.trained_std,
@@ -169,16 +169,22 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     if report.dropped_points > 0 {
         writeln!(
             out,
-            "{} points with a non-finite coordinate were dropped",
-            report.dropped_points
+            "{} with a non-finite coordinate {} dropped",
+            counted(report.dropped_points, "point"),
+            if report.dropped_points == 1 {
+                "was"
+            } else {
+                "were"
+            }
         )?;
     }
     match &geometry_only {
         Some(geometric) => {
             writeln!(
                 out,
-                "ablation: the rows above use appearance for the {} cells of {} frames that a camera saw; without it:",
-                report.cells_with_appearance, report.frames_with_images
+                "ablation: the rows above use appearance for the {} of {} that a camera saw; without it:",
+                counted(report.cells_with_appearance, "cell"),
+                counted(report.frames_with_images, "frame")
             )?;
             write_table(&mut out, geometric, true)?;
         }
@@ -278,8 +284,13 @@ pub(super) fn write_table(
     let c = &report.confusion;
     writeln!(
         out,
-        "cells: TP {} TN {} FP {} FN {} unpredictable {} over {} frames",
-        c.tp, c.tn, c.fp, c.r#fn, c.unknown, report.frames
+        "cells: TP {} TN {} FP {} FN {} unpredictable {} over {}",
+        c.tp,
+        c.tn,
+        c.fp,
+        c.r#fn,
+        c.unknown,
+        counted(report.frames, "frame")
     )?;
     let t = &report.timings_ms;
     if !with_latency {

@@ -17,12 +17,15 @@ use travmap::scoring::evaluation::Evaluation;
 use travmap::scoring::metrics::Confusion;
 
 use super::{
-    Inputs, ModelArg, Outcome, check_output, frame_count, model_json, notice_unknown_labels,
-    outcome, print_json_summary,
+    Inputs, ModelArg, Outcome, check_output, counted, frame_count, model_json,
+    notice_unknown_labels, outcome, print_json_summary,
 };
 
 /// Fuse every frame's prediction (and ground truth) into one map of the drive.
 #[derive(Args)]
+#[command(mut_arg("sequences", |a| super::one_input(a).help(
+    "A KITTI odometry / SemanticKITTI sequence directory, a recorded log (MCAP, ROS 1 bag, rosbag2 directory or .db3), a folder of .pcd / .bin scans, or one saved point cloud (.pcd) of a site"
+)))]
 pub struct MapArgs {
     #[command(flatten)]
     inputs: Inputs,
@@ -90,9 +93,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
             }
             Selection::new(source, args.inputs.frames.clone().unwrap_or(0..usize::MAX))
         }
-        _ => args
-            .inputs
-            .open_one(config.appearance.enabled, "map takes one input")?,
+        _ => args.inputs.open_one(config.appearance.enabled)?,
     };
     let config = &config;
     let selections = [selection];
@@ -155,9 +156,10 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
         print_json_summary("map", &selections, fields)?;
     } else if !output.quiet {
         println!(
-            "wrote {} ({} frames fused into {seen} cells, {area_m2:.0} m2; map {:.1} KiB)",
+            "wrote {} ({} fused into {}, {area_m2:.0} m2; map {:.1} KiB)",
             output_path.display(),
-            map.frames(),
+            counted(map.frames(), "frame"),
+            counted(seen, "cell"),
             map.memory_bytes() as f64 / 1024.0
         );
         if let Some(nav2) = &nav2 {

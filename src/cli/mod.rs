@@ -173,6 +173,14 @@ impl Progress {
     }
 }
 
+/// [`Inputs`] of a command that reads one drive (`#[command(mut_arg("sequences",
+/// one_input))]`): its help and usage say one.
+pub fn one_input(arg: clap::Arg) -> clap::Arg {
+    arg.num_args(1).action(clap::ArgAction::Set).value_name("INPUT").help(
+        "A KITTI odometry / SemanticKITTI sequence directory, a recorded log (MCAP, ROS 1 bag, rosbag2 directory or .db3) or a folder of .pcd / .bin scans",
+    )
+}
+
 /// The drives a command reads, the frames of each, and how to read them.
 #[derive(Args)]
 pub struct Inputs {
@@ -282,11 +290,9 @@ impl Inputs {
         InputFiles::of(&paths)
     }
 
-    /// Opens the one input of a command that takes one; `what` says what it takes.
-    pub fn open_one(&self, read_images: bool, what: &str) -> Result<Selection> {
-        if self.sequences.len() != 1 {
-            return Err(usage(format!("{what}, got {}", self.sequences.len())));
-        }
+    /// Opens the one input of a command that takes one (clap has checked that it is
+    /// one: [`one_input`]).
+    pub fn open_one(&self, read_images: bool) -> Result<Selection> {
         Ok(self.open(read_images)?.remove(0))
     }
 }
@@ -468,7 +474,7 @@ pub fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {
 /// `--json` output, one convention for every command (README "Machine-readable
 /// output", schemas in `schemas/json/`): JSON Lines on stdout, a `frame` record per
 /// frame where a command streams frames, then one flat `summary` record naming the
-/// command, its `inputs` (always a list of {path, frames, first_frame, last_frame}),
+/// command, its `inputs` (always a list of {path, frames: {start, end, count}}),
 /// the frames it `skipped` and, for a command that writes, its `output` (what -o
 /// named) and `outputs` (every file written).
 pub fn print_json_frame(mut fields: serde_json::Value) -> Result<()> {
@@ -507,12 +513,11 @@ pub fn print_json_summary(
 /// One input of a `--json` summary: its path and the frames read from it.
 pub fn input_json(selection: &Selection) -> serde_json::Value {
     let frames = selection.source.frames_in(&selection.frames);
-    json!({
-        "path": selection.source.path(),
-        "frames": frames.len(),
-        "first_frame": frames.first(),
-        "last_frame": frames.last(),
-    })
+    let range = match (frames.first(), frames.last()) {
+        (Some(first), Some(last)) => json!({"start": first, "end": last, "count": frames.len()}),
+        _ => json!({"start": null, "end": null, "count": 0}),
+    };
+    json!({"path": selection.source.path(), "frames": range})
 }
 
 /// `fields` with the command's own summary (a struct) merged in at the top level:
@@ -533,12 +538,31 @@ pub fn with_summary(
     Ok(fields)
 }
 
+/// A setting's value as the config file spells it (`miou`, `drive_and_prior`), not
+/// its Rust name.
+pub fn setting_word(value: &impl serde::Serialize) -> String {
+    match serde_json::to_value(value) {
+        Ok(serde_json::Value::String(word)) => word,
+        Ok(other) => other.to_string(),
+        Err(_) => "?".into(),
+    }
+}
+
+/// `n noun` with the noun in the plural unless n is 1.
+pub fn counted<N: Copy + std::fmt::Display + TryInto<u64>>(n: N, noun: &str) -> String {
+    match n.try_into().ok() {
+        Some(1) => format!("1 {noun}"),
+        _ => format!("{n} {noun}s"),
+    }
+}
+
 /// The line a command that wrote an MCAP ends with:
 /// `wrote PATH (N frames, CONTENTS, M MB, R frames/s)`.
 pub fn print_wrote(path: &Path, frames: usize, contents: &str, bytes: u64, seconds: f64) {
     println!(
-        "wrote {} ({frames} frames, {contents}, {:.1} MB, {:.1} frames/s)",
+        "wrote {} ({}, {contents}, {:.1} MB, {:.1} frames/s)",
         path.display(),
+        counted(frames, "frame"),
         bytes as f64 / 1e6,
         frames as f64 / seconds
     );
@@ -576,9 +600,9 @@ pub fn notice_unknown_labels(report: &EvaluationReport, config: &Config) {
         None => format!("{} label set", truth.labels.name()),
     };
     eprintln!(
-        "notice: {} labelled points in {} frame(s) carry ids the {label_set} does not define (e.g. {}): they count as not traversable; are these another dataset's labels (--set ground_truth.labels=..., or a label_map)?",
+        "notice: {} labelled points in {} carry ids the {label_set} does not define (e.g. {}): they count as not traversable; are these another dataset's labels (--set ground_truth.labels=..., or a label_map)?",
         unknown.points,
-        report.frames_with_unknown_labels,
+        counted(report.frames_with_unknown_labels, "frame"),
         ids.join(", ")
     );
 }

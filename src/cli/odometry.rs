@@ -13,6 +13,7 @@ use super::{Inputs, Outcome, check_output, frame_count, outcome, print_json_summ
 
 /// Estimate a drive's trajectory by scan registration (whatever poses it records).
 #[derive(Args)]
+#[command(mut_arg("sequences", super::one_input))]
 pub struct OdometryArgs {
     #[command(flatten)]
     inputs: Inputs,
@@ -35,7 +36,7 @@ pub fn odometry(args: OdometryArgs) -> Result<Outcome> {
     let config = args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
     check_output(output_path, &args.inputs.files(None))?;
-    let mut selection = args.inputs.open_one(false, "odometry takes one input")?;
+    let mut selection = args.inputs.open_one(false)?;
     // Registration needs no labels: one short cannot stop it.
     selection.source.set_read_labels(false);
     let selections = [selection];

@@ -10,12 +10,13 @@ use travmap::outputs::rendering;
 use travmap::outputs::writing::Staged;
 
 use super::{
-    Inputs, ModelArg, Outcome, check_output, check_output_dir, frame_count, outcome,
+    Inputs, ModelArg, Outcome, check_output, check_output_dir, counted, frame_count, outcome,
     print_json_summary, usage,
 };
 
 /// Draw ground truth, prediction and errors of a frame side by side as PNG.
 #[derive(Args)]
+#[command(mut_arg("sequences", super::one_input))]
 pub struct RenderArgs {
     #[command(flatten)]
     inputs: Inputs,
@@ -51,9 +52,7 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         check_output(output_path, &inputs)?;
     }
     let (model, _) = args.model.load(config)?;
-    let selection = args
-        .inputs
-        .open_one(config.appearance.enabled, "render takes one input")?;
+    let selection = args.inputs.open_one(config.appearance.enabled)?;
     if args.all
         && output_path
             .extension()
@@ -104,8 +103,8 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         print_json_summary("render", &selections, fields)?;
     } else if !output.quiet {
         println!(
-            "wrote {} picture(s): ground truth | prediction | errors (orange false positive, blue false negative)",
-            written.len()
+            "wrote {}: ground truth | prediction | errors (orange false positive, blue false negative)",
+            counted(written.len(), "picture")
         );
         for path in &written {
             println!("  {}", path.display());

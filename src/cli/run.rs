@@ -10,7 +10,7 @@ use travmap::method::grid::CellClass;
 use travmap::scoring::evaluation::Evaluation;
 
 use super::{
-    Inputs, ModelArg, Outcome, frame_count, model_json, outcome, print_json_frame,
+    Inputs, ModelArg, Outcome, counted, frame_count, model_json, outcome, print_json_frame,
     print_json_summary,
 };
 
@@ -114,8 +114,8 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     } else if !output.quiet {
         if report.frames_without_remission > 0 {
             eprintln!(
-                "note: {} frames had no usable remission (intensity): the model's fallback without remission features classified them",
-                report.frames_without_remission
+                "note: {} had no usable remission (intensity): the model's fallback without remission features classified them",
+                counted(report.frames_without_remission, "frame")
             );
         }
         let latency = report.timings_ms.latency;

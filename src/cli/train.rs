@@ -12,7 +12,8 @@ use travmap::training::crossval::collect_training_set;
 use travmap::training::{TrainingSet, train as train_model};
 
 use super::{
-    Inputs, Outcome, check_output, frame_count, input_json, model_json, outcome, print_json_summary,
+    Inputs, Outcome, check_output, frame_count, input_json, model_json, outcome,
+    print_json_summary, setting_word,
 };
 
 /// Train the SVM (grid search over C and gamma, spatially-blocked CV).
@@ -79,7 +80,7 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
     let mut inputs: Vec<serde_json::Value> = selections.iter().map(input_json).collect();
     for path in &datasets {
         let rows = read_training_rows(path, config, &mut set, labels)?;
-        inputs.push(json!({"path": path, "frames": null, "first_frame": null, "last_frame": null, "cells": rows}));
+        inputs.push(json!({"path": path, "frames": null, "cells": rows}));
         let kind = match labels {
             Labels::GroundTruth => "labelled",
             Labels::Pseudo => "self-labelled",
@@ -148,8 +149,10 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
             );
         }
         println!(
-            "grid search (spatially-blocked {}-fold CV, cells before filtering; by {:?}, class weights {:?}):",
-            config.training.folds, config.training.criterion, config.training.class_weights
+            "grid search (spatially-blocked {}-fold CV, cells before filtering; by {} (training.criterion), class weights {} (training.class_weights)):",
+            config.training.folds,
+            setting_word(&config.training.criterion),
+            setting_word(&config.training.class_weights)
         );
         for r in &model.training.search {
             println!(

@@ -240,7 +240,7 @@ impl Iterator for DriveFrames<'_> {
                         } => Error::LogUnreadableFrom {
                             path,
                             cloud: self.next_cloud,
-                            problem: format!("message {ordinal}: {problem}"),
+                            problem: format!("after message {ordinal} of the file: {problem}"),
                         },
                         other => other,
                     };

@@ -1,0 +1,25 @@
+# The real clients the ignored tests run against what travmap writes (pinned), set
+# up and exported for the shell that sources this file:
+#   source .ci/clients.sh && cargo test --release -- --ignored
+# Python mcap + mcap-ros2-support, rosbags, rerun-sdk, pyarrow, DuckDB, Polars and
+# jsonschema; Ray and pytest for the fleet script's tests (fleet/); Node @mcap/core +
+# @foxglove/rosmsg2-serialization (tests/clients/package-lock.json); Chromium for
+# rerun's web viewer (tests/viewer.rs), from Debian, as root or through sudo.
+python3 -m venv target/client-venv
+target/client-venv/bin/pip install --quiet --disable-pip-version-check \
+    "mcap==1.6.0" "mcap-ros2-support==0.6.0" "rosbags==0.11.9" "rerun-sdk==0.41.0" \
+    "pyarrow==26.0.1" "duckdb==2.0.0" "polars==2.1.0" \
+    "ray==2.60.0" "pytest==9.2.0" "jsonschema==4.26.0"
+export TRAVMAP_CLIENT_PYTHON="$PWD/target/client-venv/bin/python"
+export TRAVMAP_RERUN="$PWD/target/client-venv/bin/rerun"
+npm ci --prefix tests/clients --no-audit --no-fund --silent
+if ! command -v chromium >/dev/null 2>&1; then
+    apt_get="apt-get"
+    [ "$(id -u)" -eq 0 ] || apt_get="sudo -n apt-get"
+    { $apt_get update -qq && DEBIAN_FRONTEND=noninteractive $apt_get install -y -qq chromium >/dev/null; } ||
+        echo "could not install chromium: tests/viewer.rs will fail" >&2
+fi
+if command -v chromium >/dev/null 2>&1; then
+    export TRAVMAP_CHROMIUM="$(command -v chromium)"
+    chromium --version
+fi
