@@ -9,7 +9,7 @@ use clap::Args;
 use serde_json::json;
 use travmap::Config;
 use travmap::method::classifier::SvmModel;
-use travmap::outputs::writing::write_atomically;
+use travmap::outputs::atomic::write_atomically;
 use travmap::training::adaptation::{Adapted, adapt as adapt_model};
 
 use super::{

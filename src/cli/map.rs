@@ -8,11 +8,11 @@ use serde_json::json;
 use travmap::drive::Selection;
 use travmap::io::format::is_pcd_file;
 use travmap::io::{Recording, Source};
+use travmap::outputs::atomic::Staged;
 use travmap::outputs::drive_map::{render_drive_map, write_map_cells};
 use travmap::outputs::nav2_map::{Nav2Mode, image_path, write_nav2_map};
 use travmap::outputs::preflight::check_distinct_outputs;
 use travmap::outputs::rendering::encode_png;
-use travmap::outputs::writing::Staged;
 use travmap::scoring::evaluation::Evaluation;
 use travmap::scoring::metrics::Confusion;
 

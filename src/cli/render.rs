@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use serde_json::json;
+use travmap::outputs::atomic::Staged;
 use travmap::outputs::rendering;
-use travmap::outputs::writing::Staged;
 
 use super::{
     Inputs, ModelArg, Outcome, check_output, check_output_dir, counted, frame_count, outcome,

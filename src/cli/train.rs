@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::Args;
 use serde_json::json;
+use travmap::outputs::atomic::write_atomically;
 use travmap::outputs::dataset::reading::{Labels, read_training_rows};
-use travmap::outputs::writing::write_atomically;
 use travmap::training::crossval::collect_training_set;
 use travmap::training::{TrainingSet, train as train_model};
 

@@ -17,8 +17,8 @@ use crate::frame::RgbImage;
 use crate::io::ros::{Header, MapMetaData, OccupancyGrid, Pose, Quaternion, Time, Vector3};
 use crate::method::fusion::FusedCell;
 use crate::method::grid::CellClass;
+use crate::outputs::atomic::{AtomicFile, Staged, parquet_failure, sync_output, write_failure};
 use crate::outputs::rendering::{GAP_PX, class_colour, colour, error_colour};
-use crate::outputs::writing::{AtomicFile, Staged, parquet_failure, sync_output, write_failure};
 
 /// Cells of empty border around the map in the picture.
 const BORDER_CELLS: i64 = 2;

@@ -1,10 +1,11 @@
 //! What travmap writes: MCAP ([`writing`], used by [`conversion`] and
 //! [`annotation`]), Parquet cell tables ([`dataset`]), pictures ([`rendering`]) and
 //! nav2 maps ([`nav2_map`]).
-//! Every file goes through [`writing::AtomicFile`]: a temporary beside the output,
+//! Every file goes through [`atomic::AtomicFile`]: a temporary beside the output,
 //! renamed when complete.
 
 pub mod annotation;
+pub mod atomic;
 pub mod conversion;
 pub mod dataset;
 pub mod drive_map;

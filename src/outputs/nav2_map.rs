@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 use crate::error::{Error, Result};
 use crate::method::fusion::FusedCell;
 use crate::method::grid::CellClass;
-use crate::outputs::writing::Staged;
+use crate::outputs::atomic::Staged;
 
 /// How cells become grey levels (`mode` in the YAML).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]

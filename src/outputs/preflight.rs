@@ -12,7 +12,7 @@ use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::outputs::writing::{TEMPORARY_INFIX, temporary_path};
+use crate::outputs::atomic::{TEMPORARY_INFIX, temporary_path};
 
 /// A file's identity on this machine: (device, inode).
 type FileId = (u64, u64);

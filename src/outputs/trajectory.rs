@@ -7,7 +7,7 @@ use std::path::Path;
 
 use crate::drive::EstimatedPose;
 use crate::error::Result;
-use crate::outputs::writing::write_atomically;
+use crate::outputs::atomic::write_atomically;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TrajectoryFormat {

@@ -33,7 +33,7 @@ use crate::error::{Error, Result};
 use crate::method::features::feature_names;
 use crate::method::grid::CellClass;
 use crate::method::pipeline::FrameResult;
-use crate::outputs::writing::{AtomicFile, parquet_failure, sync_output, write_failure};
+use crate::outputs::atomic::{AtomicFile, parquet_failure, sync_output, write_failure};
 
 /// Rows per row group: about 60 MB of columns in memory at a time.
 const ROW_GROUP_ROWS: usize = 1 << 17;

@@ -1,0 +1,159 @@
+//! What commands print: the `--json` records (one convention for all), the
+//! `wrote ...` line, counts in words and notices.
+
+use std::path::Path;
+
+use anyhow::Result;
+use serde_json::json;
+use travmap::Config;
+use travmap::drive::Selection;
+use travmap::method::classifier::SvmModel;
+use travmap::scoring::evaluation::EvaluationReport;
+
+/// The model's identity in JSON outputs.
+pub fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {
+    json!({
+        "name": name,
+        "sha256": model.sha256_hex(),
+        "support_vectors": model.support_vector_count(),
+        "c": model.c,
+        "gamma": model.gamma,
+        "trained_on": model.training.sources,
+    })
+}
+
+/// `--json` output, one convention for every command (README "Machine-readable
+/// output", schemas in `schemas/json/`): JSON Lines on stdout, a `frame` record per
+/// frame where a command streams frames, then one flat `summary` record naming the
+/// command, its `inputs` (always a list of {path, frames: {start, end, count}}),
+/// the frames it `skipped` and, for a command that writes, its `output` (what -o
+/// named) and `outputs` (every file written).
+pub fn print_json_frame(mut fields: serde_json::Value) -> Result<()> {
+    fields["type"] = "frame".into();
+    print_json_line(&fields)
+}
+
+/// The `summary` record of [`print_json_frame`]'s convention: `fields` with the
+/// command, the inputs (unless `fields` names them) and the skipped frames.
+pub fn print_json_summary(
+    command: &str,
+    selections: &[Selection],
+    mut fields: serde_json::Value,
+) -> Result<()> {
+    fields["type"] = "summary".into();
+    fields["command"] = command.into();
+    if fields.get("inputs").is_none() {
+        fields["inputs"] = selections.iter().map(input_json).collect::<Vec<_>>().into();
+    }
+    if let (Some(output), None) = (fields.get("output"), fields.get("outputs")) {
+        fields["outputs"] = json!([output]);
+    }
+    fields["skipped"] = selections
+        .iter()
+        .flat_map(|s| {
+            let input = s.source.path().display().to_string();
+            s.source.skipped().into_iter().map(
+                move |skip| json!({"input": input, "frame": skip.frame, "reason": skip.reason}),
+            )
+        })
+        .collect::<Vec<_>>()
+        .into();
+    print_json_line(&fields)
+}
+
+/// One input of a `--json` summary: its path and the frames read from it.
+pub fn input_json(selection: &Selection) -> serde_json::Value {
+    let frames = selection.source.frames_in(&selection.frames);
+    let range = match (frames.first(), frames.last()) {
+        (Some(first), Some(last)) => json!({"start": first, "end": last, "count": frames.len()}),
+        _ => json!({"start": null, "end": null, "count": 0}),
+    };
+    json!({"path": selection.source.path(), "frames": range})
+}
+
+/// `fields` with the command's own summary (a struct) merged in at the top level:
+/// a summary record is flat, whatever type holds its numbers.
+pub fn with_summary(
+    mut fields: serde_json::Value,
+    summary: &impl serde::Serialize,
+) -> Result<serde_json::Value> {
+    if let serde_json::Value::Object(summary) = serde_json::to_value(summary)? {
+        for (key, value) in summary {
+            debug_assert!(
+                fields.get(&key).is_none(),
+                "summary field {key} named twice"
+            );
+            fields[key] = value;
+        }
+    }
+    Ok(fields)
+}
+
+/// A setting's value as the config file spells it (`miou`, `drive_and_prior`), not
+/// its Rust name.
+pub fn setting_word(value: &impl serde::Serialize) -> String {
+    match serde_json::to_value(value) {
+        Ok(serde_json::Value::String(word)) => word,
+        Ok(other) => other.to_string(),
+        Err(_) => "?".into(),
+    }
+}
+
+/// `n noun` with the noun in the plural unless n is 1.
+pub fn counted<N: Copy + std::fmt::Display + TryInto<u64>>(n: N, noun: &str) -> String {
+    match n.try_into().ok() {
+        Some(1) => format!("1 {noun}"),
+        _ => format!("{n} {noun}s"),
+    }
+}
+
+/// The line a command that wrote an MCAP ends with:
+/// `wrote PATH (N frames, CONTENTS, M MB, R frames/s)`.
+pub fn print_wrote(path: &Path, frames: usize, contents: &str, bytes: u64, seconds: f64) {
+    println!(
+        "wrote {} ({}, {contents}, {:.1} MB, {:.1} frames/s)",
+        path.display(),
+        counted(frames, "frame"),
+        bytes as f64 / 1e6,
+        frames as f64 / seconds
+    );
+}
+
+/// An error under `--json`: one `error` record on stderr, with the file it is
+/// about when there is one and the exit code.
+pub fn print_json_error(message: &str, file: Option<&Path>, exit_code: i32) {
+    let record = json!({
+        "type": "error",
+        "error": message.trim_start_matches("error: ").trim_end(),
+        "file": file,
+        "exit_code": exit_code,
+    });
+    eprintln!("{record}");
+}
+
+fn print_json_line(value: &serde_json::Value) -> Result<()> {
+    use std::io::Write;
+    writeln!(std::io::stdout().lock(), "{value}")?;
+    Ok(())
+}
+
+/// Says on stderr (even with -q) when labels carried ids the label set does not
+/// define: a run scored against another dataset's labels looks like a bad model.
+pub fn notice_unknown_labels(report: &EvaluationReport, config: &Config) {
+    let unknown = &report.unknown_labels;
+    if unknown.points == 0 {
+        return;
+    }
+    let ids: Vec<String> = unknown.examples.iter().map(u16::to_string).collect();
+    let truth = &config.ground_truth;
+    let label_set = match &truth.label_map {
+        Some(path) => format!("label map {}", path.display()),
+        None => format!("{} label set", truth.labels.name()),
+    };
+    eprintln!(
+        "notice: {} labelled points in {} carry ids the {label_set} does not define (e.g. {}): they count as not traversable; are these another dataset's labels (--set ground_truth.labels=..., or a label_map)?",
+        unknown.points,
+        counted(report.frames_with_unknown_labels, "frame"),
+        ids.join(", ")
+    );
+}
