@@ -10,8 +10,9 @@ use std::path::Path;
 use common::{arg, json_summary};
 use parquet::file::reader::{FileReader, SerializedFileReader};
 
-/// The shipped drive's scans in the world frame, as one binary PCD with labels.
-fn write_site_pcd(seq: &Path, path: &Path) -> usize {
+/// The shipped drive's scans in the world frame, as one binary PCD with labels;
+/// also returns its records (float32 x y z intensity, uint32 label).
+fn write_site_pcd(seq: &Path, path: &Path) -> (usize, Vec<u8>) {
     let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
     let mut data = Vec::new();
     let mut points = 0;
@@ -36,7 +37,7 @@ fn write_site_pcd(seq: &Path, path: &Path) -> usize {
     let mut bytes = header.into_bytes();
     bytes.extend_from_slice(&data);
     std::fs::write(path, bytes).unwrap();
-    points
+    (points, data)
 }
 
 /// Seen cells of a map's Parquet table: world cell -> (predicted traversable, truth).
@@ -65,7 +66,7 @@ fn a_site_cloud_maps_the_drive_it_was_merged_from() {
     let Some(seq) = common::sample() else { return };
     let dir = tempfile::tempdir().unwrap();
     let site = dir.path().join("site.pcd");
-    let points = write_site_pcd(&seq, &site);
+    let (points, _) = write_site_pcd(&seq, &site);
     let drive_cells = dir.path().join("drive.parquet");
     let site_cells = dir.path().join("site.parquet");
     let out = |name: &str| dir.path().join(name);
@@ -112,4 +113,43 @@ fn a_site_cloud_maps_the_drive_it_was_merged_from() {
     );
     assert!(coverage >= 0.9, "{:.1} % covered", 100.0 * coverage);
     assert!(agree >= 0.8, "{:.1} % agree", 100.0 * agree);
+}
+
+#[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
+fn ply_files_written_by_plyfile_map_as_the_same_cloud_in_pcd_does() {
+    let Some(seq) = common::sample() else { return };
+    let Some(python) = common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with plyfile") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let site = dir.path().join("site.pcd");
+    let (_, records) = write_site_pcd(&seq, &site);
+    let records_path = dir.path().join("records.bin");
+    std::fs::write(&records_path, records).unwrap();
+    let cells = |input: &Path, name: &str| {
+        let table = dir.path().join(format!("{name}.parquet"));
+        let png = dir.path().join(format!("{name}.png"));
+        common::success(common::travmap(&[
+            "map",
+            arg(input),
+            "-o",
+            arg(&png),
+            "--cells",
+            arg(&table),
+            "-q",
+        ]));
+        seen_cells(&table)
+    };
+    let from_pcd = cells(&site, "pcd");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/write_ply.py");
+    for encoding in ["binary_little_endian", "binary_big_endian", "ascii"] {
+        let ply = dir.path().join(format!("{encoding}.ply"));
+        let written = std::process::Command::new(&python)
+            .args([arg(&script), arg(&records_path), arg(&ply), encoding])
+            .output()
+            .unwrap();
+        assert!(written.status.success(), "{}", common::stderr(&written));
+        assert_eq!(cells(&ply, encoding), from_pcd, "{encoding}");
+    }
 }

@@ -6,7 +6,7 @@ use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use travmap::drive::Selection;
-use travmap::io::format::is_pcd_file;
+use travmap::io::format::site_cloud_format;
 use travmap::io::{Recording, Source};
 use travmap::outputs::atomic::Staged;
 use travmap::outputs::drive_map::{render_drive_map, write_map_cells};
@@ -24,7 +24,7 @@ use super::{
 /// Fuse every frame's prediction (and ground truth) into one map of the drive.
 #[derive(Args)]
 #[command(mut_arg("sequences", |a| super::one_input(a).help(
-    "A KITTI odometry / SemanticKITTI sequence directory, a recorded log (MCAP, ROS 1 bag, rosbag2 directory or .db3), a folder of .pcd / .bin scans, or one saved point cloud (.pcd) of a site"
+    "A KITTI odometry / SemanticKITTI sequence directory, a recorded log (MCAP, ROS 1 bag, rosbag2 directory or .db3), a folder of .pcd / .bin scans, or one saved point cloud of a site (.pcd or .ply)"
 )))]
 pub struct MapArgs {
     #[command(flatten)]
@@ -84,7 +84,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     }
     let (model, model_name) = args.model.load(&config)?;
     let selection = match args.inputs.sequences.as_slice() {
-        [path] if is_pcd_file(path) => {
+        [path] if site_cloud_format(path).is_some() => {
             // A tile is the whole window: its neighbours' points are its own.
             config.integration.scans = 1;
             let source = Source::site_cloud(path, config.grid.size_m)?;

@@ -45,19 +45,37 @@ pub const BAG_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
 /// How a PCD file begins: with its comment line, or straight with its version.
 const PCD_MAGICS: [&[u8]; 2] = [b"# .PCD", b"VERSION ."];
 const SINGLE_PCD: &str = "a single PCD point cloud (`travmap map` reads one as a site map; a folder of .pcd scans is a drive: put them in one)";
+/// How a PLY file begins.
+const PLY_MAGICS: [&[u8]; 2] = [b"ply\n", b"ply\r\n"];
+const SINGLE_PLY: &str = "a single PLY point cloud (`travmap map` reads one as a site map)";
 
-/// Whether `path` is one PCD file (a site cloud for `travmap map`).
-pub fn is_pcd_file(path: &Path) -> bool {
+/// The kinds of one saved point cloud `travmap map` reads as a site.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SiteCloudFormat {
+    Pcd,
+    Ply,
+}
+
+/// Whether `path` is one saved point cloud (a site cloud for `travmap map`), and
+/// of which format.
+pub fn site_cloud_format(path: &Path) -> Option<SiteCloudFormat> {
     // A regular file first: opening a pipe with no writer would block.
     if !path.is_file() {
-        return false;
+        return None;
     }
     let mut head = [0u8; 9];
     let read = std::fs::File::open(path).and_then(|mut file| {
         use std::io::Read;
         file.read(&mut head)
     });
-    read.is_ok_and(|n| PCD_MAGICS.iter().any(|m| head[..n].starts_with(m)))
+    let head = &head[..read.ok()?];
+    if PCD_MAGICS.iter().any(|m| head.starts_with(m)) {
+        Some(SiteCloudFormat::Pcd)
+    } else if PLY_MAGICS.iter().any(|m| head.starts_with(m)) {
+        Some(SiteCloudFormat::Ply)
+    } else {
+        None
+    }
 }
 
 const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
@@ -73,8 +91,8 @@ const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
     (b"\x89MCAP", Err("an MCAP file of a version other than 0")),
     (PCD_MAGICS[0], Err(SINGLE_PCD)),
     (PCD_MAGICS[1], Err(SINGLE_PCD)),
-    (b"ply\n", Err("a PLY point cloud")),
-    (b"ply\r\n", Err("a PLY point cloud")),
+    (PLY_MAGICS[0], Err(SINGLE_PLY)),
+    (PLY_MAGICS[1], Err(SINGLE_PLY)),
     (
         b"PAR1",
         Err("a Parquet file (a travmap dataset is an output, not a drive)"),

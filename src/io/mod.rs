@@ -20,6 +20,7 @@ pub mod mcap_records;
 pub mod mcap_stored;
 mod merged_clouds;
 pub mod pcd;
+pub mod ply;
 pub mod ros;
 pub mod ros1;
 pub mod ros_drive;

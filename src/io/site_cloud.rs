@@ -21,7 +21,9 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 use super::cloud::cloud_points;
+use super::format::{SiteCloudFormat, site_cloud_format};
 use super::pcd::parse_pcd_up_to;
+use super::ply::parse_ply;
 use super::skips::SkipLog;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, RemissionScale};
@@ -58,7 +60,7 @@ pub struct SiteCloud {
 }
 
 impl SiteCloud {
-    /// Reads the PCD at `path` and cuts it into tiles of `grid_size_m`.
+    /// Reads the PCD or PLY file at `path` and cuts it into tiles of `grid_size_m`.
     pub fn open(path: &Path, grid_size_m: f64) -> Result<Self> {
         let fail = |message: String| Error::Sequence {
             path: path.to_path_buf(),
@@ -67,10 +69,15 @@ impl SiteCloud {
         // The file and its decoded cloud are let go before the tiles are made.
         let read = {
             let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-            // A compressed file may hold more than it measures; not a thousandfold.
-            let largest = (bytes.len().saturating_mul(8)).max(1 << 30);
-            let cloud = parse_pcd_up_to(&bytes, SENSOR_FRAME, largest).map_err(fail)?;
-            cloud_points(&cloud).map_err(fail)?
+            let cloud = match site_cloud_format(path) {
+                Some(SiteCloudFormat::Ply) => parse_ply(&bytes, SENSOR_FRAME),
+                _ => {
+                    // A compressed PCD may hold more than it measures; not a thousandfold.
+                    let largest = (bytes.len().saturating_mul(8)).max(1 << 30);
+                    parse_pcd_up_to(&bytes, SENSOR_FRAME, largest)
+                }
+            };
+            cloud_points(&cloud.map_err(fail)?).map_err(fail)?
         };
         if read.points.is_empty() {
             return Err(fail("the cloud holds no point".into()));
