@@ -9,7 +9,7 @@ python3 -m venv target/client-venv
 target/client-venv/bin/pip install --quiet --disable-pip-version-check \
     "mcap==1.6.0" "mcap-ros2-support==0.6.0" "rosbags==0.11.9" "rerun-sdk==0.41.0" \
     "pyarrow==26.0.1" "duckdb==2.0.0" "polars==2.1.0" \
-    "ray==2.60.0" "pytest==9.2.0" "jsonschema==4.26.0" "plyfile==1.1.5"
+    "ray==2.60.0" "pytest==9.2.0" "jsonschema==4.26.0" "plyfile==1.1.5" "laspy==2.7.0" "lazrs==0.8.2"
 export TRAVMAP_CLIENT_PYTHON="$PWD/target/client-venv/bin/python"
 export TRAVMAP_RERUN="$PWD/target/client-venv/bin/rerun"
 npm ci --prefix tests/clients --no-audit --no-fund --silent

@@ -153,3 +153,85 @@ fn ply_files_written_by_plyfile_map_as_the_same_cloud_in_pcd_does() {
         assert_eq!(cells(&ply, encoding), from_pcd, "{encoding}");
     }
 }
+
+#[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
+fn las_and_laz_written_by_laspy_map_in_their_own_coordinates() {
+    let Some(seq) = common::sample() else { return };
+    let Some(python) = common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with laspy and lazrs")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let site = dir.path().join("site.pcd");
+    let (_, records) = write_site_pcd(&seq, &site);
+    // The local origin travmap picks: the smallest coordinate, floored to 100 m.
+    let smallest = |k: usize| {
+        records
+            .chunks_exact(20)
+            .map(|r| f32::from_le_bytes(r[4 * k..4 * k + 4].try_into().unwrap()) as f64)
+            .fold(f64::INFINITY, f64::min)
+    };
+    let origin = [
+        ((512_000.0 + smallest(0)) / 100.0).floor() * 100.0,
+        ((4_100_000.0 + smallest(1)) / 100.0).floor() * 100.0,
+    ];
+    let records_path = dir.path().join("records.bin");
+    std::fs::write(&records_path, &records).unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/write_las.py");
+    let map = |input: &Path, name: &str| {
+        let table = dir.path().join(format!("{name}.parquet"));
+        let png = dir.path().join(format!("{name}.png"));
+        let out = common::travmap(&["map", arg(input), "-o", arg(&png), "--cells", arg(&table)]);
+        let err = common::stderr(&out);
+        common::success(out);
+        (seen_cells(&table), err)
+    };
+    let (from_pcd, _) = map(&site, "pcd");
+    let mut from_las = Vec::new();
+    for name in ["site.las", "site.laz"] {
+        let path = dir.path().join(name);
+        let written = std::process::Command::new(&python)
+            .args([arg(&script), arg(&records_path), arg(&path)])
+            .output()
+            .unwrap();
+        assert!(written.status.success(), "{}", common::stderr(&written));
+        let (cells, notice) = map(&path, name);
+        common::assert_contains(
+            &notice,
+            &[&format!(
+                "the map's frame is the file's coordinates minus ({}, {}, ",
+                origin[0], origin[1]
+            )],
+        );
+        from_las.push(cells);
+    }
+    assert_eq!(from_las[0], from_las[1], "LAS and LAZ of the same points");
+    // Back in the drive's world frame: the origin is a whole number of cells away.
+    let shift = [
+        ((origin[0] - 512_000.0) / 0.4).round() as i64,
+        ((origin[1] - 4_100_000.0) / 0.4).round() as i64,
+    ];
+    let las: HashMap<[i64; 2], Option<bool>> = from_las[0]
+        .iter()
+        .map(|(k, v)| ([k[0] + shift[0], k[1] + shift[1]], v.0))
+        .collect();
+    let covered = from_pcd.keys().filter(|k| las.contains_key(*k)).count();
+    let common: Vec<(bool, bool)> = from_pcd
+        .iter()
+        .filter_map(|(k, v)| Some((v.0?, (*las.get(k)?)?)))
+        .collect();
+    let agree = common.iter().filter(|(a, b)| a == b).count() as f64 / common.len() as f64;
+    let coverage = covered as f64 / from_pcd.len() as f64;
+    println!(
+        "LAS / LAZ site map: {:.1} % of the PCD map's {} cells covered, {:.1} % of {} common cells agree",
+        100.0 * coverage,
+        from_pcd.len(),
+        100.0 * agree,
+        common.len()
+    );
+    assert!(coverage >= 0.99, "{:.1} % covered", 100.0 * coverage);
+    // Not all: LAS intensity is not read (the fallback model without remission
+    // classifies), and the tiles lie on the local origin's lattice.
+    assert!(agree >= 0.85, "{:.1} % agree", 100.0 * agree);
+}

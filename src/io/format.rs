@@ -48,12 +48,17 @@ const SINGLE_PCD: &str = "a single PCD point cloud (`travmap map` reads one as a
 /// How a PLY file begins.
 const PLY_MAGICS: [&[u8]; 2] = [b"ply\n", b"ply\r\n"];
 const SINGLE_PLY: &str = "a single PLY point cloud (`travmap map` reads one as a site map)";
+/// How a LAS or LAZ file begins.
+const LAS_MAGIC: &[u8] = b"LASF";
+const SINGLE_LAS: &str = "a single LAS / LAZ point cloud (`travmap map` reads one as a site map)";
 
 /// The kinds of one saved point cloud `travmap map` reads as a site.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SiteCloudFormat {
     Pcd,
     Ply,
+    /// LAS or LAZ.
+    Las,
 }
 
 /// Whether `path` is one saved point cloud (a site cloud for `travmap map`), and
@@ -73,6 +78,8 @@ pub fn site_cloud_format(path: &Path) -> Option<SiteCloudFormat> {
         Some(SiteCloudFormat::Pcd)
     } else if PLY_MAGICS.iter().any(|m| head.starts_with(m)) {
         Some(SiteCloudFormat::Ply)
+    } else if head.starts_with(LAS_MAGIC) {
+        Some(SiteCloudFormat::Las)
     } else {
         None
     }
@@ -93,6 +100,7 @@ const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
     (PCD_MAGICS[1], Err(SINGLE_PCD)),
     (PLY_MAGICS[0], Err(SINGLE_PLY)),
     (PLY_MAGICS[1], Err(SINGLE_PLY)),
+    (LAS_MAGIC, Err(SINGLE_LAS)),
     (
         b"PAR1",
         Err("a Parquet file (a travmap dataset is an output, not a drive)"),

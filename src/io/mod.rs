@@ -12,6 +12,7 @@ pub mod format;
 pub mod image;
 pub mod kitti;
 mod kitti_text;
+pub mod las;
 pub mod log;
 pub mod log_index;
 pub mod log_message;

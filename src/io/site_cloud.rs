@@ -20,8 +20,9 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
-use super::cloud::cloud_points;
+use super::cloud::{CloudPoints, cloud_points};
 use super::format::{SiteCloudFormat, site_cloud_format};
+use super::las::read_las;
 use super::pcd::parse_pcd_up_to;
 use super::ply::parse_ply;
 use super::skips::SkipLog;
@@ -56,29 +57,45 @@ pub struct SiteCloud {
     buckets: HashMap<[i64; 2], Vec<u32>>,
     tiles: Vec<Tile>,
     tile_m: f64,
+    /// Where the points' origin lies in the file's coordinates (LAS: a local origin
+    /// that keeps float32 precise; else zero), and the CRS the file names.
+    origin_m: [f64; 3],
+    crs_wkt: Option<String>,
     pub(super) skips: SkipLog,
 }
 
 impl SiteCloud {
-    /// Reads the PCD or PLY file at `path` and cuts it into tiles of `grid_size_m`.
+    /// Reads the PCD, PLY or LAS / LAZ file at `path` and cuts it into tiles of
+    /// `grid_size_m`.
     pub fn open(path: &Path, grid_size_m: f64) -> Result<Self> {
         let fail = |message: String| Error::Sequence {
             path: path.to_path_buf(),
             message,
         };
         // The file and its decoded cloud are let go before the tiles are made.
-        let read = {
-            let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let mut origin = None;
+        let mut read_cloud = || -> Result<CloudPoints> {
             let cloud = match site_cloud_format(path) {
-                Some(SiteCloudFormat::Ply) => parse_ply(&bytes, SENSOR_FRAME),
+                Some(SiteCloudFormat::Las) => {
+                    let las = read_las(path).map_err(fail)?;
+                    origin = Some((las.origin_m, las.crs_wkt));
+                    return Ok(las.points);
+                }
+                Some(SiteCloudFormat::Ply) => {
+                    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+                    parse_ply(&bytes, SENSOR_FRAME)
+                }
                 _ => {
+                    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
                     // A compressed PCD may hold more than it measures; not a thousandfold.
                     let largest = (bytes.len().saturating_mul(8)).max(1 << 30);
                     parse_pcd_up_to(&bytes, SENSOR_FRAME, largest)
                 }
             };
-            cloud_points(&cloud.map_err(fail)?).map_err(fail)?
+            cloud_points(&cloud.map_err(fail)?).map_err(fail)
         };
+        let read = read_cloud()?;
+        let (origin_m, crs_wkt) = origin.unwrap_or(([0.0; 3], None));
         if read.points.is_empty() {
             return Err(fail("the cloud holds no point".into()));
         }
@@ -128,6 +145,8 @@ impl SiteCloud {
             buckets,
             tiles,
             tile_m: grid_size_m,
+            origin_m,
+            crs_wkt,
             skips: SkipLog::default(),
         })
     }
@@ -148,13 +167,24 @@ impl SiteCloud {
 
     /// What the reader made of the cloud, for the user to hear.
     pub fn notice(&self) -> String {
-        format!(
+        let mut notice = format!(
             "{}: one point cloud of {} points, read as {} tiles of {} m (half a tile apart), each seen from {SENSOR_HEIGHT_M} m above its ground",
             self.path.display(),
             self.points.len(),
             self.tiles.len(),
             self.tile_m
-        )
+        );
+        if self.origin_m != [0.0; 3] {
+            let [x, y, z] = self.origin_m;
+            notice += &format!(
+                "; the map's frame is the file's coordinates minus ({x}, {y}, {z}), which keeps float32 precise"
+            );
+        }
+        if let Some(wkt) = &self.crs_wkt {
+            let name = wkt.split('"').nth(1).unwrap_or(wkt);
+            notice += &format!(" (the file's CRS: {name})");
+        }
+        notice
     }
 
     pub fn frames_in(&self, range: &Range<usize>) -> Vec<usize> {

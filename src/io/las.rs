@@ -1,0 +1,141 @@
+//! LAS and LAZ point clouds (ASPRS LAS 1.0-1.4, any point format; LAZ through the
+//! `las` crate's laz support) as a site cloud: coordinates with the file's scale and
+//! offset applied, then moved to a local origin so float32 keeps centimetres.
+//!
+//! Survey clouds sit in projected coordinates (UTM northings of millions of metres),
+//! where a float32 steps in tenths of a metre: the points are stored relative to
+//! [`LasCloud::origin_m`], the bounds' minimum floored to 100 m, and the notice says so.
+//! Intensity is left out ([`RemissionScale::Unknown`]): LAS asks writers to scale it
+//! to 16 bits, but files hold 8-bit, 12-bit and 16-bit values alike.
+
+use std::path::Path;
+
+use super::cloud::CloudPoints;
+use crate::frame::RemissionScale;
+
+/// Points decoded per batch: the decoded copy stays a few MB whatever the file.
+const BATCH_POINTS: u64 = 1 << 18;
+
+/// A LAS / LAZ file's points, relative to a local origin.
+pub struct LasCloud {
+    pub points: CloudPoints,
+    /// Where the points' (0, 0, 0) lies in the file's coordinates.
+    pub origin_m: [f64; 3],
+    /// The coordinate reference system the file names (its WKT), when it names one.
+    pub crs_wkt: Option<String>,
+}
+
+/// The local origin of points within `min`: floored to 100 m, so it reads plainly.
+fn local_origin(min: [f64; 3]) -> [f64; 3] {
+    min.map(|v| (v / 100.0).floor() * 100.0)
+}
+
+/// Reads the LAS or LAZ file at `path`; errors say what is wrong.
+pub fn read_las(path: &Path) -> Result<LasCloud, String> {
+    let mut reader = las::Reader::from_path(path).map_err(|e| e.to_string())?;
+    let header = reader.header();
+    let bounds = header.bounds();
+    let origin_m = local_origin([bounds.min.x, bounds.min.y, bounds.min.z]);
+    let crs_wkt = header.get_wkt_crs_bytes().map(|bytes| {
+        String::from_utf8_lossy(bytes)
+            .trim_end_matches('\0')
+            .to_string()
+    });
+    let total = header.number_of_points();
+    // Bounded by the bytes present: a header cannot make this reserve more.
+    let file_bytes = std::fs::metadata(path).map_or(0, |m| m.len());
+    let mut points = Vec::with_capacity(total.min(file_bytes) as usize);
+    let mut dropped = 0;
+    loop {
+        let batch = reader
+            .read_points(BATCH_POINTS)
+            .map_err(|e| format!("after {} points: {e}", points.len() + dropped))?;
+        if batch.is_empty() {
+            break;
+        }
+        for ((x, y), z) in batch.x().zip(batch.y()).zip(batch.z()) {
+            let local = [x - origin_m[0], y - origin_m[1], z - origin_m[2]];
+            if local.iter().all(|v| v.is_finite()) {
+                points.push([local[0] as f32, local[1] as f32, local[2] as f32, 0.0]);
+            } else {
+                dropped += 1;
+            }
+        }
+    }
+    if (points.len() + dropped) as u64 != total {
+        return Err(format!(
+            "the header says {total} points but {} could be read",
+            points.len() + dropped
+        ));
+    }
+    Ok(LasCloud {
+        points: CloudPoints {
+            points,
+            remission: RemissionScale::Unknown,
+            labels: None,
+            dropped,
+        },
+        origin_m,
+        crs_wkt,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_local_origin_floors_to_100_m() {
+        assert_eq!(
+            local_origin([512_345.67, 4_102_999.9, -12.5]),
+            [512_300.0, 4_102_900.0, -100.0]
+        );
+    }
+
+    #[test]
+    fn a_written_las_file_reads_back_relative_to_its_origin() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("site.las");
+        let mut builder = las::Builder::from((1, 2));
+        builder.transforms = las::Vector {
+            x: las::Transform {
+                scale: 0.001,
+                offset: 512_000.0,
+            },
+            y: las::Transform {
+                scale: 0.001,
+                offset: 4_100_000.0,
+            },
+            z: las::Transform {
+                scale: 0.001,
+                offset: 0.0,
+            },
+        };
+        let mut writer = las::Writer::from_path(&path, builder.into_header().unwrap()).unwrap();
+        for (x, y, z) in [
+            (512_345.678, 4_102_345.001, 10.5),
+            (512_350.0, 4_102_300.25, 11.0),
+        ] {
+            writer
+                .write_point(las::Point {
+                    x,
+                    y,
+                    z,
+                    intensity: 900,
+                    ..Default::default()
+                })
+                .unwrap();
+        }
+        writer.close().unwrap();
+        let read = read_las(&path).unwrap();
+        assert_eq!(read.origin_m, [512_300.0, 4_102_300.0, 0.0]);
+        let expected = [[45.678, 45.001, 10.5], [50.0, 0.25, 11.0]];
+        for (p, e) in read.points.points.iter().zip(expected) {
+            for k in 0..3 {
+                assert!((p[k] as f64 - e[k]).abs() < 1e-3, "{p:?} {e:?}");
+            }
+        }
+        assert_eq!(read.points.remission, RemissionScale::Unknown);
+        assert!(read_las(&dir.path().join("missing.las")).is_err());
+    }
+}
