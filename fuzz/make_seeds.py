@@ -76,6 +76,43 @@ def pcd_files(scan: bytes) -> dict:
     }
 
 
+def ply_files(scan: bytes) -> dict:
+    """A KITTI scan as PLY in each encoding, with a face element after the vertices."""
+    points = [struct.unpack("<4f", scan[i : i + 16]) for i in range(0, len(scan), 16)]
+
+    def header(encoding: str) -> str:
+        return (
+            f"ply\nformat {encoding} 1.0\ncomment a KITTI scan\nelement vertex {len(points)}\n"
+            "property float x\nproperty float y\nproperty float z\nproperty float intensity\n"
+            "element face 0\nproperty list uchar int vertex_indices\nend_header\n"
+        )
+
+    return {
+        "ascii.ply": (header("ascii") + "".join(" ".join(repr(v) for v in p) + "\n" for p in points)).encode(),
+        "binary_little_endian.ply": header("binary_little_endian").encode() + scan,
+        "binary_big_endian.ply": header("binary_big_endian").encode()
+        + b"".join(struct.pack(">4f", *p) for p in points),
+    }
+
+
+def las_files(scan: bytes, out: pathlib.Path) -> dict:
+    """A KITTI scan as LAS and LAZ, written by laspy (LAZ through lazrs)."""
+    import laspy
+    import numpy as np
+
+    points = np.frombuffer(scan, dtype="<f4").reshape(-1, 4)
+    files = {}
+    for name in ["scan.las", "scan.laz"]:
+        header = laspy.LasHeader(point_format=3, version="1.2")
+        header.scales = np.array([0.001, 0.001, 0.001])
+        las = laspy.LasData(header)
+        las.x, las.y, las.z = (points[:, k].astype(np.float64) for k in range(3))
+        las.intensity = (points[:, 3] * 65535).astype(np.uint16)
+        las.write(out / name)
+        files[name] = (out / name).read_bytes()
+    return files
+
+
 def first_message_per_topic(path: pathlib.Path) -> dict:
     with path.open("rb") as f:
         found = {}
@@ -135,6 +172,11 @@ def main() -> None:
     scan = (seq / "velodyne" / "000000.bin").read_bytes()[: 16 * POINTS]
     for name, body in pcd_files(scan).items():
         seed("pcd_file", name, body)
+    for name, body in ply_files(scan).items():
+        seed("ply_file", name, body)
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, body in las_files(scan, pathlib.Path(tmp)).items():
+            seed("las_file", name, body)
     nebula = pathlib.Path("fixtures/nebula")
     for name, db in [
         ("vlp32c", nebula / "vlp32/1713492677464078412/1713492677464078412_0.db3"),

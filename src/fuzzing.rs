@@ -28,7 +28,7 @@ pub type Target = fn(&[u8]);
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 16] = [
+pub const TARGETS: [(&str, Target); 18] = [
     ("kitti_calib", kitti_calib),
     ("kitti_poses", kitti_poses),
     ("kitti_scan", kitti_scan),
@@ -42,6 +42,8 @@ pub const TARGETS: [(&str, Target); 16] = [
     ("ros1_message", ros1_message),
     ("rosbag2_metadata", rosbag2_metadata),
     ("pcd_file", pcd_file),
+    ("ply_file", ply_file),
+    ("las_file", las_file),
     ("model", model),
     ("dataset_file", dataset_file),
     ("velodyne_scan", velodyne_scan),
@@ -210,6 +212,19 @@ pub fn pcd_file(data: &[u8]) {
     if let Ok(cloud) = crate::io::pcd::parse_pcd(data, NAMED) {
         let _ = cloud_points(&cloud);
     }
+}
+
+/// A PLY file, read into points.
+pub fn ply_file(data: &[u8]) {
+    if let Ok(cloud) = crate::io::ply::parse_ply(data, NAMED) {
+        let _ = cloud_points(&cloud);
+    }
+}
+
+/// A LAS or LAZ file, read into points.
+pub fn las_file(data: &[u8]) {
+    let bytes = data.len() as u64;
+    let _ = crate::io::las::read_las_from(std::io::Cursor::new(data.to_vec()), bytes);
 }
 
 /// A rosbag2 `metadata.yaml`, in a directory holding one empty storage file.

@@ -32,7 +32,19 @@ fn local_origin(min: [f64; 3]) -> [f64; 3] {
 
 /// Reads the LAS or LAZ file at `path`; errors say what is wrong.
 pub fn read_las(path: &Path) -> Result<LasCloud, String> {
-    let mut reader = las::Reader::from_path(path).map_err(|e| e.to_string())?;
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let file_bytes = file.metadata().map_or(0, |m| m.len());
+    read_las_from(std::io::BufReader::new(file), file_bytes)
+}
+
+/// [`read_las`] on a reader of `file_bytes` bytes.
+pub fn read_las_from<R>(read: R, file_bytes: u64) -> Result<LasCloud, String>
+where
+    R: std::io::Read + std::io::Seek + Send + Sync + 'static,
+{
+    let mut read = read;
+    check_chunk_table(&mut read, file_bytes)?;
+    let mut reader = las::Reader::new(read).map_err(|e| e.to_string())?;
     let header = reader.header();
     let bounds = header.bounds();
     let origin_m = local_origin([bounds.min.x, bounds.min.y, bounds.min.z]);
@@ -43,7 +55,6 @@ pub fn read_las(path: &Path) -> Result<LasCloud, String> {
     });
     let total = header.number_of_points();
     // Bounded by the bytes present: a header cannot make this reserve more.
-    let file_bytes = std::fs::metadata(path).map_or(0, |m| m.len());
     let mut points = Vec::with_capacity(total.min(file_bytes) as usize);
     let mut dropped = 0;
     loop {
@@ -78,6 +89,41 @@ pub fn read_las(path: &Path) -> Result<LasCloud, String> {
         origin_m,
         crs_wkt,
     })
+}
+
+/// Refuses a LAZ file whose chunk table claims more chunks than its bytes could
+/// hold, before the laz crate reserves a table of that size (an allocation that
+/// fails aborts the process: a damaged file must be an error, not a crash).
+fn check_chunk_table<R: std::io::Read + std::io::Seek>(
+    read: &mut R,
+    file_bytes: u64,
+) -> Result<(), String> {
+    use std::io::SeekFrom;
+    let at = |read: &mut R, offset: u64, bytes: usize| -> Option<u64> {
+        let mut word = [0u8; 8];
+        read.seek(SeekFrom::Start(offset)).ok()?;
+        read.read_exact(&mut word[..bytes]).ok()?;
+        Some(u64::from_le_bytes(word))
+    };
+    // Header: offset to point data at byte 96, point format at 104 (bit 7 or 6: LAZ).
+    let (Some(point_data), Some(format)) = (at(read, 96, 4), at(read, 104, 1)) else {
+        read.seek(SeekFrom::Start(0)).map_err(|e| e.to_string())?;
+        return Ok(()); // too short: the las crate says what is wrong
+    };
+    if format & 0xC0 != 0 {
+        // The point data of a LAZ file begins with the chunk table's offset (-1: none).
+        let table = at(read, point_data, 8).map(|v| v as i64);
+        if let Some(table @ 0..) = table {
+            let chunks = at(read, table as u64 + 4, 4);
+            if let Some(chunks) = chunks.filter(|&c| c.saturating_mul(8) > file_bytes) {
+                return Err(format!(
+                    "the LAZ chunk table at byte {table} claims {chunks} chunks, more than the file's {file_bytes} bytes could hold: the file is damaged"
+                ));
+            }
+        }
+    }
+    read.seek(SeekFrom::Start(0)).map_err(|e| e.to_string())?;
+    Ok(())
 }
 
 #[cfg(test)]
