@@ -11,10 +11,12 @@
 use std::path::Path;
 
 use super::cloud::CloudPoints;
+use crate::error::contain_panics;
 use crate::frame::RemissionScale;
 
-/// Points decoded per batch: the decoded copy stays a few MB whatever the file.
-const BATCH_POINTS: u64 = 1 << 18;
+/// Bytes of point records decoded per batch: the decoded copy stays this small
+/// whatever the file, and a header claiming 64 KiB records cannot make it large.
+const BATCH_BYTES: u64 = 8 << 20;
 
 /// A LAS / LAZ file's points, relative to a local origin.
 pub struct LasCloud {
@@ -37,8 +39,18 @@ pub fn read_las(path: &Path) -> Result<LasCloud, String> {
     read_las_from(std::io::BufReader::new(file), file_bytes)
 }
 
-/// [`read_las`] on a reader of `file_bytes` bytes.
+/// [`read_las`] on a reader of `file_bytes` bytes. The laz crate panics on some
+/// damaged LAZ data rather than returning an error: the panic becomes the error.
 pub fn read_las_from<R>(read: R, file_bytes: u64) -> Result<LasCloud, String>
+where
+    R: std::io::Read + std::io::Seek + Send + Sync + 'static,
+{
+    contain_panics(|| read_points(read, file_bytes)).unwrap_or_else(|panic| {
+        Err(format!("damaged LAS / LAZ data (the reader stopped: {panic})"))
+    })
+}
+
+fn read_points<R>(read: R, file_bytes: u64) -> Result<LasCloud, String>
 where
     R: std::io::Read + std::io::Seek + Send + Sync + 'static,
 {
@@ -54,12 +66,13 @@ where
             .to_string()
     });
     let total = header.number_of_points();
+    let batch_points = (BATCH_BYTES / u64::from(header.point_format().len()).max(1)).max(1);
     // Bounded by the bytes present: a header cannot make this reserve more.
     let mut points = Vec::with_capacity(total.min(file_bytes) as usize);
     let mut dropped = 0;
     loop {
         let batch = reader
-            .read_points(BATCH_POINTS)
+            .read_points(batch_points)
             .map_err(|e| format!("after {} points: {e}", points.len() + dropped))?;
         if batch.is_empty() {
             break;
