@@ -295,7 +295,7 @@ fn files_travmap_does_not_read_are_named_not_misdiagnosed() {
     std::fs::write(&text, "not a drive\n").unwrap();
     for (input, what) in [
         (pcd, "is a single PCD point cloud"),
-        (ply, "is a PLY point cloud"),
+        (ply, "is a single PLY point cloud"),
         (parquet, "is a Parquet file"),
         (object.join("image_2/000008.png"), "is a PNG image"),
         (text, "is a text file"),

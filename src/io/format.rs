@@ -227,7 +227,14 @@ mod tests {
         );
         for (bytes, what) in [
             (&b"# .PCD v0.7"[..], "PCD point cloud"),
-            (b"ply\nformat", "a PLY point cloud"),
+            (
+                b"ply\nformat",
+                "a single PLY point cloud (`travmap map` reads one",
+            ),
+            (
+                b"LASF\0\0",
+                "a single LAS / LAZ point cloud (`travmap map` reads one",
+            ),
             (b"PAR1\x15\x04", "a Parquet file"),
             (b"\x89PNG\r\n\x1a\n\0", "a PNG image"),
             (b"hello world\n", "a text file"),

@@ -46,7 +46,9 @@ where
     R: std::io::Read + std::io::Seek + Send + Sync + 'static,
 {
     contain_panics(|| read_points(read, file_bytes)).unwrap_or_else(|panic| {
-        Err(format!("damaged LAS / LAZ data (the reader stopped: {panic})"))
+        Err(format!(
+            "damaged LAS / LAZ data (the reader stopped: {panic})"
+        ))
     })
 }
 
@@ -56,7 +58,8 @@ where
 {
     let mut read = read;
     check_chunk_table(&mut read, file_bytes)?;
-    let mut reader = las::Reader::new(read).map_err(|e| e.to_string())?;
+    let mut reader = las::Reader::new(read)
+        .map_err(|e| format!("not a readable LAS / LAZ header (cut off or damaged?): {e}"))?;
     let header = reader.header();
     let bounds = header.bounds();
     let origin_m = local_origin([bounds.min.x, bounds.min.y, bounds.min.z]);
