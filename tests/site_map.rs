@@ -182,7 +182,17 @@ fn las_and_laz_written_by_laspy_map_in_their_own_coordinates() {
     let map = |input: &Path, name: &str| {
         let table = dir.path().join(format!("{name}.parquet"));
         let png = dir.path().join(format!("{name}.png"));
-        let out = common::travmap(&["map", arg(input), "-o", arg(&png), "--cells", arg(&table)]);
+        let yaml = dir.path().join(format!("{name}.yaml"));
+        let out = common::travmap(&[
+            "map",
+            arg(input),
+            "-o",
+            arg(&png),
+            "--cells",
+            arg(&table),
+            "--nav2",
+            arg(&yaml),
+        ]);
         let err = common::stderr(&out);
         common::success(out);
         (seen_cells(&table), err)
@@ -203,6 +213,24 @@ fn las_and_laz_written_by_laspy_map_in_their_own_coordinates() {
                 "the map's frame is the file's coordinates minus ({}, {}, ",
                 origin[0], origin[1]
             )],
+        );
+        // The world file places the map's upper-left pixel in the file's coordinates.
+        let yaml = std::fs::read_to_string(dir.path().join(format!("{name}.yaml"))).unwrap();
+        common::assert_contains(
+            &yaml,
+            &["# The frame is the source file's coordinates minus"],
+        );
+        let origin_line = yaml.lines().find(|l| l.starts_with("origin: [")).unwrap();
+        let nav2_origin: Vec<f64> = origin_line["origin: [".len()..origin_line.len() - 1]
+            .split(", ")
+            .map(|v| v.parse().unwrap())
+            .collect();
+        let world = std::fs::read_to_string(dir.path().join(format!("{name}.pgmw"))).unwrap();
+        let world: Vec<f64> = world.lines().map(|l| l.parse().unwrap()).collect();
+        assert_eq!(&world[..4], &[0.4, 0.0, 0.0, -0.4]);
+        assert!(
+            (world[4] - (origin[0] + nav2_origin[0] + 0.2)).abs() < 1e-6,
+            "{world:?}"
         );
         from_las.push(cells);
     }

@@ -10,7 +10,9 @@ use travmap::io::format::site_cloud_format;
 use travmap::io::{Recording, Source};
 use travmap::outputs::atomic::Staged;
 use travmap::outputs::drive_map::{render_drive_map, write_map_cells};
-use travmap::outputs::nav2_map::{Nav2Mode, image_path, write_nav2_map};
+use travmap::outputs::nav2_map::{
+    Georeference, Nav2Mode, gis_world_file, image_path, write_nav2_map,
+};
 use travmap::outputs::preflight::check_distinct_outputs;
 use travmap::outputs::rendering::encode_png;
 use travmap::scoring::evaluation::Evaluation;
@@ -96,6 +98,19 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
         _ => args.inputs.open_one(config.appearance.enabled)?,
     };
     let config = &config;
+    let georeference = match &selection.source.recording {
+        Recording::Site(site) => site.georeference().map(|(origin_m, crs)| Georeference {
+            origin_m,
+            crs_wkt: crs.map(str::to_string),
+        }),
+        _ => None,
+    };
+    if let (Some(image), Some(_)) = (&nav2_image, &georeference) {
+        // The world file and .prj a georeferenced map gets beside its image.
+        for path in [gis_world_file(image), image.with_extension("prj")] {
+            check_output(&path, &inputs)?;
+        }
+    }
     let selections = [selection];
     let bar = output.progress(frame_count(&selections), "mapping");
     let mut trajectory = Vec::new();
@@ -126,6 +141,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
                 map.cell_size_m(),
                 world_frame,
                 nav2_mode,
+                georeference.as_ref(),
             )
         })
         .transpose()?;
@@ -139,7 +155,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     if output.json {
         let fields = json!({
             "output": output_path,
-            "outputs": outputs,
+            "outputs": outputs.iter().copied().chain(nav2.iter().flat_map(|n| n.gis_files.iter().map(PathBuf::as_path))).collect::<Vec<&Path>>(),
             "cells_output": args.cells,
             "nav2": nav2,
             "model": model_json(&model, &model_name),

@@ -165,6 +165,13 @@ impl SiteCloud {
         &self.path
     }
 
+    /// The cloud's local origin in the file's coordinates and the CRS the file
+    /// names, when the file is georeferenced (LAS / LAZ); None otherwise.
+    pub fn georeference(&self) -> Option<([f64; 3], Option<&str>)> {
+        (self.origin_m != [0.0; 3] || self.crs_wkt.is_some())
+            .then_some((self.origin_m, self.crs_wkt.as_deref()))
+    }
+
     /// What the reader made of the cloud, for the user to hear.
     pub fn notice(&self) -> String {
         let mut notice = format!(

@@ -41,6 +41,15 @@ pub const OCCUPIED_THRESH: f64 = 0.65;
 /// `p` at or below this loads as free (see the module comment for why not 0.25).
 pub const FREE_THRESH: f64 = 0.196;
 
+/// Where a map's frame lies in a georeferenced source's coordinates (a LAS file's).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Georeference {
+    /// The frame's (0, 0, 0) in the source's coordinates.
+    pub origin_m: [f64; 3],
+    /// The source's coordinate reference system, as WKT.
+    pub crs_wkt: Option<String>,
+}
+
 /// Where the map lies: the image's size and the world position of its lower-left
 /// corner.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -54,6 +63,11 @@ pub struct Nav2Map {
     /// x, y (metres) and yaw (radians) of the lower-left pixel in `frame`.
     pub origin: [f64; 3],
     pub frame: String,
+    /// The source's georeference, written beside the map as a world file (and a
+    /// `.prj` with the CRS) so GIS tools place it; None: the drive's own frame.
+    pub georeference: Option<Georeference>,
+    /// The world file and `.prj` written, when georeferenced.
+    pub gis_files: Vec<PathBuf>,
 }
 
 /// The image of a map: cells seen by some frame, from the lowest key to the highest.
@@ -110,8 +124,16 @@ pub fn image_path(yaml: &Path, mode: Nav2Mode) -> PathBuf {
     })
 }
 
+/// The world file GIS tools read beside `image` (GDAL: `<image>.<ext>w`).
+pub fn gis_world_file(image: &Path) -> PathBuf {
+    let mut name = image.as_os_str().to_os_string();
+    name.push("w");
+    PathBuf::from(name)
+}
+
 /// Writes the map of the seen `cells` (world cells of `resolution_m`, in `frame`) as
-/// `yaml` and its image, staged to appear with the command's other outputs.
+/// `yaml` and its image (and, for a georeferenced source, a world file and `.prj`
+/// beside the image), staged to appear with the command's other outputs.
 pub fn write_nav2_map(
     staged: &mut Staged,
     yaml: &Path,
@@ -119,6 +141,7 @@ pub fn write_nav2_map(
     resolution_m: f64,
     frame: &str,
     mode: Nav2Mode,
+    georeference: Option<&Georeference>,
 ) -> Result<Nav2Map> {
     let seen: Vec<&FusedCell> = cells.iter().filter(|c| c.observations > 0).collect();
     if seen.is_empty() {
@@ -155,7 +178,7 @@ pub fn write_nav2_map(
         raster.low_key[1] as f64 * resolution_m,
         0.0,
     ];
-    let map = Nav2Map {
+    let mut map = Nav2Map {
         yaml: yaml.to_path_buf(),
         image,
         mode,
@@ -164,9 +187,31 @@ pub fn write_nav2_map(
         resolution_m,
         origin,
         frame: frame.to_string(),
+        georeference: georeference.cloned(),
+        gis_files: Vec::new(),
     };
     staged.write(&map.image, &bytes)?;
     staged.write(yaml, map.yaml_text().as_bytes())?;
+    if let Some(georeference) = georeference {
+        // The world file: the pixel size, no rotation, and the centre of the
+        // upper-left pixel, in the source's coordinates.
+        let world_file = gis_world_file(&map.image);
+        let upper_left = [
+            georeference.origin_m[0] + origin[0] + 0.5 * resolution_m,
+            georeference.origin_m[1] + origin[1] + (map.height as f64 - 0.5) * resolution_m,
+        ];
+        let text = format!(
+            "{resolution_m}\n0\n0\n{}\n{}\n{}\n",
+            -resolution_m, upper_left[0], upper_left[1]
+        );
+        staged.write(&world_file, text.as_bytes())?;
+        map.gis_files.push(world_file);
+        if let Some(wkt) = &georeference.crs_wkt {
+            let prj = map.image.with_extension("prj");
+            staged.write(&prj, wkt.as_bytes())?;
+            map.gis_files.push(prj);
+        }
+    }
     Ok(map)
 }
 
@@ -191,6 +236,18 @@ impl Nav2Map {
             env!("CARGO_PKG_VERSION"),
             self.frame
         );
+        if let Some(georeference) = &self.georeference {
+            let [x, y, z] = georeference.origin_m;
+            let _ = writeln!(
+                text,
+                "# The frame is the source file's coordinates minus ({x}, {y}, {z}): add them to `origin` to place the map there{}.",
+                if georeference.crs_wkt.is_some() {
+                    " (CRS in the .prj beside the image)"
+                } else {
+                    ""
+                }
+            );
+        }
         let _ = writeln!(text, "image: {}", yaml_string(&image_name));
         let _ = writeln!(text, "mode: {mode}");
         let _ = writeln!(text, "resolution: {}", self.resolution_m);
