@@ -276,22 +276,38 @@ fn the_next_run_removes_what_a_killed_run_left() {
     assert_eq!(left, ["drive.mcap"]);
 }
 
+/// A tmpfs of `size` mounted on a new temporary directory, or None (with the
+/// reason printed) where mounting is not allowed.
+fn small_tmpfs(size: &str) -> Option<tempfile::TempDir> {
+    let small = tempfile::tempdir().unwrap();
+    let mounted = Command::new("mount")
+        .args([
+            "-t",
+            "tmpfs",
+            "-o",
+            &format!("size={size}"),
+            "tmpfs",
+            arg(small.path()),
+        ])
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        eprintln!("skipping: cannot mount a small tmpfs here (not root?)");
+        return None;
+    }
+    Some(small)
+}
+
 #[test]
 fn a_full_disk_is_named_and_leaves_nothing() {
     let Some(sample) = common::sample() else {
         return;
     };
     // A 1 MiB file system: the conversion of six scans (8.8 MB) fills it.
-    let small = tempfile::tempdir().unwrap();
-    let mounted = Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=1m", "tmpfs", arg(small.path())])
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if !mounted {
-        eprintln!("skipping: cannot mount a small tmpfs here (not root?)");
+    let Some(small) = small_tmpfs("1m") else {
         return;
-    }
+    };
     let output = small.path().join("drive.mcap");
     let out = travmap(&["convert", arg(&sample), "-o", arg(&output), "-q"]);
     let left: Vec<_> = std::fs::read_dir(small.path()).unwrap().collect();
@@ -308,16 +324,9 @@ fn a_full_disk_leaves_nothing_of_any_command_with_several_outputs() {
     };
     // 16 KiB: two or three of render's 2 KB pictures and the map's PNG fit, the
     // rest does not.
-    let small = tempfile::tempdir().unwrap();
-    let mounted = Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=16k", "tmpfs", arg(small.path())])
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if !mounted {
-        eprintln!("skipping: cannot mount a small tmpfs here (not root?)");
+    let Some(small) = small_tmpfs("16k") else {
         return;
-    }
+    };
     let at = |name: &str| small.path().join(name);
     let runs: [Vec<String>; 3] = [
         vec![
