@@ -213,6 +213,7 @@ fn bench_prints_every_stage_and_throughput() {
         "latency",
         "appearance",
         "write",
+        "floor",
         "frames/s",
     ] {
         assert!(out.contains(stage), "missing {stage}:\n{out}");
@@ -221,6 +222,9 @@ fn bench_prints_every_stage_and_throughput() {
     let report = &doc["report"];
     assert_eq!(report["timed_frames"], 4);
     assert!(report["stages_ms"]["latency"]["median"].as_f64().unwrap() > 0.0);
+    // The method touches every point of the window at least as the floor does.
+    assert!(report["floor_ms"]["median"].as_f64().unwrap() > 0.0);
+    assert!(report["latency_over_floor"].as_f64().unwrap() > 1.0);
     assert!(report["one_thread"]["frames_per_second"].as_f64().unwrap() > 0.0);
 }
 

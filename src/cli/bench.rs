@@ -107,6 +107,14 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
     ] {
         writeln!(out, "{name:<34} {:>9.3} {:>9.3}", spread.median, spread.p95)?;
     }
+    writeln!(
+        out,
+        "{:<34} {:>9.3} {:>9.3}   latency = {:.1}x the floor",
+        "floor: move + count in cells",
+        report.floor_ms.median,
+        report.floor_ms.p95,
+        report.latency_over_floor
+    )?;
     if report.registration_lost > 0 {
         writeln!(
             out,

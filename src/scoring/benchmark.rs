@@ -6,9 +6,11 @@
 use serde::Serialize;
 
 use crate::config::Config;
-use crate::drive::Selection;
+use crate::drive::{ReadFrame, Selection};
 use crate::error::{Error, Result};
+use crate::frame::Frame;
 use crate::method::classifier::SvmModel;
+use crate::method::grid::GridLayout;
 use crate::method::registration::Odometry;
 use crate::scoring::evaluation::{Spread, TimingReport};
 use crate::stopwatch::{Stopwatch, timed};
@@ -34,6 +36,11 @@ pub struct BenchmarkReport {
     /// One frame at a time, one thread, posed as the source is (`register` holds
     /// the registration when its poses are estimated).
     pub stages_ms: TimingReport,
+    /// The floor ([`floor_ms`]): moving the window's points into the frame's grid
+    /// and counting them per cell, nothing else; one thread, per frame.
+    pub floor_ms: Spread,
+    /// Median latency over the floor's median.
+    pub latency_over_floor: f64,
     /// Scan registration (`--poses registration`), one thread, every frame after the
     /// first (which only starts the map), whatever the source's posing: what
     /// estimating the poses would cost.
@@ -96,6 +103,8 @@ pub fn benchmark(
         Ok::<(), Error>(())
     })?;
 
+    let floor = pool(1)?.install(|| floor_ms(&loaded, first_timed, config, repeats.max(1)));
+
     // Registration: each repeat registers the selection from scratch. A scan that
     // does not register (a synthetic drive of repeated scans jumps back) starts the
     // map again from it, as `--keep-going` would; it is counted, not timed.
@@ -155,6 +164,8 @@ pub fn benchmark(
         predictable_cells: Spread::of(&cells).median,
         points_in_grid: Spread::of(&points).median,
         support_vectors: model.support_vector_count(),
+        latency_over_floor: TimingReport::of(&timings).latency.median / floor.median,
+        floor_ms: floor,
         stages_ms: TimingReport::of(&timings),
         registration_ms: Spread::of(&registration_ms),
         registration_lost,
@@ -162,4 +173,62 @@ pub fn benchmark(
         one_thread,
         all_cores,
     })
+}
+
+/// The least any grid method must do per frame on this machine, timed over the
+/// same frames as the stages: every point of the frame's n scans moved by its
+/// scan's pose into the frame's grid (x and y: the cell needs no more) and counted
+/// in its cell. No copy, no sort, no feature; the rotation in f32 with the
+/// translation to the grid's corner taken in f64 first, so it stays exact far
+/// from the origin. A frame's latency over this is what the method costs beyond
+/// touching its points once.
+fn floor_ms(loaded: &[ReadFrame], first_timed: usize, config: &Config, repeats: usize) -> Spread {
+    let scans = config.integration.scans;
+    let cells_per_side = config.grid.cells_per_side();
+    let mut counts = vec![0u32; cells_per_side * cells_per_side];
+    let mut times = Vec::new();
+    let mut checksum = 0u64;
+    for _ in 0..repeats {
+        for (frame, _) in loaded.iter().filter(|(f, _)| f.index >= first_timed) {
+            let window = loaded
+                .iter()
+                .map(|(f, _)| f)
+                .filter(|f| f.index <= frame.index && f.index + scans > frame.index);
+            let sensor = frame.world_from_velodyne.translation.vector;
+            let layout = GridLayout::centred_on(
+                [sensor.x, sensor.y],
+                config.grid.cell_size_m,
+                cells_per_side,
+            );
+            let watch = Stopwatch::start();
+            counts.fill(0);
+            for scan in window {
+                count_into_cells(scan, &layout, &mut counts);
+            }
+            times.push(watch.elapsed_ms());
+            // Keeps the counting from being optimised away.
+            checksum = checksum.wrapping_add(counts.iter().map(|&c| c as u64).sum::<u64>());
+        }
+    }
+    std::hint::black_box(checksum);
+    Spread::of(&times)
+}
+
+/// Counts the points of `frame` in the cells of `layout`. (Computing a block's
+/// cells first, so that it vectorises, was no faster: the pass is bound by
+/// reading the points.)
+fn count_into_cells(frame: &Frame, layout: &GridLayout, counts: &mut [u32]) {
+    let m = frame.world_from_velodyne.to_homogeneous();
+    let [min_x, min_y] = layout.min_corner_in_world();
+    let r = |row: usize, col: usize| m[(row, col)] as f32;
+    let (tx, ty) = ((m[(0, 3)] - min_x) as f32, (m[(1, 3)] - min_y) as f32);
+    let per_cell = 1.0 / layout.cell_size_m as f32;
+    let side = layout.cells_per_side as f32;
+    for p in &frame.points_in_velodyne {
+        let col = (r(0, 0) * p[0] + r(0, 1) * p[1] + r(0, 2) * p[2] + tx) * per_cell;
+        let row = (r(1, 0) * p[0] + r(1, 1) * p[1] + r(1, 2) * p[2] + ty) * per_cell;
+        if col >= 0.0 && row >= 0.0 && col < side && row < side {
+            counts[row as usize * layout.cells_per_side + col as usize] += 1;
+        }
+    }
 }
