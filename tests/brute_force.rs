@@ -38,7 +38,7 @@ fn scan(
     WorldScan {
         index,
         stamp_ns: index as u64 * 100_000_000,
-        points_in_world: points,
+        points_in_world: points.into(),
         origin_in_world: origin,
         labels,
         remission: None,
@@ -988,6 +988,7 @@ fn random_grid(
             range_m,
             labels: None,
             remission: None,
+            newest_per_cell: vec![0; layout.cell_count()],
         },
         made_as,
     }
@@ -1241,6 +1242,7 @@ fn degenerate_cells_take_the_guards_defined_values() {
             points_in_grid: points,
             labels: None,
             remission: None,
+            newest_per_cell: vec![0],
         };
         extractor
             .compute(&cells, [0.0, 0.0, 1.0], [0.0; 3])

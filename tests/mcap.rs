@@ -13,7 +13,7 @@ use travmap::io::KittiSequence;
 use travmap::io::cloud::{check_some_finite, cloud_points};
 use travmap::io::format::InputFormat;
 use travmap::io::log::Log;
-use travmap::io::ros::{OccupancyGrid, decode};
+use travmap::io::ros::{OccupancyGrid, PointCloud2, decode};
 use travmap::io::ros_drive::{DriveOptions, RosDrive};
 use travmap::outputs::mcap_writer::Compression;
 use travmap::outputs::writing::McapSink;
@@ -125,6 +125,66 @@ fn annotated_grid_matches_run_and_carries_metadata() {
     assert_eq!(metadata["model_sha256"].len(), 64);
     let config: Value = serde_json::from_str(&metadata["config"]).unwrap();
     assert_eq!(config["grid"]["size_m"], 12.0);
+}
+
+#[test]
+fn the_cloud_is_the_scan_in_the_grid_the_whole_scan_or_none() {
+    let dir = tempfile::tempdir().unwrap();
+    let annotated = |cloud: &str| {
+        let flags = ["--frames", "0..4", "--no-passthrough", "--cloud", cloud];
+        let out = dir.path().join(format!("{cloud}.mcap"));
+        let seq = common::sample()?;
+        write_output("annotate", &seq, &out, &flags);
+        Some((seq, out))
+    };
+    let Some((seq, grid_file)) = annotated("grid") else {
+        return;
+    };
+    let (_, all_file) = annotated("all").unwrap();
+    let (_, none_file) = annotated("none").unwrap();
+    assert!(messages::<PointCloud2>(&none_file, "/travmap/cloud").is_empty());
+    let grids = messages::<OccupancyGrid>(&grid_file, "/travmap/prediction");
+    let truths = messages::<OccupancyGrid>(&grid_file, "/travmap/ground_truth");
+    let in_grid = messages::<PointCloud2>(&grid_file, "/travmap/cloud");
+    let whole = messages::<PointCloud2>(&all_file, "/travmap/cloud");
+    assert_eq!((in_grid.len(), whole.len()), (4, 4));
+    let sequence = KittiSequence::open(&seq).unwrap();
+    for (frame, (((_, grid), (_, truth)), ((_, in_grid), (_, whole)))) in grids
+        .iter()
+        .zip(&truths)
+        .zip(in_grid.iter().zip(&whole))
+        .enumerate()
+    {
+        let scan_points = sequence.read_frame(frame).unwrap().points_in_velodyne.len();
+        assert_eq!(whole.width as usize, scan_points, "frame {frame}");
+        // Each point with the values of its cell, -1 outside the grid.
+        let (origin, r, side) = (&grid.info.origin.position, grid.info.resolution as f64, 30);
+        let cell_of = |point: &[u8]| {
+            let v = |at: usize| f32::from_le_bytes(point[at..at + 4].try_into().unwrap()) as f64;
+            let (col, row) = ((v(0) - origin.x) / r, (v(4) - origin.y) / r);
+            (col >= 0.0 && row >= 0.0 && col < side as f64 && row < side as f64)
+                .then(|| row as usize * side + col as usize)
+        };
+        let check = |cloud: &PointCloud2| {
+            let mut inside = 0;
+            for point in cloud.data.chunks_exact(cloud.point_step as usize) {
+                let cell = cell_of(point);
+                let expected = cell.map_or([-1, -1], |c| [grid.data[c], truth.data[c]]);
+                assert_eq!(
+                    [point[12] as i8, point[13] as i8],
+                    expected,
+                    "frame {frame}"
+                );
+                inside += usize::from(cell.is_some());
+            }
+            inside
+        };
+        let whole_inside = check(whole);
+        // The grid cloud is exactly the scan's points inside the grid.
+        assert_eq!(check(in_grid), in_grid.width as usize);
+        assert_eq!(in_grid.width as usize, whole_inside, "frame {frame}");
+        assert!(whole_inside > 10_000 && whole_inside < scan_points / 2);
+    }
 }
 
 /// Checks one client's summary of an annotated file of the whole sample against

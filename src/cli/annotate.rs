@@ -5,9 +5,9 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::Result;
-use clap::Args;
+use clap::{Args, ValueEnum};
 use serde_json::json;
-use travmap::outputs::annotation::{self, AnnotationOptions};
+use travmap::outputs::annotation::{self, AnnotationOptions, CloudPoints};
 
 use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;
@@ -39,9 +39,21 @@ pub struct AnnotateArgs {
     /// transient-local so that a replayed bag feeds a static map layer.
     #[arg(long)]
     static_map: bool,
+    /// The points on /travmap/cloud, each with its cell's class (and ground
+    /// truth): the frame's scan inside the grid, the whole scan (-1 outside the
+    /// grid), or no cloud.
+    #[arg(long, value_enum, default_value_t = CloudArg::Grid)]
+    cloud: CloudArg,
     /// Height of the drawn grids relative to the sensor, metres.
     #[arg(long, default_value_t = -1.73, allow_negative_numbers = true, value_parser = super::parse_finite)]
     grid_height: f64,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum CloudArg {
+    Grid,
+    All,
+    None,
 }
 
 pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
@@ -53,6 +65,11 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
         passthrough: !args.no_passthrough,
         grid_height_m: args.grid_height,
         static_map: args.static_map,
+        cloud: match args.cloud {
+            CloudArg::Grid => CloudPoints::Grid,
+            CloudArg::All => CloudPoints::All,
+            CloudArg::None => CloudPoints::None,
+        },
     };
     let (model, model_name) =
         (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;

@@ -163,7 +163,7 @@ mod tests {
         let scan = WorldScan {
             index: 0,
             stamp_ns: 0,
-            points_in_world: points,
+            points_in_world: points.into(),
             origin_in_world: [0.5, -2.5, 0.0],
             labels: None,
             remission: None,

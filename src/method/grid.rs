@@ -133,6 +133,9 @@ pub struct CellPoints {
     pub labels: Option<Vec<u32>>,
     /// Per-point remission (0..1), present when every scan of the window has it.
     pub remission: Option<Vec<f32>>,
+    /// The last `newest_per_cell[c]` points of cell `c` are from the window's
+    /// newest scan (a cell's points come in the order of the scans).
+    pub newest_per_cell: Vec<u32>,
 }
 
 impl CellPoints {
@@ -142,6 +145,12 @@ impl CellPoints {
 
     pub fn point_count(&self, cell: usize) -> usize {
         self.cell_range(cell).len()
+    }
+
+    /// The points of `cell` from the window's newest scan.
+    pub fn newest_range(&self, cell: usize) -> std::ops::Range<usize> {
+        let all = self.cell_range(cell);
+        all.end - self.newest_per_cell[cell] as usize..all.end
     }
 }
 
@@ -153,11 +162,18 @@ pub fn grid_points(scans: &[WorldScan], layout: GridLayout) -> CellPoints {
     // Pass 1: the cell of every in-grid point, and the count per cell.
     let mut in_grid: Vec<(u32, u32, u32)> = Vec::new(); // (cell, scan, point)
     let mut counts = vec![0u32; cell_count];
+    let mut newest_per_cell = vec![0u32; cell_count];
     for (s, scan) in scans.iter().enumerate() {
+        let first_in_grid = in_grid.len();
         for (i, p) in scan.points_in_world.iter().enumerate() {
             if let Some(cell) = layout.cell_of_local(p[0] as f64 - min_x, p[1] as f64 - min_y) {
                 counts[cell] += 1;
                 in_grid.push((cell as u32, s as u32, i as u32));
+            }
+        }
+        if s + 1 == scans.len() {
+            for &(cell, _, _) in &in_grid[first_in_grid..] {
+                newest_per_cell[cell as usize] += 1;
             }
         }
     }
@@ -205,6 +221,7 @@ pub fn grid_points(scans: &[WorldScan], layout: GridLayout) -> CellPoints {
         range_m,
         labels: with_labels.then_some(labels),
         remission: with_remission.then_some(remission),
+        newest_per_cell,
     }
 }
 
@@ -219,7 +236,7 @@ mod tests {
             stamp_ns: 0,
             labels: Some((0..points.len() as u32).collect()),
             remission: None,
-            points_in_world: points,
+            points_in_world: points.into(),
             origin_in_world: origin,
             moments: Moments::default(),
         }
@@ -255,6 +272,8 @@ mod tests {
         assert_eq!(cells.point_count(c), 2);
         let r = cells.cell_range(c);
         assert_eq!(cells.points_in_grid[r.start], [2.5, 2.5, 1.0]);
+        // b, the newest scan, holds the cell's second point.
+        assert_eq!(cells.newest_range(c), r.start + 1..r.end);
         assert_eq!(cells.labels.as_ref().unwrap()[r.start..r.end], [0, 0]);
         // The second point of the cell came from scan b: its range is from b's origin.
         assert!((cells.range_m[r.start + 1] - (0.01f32 + 0.01 + 9.0).sqrt()).abs() < 1e-5);

@@ -5,6 +5,8 @@
 //! Input: a [`Frame`]. Output: a [`WorldScan`]; the [`IntegrationWindow`] keeps the
 //! last n of them and [`ground_normal`] fits the plane of their union.
 
+use std::sync::Arc;
+
 use crate::frame::Frame;
 use crate::geometry::Moments;
 
@@ -13,7 +15,8 @@ use crate::geometry::Moments;
 pub struct WorldScan {
     pub index: usize,
     pub stamp_ns: u64,
-    pub points_in_world: Vec<[f32; 3]>,
+    /// Shared with the results of the frames that integrate it.
+    pub points_in_world: Arc<Vec<[f32; 3]>>,
     /// Where the sensor was when it took this scan; curvity measures ranges from it.
     pub origin_in_world: [f64; 3],
     pub labels: Option<Vec<u32>>,
@@ -40,7 +43,8 @@ pub fn scan_to_world(frame: Frame) -> WorldScan {
             moments.add(w);
             [w[0] as f32, w[1] as f32, w[2] as f32]
         })
-        .collect();
+        .collect::<Vec<_>>()
+        .into();
     WorldScan {
         index: frame.index,
         stamp_ns: frame.stamp_ns,
@@ -192,7 +196,7 @@ mod tests {
         WorldScan {
             index,
             stamp_ns: 0,
-            points_in_world: Vec::new(),
+            points_in_world: Arc::default(),
             origin_in_world: [0.0; 3],
             labels: None,
             remission: None,

@@ -62,6 +62,9 @@ pub struct FrameResult {
     pub sensor_in_world: [f64; 3],
     /// The integrated points inside the grid, by cell.
     pub cells: CellPoints,
+    /// Every point of the frame's own scan, in the world frame (shared with the
+    /// integration window, not copied).
+    pub scan_in_world: std::sync::Arc<Vec<[f32; 3]>>,
     /// Points of this frame's scan that the reader dropped (non-finite coordinates).
     pub dropped_points: usize,
     /// Points of this frame's scan whose label id the label set does not define.
@@ -396,6 +399,7 @@ impl Pipeline {
                 world_from_velodyne: extras.world_from_velodyne,
                 sensor_in_world: current.origin_in_world,
                 cells,
+                scan_in_world: current.points_in_world.clone(),
                 dropped_points: extras.dropped_points,
                 unknown_labels: extras.unknown_labels,
                 remission: extras.remission,

@@ -3,7 +3,8 @@
 //!
 //! Per frame, in the world frame (`map` for KITTI input): the filtered prediction and
 //! the ground truth as `nav_msgs/msg/OccupancyGrid` (0 traversable, 100 not, -1
-//! unknown), the integrated in-grid points as a PointCloud2 with each point's cell
+//! unknown), the frame's scan (by default its points inside the grid; see
+//! [`CloudPoints`]) as a PointCloud2 with each point's cell
 //! class, and `travmap_msgs/msg/FrameMetrics`; every [`DRIVE_MAP_EVERY`] frames and
 //! after the last, the fused map of the drive so far on `/travmap/drive_map` (an
 //! OccupancyGrid: 100 x P(not traversable), -1 unseen). With poses from registration,
@@ -57,6 +58,8 @@ pub struct AnnotationOptions {
     pub grid_height_m: f64,
     /// Also write the final fused map once, at the end, on [`STATIC_MAP_TOPIC`].
     pub static_map: bool,
+    /// What [`CLOUD_TOPIC`] holds.
+    pub cloud: CloudPoints,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -98,45 +101,87 @@ fn grid_message(
     }
 }
 
-/// The in-grid points in world coordinates with `class` (and `ground_truth`) int8.
-fn cloud_message(result: &FrameResult, classes: &[CellClass], world_frame: &str) -> PointCloud2 {
-    let cells = &result.cells;
+/// The points of a frame's `/travmap/cloud`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CloudPoints {
+    /// The frame's own scan's points inside the grid: each point once over the
+    /// drive (the window's older scans were written with their own frames).
+    Grid,
+    /// Every point of the frame's scan; outside the grid class -1 (unknown).
+    All,
+    /// No cloud.
+    None,
+}
+
+/// The frame's points in world coordinates with `class` (and `ground_truth`) int8:
+/// the occupancy values of their cells (0 traversable, 100 not, -1 unknown).
+fn cloud_message(
+    result: &FrameResult,
+    classes: &[CellClass],
+    world_frame: &str,
+    which: CloudPoints,
+) -> Option<PointCloud2> {
     let [min_x, min_y] = result.layout.min_corner_in_world();
+    let occupancy = |cell: Option<usize>| {
+        let of = |grid: &[CellClass]| cell.and_then(|c| grid.get(c)).map_or(-1, |c| c.occupancy());
+        let truth = result.ground_truth.as_deref().map_or(-1, of);
+        [of(classes) as u8, truth as u8, 0, 0]
+    };
+    let points = match which {
+        CloudPoints::Grid => result.cells.newest_per_cell.iter().sum::<u32>() as usize,
+        CloudPoints::All => result.scan_in_world.len(),
+        CloudPoints::None => 0,
+    };
+    let mut data = Vec::with_capacity(points * CLOUD_POINT_STEP);
+    let mut put = |xyz: [f32; 3], cell: Option<usize>| {
+        for v in xyz {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+        data.extend_from_slice(&occupancy(cell));
+    };
+    match which {
+        CloudPoints::None => return None,
+        CloudPoints::Grid => {
+            let cells = &result.cells;
+            for cell in 0..result.layout.cell_count() {
+                for p in &cells.points_in_grid[cells.newest_range(cell)] {
+                    let x = (p[0] as f64 + min_x) as f32;
+                    let y = (p[1] as f64 + min_y) as f32;
+                    put([x, y, p[2]], Some(cell));
+                }
+            }
+        }
+        CloudPoints::All => {
+            for p in result.scan_in_world.iter() {
+                let cell = (result.layout).cell_of_local(p[0] as f64 - min_x, p[1] as f64 - min_y);
+                put(*p, cell);
+            }
+        }
+    }
     let mut fields = PointField::xyz_float32();
     fields.push(PointField::scalar("class", 12, datatype::INT8));
     if result.ground_truth.is_some() {
         fields.push(PointField::scalar("ground_truth", 13, datatype::INT8));
     }
-    let n = cells.points_in_grid.len();
-    let mut data = Vec::with_capacity(16 * n);
-    for cell in 0..result.layout.cell_count() {
-        let class = classes[cell].occupancy();
-        let truth = result
-            .ground_truth
-            .as_ref()
-            .map_or(-1, |t| t[cell].occupancy());
-        for p in &cells.points_in_grid[cells.cell_range(cell)] {
-            data.extend_from_slice(&((p[0] as f64 + min_x) as f32).to_le_bytes());
-            data.extend_from_slice(&((p[1] as f64 + min_y) as f32).to_le_bytes());
-            data.extend_from_slice(&p[2].to_le_bytes());
-            data.extend_from_slice(&[class as u8, truth as u8, 0, 0]);
-        }
-    }
-    PointCloud2 {
+    Some(PointCloud2 {
         header: Header {
             stamp: Time::from_ns(result.stamp_ns),
             frame_id: world_frame.into(),
         },
         height: 1,
-        width: n as u32,
+        width: points as u32,
         fields,
         is_bigendian: false,
-        point_step: 16,
-        row_step: (16 * n) as u32,
+        point_step: CLOUD_POINT_STEP as u32,
+        row_step: data.len() as u32,
         data,
         is_dense: true,
-    }
+    })
 }
+
+/// x, y, z float32, class and ground truth int8, two bytes that keep points
+/// 4-byte aligned (viewers read the floats in place).
+const CLOUD_POINT_STEP: usize = 16;
 
 fn metrics_message(result: &FrameResult, classes: &[CellClass], world_frame: &str) -> FrameMetrics {
     let count = |class: CellClass| classes.iter().filter(|&&c| c == class).count() as u32;
@@ -236,11 +281,9 @@ pub fn annotate(
                 &grid_message(&result, truth, &world_frame, options.grid_height_m),
             )?;
         }
-        sink.write(
-            CLOUD_TOPIC,
-            stamp,
-            &cloud_message(&result, classes, &world_frame),
-        )?;
+        if let Some(cloud) = cloud_message(&result, classes, &world_frame, options.cloud) {
+            sink.write(CLOUD_TOPIC, stamp, &cloud)?;
+        }
         sink.write(
             METRICS_TOPIC,
             stamp,
