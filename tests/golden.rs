@@ -4,7 +4,7 @@
 //!
 //! The dump holds what a run must reproduce bit for bit: per frame the predicted and
 //! ground-truth OccupancyGrids (header, geometry, cell counts and a SHA-256 of the
-//! cells), the in-grid cloud (point count, fields, SHA-256 of its bytes) and every
+//! cells), the frame's in-grid cloud (point count, fields, SHA-256 of its bytes) and every
 //! FrameMetrics field except `latency_ms`, which is a measured time. A change of any
 //! of them fails with the list of what changed; when the change is intended,
 //! `TRAVMAP_BLESS=1 cargo test --release --test golden` rewrites the fixture (see
