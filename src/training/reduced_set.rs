@@ -2,7 +2,12 @@
 //! the support vectors with weights fitted by least squares to the exact decision
 //! function, so prediction costs the centres' count instead of the support vectors'.
 
+use rayon::prelude::*;
+
 use super::set::TrainingSet;
+
+/// Rows of the reduced set's design matrix computed at a time.
+const DESIGN_BLOCK_ROWS: usize = 1024;
 use crate::config::{Config, ForeignRemissionPolicy};
 use crate::method::classifier::{PredictionScratch, ReducedSet, SvmModel};
 use crate::random::SplitMix64;
@@ -24,17 +29,24 @@ fn k_means(
         .flat_map(|&i| points[i * d..(i + 1) * d].iter().copied())
         .collect();
     for _ in 0..iterations {
+        // The nearest centres on all cores; the sums in the points' order, so the
+        // centres are the same whatever the thread count.
+        let nearest: Vec<usize> = points
+            .par_chunks_exact(d)
+            .map(|p| {
+                centres
+                    .chunks_exact(d)
+                    .map(|c| c.iter().zip(p).map(|(a, b)| (a - b) * (a - b)).sum::<f32>())
+                    .enumerate()
+                    .fold((0, f32::INFINITY), |best, (j, dist)| {
+                        if dist < best.1 { (j, dist) } else { best }
+                    })
+                    .0
+            })
+            .collect();
         let mut sums = vec![0f64; k * d];
         let mut counts = vec![0usize; k];
-        for p in points.chunks_exact(d) {
-            let nearest = centres
-                .chunks_exact(d)
-                .map(|c| c.iter().zip(p).map(|(a, b)| (a - b) * (a - b)).sum::<f32>())
-                .enumerate()
-                .fold((0, f32::INFINITY), |best, (j, dist)| {
-                    if dist < best.1 { (j, dist) } else { best }
-                })
-                .0;
+        for (p, &nearest) in points.chunks_exact(d).zip(&nearest) {
             counts[nearest] += 1;
             for (s, &v) in sums[nearest * d..(nearest + 1) * d].iter_mut().zip(p) {
                 *s += v as f64;
@@ -61,13 +73,12 @@ pub(super) fn fit_reduced_set(
     set: &TrainingSet,
     config: &Config,
 ) -> Option<ReducedSet> {
-    let mut scratch = PredictionScratch::default();
     fit_expansion(
         model,
         &model.support_vectors,
         &set.features,
         config,
-        |row| model.exact_decision_value(row, &mut scratch),
+        |row, [scratch, _]| model.exact_decision_value(row, scratch),
     )
 }
 
@@ -107,24 +118,30 @@ pub(super) fn fit_folded_reduced_set(
         candidates.extend_from_slice(model.standardise(row, &mut scratch));
     }
     let all_rows = [rows, &prior_raw].concat();
-    let (mut own, mut other) = (PredictionScratch::default(), PredictionScratch::default());
     let weight = model.prior_weight;
-    fit_expansion(model, &candidates, &all_rows, config, |row| {
-        model.exact_decision_value(row, &mut own)
-            + weight * (prior.exact_decision_value(row, &mut other) - prior.threshold)
-    })
+    fit_expansion(
+        model,
+        &candidates,
+        &all_rows,
+        config,
+        |row, [own, other]| {
+            model.exact_decision_value(row, own)
+                + weight * (prior.exact_decision_value(row, other) - prior.threshold)
+        },
+    )
 }
 
 /// `training.reduced_set_size` k-means centres of `candidates` (standardised as
 /// `model` does) with weights and bias by weighted ridge least squares to `target`
 /// on at most `training.reduced_set_samples` of `rows` (raw features, row-major),
-/// in `model`'s kernel. None when there are no more candidates than centres.
+/// in `model`'s kernel (`target_of` is given two scratch spaces for the models it
+/// runs). None when there are no more candidates than centres.
 fn fit_expansion(
     model: &SvmModel,
     candidates: &[f32],
     rows: &[f32],
     config: &Config,
-    mut target_of: impl FnMut(&[f32]) -> f32,
+    target_of: impl Fn(&[f32], [&mut PredictionScratch; 2]) -> f32 + Sync,
 ) -> Option<ReducedSet> {
     let t = &config.training;
     let d = model.dimension();
@@ -140,18 +157,39 @@ fn fit_expansion(
     // Design matrix: the kernel to every centre plus a column of ones for the bias.
     let m = t.reduced_set_size;
     let gamma = model.gamma;
-    let mut scratch = PredictionScratch::default();
+    // Rows are computed on all cores a block at a time (the matrix is column-major,
+    // so a block is copied in; whole, the copy would double the matrix's memory).
     let mut design = nalgebra::DMatrix::<f64>::zeros(chosen.len(), m + 1);
     let mut target = nalgebra::DVector::<f64>::zeros(chosen.len());
-    for (r, &i) in chosen.iter().enumerate() {
-        let features = &rows[i * d..(i + 1) * d];
-        target[r] = target_of(features) as f64;
-        let z = model.standardise(features, &mut scratch);
-        for (j, c) in centres.chunks_exact(d).enumerate() {
-            let distance: f64 = c.iter().zip(z).map(|(a, b)| ((a - b) as f64).powi(2)).sum();
-            design[(r, j)] = (-gamma * distance).exp();
+    for (block, indices) in chosen.chunks(DESIGN_BLOCK_ROWS).enumerate() {
+        let block_rows: Vec<(f64, Vec<f64>)> = indices
+            .par_iter()
+            .map_init(
+                || <[PredictionScratch; 3]>::default(),
+                |[own, other, scratch], &i| {
+                    let features = &rows[i * d..(i + 1) * d];
+                    let target = target_of(features, [own, other]) as f64;
+                    let z = model.standardise(features, scratch);
+                    let kernel = centres
+                        .chunks_exact(d)
+                        .map(|c| {
+                            let distance: f64 =
+                                c.iter().zip(z).map(|(a, b)| ((a - b) as f64).powi(2)).sum();
+                            (-gamma * distance).exp()
+                        })
+                        .collect();
+                    (target, kernel)
+                },
+            )
+            .collect();
+        for (offset, (value, kernel)) in block_rows.into_iter().enumerate() {
+            let r = block * DESIGN_BLOCK_ROWS + offset;
+            target[r] = value;
+            for (j, k) in kernel.into_iter().enumerate() {
+                design[(r, j)] = k;
+            }
+            design[(r, m)] = 1.0;
         }
-        design[(r, m)] = 1.0;
     }
     // Rows near the decision boundary decide signs: weight them up, w = 1 / (1 + f^2).
     let mut weighted = design.clone();

@@ -9,6 +9,12 @@
 
 use std::sync::Arc;
 
+use rayon::prelude::*;
+
+/// Rows at least this long are computed on all cores (the entries are independent,
+/// so the row is the same); shorter ones are not worth the hand-off.
+const PARALLEL_ROW_LENGTH: usize = 4096;
+
 /// libsvm's floor on the curvature of a non-positive-definite pair.
 const TAU: f64 = 1e-12;
 
@@ -94,16 +100,25 @@ impl<'a> KernelRows<'a> {
         let d = p.dimension;
         let xi = &p.samples[i * d..(i + 1) * d];
         let (yi, ni) = (p.labels[i], self.squared_norms[i]);
-        let row: Arc<[f32]> = p
-            .samples
-            .chunks_exact(d)
-            .zip(p.labels)
-            .zip(&self.squared_norms)
-            .map(|((xt, &yt), &nt)| {
-                let dot: f32 = xi.iter().zip(xt).map(|(a, b)| a * b).sum();
-                yi * yt * (-self.gamma * (ni + nt - 2.0 * dot).max(0.0)).exp()
-            })
-            .collect();
+        let gamma = self.gamma;
+        let entry = |((xt, &yt), &nt): ((&[f32], &f32), &f32)| {
+            let dot: f32 = xi.iter().zip(xt).map(|(a, b)| a * b).sum();
+            yi * yt * (-gamma * (ni + nt - 2.0 * dot).max(0.0)).exp()
+        };
+        let row: Arc<[f32]> = if p.labels.len() >= PARALLEL_ROW_LENGTH {
+            let row: Vec<f32> = (p.samples.par_chunks_exact(d))
+                .zip(p.labels)
+                .zip(&self.squared_norms)
+                .map(entry)
+                .collect();
+            row.into()
+        } else {
+            (p.samples.chunks_exact(d))
+                .zip(p.labels)
+                .zip(&self.squared_norms)
+                .map(entry)
+                .collect()
+        };
         self.rows[i] = Some(row.clone());
         self.cached.push(i);
         row
