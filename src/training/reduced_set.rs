@@ -165,7 +165,7 @@ fn fit_expansion(
         let block_rows: Vec<(f64, Vec<f64>)> = indices
             .par_iter()
             .map_init(
-                || <[PredictionScratch; 3]>::default(),
+                <[PredictionScratch; 3]>::default,
                 |[own, other, scratch], &i| {
                     let features = &rows[i * d..(i + 1) * d];
                     let target = target_of(features, [own, other]) as f64;
