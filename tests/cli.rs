@@ -254,6 +254,7 @@ fn bench_tools_times_every_subcommand_as_a_child_process() {
         r#""annotate" "mcap" true"#,
         r#""annotate" "mcap" false"#,
         r#""dataset" "kitti" null"#,
+        r#""adapt" "kitti" null"#,
     ];
     assert_eq!(kinds, expected, "{doc}");
     for row in rows {

@@ -1,5 +1,5 @@
 //! `travmap bench --tools`: the subcommands themselves (`convert`, `annotate`,
-//! `dataset`) run as child processes of this executable on the bench's input, on one
+//! `dataset`, `adapt`) run as child processes of this executable on the bench's input, on one
 //! thread and on all cores; frames/s, MB/s written and the child's peak memory.
 //! Unlike the method table these include the disk, decoding, compression and writing.
 
@@ -41,7 +41,7 @@ struct ToolSpec {
 const CONVERTED: &str = "converted.mcap";
 
 /// The rows, in order: `convert` first, since the MCAP-input rows read what it wrote.
-const ROWS: [ToolSpec; 6] = [
+const ROWS: [ToolSpec; 7] = [
     ToolSpec {
         tool: "convert",
         input: ToolInput::Given,
@@ -78,6 +78,14 @@ const ROWS: [ToolSpec; 6] = [
         passthrough: None,
         output_name: "cells.parquet",
     },
+    // The self-supervised adaptation: a pass over the drive on the training grid,
+    // then the fits; its MB/s are of the model file.
+    ToolSpec {
+        tool: "adapt",
+        input: ToolInput::Given,
+        passthrough: None,
+        output_name: "adapted.json",
+    },
 ];
 
 impl ToolSpec {
@@ -102,7 +110,7 @@ impl ToolSpec {
     /// The command line of this row's tool reading `input` into `output`, quiet:
     /// the bench's `--frames` for its own input; the configuration and how to read
     /// logs for every tool that takes them (`convert` takes none); the model for
-    /// `annotate`.
+    /// `annotate`, and as the prior for `adapt`.
     fn arguments(
         &self,
         input: &Path,
@@ -130,7 +138,7 @@ impl ToolSpec {
             (_, ToolInput::Given) => arguments.extend(inputs.reading_arguments()),
             (_, ToolInput::Converted) => arguments.extend(inputs.settings.as_arguments()),
         }
-        if let ("annotate", Some(model)) = (self.tool, model) {
+        if let ("annotate" | "adapt", Some(model)) = (self.tool, model) {
             arguments.extend(["--model".into(), model.into()]);
         }
         if self.passthrough == Some(false) {
@@ -544,6 +552,10 @@ mod tests {
         assert_eq!(
             command(5, "seq"),
             "dataset seq -o out -q --frames 2..5 --cloud-topic /points --set grid.size_m=16"
+        );
+        assert_eq!(
+            command(6, "seq"),
+            "adapt seq -o out -q --frames 2..5 --cloud-topic /points --set grid.size_m=16 --model m.json"
         );
     }
 
