@@ -3,17 +3,38 @@
 //!
 //! Input: [`CellPoints`] with labels. Output: one [`CellClass`] per cell.
 
-use crate::config::{ClassRule, GroundTruthConfig};
+use crate::config::GroundTruthConfig;
 use crate::method::grid::{CellClass, CellPoints};
 
 /// Labels cells from per-point semantic classes.
 #[derive(Clone, Debug)]
 pub struct GroundTruth {
     pub config: GroundTruthConfig,
-    /// The classes of `config` in force.
-    classes: ClassRule,
-    /// The ids the label set defines, one bit per id; None: any id is accepted.
-    known: Option<Box<[u64; 1024]>>,
+    /// The classes of `config` in force: looked up for every labelled point, so as
+    /// bits rather than lists.
+    traversable: IdSet,
+    ignored: IdSet,
+    /// The ids the label set defines; None: any id is accepted.
+    known: Option<IdSet>,
+}
+
+/// A set of label ids, one bit per id.
+#[derive(Clone, Debug)]
+struct IdSet(Box<[u64; 1024]>);
+
+impl IdSet {
+    fn of(ids: &[u16]) -> Self {
+        let mut bits = Box::new([0u64; 1024]);
+        for &id in ids {
+            bits[id as usize / 64] |= 1 << (id % 64);
+        }
+        Self(bits)
+    }
+
+    #[inline]
+    fn contains(&self, id: u16) -> bool {
+        self.0[id as usize / 64] & (1 << (id % 64)) != 0
+    }
 }
 
 /// Points of a scan whose label id the label set does not define: random ids, or
@@ -42,16 +63,10 @@ impl UnknownLabels {
 impl GroundTruth {
     pub fn new(config: GroundTruthConfig) -> Self {
         let classes = config.classes();
-        let known = classes.known.as_ref().map(|ids| {
-            let mut bits = Box::new([0u64; 1024]);
-            for &id in ids {
-                bits[id as usize / 64] |= 1 << (id % 64);
-            }
-            bits
-        });
         Self {
-            classes,
-            known,
+            traversable: IdSet::of(&classes.traversable),
+            ignored: IdSet::of(&classes.ignored),
+            known: classes.known.as_deref().map(IdSet::of),
             config,
         }
     }
@@ -64,7 +79,7 @@ impl GroundTruth {
         let mut unknown = UnknownLabels::default();
         for &label in labels {
             let id = (label & 0xFFFF) as u16;
-            if known[id as usize / 64] & (1 << (id % 64)) == 0 {
+            if !known.contains(id) {
                 unknown.points += 1;
                 if unknown.examples.len() < EXAMPLE_IDS && !unknown.examples.contains(&id) {
                     unknown.examples.push(id);
@@ -92,11 +107,11 @@ impl GroundTruth {
         let (mut voting, mut non_traversable) = (0usize, 0usize);
         for &label in point_labels {
             let class = (label & 0xFFFF) as u16;
-            if self.classes.ignored.contains(&class) {
+            if self.ignored.contains(class) {
                 continue;
             }
             voting += 1;
-            if !self.classes.traversable.contains(&class) {
+            if !self.traversable.contains(class) {
                 non_traversable += 1;
             }
         }
@@ -116,6 +131,17 @@ mod tests {
 
     fn gt() -> GroundTruth {
         GroundTruth::new(GroundTruthConfig::default())
+    }
+
+    #[test]
+    fn id_sets_hold_exactly_their_ids_at_word_edges() {
+        let set = IdSet::of(&[0, 63, 64, 65535]);
+        for id in [0, 63, 64, 65535] {
+            assert!(set.contains(id), "{id}");
+        }
+        for id in [1, 62, 65, 127, 128, 65534] {
+            assert!(!set.contains(id), "{id}");
+        }
     }
 
     #[test]
