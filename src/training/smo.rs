@@ -11,8 +11,8 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-/// Rows at least this long are computed on all cores (the entries are independent,
-/// so the row is the same); shorter ones are not worth the hand-off.
+/// A row is split across cores in pieces of at least this many entries (they are
+/// independent, so the row is the same); a shorter one stays on one thread.
 const PARALLEL_ROW_LENGTH: usize = 4096;
 
 /// libsvm's floor on the curvature of a non-positive-definite pair.
@@ -101,24 +101,16 @@ impl<'a> KernelRows<'a> {
         let xi = &p.samples[i * d..(i + 1) * d];
         let (yi, ni) = (p.labels[i], self.squared_norms[i]);
         let gamma = self.gamma;
-        let entry = |((xt, &yt), &nt): ((&[f32], &f32), &f32)| {
-            let dot: f32 = xi.iter().zip(xt).map(|(a, b)| a * b).sum();
-            yi * yt * (-gamma * (ni + nt - 2.0 * dot).max(0.0)).exp()
-        };
-        let row: Arc<[f32]> = if p.labels.len() >= PARALLEL_ROW_LENGTH {
-            let row: Vec<f32> = (p.samples.par_chunks_exact(d))
-                .zip(p.labels)
-                .zip(&self.squared_norms)
-                .map(entry)
-                .collect();
-            row.into()
-        } else {
-            (p.samples.chunks_exact(d))
-                .zip(p.labels)
-                .zip(&self.squared_norms)
-                .map(entry)
-                .collect()
-        };
+        let row: Vec<f32> = (p.samples.par_chunks_exact(d))
+            .zip(p.labels)
+            .zip(&self.squared_norms)
+            .with_min_len(PARALLEL_ROW_LENGTH)
+            .map(|((xt, &yt), &nt)| {
+                let dot: f32 = xi.iter().zip(xt).map(|(a, b)| a * b).sum();
+                yi * yt * (-gamma * (ni + nt - 2.0 * dot).max(0.0)).exp()
+            })
+            .collect();
+        let row: Arc<[f32]> = row.into();
         self.rows[i] = Some(row.clone());
         self.cached.push(i);
         row
