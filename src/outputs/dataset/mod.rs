@@ -40,9 +40,14 @@ use crate::outputs::atomic::{AtomicFile, parquet_failure, sync_output, write_fai
 /// groups cost memory too, as the writer keeps every group's metadata for the
 /// footer (README, "Speed": memory).
 const ROW_GROUP_ROWS: usize = 1 << 15;
-/// The largest row group read back (pyarrow writes up to 2^20 rows by default):
-/// about 2 GB of columns in memory.
-const MAX_READ_GROUP_ROWS: usize = 1 << 22;
+/// Rows read back per batch, from each column of a row group at once: memory stays
+/// this small whatever size of group a writer chose (pyarrow's are 2^20 rows).
+const READ_BATCH_ROWS: usize = 1 << 13;
+/// The most values (rows x columns) a dataset may declare per byte of file. Real
+/// cell tables hold about one (1.15 in travmap's zstd file of the shipped drive); run-length
+/// encoding lets a damaged or made-up file declare billions of rows in a few bytes,
+/// which must not fill memory or run for hours.
+const MAX_VALUES_PER_FILE_BYTE: usize = 1 << 10;
 
 const CONFIG_KEY: &str = "travmap.config";
 const FORMAT_KEY: &str = "travmap.format";
@@ -427,5 +432,136 @@ mod tests {
         });
         let err = read(&path).unwrap_err();
         assert!(err.contains("column 122 is `(none)`; expected `pseudo_label BOOLEAN` (122 columns, expected 123)"), "{err}");
+    }
+
+    /// A file with the cell schema and `rows` rows in one group: column `c` of row
+    /// `r` holds `value(r, c)`; the labels are present where `labelled(r)`,
+    /// traversable in even rows; appearance in every row.
+    fn write_rows(
+        path: &Path,
+        config: &Config,
+        rows: usize,
+        value: impl Fn(usize, usize) -> f64,
+        labelled: impl Fn(usize) -> bool,
+    ) {
+        use parquet::column::writer::ColumnWriter;
+        let features = feature_names(&config.features.groups);
+        let schema = schema(&features, &appearance_columns(config), true);
+        let schema = parquet::schema::parser::parse_message_type(&schema).unwrap();
+        let properties = WriterProperties::builder()
+            .set_key_value_metadata(Some(vec![
+                KeyValue::new(FORMAT_KEY.into(), FORMAT.to_string()),
+                KeyValue::new(CONFIG_KEY.into(), serde_json::to_string(config).unwrap()),
+            ]))
+            // As a compact writer would: the constant pages of a made-up file shrink
+            // to nothing, as a fuzzer's do.
+            .set_compression(Compression::ZSTD(ZstdLevel::default()))
+            .set_data_page_row_count_limit(usize::MAX)
+            .build();
+        let file = File::create(path).unwrap();
+        let mut writer =
+            SerializedFileWriter::new(file, Arc::new(schema), Arc::new(properties)).unwrap();
+        let optional: Vec<bool> = (writer.schema_descr().columns().iter())
+            .map(|column| column.max_def_level() > 0)
+            .collect();
+        let mut group = writer.next_row_group().unwrap();
+        let mut c = 0;
+        let label_levels: Vec<i16> = (0..rows).map(|r| labelled(r) as i16).collect();
+        let labelled: Vec<usize> = (0..rows).filter(|&r| labelled(r)).collect();
+        while let Some(mut column) = group.next_column().unwrap() {
+            let all_levels = vec![1i16; rows];
+            let levels = |optional: bool| optional.then_some(&all_levels[..]);
+            let optional = optional[c];
+            match column.untyped() {
+                ColumnWriter::ByteArrayColumnWriter(w) => {
+                    w.write_batch(&vec![ByteArray::from("t"); rows], None, None)
+                }
+                ColumnWriter::Int64ColumnWriter(w) => {
+                    let values: Vec<i64> = (0..rows).map(|r| value(r, c) as i64).collect();
+                    w.write_batch(&values, None, None)
+                }
+                ColumnWriter::Int32ColumnWriter(w) => {
+                    let values: Vec<i32> = (0..rows).map(|r| value(r, c) as i32).collect();
+                    w.write_batch(&values, None, None)
+                }
+                ColumnWriter::DoubleColumnWriter(w) => {
+                    let values: Vec<f64> = (0..rows).map(|r| value(r, c)).collect();
+                    w.write_batch(&values, None, None)
+                }
+                ColumnWriter::FloatColumnWriter(w) => {
+                    let values: Vec<f32> = (0..rows).map(|r| value(r, c) as f32).collect();
+                    w.write_batch(&values, levels(optional), None)
+                }
+                ColumnWriter::BoolColumnWriter(w) if optional => {
+                    let values: Vec<bool> = labelled.iter().map(|r| r % 2 == 0).collect();
+                    w.write_batch(&values, Some(&label_levels), None)
+                }
+                ColumnWriter::BoolColumnWriter(w) => w.write_batch(&vec![false; rows], None, None),
+                _ => unreachable!("the cell schema has no other column type"),
+            }
+            .unwrap();
+            column.close().unwrap();
+            c += 1;
+        }
+        group.close().unwrap();
+        writer.close().unwrap();
+    }
+
+    #[test]
+    fn row_groups_are_read_in_batches_row_for_row() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cells.parquet");
+        let config = Config::default();
+        let rows = 2 * READ_BATCH_ROWS + 7;
+        let value = |r: usize, c: usize| r as f64 / 1000.0 + c as f64;
+        write_rows(&path, &config, rows, value, |r| r % 3 != 0);
+        let mut set = TrainingSet::for_features(&config);
+        let added =
+            read_training_rows(&path, &config, &mut set, reading::Labels::GroundTruth).unwrap();
+        let labelled: Vec<usize> = (0..rows).filter(|r| r % 3 != 0).collect();
+        assert_eq!(added, labelled.len());
+        let dimension = set.dimension;
+        assert_eq!(dimension, feature_names(&config.features.groups).len());
+        for (i, &r) in labelled.iter().enumerate() {
+            assert_eq!(set.traversable[i], r % 2 == 0, "row {r}");
+            assert_eq!(set.centre_in_world[i], [value(r, 5), value(r, 6)]);
+            let features = &set.features[i * dimension..(i + 1) * dimension];
+            let expected: Vec<f32> = (0..dimension).map(|f| value(r, 8 + f) as f32).collect();
+            assert_eq!(features, expected, "row {r}");
+            let appearance = set.appearance_row[i].expect("every row has appearance");
+            let at = appearance * set.appearance_len;
+            assert_eq!(
+                set.appearance[at],
+                value(r, 8 + dimension) as f32,
+                "row {r}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_file_declaring_far_more_rows_than_its_bytes_can_hold_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cells.parquet");
+        let mut config = Config::default();
+        // One value per row: run-length encoding holds a million rows in a few bytes.
+        config.features.groups.clear();
+        let rows = 1 << 20;
+        write_rows(&path, &config, rows, |_, _| 0.5, |_| true);
+        let bytes = std::fs::metadata(&path).unwrap().len();
+        let err = read_training_rows(
+            &path,
+            &config,
+            &mut TrainingSet::default(),
+            reading::Labels::GroundTruth,
+        )
+        .map(|_| bytes)
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("cells.parquet")
+                && err.contains(&format!("row group 0 declares {rows} rows"))
+                && err.contains(&format!("values per byte of a {bytes}-byte file")),
+            "{err}"
+        );
     }
 }

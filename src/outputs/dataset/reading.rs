@@ -14,7 +14,7 @@ use parquet::file::serialized_reader::SerializedFileReader;
 use parquet::schema::types::SchemaDescriptor;
 
 use super::{
-    CONFIG_KEY, FORMAT, FORMAT_1, FORMAT_KEY, MAX_READ_GROUP_ROWS, ROW_GROUP_ROWS,
+    CONFIG_KEY, FORMAT, FORMAT_1, FORMAT_KEY, MAX_VALUES_PER_FILE_BYTE, READ_BATCH_ROWS,
     appearance_columns, feature_settings, schema,
 };
 use crate::Config;
@@ -30,49 +30,95 @@ fn read_error(path: &Path, message: impl std::fmt::Display) -> Error {
     }
 }
 
-/// Reads a whole column of a row group: its present values, and per row whether
-/// it is present (all true for a required column).
-fn read_column<T: DataType>(
-    group: &dyn RowGroupReader,
+/// One column of a row group, read a batch of rows at a time so that memory stays
+/// the batch's whatever the group declares: the batch's present values, and per row
+/// whether it is present.
+struct ColumnBatches<T: DataType> {
+    reader: ColumnReaderImpl<T>,
     index: usize,
-    rows: usize,
-) -> parquet::errors::Result<(Vec<T::T>, Vec<bool>)>
+    values: Vec<T::T>,
+    levels: Vec<i16>,
+    present: Vec<bool>,
+}
+
+impl<T: DataType> ColumnBatches<T>
 where
     T::T: Default + Clone,
 {
-    let mut values = Vec::with_capacity(rows.min(ROW_GROUP_ROWS));
-    let mut levels = Vec::with_capacity(rows.min(ROW_GROUP_ROWS));
-    contained(|| {
-        let mut reader: ColumnReaderImpl<T> =
-            parquet::column::reader::get_typed_column_reader(group.get_column_reader(index)?);
-        let mut read = 0;
-        while read < rows {
-            let (records, _, _) =
-                reader.read_records(rows - read, Some(&mut levels), None, &mut values)?;
-            if records == 0 {
-                return Err(parquet::errors::ParquetError::EOF(format!(
-                    "{read} of {rows} rows"
-                )));
+    fn open(group: &dyn RowGroupReader, index: usize) -> parquet::errors::Result<Self> {
+        let reader = contained(|| {
+            Ok(parquet::column::reader::get_typed_column_reader(
+                group.get_column_reader(index)?,
+            ))
+        })?;
+        Ok(Self {
+            reader,
+            index,
+            values: Vec::with_capacity(READ_BATCH_ROWS),
+            levels: Vec::with_capacity(READ_BATCH_ROWS),
+            present: Vec::with_capacity(READ_BATCH_ROWS),
+        })
+    }
+
+    /// Reads the next `rows` rows (at most [`READ_BATCH_ROWS`]).
+    fn read(&mut self, rows: usize) -> parquet::errors::Result<()> {
+        let Self {
+            reader,
+            values,
+            levels,
+            present,
+            ..
+        } = self;
+        values.clear();
+        levels.clear();
+        contained(|| {
+            let mut read = 0;
+            while read < rows {
+                let (records, _, _) =
+                    reader.read_records(rows - read, Some(&mut *levels), None, &mut *values)?;
+                if records == 0 {
+                    return Err(parquet::errors::ParquetError::EOF(format!(
+                        "{read} of {rows} rows"
+                    )));
+                }
+                read += records;
             }
-            read += records;
+            Ok(())
+        })?;
+        // A required column has no levels: every row is present.
+        present.clear();
+        if levels.is_empty() {
+            present.resize(rows, true);
+        } else {
+            present.extend(levels.iter().map(|&l| l > 0));
+        }
+        let present_count = present.iter().filter(|&&p| p).count();
+        if present.len() != rows || values.len() != present_count {
+            return Err(parquet::errors::ParquetError::General(format!(
+                "a column of {rows} rows gave {} levels and {} values for {present_count} present rows",
+                present.len(),
+                values.len()
+            )));
         }
         Ok(())
-    })?;
-    // A required column has no levels: every row is present.
-    let present = if levels.is_empty() {
-        vec![true; rows]
-    } else {
-        levels.iter().map(|&l| l > 0).collect::<Vec<_>>()
-    };
-    let present_count = present.iter().filter(|&&p| p).count();
-    if present.len() != rows || values.len() != present_count {
-        return Err(parquet::errors::ParquetError::General(format!(
-            "a column of {rows} rows gave {} levels and {} values for {present_count} present rows",
-            present.len(),
-            values.len()
-        )));
     }
-    Ok((values, present))
+
+    /// The batch's values of a column that must have a value in every row; `first_row`
+    /// is the batch's first row in its row group, for the error.
+    fn required(
+        &self,
+        group: &dyn RowGroupReader,
+        first_row: usize,
+    ) -> parquet::errors::Result<&[T::T]> {
+        match self.present.iter().position(|&p| !p) {
+            None => Ok(&self.values),
+            Some(row) => Err(parquet::errors::ParquetError::General(format!(
+                "column `{}` is null in row {} of its row group; travmap needs a value in every row",
+                group.metadata().column(self.index).column_path().string(),
+                first_row + row
+            ))),
+        }
+    }
 }
 
 /// Runs a call into the parquet crate, which panics on some corrupt input rather
@@ -83,25 +129,6 @@ fn contained<T>(call: impl FnOnce() -> parquet::errors::Result<T>) -> parquet::e
             "corrupt Parquet file (the parquet reader stopped: {panic})"
         )))
     })
-}
-
-/// Reads a whole column of a row group that must have a value in every row.
-fn read_required<T: DataType>(
-    group: &dyn RowGroupReader,
-    index: usize,
-    rows: usize,
-) -> parquet::errors::Result<Vec<T::T>>
-where
-    T::T: Default + Clone,
-{
-    let (values, present) = read_column::<T>(group, index, rows)?;
-    match present.iter().position(|&p| !p) {
-        None => Ok(values),
-        Some(row) => Err(parquet::errors::ParquetError::General(format!(
-            "column `{}` is null in row {row} of its row group; travmap needs a value in every row",
-            group.metadata().column(index).column_path().string()
-        ))),
-    }
 }
 
 /// Which labels a training set takes from a dataset.
@@ -126,6 +153,7 @@ pub fn read_training_rows(
     // millions of them on some corrupt page headers (15 s for a 26 kB file). The
     // rows take more memory than the compressed file does anyway.
     let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let file_bytes = data.len();
     if !data.starts_with(b"PAR1") {
         return Err(read_error(
             path,
@@ -225,73 +253,88 @@ pub fn read_training_rows(
     use parquet::data_type::{BoolType, DoubleType, FloatType};
     let label_columns = if self_labels { 4 } else { 2 };
     let appearance_len = wanted.len() - 8 - label_columns - feature_count;
-    let mut added = 0;
+    let truth_column = 8
+        + feature_count
+        + appearance_len
+        + match labels {
+            Labels::GroundTruth => 0,
+            // After the ground truth, the prediction and the footprint.
+            Labels::Pseudo => 3,
+        };
+    let largest_values = file_bytes.saturating_mul(MAX_VALUES_PER_FILE_BYTE);
+    let (mut declared_values, mut added) = (0usize, 0);
+    let mut row_features = vec![0.0f32; feature_count];
+    let mut row_appearance = vec![0.0f32; appearance_len];
+    let mut appearance_next = vec![0usize; appearance_len];
     for g in 0..reader.num_row_groups() {
         let group = contained(|| reader.get_row_group(g)).map_err(fail)?;
-        // Columns are read whole, so a corrupt count must not size them.
-        let rows = usize::try_from(group.metadata().num_rows())
+        let group = group.as_ref();
+        let declared = group.metadata().num_rows();
+        declared_values = usize::try_from(declared)
             .ok()
-            .filter(|&rows| rows <= MAX_READ_GROUP_ROWS)
+            .and_then(|rows| rows.checked_mul(wanted.len()))
+            .and_then(|values| values.checked_add(declared_values))
+            .filter(|&values| values <= largest_values)
             .ok_or_else(|| {
                 read_error(
                     path,
                     format!(
-                        "row group {g} declares {} rows; travmap reads groups of 0 to {MAX_READ_GROUP_ROWS}",
-                        group.metadata().num_rows()
+                        "row group {g} declares {declared} rows: with the groups before it, more than {MAX_VALUES_PER_FILE_BYTE} values per byte of a {file_bytes}-byte file (a damaged row count?)"
                     ),
                 )
             })?;
-        let x_m = read_required::<DoubleType>(group.as_ref(), 5, rows).map_err(fail)?;
-        let y_m = read_required::<DoubleType>(group.as_ref(), 6, rows).map_err(fail)?;
-        let mut features = Vec::with_capacity(feature_count);
-        for f in 0..feature_count {
-            features.push(read_required::<FloatType>(group.as_ref(), 8 + f, rows).map_err(fail)?);
-        }
-        let mut appearance = Vec::with_capacity(appearance_len);
-        let mut seen = vec![true; rows];
-        for a in 0..appearance_len {
-            let (values, present) =
-                read_column::<FloatType>(group.as_ref(), 8 + feature_count + a, rows)
-                    .map_err(fail)?;
-            // Values are packed over the present rows; spread them back.
-            let mut spread = vec![0.0f32; rows];
-            let mut next = values.into_iter();
-            for (row, &p) in present.iter().enumerate() {
-                if p {
-                    spread[row] = next.next().unwrap_or_default();
-                } else {
-                    seen[row] = false;
+        let rows = declared as usize;
+        let open_floats = |columns: std::ops::Range<usize>| {
+            columns
+                .map(|c| ColumnBatches::<FloatType>::open(group, c))
+                .collect::<parquet::errors::Result<Vec<_>>>()
+                .map_err(fail)
+        };
+        let mut x_m = ColumnBatches::<DoubleType>::open(group, 5).map_err(fail)?;
+        let mut y_m = ColumnBatches::<DoubleType>::open(group, 6).map_err(fail)?;
+        let mut features = open_floats(8..8 + feature_count)?;
+        let mut appearance = open_floats(8 + feature_count..8 + feature_count + appearance_len)?;
+        let mut truth = ColumnBatches::<BoolType>::open(group, truth_column).map_err(fail)?;
+        for first_row in (0..rows).step_by(READ_BATCH_ROWS) {
+            let batch = READ_BATCH_ROWS.min(rows - first_row);
+            x_m.read(batch).map_err(fail)?;
+            y_m.read(batch).map_err(fail)?;
+            for column in features.iter_mut().chain(appearance.iter_mut()) {
+                column.read(batch).map_err(fail)?;
+            }
+            truth.read(batch).map_err(fail)?;
+            let xs = x_m.required(group, first_row).map_err(fail)?;
+            let ys = y_m.required(group, first_row).map_err(fail)?;
+            let feature_values = features
+                .iter()
+                .map(|column| column.required(group, first_row))
+                .collect::<parquet::errors::Result<Vec<_>>>()
+                .map_err(fail)?;
+            appearance_next.fill(0);
+            let mut truth_next = 0;
+            for row in 0..batch {
+                // Optional values are packed over their column's present rows.
+                let mut seen = appearance_len > 0;
+                for (a, column) in appearance.iter().enumerate() {
+                    if column.present[row] {
+                        row_appearance[a] = column.values[appearance_next[a]];
+                        appearance_next[a] += 1;
+                    } else {
+                        seen = false;
+                    }
                 }
+                if !truth.present[row] {
+                    continue;
+                }
+                let traversable = truth.values[truth_next];
+                truth_next += 1;
+                for (value, column) in row_features.iter_mut().zip(&feature_values) {
+                    *value = column[row];
+                }
+                let appearance = seen.then_some(&row_appearance[..]);
+                set.push(&row_features, appearance, traversable, [xs[row], ys[row]]);
+                added += 1;
             }
-            appearance.push(spread);
-        }
-        let truth_column = 8
-            + feature_count
-            + appearance_len
-            + match labels {
-                Labels::GroundTruth => 0,
-                // After the ground truth, the prediction and the footprint.
-                Labels::Pseudo => 3,
-            };
-        let (truth, labelled) =
-            read_column::<BoolType>(group.as_ref(), truth_column, rows).map_err(fail)?;
-        let mut truth = truth.into_iter();
-        let mut row_features = vec![0.0f32; feature_count];
-        let mut row_appearance = vec![0.0f32; appearance_len];
-        for row in 0..rows {
-            if !labelled[row] {
-                continue;
-            }
-            let traversable = truth.next().unwrap_or_default();
-            for (f, column) in features.iter().enumerate() {
-                row_features[f] = column[row];
-            }
-            for (a, column) in appearance.iter().enumerate() {
-                row_appearance[a] = column[row];
-            }
-            let appearance = (seen[row] && appearance_len > 0).then_some(&row_appearance[..]);
-            set.push(&row_features, appearance, traversable, [x_m[row], y_m[row]]);
-            added += 1;
         }
     }
     Ok(added)
