@@ -224,7 +224,7 @@ pub fn ply_file(data: &[u8]) {
 /// A LAS or LAZ file, read into points.
 pub fn las_file(data: &[u8]) {
     let bytes = data.len() as u64;
-    let _ = crate::io::las::read_las_from(std::io::Cursor::new(data.to_vec()), bytes);
+    let _ = crate::io::las::las_points(std::io::Cursor::new(data.to_vec()), bytes, &mut |_| Ok(()));
 }
 
 /// A rosbag2 `metadata.yaml`, in a directory holding one empty storage file.

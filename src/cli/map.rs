@@ -123,7 +123,10 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     })?;
     let seconds = bar.finish();
     let cells = map.cells();
-    let picture = render_drive_map(&cells, &trajectory, map.cell_size_m(), cell_px);
+    let (cell_size_m, frames, memory_bytes) = (map.cell_size_m(), map.frames(), map.memory_bytes());
+    // The cells are the map from here on: its tiles (most of a site map's memory) go.
+    drop(map);
+    let picture = render_drive_map(&cells, &trajectory, cell_size_m, cell_px);
     let mut staged = Staged::default();
     staged.write(output_path, &encode_png(&picture))?;
     if let Some(path) = &args.cells {
@@ -138,7 +141,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
                 &mut staged,
                 yaml,
                 &cells,
-                map.cell_size_m(),
+                cell_size_m,
                 world_frame,
                 nav2_mode,
                 georeference.as_ref(),
@@ -151,7 +154,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let per_frame = per_frame.report();
     notice_unknown_labels(&per_frame, config);
     let seen = cells.iter().filter(|c| c.observations > 0).count();
-    let area_m2 = seen as f64 * map.cell_size_m().powi(2);
+    let area_m2 = seen as f64 * cell_size_m.powi(2);
     if output.json {
         let fields = json!({
             "output": output_path,
@@ -159,11 +162,11 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
             "cells_output": args.cells,
             "nav2": nav2,
             "model": model_json(&model, &model_name),
-            "frames": map.frames(),
+            "frames": frames,
             "cells": cells.len(),
             "seen_cells": seen,
             "area_m2": area_m2,
-            "memory_bytes": map.memory_bytes(),
+            "memory_bytes": memory_bytes,
             "fused_confusion": fused,
             "fused_scores": fused_scores,
             "per_frame_scores": per_frame.scores,
@@ -174,9 +177,9 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
         println!(
             "wrote {} ({} fused into {}, {area_m2:.0} m2; map {:.1} KiB)",
             output_path.display(),
-            counted(map.frames(), "frame"),
+            counted(frames, "frame"),
             counted(seen, "cell"),
-            map.memory_bytes() as f64 / 1024.0
+            memory_bytes as f64 / 1024.0
         );
         if let Some(nav2) = &nav2 {
             println!(

@@ -55,6 +55,15 @@ pub fn check_some_finite(kept: usize, dropped: usize) -> Result<(), String> {
 
 /// Reads x, y, z, intensity and label; points with a non-finite coordinate are dropped.
 pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
+    let (mut points, intensity_datatype) = raw_cloud_points(cloud)?;
+    points.remission = normalise_remission(&mut points.points, intensity_datatype);
+    Ok(points)
+}
+
+/// [`cloud_points`] with the intensity as the cloud holds it (`remission` is
+/// `Missing`), and the intensity field's datatype: for a cloud read in pieces, whose
+/// scale is decided over all of them ([`remission_scale`]).
+pub fn raw_cloud_points(cloud: &PointCloud2) -> Result<(CloudPoints, Option<u8>), String> {
     let field = |names: &[&str]| {
         cloud
             .fields
@@ -142,23 +151,37 @@ pub fn cloud_points(cloud: &PointCloud2) -> Result<CloudPoints, String> {
             }
         }
     }
-    let remission = normalise_remission(&mut points, intensity.map(|(_, datatype)| datatype));
-    Ok(CloudPoints {
-        points,
-        labels,
-        remission,
-        dropped,
-    })
+    Ok((
+        CloudPoints {
+            points,
+            labels,
+            remission: RemissionScale::Missing,
+            dropped,
+        },
+        intensity.map(|(_, datatype)| datatype),
+    ))
 }
 
 /// Brings the intensity of `points` to 0..1 by its field's type and range: uint8
 /// and floats up to 255 are Velodyne's 0..255; floats up to 1 are KITTI's own; any
 /// other scale is not guessed at (zeroed, and said so by the returned scale).
 fn normalise_remission(points: &mut [[f32; 4]], datatype_id: Option<u8>) -> RemissionScale {
-    let Some(datatype_id) = datatype_id else {
-        return RemissionScale::Missing;
-    };
     let largest = points.iter().map(|p| p[3]).fold(0.0f32, f32::max);
+    let (scale, factor) = remission_scale(datatype_id, largest);
+    if scale != RemissionScale::Unit {
+        for p in points.iter_mut() {
+            p[3] *= factor;
+        }
+    }
+    scale
+}
+
+/// The scale of an intensity field of type `datatype_id` whose largest value is
+/// `largest`, and the factor that brings it to 0..1 (0 for a scale not guessed at).
+pub fn remission_scale(datatype_id: Option<u8>, largest: f32) -> (RemissionScale, f32) {
+    let Some(datatype_id) = datatype_id else {
+        return (RemissionScale::Missing, 0.0);
+    };
     let scale = match datatype_id {
         datatype::UINT8 => RemissionScale::Byte,
         datatype::FLOAT32 | datatype::FLOAT64 if largest <= 1.0 => RemissionScale::Unit,
@@ -166,12 +189,9 @@ fn normalise_remission(points: &mut [[f32; 4]], datatype_id: Option<u8>) -> Remi
         _ => RemissionScale::Unknown,
     };
     let factor = match scale {
-        RemissionScale::Unit => return scale,
+        RemissionScale::Unit => 1.0,
         RemissionScale::Byte => 1.0 / 255.0,
         _ => 0.0,
     };
-    for p in points.iter_mut() {
-        p[3] *= factor;
-    }
-    scale
+    (scale, factor)
 }

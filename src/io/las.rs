@@ -4,27 +4,29 @@
 //!
 //! Survey clouds sit in projected coordinates (UTM northings of millions of metres),
 //! where a float32 steps in tenths of a metre: the points are stored relative to
-//! [`LasCloud::origin_m`], the bounds' minimum floored to 100 m, and the notice says so.
-//! Intensity is left out ([`RemissionScale::Unknown`]): LAS asks writers to scale it
-//! to 16 bits, but files hold 8-bit, 12-bit and 16-bit values alike.
+//! [`LasPlace::origin_m`], the bounds' minimum floored to 100 m, and the notice says so.
+//! Intensity is left out (a remission of unknown scale): LAS asks writers to scale
+//! it to 16 bits, but files hold 8-bit, 12-bit and 16-bit values alike.
 
 use std::path::Path;
 
-use super::cloud::CloudPoints;
 use crate::error::contain_panics;
-use crate::frame::RemissionScale;
 
 /// Bytes of point records decoded per batch: the decoded copy stays this small
 /// whatever the file, and a header claiming 64 KiB records cannot make it large.
 const BATCH_BYTES: u64 = 8 << 20;
 
-/// A LAS / LAZ file's points, relative to a local origin.
-pub struct LasCloud {
-    pub points: CloudPoints,
+/// What is given each batch of points (x, y, z, 0), to keep or refuse.
+pub type OnPoints<'a> = dyn FnMut(&[[f32; 4]]) -> Result<(), String> + 'a;
+
+/// Where a LAS / LAZ file's points lie.
+pub struct LasPlace {
     /// Where the points' (0, 0, 0) lies in the file's coordinates.
     pub origin_m: [f64; 3],
     /// The coordinate reference system the file names (its WKT), when it names one.
     pub crs_wkt: Option<String>,
+    /// Points dropped for a non-finite coordinate.
+    pub dropped: usize,
 }
 
 /// The local origin of points within `min`: floored to 100 m, so it reads plainly.
@@ -32,27 +34,28 @@ fn local_origin(min: [f64; 3]) -> [f64; 3] {
     min.map(|v| (v / 100.0).floor() * 100.0)
 }
 
-/// Reads the LAS or LAZ file at `path`; errors say what is wrong.
-pub fn read_las(path: &Path) -> Result<LasCloud, String> {
+/// Reads the LAS or LAZ file at `path` a batch of points at a time: x, y, z
+/// relative to the returned origin and an intensity of 0. Errors say what is wrong.
+pub fn stream_las(path: &Path, on_points: &mut OnPoints) -> Result<LasPlace, String> {
     let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
     let file_bytes = file.metadata().map_or(0, |m| m.len());
-    read_las_from(std::io::BufReader::new(file), file_bytes)
+    las_points(std::io::BufReader::new(file), file_bytes, on_points)
 }
 
-/// [`read_las`] on a reader of `file_bytes` bytes. The laz crate panics on some
+/// [`stream_las`] on a reader of `file_bytes` bytes. The laz crate panics on some
 /// damaged LAZ data rather than returning an error: the panic becomes the error.
-pub fn read_las_from<R>(read: R, file_bytes: u64) -> Result<LasCloud, String>
+pub fn las_points<R>(read: R, file_bytes: u64, on_points: &mut OnPoints) -> Result<LasPlace, String>
 where
     R: std::io::Read + std::io::Seek + Send + Sync + 'static,
 {
-    contain_panics(|| read_points(read, file_bytes)).unwrap_or_else(|panic| {
+    contain_panics(|| read_points(read, file_bytes, on_points)).unwrap_or_else(|panic| {
         Err(format!(
             "damaged LAS / LAZ data (the reader stopped: {panic})"
         ))
     })
 }
 
-fn read_points<R>(read: R, file_bytes: u64) -> Result<LasCloud, String>
+fn read_points<R>(read: R, file_bytes: u64, on_points: &mut OnPoints) -> Result<LasPlace, String>
 where
     R: std::io::Read + std::io::Seek + Send + Sync + 'static,
 {
@@ -70,16 +73,16 @@ where
     });
     let total = header.number_of_points();
     let batch_points = (BATCH_BYTES / u64::from(header.point_format().len()).max(1)).max(1);
-    // Bounded by the bytes present: a header cannot make this reserve more.
-    let mut points = Vec::with_capacity(total.min(file_bytes) as usize);
-    let mut dropped = 0;
+    let mut points = Vec::new();
+    let (mut kept, mut dropped) = (0, 0);
     loop {
         let batch = reader
             .read_points(batch_points)
-            .map_err(|e| format!("after {} points: {e}", points.len() + dropped))?;
+            .map_err(|e| format!("after {} points: {e}", kept + dropped))?;
         if batch.is_empty() {
             break;
         }
+        points.clear();
         for ((x, y), z) in batch.x().zip(batch.y()).zip(batch.z()) {
             let local = [x - origin_m[0], y - origin_m[1], z - origin_m[2]];
             if local.iter().all(|v| v.is_finite()) {
@@ -88,22 +91,19 @@ where
                 dropped += 1;
             }
         }
+        kept += points.len();
+        on_points(&points)?;
     }
-    if (points.len() + dropped) as u64 != total {
+    if (kept + dropped) as u64 != total {
         return Err(format!(
             "the header says {total} points but {} could be read",
-            points.len() + dropped
+            kept + dropped
         ));
     }
-    Ok(LasCloud {
-        points: CloudPoints {
-            points,
-            remission: RemissionScale::Unknown,
-            labels: None,
-            dropped,
-        },
+    Ok(LasPlace {
         origin_m,
         crs_wkt,
+        dropped,
     })
 }
 
@@ -189,15 +189,22 @@ mod tests {
                 .unwrap();
         }
         writer.close().unwrap();
-        let read = read_las(&path).unwrap();
-        assert_eq!(read.origin_m, [512_300.0, 4_102_300.0, 0.0]);
+        let mut points = Vec::new();
+        let mut keep = |batch: &[[f32; 4]]| {
+            points.extend_from_slice(batch);
+            Ok(())
+        };
+        let place = stream_las(&path, &mut keep).unwrap();
+        assert_eq!(place.origin_m, [512_300.0, 4_102_300.0, 0.0]);
+        assert_eq!(place.dropped, 0);
         let expected = [[45.678, 45.001, 10.5], [50.0, 0.25, 11.0]];
-        for (p, e) in read.points.points.iter().zip(expected) {
+        assert_eq!(points.len(), 2);
+        for (p, e) in points.iter().zip(expected) {
             for k in 0..3 {
                 assert!((p[k] as f64 - e[k]).abs() < 1e-3, "{p:?} {e:?}");
             }
+            assert_eq!(p[3], 0.0);
         }
-        assert_eq!(read.points.remission, RemissionScale::Unknown);
-        assert!(read_las(&dir.path().join("missing.las")).is_err());
+        assert!(stream_las(&dir.path().join("missing.las"), &mut |_| Ok(())).is_err());
     }
 }

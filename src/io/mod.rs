@@ -6,6 +6,7 @@
 //! Nothing here knows the method.
 
 pub mod bag;
+mod bucket_store;
 pub mod cloud;
 pub mod drive_frames;
 pub mod format;
@@ -22,6 +23,7 @@ pub mod mcap_stored;
 mod merged_clouds;
 pub mod pcd;
 pub mod ply;
+mod point_rows;
 pub mod ros;
 pub mod ros1;
 pub mod ros_drive;

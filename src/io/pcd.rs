@@ -6,7 +6,11 @@
 //! The header is checked against the data before anything is allocated: a header
 //! that lies (more points than the data holds, sizes that overflow) is an error.
 
-use super::ros::{Header, PointCloud2, PointField, datatype};
+use std::io::{BufRead, Read};
+use std::path::Path;
+
+use super::point_rows::{Encoding, Rows, header_line, read_rows};
+use super::ros::{PointCloud2, PointField, datatype};
 
 /// No scan is near this; a header claiming more is not believed.
 const LARGEST_CLOUD_BYTES: usize = 1 << 30;
@@ -40,31 +44,87 @@ impl Column {
     }
 }
 
-/// Parses a PCD file into a cloud in frame `frame_id`; the error says what is wrong.
-pub fn parse_pcd(bytes: &[u8], frame_id: &str) -> Result<PointCloud2, String> {
-    parse_pcd_up_to(bytes, frame_id, LARGEST_CLOUD_BYTES)
+/// What a PCD header says: the columns, the records' layout (fields, point_step,
+/// width and height; no data) and how the data is written.
+struct PcdHeader {
+    columns: Vec<Column>,
+    layout: PointCloud2,
+    points: usize,
+    data_kind: String,
 }
 
-/// [`parse_pcd`] for a cloud of up to `largest_bytes` of point data (a site map is
-/// bigger than any scan).
-pub fn parse_pcd_up_to(
-    bytes: &[u8],
-    frame_id: &str,
-    largest_bytes: usize,
-) -> Result<PointCloud2, String> {
+impl PcdHeader {
+    fn rows(&self) -> Rows<'_> {
+        Rows {
+            layout: &self.layout,
+            points: self.points,
+            noun: ("point", "points"),
+        }
+    }
+
+    /// The bytes of every record: `points` x `point_step`, if that fits.
+    fn total_bytes(&self) -> Option<usize> {
+        self.points.checked_mul(self.layout.point_step as usize)
+    }
+}
+
+/// Parses a PCD file into a cloud in frame `frame_id`; the error says what is wrong.
+pub fn parse_pcd(bytes: &[u8], frame_id: &str) -> Result<PointCloud2, String> {
+    let mut read = bytes;
+    let header = read_header(&mut read)?;
+    let total = header
+        .total_bytes()
+        .filter(|total| *total <= LARGEST_CLOUD_BYTES)
+        .ok_or_else(|| {
+            format!(
+                "{} points of {} bytes: more than the {LARGEST_CLOUD_BYTES} bytes travmap reads",
+                header.points, header.layout.point_step
+            )
+        })?;
+    // Bounded by the bytes present: a header cannot make this reserve more.
+    let mut data = Vec::with_capacity(total.min(bytes.len()));
+    read_body(&mut read, &header, &mut |chunk| {
+        data.extend_from_slice(&chunk.data);
+        Ok(())
+    })?;
+    let mut cloud = header.layout;
+    cloud.header.frame_id = frame_id.to_string();
+    cloud.data = data;
+    Ok(cloud)
+}
+
+/// Reads the PCD file at `path` a chunk of points at a time (see [`read_rows`]),
+/// so memory stays the chunk's: ascii and binary data stream from the file;
+/// binary_compressed data (LZF over whole columns) is decompressed whole first.
+pub fn stream_pcd(
+    path: &Path,
+    on_chunk: &mut dyn FnMut(&PointCloud2) -> Result<(), String>,
+) -> Result<(), String> {
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let mut read = std::io::BufReader::with_capacity(1 << 20, file);
+    let header = read_header(&mut read)?;
+    header.total_bytes().ok_or_else(|| {
+        format!(
+            "{} points of {} bytes overflow",
+            header.points, header.layout.point_step
+        )
+    })?;
+    read_body(&mut read, &header, on_chunk)
+}
+
+/// Reads the header through its DATA line.
+fn read_header(read: &mut impl BufRead) -> Result<PcdHeader, String> {
     let mut columns: Vec<Column> = Vec::new();
     let (mut width, mut height, mut points) = (None, 1usize, None);
-    let mut at = 0;
+    let (mut at, mut bytes) = (0, Vec::new());
     let data_kind = loop {
-        let end = bytes[at..]
-            .iter()
-            .position(|b| *b == b'\n')
-            .map(|n| at + n + 1)
-            .ok_or("the header ends before its DATA line")?;
-        let line = std::str::from_utf8(&bytes[at..end])
+        if !header_line(read, &mut bytes)? {
+            return Err("the header ends before its DATA line".into());
+        }
+        let line = std::str::from_utf8(&bytes)
             .map_err(|_| format!("header line at byte {at} is not text"))?
             .trim();
-        at = end;
+        at += bytes.len();
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
@@ -136,116 +196,91 @@ pub fn parse_pcd_up_to(
             .and_then(|bytes| point_step.checked_add(bytes))
             .ok_or("SIZE x COUNT overflows")?;
     }
-    let total = points
-        .checked_mul(point_step)
-        .filter(|total| *total <= largest_bytes)
-        .ok_or_else(|| {
-            format!("{points} points of {point_step} bytes: more than the {largest_bytes} bytes travmap reads")
-        })?;
-    let body = &bytes[at..];
-    let data = match data_kind.as_str() {
-        "binary" => {
-            if body.len() < total {
-                return Err(format!(
-                    "the header says {points} points of {point_step} bytes ({total} bytes) but {} bytes of data follow",
-                    body.len()
-                ));
-            }
-            body[..total].to_vec()
-        }
-        "ascii" => ascii_rows(body, &columns, points, total)?,
-        "binary_compressed" => compressed_rows(body, &columns, points, total)?,
-        other => {
-            return Err(format!(
-                "DATA `{other}`; PCD data is ascii, binary or binary_compressed"
-            ));
-        }
-    };
-    Ok(PointCloud2 {
-        header: Header {
-            frame_id: frame_id.to_string(),
-            ..Default::default()
-        },
+    let point_step_u32 = u32::try_from(point_step).map_err(|_| "fields too wide")?;
+    let layout = PointCloud2 {
         height: u32::try_from(height).map_err(|_| "HEIGHT too large")?,
         width: u32::try_from(width).map_err(|_| "WIDTH too large")?,
         fields,
-        is_bigendian: false,
-        point_step: point_step as u32,
-        row_step: (point_step * width) as u32,
-        data,
-        is_dense: false,
+        point_step: point_step_u32,
+        row_step: point_step
+            .saturating_mul(width)
+            .try_into()
+            .unwrap_or(u32::MAX),
+        ..PointCloud2::default()
+    };
+    Ok(PcdHeader {
+        columns,
+        layout,
+        points,
+        data_kind,
     })
 }
 
-/// ASCII rows, one point per line, written as the binary layout.
-fn ascii_rows(
-    body: &[u8],
-    columns: &[Column],
-    points: usize,
-    total: usize,
-) -> Result<Vec<u8>, String> {
-    let text = std::str::from_utf8(body).map_err(|_| "ascii DATA that is not text")?;
-    let mut out = Vec::with_capacity(total);
-    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-    for point in 0..points {
-        let line = lines.next().ok_or_else(|| {
-            format!("the header says {points} points but the ascii data has {point}")
-        })?;
-        let mut values = line.split_whitespace();
-        for column in columns {
-            for _ in 0..column.count {
-                let value = values
-                    .next()
-                    .ok_or_else(|| format!("point {point}: too few values"))?;
-                let number: f64 = value
-                    .parse()
-                    .map_err(|_| format!("point {point}: `{value}` is not a number"))?;
-                write_value(&mut out, column, number);
-            }
+/// The data after the header, a chunk of points at a time.
+fn read_body(
+    read: &mut impl BufRead,
+    header: &PcdHeader,
+    on_chunk: &mut dyn FnMut(&PointCloud2) -> Result<(), String>,
+) -> Result<(), String> {
+    let rows = header.rows();
+    match header.data_kind.as_str() {
+        "binary" => read_rows(read, &rows, &Encoding::Binary, on_chunk),
+        "ascii" => {
+            let value_types = (header.columns.iter())
+                .map(|c| c.datatype().map(|d| std::iter::repeat_n(d, c.count)))
+                .collect::<Result<Vec<_>, _>>()?
+                .into_iter()
+                .flatten()
+                .collect();
+            read_rows(read, &rows, &Encoding::Ascii(value_types), on_chunk)
         }
-    }
-    Ok(out)
-}
-
-fn write_value(out: &mut Vec<u8>, column: &Column, value: f64) {
-    match (column.kind, column.size) {
-        ('F', 8) => out.extend_from_slice(&value.to_le_bytes()),
-        ('F', _) => out.extend_from_slice(&(value as f32).to_le_bytes()),
-        ('U', 1) => out.push(value as u8),
-        ('U', 2) => out.extend_from_slice(&(value as u16).to_le_bytes()),
-        ('U', _) => out.extend_from_slice(&(value as u32).to_le_bytes()),
-        ('I', 1) => out.push(value as i8 as u8),
-        ('I', 2) => out.extend_from_slice(&(value as i16).to_le_bytes()),
-        _ => out.extend_from_slice(&(value as i32).to_le_bytes()),
+        "binary_compressed" => {
+            let body = compressed_rows(read, header)?;
+            read_rows(&mut &body[..], &rows, &Encoding::Binary, on_chunk)
+        }
+        other => Err(format!(
+            "DATA `{other}`; PCD data is ascii, binary or binary_compressed"
+        )),
     }
 }
 
 /// `binary_compressed`: sizes, then LZF of the columns one after another (all x, then
 /// all y, ...), turned back into rows.
-fn compressed_rows(
-    body: &[u8],
-    columns: &[Column],
-    points: usize,
-    total: usize,
-) -> Result<Vec<u8>, String> {
-    let word = |at: usize| -> Result<usize, String> {
-        body.get(at..at + 4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
-            .ok_or_else(|| "binary_compressed DATA shorter than its two sizes".to_string())
+fn compressed_rows(read: &mut impl BufRead, header: &PcdHeader) -> Result<Vec<u8>, String> {
+    let (points, columns) = (header.points, &header.columns);
+    let total = header.total_bytes().unwrap_or(usize::MAX);
+    let mut sizes = [0u8; 8];
+    read.read_exact(&mut sizes)
+        .map_err(|_| "binary_compressed DATA shorter than its two sizes".to_string())?;
+    let word = |at: usize| {
+        u32::from_le_bytes([sizes[at], sizes[at + 1], sizes[at + 2], sizes[at + 3]]) as usize
     };
-    let (compressed, uncompressed) = (word(0)?, word(4)?);
+    let (compressed, uncompressed) = (word(0), word(4));
     if uncompressed != total {
         return Err(format!(
             "binary_compressed DATA says {uncompressed} bytes uncompressed; {points} points of the header's fields are {total}"
         ));
     }
-    let source = body.get(8..8 + compressed).ok_or_else(|| {
-        format!(
+    // Grown as it is read: a size that lies cannot make this reserve more.
+    let mut source = Vec::new();
+    read.take(compressed as u64)
+        .read_to_end(&mut source)
+        .map_err(|e| format!("reading binary_compressed DATA: {e}"))?;
+    if source.len() < compressed {
+        return Err(format!(
             "binary_compressed DATA claims {compressed} compressed bytes, {} follow",
-            body.len() - 8
-        )
-    })?;
-    let columnar = lzf_decompress(source, uncompressed)?;
+            source.len()
+        ));
+    }
+    // LZF shortens by a few times at most: a larger claim is not believed.
+    let largest = source.len().saturating_mul(8).max(LARGEST_CLOUD_BYTES);
+    if total > largest {
+        return Err(format!(
+            "binary_compressed DATA says {total} bytes uncompressed from {compressed}: more than LZF can make"
+        ));
+    }
+    let columnar = lzf_decompress(&source, uncompressed)?;
+    drop(source);
     let point_step = total / points.max(1);
     let mut rows = vec![0u8; total];
     let (mut column_start, mut offset) = (0, 0);
@@ -385,7 +420,7 @@ mod tests {
         assert!(
             parse_pcd(few.as_bytes(), "lidar")
                 .unwrap_err()
-                .contains("ascii data has 1")
+                .contains("the data ends after 1")
         );
         let mismatch = HEADER.replace("SIZE 4 4 4 4", "SIZE 4 4 4");
         assert!(

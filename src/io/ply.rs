@@ -7,7 +7,11 @@
 //! cloud's data as it is, each property a field at its offset. ASCII values are
 //! written into the same layout. CloudCompare's `scalar_Intensity` is the intensity.
 
-use crate::io::ros::{Header, PointCloud2, PointField, datatype};
+use std::io::BufRead;
+use std::path::Path;
+
+use super::point_rows::{self, Rows, header_line, read_rows};
+use super::ros::{PointCloud2, PointField, datatype};
 
 /// The PointField datatype and size of a PLY scalar type.
 fn scalar_type(name: &str) -> Option<(u8, usize)> {
@@ -39,26 +43,95 @@ fn field_name(property: &str) -> &str {
     }
 }
 
+/// What a PLY header says of its vertices: their layout (fields, point_step; no
+/// data), count and encoding.
+struct PlyHeader {
+    layout: PointCloud2,
+    points: usize,
+    encoding: Encoding,
+}
+
+impl PlyHeader {
+    fn read_body(
+        &self,
+        read: &mut impl BufRead,
+        on_chunk: &mut dyn FnMut(&PointCloud2) -> Result<(), String>,
+    ) -> Result<(), String> {
+        let rows = Rows {
+            layout: &self.layout,
+            points: self.points,
+            noun: ("vertex", "vertices"),
+        };
+        let encoding = match self.encoding {
+            Encoding::Ascii => {
+                point_rows::Encoding::Ascii(self.layout.fields.iter().map(|f| f.datatype).collect())
+            }
+            Encoding::LittleEndian | Encoding::BigEndian => point_rows::Encoding::Binary,
+        };
+        read_rows(read, &rows, &encoding, on_chunk)
+    }
+}
+
 /// The PLY file `bytes` as a cloud in `frame_id`; errors say what is wrong.
 pub fn parse_ply(bytes: &[u8], frame_id: &str) -> Result<PointCloud2, String> {
-    let header_end = find(bytes, b"end_header\n")
-        .map(|at| at + b"end_header\n".len())
-        .or_else(|| find(bytes, b"end_header\r\n").map(|at| at + b"end_header\r\n".len()))
-        .ok_or("no `end_header` line: not a PLY file, or cut off in its header")?;
-    let header = std::str::from_utf8(&bytes[..header_end])
-        .map_err(|_| "the header is not text".to_string())?;
-    let mut lines = header.lines().map(str::trim);
-    if lines.next() != Some("ply") {
-        return Err("does not begin with `ply`".into());
-    }
+    let mut read = bytes;
+    let header = read_header(&mut read)?;
+    // Bounded by the bytes present: a header cannot make this reserve more.
+    let mut data = Vec::with_capacity(
+        (header.layout.point_step as usize)
+            .saturating_mul(header.points)
+            .min(bytes.len()),
+    );
+    header.read_body(&mut read, &mut |chunk| {
+        data.extend_from_slice(&chunk.data);
+        Ok(())
+    })?;
+    let mut cloud = header.layout;
+    cloud.header.frame_id = frame_id.to_string();
+    cloud.width = header.points as u32;
+    cloud.row_step = data.len() as u32;
+    cloud.data = data;
+    Ok(cloud)
+}
+
+/// Reads the PLY file at `path` a chunk of vertices at a time (see [`read_rows`]),
+/// so memory stays the chunk's whatever the file's size.
+pub fn stream_ply(
+    path: &Path,
+    on_chunk: &mut dyn FnMut(&PointCloud2) -> Result<(), String>,
+) -> Result<(), String> {
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let mut read = std::io::BufReader::with_capacity(1 << 20, file);
+    read_header(&mut read)?.read_body(&mut read, on_chunk)
+}
+
+/// Reads the header through its `end_header` line.
+fn read_header(read: &mut impl BufRead) -> Result<PlyHeader, String> {
     let mut encoding = None;
     let mut points: Option<usize> = None;
-    let mut in_vertex = false;
+    let (mut in_vertex, mut past_vertex) = (false, false);
     let mut fields = Vec::new();
     let mut step = 0usize;
-    for line in lines {
+    let mut bytes = Vec::new();
+    let mut first = true;
+    loop {
+        if !header_line(read, &mut bytes)? {
+            return Err("no `end_header` line: not a PLY file, or cut off in its header".into());
+        }
+        let line = std::str::from_utf8(&bytes)
+            .map_err(|_| "the header is not text".to_string())?
+            .trim();
+        if std::mem::take(&mut first) {
+            if line != "ply" {
+                return Err("does not begin with `ply`".into());
+            }
+            continue;
+        }
         let words: Vec<&str> = line.split_whitespace().collect();
         match words.as_slice() {
+            ["end_header"] => break,
+            // The elements after the vertices are not read.
+            _ if past_vertex => {}
             ["format", format, "1.0"] => {
                 encoding = Some(match *format {
                     "ascii" => Encoding::Ascii,
@@ -69,7 +142,8 @@ pub fn parse_ply(bytes: &[u8], frame_id: &str) -> Result<PointCloud2, String> {
             }
             ["element", name, count] => {
                 if points.is_some() {
-                    break; // the elements after the vertices are not read
+                    past_vertex = true;
+                    continue;
                 }
                 if *name != "vertex" {
                     return Err(format!(
@@ -92,7 +166,7 @@ pub fn parse_ply(bytes: &[u8], frame_id: &str) -> Result<PointCloud2, String> {
                 fields.push(PointField::scalar(field_name(name), step as u32, datatype));
                 step += size;
             }
-            ["comment", ..] | ["obj_info", ..] | ["end_header"] | [] => {}
+            ["comment", ..] | ["obj_info", ..] | [] => {}
             ["property", ..] => {}
             _ => return Err(format!("header line `{line}` is not PLY")),
         }
@@ -102,80 +176,18 @@ pub fn parse_ply(bytes: &[u8], frame_id: &str) -> Result<PointCloud2, String> {
     if step == 0 {
         return Err("the vertex element has no property".into());
     }
-    let body = &bytes[header_end..];
-    let data = match encoding {
-        Encoding::Ascii => ascii_records(body, &fields, step, points)?,
-        Encoding::LittleEndian | Encoding::BigEndian => {
-            let needed = points as u128 * step as u128;
-            if (body.len() as u128) < needed {
-                return Err(format!(
-                    "the header says {points} vertices of {step} bytes ({needed} bytes) but {} bytes of data follow",
-                    body.len()
-                ));
-            }
-            body[..needed as usize].to_vec()
-        }
-    };
-    Ok(PointCloud2 {
-        header: Header {
-            frame_id: frame_id.to_string(),
-            ..Header::default()
-        },
+    let layout = PointCloud2 {
         height: 1,
-        width: points as u32,
         fields,
         is_bigendian: encoding == Encoding::BigEndian,
         point_step: step as u32,
-        row_step: (points * step) as u32,
-        data,
-        is_dense: false,
+        ..PointCloud2::default()
+    };
+    Ok(PlyHeader {
+        layout,
+        points,
+        encoding,
     })
-}
-
-/// ASCII vertex lines written as little-endian records of `fields`.
-fn ascii_records(
-    body: &[u8],
-    fields: &[PointField],
-    step: usize,
-    points: usize,
-) -> Result<Vec<u8>, String> {
-    let text = std::str::from_utf8(body).map_err(|_| "the ASCII body is not text".to_string())?;
-    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-    // Bounded by the text present: a header cannot make this reserve more.
-    let mut data = Vec::with_capacity(step * points.min(text.len() / 2 + 1));
-    for index in 0..points {
-        let line = lines.next().ok_or_else(|| {
-            format!("the header says {points} vertices but the file ends after {index}")
-        })?;
-        let values: Vec<&str> = line.split_whitespace().collect();
-        if values.len() < fields.len() {
-            return Err(format!(
-                "vertex {index}: {} values for {} properties",
-                values.len(),
-                fields.len()
-            ));
-        }
-        for (field, value) in fields.iter().zip(values) {
-            let number: f64 = value
-                .parse()
-                .map_err(|_| format!("vertex {index}: `{value}` is not a number"))?;
-            match field.datatype {
-                datatype::INT8 => data.extend((number as i8).to_le_bytes()),
-                datatype::UINT8 => data.extend((number as u8).to_le_bytes()),
-                datatype::INT16 => data.extend((number as i16).to_le_bytes()),
-                datatype::UINT16 => data.extend((number as u16).to_le_bytes()),
-                datatype::INT32 => data.extend((number as i32).to_le_bytes()),
-                datatype::UINT32 => data.extend((number as u32).to_le_bytes()),
-                datatype::FLOAT32 => data.extend((number as f32).to_le_bytes()),
-                _ => data.extend(number.to_le_bytes()),
-            }
-        }
-    }
-    Ok(data)
-}
-
-fn find(haystack: &[u8], needle: &[u8]) -> Option<usize> {
-    haystack.windows(needle.len()).position(|w| w == needle)
 }
 
 #[cfg(test)]
@@ -243,7 +255,7 @@ mod tests {
         );
         let short = header("ascii") + "1 2 3 0.5 200\n";
         let err = parse_ply(short.as_bytes(), "site").unwrap_err();
-        assert!(err.contains("ends after 1"), "{err}");
+        assert!(err.contains("the data ends after 1"), "{err}");
         let faces_first = "ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\nelement vertex 1\nproperty float x\nend_header\n";
         let err = parse_ply(faces_first.as_bytes(), "site").unwrap_err();
         assert!(err.contains("first element is `face`"), "{err}");

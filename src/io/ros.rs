@@ -96,7 +96,7 @@ pub mod datatype {
 }
 
 /// `sensor_msgs/msg/PointCloud2`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PointCloud2 {
     pub header: Header,
     pub height: u32,

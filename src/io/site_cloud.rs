@@ -11,20 +11,23 @@
 //! of many passes is denser than the 3-scan window the model was trained on, and
 //! `integration.scans` is 1 (the tile is the whole window).
 //!
-//! The cloud is read whole into memory: 16 bytes a point (4 more with labels) and 4
-//! for its bucket, after the file and its decoded copy are let go.
+//! The file is read once, a chunk at a time, into a [`BucketStore`] (points by
+//! bucket of half a tile; past a bound, in a temporary file), and each tile is read
+//! back from its four buckets when it is the method's turn: memory stays bounded
+//! whatever the cloud's size.
 
-use std::collections::HashMap;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
-use super::cloud::{CloudPoints, cloud_points};
+use super::bucket_store::{BucketStore, SpillError, WORDS_PER_POINT};
+use super::cloud::{raw_cloud_points, remission_scale};
 use super::format::{SiteCloudFormat, site_cloud_format};
-use super::las::read_las;
-use super::pcd::parse_pcd_up_to;
-use super::ply::parse_ply;
+use super::las::stream_las;
+use super::pcd::stream_pcd;
+use super::ply::stream_ply;
+use super::ros::PointCloud2;
 use super::skips::SkipLog;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, RemissionScale};
@@ -50,11 +53,13 @@ struct Tile {
 /// An opened site cloud and its tiles.
 pub struct SiteCloud {
     path: PathBuf,
-    points: Vec<[f32; 4]>,
-    labels: Option<Vec<u32>>,
+    points: usize,
+    /// Points by bucket of half a tile, as the file holds them (intensity unscaled).
+    store: BucketStore,
+    labelled: bool,
     remission: RemissionScale,
-    /// Point indices by bucket of half a tile.
-    buckets: HashMap<[i64; 2], Vec<u32>>,
+    /// Brings the file's intensity to the 0..1 scale.
+    remission_factor: f32,
     tiles: Vec<Tile>,
     tile_m: f64,
     /// Where the points' origin lies in the file's coordinates (LAS: a local origin
@@ -72,64 +77,85 @@ impl SiteCloud {
             path: path.to_path_buf(),
             message,
         };
-        // The file and its decoded cloud are let go before the tiles are made.
-        let mut origin = None;
-        let mut read_cloud = || -> Result<CloudPoints> {
-            let cloud = match site_cloud_format(path) {
-                Some(SiteCloudFormat::Las) => {
-                    let las = read_las(path).map_err(fail)?;
-                    origin = Some((las.origin_m, las.crs_wkt));
-                    return Ok(las.points);
-                }
-                Some(SiteCloudFormat::Ply) => {
-                    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-                    parse_ply(&bytes, SENSOR_FRAME)
-                }
-                _ => {
-                    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-                    // A compressed PCD may hold more than it measures; not a thousandfold.
-                    let largest = (bytes.len().saturating_mul(8)).max(1 << 30);
-                    parse_pcd_up_to(&bytes, SENSOR_FRAME, largest)
-                }
-            };
-            cloud_points(&cloud.map_err(fail)?).map_err(fail)
+        let spill_failed = |e: SpillError| {
+            fail(format!(
+                "keeping the cloud's points in the temporary file {} (TMPDIR picks its place): {}",
+                e.path.display(),
+                e.error
+            ))
         };
-        let read = read_cloud()?;
-        let (origin_m, crs_wkt) = origin.unwrap_or(([0.0; 3], None));
-        if read.points.is_empty() {
+        let step = grid_size_m / 2.0;
+        let key = |p: &[f32; 4]| [p[0], p[1]].map(|v| (v as f64 / step).floor() as i64);
+        let mut store = BucketStore::default();
+        let (mut points, mut labelled, mut largest_intensity) = (0usize, false, 0.0f32);
+        let mut intensity_datatype = None;
+        let mut spilled: Option<SpillError> = None;
+        let mut keep =
+            |batch: &[[f32; 4]], labels: Option<&[u32]>| -> std::result::Result<(), String> {
+                for (i, p) in batch.iter().enumerate() {
+                    if let Err(e) = store.push(key(p), *p, labels.map_or(0, |l| l[i])) {
+                        let message = e.error.to_string();
+                        spilled = Some(e);
+                        return Err(message);
+                    }
+                }
+                points += batch.len();
+                Ok(())
+            };
+        let mut keep_cloud = |chunk: &PointCloud2| {
+            let (read, datatype) = raw_cloud_points(chunk)?;
+            intensity_datatype = datatype;
+            labelled = read.labels.is_some();
+            largest_intensity = read
+                .points
+                .iter()
+                .map(|p| p[3])
+                .fold(largest_intensity, f32::max);
+            keep(&read.points, read.labels.as_deref())
+        };
+        let read = match site_cloud_format(path) {
+            Some(SiteCloudFormat::Las) => stream_las(path, &mut |batch| keep(batch, None))
+                .map(|place| Some((place.origin_m, place.crs_wkt))),
+            Some(SiteCloudFormat::Ply) => stream_ply(path, &mut keep_cloud).map(|()| None),
+            _ => stream_pcd(path, &mut keep_cloud).map(|()| None),
+        };
+        if let Some(e) = spilled {
+            return Err(spill_failed(e));
+        }
+        let place = read.map_err(fail)?;
+        // LAS intensity is not used (see `las.rs`): an unknown scale.
+        let (remission, remission_factor) = match &place {
+            Some(_) => (RemissionScale::Unknown, 0.0),
+            None => remission_scale(intensity_datatype, largest_intensity),
+        };
+        let (origin_m, crs_wkt) = place.unwrap_or(([0.0; 3], None));
+        if points == 0 {
             return Err(fail("the cloud holds no point".into()));
         }
-        let step = grid_size_m / 2.0;
-        let key = |v: f32| (v as f64 / step).floor() as i64;
-        // Buckets of step x step metres; a tile is the 2 x 2 buckets around a corner.
-        let mut buckets: HashMap<[i64; 2], Vec<u32>> = HashMap::new();
-        for (i, p) in read.points.iter().enumerate() {
-            buckets
-                .entry([key(p[0]), key(p[1])])
-                .or_default()
-                .push(i as u32);
-        }
-        let mut corners: Vec<[i64; 2]> = buckets
+        // A tile is the 2 x 2 buckets around a corner.
+        let mut corners: Vec<[i64; 2]> = store
             .keys()
             .flat_map(|&[x, y]| [[x, y], [x + 1, y], [x, y + 1], [x + 1, y + 1]])
             .collect();
         corners.sort_unstable();
         corners.dedup();
         let mut tiles = Vec::new();
-        let mut heights = Vec::new();
+        let (mut records, mut heights) = (Vec::new(), Vec::new());
         for [cx, cy] in corners {
             let tile_buckets = [[cx - 1, cy - 1], [cx, cy - 1], [cx - 1, cy], [cx, cy]];
-            heights.clear();
-            heights.extend(
-                tile_buckets
-                    .iter()
-                    .filter_map(|b| buckets.get(b))
-                    .flatten()
-                    .map(|&i| read.points[i as usize][2]),
-            );
-            if heights.len() < MIN_TILE_POINTS {
+            if tile_buckets.iter().map(|b| store.points(b)).sum::<usize>() < MIN_TILE_POINTS {
                 continue;
             }
+            records.clear();
+            for bucket in &tile_buckets {
+                store.read(bucket, &mut records).map_err(spill_failed)?;
+            }
+            heights.clear();
+            heights.extend(
+                records
+                    .chunks_exact(WORDS_PER_POINT)
+                    .map(|r| f32::from_bits(r[2])),
+            );
             let at = ((heights.len() - 1) as f64 * GROUND_QUANTILE) as usize;
             let ground = *heights.select_nth_unstable_by(at, f32::total_cmp).1 as f64;
             tiles.push(Tile {
@@ -139,26 +165,17 @@ impl SiteCloud {
         }
         Ok(Self {
             path: path.to_path_buf(),
-            points: read.points,
-            labels: read.labels,
-            remission: read.remission,
-            buckets,
+            points,
+            store,
+            labelled,
+            remission,
+            remission_factor,
             tiles,
             tile_m: grid_size_m,
             origin_m,
             crs_wkt,
             skips: SkipLog::default(),
         })
-    }
-
-    /// The points of tile `index`, by their place in the cloud.
-    fn tile_points(&self, index: usize) -> impl Iterator<Item = usize> + '_ {
-        self.tiles[index]
-            .buckets
-            .iter()
-            .filter_map(|b| self.buckets.get(b))
-            .flatten()
-            .map(|&i| i as usize)
     }
 
     pub fn path(&self) -> &Path {
@@ -177,7 +194,7 @@ impl SiteCloud {
         let mut notice = format!(
             "{}: one point cloud of {} points, read as {} tiles of {} m (half a tile apart), each seen from {SENSOR_HEIGHT_M} m above its ground",
             self.path.display(),
-            self.points.len(),
+            self.points,
             self.tiles.len(),
             self.tile_m
         );
@@ -185,6 +202,14 @@ impl SiteCloud {
             let [x, y, z] = self.origin_m;
             notice += &format!(
                 "; the map's frame is the file's coordinates minus ({x}, {y}, {z}), which keeps float32 precise"
+            );
+        }
+        let spilled = self.store.spilled_bytes();
+        if spilled > 0 {
+            notice += &format!(
+                "; {} MB of its points kept in a temporary file in {} (TMPDIR) so memory stays bounded",
+                spilled >> 20,
+                std::env::temp_dir().display()
             );
         }
         if let Some(wkt) = &self.crs_wkt {
@@ -210,24 +235,39 @@ impl SiteCloud {
 
     /// Tile `index` as a frame: its points relative to its sensor.
     pub fn read_frame(&self, index: usize) -> Result<Frame> {
-        let [x, y, z] = self.tiles[index].sensor_in_world;
-        let points_in_velodyne = self
-            .tile_points(index)
-            .map(|i| {
-                let p = self.points[i];
-                let relative = |v: f32, origin: f64| (v as f64 - origin) as f32;
+        let tile = &self.tiles[index];
+        let mut records = Vec::new();
+        for bucket in &tile.buckets {
+            self.store
+                .read(bucket, &mut records)
+                .map_err(|e| Error::Sequence {
+                    path: self.path.clone(),
+                    message: format!(
+                        "reading tile {index} back from the temporary file {}: {}",
+                        e.path.display(),
+                        e.error
+                    ),
+                })?;
+        }
+        let [x, y, z] = tile.sensor_in_world;
+        let relative = |v: u32, origin: f64| (f32::from_bits(v) as f64 - origin) as f32;
+        let points_in_velodyne = records
+            .chunks_exact(WORDS_PER_POINT)
+            .map(|r| {
                 [
-                    relative(p[0], x),
-                    relative(p[1], y),
-                    relative(p[2], z),
-                    p[3],
+                    relative(r[0], x),
+                    relative(r[1], y),
+                    relative(r[2], z),
+                    f32::from_bits(r[3]) * self.remission_factor,
                 ]
             })
             .collect();
-        let labels = self
-            .labels
-            .as_ref()
-            .map(|labels| self.tile_points(index).map(|i| labels[i]).collect());
+        let labels = self.labelled.then(|| {
+            records
+                .chunks_exact(WORDS_PER_POINT)
+                .map(|r| r[4])
+                .collect()
+        });
         Ok(Frame {
             index,
             stamp_ns: index as u64 * TILE_PERIOD_NS,
