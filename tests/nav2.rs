@@ -9,8 +9,13 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use common::{arg, json_summary};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use travmap::io::ros::{Header, TfMessage, Time, TransformStamped};
 use travmap::method::fusion::FusedCell;
 use travmap::method::grid::CellClass;
+use travmap::outputs::conversion::{scan_to_cloud, transform_from_pose};
+use travmap::outputs::mcap_writer::Compression;
+use travmap::outputs::writing::McapSink;
 
 /// map_server's OccupancyGrid values.
 const FREE: i8 = 0;
@@ -297,4 +302,134 @@ fn annotate_writes_the_final_map_once_on_a_latched_map_topic() {
     let unseen = grid.data.iter().filter(|&&v| v == UNKNOWN).count();
     let seen = cells.iter().filter(|c| c.observations > 0).count();
     assert!(unseen >= grid.data.len() - seen);
+}
+
+/// The shipped drive as an MCAP whose poses are `map -> velodyne` on /tf, with `utm`
+/// placed on /tf_static as `place` says: `Some(true)` as the root above `map`,
+/// `Some(false)` as a child of `map` (robot_localization's navsat_transform
+/// default), None not at all.
+fn write_placed_log(seq: &Path, path: &Path, utm_from_map: &Isometry3<f64>, place: Option<bool>) {
+    let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
+    let mut sink = McapSink::create(path, Compression::Zstd).unwrap();
+    let start_ns = 1_600_000_000_000_000_000;
+    match place {
+        Some(true) => sink.write(
+            "/tf_static",
+            start_ns,
+            &tf(start_ns, "utm", "map", utm_from_map),
+        ),
+        Some(false) => sink.write(
+            "/tf_static",
+            start_ns,
+            &tf(start_ns, "map", "utm", &utm_from_map.inverse()),
+        ),
+        None => Ok(()),
+    }
+    .unwrap();
+    for frame in source.read(&(0..usize::MAX)).map(Result::unwrap) {
+        let stamp = start_ns + frame.stamp_ns;
+        sink.write(
+            "/tf",
+            stamp,
+            &tf(stamp, "map", "velodyne", &frame.world_from_velodyne),
+        )
+        .unwrap();
+        sink.write("/points", stamp, &scan_to_cloud(&frame, stamp))
+            .unwrap();
+    }
+    sink.finish().unwrap();
+}
+
+fn tf(stamp_ns: u64, parent: &str, child: &str, pose: &Isometry3<f64>) -> TfMessage {
+    TfMessage {
+        transforms: vec![TransformStamped {
+            header: Header {
+                stamp: Time::from_ns(stamp_ns),
+                frame_id: parent.into(),
+            },
+            child_frame_id: child.into(),
+            transform: transform_from_pose(pose),
+        }],
+    }
+}
+
+#[test]
+fn a_log_placed_in_utm_gets_its_map_placed_there() {
+    let Some(seq) = common::sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let yaw = 30f64.to_radians();
+    let utm_from_map = Isometry3::from_parts(
+        Translation3::new(512_000.5, 4_100_000.25, 30.0),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+    );
+    let mut maps = Vec::new();
+    for (name, place) in [("none", None), ("root", Some(true)), ("child", Some(false))] {
+        let log = dir.path().join(format!("{name}.mcap"));
+        write_placed_log(&seq, &log, &utm_from_map, place);
+        let yaml = dir.path().join(format!("{name}.yaml"));
+        let png = dir.path().join(format!("{name}.png"));
+        let summary = json_summary(&["map", arg(&log), "-o", arg(&png), "--nav2", arg(&yaml)]);
+        let nav2 = &summary["nav2"];
+        // Mapped in `map` whichever way utm hangs: float32 keeps its centimetres there.
+        assert_eq!(nav2["frame"], "map", "{name}");
+        let pgm = std::fs::read(dir.path().join(format!("{name}.pgm"))).unwrap();
+        let text = std::fs::read_to_string(&yaml).unwrap();
+        maps.push((pgm, parse_yaml(&text)));
+        let world_file = dir.path().join(format!("{name}.pgmw"));
+        if place.is_none() {
+            assert!(nav2["georeference"].is_null());
+            assert!(!world_file.exists());
+            continue;
+        }
+        let georeference = &nav2["georeference"];
+        assert_eq!(georeference["frame"], "utm", "{name}");
+        let origin: Vec<f64> = serde_json::from_value(georeference["origin_m"].clone()).unwrap();
+        for (got, want) in origin.iter().zip([512_000.5, 4_100_000.25, 30.0]) {
+            assert!((got - want).abs() < 1e-6, "{name}: {origin:?}");
+        }
+        assert!(text.contains("`utm`"), "{text}");
+        assert_eq!(
+            nav2["gis_files"],
+            serde_json::json!([world_file.to_str().unwrap()]),
+            "a log names no CRS: no .prj"
+        );
+        // The world file: each pixel's centre in utm, rotated with the map.
+        let numbers: Vec<f64> = std::fs::read_to_string(&world_file)
+            .unwrap()
+            .lines()
+            .map(|l| l.parse().unwrap())
+            .collect();
+        let resolution = nav2["resolution_m"].as_f64().unwrap();
+        let height = nav2["height"].as_f64().unwrap();
+        let origin_xy: Vec<f64> = serde_json::from_value(nav2["origin"].clone()).unwrap();
+        let pixel_in_utm = |col: f64, row: f64| {
+            let in_map = nalgebra::Point3::new(
+                origin_xy[0] + (col + 0.5) * resolution,
+                origin_xy[1] + (height - row - 0.5) * resolution,
+                0.0,
+            );
+            utm_from_map * in_map
+        };
+        let by_world_file = |col: f64, row: f64| {
+            [
+                numbers[0] * col + numbers[2] * row + numbers[4],
+                numbers[1] * col + numbers[3] * row + numbers[5],
+            ]
+        };
+        for (col, row) in [(0.0, 0.0), (10.0, 0.0), (0.0, 7.0), (123.0, 45.0)] {
+            let want = pixel_in_utm(col, row);
+            let got = by_world_file(col, row);
+            assert!(
+                (got[0] - want.x).abs() < 1e-6 && (got[1] - want.y).abs() < 1e-6,
+                "{name}: pixel ({col}, {row}) at {got:?}, expected ({}, {})",
+                want.x,
+                want.y
+            );
+        }
+    }
+    // The map itself is the same whether or not, and however, utm is there.
+    for (pgm, yaml) in &maps[1..] {
+        assert!(pgm == &maps[0].0);
+        assert_eq!(yaml["origin"], maps[0].1["origin"]);
+    }
 }

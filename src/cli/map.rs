@@ -100,15 +100,29 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let config = &config;
     let georeference = match &selection.source.recording {
         Recording::Site(site) => site.georeference().map(|(origin_m, crs)| Georeference {
+            frame: None,
             origin_m,
+            rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
             crs_wkt: crs.map(str::to_string),
+        }),
+        Recording::Log(drive) => drive.georeference().map(|(frame, geo_from_world)| {
+            let q = geo_from_world.rotation.coords;
+            Georeference {
+                frame: Some(frame.clone()),
+                origin_m: geo_from_world.translation.vector.into(),
+                rotation_xyzw: [q.x, q.y, q.z, q.w],
+                crs_wkt: None,
+            }
         }),
         _ => None,
     };
-    if let (Some(image), Some(_)) = (&nav2_image, &georeference) {
+    if let (Some(image), Some(georeference)) = (&nav2_image, &georeference) {
         // The world file and .prj a georeferenced map gets beside its image.
-        for path in [gis_world_file(image), image.with_extension("prj")] {
-            check_output(&path, &inputs)?;
+        if georeference.is_planar() {
+            check_output(&gis_world_file(image), &inputs)?;
+        }
+        if georeference.crs_wkt.is_some() {
+            check_output(&image.with_extension("prj"), &inputs)?;
         }
     }
     let selections = [selection];

@@ -29,6 +29,38 @@ use crate::posing::{Posing, decide};
 /// An image is paired with a cloud when their stamps are at most this far apart.
 pub(super) const IMAGE_PAIRING_NS: u64 = 50_000_000;
 
+/// Frames that place a drive on the Earth: `utm` (robot_localization's
+/// navsat_transform; planar metres of a zone) and `earth` (REP 105; ECEF).
+pub const GEO_FRAMES: [&str; 2] = ["utm", "earth"];
+
+/// `geo_from_world` for the first frame of [`GEO_FRAMES`] that the tree links to
+/// `world_frame` at `stamp_ns`, above it or below it.
+fn place_on_earth(
+    transforms: &TransformTree,
+    world_frame: &str,
+    stamp_ns: u64,
+) -> Option<(String, Isometry3<f64>)> {
+    GEO_FRAMES
+        .iter()
+        .filter(|geo| **geo != world_frame)
+        .find_map(|geo| {
+            let above = transforms
+                .ancestor_from(geo, world_frame, stamp_ns)
+                .ok()
+                .flatten();
+            let below = || {
+                (transforms
+                    .ancestor_from(world_frame, geo, stamp_ns)
+                    .ok()
+                    .flatten())
+                .map(|world_from_geo| world_from_geo.inverse())
+            };
+            above
+                .or_else(below)
+                .map(|geo_from_world| (geo.to_string(), geo_from_world))
+        })
+}
+
 /// An opened drive.
 pub struct RosDrive {
     pub(super) path: PathBuf,
@@ -46,6 +78,9 @@ pub struct RosDrive {
     damaged_chunks: usize,
     /// When the cloud topic carries Velodyne packets: their model and calibration.
     pub(super) packets: Option<(VelodyneModel, Calibration)>,
+    /// Where the world frame lies on the Earth: a frame of [`GEO_FRAMES`] and
+    /// `geo_from_world` at the first scan.
+    georeference: Option<(String, Isometry3<f64>)>,
     /// Other sensors' PointCloud2 topics merged into each scan, with their frames.
     pub(super) merged: Vec<(String, String)>,
     /// The clouds' median period: a merged cloud within half of it joins a scan.
@@ -67,19 +102,49 @@ impl RosDrive {
             })
             .transpose()?;
         let decision = decide(log.path(), options.poses, &index.pose_record(options))?;
+        let mut notice = decision.notice;
         let world_frame = match (&options.world_frame, decision.posing) {
             (Some(frame), _) => frame.clone(),
-            (None, Posing::Recorded) => index.root_frame,
+            // A tree rooted on the Earth: the drive is mapped in the frame below
+            // the root, where coordinates are small enough for float32's
+            // centimetres, and the root places the map.
+            (None, Posing::Recorded) => match GEO_FRAMES
+                .contains(&index.root_frame.as_str())
+                .then(|| {
+                    index
+                        .transforms
+                        .child_below(&index.root_frame, &index.cloud_frame)
+                })
+                .flatten()
+            {
+                Some(below) => {
+                    let said = notice.take().map(|n| format!("{n}; ")).unwrap_or_default();
+                    notice = Some(format!(
+                        "{said}{}: the transform tree's root is `{}`: the drive is mapped in `{below}`, the frame below it (small coordinates keep float32's centimetres), and placed in `{}` by its transform",
+                        log.path().display(),
+                        index.root_frame,
+                        index.root_frame
+                    ));
+                    below
+                }
+                None => index.root_frame,
+            },
             // Estimated poses: `map` is the first scan's frame.
             (None, Posing::Registration) => "map".to_string(),
             (None, Posing::Alone) => index.cloud_frame.clone(),
         };
+        let georeference = place_on_earth(
+            &index.transforms,
+            &world_frame,
+            index.stamps_ns.first().copied().unwrap_or(0),
+        );
         let period_ns = median_period_ns(&index.stamps_ns);
         let mut drive = Self {
             path: log.path().to_path_buf(),
             log,
             posing: decision.posing,
-            notice: decision.notice,
+            notice,
+            georeference,
             cloud_topic: index.cloud_topic,
             cloud_frame: index.cloud_frame,
             world_frame,
@@ -137,6 +202,12 @@ impl RosDrive {
 
     pub fn world_frame(&self) -> &str {
         &self.world_frame
+    }
+
+    /// Where the world frame lies on the Earth, when the transform tree links it
+    /// to `utm` or `earth`: that frame and `geo_from_world` at the first scan.
+    pub fn georeference(&self) -> Option<&(String, Isometry3<f64>)> {
+        self.georeference.as_ref()
     }
 
     /// Frame numbers: the clouds' order on their topic.

@@ -67,6 +67,20 @@ impl TransformTree {
         })
     }
 
+    /// The frame just below `ancestor` on the way up from `frame`; None when
+    /// `ancestor` is not above `frame`.
+    pub fn child_below(&self, ancestor: &str, frame: &str) -> Option<String> {
+        let mut current = frame;
+        for _ in 0..=MAX_DEPTH {
+            let edge = self.edges.get(current)?;
+            if edge.parent == ancestor {
+                return Some(current.to_string());
+            }
+            current = &edge.parent;
+        }
+        None
+    }
+
     /// `ancestor_from_frame` at `stamp_ns`, composed up the tree; None when
     /// `ancestor` is not above `frame`.
     pub fn ancestor_from(

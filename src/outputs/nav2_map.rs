@@ -41,13 +41,32 @@ pub const OCCUPIED_THRESH: f64 = 0.65;
 /// `p` at or below this loads as free (see the module comment for why not 0.25).
 pub const FREE_THRESH: f64 = 0.196;
 
-/// Where a map's frame lies in a georeferenced source's coordinates (a LAS file's).
+/// Where a map's frame lies in a georeferenced source's coordinates: a LAS file's,
+/// or a log's `utm` / `earth` frame.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Georeference {
-    /// The frame's (0, 0, 0) in the source's coordinates.
+    /// The log's frame the map is placed in; None: the source file's coordinates.
+    pub frame: Option<String>,
+    /// The map frame's (0, 0, 0) in those coordinates.
     pub origin_m: [f64; 3],
+    /// The map frame's rotation in those coordinates (x, y, z, w; identity for a file).
+    pub rotation_xyzw: [f64; 4],
     /// The source's coordinate reference system, as WKT.
     pub crs_wkt: Option<String>,
+}
+
+impl Georeference {
+    /// Whether the coordinates are planar metres a world file can carry: a file's
+    /// (projected CRS) or `utm`; not `earth`, which is ECEF.
+    pub fn is_planar(&self) -> bool {
+        self.frame.as_deref().is_none_or(|frame| frame == "utm")
+    }
+
+    /// The rotation about z (radians) that a world file carries.
+    fn yaw_rad(&self) -> f64 {
+        let [x, y, z, w] = self.rotation_xyzw;
+        (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z))
+    }
 }
 
 /// Where the map lies: the image's size and the world position of its lower-left
@@ -192,18 +211,26 @@ pub fn write_nav2_map(
     };
     staged.write(&map.image, &bytes)?;
     staged.write(yaml, map.yaml_text().as_bytes())?;
-    if let Some(georeference) = georeference {
-        // The world file: the pixel size, no rotation, and the centre of the
-        // upper-left pixel, in the source's coordinates.
+    if let Some(georeference) = georeference.filter(|g| g.is_planar()) {
+        // The world file: the pixel's size and turn, and the centre of the upper-left
+        // pixel, in the source's coordinates (x' = A col + B row + C, y' = D col + E
+        // row + F; written A, D, B, E, C, F).
         let world_file = gis_world_file(&map.image);
+        let (sin, cos) = georeference.yaw_rad().sin_cos();
         let upper_left = [
-            georeference.origin_m[0] + origin[0] + 0.5 * resolution_m,
-            georeference.origin_m[1] + origin[1] + (map.height as f64 - 0.5) * resolution_m,
+            origin[0] + 0.5 * resolution_m,
+            origin[1] + (map.height as f64 - 0.5) * resolution_m,
         ];
-        let text = format!(
-            "{resolution_m}\n0\n0\n{}\n{}\n{}\n",
-            -resolution_m, upper_left[0], upper_left[1]
+        let [x0, y0, _] = georeference.origin_m;
+        let c = x0 + cos * upper_left[0] - sin * upper_left[1];
+        let f = y0 + sin * upper_left[0] + cos * upper_left[1];
+        let (a, d, b, e) = (
+            resolution_m * cos,
+            resolution_m * sin,
+            resolution_m * sin,
+            -resolution_m * cos,
         );
+        let text = format!("{a}\n{d}\n{b}\n{e}\n{c}\n{f}\n");
         staged.write(&world_file, text.as_bytes())?;
         map.gis_files.push(world_file);
         if let Some(wkt) = &georeference.crs_wkt {
@@ -238,15 +265,32 @@ impl Nav2Map {
         );
         if let Some(georeference) = &self.georeference {
             let [x, y, z] = georeference.origin_m;
-            let _ = writeln!(
-                text,
-                "# The frame is the source file's coordinates minus ({x}, {y}, {z}): add them to `origin` to place the map there{}.",
-                if georeference.crs_wkt.is_some() {
-                    " (CRS in the .prj beside the image)"
-                } else {
-                    ""
+            match &georeference.frame {
+                None => {
+                    let _ = writeln!(
+                        text,
+                        "# The frame is the source file's coordinates minus ({x}, {y}, {z}): add them to `origin` to place the map there{}.",
+                        if georeference.crs_wkt.is_some() {
+                            " (CRS in the .prj beside the image)"
+                        } else {
+                            ""
+                        }
+                    );
                 }
-            );
+                Some(geo) => {
+                    let [qx, qy, qz, qw] = georeference.rotation_xyzw;
+                    let _ = writeln!(
+                        text,
+                        "# `{}` lies in the log's `{geo}` frame at ({x}, {y}, {z}), turned by the quaternion (x, y, z, w) ({qx}, {qy}, {qz}, {qw}), from its transforms at the first scan{}.",
+                        self.frame,
+                        if georeference.is_planar() {
+                            "; the world file beside the image places each pixel in it (the log names no zone, so no .prj)"
+                        } else {
+                            ""
+                        }
+                    );
+                }
+            }
         }
         let _ = writeln!(text, "image: {}", yaml_string(&image_name));
         let _ = writeln!(text, "mode: {mode}");
