@@ -10,6 +10,7 @@ mod bucket_store;
 pub mod cloud;
 pub mod drive_frames;
 pub mod format;
+pub mod hesai;
 pub mod image;
 pub mod kitti;
 mod kitti_text;

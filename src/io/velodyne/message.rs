@@ -17,6 +17,18 @@ pub struct ScanMessage<'a> {
 /// Reads a VelodyneScan (`Header header`, `VelodynePacket[] packets` of
 /// `time stamp`, `uint8[1206] data`) without copying its packets.
 pub fn scan_message(data: &[u8], encoding: MessageEncoding) -> Result<ScanMessage<'_>, String> {
+    packets_message(data, encoding, PACKET_BYTES, false)
+}
+
+/// Reads a message of a header and packets (`time stamp`, `uint8[data_bytes] data`,
+/// then with `sized` a `uint32 size`: the packet is the first `size` bytes), as
+/// Velodyne's and Hesai's scan messages are, without copying the packets.
+pub(crate) fn packets_message(
+    data: &[u8],
+    encoding: MessageEncoding,
+    data_bytes: usize,
+    sized: bool,
+) -> Result<ScanMessage<'_>, String> {
     let mut reader = Reader {
         data,
         at: 0,
@@ -40,13 +52,20 @@ pub fn scan_message(data: &[u8], encoding: MessageEncoding) -> Result<ScanMessag
     };
     let frame_id = String::from_utf8_lossy(name).into_owned();
     let count = reader.u32()? as usize;
-    if count > data.len() / PACKET_BYTES {
+    if count > data.len() / data_bytes {
         return Err(format!("{count} packets claimed in {} bytes", data.len()));
     }
     let mut packets = Vec::with_capacity(count);
     for _ in 0..count {
         let stamp = reader.stamp(encoding)?;
-        packets.push((stamp, reader.bytes(PACKET_BYTES)?));
+        let mut packet = reader.bytes(data_bytes)?;
+        if sized {
+            let size = reader.u32()? as usize;
+            packet = packet.get(..size).ok_or_else(|| {
+                format!("a packet of size {size} in a field of {data_bytes} bytes")
+            })?;
+        }
+        packets.push((stamp, packet));
     }
     Ok(ScanMessage {
         frame_id,

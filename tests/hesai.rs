@@ -1,0 +1,117 @@
+//! Hesai packets against tier4/nebula's own decoder ground truth
+//! (`fixtures/nebula/xt32`, `xt16`, see fixtures/README.md): the scan nebula's test
+//! compares, cut from the same packets, point for point in nebula's order.
+
+use std::path::{Path, PathBuf};
+
+use travmap::io::cloud::cloud_points;
+use travmap::io::format::InputFormat;
+use travmap::io::hesai::{HesaiAssembler, HesaiCalibration, HesaiModel, pandar_scan_message};
+use travmap::io::log::Log;
+use travmap::io::pcd::parse_pcd;
+
+fn fixture(relative: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures/nebula")
+        .join(relative)
+}
+
+/// Decodes the bag as nebula's test does: the ground truth is the scan completed
+/// while the message logged at the PCD's stamp is read. Returns (ground truth,
+/// decoded scan, how many scans came before it).
+fn decode_like_nebula(
+    bag: &str,
+    truth: &str,
+    model: HesaiModel,
+) -> (Vec<[f32; 3]>, Vec<[f32; 3]>, usize) {
+    let truth_path = fixture(truth);
+    let truth_stamp: u64 = truth_path
+        .file_stem()
+        .unwrap()
+        .to_str()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let cloud = parse_pcd(&std::fs::read(&truth_path).unwrap(), "hesai").unwrap();
+    let truth: Vec<[f32; 3]> = (cloud_points(&cloud).unwrap().points.iter())
+        .map(|p| [p[0], p[1], p[2]])
+        .collect();
+    let mut assembler = HesaiAssembler::new(model, &HesaiCalibration::builtin(model)).unwrap();
+    let log = Log::open(&fixture(bag), InputFormat::Rosbag2).unwrap();
+    let mut before = 0;
+    for message in log.messages() {
+        let message = message.unwrap();
+        let encoding = message.connection.encoding().unwrap();
+        let scan = pandar_scan_message(&message.data, encoding).unwrap();
+        for (_, packet) in scan.packets {
+            if let Some(scan) = assembler.push(packet).unwrap() {
+                if message.log_time_ns == truth_stamp {
+                    return (truth, scan.points.iter().map(|p| p.xyz_m).collect(), before);
+                }
+                before += 1;
+            }
+        }
+    }
+    panic!("no scan completed in the message logged at {truth_stamp}");
+}
+
+/// The same points in the same order, each within `tolerance_m`.
+fn point_for_point(name: &str, truth: &[[f32; 3]], decoded: &[[f32; 3]], tolerance_m: f32) {
+    assert_eq!(decoded.len(), truth.len(), "{name}: point count");
+    let worst = truth
+        .iter()
+        .zip(decoded)
+        .map(|(t, d)| (0..3).map(|i| (t[i] - d[i]).abs()).fold(0.0, f32::max))
+        .fold(0.0, f32::max);
+    println!(
+        "{name}: {} points, in nebula's order, the farthest {worst:e} m from nebula's",
+        truth.len()
+    );
+    assert!(worst <= tolerance_m, "{name}: a point {worst} m off");
+}
+
+#[test]
+fn xt32_dual_return_packets_decode_to_nebulas_points() {
+    let (truth, decoded, before) = decode_like_nebula(
+        "xt32/1673400677802009732",
+        "xt32/1673400678101968885.pcd",
+        HesaiModel::PandarXt32,
+    );
+    // nebula's fourth scan: the first is the part-scan from where the log began.
+    assert_eq!(before, 3);
+    point_for_point("Pandar XT32", &truth, &decoded, 1e-4);
+}
+
+#[test]
+fn xt16_dual_return_packets_decode_to_nebulas_points() {
+    let (truth, decoded, before) = decode_like_nebula(
+        "xt16/1732848127890747768",
+        "xt16/1732848128093928016.pcd",
+        HesaiModel::PandarXt16,
+    );
+    assert_eq!(before, 2);
+    point_for_point("Pandar XT16", &truth, &decoded, 1e-4);
+}
+
+#[test]
+fn the_packets_name_their_model_and_a_mismatch_is_refused() {
+    let log = Log::open(&fixture("xt16/1732848127890747768"), InputFormat::Rosbag2).unwrap();
+    let message = log.messages().next().unwrap().unwrap();
+    let scan = pandar_scan_message(&message.data, message.connection.encoding().unwrap()).unwrap();
+    let packet = scan.packets[0].1;
+    assert_eq!(packet.len(), 568);
+    assert_eq!(HesaiModel::of_packet(packet), Ok(HesaiModel::PandarXt16));
+    let model = HesaiModel::PandarXt32;
+    let mut xt32 = HesaiAssembler::new(model, &HesaiCalibration::builtin(model)).unwrap();
+    let err = xt32.push(packet).unwrap_err();
+    assert!(
+        err.contains("Pandar XT16 packet on a topic of Pandar XT32"),
+        "{err}"
+    );
+    let err = HesaiModel::of_packet(&packet[..500]).unwrap_err();
+    assert!(err.contains("500-byte Pandar XT16 packet"), "{err}");
+    let err = HesaiAssembler::new(model, &HesaiCalibration::builtin(HesaiModel::PandarXt16))
+        .err()
+        .unwrap();
+    assert!(err.contains("16 lasers for the Pandar XT32"), "{err}");
+}
