@@ -1,16 +1,17 @@
-//! `cargo bench --bench velodyne`: Velodyne packets decoded and cut into scans on one
-//! thread, on nebula's VLP-32C and VLP-16 test logs (`fixtures/nebula/`): the median
-//! time per packet and per second of recording, and the real-time factor (seconds of
-//! recording decoded per second). Asserts nothing about time.
+//! `cargo bench --bench velodyne`: LiDAR packets decoded and cut into scans on one
+//! thread, on nebula's test logs (`fixtures/nebula/`: Velodyne VLP-32C and VLP-16,
+//! Hesai Pandar XT32 and XT16): the median time per packet and per second of
+//! recording, and the real-time factor (seconds of recording decoded per second).
+//! Asserts nothing about time.
 
 use std::path::Path;
 use std::time::Instant;
 
 use travmap::io::format::InputFormat;
+use travmap::io::hesai::{HesaiModel, PANDAR_SCAN};
 use travmap::io::log::Log;
-use travmap::io::velodyne::{
-    Calibration, Decoder, DecoderSettings, ScanAssembler, VelodyneModel, scan_message,
-};
+use travmap::io::packets::{PacketAssembler, PacketCalibration, PacketModel, packet_message};
+use travmap::io::velodyne::{VELODYNE_SCAN, VelodyneModel};
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -20,36 +21,55 @@ fn median(mut v: Vec<f64>) -> f64 {
 fn main() {
     let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/nebula");
     println!(
-        "{:<8} {:>8} {:>10} {:>12} {:>14} {:>10}",
+        "{:<12} {:>8} {:>10} {:>12} {:>14} {:>10}",
         "model", "packets", "points", "us/packet", "recorded s", "x realtime"
     );
-    for (model, bag) in [
-        (VelodyneModel::Vlp32c, "vlp32/1713492677464078412"),
-        (VelodyneModel::Vlp16, "vlp16/1673400471837873222"),
+    for (model, message_type, bag) in [
+        (
+            PacketModel::Velodyne(VelodyneModel::Vlp32c),
+            VELODYNE_SCAN,
+            "vlp32/1713492677464078412",
+        ),
+        (
+            PacketModel::Velodyne(VelodyneModel::Vlp16),
+            VELODYNE_SCAN,
+            "vlp16/1673400471837873222",
+        ),
+        (
+            PacketModel::Hesai(HesaiModel::PandarXt32),
+            PANDAR_SCAN,
+            "xt32/1673400677802009732",
+        ),
+        (
+            PacketModel::Hesai(HesaiModel::PandarXt16),
+            PANDAR_SCAN,
+            "xt16/1732848127890747768",
+        ),
     ] {
         let log = Log::open(&fixtures.join(bag), InputFormat::Rosbag2).unwrap();
         let messages: Vec<_> = log.messages().map(Result::unwrap).collect();
-        let packets: Vec<(u64, Vec<u8>)> = messages
+        let stamps: Vec<u64> = messages
             .iter()
             .flat_map(|m| {
-                let scan = scan_message(&m.data, m.connection.encoding().unwrap()).unwrap();
+                let encoding = m.connection.encoding().unwrap();
+                let scan = packet_message(message_type, &m.data, encoding).unwrap();
                 scan.packets
                     .into_iter()
-                    .map(|(stamp, p)| (stamp, p.to_vec()))
+                    .map(|(stamp, _)| stamp)
                     .collect::<Vec<_>>()
             })
             .collect();
-        let recorded_s = (packets.last().unwrap().0 - packets.first().unwrap().0) as f64 * 1e-9;
+        let recorded_s = (stamps.last().unwrap() - stamps.first().unwrap()) as f64 * 1e-9;
+        let calibration = PacketCalibration::for_model(model, None).unwrap();
         let mut points = 0;
         let seconds: Vec<f64> = (0..50)
             .map(|_| {
-                let calibration = Calibration::builtin(model).unwrap();
-                let decoder = Decoder::new(model, calibration, DecoderSettings::default());
-                let mut assembler = ScanAssembler::new(decoder.unwrap());
+                let mut assembler = PacketAssembler::new(model, &calibration).unwrap();
                 let start = Instant::now();
                 points = 0;
-                for (stamp, packet) in &packets {
-                    if let Some(scan) = assembler.push(packet, *stamp).unwrap() {
+                for m in &messages {
+                    let encoding = m.connection.encoding().unwrap();
+                    for scan in assembler.push_message(&m.data, encoding).unwrap() {
                         points += scan.points.len();
                     }
                 }
@@ -58,11 +78,11 @@ fn main() {
             .collect();
         let seconds = median(seconds);
         println!(
-            "{:<8} {:>8} {:>10} {:>12.2} {:>14.3} {:>10.0}",
+            "{:<12} {:>8} {:>10} {:>12.2} {:>14.3} {:>10.0}",
             model.name(),
-            packets.len(),
+            stamps.len(),
             points,
-            seconds * 1e6 / packets.len() as f64,
+            seconds * 1e6 / stamps.len() as f64,
             recorded_s,
             recorded_s / seconds
         );

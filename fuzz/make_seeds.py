@@ -121,9 +121,10 @@ def first_message_per_topic(path: pathlib.Path) -> dict:
         return found
 
 
-def velodyne_scans(db: pathlib.Path, packets: int = 3) -> dict:
-    """The first VelodyneScan message of a rosbag2 .db3 cut to its first packets, as
-    CDR and as ROS 1."""
+def packet_scans(db: pathlib.Path, data_bytes: int = 1206, sized: bool = False, packets: int = 3) -> dict:
+    """The first packet message (VelodyneScan: `uint8[1206] data`; PandarScan:
+    `uint8[1500] data` and `uint32 size`) of a rosbag2 .db3 cut to its first packets,
+    as CDR and as ROS 1."""
     import sqlite3
     import struct
 
@@ -137,15 +138,23 @@ def velodyne_scans(db: pathlib.Path, packets: int = 3) -> dict:
     for _ in range(packets):
         at = (at + 3) & ~3
         sec, nsec = struct.unpack_from("<iI", buf, at)
-        cut.append((sec, nsec, buf[at + 8 : at + 8 + 1206]))
-        at += 8 + 1206
+        data = buf[at + 8 : at + 8 + data_bytes]
+        at += 8 + data_bytes
+        size = b""
+        if sized:
+            at = (at + 3) & ~3
+            size = buf[at : at + 4]
+            at += 4
+        cut.append((sec, nsec, data, size))
     cdr = bytearray(header) + struct.pack("<I", len(cut))
-    for sec, nsec, data in cut:
+    for sec, nsec, data, size in cut:
         cdr += b"\0" * ((4 - (len(cdr) - 4) % 4) % 4) + struct.pack("<iI", sec, nsec) + data
+        if sized:
+            cdr += b"\0" * ((4 - (len(cdr) - 4) % 4) % 4) + size
     sec, nsec = struct.unpack_from("<iI", header, 4)
     ros1 = struct.pack("<III", 0, sec, nsec) + struct.pack("<I", len(frame)) + frame + struct.pack("<I", len(cut))
-    for sec, nsec, data in cut:
-        ros1 += struct.pack("<II", sec, nsec) + data
+    for sec, nsec, data, size in cut:
+        ros1 += struct.pack("<II", sec, nsec) + data + size
     return {"cdr": bytes(cdr), "ros1": ros1}
 
 
@@ -182,8 +191,14 @@ def main() -> None:
         ("vlp32c", nebula / "vlp32/1713492677464078412/1713492677464078412_0.db3"),
         ("vlp16_dual", nebula / "vlp16/1673400471837873222/1673400471837873222_0.db3"),
     ]:
-        for encoding, body in velodyne_scans(db).items():
+        for encoding, body in packet_scans(db).items():
             seed("velodyne_scan", f"{name}.{encoding}", body)
+    for name, db in [
+        ("xt32_dual", nebula / "xt32/1673400677802009732/1673400677802009732_0.db3"),
+        ("xt16_dual", nebula / "xt16/1732848127890747768/1732848127890747768_0.db3"),
+    ]:
+        for encoding, body in packet_scans(db, 1500, sized=True).items():
+            seed("pandar_scan", f"{name}.{encoding}", body)
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = pathlib.Path(tmp)

@@ -28,7 +28,7 @@ pub type Target = fn(&[u8]);
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 18] = [
+pub const TARGETS: [(&str, Target); 19] = [
     ("kitti_calib", kitti_calib),
     ("kitti_poses", kitti_poses),
     ("kitti_scan", kitti_scan),
@@ -47,6 +47,7 @@ pub const TARGETS: [(&str, Target); 18] = [
     ("model", model),
     ("dataset_file", dataset_file),
     ("velodyne_scan", velodyne_scan),
+    ("pandar_scan", pandar_scan),
 ];
 
 const NAMED: &str = "fuzzed";
@@ -281,5 +282,39 @@ pub fn model(data: &[u8]) {
     if let Ok(model) = SvmModel::from_json(data, NAMED) {
         let mut scratch = model.scratch();
         let _ = model.decision_value(&vec![0.5; model.dimension()], &mut scratch);
+    }
+}
+
+/// A `pandar_msgs/msg/PandarScan` message, CDR and then ROS 1: its packets decoded
+/// and cut into scans as the Hesai model they name; and the bytes as a Hesai
+/// angle-correction CSV.
+pub fn pandar_scan(data: &[u8]) {
+    use crate::io::hesai::{HesaiAssembler, HesaiCalibration, HesaiModel, pandar_scan_message};
+    use crate::io::ros::MessageEncoding;
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = HesaiCalibration::from_csv(text);
+    }
+    for encoding in [MessageEncoding::Cdr, MessageEncoding::Ros1] {
+        let Ok(message) = pandar_scan_message(data, encoding) else {
+            continue;
+        };
+        let Some(Ok(model)) = message
+            .packets
+            .first()
+            .map(|(_, p)| HesaiModel::of_packet(p))
+        else {
+            continue;
+        };
+        let mut assembler = HesaiAssembler::new(model, &HesaiCalibration::builtin(model))
+            .expect("the factory table fits its model");
+        for (stamp_ns, packet) in message.packets {
+            if let Ok(Some(scan)) = assembler.push(packet, stamp_ns) {
+                assert!(
+                    scan.points
+                        .iter()
+                        .all(|p| p.xyz_m.iter().all(|v| v.is_finite()))
+                );
+            }
+        }
     }
 }

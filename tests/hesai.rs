@@ -2,6 +2,8 @@
 //! (`fixtures/nebula/xt32`, `xt16`, see fixtures/README.md): the scan nebula's test
 //! compares, cut from the same packets, point for point in nebula's order.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use travmap::io::cloud::cloud_points;
@@ -43,8 +45,8 @@ fn decode_like_nebula(
         let message = message.unwrap();
         let encoding = message.connection.encoding().unwrap();
         let scan = pandar_scan_message(&message.data, encoding).unwrap();
-        for (_, packet) in scan.packets {
-            if let Some(scan) = assembler.push(packet).unwrap() {
+        for (stamp_ns, packet) in scan.packets {
+            if let Some(scan) = assembler.push(packet, stamp_ns).unwrap() {
                 if message.log_time_ns == truth_stamp {
                     return (truth, scan.points.iter().map(|p| p.xyz_m).collect(), before);
                 }
@@ -103,7 +105,7 @@ fn the_packets_name_their_model_and_a_mismatch_is_refused() {
     assert_eq!(HesaiModel::of_packet(packet), Ok(HesaiModel::PandarXt16));
     let model = HesaiModel::PandarXt32;
     let mut xt32 = HesaiAssembler::new(model, &HesaiCalibration::builtin(model)).unwrap();
-    let err = xt32.push(packet).unwrap_err();
+    let err = xt32.push(packet, 0).unwrap_err();
     assert!(
         err.contains("Pandar XT16 packet on a topic of Pandar XT32"),
         "{err}"
@@ -114,4 +116,67 @@ fn the_packets_name_their_model_and_a_mismatch_is_refused() {
         .err()
         .unwrap();
     assert!(err.contains("16 lasers for the Pandar XT32"), "{err}");
+}
+
+#[test]
+fn a_pandar_log_is_a_drive_for_every_command() {
+    use common::{arg, json_records, success, travmap};
+    let bag = fixture("xt32/1673400677802009732");
+    let model = HesaiModel::PandarXt32;
+    let mut assembler = HesaiAssembler::new(model, &HesaiCalibration::builtin(model)).unwrap();
+    let mut scans = Vec::new();
+    let log = Log::open(&bag, InputFormat::Rosbag2).unwrap();
+    for message in log.messages() {
+        let message = message.unwrap();
+        scans.extend(
+            assembler
+                .push_message(&message.data, message.connection.encoding().unwrap())
+                .unwrap(),
+        );
+    }
+    assert_eq!(
+        scans.iter().map(|s| s.points.len()).collect::<Vec<_>>(),
+        [62_826, 63_058, 63_040, 63_021]
+    );
+    // Stamped in the log's clock (the sensor's says 2019): the poses are found.
+    let first_packet_ns = 1_673_400_677_000_000_000;
+    assert!(scans.iter().all(|s| s.stamp_ns > first_packet_ns));
+    let whole = &scans[3];
+    let times = whole.points.iter().map(|p| p.time_ns - whole.stamp_ns);
+    assert!(times.max().unwrap() < 110_000_000, "a turn takes 0.1 s");
+
+    let (frames, summary) = json_records(&success(travmap(&["run", arg(&bag), "--json"])));
+    assert_eq!(summary["frames"], scans.len());
+    for (frame, scan) in frames.iter().zip(&scans) {
+        assert_eq!(frame["stamp_ns"], scan.stamp_ns);
+    }
+    // convert writes the scans as PointCloud2 beside the packets.
+    let dir = tempfile::tempdir().unwrap();
+    let converted = dir.path().join("converted.mcap");
+    let doc = common::json_summary(&["convert", arg(&bag), "-o", arg(&converted)]);
+    assert_eq!(doc["decoded_topic"], "/pandar_points");
+    assert_eq!(doc["decoded_scans"], scans.len());
+    let log = Log::open(&converted, InputFormat::Mcap).unwrap();
+    let clouds: Vec<travmap::io::ros::PointCloud2> = log
+        .messages()
+        .map(Result::unwrap)
+        .filter(|m| m.connection.topic == "/pandar_points")
+        .map(|m| travmap::io::ros::decode(&m.data).unwrap())
+        .collect();
+    assert_eq!(clouds.len(), scans.len());
+    for (cloud, scan) in clouds.iter().zip(&scans) {
+        assert_eq!(cloud.width as usize, scan.points.len());
+        assert_eq!(cloud.header.frame_id, "hesai");
+        assert_eq!(cloud.header.stamp.to_ns(), scan.stamp_ns);
+    }
+    // A table of another model is refused, naming both.
+    let xt16 = dir.path().join("PandarXT16.csv");
+    std::fs::write(&xt16, "Channel,Elevation,Azimuth\n1,15,0\n2,13,0\n").unwrap();
+    let err = common::clean_failure(travmap(&[
+        "run",
+        arg(&bag),
+        "--lidar-calibration",
+        arg(&xt16),
+    ]));
+    assert!(err.contains("2 lasers for the Pandar XT32"), "{err}");
 }

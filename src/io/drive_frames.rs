@@ -1,5 +1,5 @@
 //! A drive's frames, streamed in one pass over its log ([`RosDrive::read`]): clouds
-//! (PointCloud2 messages, or scans cut from Velodyne packets) handed on when the next
+//! (PointCloud2 messages, or scans cut from LiDAR packets) handed on when the next
 //! one arrives, with the camera image and the other sensors' clouds nearest in time.
 
 use std::collections::VecDeque;
@@ -9,14 +9,15 @@ use super::cloud::{CloudPoints, check_some_finite, cloud_points};
 use super::log_index::HeaderOnly;
 use super::log_message::LogMessage;
 use super::merged_clouds::{MergedCloud, merge};
+use super::packets::PacketAssembler;
 use super::ros::PointCloud2;
 use super::ros_drive::{IMAGE_PAIRING_NS, RosDrive};
-use super::velodyne::{Decoder, DecoderSettings, PacketScan, ScanAssembler, VelodynePoint};
+use super::velodyne::{PacketScan, VelodynePoint};
 use crate::error::{Error, Result};
 use crate::frame::{Frame, RemissionScale};
 
 impl RosDrive {
-    /// When the cloud topic carries Velodyne packets: its scans, cut and decoded in
+    /// When the cloud topic carries LiDAR packets: its scans, cut and decoded in
     /// one pass (no poses), each with the stamp the index gave it.
     pub fn packet_scans(&self) -> Option<impl Iterator<Item = Result<PacketScan>> + '_> {
         let mut assembler = self.assembler()?;
@@ -46,13 +47,10 @@ impl RosDrive {
     }
 
     /// A fresh scan assembler for a packet topic.
-    fn assembler(&self) -> Option<ScanAssembler> {
+    fn assembler(&self) -> Option<PacketAssembler> {
         let (model, calibration) = self.packets.as_ref()?;
-        let decoder = Decoder::new(*model, calibration.clone(), DecoderSettings::default());
         // The calibration was checked against the model at open.
-        Some(ScanAssembler::new(
-            decoder.expect("a calibration of the model"),
-        ))
+        Some(PacketAssembler::new(*model, calibration).expect("a calibration of the model"))
     }
 
     /// The frames in `frames`, streamed in one pass over the file, each with the
@@ -180,7 +178,7 @@ pub struct DriveFrames<'a> {
     /// Clouds to hand on, in order (a packet message can complete several scans).
     ready: VecDeque<(usize, Cloud)>,
     /// Packets into scans, for a packet topic.
-    assembler: Option<ScanAssembler>,
+    assembler: Option<PacketAssembler>,
     /// Clouds of merged topics since a period before the pending cloud.
     merged_clouds: Vec<MergedCloud>,
     /// Images since the cloud before the pending one: (stamp, message data).
@@ -334,7 +332,7 @@ impl Iterator for DriveFrames<'_> {
 
 /// The scans a packet message completes.
 fn push_message(
-    assembler: &mut ScanAssembler,
+    assembler: &mut PacketAssembler,
     message: &LogMessage,
 ) -> std::result::Result<Vec<Vec<VelodynePoint>>, String> {
     let encoding = message

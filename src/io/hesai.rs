@@ -16,7 +16,10 @@
 //! Scans are cut at azimuth 0 channel by channel, as nebula's cutter does: each
 //! laser moves to the next scan at the first firing whose corrected azimuth passes
 //! the cut, and a scan is handed on once its last laser has moved on. A scan is
-//! stamped with its first firing; every point keeps its own firing time.
+//! stamped with its first firing; every point keeps its own firing time. Times are
+//! the sensor's (the packet's date and microseconds) moved to the log's clock by
+//! the packet's recorded stamp where the scan began: a sensor without time
+//! synchronisation still finds its poses, and the firings keep their spacing.
 
 use super::ros::MessageEncoding;
 use super::velodyne::{PacketScan, ScanMessage, VelodynePoint, packets_message};
@@ -256,8 +259,10 @@ pub struct HesaiAssembler {
     /// complete when both have moved past the cut.
     first_laser: usize,
     last_laser: usize,
-    /// The two scans being filled (this one and the next), and their stamps.
+    /// The two scans being filled (this one and the next), in the sensor's clock,
+    /// and what moves each to the log's clock.
     scans: [PacketScan; 2],
+    to_log_clock_ns: [i64; 2],
     /// The scan each laser is filling, and its last corrected azimuth.
     laser_scan: Vec<usize>,
     last_azimuth: Vec<f32>,
@@ -307,6 +312,7 @@ impl HesaiAssembler {
             last_laser: extreme(|a, b| a > b),
             azimuth_offset_rad: offsets,
             scans: [empty(), empty()],
+            to_log_clock_ns: [0; 2],
             laser_scan: vec![0; lasers],
             last_azimuth: vec![0.0; lasers],
             current: 0,
@@ -326,14 +332,15 @@ impl HesaiAssembler {
     ) -> Result<Vec<PacketScan>, String> {
         let message = pandar_scan_message(data, encoding)?;
         let mut scans = Vec::new();
-        for (_, packet) in message.packets {
-            scans.extend(self.push(packet)?);
+        for (stamp_ns, packet) in message.packets {
+            scans.extend(self.push(packet, stamp_ns)?);
         }
         Ok(scans)
     }
 
-    /// Adds a packet; the scan it completes, if it does.
-    pub fn push(&mut self, packet: &[u8]) -> Result<Option<PacketScan>, String> {
+    /// Adds a packet recorded at `stamp_ns` (0: unknown, the sensor's clock is the
+    /// log's); the scan it completes, if it does.
+    pub fn push(&mut self, packet: &[u8], stamp_ns: u64) -> Result<Option<PacketScan>, String> {
         let model = HesaiModel::of_packet(packet)?;
         if model != self.model {
             return Err(format!(
@@ -345,6 +352,10 @@ impl HesaiAssembler {
         let tail = &packet[model.tail_at()..model.packet_bytes()];
         let returns = returns_of(tail[10])?;
         let packet_ns = packet_time_ns(tail)?;
+        let to_log_clock_ns = match stamp_ns {
+            0 => 0,
+            stamp_ns => (i128::from(stamp_ns) - i128::from(packet_ns)) as i64,
+        };
         // In f64 then rounded, as nebula computes them.
         let unit_m = f64::from(packet[9]) / 1000.0;
         let metres = |raw: u16| (f64::from(raw) * unit_m) as f32;
@@ -363,7 +374,7 @@ impl HesaiAssembler {
                     + model.laser_step_ns() * laser as i64
             };
             let group_ns = packet_ns.saturating_add_signed(offset_ns(first_block, 0));
-            if let Some(scan) = self.cut(block_rad, group_ns) {
+            if let Some(scan) = self.cut(block_rad, group_ns, to_log_clock_ns) {
                 completed = Some(scan);
             }
             for laser in 0..lasers {
@@ -415,7 +426,7 @@ impl HesaiAssembler {
 
     /// Moves each laser whose azimuth passed the cut (0) to the other scan; the
     /// scan its lasers have all left, once they have.
-    fn cut(&mut self, block_rad: f32, group_ns: u64) -> Option<PacketScan> {
+    fn cut(&mut self, block_rad: f32, group_ns: u64, to_log_clock_ns: i64) -> Option<PacketScan> {
         let lasers = self.laser_scan.len();
         let azimuth = |laser: usize| normalised(block_rad + self.azimuth_offset_rad[laser]);
         let (cut, half) = (0.0, std::f32::consts::PI);
@@ -436,6 +447,7 @@ impl HesaiAssembler {
             for scan in 0..2 {
                 if self.laser_scan.contains(&scan) {
                     self.scans[scan].stamp_ns = group_ns;
+                    self.to_log_clock_ns[scan] = to_log_clock_ns;
                 }
             }
             return None;
@@ -461,16 +473,22 @@ impl HesaiAssembler {
         // current scan: it is complete.
         if before == Some(current) && after != Some(current) {
             self.scans[next].stamp_ns = group_ns;
+            self.to_log_clock_ns[next] = to_log_clock_ns;
         }
         if before != Some(next) && after == Some(next) {
             self.current = next;
-            let scan = std::mem::replace(
+            let mut scan = std::mem::replace(
                 &mut self.scans[current],
                 PacketScan {
                     stamp_ns: 0,
                     points: Vec::new(),
                 },
             );
+            let shift = self.to_log_clock_ns[current];
+            scan.stamp_ns = scan.stamp_ns.saturating_add_signed(shift);
+            for point in &mut scan.points {
+                point.time_ns = point.time_ns.saturating_add_signed(shift);
+            }
             return Some(scan);
         }
         None

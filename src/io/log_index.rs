@@ -7,11 +7,13 @@ use std::path::Path;
 
 use serde::Deserialize;
 
+use super::hesai::{HesaiAssembler, HesaiCalibration, PANDAR_SCAN};
 use super::log::Log;
 use super::log_message::{LogMessage, ros2_type_name};
+use super::packets::{PacketCalibration, PacketModel, packet_message};
 use super::ros::{Header, MessageEncoding, Odometry, TfMessage, Transform};
 use super::transforms::{TransformTree, isometry};
-use super::velodyne::{DecoderSettings, ScanCutter, VELODYNE_SCAN, VelodyneModel, scan_message};
+use super::velodyne::{DecoderSettings, ScanCutter, VELODYNE_SCAN};
 use crate::config::PoseSource;
 use crate::error::{CloudTopicProblem, Error, Result};
 use crate::posing::PoseRecord;
@@ -89,10 +91,19 @@ pub(super) struct Contents {
     poses: PoseSource,
     /// Image topic -> (compressed, encoding, frame).
     image_topics: BTreeMap<String, (bool, MessageEncoding, String)>,
-    /// Velodyne packet topic -> the model and where its scans are cut.
-    packet_topics: HashMap<String, (VelodyneModel, ScanCutter)>,
+    /// Packet topic -> the model and where its scans are cut.
+    packet_topics: HashMap<String, (PacketModel, PacketCut)>,
+    /// The packets' calibration file (`--lidar-calibration`).
+    lidar_calibration: Option<std::path::PathBuf>,
     /// Velodyne packet topic -> the stamp of the scan being cut.
     packet_scan_start: HashMap<String, u64>,
+}
+
+/// Where a packet topic's scans are cut, for their stamps: Velodyne's cut is on the
+/// packets' azimuths alone; Hesai's is per laser, on the points' corrected azimuths.
+enum PacketCut {
+    Velodyne(ScanCutter),
+    Hesai(Box<HesaiAssembler>),
 }
 
 impl Contents {
@@ -114,6 +125,7 @@ impl Contents {
             schema.as_ref(),
             POINT_CLOUD
                 | VELODYNE_SCAN
+                | PANDAR_SCAN
                 | TF_MESSAGE
                 | TF1_MESSAGE
                 | ODOMETRY
@@ -148,26 +160,41 @@ impl Contents {
                     .or_insert_with(|| (header.header.frame_id.clone(), Vec::new()));
                 entry.1.push(stamp);
             }
-            VELODYNE_SCAN => {
-                let scan = scan_message(data, encoding).map_err(problem)?;
+            VELODYNE_SCAN | PANDAR_SCAN => {
+                let scan = packet_message(&schema, data, encoding).map_err(problem)?;
                 let Some(first) = scan.packets.first() else {
                     return Ok(());
                 };
-                let first_model = VelodyneModel::of_packet(first.1).map_err(problem)?;
-                let (model, cutter) = self
-                    .packet_topics
-                    .entry(connection.topic.clone())
-                    .or_insert_with(|| {
-                        let cut_angle_deg = DecoderSettings::default().cut_angle_deg;
-                        (first_model, ScanCutter::new(cut_angle_deg))
-                    });
+                let topic = &connection.topic;
+                if !self.packet_topics.contains_key(topic) {
+                    let model = PacketModel::of_packet(&schema, first.1).map_err(problem)?;
+                    let cut = match model {
+                        PacketModel::Velodyne(_) => PacketCut::Velodyne(ScanCutter::new(
+                            DecoderSettings::default().cut_angle_deg,
+                        )),
+                        PacketModel::Hesai(hesai) => {
+                            // A file that does not fit is refused by name when the
+                            // drive opens; the factory table cuts until then.
+                            let file = self.lidar_calibration.as_deref();
+                            let calibration = match PacketCalibration::for_model(model, file) {
+                                Ok(PacketCalibration::Hesai(calibration)) => calibration,
+                                _ => HesaiCalibration::builtin(hesai),
+                            };
+                            let assembler =
+                                HesaiAssembler::new(hesai, &calibration).map_err(problem)?;
+                            PacketCut::Hesai(Box::new(assembler))
+                        }
+                    };
+                    self.packet_topics.insert(topic.clone(), (model, cut));
+                }
+                let (model, cut) = self.packet_topics.get_mut(topic).expect("inserted above");
                 let stamps = &mut self
                     .cloud_stamps
-                    .entry(connection.topic.clone())
+                    .entry(topic.clone())
                     .or_insert_with(|| (scan.frame_id.clone(), Vec::new()))
                     .1;
                 for (stamp_ns, packet) in &scan.packets {
-                    let packet_model = VelodyneModel::of_packet(packet).map_err(problem)?;
+                    let packet_model = PacketModel::of_packet(&schema, packet).map_err(problem)?;
                     if packet_model != *model {
                         return Err(problem(format!(
                             "a {} packet on a topic of {} packets",
@@ -175,15 +202,27 @@ impl Contents {
                             model.name()
                         )));
                     }
-                    // A scan is stamped as ScanAssembler stamps it: the first scan
-                    // with its first packet, the others with the packet that cut the
-                    // scan before (it carries points past the cut into them).
-                    let scan_start = self.packet_scan_start.entry(connection.topic.clone());
-                    let start = *scan_start.or_insert(*stamp_ns);
-                    if cutter.completes(packet) {
-                        stamps.push(start);
-                        self.packet_scan_start
-                            .insert(connection.topic.clone(), *stamp_ns);
+                    match cut {
+                        PacketCut::Velodyne(cutter) => {
+                            // A scan is stamped as ScanAssembler stamps it: the first
+                            // scan with its first packet, the others with the packet
+                            // that cut the scan before (it carries points past the
+                            // cut into them).
+                            let scan_start = self.packet_scan_start.entry(topic.clone());
+                            let start = *scan_start.or_insert(*stamp_ns);
+                            if cutter.completes(packet) {
+                                stamps.push(start);
+                                self.packet_scan_start.insert(topic.clone(), *stamp_ns);
+                            }
+                        }
+                        // Stamped as the drive's frames are: by the same assembler.
+                        PacketCut::Hesai(assembler) => {
+                            if let Some(scan) =
+                                assembler.push(packet, *stamp_ns).map_err(problem)?
+                            {
+                                stamps.push(scan.stamp_ns);
+                            }
+                        }
                     }
                 }
             }
@@ -291,7 +330,7 @@ impl Contents {
                 return Err(Error::LogContainer {
                     path: path.to_path_buf(),
                     problem: format!(
-                        "{topic} carries Velodyne packets: only PointCloud2 topics are merged into another sensor's scans (`travmap convert` writes its scans as PointCloud2)"
+                        "{topic} carries LiDAR packets: only PointCloud2 topics are merged into another sensor's scans (`travmap convert` writes its scans as PointCloud2)"
                     ),
                 });
             }
@@ -307,7 +346,12 @@ impl Contents {
             cloud_topics: self
                 .topics
                 .iter()
-                .filter(|(_, s)| matches!(ros2_type_name(s).as_ref(), POINT_CLOUD | VELODYNE_SCAN))
+                .filter(|(_, s)| {
+                    matches!(
+                        ros2_type_name(s).as_ref(),
+                        POINT_CLOUD | VELODYNE_SCAN | PANDAR_SCAN
+                    )
+                })
                 .map(|(t, _)| t.clone())
                 .collect(),
             all_topics: self
@@ -372,8 +416,8 @@ pub(super) struct LogIndex {
     pub(super) camera: Option<CameraSource>,
     /// The root of the transform tree above the clouds' frame.
     pub(super) root_frame: String,
-    /// The model, when the cloud topic carries Velodyne packets.
-    pub(super) packets: Option<VelodyneModel>,
+    /// The model, when the cloud topic carries LiDAR packets.
+    pub(super) packets: Option<PacketModel>,
     /// Other sensors' PointCloud2 topics merged into each scan, with their frames.
     pub(super) merged: Vec<(String, String)>,
     /// Chunks whose messages could not be read (see [`Error::LogChunk`]).
@@ -387,6 +431,7 @@ impl LogIndex {
         let path = log.path();
         let mut contents = Contents {
             poses: options.poses,
+            lidar_calibration: options.lidar_calibration.clone(),
             ..Default::default()
         };
         let (mut damaged_chunks, mut first_damage) = (0, None);

@@ -22,6 +22,7 @@ pub mod mcap_messages;
 pub mod mcap_records;
 pub mod mcap_stored;
 mod merged_clouds;
+pub mod packets;
 pub mod pcd;
 pub mod ply;
 mod point_rows;

@@ -19,9 +19,9 @@ use super::log_index::{CameraSource, LogIndex};
 pub use super::log_index::{DriveOptions, MergedTopics};
 use super::log_message::LogMessage;
 use super::merged_clouds::median_period_ns;
+use super::packets::{PacketCalibration, PacketModel};
 use super::skips::SkipLog;
 use super::transforms::TransformTree;
-use super::velodyne::{Calibration, VelodyneModel};
 use crate::error::{Error, Result};
 use crate::frame::CameraImage;
 use crate::posing::{Posing, decide};
@@ -76,8 +76,8 @@ pub struct RosDrive {
     pub(super) camera: Option<CameraSource>,
     /// Chunks the index pass could not read: their messages are lost.
     damaged_chunks: usize,
-    /// When the cloud topic carries Velodyne packets: their model and calibration.
-    pub(super) packets: Option<(VelodyneModel, Calibration)>,
+    /// When the cloud topic carries LiDAR packets: their model and calibration.
+    pub(super) packets: Option<(PacketModel, PacketCalibration)>,
     /// Where the world frame lies on the Earth: a frame of [`GEO_FRAMES`] and
     /// `geo_from_world` at the first scan.
     georeference: Option<(String, Isometry3<f64>)>,
@@ -369,14 +369,14 @@ impl RosDrive {
     }
 }
 
-/// The calibration of a packet topic's `model` (see [`Calibration::for_model`]).
+/// The calibration of a packet topic's `model` (see [`PacketCalibration::for_model`]).
 fn packet_calibration(
     path: &Path,
     topic: &str,
-    model: VelodyneModel,
+    model: PacketModel,
     file: Option<&Path>,
-) -> Result<Calibration> {
-    Calibration::for_model(model, file).map_err(|problem| Error::LogContainer {
+) -> Result<PacketCalibration> {
+    PacketCalibration::for_model(model, file).map_err(|problem| Error::LogContainer {
         path: path.to_path_buf(),
         problem: format!("{topic} ({} packets): {problem}", model.name()),
     })

@@ -1,0 +1,124 @@
+//! LiDAR packet topics whatever the vendor: Velodyne's `VelodyneScan` and Hesai's
+//! `PandarScan`, each with its model (read from the packets), its calibration and
+//! its scan assembler, behind one face for the log index and the drive's frames.
+
+use std::path::Path;
+
+use super::hesai::{
+    HesaiAssembler, HesaiCalibration, HesaiModel, PANDAR_SCAN, pandar_scan_message,
+};
+use super::ros::MessageEncoding;
+use super::velodyne::{
+    Calibration, Decoder, DecoderSettings, PacketScan, ScanAssembler, ScanMessage, VELODYNE_SCAN,
+    VelodyneModel, scan_message,
+};
+
+/// The message types that carry packets.
+pub const PACKET_MESSAGES: [&str; 2] = [VELODYNE_SCAN, PANDAR_SCAN];
+
+/// A LiDAR whose packets travmap decodes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PacketModel {
+    Velodyne(VelodyneModel),
+    Hesai(HesaiModel),
+}
+
+impl PacketModel {
+    /// The model of a packet of a message of type `message_type`.
+    pub fn of_packet(message_type: &str, packet: &[u8]) -> Result<Self, String> {
+        if message_type == PANDAR_SCAN {
+            HesaiModel::of_packet(packet).map(Self::Hesai)
+        } else {
+            VelodyneModel::of_packet(packet).map(Self::Velodyne)
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Velodyne(model) => model.name(),
+            Self::Hesai(model) => model.name(),
+        }
+    }
+}
+
+/// Reads a packet message of type `message_type` without copying its packets.
+pub fn packet_message<'a>(
+    message_type: &str,
+    data: &'a [u8],
+    encoding: MessageEncoding,
+) -> Result<ScanMessage<'a>, String> {
+    if message_type == PANDAR_SCAN {
+        pandar_scan_message(data, encoding)
+    } else {
+        scan_message(data, encoding)
+    }
+}
+
+/// A packet model's calibration: the file given (`--lidar-calibration`: the
+/// velodyne_pointcloud / nebula YAML, or Hesai's angle-correction CSV), else the
+/// model's built-in table.
+#[derive(Clone, Debug)]
+pub enum PacketCalibration {
+    Velodyne(Calibration),
+    Hesai(HesaiCalibration),
+}
+
+impl PacketCalibration {
+    pub fn for_model(model: PacketModel, file: Option<&Path>) -> Result<Self, String> {
+        match model {
+            PacketModel::Velodyne(model) => Calibration::for_model(model, file).map(Self::Velodyne),
+            PacketModel::Hesai(model) => {
+                let calibration = match file {
+                    None => HesaiCalibration::builtin(model),
+                    Some(file) => {
+                        let text = std::fs::read_to_string(file)
+                            .map_err(|e| format!("{}: {e}", file.display()))?;
+                        HesaiCalibration::from_csv(&text)
+                            .map_err(|e| format!("{}: {e}", file.display()))?
+                    }
+                };
+                // A table of another model is refused here, naming both.
+                HesaiAssembler::new(model, &calibration)?;
+                Ok(Self::Hesai(calibration))
+            }
+        }
+    }
+}
+
+/// Packets in, scans out, whichever vendor.
+pub enum PacketAssembler {
+    Velodyne(ScanAssembler),
+    Hesai(Box<HesaiAssembler>),
+}
+
+impl PacketAssembler {
+    pub fn new(model: PacketModel, calibration: &PacketCalibration) -> Result<Self, String> {
+        Ok(match (model, calibration) {
+            (PacketModel::Velodyne(model), PacketCalibration::Velodyne(calibration)) => {
+                let decoder = Decoder::new(model, calibration.clone(), DecoderSettings::default())?;
+                Self::Velodyne(ScanAssembler::new(decoder))
+            }
+            (PacketModel::Hesai(model), PacketCalibration::Hesai(calibration)) => {
+                Self::Hesai(Box::new(HesaiAssembler::new(model, calibration)?))
+            }
+            _ => {
+                return Err(format!(
+                    "a calibration of another vendor than the {}'s",
+                    model.name()
+                ));
+            }
+        })
+    }
+
+    /// Adds the packets of a message; the scans they complete.
+    pub fn push_message(
+        &mut self,
+        data: &[u8],
+        encoding: MessageEncoding,
+    ) -> Result<Vec<PacketScan>, String> {
+        match self {
+            Self::Velodyne(assembler) => assembler.push_message(data, encoding),
+            Self::Hesai(assembler) => assembler.push_message(data, encoding),
+        }
+    }
+}
