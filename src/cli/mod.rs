@@ -193,13 +193,14 @@ pub struct Inputs {
     /// .db3) or folders of .pcd / .bin scans.
     #[arg(required = true)]
     pub sequences: Vec<PathBuf>,
-    /// Log input: the PointCloud2 or Velodyne packet topic (needed when there are
+    /// Log input: the PointCloud2 or LiDAR packet topic (needed when there are
     /// several). Repeated, the first topic's scans with the other sensors' clouds
     /// merged in (through /tf_static); `all` merges every PointCloud2 topic.
     #[arg(long)]
     cloud_topic: Vec<String>,
     /// MCAP input: the world frame poses are taken in (default: the root of the
-    /// transform tree above the clouds' frame).
+    /// transform tree above the clouds' frame; the frame below it when the root is
+    /// `utm` or `earth`).
     #[arg(long)]
     world_frame: Option<String>,
     /// MCAP input: the camera's Image or CompressedImage topic (needed when there are
@@ -209,9 +210,10 @@ pub struct Inputs {
     /// Frames to use: A..B (B excluded), A..=B, A.. or N. Default: all.
     #[arg(long, value_parser = parse_frame_range)]
     pub frames: Option<Range<usize>>,
-    /// Velodyne packet input: the sensor's calibration YAML (velodyne_pointcloud /
-    /// nebula format); the VLP-16 and VLP-32C have built-in tables.
-    #[arg(long, value_name = "YAML")]
+    /// LiDAR packet input: the sensor's calibration, Velodyne's YAML
+    /// (velodyne_pointcloud / nebula format) or Hesai's angle-correction CSV; the
+    /// VLP-16, VLP-32C, Pandar XT32 and XT16 have built-in tables.
+    #[arg(long, value_name = "FILE")]
     lidar_calibration: Option<PathBuf>,
     /// Folder-of-scans input: the scan rate, Hz, when the file names are not times
     /// (default 10).
