@@ -110,11 +110,20 @@ fn the_packets_name_their_model_and_a_mismatch_is_refused() {
         err.contains("Pandar XT16 packet on a topic of Pandar XT32"),
         "{err}"
     );
+    // Three returns do not divide eight blocks (the fuzzer's first find).
+    let mut triple = packet.to_vec();
+    triple[540 + 10] = 0x3d;
+    let xt16_model = HesaiModel::PandarXt16;
+    let xt16_table = HesaiCalibration::builtin(xt16_model);
+    let mut xt16 = HesaiAssembler::new(xt16_model, &xt16_table).unwrap();
+    let err = xt16.push(&triple, 0).unwrap_err();
+    assert!(
+        err.contains("0x3d (3 returns) in a packet of 8 blocks"),
+        "{err}"
+    );
     let err = HesaiModel::of_packet(&packet[..500]).unwrap_err();
     assert!(err.contains("500-byte Pandar XT16 packet"), "{err}");
-    let err = HesaiAssembler::new(model, &HesaiCalibration::builtin(HesaiModel::PandarXt16))
-        .err()
-        .unwrap();
+    let err = HesaiAssembler::new(model, &xt16_table).err().unwrap();
     assert!(err.contains("16 lasers for the Pandar XT32"), "{err}");
 }
 

@@ -351,6 +351,13 @@ impl HesaiAssembler {
         }
         let tail = &packet[model.tail_at()..model.packet_bytes()];
         let returns = returns_of(tail[10])?;
+        if !BLOCKS.is_multiple_of(returns) {
+            return Err(format!(
+                "return mode 0x{:02x} ({returns} returns) in a packet of {BLOCKS} blocks: the {} does not fire so",
+                tail[10],
+                model.name()
+            ));
+        }
         let packet_ns = packet_time_ns(tail)?;
         let to_log_clock_ns = match stamp_ns {
             0 => 0,
