@@ -4,19 +4,11 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use common::{nebula_fixture, nebula_ground_truth};
 
-use travmap::io::cloud::cloud_points;
 use travmap::io::format::InputFormat;
 use travmap::io::hesai::{HesaiAssembler, HesaiCalibration, HesaiModel, pandar_scan_message};
 use travmap::io::log::Log;
-use travmap::io::pcd::parse_pcd;
-
-fn fixture(relative: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("fixtures/nebula")
-        .join(relative)
-}
 
 /// Decodes the bag as nebula's test does: the ground truth is the scan completed
 /// while the message logged at the PCD's stamp is read. Returns (ground truth,
@@ -26,20 +18,9 @@ fn decode_like_nebula(
     truth: &str,
     model: HesaiModel,
 ) -> (Vec<[f32; 3]>, Vec<[f32; 3]>, usize) {
-    let truth_path = fixture(truth);
-    let truth_stamp: u64 = truth_path
-        .file_stem()
-        .unwrap()
-        .to_str()
-        .unwrap()
-        .parse()
-        .unwrap();
-    let cloud = parse_pcd(&std::fs::read(&truth_path).unwrap(), "hesai").unwrap();
-    let truth: Vec<[f32; 3]> = (cloud_points(&cloud).unwrap().points.iter())
-        .map(|p| [p[0], p[1], p[2]])
-        .collect();
+    let (truth_stamp, truth) = nebula_ground_truth(truth);
     let mut assembler = HesaiAssembler::new(model, &HesaiCalibration::builtin(model)).unwrap();
-    let log = Log::open(&fixture(bag), InputFormat::Rosbag2).unwrap();
+    let log = Log::open(&nebula_fixture(bag), InputFormat::Rosbag2).unwrap();
     let mut before = 0;
     for message in log.messages() {
         let message = message.unwrap();
@@ -97,7 +78,11 @@ fn xt16_dual_return_packets_decode_to_nebulas_points() {
 
 #[test]
 fn the_packets_name_their_model_and_a_mismatch_is_refused() {
-    let log = Log::open(&fixture("xt16/1732848127890747768"), InputFormat::Rosbag2).unwrap();
+    let log = Log::open(
+        &nebula_fixture("xt16/1732848127890747768"),
+        InputFormat::Rosbag2,
+    )
+    .unwrap();
     let message = log.messages().next().unwrap().unwrap();
     let scan = pandar_scan_message(&message.data, message.connection.encoding().unwrap()).unwrap();
     let packet = scan.packets[0].1;
@@ -130,7 +115,7 @@ fn the_packets_name_their_model_and_a_mismatch_is_refused() {
 #[test]
 fn a_pandar_log_is_a_drive_for_every_command() {
     use common::{arg, json_records, success, travmap};
-    let bag = fixture("xt32/1673400677802009732");
+    let bag = nebula_fixture("xt32/1673400677802009732");
     let model = HesaiModel::PandarXt32;
     let mut assembler = HesaiAssembler::new(model, &HesaiCalibration::builtin(model)).unwrap();
     let mut scans = Vec::new();

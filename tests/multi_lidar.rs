@@ -9,13 +9,12 @@ mod common;
 
 use std::path::Path;
 
-use common::{arg, assert_contains, clean_failure, json_records, success, travmap};
+use common::{arg, assert_contains, clean_failure, json_records, success, tf, travmap};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use travmap::io::format::InputFormat;
 use travmap::io::log::Log;
-use travmap::io::ros::{Header, TfMessage, Time, TransformStamped};
 use travmap::io::ros_drive::{DriveOptions, MergedTopics, RosDrive};
-use travmap::outputs::conversion::{scan_to_cloud, transform_from_pose};
+use travmap::outputs::conversion::scan_to_cloud;
 use travmap::outputs::mcap_writer::Compression;
 use travmap::outputs::writing::McapSink;
 
@@ -25,19 +24,6 @@ fn rear_from_velodyne() -> Isometry3<f64> {
         UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::PI),
     );
     velodyne_from_rear.inverse()
-}
-
-fn tf(stamp_ns: u64, parent: &str, child: &str, pose: &Isometry3<f64>) -> TfMessage {
-    TfMessage {
-        transforms: vec![TransformStamped {
-            header: Header {
-                stamp: Time::from_ns(stamp_ns),
-                frame_id: parent.into(),
-            },
-            child_frame_id: child.into(),
-            transform: transform_from_pose(pose),
-        }],
-    }
 }
 
 /// The shipped drive as a two-sensor log; the rear sensor falls silent for the

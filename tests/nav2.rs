@@ -8,12 +8,11 @@ mod common;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use common::{arg, json_summary};
+use common::{arg, json_summary, tf};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-use travmap::io::ros::{Header, TfMessage, Time, TransformStamped};
 use travmap::method::fusion::FusedCell;
 use travmap::method::grid::CellClass;
-use travmap::outputs::conversion::{scan_to_cloud, transform_from_pose};
+use travmap::outputs::conversion::scan_to_cloud;
 use travmap::outputs::mcap_writer::Compression;
 use travmap::outputs::writing::McapSink;
 
@@ -338,19 +337,6 @@ fn write_placed_log(seq: &Path, path: &Path, utm_from_map: &Isometry3<f64>, plac
             .unwrap();
     }
     sink.finish().unwrap();
-}
-
-fn tf(stamp_ns: u64, parent: &str, child: &str, pose: &Isometry3<f64>) -> TfMessage {
-    TfMessage {
-        transforms: vec![TransformStamped {
-            header: Header {
-                stamp: Time::from_ns(stamp_ns),
-                frame_id: parent.into(),
-            },
-            child_frame_id: child.into(),
-            transform: transform_from_pose(pose),
-        }],
-    }
 }
 
 #[test]

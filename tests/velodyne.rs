@@ -4,22 +4,16 @@
 
 mod common;
 
-use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use common::{nebula_fixture, nebula_ground_truth};
 
-use travmap::io::cloud::cloud_points;
+use std::collections::HashMap;
+use std::path::Path;
+
 use travmap::io::format::InputFormat;
 use travmap::io::log::Log;
-use travmap::io::pcd::parse_pcd;
 use travmap::io::velodyne::{
     Calibration, Decoder, DecoderSettings, ScanAssembler, VelodyneModel, scan_message,
 };
-
-fn fixture(relative: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("fixtures/nebula")
-        .join(relative)
-}
 
 /// How many of `truth`'s points have a decoded point within `tolerance_m`.
 fn matched(truth: &[[f32; 3]], decoded: &[[f32; 3]], tolerance_m: f32) -> usize {
@@ -57,24 +51,10 @@ fn decode_like_nebula(
     model: VelodyneModel,
     settings: DecoderSettings,
 ) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
-    let truth_path = fixture(truth);
-    let truth_stamp: u64 = truth_path
-        .file_stem()
-        .unwrap()
-        .to_str()
-        .unwrap()
-        .parse()
-        .unwrap();
-    let cloud = parse_pcd(&std::fs::read(&truth_path).unwrap(), "velodyne").unwrap();
-    let truth: Vec<[f32; 3]> = cloud_points(&cloud)
-        .unwrap()
-        .points
-        .iter()
-        .map(|p| [p[0], p[1], p[2]])
-        .collect();
+    let (truth_stamp, truth) = nebula_ground_truth(truth);
     let calibration = Calibration::builtin(model).unwrap();
     let mut assembler = ScanAssembler::new(Decoder::new(model, calibration, settings).unwrap());
-    let log = Log::open(&fixture(bag), InputFormat::Rosbag2).unwrap();
+    let log = Log::open(&nebula_fixture(bag), InputFormat::Rosbag2).unwrap();
     for message in log.messages() {
         let message = message.unwrap();
         let scan = scan_message(&message.data, message.connection.encoding().unwrap()).unwrap();
@@ -145,7 +125,11 @@ fn vlp16_dual_return_packets_decode_to_nebulas_points() {
 
 #[test]
 fn the_packets_name_their_model() {
-    let log = Log::open(&fixture("vlp32/1713492677464078412"), InputFormat::Rosbag2).unwrap();
+    let log = Log::open(
+        &nebula_fixture("vlp32/1713492677464078412"),
+        InputFormat::Rosbag2,
+    )
+    .unwrap();
     let message = log.messages().next().unwrap().unwrap();
     assert_eq!(
         message.connection.type_name(),
@@ -163,7 +147,7 @@ fn the_packets_name_their_model() {
 #[test]
 fn a_packet_log_is_a_drive_for_every_command() {
     use common::{arg, assert_contains, clean_failure, json_records, success, travmap};
-    let bag = fixture("vlp32/1713492677464078412");
+    let bag = nebula_fixture("vlp32/1713492677464078412");
     // The scans run cuts are the scans the library assembles (cut angle 0).
     let calibration = Calibration::builtin(VelodyneModel::Vlp32c).unwrap();
     let decoder = Decoder::new(

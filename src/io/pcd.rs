@@ -9,7 +9,7 @@
 use std::io::{BufRead, Read};
 use std::path::Path;
 
-use super::point_rows::{Encoding, Rows, header_line, read_rows};
+use super::point_rows::{Encoding, Rows, header_line, open_buffered, read_rows};
 use super::ros::{PointCloud2, PointField, datatype};
 
 /// No scan is near this; a header claiming more is not believed.
@@ -100,8 +100,7 @@ pub fn stream_pcd(
     path: &Path,
     on_chunk: &mut dyn FnMut(&PointCloud2) -> Result<(), String>,
 ) -> Result<(), String> {
-    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
-    let mut read = std::io::BufReader::with_capacity(1 << 20, file);
+    let mut read = open_buffered(path)?;
     let header = read_header(&mut read)?;
     header.total_bytes().ok_or_else(|| {
         format!(

@@ -10,7 +10,7 @@
 use std::io::BufRead;
 use std::path::Path;
 
-use super::point_rows::{self, Rows, header_line, read_rows};
+use super::point_rows::{self, Rows, header_line, open_buffered, read_rows};
 use super::ros::{PointCloud2, PointField, datatype};
 
 /// The PointField datatype and size of a PLY scalar type.
@@ -100,8 +100,7 @@ pub fn stream_ply(
     path: &Path,
     on_chunk: &mut dyn FnMut(&PointCloud2) -> Result<(), String>,
 ) -> Result<(), String> {
-    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
-    let mut read = std::io::BufReader::with_capacity(1 << 20, file);
+    let mut read = open_buffered(path)?;
     read_header(&mut read)?.read_body(&mut read, on_chunk)
 }
 

@@ -139,6 +139,12 @@ fn ascii_record(line: &str, value_types: &[u8], out: &mut Vec<u8>) -> Result<(),
     Ok(())
 }
 
+/// The file at `path`, buffered for reading its header and body in chunks.
+pub fn open_buffered(path: &std::path::Path) -> Result<std::io::BufReader<std::fs::File>, String> {
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    Ok(std::io::BufReader::with_capacity(1 << 20, file))
+}
+
 /// Reads a header line of at most 64 KiB (with its newline) into `line`, for
 /// headers read from a reader: a binary file with no newline is not read whole.
 /// False at the end of the input.

@@ -282,3 +282,40 @@ pub fn fused_drive(seq: &Path) -> Vec<travmap::method::fusion::FusedCell> {
         .unwrap();
     map.cells()
 }
+
+/// A /tf message of one transform, `parent_from_child` at `stamp_ns`.
+pub fn tf(
+    stamp_ns: u64,
+    parent: &str,
+    child: &str,
+    pose: &nalgebra::Isometry3<f64>,
+) -> travmap::io::ros::TfMessage {
+    use travmap::io::ros::{Header, TfMessage, Time, TransformStamped};
+    TfMessage {
+        transforms: vec![TransformStamped {
+            header: Header {
+                stamp: Time::from_ns(stamp_ns),
+                frame_id: parent.into(),
+            },
+            child_frame_id: child.into(),
+            transform: travmap::outputs::conversion::transform_from_pose(pose),
+        }],
+    }
+}
+
+/// A file of tier4/nebula's decoder tests staged in `fixtures/nebula/`.
+pub fn nebula_fixture(relative: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures/nebula")
+        .join(relative)
+}
+
+/// nebula's ground-truth scan `relative` (a PCD named for the stamp of the message
+/// during which nebula completed it): that stamp, and its points.
+pub fn nebula_ground_truth(relative: &str) -> (u64, Vec<[f32; 3]>) {
+    let path = nebula_fixture(relative);
+    let stamp = path.file_stem().unwrap().to_str().unwrap().parse().unwrap();
+    let cloud = travmap::io::pcd::parse_pcd(&std::fs::read(&path).unwrap(), "lidar").unwrap();
+    let points = travmap::io::cloud::cloud_points(&cloud).unwrap().points;
+    (stamp, points.iter().map(|p| [p[0], p[1], p[2]]).collect())
+}
