@@ -165,3 +165,143 @@ fn two_sensors_merge_into_the_scans_they_were_cut_from() {
     let (named, _) = json_records(&success(named));
     assert_eq!(cells(&named[0]), cells(&merged[0]));
 }
+
+/// Nebula's Pandar XT32 test packets on two topics, as two sensors would record
+/// them: `/front/pandar_packets` as recorded, `/rear/pandar_packets` the same
+/// packets in frame `hrear`, mounted as the rear sensor above. Both are cut into
+/// scans and merged as clouds are; convert decodes both.
+#[test]
+fn packet_topics_merge_as_clouds_do() {
+    let bag = common::nebula_fixture("xt32/1673400677802009732");
+    let dir = tempfile::tempdir().unwrap();
+    let log_path = dir.path().join("two_pandars.mcap");
+    let mut sink = McapSink::create(&log_path, Compression::Zstd).unwrap();
+    let velodyne_from_rear = rear_from_velodyne().inverse();
+    sink.write(
+        "/tf_static",
+        0,
+        &tf(0, "hesai", "hrear", &velodyne_from_rear),
+    )
+    .unwrap();
+    for message in Log::open(&bag, InputFormat::Rosbag2).unwrap().messages() {
+        let message = message.unwrap();
+        let c = &message.connection;
+        for (topic, frame) in [
+            ("/front/pandar_packets", b"hesai"),
+            ("/rear/pandar_packets", b"hrear"),
+        ] {
+            let id = sink
+                .channel(
+                    topic,
+                    &c.schema_name,
+                    &c.schema_encoding,
+                    &c.schema_data,
+                    &c.message_encoding,
+                )
+                .unwrap();
+            // The header's frame_id: as long as the recorded one, so nothing moves.
+            let mut data = message.data.clone();
+            assert_eq!(&data[16..22], b"hesai\0");
+            data[16..21].copy_from_slice(frame);
+            sink.write_raw(id, message.log_time_ns, message.publish_time_ns, data)
+                .unwrap();
+        }
+    }
+    sink.finish().unwrap();
+
+    let options = DriveOptions {
+        merged_topics: MergedTopics::All,
+        ..Default::default()
+    };
+    let drive = RosDrive::open(Log::open(&log_path, InputFormat::Mcap).unwrap(), &options).unwrap();
+    assert_eq!(drive.cloud_topic(), "/front/pandar_packets");
+    let frames: Vec<_> = drive.read(&(0..usize::MAX)).map(Result::unwrap).collect();
+    assert_eq!(frames.len(), 4);
+    for frame in &frames {
+        let sensors: Vec<&str> = frame.sensors.iter().map(String::as_str).collect();
+        assert_eq!(sensors, ["/front/pandar_packets", "/rear/pandar_packets"]);
+        let (front, rear) = frame
+            .points_in_velodyne
+            .split_at(frame.points_in_velodyne.len() / 2);
+        // The rear sensor saw what the front did, from where it is mounted.
+        let worst = front
+            .iter()
+            .zip(rear)
+            .map(|(f, r)| {
+                let moved = velodyne_from_rear
+                    * nalgebra::Point3::new(f[0] as f64, f[1] as f64, f[2] as f64);
+                let r = [r[0] as f64, r[1] as f64, r[2] as f64];
+                (0..3).map(|k| (moved[k] - r[k]).abs()).fold(0.0, f64::max)
+            })
+            .fold(0.0, f64::max);
+        assert!(
+            worst < 1e-4,
+            "frame {}: a rear point {worst} m off",
+            frame.index
+        );
+        assert!(
+            front.iter().zip(rear).all(|(f, r)| f[3] == r[3]),
+            "intensity"
+        );
+    }
+    let sizes: Vec<usize> = frames
+        .iter()
+        .map(|f| f.points_in_velodyne.len() / 2)
+        .collect();
+    assert_eq!(sizes, [62_826, 63_058, 63_040, 63_021]);
+
+    // convert decodes every packet topic read, each in its own frame.
+    let converted = dir.path().join("converted.mcap");
+    let doc = common::json_summary(&[
+        "convert",
+        arg(&log_path),
+        "--cloud-topic",
+        "all",
+        "-o",
+        arg(&converted),
+    ]);
+    assert_eq!(
+        doc["decoded_topics"],
+        serde_json::json!(["/front/pandar_points", "/rear/pandar_points"])
+    );
+    assert_eq!(doc["decoded_scans"], 8);
+    let log = Log::open(&converted, InputFormat::Mcap).unwrap();
+    let frames_of = |topic: &str| -> Vec<String> {
+        (log.messages().map(Result::unwrap))
+            .filter(|m| m.connection.topic == topic)
+            .map(|m| travmap::io::ros::decode::<travmap::io::ros::PointCloud2>(&m.data).unwrap())
+            .map(|cloud| cloud.header.frame_id)
+            .collect()
+    };
+    assert_eq!(frames_of("/front/pandar_points"), ["hesai"; 4]);
+    assert_eq!(frames_of("/rear/pandar_points"), ["hrear"; 4]);
+
+    // One calibration file for two sensors: refused at the one it does not fit,
+    // with the way to give each its own; a file per topic is taken.
+    let xt16 = dir.path().join("PandarXT16.csv");
+    std::fs::write(&xt16, "Channel,Elevation,Azimuth\n1,15,0\n2,13,0\n").unwrap();
+    let all = ["run", arg(&log_path), "--cloud-topic", "all"];
+    let err = clean_failure(travmap(
+        &[&all[..], &["--lidar-calibration", arg(&xt16)]].concat(),
+    ));
+    assert_contains(
+        &err,
+        &[
+            "/front/pandar_packets (Pandar XT32 packets)",
+            "2 lasers for the Pandar XT32",
+            "--lidar-calibration /front/pandar_packets=FILE",
+        ],
+    );
+    let rear_only = format!("/rear/pandar_packets={}", xt16.display());
+    let err = clean_failure(travmap(
+        &[&all[..], &["--lidar-calibration", &rear_only]].concat(),
+    ));
+    assert_contains(
+        &err,
+        &["/rear/pandar_packets (Pandar XT32 packets)", "2 lasers"],
+    );
+    assert!(
+        !err.contains("TOPIC=FILE") && !err.contains("=FILE"),
+        "{err}"
+    );
+}

@@ -14,8 +14,8 @@ use travmap::outputs::mcap_writer::Compression;
 use travmap::outputs::preflight::InputFiles;
 
 use super::{
-    Outcome, Output, check_output, frame_count, open_selection, outcome, parse_frame_range,
-    print_json_summary, print_wrote, with_summary,
+    Outcome, Output, Sensors, check_output, frame_count, open_selection, outcome,
+    parse_frame_range, print_json_summary, print_wrote, with_summary,
 };
 
 /// Convert a KITTI / SemanticKITTI sequence (clouds, poses on /tf, images) or a recorded
@@ -35,10 +35,10 @@ pub struct ConvertArgs {
     /// Seconds since the Unix epoch added to times.txt for every stamp.
     #[arg(long, default_value_t = 0.0, value_parser = parse_start_time)]
     start_time: f64,
-    /// Log input with several PointCloud2 topics: the one whose clouds are counted
-    /// as frames (every topic is converted either way).
-    #[arg(long)]
-    cloud_topic: Option<String>,
+    /// Log input: every topic is converted either way; these choose the cloud
+    /// topic whose clouds are counted as frames and the packet topics decoded.
+    #[command(flatten)]
+    sensors: Sensors,
     /// Log input: leave out the messages of damaged chunks (named on stderr, exit
     /// code 3) instead of stopping at the first.
     #[arg(long)]
@@ -78,10 +78,7 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
     let start_time_s = args.start_time;
     check_output(output_path, &InputFiles::of(&[&args.sequence]))?;
     let frames = args.frames.clone().unwrap_or(0..usize::MAX);
-    let options = DriveOptions {
-        cloud_topic: args.cloud_topic.clone(),
-        ..Default::default()
-    };
+    let options = args.sensors.drive_options(DriveOptions::default())?;
     let selection = open_selection(&args.sequence, &frames, &options, args.keep_going, false)?;
     let selections = [selection];
     let sequence = match &selections[0].source.recording {

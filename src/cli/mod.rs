@@ -33,7 +33,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use travmap::Config;
 use travmap::drive::Selection;
-use travmap::io::ros_drive::{DriveOptions, MergedTopics};
+use travmap::io::ros_drive::{DriveOptions, LidarCalibrations, MergedTopics};
 use travmap::io::{Recording, Source};
 use travmap::method::classifier::SvmModel;
 use travmap::outputs::preflight::{InputFiles, check_output_directory, check_output_file};
@@ -185,6 +185,50 @@ pub fn one_input(arg: clap::Arg) -> clap::Arg {
     )
 }
 
+/// Which of a log's LiDAR topics are read, and their calibrations.
+#[derive(Args)]
+pub struct Sensors {
+    /// Log input: the PointCloud2 or LiDAR packet topic (needed when there are
+    /// several). Repeated, the first topic's scans with the other sensors' clouds
+    /// merged in (through /tf_static); `all` merges every cloud and packet topic.
+    #[arg(long)]
+    cloud_topic: Vec<String>,
+    /// LiDAR packet input: the sensor's calibration, Velodyne's YAML
+    /// (velodyne_pointcloud / nebula format) or Hesai's angle-correction CSV; the
+    /// VLP-16, VLP-32C, Pandar XT32 and XT16 have built-in tables. With several
+    /// packet topics, TOPIC=FILE gives one topic's (repeatable); a FILE alone is
+    /// for every packet topic without its own.
+    #[arg(long, value_name = "[TOPIC=]FILE")]
+    lidar_calibration: Vec<String>,
+}
+
+impl Sensors {
+    /// `options` reading these topics with these calibrations.
+    pub fn drive_options(&self, options: DriveOptions) -> Result<DriveOptions> {
+        let (cloud_topic, merged_topics) = match self.cloud_topic.as_slice() {
+            [] => (None, MergedTopics::None),
+            [all] if all == "all" => (None, MergedTopics::All),
+            [one] => (Some(one.clone()), MergedTopics::None),
+            [first, more @ ..] => (Some(first.clone()), MergedTopics::Topics(more.to_vec())),
+        };
+        Ok(DriveOptions {
+            cloud_topic,
+            merged_topics,
+            lidar_calibrations: LidarCalibrations::from_arguments(&self.lidar_calibration)
+                .map_err(|problem| usage(format!("--lidar-calibration: {problem}")))?,
+            ..options
+        })
+    }
+
+    /// The flags that give a child travmap these topics and calibrations.
+    fn arguments(&self) -> impl Iterator<Item = (&'static str, Option<OsString>)> + '_ {
+        let topics = (self.cloud_topic.iter()).map(|t| ("--cloud-topic", Some(t.into())));
+        let calibrations =
+            (self.lidar_calibration.iter()).map(|file| ("--lidar-calibration", Some(file.into())));
+        topics.chain(calibrations)
+    }
+}
+
 /// The drives a command reads, the frames of each, and how to read them.
 #[derive(Args)]
 pub struct Inputs {
@@ -193,11 +237,8 @@ pub struct Inputs {
     /// .db3) or folders of .pcd / .bin scans.
     #[arg(required = true)]
     pub sequences: Vec<PathBuf>,
-    /// Log input: the PointCloud2 or LiDAR packet topic (needed when there are
-    /// several). Repeated, the first topic's scans with the other sensors' clouds
-    /// merged in (through /tf_static); `all` merges every PointCloud2 topic.
-    #[arg(long)]
-    cloud_topic: Vec<String>,
+    #[command(flatten)]
+    sensors: Sensors,
     /// MCAP input: the world frame poses are taken in (default: the root of the
     /// transform tree above the clouds' frame; the frame below it when the root is
     /// `utm` or `earth`).
@@ -210,11 +251,6 @@ pub struct Inputs {
     /// Frames to use: A..B (B excluded), A..=B, A.. or N. Default: all.
     #[arg(long, value_parser = parse_frame_range)]
     pub frames: Option<Range<usize>>,
-    /// LiDAR packet input: the sensor's calibration, Velodyne's YAML
-    /// (velodyne_pointcloud / nebula format) or Hesai's angle-correction CSV; the
-    /// VLP-16, VLP-32C, Pandar XT32 and XT16 have built-in tables.
-    #[arg(long, value_name = "FILE")]
-    lidar_calibration: Option<PathBuf>,
     /// Folder-of-scans input: the scan rate, Hz, when the file names are not times
     /// (default 10).
     #[arg(long, value_name = "HZ", value_parser = parse_rate_hz)]
@@ -231,20 +267,12 @@ pub struct Inputs {
 
 impl Inputs {
     fn drive_options(&self) -> Result<DriveOptions> {
-        let (cloud_topic, merged_topics) = match self.cloud_topic.as_slice() {
-            [] => (None, MergedTopics::None),
-            [all] if all == "all" => (None, MergedTopics::All),
-            [one] => (Some(one.clone()), MergedTopics::None),
-            [first, more @ ..] => (Some(first.clone()), MergedTopics::Topics(more.to_vec())),
-        };
-        Ok(DriveOptions {
-            cloud_topic,
-            merged_topics,
+        self.sensors.drive_options(DriveOptions {
             world_frame: self.world_frame.clone(),
             camera_topic: self.camera_topic.clone(),
             poses: self.settings.load()?.integration.poses,
             rate_hz: self.rate,
-            lidar_calibration: self.lidar_calibration.clone(),
+            ..Default::default()
         })
     }
 
@@ -252,8 +280,7 @@ impl Inputs {
     /// (`bench --tools`): the log's topics and world frame, the scan rate and the
     /// configuration; not `--frames`, which the caller adds where it applies.
     pub fn reading_arguments(&self) -> Vec<OsString> {
-        let topics = (self.cloud_topic.iter()).map(|t| ("--cloud-topic", Some(t.into())));
-        let mut arguments = flags(topics.chain([
+        let mut arguments = flags(self.sensors.arguments().chain([
             (
                 "--world-frame",
                 self.world_frame.clone().map(OsString::from),
@@ -263,10 +290,6 @@ impl Inputs {
                 self.camera_topic.clone().map(OsString::from),
             ),
             ("--rate", self.rate.map(|hz| hz.to_string().into())),
-            (
-                "--lidar-calibration",
-                self.lidar_calibration.clone().map(OsString::from),
-            ),
         ]));
         arguments.extend(self.settings.as_arguments());
         arguments

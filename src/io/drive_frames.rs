@@ -8,49 +8,67 @@ use std::ops::Range;
 use super::cloud::{CloudPoints, check_some_finite, cloud_points};
 use super::log_index::HeaderOnly;
 use super::log_message::LogMessage;
-use super::merged_clouds::{MergedCloud, merge};
-use super::packets::PacketAssembler;
+use super::merged_clouds::{MergedCloud, MergedContent, merge};
+use super::packets::{PacketAssembler, PacketCalibration, PacketModel};
 use super::ros::PointCloud2;
 use super::ros_drive::{IMAGE_PAIRING_NS, RosDrive};
 use super::velodyne::{PacketScan, VelodynePoint};
 use crate::error::{Error, Result};
 use crate::frame::{Frame, RemissionScale};
 
+/// A scan cut from a packet topic's packets.
+pub struct DecodedScan<'a> {
+    /// The packet topic, and the frame its points are in.
+    pub topic: &'a str,
+    pub frame: &'a str,
+    pub scan: PacketScan,
+}
+
 impl RosDrive {
-    /// When the cloud topic carries LiDAR packets: its scans, cut and decoded in
-    /// one pass (no poses), each with the stamp the index gave it.
-    pub fn packet_scans(&self) -> Option<impl Iterator<Item = Result<PacketScan>> + '_> {
-        let mut assembler = self.assembler()?;
+    /// The scans of every packet topic read (the cloud topic's and the merged
+    /// ones'), cut and decoded in one pass (no poses), in log order; the cloud
+    /// topic's with the stamps the index gave them. None without a packet topic.
+    pub fn packet_scans(&self) -> Option<impl Iterator<Item = Result<DecodedScan<'_>>> + '_> {
+        let own = (self.assembler()).map(|a| (self.cloud_topic.as_str(), self.cloud_frame(), a));
+        let merged = (self.merged.iter()).filter_map(|sensor| {
+            let assembler = assembler(sensor.packets.as_ref())?;
+            Some((sensor.topic.as_str(), sensor.frame.as_str(), assembler))
+        });
+        let mut topics: Vec<_> = own.into_iter().chain(merged).collect();
+        if topics.is_empty() {
+            return None;
+        }
         let mut next = 0;
-        let scans = self
-            .messages()
-            .filter(|message| !matches!(message, Ok(m) if m.connection.topic != self.cloud_topic))
-            .flat_map(move |message| {
-                let scans = message.and_then(|message| {
-                    push_message(&mut assembler, &message)
-                        .map_err(|problem| self.cloud_error(next, problem))
-                });
-                let scans: Vec<Result<PacketScan>> = match scans {
-                    Ok(scans) => scans
-                        .into_iter()
-                        .map(|points| {
-                            let stamp_ns = self.stamps_ns.get(next).copied().unwrap_or_default();
+        let scans = self.messages().flat_map(move |message| {
+            let message = match message {
+                Ok(message) => message,
+                Err(error) => return vec![Err(error)],
+            };
+            let Some((topic, frame, assembler)) =
+                (topics.iter_mut()).find(|(topic, _, _)| *topic == message.connection.topic)
+            else {
+                return Vec::new();
+            };
+            let own = *topic == self.cloud_topic;
+            match push_message(assembler, &message) {
+                Ok(scans) => (scans.into_iter())
+                    .map(|mut scan| {
+                        if own {
+                            scan.stamp_ns = self.stamps_ns.get(next).copied().unwrap_or_default();
                             next += 1;
-                            Ok(PacketScan { stamp_ns, points })
-                        })
-                        .collect(),
-                    Err(error) => vec![Err(error)],
-                };
-                scans
-            });
+                        }
+                        Ok(DecodedScan { topic, frame, scan })
+                    })
+                    .collect(),
+                Err(problem) => vec![Err(self.cloud_error_on(topic, next, problem))],
+            }
+        });
         Some(scans)
     }
 
-    /// A fresh scan assembler for a packet topic.
+    /// A fresh scan assembler for the cloud topic, when it carries packets.
     fn assembler(&self) -> Option<PacketAssembler> {
-        let (model, calibration) = self.packets.as_ref()?;
-        // The calibration was checked against the model at open.
-        Some(PacketAssembler::new(*model, calibration).expect("a calibration of the model"))
+        assembler(self.packets.as_ref())
     }
 
     /// The frames in `frames`, streamed in one pass over the file, each with the
@@ -65,6 +83,9 @@ impl RosDrive {
             pending: None,
             ready: VecDeque::new(),
             assembler: self.assembler(),
+            merged_assemblers: (self.merged.iter())
+                .map(|sensor| assembler(sensor.packets.as_ref()))
+                .collect(),
             merged_clouds: Vec::new(),
             images: Vec::new(),
             next_cloud: 0,
@@ -94,18 +115,7 @@ impl RosDrive {
                 check_some_finite(points.points.len(), points.dropped).map_err(fail)?;
                 points
             }
-            Cloud::Packets(points) => CloudPoints {
-                points: points
-                    .iter()
-                    .map(|p| {
-                        let [x, y, z] = p.xyz_m;
-                        [x, y, z, p.intensity as f32 / 255.0]
-                    })
-                    .collect(),
-                remission: RemissionScale::Byte,
-                labels: None,
-                dropped: 0,
-            },
+            Cloud::Packets(points) => packet_points(points),
         };
         let stamp_ns = self.stamps_ns[current];
         let (points, sensors) = merge(
@@ -151,12 +161,40 @@ impl RosDrive {
     }
 
     fn cloud_error(&self, cloud: usize, problem: String) -> Error {
+        self.cloud_error_on(&self.cloud_topic, cloud, problem)
+    }
+
+    /// A problem with a cloud of `topic` (the cloud topic's or a merged one's),
+    /// read while frame `cloud` was being made.
+    fn cloud_error_on(&self, topic: &str, cloud: usize, problem: String) -> Error {
         Error::LogCloud {
             path: self.path.clone(),
-            topic: self.cloud_topic.clone(),
+            topic: topic.into(),
             cloud,
             problem,
         }
+    }
+}
+
+/// A fresh scan assembler for a packet topic's model and calibration.
+fn assembler(packets: Option<&(PacketModel, PacketCalibration)>) -> Option<PacketAssembler> {
+    let (model, calibration) = packets?;
+    // The calibration was checked against the model at open.
+    Some(PacketAssembler::new(*model, calibration).expect("a calibration of the model"))
+}
+
+/// A scan cut from packets as a cloud: intensity on the 0..1 byte scale.
+fn packet_points(points: &[VelodynePoint]) -> CloudPoints {
+    CloudPoints {
+        points: (points.iter())
+            .map(|p| {
+                let [x, y, z] = p.xyz_m;
+                [x, y, z, p.intensity as f32 / 255.0]
+            })
+            .collect(),
+        remission: RemissionScale::Byte,
+        labels: None,
+        dropped: 0,
     }
 }
 
@@ -179,6 +217,8 @@ pub struct DriveFrames<'a> {
     ready: VecDeque<(usize, Cloud)>,
     /// Packets into scans, for a packet topic.
     assembler: Option<PacketAssembler>,
+    /// Likewise for each merged topic, in [`RosDrive`]'s `merged` order.
+    merged_assemblers: Vec<Option<PacketAssembler>>,
     /// Clouds of merged topics since a period before the pending cloud.
     merged_clouds: Vec<MergedCloud>,
     /// Images since the cloud before the pending one: (stamp, message data).
@@ -202,6 +242,36 @@ impl DriveFrames<'_> {
             Ok(frame) => Some(Ok(frame)),
             Err(error) => self.drive.skips.handle(index, error).err().map(Err),
         }
+    }
+
+    /// Holds a message of merged topic `topic` (its place in `merged`) until a scan
+    /// takes it: a cloud as it is, packets as the scans they complete.
+    fn hold_merged(&mut self, topic: usize, message: LogMessage) -> Result<()> {
+        let Some(assembler) = &mut self.merged_assemblers[topic] else {
+            let stamp = (message.connection.encoding())
+                .and_then(|encoding| encoding.decode::<HeaderOnly>(&message.data).ok());
+            let stamp_ns = match stamp.map(|h| h.header.stamp.to_ns()) {
+                Some(0) | None => message.log_time_ns,
+                Some(ns) => ns,
+            };
+            self.merged_clouds.push(MergedCloud {
+                stamp_ns,
+                topic,
+                cloud: MergedContent::Message(message),
+            });
+            return Ok(());
+        };
+        let scans = push_message(assembler, &message).map_err(|problem| {
+            let sensor = &self.drive.merged[topic].topic;
+            self.drive.cloud_error_on(sensor, self.next_cloud, problem)
+        })?;
+        self.merged_clouds
+            .extend(scans.into_iter().map(|scan| MergedCloud {
+                stamp_ns: scan.stamp_ns,
+                topic,
+                cloud: MergedContent::Scan(packet_points(&scan.points)),
+            }));
+        Ok(())
     }
 }
 
@@ -266,22 +336,15 @@ impl Iterator for DriveFrames<'_> {
                 }
                 continue;
             }
-            if let Some(topic) =
-                (self.drive.merged.iter()).position(|(topic, _)| *topic == message.connection.topic)
+            if let Some(topic) = (self.drive.merged.iter())
+                .position(|sensor| sensor.topic == message.connection.topic)
             {
-                let stamp = message
-                    .connection
-                    .encoding()
-                    .and_then(|encoding| encoding.decode::<HeaderOnly>(&message.data).ok());
-                let stamp_ns = match stamp.map(|h| h.header.stamp.to_ns()) {
-                    Some(0) | None => message.log_time_ns,
-                    Some(ns) => ns,
-                };
-                self.merged_clouds.push(MergedCloud {
-                    stamp_ns,
-                    topic,
-                    message,
-                });
+                if let Err(error) = self.hold_merged(topic, message) {
+                    if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
+                        self.stream_ended = true;
+                        return Some(Err(error));
+                    }
+                }
                 continue;
             }
             if message.connection.topic != self.drive.cloud_topic {
@@ -290,7 +353,9 @@ impl Iterator for DriveFrames<'_> {
             let clouds = match &mut self.assembler {
                 None => vec![Cloud::Message(message)],
                 Some(assembler) => match push_message(assembler, &message) {
-                    Ok(scans) => scans.into_iter().map(Cloud::Packets).collect(),
+                    Ok(scans) => (scans.into_iter())
+                        .map(|scan| Cloud::Packets(scan.points))
+                        .collect(),
                     Err(problem) => {
                         let error = self.drive.cloud_error(self.next_cloud, problem);
                         if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
@@ -334,11 +399,10 @@ impl Iterator for DriveFrames<'_> {
 fn push_message(
     assembler: &mut PacketAssembler,
     message: &LogMessage,
-) -> std::result::Result<Vec<Vec<VelodynePoint>>, String> {
+) -> std::result::Result<Vec<PacketScan>, String> {
     let encoding = message
         .connection
         .encoding()
         .ok_or_else(|| format!("message encoding `{}`", message.connection.message_encoding))?;
-    let scans = assembler.push_message(&message.data, encoding)?;
-    Ok(scans.into_iter().map(|scan| scan.points).collect())
+    assembler.push_message(&message.data, encoding)
 }

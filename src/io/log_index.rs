@@ -3,7 +3,7 @@
 //! Odometry, as `--poses` lets them count), camera intrinsics and image topics.
 
 use std::collections::{BTreeMap, HashMap};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
@@ -42,9 +42,53 @@ pub struct DriveOptions {
     /// Folders of scans: the rate stamps are made at when the file names are not
     /// times (10 Hz when None).
     pub rate_hz: Option<f64>,
-    /// Velodyne packet topics: the calibration YAML (the model's own table when
-    /// None, for the models that have one).
-    pub lidar_calibration: Option<std::path::PathBuf>,
+    /// Packet topics' calibration files (`--lidar-calibration`).
+    pub lidar_calibrations: LidarCalibrations,
+}
+
+/// The calibration files given for packet topics: each for one topic, or one for
+/// every packet topic without its own.
+#[derive(Clone, Debug, Default)]
+pub struct LidarCalibrations {
+    pub any_topic: Option<PathBuf>,
+    pub by_topic: Vec<(String, PathBuf)>,
+}
+
+impl LidarCalibrations {
+    /// `--lidar-calibration`'s values: `FILE` or `TOPIC=FILE`; at most one of each
+    /// topic and one without.
+    pub fn from_arguments(values: &[String]) -> Result<Self, String> {
+        let mut calibrations = Self::default();
+        for value in values {
+            // A file whose name holds `=` is still a file.
+            let named = (!Path::new(value).exists())
+                .then(|| value.split_once('='))
+                .flatten();
+            match named {
+                Some((topic, file)) => {
+                    if calibrations.by_topic.iter().any(|(t, _)| t == topic) {
+                        return Err(format!("two calibration files for {topic}"));
+                    }
+                    calibrations.by_topic.push((topic.into(), file.into()));
+                }
+                None if calibrations.any_topic.is_some() => {
+                    return Err(
+                        "two calibration files without a topic: give them as TOPIC=FILE".into(),
+                    );
+                }
+                None => calibrations.any_topic = Some(value.into()),
+            }
+        }
+        Ok(calibrations)
+    }
+
+    /// The file for packet topic `topic`: its own, else the one for every topic.
+    pub fn for_topic(&self, topic: &str) -> Option<&Path> {
+        (self.by_topic.iter())
+            .find(|(t, _)| t == topic)
+            .map(|(_, file)| file.as_path())
+            .or(self.any_topic.as_deref())
+    }
 }
 
 /// Which other cloud topics are merged into the frames' scans.
@@ -53,10 +97,19 @@ pub enum MergedTopics {
     /// One sensor.
     #[default]
     None,
-    /// These PointCloud2 topics.
+    /// These cloud or packet topics.
     Topics(Vec<String>),
-    /// Every PointCloud2 topic but the frames' own.
+    /// Every cloud or packet topic but the frames' own.
     All,
+}
+
+/// Another sensor's topic, merged into the frames' scans.
+pub(super) struct MergedTopic {
+    pub(super) topic: String,
+    /// The frame its clouds are in.
+    pub(super) frame: String,
+    /// The model, when it carries LiDAR packets.
+    pub(super) packets: Option<PacketModel>,
 }
 
 /// The camera the appearance features come from.
@@ -93,8 +146,8 @@ pub(super) struct Contents {
     image_topics: BTreeMap<String, (bool, MessageEncoding, String)>,
     /// Packet topic -> the model and where its scans are cut.
     packet_topics: HashMap<String, (PacketModel, PacketCut)>,
-    /// The packets' calibration file (`--lidar-calibration`).
-    lidar_calibration: Option<std::path::PathBuf>,
+    /// The packets' calibration files (`--lidar-calibration`).
+    lidar_calibrations: LidarCalibrations,
     /// Velodyne packet topic -> the stamp of the scan being cut.
     packet_scan_start: HashMap<String, u64>,
 }
@@ -175,7 +228,7 @@ impl Contents {
                         PacketModel::Hesai(hesai) => {
                             // A file that does not fit is refused by name when the
                             // drive opens; the factory table cuts until then.
-                            let file = self.lidar_calibration.as_deref();
+                            let file = self.lidar_calibrations.for_topic(topic);
                             let calibration = match PacketCalibration::for_model(model, file) {
                                 Ok(PacketCalibration::Hesai(calibration)) => calibration,
                                 _ => HesaiCalibration::builtin(hesai),
@@ -305,13 +358,14 @@ impl Contents {
         Err(self.topic_error(path, problem))
     }
 
-    /// The PointCloud2 topics merged into `cloud_topic`'s scans, with their frames.
+    /// The topics merged into `cloud_topic`'s scans, with their frames and, for
+    /// packet topics, their models.
     fn merged_topics(
         &self,
         path: &Path,
         options: &DriveOptions,
         cloud_topic: &str,
-    ) -> Result<Vec<(String, String)>> {
+    ) -> Result<Vec<MergedTopic>> {
         let topics: Vec<String> = match &options.merged_topics {
             MergedTopics::None => return Ok(Vec::new()),
             MergedTopics::All => {
@@ -326,15 +380,11 @@ impl Contents {
             let Some((frame, _)) = self.cloud_stamps.get(&topic) else {
                 return Err(self.topic_error(path, CloudTopicProblem::NotFound(topic)));
             };
-            if self.packet_topics.contains_key(&topic) {
-                return Err(Error::LogContainer {
-                    path: path.to_path_buf(),
-                    problem: format!(
-                        "{topic} carries LiDAR packets: only PointCloud2 topics are merged into another sensor's scans (`travmap convert` writes its scans as PointCloud2)"
-                    ),
-                });
-            }
-            merged.push((topic.clone(), frame.clone()));
+            merged.push(MergedTopic {
+                frame: frame.clone(),
+                packets: self.packet_topics.get(&topic).map(|(model, _)| *model),
+                topic,
+            });
         }
         Ok(merged)
     }
@@ -418,8 +468,8 @@ pub(super) struct LogIndex {
     pub(super) root_frame: String,
     /// The model, when the cloud topic carries LiDAR packets.
     pub(super) packets: Option<PacketModel>,
-    /// Other sensors' PointCloud2 topics merged into each scan, with their frames.
-    pub(super) merged: Vec<(String, String)>,
+    /// Other sensors' topics merged into each scan.
+    pub(super) merged: Vec<MergedTopic>,
     /// Chunks whose messages could not be read (see [`Error::LogChunk`]).
     pub(super) damaged_chunks: usize,
 }
@@ -431,7 +481,7 @@ impl LogIndex {
         let path = log.path();
         let mut contents = Contents {
             poses: options.poses,
-            lidar_calibration: options.lidar_calibration.clone(),
+            lidar_calibrations: options.lidar_calibrations.clone(),
             ..Default::default()
         };
         let (mut damaged_chunks, mut first_damage) = (0, None);
@@ -497,5 +547,42 @@ impl LogIndex {
                 self.cloud_frame
             ))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn calibration_files_are_for_their_topic_or_for_every_topic() {
+        let values = [
+            "/rear/packets=rear.yaml",
+            "any.yaml",
+            "/top/packets=a=b.csv",
+        ];
+        let calibrations = LidarCalibrations::from_arguments(&values.map(String::from)).unwrap();
+        assert_eq!(
+            calibrations.for_topic("/rear/packets"),
+            Some(Path::new("rear.yaml"))
+        );
+        assert_eq!(
+            calibrations.for_topic("/top/packets"),
+            Some(Path::new("a=b.csv"))
+        );
+        assert_eq!(
+            calibrations.for_topic("/front/packets"),
+            Some(Path::new("any.yaml"))
+        );
+        assert_eq!(
+            LidarCalibrations::default().for_topic("/front/packets"),
+            None
+        );
+        let twice = ["a.yaml", "b.yaml"].map(String::from);
+        let err = LidarCalibrations::from_arguments(&twice).unwrap_err();
+        assert!(err.contains("give them as TOPIC=FILE"), "{err}");
+        let twice = ["/a=a.yaml", "/a=b.yaml"].map(String::from);
+        let err = LidarCalibrations::from_arguments(&twice).unwrap_err();
+        assert!(err.contains("two calibration files for /a"), "{err}");
     }
 }

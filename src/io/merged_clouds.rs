@@ -1,20 +1,28 @@
-//! Several LiDARs in one scan: the clouds of the other sensors' topics, held until
-//! the scan they belong to (the nearest in time, within half a period) is read, and
-//! moved into the scan's frame through the transform tree.
+//! Several LiDARs in one scan: the clouds of the other sensors' topics (PointCloud2
+//! messages, or scans cut from their packets), held until the scan they belong to
+//! (the nearest in time, within half a period) is read, and moved into the scan's
+//! frame through the transform tree.
 
 use nalgebra::{Isometry3, Point3};
 
 use super::cloud::{CloudPoints, cloud_points};
 use super::log_message::LogMessage;
 use super::ros::PointCloud2;
+use super::ros_drive::MergedSensor;
 use crate::error::{Error, Result};
 
 /// A cloud of a merged topic waiting for its scan: its stamp, the topic's place in
-/// [`RosDrive`]'s `merged`, and the message.
+/// [`super::ros_drive::RosDrive`]'s `merged`, and the cloud.
 pub(super) struct MergedCloud {
     pub(super) stamp_ns: u64,
     pub(super) topic: usize,
-    pub(super) message: LogMessage,
+    pub(super) cloud: MergedContent,
+}
+
+/// A merged cloud as it came: a PointCloud2 message is decoded only if a scan takes it.
+pub(super) enum MergedContent {
+    Message(LogMessage),
+    Scan(CloudPoints),
 }
 
 /// The median time between clouds (100 ms with fewer than two).
@@ -38,29 +46,36 @@ pub(super) fn merge(
     mut points: CloudPoints,
     stamp_ns: u64,
     period_ns: u64,
-    topics: &[(String, String)],
+    topics: &[MergedSensor],
     clouds: &[MergedCloud],
     cloud_error: &dyn Fn(&str, String) -> Error,
     cloud_from_frame: &dyn Fn(&str, u64) -> Result<Isometry3<f64>>,
 ) -> Result<(CloudPoints, Vec<String>)> {
     let mut merged = Vec::new();
-    for (at, (topic, frame)) in topics.iter().enumerate() {
+    for (at, sensor) in topics.iter().enumerate() {
         let nearest = clouds
             .iter()
             .filter(|c| c.topic == at && c.stamp_ns.abs_diff(stamp_ns) <= period_ns / 2)
             .min_by_key(|c| c.stamp_ns.abs_diff(stamp_ns));
         let Some(other) = nearest else { continue };
-        let fail = |problem: String| cloud_error(topic, problem);
-        let encoding = (other.message.connection.encoding())
-            .ok_or_else(|| fail("an encoding travmap does not read".into()))?;
-        let cloud: PointCloud2 = encoding.decode(&other.message.data).map_err(fail)?;
-        let other_points = cloud_points(&cloud).map_err(fail)?;
-        let pose = cloud_from_frame(frame, other.stamp_ns)?;
+        let fail = |problem: String| cloud_error(&sensor.topic, problem);
+        let decoded;
+        let other_points = match &other.cloud {
+            MergedContent::Scan(points) => points,
+            MergedContent::Message(message) => {
+                let encoding = (message.connection.encoding())
+                    .ok_or_else(|| fail("an encoding travmap does not read".into()))?;
+                let cloud: PointCloud2 = encoding.decode(&message.data).map_err(fail)?;
+                decoded = cloud_points(&cloud).map_err(fail)?;
+                &decoded
+            }
+        };
+        let pose = cloud_from_frame(&sensor.frame, other.stamp_ns)?;
         points.points.extend(other_points.points.iter().map(|p| {
             let q = pose * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
             [q.x as f32, q.y as f32, q.z as f32, p[3]]
         }));
-        points.labels = match (points.labels.take(), other_points.labels) {
+        points.labels = match (points.labels.take(), &other_points.labels) {
             (Some(mut labels), Some(more)) => {
                 labels.extend(more);
                 Some(labels)
@@ -68,7 +83,7 @@ pub(super) fn merge(
             _ => None,
         };
         points.dropped += other_points.dropped;
-        merged.push(topic.clone());
+        merged.push(sensor.topic.clone());
     }
     Ok((points, merged))
 }

@@ -16,7 +16,7 @@ use nalgebra::Isometry3;
 use super::image::image_pixels;
 use super::log::Log;
 use super::log_index::{CameraSource, LogIndex};
-pub use super::log_index::{DriveOptions, MergedTopics};
+pub use super::log_index::{DriveOptions, LidarCalibrations, MergedTopics};
 use super::log_message::LogMessage;
 use super::merged_clouds::median_period_ns;
 use super::packets::{PacketCalibration, PacketModel};
@@ -25,6 +25,15 @@ use super::transforms::TransformTree;
 use crate::error::{Error, Result};
 use crate::frame::CameraImage;
 use crate::posing::{Posing, decide};
+
+/// Another sensor's topic merged into the frames' scans.
+pub(super) struct MergedSensor {
+    pub(super) topic: String,
+    /// The frame its clouds are in.
+    pub(super) frame: String,
+    /// When it carries LiDAR packets: their model and calibration.
+    pub(super) packets: Option<(PacketModel, PacketCalibration)>,
+}
 
 /// An image is paired with a cloud when their stamps are at most this far apart.
 pub(super) const IMAGE_PAIRING_NS: u64 = 50_000_000;
@@ -81,8 +90,8 @@ pub struct RosDrive {
     /// Where the world frame lies on the Earth: a frame of [`GEO_FRAMES`] and
     /// `geo_from_world` at the first scan.
     georeference: Option<(String, Isometry3<f64>)>,
-    /// Other sensors' PointCloud2 topics merged into each scan, with their frames.
-    pub(super) merged: Vec<(String, String)>,
+    /// Other sensors' topics merged into each scan.
+    pub(super) merged: Vec<MergedSensor>,
     /// The clouds' median period: a merged cloud within half of it joins a scan.
     pub(super) period_ns: u64,
     pub(super) skips: SkipLog,
@@ -92,15 +101,29 @@ impl RosDrive {
     /// Reads `log`'s topics, cloud stamps and transforms in one pass
     /// ([`LogIndex`]), and poses the clouds as [`decide`] says.
     pub fn open(log: Log, options: &DriveOptions) -> Result<Self> {
-        let index = LogIndex::read(&log, options)?;
-        let packets = index
-            .packets
-            .map(|model| {
-                let file = options.lidar_calibration.as_deref();
-                packet_calibration(log.path(), &index.cloud_topic, model, file)
-                    .map(|calibration| (model, calibration))
+        let mut index = LogIndex::read(&log, options)?;
+        let packet_topics = usize::from(index.packets.is_some())
+            + (index.merged.iter())
+                .filter(|m| m.packets.is_some())
+                .count();
+        let calibrated = |topic: &str, model: Option<PacketModel>| {
+            (model.map(|model| {
+                let calibrations = &options.lidar_calibrations;
+                packet_calibration(log.path(), topic, model, calibrations, packet_topics)
+                    .map(|c| (model, c))
+            }))
+            .transpose()
+        };
+        let packets = calibrated(&index.cloud_topic, index.packets)?;
+        let merged = (std::mem::take(&mut index.merged).into_iter())
+            .map(|merged| {
+                Ok(MergedSensor {
+                    packets: calibrated(&merged.topic, merged.packets)?,
+                    topic: merged.topic,
+                    frame: merged.frame,
+                })
             })
-            .transpose()?;
+            .collect::<Result<Vec<_>>>()?;
         let decision = decide(log.path(), options.poses, &index.pose_record(options))?;
         let mut notice = decision.notice;
         let world_frame = match (&options.world_frame, decision.posing) {
@@ -154,7 +177,7 @@ impl RosDrive {
             damaged_chunks: index.damaged_chunks,
             packets,
             period_ns,
-            merged: index.merged,
+            merged,
             skips: SkipLog::default(),
         };
         drive.trim_cut_end();
@@ -374,10 +397,21 @@ fn packet_calibration(
     path: &Path,
     topic: &str,
     model: PacketModel,
-    file: Option<&Path>,
+    calibrations: &LidarCalibrations,
+    packet_topics: usize,
 ) -> Result<PacketCalibration> {
-    PacketCalibration::for_model(model, file).map_err(|problem| Error::LogContainer {
-        path: path.to_path_buf(),
-        problem: format!("{topic} ({} packets): {problem}", model.name()),
+    let file = calibrations.for_topic(topic);
+    PacketCalibration::for_model(model, file).map_err(|problem| {
+        // A file given for every packet topic may fit only one of several.
+        let shared =
+            packet_topics > 1 && file.is_some() && file == calibrations.any_topic.as_deref();
+        let hint = match shared {
+            true => format!(" (a file for one topic only: --lidar-calibration {topic}=FILE)"),
+            false => String::new(),
+        };
+        Error::LogContainer {
+            path: path.to_path_buf(),
+            problem: format!("{topic} ({} packets): {problem}{hint}", model.name()),
+        }
     })
 }

@@ -66,9 +66,10 @@ pub struct LogCopySummary {
     pub translated_messages: usize,
     /// Topics copied as recorded, in an encoding other than ROS 2 CDR.
     pub topics_as_recorded: Vec<String>,
-    /// Velodyne packet input: the topic its scans were written to as PointCloud2,
-    /// and how many.
+    /// LiDAR packet input: the first topic scans were written to as PointCloud2,
+    /// every such topic (one per packet topic read), and how many scans.
     pub decoded_topic: Option<String>,
+    pub decoded_topics: Vec<String>,
     pub decoded_scans: usize,
     pub output_bytes: u64,
 }
@@ -185,14 +186,17 @@ pub fn convert_log(
     // Converting is asked for a compression; passing through is not.
     let mut summary = write_log_messages(&mut sink, drive, false, on_messages)?;
     if let Some(scans) = drive.packet_scans() {
-        let topic = decoded_topic(drive.cloud_topic());
-        for scan in scans {
-            let scan = scan?;
-            let cloud = packet_cloud(&scan, drive.cloud_frame());
-            sink.write(&topic, scan.stamp_ns, &cloud)?;
+        for decoded in scans {
+            let decoded = decoded?;
+            let topic = decoded_topic(decoded.topic);
+            let cloud = packet_cloud(&decoded.scan, decoded.frame);
+            sink.write(&topic, decoded.scan.stamp_ns, &cloud)?;
             summary.decoded_scans += 1;
+            if !summary.decoded_topics.contains(&topic) {
+                summary.decoded_topics.push(topic);
+            }
         }
-        summary.decoded_topic = Some(topic);
+        summary.decoded_topic = summary.decoded_topics.first().cloned();
     }
     sink.finish()?;
     summary.output_bytes = std::fs::metadata(output)
