@@ -339,11 +339,11 @@ impl Iterator for DriveFrames<'_> {
             if let Some(topic) = (self.drive.merged.iter())
                 .position(|sensor| sensor.topic == message.connection.topic)
             {
-                if let Err(error) = self.hold_merged(topic, message) {
-                    if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
-                        self.stream_ended = true;
-                        return Some(Err(error));
-                    }
+                if let Err(error) = self.hold_merged(topic, message)
+                    && let Err(error) = self.drive.skips.handle(self.next_cloud, error)
+                {
+                    self.stream_ended = true;
+                    return Some(Err(error));
                 }
                 continue;
             }
