@@ -69,7 +69,10 @@ fn main() {
                 points = 0;
                 for m in &messages {
                     let encoding = m.connection.encoding().unwrap();
-                    for scan in assembler.push_message(&m.data, encoding).unwrap() {
+                    for scan in assembler
+                        .push_message(message_type, &m.data, encoding)
+                        .unwrap()
+                    {
                         points += scan.points.len();
                     }
                 }

@@ -124,7 +124,8 @@ def first_message_per_topic(path: pathlib.Path) -> dict:
 def packet_scans(db: pathlib.Path, data_bytes: int = 1206, sized: bool = False, packets: int = 3) -> dict:
     """The first packet message (VelodyneScan: `uint8[1206] data`; PandarScan:
     `uint8[1500] data` and `uint32 size`) of a rosbag2 .db3 cut to its first packets,
-    as CDR and as ROS 1."""
+    as CDR and as ROS 1, and the same packets as nebula's NebulaPackets (CDR,
+    `uint8[] data`)."""
     import sqlite3
     import struct
 
@@ -155,7 +156,11 @@ def packet_scans(db: pathlib.Path, data_bytes: int = 1206, sized: bool = False, 
     ros1 = struct.pack("<III", 0, sec, nsec) + struct.pack("<I", len(frame)) + frame + struct.pack("<I", len(cut))
     for sec, nsec, data, size in cut:
         ros1 += struct.pack("<II", sec, nsec) + data + size
-    return {"cdr": bytes(cdr), "ros1": ros1}
+    nebula = bytearray(header) + struct.pack("<I", len(cut))
+    for sec, nsec, data, size in cut:
+        packet = data[: struct.unpack("<I", size)[0]] if sized else data
+        nebula += b"\0" * ((4 - (len(nebula) - 4) % 4) % 4) + struct.pack("<iII", sec, nsec, len(packet)) + packet
+    return {"cdr": bytes(cdr), "ros1": ros1, "nebula": bytes(nebula)}
 
 
 def main() -> None:
@@ -191,13 +196,17 @@ def main() -> None:
         ("vlp32c", nebula / "vlp32/1713492677464078412/1713492677464078412_0.db3"),
         ("vlp16_dual", nebula / "vlp16/1673400471837873222/1673400471837873222_0.db3"),
     ]:
-        for encoding, body in packet_scans(db).items():
+        scans = packet_scans(db)
+        seed("nebula_packets", f"{name}.cdr", scans.pop("nebula"))
+        for encoding, body in scans.items():
             seed("velodyne_scan", f"{name}.{encoding}", body)
     for name, db in [
         ("xt32_dual", nebula / "xt32/1673400677802009732/1673400677802009732_0.db3"),
         ("xt16_dual", nebula / "xt16/1732848127890747768/1732848127890747768_0.db3"),
     ]:
-        for encoding, body in packet_scans(db, 1500, sized=True).items():
+        scans = packet_scans(db, 1500, sized=True)
+        seed("nebula_packets", f"{name}.cdr", scans.pop("nebula"))
+        for encoding, body in scans.items():
             seed("pandar_scan", f"{name}.{encoding}", body)
 
     with tempfile.TemporaryDirectory() as tmp:

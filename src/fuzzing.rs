@@ -28,7 +28,7 @@ pub type Target = fn(&[u8]);
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 19] = [
+pub const TARGETS: [(&str, Target); 20] = [
     ("kitti_calib", kitti_calib),
     ("kitti_poses", kitti_poses),
     ("kitti_scan", kitti_scan),
@@ -48,6 +48,7 @@ pub const TARGETS: [(&str, Target); 19] = [
     ("dataset_file", dataset_file),
     ("velodyne_scan", velodyne_scan),
     ("pandar_scan", pandar_scan),
+    ("nebula_packets", nebula_packets),
 ];
 
 const NAMED: &str = "fuzzed";
@@ -164,6 +165,12 @@ pub fn ros1_message(data: &[u8]) {
     let _ = ros1::decode::<TfMessage>(data);
     let _ = ros1::decode::<Odometry>(data);
     let _ = ros1::decode::<CameraInfo>(data);
+    for type_name in [
+        "velodyne_msgs/msg/VelodyneScan",
+        "pandar_msgs/msg/PandarScan",
+    ] {
+        let _ = crate::io::ros::ros1_to_cdr(type_name, data);
+    }
 }
 
 /// A `velodyne_msgs/msg/VelodyneScan` message, CDR and then ROS 1: its packets
@@ -316,5 +323,37 @@ pub fn pandar_scan(data: &[u8]) {
                 );
             }
         }
+    }
+}
+
+/// A `nebula_msgs/msg/NebulaPackets` message (CDR): read in place and as its serde
+/// type (the same packet bytes when both read it); each packet's vendor and model
+/// told from its bytes, and the packets cut into scans with the model's built-in
+/// table.
+pub fn nebula_packets(data: &[u8]) {
+    use crate::io::packets::{
+        NEBULA_PACKETS, PacketAssembler, PacketCalibration, PacketModel, packet_message,
+    };
+    use crate::io::ros::{MessageEncoding, NebulaPackets, decode};
+    let Ok(message) = packet_message(NEBULA_PACKETS, data, MessageEncoding::Cdr) else {
+        return;
+    };
+    if let Ok(typed) = decode::<NebulaPackets>(data) {
+        let typed = typed.packets.iter().map(|p| p.data.as_slice());
+        assert!(typed.eq(message.packets.iter().map(|(_, p)| *p)));
+    }
+    let Some(Ok(model)) =
+        (message.packets.first()).map(|(_, packet)| PacketModel::of_packet(NEBULA_PACKETS, packet))
+    else {
+        return;
+    };
+    let Ok(calibration) = PacketCalibration::for_model(model, None) else {
+        return;
+    };
+    let mut assembler =
+        PacketAssembler::new(model, &calibration).expect("a built-in table fits its model");
+    if let Ok(scans) = assembler.push_message(NEBULA_PACKETS, data, MessageEncoding::Cdr) {
+        let points = scans.iter().flat_map(|scan| &scan.points);
+        assert!(points.flat_map(|p| p.xyz_m).all(f32::is_finite));
     }
 }

@@ -122,11 +122,13 @@ fn a_pandar_log_is_a_drive_for_every_command() {
     let log = Log::open(&bag, InputFormat::Rosbag2).unwrap();
     for message in log.messages() {
         let message = message.unwrap();
-        scans.extend(
-            assembler
-                .push_message(&message.data, message.connection.encoding().unwrap())
-                .unwrap(),
-        );
+        let encoding = message.connection.encoding().unwrap();
+        for (stamp_ns, packet) in pandar_scan_message(&message.data, encoding)
+            .unwrap()
+            .packets
+        {
+            scans.extend(assembler.push(packet, stamp_ns).unwrap());
+        }
     }
     assert_eq!(
         scans.iter().map(|s| s.points.len()).collect::<Vec<_>>(),
@@ -173,4 +175,23 @@ fn a_pandar_log_is_a_drive_for_every_command() {
         arg(&xt16),
     ]));
     assert!(err.contains("2 lasers for the Pandar XT32"), "{err}");
+}
+
+#[test]
+fn ros1_pandar_scans_are_re_encoded_as_the_ros2_ones() {
+    use travmap::io::ros::MessageEncoding;
+    let seeds = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/pandar_scan");
+    for name in ["xt32_dual", "xt16_dual"] {
+        let cdr = std::fs::read(seeds.join(format!("{name}.cdr"))).unwrap();
+        let ros1 = std::fs::read(seeds.join(format!("{name}.ros1"))).unwrap();
+        let (a, b) = (
+            pandar_scan_message(&cdr, MessageEncoding::Cdr).unwrap(),
+            pandar_scan_message(&ros1, MessageEncoding::Ros1).unwrap(),
+        );
+        assert_eq!(a.packets, b.packets, "{name}");
+        let translated = travmap::io::ros::ros1_to_cdr("pandar_msgs/msg/PandarScan", &ros1)
+            .unwrap()
+            .unwrap();
+        assert_eq!(translated.data, cdr, "{name}");
+    }
 }

@@ -439,7 +439,7 @@ fn compression_options_all_round_trip() {
 fn write_odometry_drive(path: &Path) {
     use travmap::io::ros::*;
     let mut sink = McapSink::create(path, Compression::None).unwrap();
-    let covariance = Covariance6([0.0; 36]);
+    let covariance = FixedArray(vec![0.0; 36]);
     for (i, x) in [(0u64, 0.0), (1, 2.0)] {
         let stamp = 1_000_000_000 + i * 100_000_000;
         let odometry = Odometry {

@@ -274,6 +274,11 @@ fn ros1_and_ros2_scan_messages_carry_the_same_packets() {
     assert_eq!(a.stamp_ns, b.stamp_ns);
     assert_eq!(a.packets, b.packets);
     assert_eq!(a.packets.len(), 3);
+    // convert re-encodes the ROS 1 message as ROS 2, byte for byte the CDR one.
+    let translated = travmap::io::ros::ros1_to_cdr("velodyne_msgs/msg/VelodyneScan", &ros1)
+        .unwrap()
+        .unwrap();
+    assert_eq!(translated.data, cdr);
     // A message cut inside a packet is an error, not a shorter packet.
     let err = scan_message(&cdr[..cdr.len() - 10], MessageEncoding::Cdr)
         .err()

@@ -22,7 +22,7 @@
 //! synchronisation still finds its poses, and the firings keep their spacing.
 
 use super::ros::MessageEncoding;
-use super::velodyne::{PacketScan, ScanMessage, VelodynePoint, packets_message};
+use super::velodyne::{PacketField, PacketScan, ScanMessage, VelodynePoint, packets_message};
 
 /// The message type that carries Hesai packets.
 pub const PANDAR_SCAN: &str = "pandar_msgs/msg/PandarScan";
@@ -35,7 +35,11 @@ pub fn pandar_scan_message(
     data: &[u8],
     encoding: MessageEncoding,
 ) -> Result<ScanMessage<'_>, String> {
-    packets_message(data, encoding, PANDAR_PACKET_DATA_BYTES, true)
+    packets_message(
+        data,
+        encoding,
+        PacketField::FixedSized(PANDAR_PACKET_DATA_BYTES),
+    )
 }
 
 /// Blocks per packet.
@@ -322,20 +326,6 @@ impl HesaiAssembler {
 
     pub fn model(&self) -> HesaiModel {
         self.model
-    }
-
-    /// Adds the packets of a PandarScan message; the scans they complete.
-    pub fn push_message(
-        &mut self,
-        data: &[u8],
-        encoding: MessageEncoding,
-    ) -> Result<Vec<PacketScan>, String> {
-        let message = pandar_scan_message(data, encoding)?;
-        let mut scans = Vec::new();
-        for (stamp_ns, packet) in message.packets {
-            scans.extend(self.push(packet, stamp_ns)?);
-        }
-        Ok(scans)
     }
 
     /// Adds a packet recorded at `stamp_ns` (0: unknown, the sensor's clock is the

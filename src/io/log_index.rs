@@ -10,7 +10,9 @@ use serde::Deserialize;
 use super::hesai::{HesaiAssembler, HesaiCalibration, PANDAR_SCAN};
 use super::log::Log;
 use super::log_message::{LogMessage, ros2_type_name};
-use super::packets::{PacketCalibration, PacketModel, packet_message};
+use super::packets::{
+    NEBULA_PACKETS, PACKET_MESSAGES, PacketCalibration, PacketModel, packet_message,
+};
 use super::ros::{Header, MessageEncoding, Odometry, TfMessage, Transform};
 use super::transforms::{TransformTree, isometry};
 use super::velodyne::{DecoderSettings, ScanCutter, VELODYNE_SCAN};
@@ -174,18 +176,17 @@ impl Contents {
             log_time_ns: message.log_time_ns,
             problem,
         };
-        let known = matches!(
-            schema.as_ref(),
-            POINT_CLOUD
-                | VELODYNE_SCAN
-                | PANDAR_SCAN
-                | TF_MESSAGE
-                | TF1_MESSAGE
-                | ODOMETRY
-                | CAMERA_INFO
-                | COMPRESSED_IMAGE
-                | RAW_IMAGE
-        );
+        let known = PACKET_MESSAGES.contains(&schema.as_ref())
+            || matches!(
+                schema.as_ref(),
+                POINT_CLOUD
+                    | TF_MESSAGE
+                    | TF1_MESSAGE
+                    | ODOMETRY
+                    | CAMERA_INFO
+                    | COMPRESSED_IMAGE
+                    | RAW_IMAGE
+            );
         let encoding = match connection.encoding() {
             Some(encoding) => encoding,
             None if known => {
@@ -213,7 +214,7 @@ impl Contents {
                     .or_insert_with(|| (header.header.frame_id.clone(), Vec::new()));
                 entry.1.push(stamp);
             }
-            VELODYNE_SCAN | PANDAR_SCAN => {
+            VELODYNE_SCAN | PANDAR_SCAN | NEBULA_PACKETS => {
                 let scan = packet_message(&schema, data, encoding).map_err(problem)?;
                 let Some(first) = scan.packets.first() else {
                     return Ok(());
@@ -397,10 +398,8 @@ impl Contents {
                 .topics
                 .iter()
                 .filter(|(_, s)| {
-                    matches!(
-                        ros2_type_name(s).as_ref(),
-                        POINT_CLOUD | VELODYNE_SCAN | PANDAR_SCAN
-                    )
+                    let type_name = ros2_type_name(s);
+                    type_name == POINT_CLOUD || PACKET_MESSAGES.contains(&type_name.as_ref())
                 })
                 .map(|(t, _)| t.clone())
                 .collect(),

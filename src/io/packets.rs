@@ -1,6 +1,7 @@
-//! LiDAR packet topics whatever the vendor: Velodyne's `VelodyneScan` and Hesai's
-//! `PandarScan`, each with its model (read from the packets), its calibration and
-//! its scan assembler, behind one face for the log index and the drive's frames.
+//! LiDAR packet topics whatever the vendor: Velodyne's `VelodyneScan`, Hesai's
+//! `PandarScan` and nebula's vendor-neutral `NebulaPackets`, each with its model
+//! (read from the packets), its calibration and its scan assembler, behind one face
+//! for the log index and the drive's frames.
 
 use std::path::Path;
 
@@ -9,12 +10,20 @@ use super::hesai::{
 };
 use super::ros::MessageEncoding;
 use super::velodyne::{
-    Calibration, Decoder, DecoderSettings, PacketScan, ScanAssembler, ScanMessage, VELODYNE_SCAN,
-    VelodyneModel, scan_message,
+    Calibration, Decoder, DecoderSettings, PacketField, PacketScan, ScanAssembler, ScanMessage,
+    VELODYNE_SCAN, VelodyneModel, packets_message, scan_message,
 };
 
+/// nebula's packet message, of any sensor: `std_msgs/Header header`,
+/// `NebulaPacket[] packets` of `builtin_interfaces/Time stamp`, `uint8[] data`.
+pub const NEBULA_PACKETS: &str = "nebula_msgs/msg/NebulaPackets";
+
 /// The message types that carry packets.
-pub const PACKET_MESSAGES: [&str; 2] = [VELODYNE_SCAN, PANDAR_SCAN];
+pub const PACKET_MESSAGES: [&str; 3] = [VELODYNE_SCAN, PANDAR_SCAN, NEBULA_PACKETS];
+
+/// Hesai packets begin with this (its start of packet, 0xEE 0xFF); Velodyne's with a
+/// block flag (0xFF 0xEE).
+const HESAI_START: [u8; 2] = [0xEE, 0xFF];
 
 /// A LiDAR whose packets travmap decodes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -24,12 +33,17 @@ pub enum PacketModel {
 }
 
 impl PacketModel {
-    /// The model of a packet of a message of type `message_type`.
+    /// The model of a packet of a message of type `message_type`; a NebulaPackets
+    /// packet is told apart by its first bytes.
     pub fn of_packet(message_type: &str, packet: &[u8]) -> Result<Self, String> {
-        if message_type == PANDAR_SCAN {
-            HesaiModel::of_packet(packet).map(Self::Hesai)
-        } else {
-            VelodyneModel::of_packet(packet).map(Self::Velodyne)
+        let hesai = match message_type {
+            PANDAR_SCAN => true,
+            NEBULA_PACKETS => packet.starts_with(&HESAI_START),
+            _ => false,
+        };
+        match hesai {
+            true => HesaiModel::of_packet(packet).map(Self::Hesai),
+            false => VelodyneModel::of_packet(packet).map(Self::Velodyne),
         }
     }
 
@@ -47,10 +61,10 @@ pub fn packet_message<'a>(
     data: &'a [u8],
     encoding: MessageEncoding,
 ) -> Result<ScanMessage<'a>, String> {
-    if message_type == PANDAR_SCAN {
-        pandar_scan_message(data, encoding)
-    } else {
-        scan_message(data, encoding)
+    match message_type {
+        PANDAR_SCAN => pandar_scan_message(data, encoding),
+        NEBULA_PACKETS => packets_message(data, encoding, PacketField::Sequence),
+        _ => scan_message(data, encoding),
     }
 }
 
@@ -110,15 +124,22 @@ impl PacketAssembler {
         })
     }
 
-    /// Adds the packets of a message; the scans they complete.
+    /// Adds the packets of a message of type `message_type`; the scans they complete.
     pub fn push_message(
         &mut self,
+        message_type: &str,
         data: &[u8],
         encoding: MessageEncoding,
     ) -> Result<Vec<PacketScan>, String> {
-        match self {
-            Self::Velodyne(assembler) => assembler.push_message(data, encoding),
-            Self::Hesai(assembler) => assembler.push_message(data, encoding),
+        let message = packet_message(message_type, data, encoding)?;
+        let mut scans = Vec::new();
+        for (stamp_ns, packet) in message.packets {
+            let scan = match self {
+                Self::Velodyne(assembler) => assembler.push(packet, stamp_ns)?,
+                Self::Hesai(assembler) => assembler.push(packet, stamp_ns)?,
+            };
+            scans.extend(scan);
         }
+        Ok(scans)
     }
 }

@@ -264,14 +264,24 @@ pub struct Odometry {
     pub twist: TwistWithCovariance,
 }
 
-/// A `float64[36]`: serde derives arrays only up to 32, CDR writes it as 36 values.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Covariance6(pub [f64; 36]);
+/// A `float64[36]` (a 6 x 6 covariance, row-major).
+pub type Covariance6 = FixedArray<f64, 36>;
 
-impl Serialize for Covariance6 {
+/// A ROS fixed-length array `T[N]`: serde derives arrays only up to 32; CDR and ROS 1
+/// write it as N values and no length. Holds exactly N values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FixedArray<T, const N: usize>(pub Vec<T>);
+
+impl<T: Serialize, const N: usize> Serialize for FixedArray<T, N> {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        use serde::ser::SerializeTuple;
-        let mut tuple = serializer.serialize_tuple(36)?;
+        use serde::ser::{Error, SerializeTuple};
+        if self.0.len() != N {
+            return Err(S::Error::custom(format!(
+                "{} values in an array of {N}",
+                self.0.len()
+            )));
+        }
+        let mut tuple = serializer.serialize_tuple(N)?;
         for v in &self.0 {
             tuple.serialize_element(v)?;
         }
@@ -279,29 +289,73 @@ impl Serialize for Covariance6 {
     }
 }
 
-impl<'de> Deserialize<'de> for Covariance6 {
+impl<'de, T: Deserialize<'de>, const N: usize> Deserialize<'de> for FixedArray<T, N> {
     fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        struct Values;
-        impl<'de> serde::de::Visitor<'de> for Values {
-            type Value = Covariance6;
+        struct Values<T, const N: usize>(std::marker::PhantomData<T>);
+        impl<'de, T: Deserialize<'de>, const N: usize> serde::de::Visitor<'de> for Values<T, N> {
+            type Value = FixedArray<T, N>;
             fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str("36 float64 values")
+                write!(f, "{N} values")
             }
             fn visit_seq<A: serde::de::SeqAccess<'de>>(
                 self,
                 mut seq: A,
-            ) -> Result<Covariance6, A::Error> {
-                let mut out = [0.0; 36];
-                for (i, v) in out.iter_mut().enumerate() {
-                    *v = seq
-                        .next_element()?
-                        .ok_or_else(|| serde::de::Error::invalid_length(i, &self))?;
+            ) -> Result<FixedArray<T, N>, A::Error> {
+                let mut out = Vec::with_capacity(N);
+                for i in 0..N {
+                    let value = seq.next_element()?;
+                    out.push(value.ok_or_else(|| serde::de::Error::invalid_length(i, &self))?);
                 }
-                Ok(Covariance6(out))
+                Ok(FixedArray(out))
             }
         }
-        deserializer.deserialize_tuple(36, Values)
+        deserializer.deserialize_tuple(N, Values::<T, N>(std::marker::PhantomData))
     }
+}
+
+/// `velodyne_msgs/msg/VelodyneScan`: a turn's raw packets. Read in place for
+/// decoding ([`super::velodyne::scan_message`]); this type re-encodes ROS 1 scans as
+/// ROS 2.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VelodyneScan {
+    pub header: Header,
+    pub packets: Vec<VelodynePacket>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VelodynePacket {
+    pub stamp: Time,
+    pub data: FixedArray<u8, 1206>,
+}
+
+/// `pandar_msgs/msg/PandarScan`: Hesai packets, each the first `size` bytes of
+/// `data` (read in place by [`super::hesai::pandar_scan_message`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PandarScan {
+    pub header: Header,
+    pub packets: Vec<PandarPacket>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PandarPacket {
+    pub stamp: Time,
+    pub data: FixedArray<u8, 1500>,
+    pub size: u32,
+}
+
+/// `nebula_msgs/msg/NebulaPackets`: nebula's packets of any sensor (read in place by
+/// [`super::packets::packet_message`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NebulaPackets {
+    pub header: Header,
+    pub packets: Vec<NebulaPacket>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NebulaPacket {
+    pub stamp: Time,
+    #[serde(with = "serde_bytes")]
+    pub data: Vec<u8>,
 }
 
 /// `travmap_msgs/msg/FrameMetrics`: travmap's per-frame result (schema in `schemas/`).
@@ -363,6 +417,21 @@ ros_message!(
     "nav_msgs__OccupancyGrid.msg"
 );
 ros_message!(
+    VelodyneScan,
+    "velodyne_msgs/msg/VelodyneScan",
+    "velodyne_msgs__VelodyneScan.msg"
+);
+ros_message!(
+    PandarScan,
+    "pandar_msgs/msg/PandarScan",
+    "pandar_msgs__PandarScan.msg"
+);
+ros_message!(
+    NebulaPackets,
+    "nebula_msgs/msg/NebulaPackets",
+    "nebula_msgs__NebulaPackets.msg"
+);
+ros_message!(
     FrameMetrics,
     "travmap_msgs/msg/FrameMetrics",
     "travmap_msgs__FrameMetrics.msg"
@@ -421,6 +490,8 @@ pub fn ros1_to_cdr(type_name: &str, data: &[u8]) -> Option<Result<Ros2Message, S
         "sensor_msgs/msg/CameraInfo" => translate::<CameraInfo>(data),
         "sensor_msgs/msg/CompressedImage" => translate::<CompressedImage>(data),
         "sensor_msgs/msg/Image" => translate::<Image>(data),
+        "velodyne_msgs/msg/VelodyneScan" => translate::<VelodyneScan>(data),
+        "pandar_msgs/msg/PandarScan" => translate::<PandarScan>(data),
         _ => return None,
     })
 }

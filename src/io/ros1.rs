@@ -337,6 +337,8 @@ mod tests {
             "sensor_msgs__CameraInfo.msg",
             "nav_msgs__Odometry.msg",
             "tf2_msgs__TFMessage.msg",
+            "velodyne_msgs__VelodyneScan.msg",
+            "pandar_msgs__PandarScan.msg",
         ] {
             let fields = |path: std::path::PathBuf| -> Vec<String> {
                 std::fs::read_to_string(&path)

@@ -17,17 +17,27 @@ pub struct ScanMessage<'a> {
 /// Reads a VelodyneScan (`Header header`, `VelodynePacket[] packets` of
 /// `time stamp`, `uint8[1206] data`) without copying its packets.
 pub fn scan_message(data: &[u8], encoding: MessageEncoding) -> Result<ScanMessage<'_>, String> {
-    packets_message(data, encoding, PACKET_BYTES, false)
+    packets_message(data, encoding, PacketField::Fixed(PACKET_BYTES))
 }
 
-/// Reads a message of a header and packets (`time stamp`, `uint8[data_bytes] data`,
-/// then with `sized` a `uint32 size`: the packet is the first `size` bytes), as
-/// Velodyne's and Hesai's scan messages are, without copying the packets.
+/// How a packet message holds each packet's bytes, after its `time stamp`.
+#[derive(Clone, Copy)]
+pub(crate) enum PacketField {
+    /// `uint8[N] data`: the packet (Velodyne's).
+    Fixed(usize),
+    /// `uint8[N] data`, `uint32 size`: the packet is the first `size` bytes (Hesai's).
+    FixedSized(usize),
+    /// `uint8[] data` (nebula's).
+    Sequence,
+}
+
+/// Reads a message of a header and packets (`time stamp`, then the packet as
+/// `field` says), as Velodyne's, Hesai's and nebula's packet messages are, without
+/// copying the packets.
 pub(crate) fn packets_message(
     data: &[u8],
     encoding: MessageEncoding,
-    data_bytes: usize,
-    sized: bool,
+    field: PacketField,
 ) -> Result<ScanMessage<'_>, String> {
     let mut reader = Reader {
         data,
@@ -52,19 +62,31 @@ pub(crate) fn packets_message(
     };
     let frame_id = String::from_utf8_lossy(name).into_owned();
     let count = reader.u32()? as usize;
-    if count > data.len() / data_bytes {
+    // A packet takes at least its stamp and its length.
+    let least_bytes = match field {
+        PacketField::Fixed(bytes) | PacketField::FixedSized(bytes) => bytes,
+        PacketField::Sequence => 12,
+    };
+    if count > data.len() / least_bytes {
         return Err(format!("{count} packets claimed in {} bytes", data.len()));
     }
     let mut packets = Vec::with_capacity(count);
     for _ in 0..count {
         let stamp = reader.stamp(encoding)?;
-        let mut packet = reader.bytes(data_bytes)?;
-        if sized {
-            let size = reader.u32()? as usize;
-            packet = packet.get(..size).ok_or_else(|| {
-                format!("a packet of size {size} in a field of {data_bytes} bytes")
-            })?;
-        }
+        let packet = match field {
+            PacketField::Fixed(bytes) => reader.bytes(bytes)?,
+            PacketField::FixedSized(bytes) => {
+                let packet = reader.bytes(bytes)?;
+                let size = reader.u32()? as usize;
+                packet
+                    .get(..size)
+                    .ok_or_else(|| format!("a packet of size {size} in a field of {bytes} bytes"))?
+            }
+            PacketField::Sequence => {
+                let length = reader.u32()? as usize;
+                reader.bytes(length)?
+            }
+        };
         packets.push((stamp, packet));
     }
     Ok(ScanMessage {

@@ -30,7 +30,7 @@ mod scans;
 
 pub use calibration::Calibration;
 pub use decoder::{Decoder, DecoderSettings, VelodynePoint};
-pub(crate) use message::packets_message;
+pub(crate) use message::{PacketField, packets_message};
 pub use message::{ScanMessage, VELODYNE_SCAN, scan_message};
 pub use packet::{PACKET_BYTES, VelodyneModel};
 pub use scans::{PacketScan, ScanAssembler, ScanCutter};

@@ -1,9 +1,7 @@
 //! A stream of Velodyne packets cut into scans at a cut angle.
 
 use super::decoder::{Decoder, VelodynePoint};
-use super::message::scan_message;
 use super::packet::{BLOCK_BYTES, BLOCKS, CENTIDEGREES, VelodyneModel};
-use crate::io::ros::MessageEncoding;
 
 /// Where a stream of packets is cut into scans: nebula's rule, on the azimuths of
 /// each packet's first and last block only (the index pass needs no points).
@@ -66,20 +64,6 @@ impl ScanAssembler {
             points: Vec::new(),
             stamp_ns: None,
         }
-    }
-
-    /// Adds the packets of a VelodyneScan message; the scans they complete.
-    pub fn push_message(
-        &mut self,
-        data: &[u8],
-        encoding: MessageEncoding,
-    ) -> Result<Vec<PacketScan>, String> {
-        let message = scan_message(data, encoding)?;
-        let mut scans = Vec::new();
-        for (stamp_ns, packet) in message.packets {
-            scans.extend(self.push(packet, stamp_ns)?);
-        }
-        Ok(scans)
     }
 
     /// Adds a packet; the scan it completes, if it does.
