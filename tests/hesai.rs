@@ -195,3 +195,41 @@ fn ros1_pandar_scans_are_re_encoded_as_the_ros2_ones() {
         assert_eq!(translated.data, cdr, "{name}");
     }
 }
+
+/// The log index cuts scans without decoding their points: the same scans, stamped
+/// the same, as decoding them all.
+#[test]
+fn scans_cut_for_their_stamps_alone_are_the_decoded_scans() {
+    for (bag, model) in [
+        ("xt32/1673400677802009732", HesaiModel::PandarXt32),
+        ("xt16/1732848127890747768", HesaiModel::PandarXt16),
+    ] {
+        let calibration = HesaiCalibration::builtin(model);
+        let mut decoding = HesaiAssembler::new(model, &calibration).unwrap();
+        let mut cutting = HesaiAssembler::new(model, &calibration)
+            .unwrap()
+            .stamps_only();
+        let (mut decoded, mut cut) = (Vec::new(), Vec::new());
+        for message in Log::open(&nebula_fixture(bag), InputFormat::Rosbag2)
+            .unwrap()
+            .messages()
+        {
+            let message = message.unwrap();
+            let encoding = message.connection.encoding().unwrap();
+            for (stamp_ns, packet) in pandar_scan_message(&message.data, encoding)
+                .unwrap()
+                .packets
+            {
+                decoded.extend(decoding.push(packet, stamp_ns).unwrap());
+                cut.extend(cutting.push(packet, stamp_ns).unwrap());
+            }
+        }
+        assert!(decoded.len() >= 3, "{bag}");
+        assert!(decoded.iter().all(|scan| !scan.points.is_empty()));
+        assert!(cut.iter().all(|scan| scan.points.is_empty()));
+        let stamps = |scans: &[travmap::io::velodyne::PacketScan]| -> Vec<u64> {
+            scans.iter().map(|scan| scan.stamp_ns).collect()
+        };
+        assert_eq!(stamps(&cut), stamps(&decoded), "{bag}");
+    }
+}

@@ -1,7 +1,9 @@
 //! `travmap bench --tools`: the subcommands themselves (`convert`, `annotate`,
 //! `dataset`, `adapt`) run as child processes of this executable on the bench's input, on one
-//! thread and on all cores; frames/s, MB/s written and the child's peak memory.
-//! Unlike the method table these include the disk, decoding, compression and writing.
+//! thread and on all cores; frames/s, MB/s written, times real time and the child's
+//! peak memory. Unlike the method table these include the disk, decoding,
+//! compression and writing. On a log of LiDAR packets the convert row is the decode
+//! row: packets cut into scans and written as PointCloud2.
 
 use std::ffi::OsString;
 use std::io::{Read, Write};
@@ -36,6 +38,9 @@ struct ToolSpec {
     /// The file it writes, in the temporary directory.
     output_name: &'static str,
 }
+
+/// The inputs `convert` reads (a log converted whole).
+const CONVERTIBLE: [&str; 3] = ["kitti", "log", "packets"];
 
 /// The file the `convert` row writes and the `Converted` rows read.
 const CONVERTED: &str = "converted.mcap";
@@ -89,6 +94,12 @@ const ROWS: [ToolSpec; 7] = [
 ];
 
 impl ToolSpec {
+    /// Whether this row converts the bench's input (of `given_kind`), a log, whole.
+    fn converts_whole_log(&self, given_kind: &str) -> bool {
+        let log = matches!(given_kind, "log" | "packets");
+        self.tool == "convert" && matches!(self.input, ToolInput::Given) && log
+    }
+
     /// The file this row's tool reads (`given` of `given_kind`, or the MCAP the
     /// convert row wrote), or why the row is skipped.
     fn input<'a>(
@@ -98,9 +109,11 @@ impl ToolSpec {
         converted: Option<&'a Path>,
     ) -> std::result::Result<&'a Path, String> {
         match self.input {
-            ToolInput::Given if self.tool == "convert" && given_kind != "kitti" => Err(format!(
-                "convert is timed on KITTI input only, not on {given_kind} input"
-            )),
+            ToolInput::Given if self.tool == "convert" && !CONVERTIBLE.contains(&given_kind) => {
+                Err(format!(
+                    "convert is timed on KITTI input and logs, not on {given_kind} input"
+                ))
+            }
             ToolInput::Given => Ok(given),
             ToolInput::Converted => converted
                 .ok_or_else(|| "needs the MCAP the convert row writes (KITTI input)".into()),
@@ -108,16 +121,19 @@ impl ToolSpec {
     }
 
     /// The command line of this row's tool reading `input` into `output`, quiet:
-    /// the bench's `--frames` for its own input; the configuration and how to read
-    /// logs for every tool that takes them (`convert` takes none); the model for
+    /// the bench's `--frames` for its own input (not a log's convert: a log is
+    /// converted whole); the configuration and how to read logs for every tool that
+    /// takes them (`convert` only the LiDAR topics and calibrations); the model for
     /// `annotate`, and as the prior for `adapt`.
     fn arguments(
         &self,
         input: &Path,
         output: &Path,
         inputs: &Inputs,
+        given_kind: &str,
         model: Option<&Path>,
     ) -> Vec<OsString> {
+        let whole_log = self.converts_whole_log(given_kind);
         let mut arguments: Vec<OsString> = vec![
             self.tool.into(),
             input.into(),
@@ -125,7 +141,7 @@ impl ToolSpec {
             output.into(),
             "-q".into(),
         ];
-        if let (ToolInput::Given, Some(frames)) = (self.input, &inputs.frames) {
+        if let (ToolInput::Given, Some(frames), false) = (self.input, &inputs.frames, whole_log) {
             let end = match frames.end {
                 usize::MAX => String::new(),
                 end => end.to_string(),
@@ -134,6 +150,7 @@ impl ToolSpec {
             arguments.extend(["--frames".into(), range.into()]);
         }
         match (self.tool, self.input) {
+            ("convert", _) if whole_log => arguments.extend(inputs.sensor_arguments()),
             ("convert", _) => {}
             (_, ToolInput::Given) => arguments.extend(inputs.reading_arguments()),
             (_, ToolInput::Converted) => arguments.extend(inputs.settings.as_arguments()),
@@ -163,6 +180,8 @@ pub struct ToolTiming {
     frames_per_second: f64,
     /// Bytes of the output file (1 MB = 10^6 bytes) per second of wall time.
     megabytes_per_second: f64,
+    /// The frames' recorded time per second of wall time; None without stamps.
+    real_time: Option<f64>,
     /// The child's peak resident set (`ru_maxrss`), MiB; None where the platform
     /// does not report it.
     peak_rss_mib: Option<f64>,
@@ -192,8 +211,10 @@ pub struct ToolRow {
     input: &'static str,
     /// `annotate`: whether the input's messages were copied through.
     passthrough: Option<bool>,
-    /// Frames the tool read: the bench's selection.
+    /// Frames the tool read: the bench's selection (a log's every frame for
+    /// convert), and the time they span as recorded.
     frames: usize,
+    recorded_s: Option<f64>,
     #[serde(flatten)]
     outcome: ToolOutcome,
 }
@@ -221,26 +242,33 @@ pub fn bench_tools(
     let all_cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let directory = TemporaryDirectory::create()?;
     let given = selection.source.path();
-    let given_kind = match selection.source.recording {
+    let given_kind = match &selection.source.recording {
         Recording::Kitti(..) => "kitti",
+        Recording::Log(drive) if drive.packet_model().is_some() => "packets",
         Recording::Log(..) => "log",
         Recording::Scans(..) => "scans",
         Recording::Site(..) => "site",
     };
-    let frames = selection.source.frames_in(&selection.frames).len();
+    let source = &selection.source;
+    let selected = source.frames_in(&selection.frames);
     let mut converted: Option<PathBuf> = None;
     let mut rows = Vec::new();
     for spec in &ROWS {
         let output = directory.0.join(spec.output_name);
+        let frames = match spec.converts_whole_log(given_kind) {
+            true => source.frames(),
+            false => selected.clone(),
+        };
+        let recorded_s = source.recorded_seconds(&frames);
         let outcome = match spec.input(given, given_kind, converted.as_deref()) {
             Err(skipped) => ToolOutcome::Skipped { skipped },
             Ok(input) => {
-                let arguments = spec.arguments(input, &output, inputs, model);
+                let arguments = spec.arguments(input, &output, inputs, given_kind, model);
                 let time = |threads| -> Result<ToolTiming> {
                     let runs = (0..repeats.max(1))
                         .map(|_| run_child(&executable, &arguments, threads, &output))
                         .collect::<Result<Vec<_>>>()?;
-                    Ok(ToolTiming::of(&runs, threads, frames))
+                    Ok(ToolTiming::of(&runs, threads, frames.len(), recorded_s))
                 };
                 let (one_thread, all_cores) = (time(1)?, time(all_cores)?);
                 ToolOutcome::Timed {
@@ -254,14 +282,16 @@ pub fn bench_tools(
             ToolInput::Given => given_kind,
             ToolInput::Converted => "mcap",
         };
-        if spec.tool == "convert" && matches!(outcome, ToolOutcome::Timed { .. }) {
-            converted = Some(output);
+        // The MCAP rows read KITTI converted; a log converted is the log again.
+        if spec.tool == "convert" && given_kind == "kitti" {
+            converted = matches!(outcome, ToolOutcome::Timed { .. }).then_some(output);
         }
         rows.push(ToolRow {
             tool: spec.tool,
             input: input_kind,
             passthrough: spec.passthrough,
-            frames,
+            frames: frames.len(),
+            recorded_s,
             outcome,
         });
     }
@@ -283,25 +313,30 @@ pub fn print_tools_table(
             ToolOutcome::Skipped { .. } => None,
         })
         .unwrap_or_else(|| "all".into());
-    let frames = rows.first().map_or(0, |row| row.frames);
+    let frames = (rows.iter().map(|row| row.frames)).min().unwrap_or(0);
     writeln!(
         out,
-        "tools on {input} ({frames} frames; each a child process; median of {repeats} runs; wall time from start to exit; the child's peak RSS):"
+        "tools on {input} ({frames} frames; a log's convert: all of them; each a child process; median of {repeats} runs; wall time from start to exit; x real time: recorded time / wall time; the child's peak RSS):"
     )?;
     writeln!(
         out,
-        "{:<34} {:>17} {:>17} {:>17} {:>7}",
-        "tool input", "frames/s", "MB/s written", "peak RSS MiB", "speedup"
+        "{:<34} {:>17} {:>17} {:>17} {:>17} {:>7}",
+        "tool input", "frames/s", "x real time", "MB/s written", "peak RSS MiB", "speedup"
     )?;
     writeln!(
         out,
-        "{:<34} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7}",
-        "", "1 thr", all_cores, "1 thr", all_cores, "1 thr", all_cores, ""
+        "{:<34} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7}",
+        "", "1 thr", all_cores, "1 thr", all_cores, "1 thr", all_cores, "1 thr", all_cores, ""
     )?;
     let rss = |timing: &ToolTiming| {
         timing
             .peak_rss_mib
             .map_or("-".to_string(), |mib| format!("{mib:.0}"))
+    };
+    let real_time = |timing: &ToolTiming| {
+        timing
+            .real_time
+            .map_or("-".to_string(), |times| format!("{times:.1}"))
     };
     for row in rows {
         let label = row.label();
@@ -312,9 +347,11 @@ pub fn print_tools_table(
                 speedup,
             } => writeln!(
                 out,
-                "{label:<34} {:>8.1} {:>8.1} {:>8.1} {:>8.1} {:>8} {:>8} {:>6.2}x",
+                "{label:<34} {:>8.1} {:>8.1} {:>8} {:>8} {:>8.1} {:>8.1} {:>8} {:>8} {:>6.2}x",
                 one_thread.frames_per_second,
                 all_cores.frames_per_second,
+                real_time(one_thread),
+                real_time(all_cores),
                 one_thread.megabytes_per_second,
                 all_cores.megabytes_per_second,
                 rss(one_thread),
@@ -336,8 +373,9 @@ struct ChildRun {
 }
 
 impl ToolTiming {
-    /// Medians of `runs` on `threads` threads, each over `frames` frames.
-    fn of(runs: &[ChildRun], threads: usize, frames: usize) -> Self {
+    /// Medians of `runs` on `threads` threads, each over `frames` frames recorded
+    /// over `recorded_s`.
+    fn of(runs: &[ChildRun], threads: usize, frames: usize, recorded_s: Option<f64>) -> Self {
         let median = |values: Vec<f64>| Spread::of(&values).median;
         let wall_s = median(runs.iter().map(|r| r.wall_s).collect());
         let output_bytes = median(runs.iter().map(|r| r.output_bytes as f64).collect());
@@ -347,6 +385,7 @@ impl ToolTiming {
             wall_s,
             frames_per_second: frames as f64 / wall_s,
             megabytes_per_second: output_bytes * 1e-6 / wall_s,
+            real_time: recorded_s.map(|recorded_s| recorded_s / wall_s),
             peak_rss_mib: (!rss.is_empty()).then(|| median(rss)),
         }
     }
@@ -533,6 +572,7 @@ mod tests {
                     Path::new(input),
                     Path::new("out"),
                     &line.inputs,
+                    "kitti",
                     Some(Path::new("m.json")),
                 )
                 .iter()
@@ -542,9 +582,23 @@ mod tests {
         };
         assert_eq!(command(0, "seq"), "convert seq -o out -q --frames 2..5");
         let open_ended = Line::parse_from(["bench", "seq", "--frames", "3.."]);
-        let arguments =
-            ROWS[0].arguments(Path::new("seq"), Path::new("out"), &open_ended.inputs, None);
+        let arguments = ROWS[0].arguments(
+            Path::new("seq"),
+            Path::new("out"),
+            &open_ended.inputs,
+            "kitti",
+            None,
+        );
         assert_eq!(arguments[5..], ["--frames", "3.."]);
+        // A log is converted whole, with its LiDAR topics and calibrations.
+        let log = ROWS[0].arguments(
+            Path::new("d.mcap"),
+            Path::new("out"),
+            &line.inputs,
+            "packets",
+            None,
+        );
+        assert_eq!(log[4..], ["-q", "--cloud-topic", "/points"]);
         assert_eq!(
             command(2, "seq"),
             "annotate seq -o out -q --frames 2..5 --cloud-topic /points --set grid.size_m=16 --model m.json --no-passthrough"

@@ -276,6 +276,11 @@ impl Inputs {
         })
     }
 
+    /// The flags that give a child travmap the LiDAR topics and calibrations.
+    pub fn sensor_arguments(&self) -> Vec<OsString> {
+        flags(self.sensors.arguments())
+    }
+
     /// The flags that make a child travmap read an input as this command does
     /// (`bench --tools`): the log's topics and world frame, the scan rate and the
     /// configuration; not `--frames`, which the caller adds where it applies.

@@ -272,6 +272,8 @@ pub struct HesaiAssembler {
     last_azimuth: Vec<f32>,
     current: usize,
     started: bool,
+    /// False: scans are cut and stamped but hold no points (the log index's pass).
+    decode_points: bool,
 }
 
 impl HesaiAssembler {
@@ -321,7 +323,17 @@ impl HesaiAssembler {
             last_azimuth: vec![0.0; lasers],
             current: 0,
             started: false,
+            decode_points: true,
         })
+    }
+
+    /// This assembler cutting and stamping scans without decoding their points:
+    /// the same scans, empty, for a pass that wants only their stamps.
+    pub fn stamps_only(self) -> Self {
+        Self {
+            decode_points: false,
+            ..self
+        }
     }
 
     pub fn model(&self) -> HesaiModel {
@@ -373,6 +385,9 @@ impl HesaiAssembler {
             let group_ns = packet_ns.saturating_add_signed(offset_ns(first_block, 0));
             if let Some(scan) = self.cut(block_rad, group_ns, to_log_clock_ns) {
                 completed = Some(scan);
+            }
+            if !self.decode_points {
+                continue;
             }
             for laser in 0..lasers {
                 let azimuth = block_rad + self.azimuth_offset_rad[laser];

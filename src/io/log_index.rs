@@ -236,7 +236,7 @@ impl Contents {
                             };
                             let assembler =
                                 HesaiAssembler::new(hesai, &calibration).map_err(problem)?;
-                            PacketCut::Hesai(Box::new(assembler))
+                            PacketCut::Hesai(Box::new(assembler.stamps_only()))
                         }
                     };
                     self.packet_topics.insert(topic.clone(), (model, cut));

@@ -234,6 +234,16 @@ impl RosDrive {
     }
 
     /// Frame numbers: the clouds' order on their topic.
+    /// The model of the cloud topic's LiDAR, when it carries packets.
+    pub fn packet_model(&self) -> Option<PacketModel> {
+        self.packets.as_ref().map(|(model, _)| *model)
+    }
+
+    /// The stamp of cloud `index`, when the drive has it.
+    pub fn stamp_ns(&self, index: usize) -> Option<u64> {
+        self.stamps_ns.get(index).copied()
+    }
+
     pub fn frame_count(&self) -> usize {
         self.stamps_ns.len()
     }

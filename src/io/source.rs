@@ -196,6 +196,21 @@ impl Source {
         }
     }
 
+    /// The time `frames` (ascending) span as recorded: from the first stamp to the
+    /// last, plus the median period between them; None for a source without stamps
+    /// (folders of scans, site clouds) or fewer than two frames.
+    pub fn recorded_seconds(&self, frames: &[usize]) -> Option<f64> {
+        let stamp_ns = |frame: usize| match &self.recording {
+            Recording::Kitti(s) => s.stamp_ns(frame).ok(),
+            Recording::Log(d) => d.stamp_ns(frame),
+            Recording::Scans(..) | Recording::Site(..) => None,
+        };
+        let stamps: Vec<u64> = frames.iter().map(|&f| stamp_ns(f)).collect::<Option<_>>()?;
+        let (first, last) = (*stamps.first()?, *stamps.last()?);
+        (stamps.len() > 1)
+            .then(|| (last - first + super::merged_clouds::median_period_ns(&stamps)) as f64 * 1e-9)
+    }
+
     /// All frame numbers, ascending.
     pub fn frames(&self) -> Vec<usize> {
         self.frames_in(&(0..usize::MAX))
