@@ -259,11 +259,19 @@ fn bench_tools_times_every_subcommand_as_a_child_process() {
     assert_eq!(kinds, expected, "{doc}");
     for row in rows {
         assert_eq!(row["frames"], 6, "{row}");
+        // Six scans about 0.1 s apart (times.txt: 0.0 to 0.518 s) span 0.62 s.
+        let recorded_s = row["recorded_s"].as_f64().unwrap();
+        assert!((recorded_s - 0.62).abs() < 0.01, "{row}");
         assert!(row.get("skipped").is_none(), "{row}");
         for (timing, threads) in [(&row["one_thread"], Some(1)), (&row["all_cores"], None)] {
             let rate = |key: &str| timing[key].as_f64().unwrap();
             assert!(rate("frames_per_second") > 0.0, "{row}");
             assert!(rate("megabytes_per_second") > 0.0, "{row}");
+            let real_time = recorded_s / rate("wall_s");
+            assert!(
+                (rate("real_time") - real_time).abs() < 1e-9 * real_time,
+                "{row}"
+            );
             if let Some(threads) = threads {
                 assert_eq!(timing["threads"], threads, "{row}");
             }

@@ -233,3 +233,25 @@ fn scans_cut_for_their_stamps_alone_are_the_decoded_scans() {
         assert_eq!(stamps(&cut), stamps(&decoded), "{bag}");
     }
 }
+
+/// `bench --tools` on a packet log: its convert row is the decode row (the whole
+/// log, packets cut into scans and written as PointCloud2), in times real time.
+#[test]
+fn bench_tools_times_decoding_a_packet_log() {
+    let bag = nebula_fixture("xt32/1673400677802009732");
+    let args = ["bench", common::arg(&bag), "--repeats", "1"];
+    let doc = common::json_summary(&[&args[..], &["--tools", "--tool-repeats", "1"]].concat());
+    let rows = doc["tools"].as_array().unwrap();
+    let convert = &rows[0];
+    assert_eq!(
+        (&convert["tool"], &convert["input"]),
+        (&"convert".into(), &"packets".into())
+    );
+    assert_eq!(convert["frames"], 4, "{convert}");
+    assert!(convert["recorded_s"].as_f64().unwrap() > 0.0, "{convert}");
+    assert!(
+        convert["one_thread"]["real_time"].as_f64().unwrap() > 0.0,
+        "{convert}"
+    );
+    assert!(rows[3]["skipped"].is_string(), "{}", rows[3]);
+}
