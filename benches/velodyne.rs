@@ -1,6 +1,6 @@
 //! `cargo bench --bench velodyne`: LiDAR packets decoded and cut into scans on one
 //! thread, on nebula's test logs (`fixtures/nebula/`: Velodyne VLP-32C and VLP-16,
-//! Hesai Pandar XT32 and XT16): the median time per packet and per second of
+//! Hesai Pandar XT32, XT16, 40P, 64 and QT64): the median time per packet and per second of
 //! recording, and the real-time factor (seconds of recording decoded per second).
 //! Asserts nothing about time.
 
@@ -44,6 +44,21 @@ fn main() {
             PacketModel::Hesai(HesaiModel::PandarXt16),
             PANDAR_SCAN,
             "xt16/1732848127890747768",
+        ),
+        (
+            PacketModel::Hesai(HesaiModel::Pandar40p),
+            PANDAR_SCAN,
+            "40p/1673400149412331409",
+        ),
+        (
+            PacketModel::Hesai(HesaiModel::Pandar64),
+            PANDAR_SCAN,
+            "64/1673403880599376836",
+        ),
+        (
+            PacketModel::Hesai(HesaiModel::PandarQt64),
+            PANDAR_SCAN,
+            "qt64/1673401195788312575",
         ),
     ] {
         let log = Log::open(&fixtures.join(bag), InputFormat::Rosbag2).unwrap();

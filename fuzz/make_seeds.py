@@ -203,6 +203,9 @@ def main() -> None:
     for name, db in [
         ("xt32_dual", nebula / "xt32/1673400677802009732/1673400677802009732_0.db3"),
         ("xt16_dual", nebula / "xt16/1732848127890747768/1732848127890747768_0.db3"),
+        ("p40_dual", nebula / "40p/1673400149412331409/1673400149412331409_0.db3"),
+        ("p64_dual", nebula / "64/1673403880599376836/1673403880599376836_0.db3"),
+        ("qt64_dual", nebula / "qt64/1673401195788312575/1673401195788312575_0.db3"),
     ]:
         scans = packet_scans(db, 1500, sized=True)
         seed("nebula_packets", f"{name}.cdr", scans.pop("nebula"))

@@ -77,6 +77,39 @@ fn xt16_dual_return_packets_decode_to_nebulas_points() {
 }
 
 #[test]
+fn pandar_40p_packets_decode_to_nebulas_points() {
+    let (truth, decoded, before) = decode_like_nebula(
+        "40p/1673400149412331409",
+        "40p/1673400149711850138.pcd",
+        HesaiModel::Pandar40p,
+    );
+    assert_eq!(before, 3);
+    point_for_point("Pandar 40P", &truth, &decoded, 1e-4);
+}
+
+#[test]
+fn pandar_64_packets_decode_to_nebulas_points() {
+    let (truth, decoded, before) = decode_like_nebula(
+        "64/1673403880599376836",
+        "64/1673403880898440686.pcd",
+        HesaiModel::Pandar64,
+    );
+    assert_eq!(before, 3);
+    point_for_point("Pandar 64", &truth, &decoded, 1e-4);
+}
+
+#[test]
+fn pandar_qt64_packets_decode_to_nebulas_points() {
+    let (truth, decoded, before) = decode_like_nebula(
+        "qt64/1673401195788312575",
+        "qt64/1673401196087570870.pcd",
+        HesaiModel::PandarQt64,
+    );
+    assert_eq!(before, 3);
+    point_for_point("Pandar QT64", &truth, &decoded, 1e-4);
+}
+
+#[test]
 fn the_packets_name_their_model_and_a_mismatch_is_refused() {
     let log = Log::open(
         &nebula_fixture("xt16/1732848127890747768"),
@@ -181,7 +214,7 @@ fn a_pandar_log_is_a_drive_for_every_command() {
 fn ros1_pandar_scans_are_re_encoded_as_the_ros2_ones() {
     use travmap::io::ros::MessageEncoding;
     let seeds = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/pandar_scan");
-    for name in ["xt32_dual", "xt16_dual"] {
+    for name in ["xt32_dual", "xt16_dual", "p40_dual", "p64_dual", "qt64_dual"] {
         let cdr = std::fs::read(seeds.join(format!("{name}.cdr"))).unwrap();
         let ros1 = std::fs::read(seeds.join(format!("{name}.ros1"))).unwrap();
         let (a, b) = (
@@ -203,6 +236,9 @@ fn scans_cut_for_their_stamps_alone_are_the_decoded_scans() {
     for (bag, model) in [
         ("xt32/1673400677802009732", HesaiModel::PandarXt32),
         ("xt16/1732848127890747768", HesaiModel::PandarXt16),
+        ("40p/1673400149412331409", HesaiModel::Pandar40p),
+        ("64/1673403880599376836", HesaiModel::Pandar64),
+        ("qt64/1673401195788312575", HesaiModel::PandarQt64),
     ] {
         let calibration = HesaiCalibration::builtin(model);
         let mut decoding = HesaiAssembler::new(model, &calibration).unwrap();

@@ -87,8 +87,11 @@ fn nebula_packets_are_the_vendors_drive(bag: &str, model: &str) {
     assert_eq!(first.connection.schema_name, NEBULA_PACKETS);
     same_packets(&bag, &nebula, model);
 
-    let (recorded, _) = json_records(&success(travmap(&["run", arg(&bag), "--json"])));
-    let (rewrapped, _) = json_records(&success(travmap(&["run", arg(&nebula), "--json"])));
+    // Each scan alone: a log's first scan is partial (the 40P's holds 152 points,
+    // too few to register).
+    let run = |log: &Path| travmap(&["run", arg(log), "--poses", "none", "--json"]);
+    let (recorded, _) = json_records(&success(run(&bag)));
+    let (rewrapped, _) = json_records(&success(run(&nebula)));
     assert!(!recorded.is_empty());
     assert_eq!(recorded.len(), rewrapped.len());
     for (a, b) in recorded.iter().zip(&rewrapped) {
@@ -114,6 +117,12 @@ fn nebula_packets_of_a_pandar_are_its_pandar_scans() {
     nebula_packets_are_the_vendors_drive("xt32/1673400677802009732", "Pandar XT32");
 }
 
+/// A 40P packet begins `FF EE`, as a Velodyne block does: its length tells them apart.
+#[test]
+fn nebula_packets_of_a_pandar_40p_are_not_taken_for_velodyne_ones() {
+    nebula_packets_are_the_vendors_drive("40p/1673400149412331409", "Pandar 40P");
+}
+
 #[test]
 fn the_fuzz_seeds_are_nebula_packets_of_each_model() {
     use travmap::io::ros::MessageEncoding;
@@ -123,6 +132,9 @@ fn the_fuzz_seeds_are_nebula_packets_of_each_model() {
         ("vlp32c", "VLP-32C"),
         ("xt16_dual", "Pandar XT16"),
         ("xt32_dual", "Pandar XT32"),
+        ("p40_dual", "Pandar 40P"),
+        ("p64_dual", "Pandar 64"),
+        ("qt64_dual", "Pandar QT64"),
     ] {
         let data = std::fs::read(seeds.join(format!("{name}.cdr"))).unwrap();
         let message = packet_message(NEBULA_PACKETS, &data, MessageEncoding::Cdr).unwrap();

@@ -21,10 +21,6 @@ pub const NEBULA_PACKETS: &str = "nebula_msgs/msg/NebulaPackets";
 /// The message types that carry packets.
 pub const PACKET_MESSAGES: [&str; 3] = [VELODYNE_SCAN, PANDAR_SCAN, NEBULA_PACKETS];
 
-/// Hesai packets begin with this (its start of packet, 0xEE 0xFF); Velodyne's with a
-/// block flag (0xFF 0xEE).
-const HESAI_START: [u8; 2] = [0xEE, 0xFF];
-
 /// A LiDAR whose packets travmap decodes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PacketModel {
@@ -33,17 +29,23 @@ pub enum PacketModel {
 }
 
 impl PacketModel {
-    /// The model of a packet of a message of type `message_type`; a NebulaPackets
-    /// packet is told apart by its first bytes.
+    /// The model of a packet of a message of type `message_type`. A NebulaPackets
+    /// packet is Hesai's if Hesai's header and length fit it (a Pandar 40P begins
+    /// `FF EE` as Velodyne's blocks do, but is 1,262 bytes to their 1,206), else
+    /// Velodyne's.
     pub fn of_packet(message_type: &str, packet: &[u8]) -> Result<Self, String> {
-        let hesai = match message_type {
-            PANDAR_SCAN => true,
-            NEBULA_PACKETS => packet.starts_with(&HESAI_START),
-            _ => false,
-        };
-        match hesai {
-            true => HesaiModel::of_packet(packet).map(Self::Hesai),
-            false => VelodyneModel::of_packet(packet).map(Self::Velodyne),
+        match message_type {
+            PANDAR_SCAN => HesaiModel::of_packet(packet).map(Self::Hesai),
+            NEBULA_PACKETS => HesaiModel::of_packet(packet)
+                .map(Self::Hesai)
+                .or_else(|hesai| {
+                    VelodyneModel::of_packet(packet)
+                        .map(Self::Velodyne)
+                        .map_err(|velodyne| {
+                            format!("neither Hesai's ({hesai}) nor Velodyne's ({velodyne})")
+                        })
+                }),
+            _ => VelodyneModel::of_packet(packet).map(Self::Velodyne),
         }
     }
 
