@@ -214,7 +214,13 @@ fn a_pandar_log_is_a_drive_for_every_command() {
 fn ros1_pandar_scans_are_re_encoded_as_the_ros2_ones() {
     use travmap::io::ros::MessageEncoding;
     let seeds = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/pandar_scan");
-    for name in ["xt32_dual", "xt16_dual", "p40_dual", "p64_dual", "qt64_dual"] {
+    for name in [
+        "xt32_dual",
+        "xt16_dual",
+        "p40_dual",
+        "p64_dual",
+        "qt64_dual",
+    ] {
         let cdr = std::fs::read(seeds.join(format!("{name}.cdr"))).unwrap();
         let ros1 = std::fs::read(seeds.join(format!("{name}.ros1"))).unwrap();
         let (a, b) = (
