@@ -6,6 +6,7 @@ pub mod adapt;
 pub mod annotate;
 pub mod bench;
 pub mod bench_tools;
+mod child_runs;
 pub mod config;
 pub mod convert;
 pub mod crossval;

@@ -7,9 +7,18 @@ use nalgebra::{Isometry3, Point3};
 
 use super::cloud::{CloudPoints, cloud_points};
 use super::log_message::LogMessage;
+use super::packets::{PacketCalibration, PacketModel};
 use super::ros::PointCloud2;
-use super::ros_drive::MergedSensor;
 use crate::error::{Error, Result};
+
+/// Another sensor's topic merged into the frames' scans.
+pub(super) struct MergedSensor {
+    pub(super) topic: String,
+    /// The frame its clouds are in.
+    pub(super) frame: String,
+    /// When it carries LiDAR packets: their model and calibration.
+    pub(super) packets: Option<(PacketModel, PacketCalibration)>,
+}
 
 /// A cloud of a merged topic waiting for its scan: its stamp, the topic's place in
 /// [`super::ros_drive::RosDrive`]'s `merged`, and the cloud.

@@ -18,22 +18,13 @@ use super::log::Log;
 use super::log_index::{CameraSource, LogIndex};
 pub use super::log_index::{DriveOptions, LidarCalibrations, MergedTopics};
 use super::log_message::LogMessage;
-use super::merged_clouds::median_period_ns;
+use super::merged_clouds::{MergedSensor, median_period_ns};
 use super::packets::{PacketCalibration, PacketModel};
 use super::skips::SkipLog;
 use super::transforms::TransformTree;
 use crate::error::{Error, Result};
 use crate::frame::CameraImage;
 use crate::posing::{Posing, decide};
-
-/// Another sensor's topic merged into the frames' scans.
-pub(super) struct MergedSensor {
-    pub(super) topic: String,
-    /// The frame its clouds are in.
-    pub(super) frame: String,
-    /// When it carries LiDAR packets: their model and calibration.
-    pub(super) packets: Option<(PacketModel, PacketCalibration)>,
-}
 
 /// An image is paired with a cloud when their stamps are at most this far apart.
 pub(super) const IMAGE_PAIRING_NS: u64 = 50_000_000;

@@ -1,0 +1,259 @@
+//! Each Hesai model's packet: its [`Layout`], how it is told from its bytes, when
+//! its lasers fire, and the packet's time.
+
+/// Hesai models with a decoder.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HesaiModel {
+    PandarXt32,
+    PandarXt16,
+    Pandar40p,
+    Pandar64,
+    PandarQt64,
+}
+
+/// Where a model's distance unit is: a header byte (mm), or fixed.
+#[derive(Clone, Copy)]
+pub(super) enum DistanceUnit {
+    HeaderByte(usize),
+    FixedMm(u8),
+}
+
+/// A model's packet, as nebula's packet structs lay it out (offsets in bytes).
+pub(super) struct Layout {
+    pub(super) lasers: usize,
+    pub(super) blocks: usize,
+    /// Bytes before the first block.
+    pub(super) header: usize,
+    /// Bytes of a block before its units; the azimuth is the last two of them.
+    pub(super) block_prefix: usize,
+    /// Bytes of one laser's return.
+    pub(super) unit: usize,
+    /// The least length nebula reads (some firmware appends a sequence number).
+    pub(super) packet: usize,
+    /// In the tail: the return mode, the date (6 bytes: year, month, day, hour,
+    /// minute, second) and the microseconds (u32).
+    pub(super) mode_at: usize,
+    pub(super) date_at: usize,
+    pub(super) micros_at: usize,
+    /// What the date's year counts from.
+    pub(super) year_base: i64,
+    pub(super) unit_mm: DistanceUnit,
+    /// The range nebula keeps, metres.
+    pub(super) range_m: (f32, f32),
+}
+
+impl Layout {
+    pub(super) fn block_bytes(&self) -> usize {
+        self.block_prefix + self.unit * self.lasers
+    }
+
+    pub(super) fn tail_at(&self) -> usize {
+        self.header + self.blocks * self.block_bytes()
+    }
+}
+
+const XT_TAIL: (usize, usize, usize) = (10, 13, 19);
+
+impl HesaiModel {
+    /// The model of a packet, from its first bytes: a 40P's blocks begin `FF EE`;
+    /// the others begin `EE FF`, then the XT's and QT64's protocol (6.1, 3.1) and
+    /// laser count, or the 64's laser and block counts. Then its length.
+    pub fn of_packet(packet: &[u8]) -> Result<Self, String> {
+        let model = match packet {
+            [0xFF, 0xEE, ..] => Self::Pandar40p,
+            [0xEE, 0xFF, 6, _, _, _, 32, 8, ..] => Self::PandarXt32,
+            [0xEE, 0xFF, 6, _, _, _, 16, 8, ..] => Self::PandarXt16,
+            [0xEE, 0xFF, 3, _, _, _, 64, 4, ..] => Self::PandarQt64,
+            [0xEE, 0xFF, 64, 6, ..] => Self::Pandar64,
+            [0xEE, 0xFF, a, b, _, _, c, d, ..] => {
+                return Err(format!(
+                    "a Hesai packet of header bytes {a} {b} .. {c} {d}: travmap decodes the Pandar XT32 and XT16 (protocol 6.1, 32 / 16 lasers, 8 blocks), QT64 (protocol 3.1, 64 lasers, 4 blocks), 64 (64 lasers, 6 blocks) and 40P"
+                ));
+            }
+            _ => {
+                return Err(format!(
+                    "a {}-byte packet without Hesai's EE FF header (or a Pandar 40P's FF EE block)",
+                    packet.len()
+                ));
+            }
+        };
+        let layout = model.layout();
+        if packet.len() < layout.packet {
+            return Err(format!(
+                "a {}-byte {} packet; it has {} bytes",
+                packet.len(),
+                model.name(),
+                layout.packet
+            ));
+        }
+        Ok(model)
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::PandarXt32 => "Pandar XT32",
+            Self::PandarXt16 => "Pandar XT16",
+            Self::Pandar40p => "Pandar 40P",
+            Self::Pandar64 => "Pandar 64",
+            Self::PandarQt64 => "Pandar QT64",
+        }
+    }
+
+    pub fn lasers(self) -> usize {
+        self.layout().lasers
+    }
+
+    pub(super) fn layout(self) -> Layout {
+        let xt = |lasers| Layout {
+            lasers,
+            blocks: 8,
+            header: 12,
+            block_prefix: 2,
+            unit: 4,
+            packet: 12 + 8 * (2 + 4 * lasers) + 28,
+            mode_at: XT_TAIL.0,
+            date_at: XT_TAIL.1,
+            micros_at: XT_TAIL.2,
+            year_base: 1900,
+            unit_mm: DistanceUnit::HeaderByte(9),
+            range_m: (0.05, 120.0),
+        };
+        match self {
+            Self::PandarXt32 => xt(32),
+            Self::PandarXt16 => xt(16),
+            Self::Pandar40p => Layout {
+                lasers: 40,
+                blocks: 10,
+                header: 0,
+                block_prefix: 4,
+                unit: 3,
+                packet: 1262,
+                mode_at: 14,
+                date_at: 16,
+                micros_at: 10,
+                year_base: 2000,
+                unit_mm: DistanceUnit::FixedMm(4),
+                range_m: (0.3, 200.0),
+            },
+            Self::Pandar64 => Layout {
+                lasers: 64,
+                blocks: 6,
+                header: 8,
+                block_prefix: 2,
+                unit: 3,
+                packet: 1194,
+                mode_at: 14,
+                date_at: 16,
+                micros_at: 10,
+                year_base: 2000,
+                unit_mm: DistanceUnit::HeaderByte(5),
+                range_m: (0.3, 200.0),
+            },
+            Self::PandarQt64 => Layout {
+                lasers: 64,
+                blocks: 4,
+                header: 12,
+                block_prefix: 2,
+                unit: 4,
+                packet: 1072,
+                mode_at: 16,
+                date_at: 18,
+                micros_at: 12,
+                year_base: 1900,
+                unit_mm: DistanceUnit::HeaderByte(9),
+                range_m: (0.1, 60.0),
+            },
+        }
+    }
+
+    /// When laser `laser` of block `block` fires, ns from the packet's time, with
+    /// `returns` returns per firing (nebula's firing-time tables, which follow the
+    /// manuals).
+    pub(super) fn firing_offset_ns(self, block: usize, returns: usize, laser: usize) -> i64 {
+        let blocks = self.layout().blocks;
+        let before_last = ((blocks - block - 1) / returns) as i64;
+        match self {
+            Self::PandarXt32 => 5_632 - 50_000 * before_last + 368 + 1_512 * laser as i64,
+            Self::PandarXt16 => 5_632 - 50_000 * before_last + 368 + 3_024 * laser as i64,
+            Self::Pandar40p => -28_580 - 55_560 * before_last + P40_FIRING_NS[laser],
+            Self::Pandar64 => -42_580 - 55_560 * before_last + P64_FIRING_NS[laser],
+            Self::PandarQt64 => {
+                25_710 + 500_000 * (block / returns) as i64 / 3 + QT64_FIRING_NS[laser]
+            }
+        }
+    }
+}
+
+/// The returns a packet's return mode byte says each firing has.
+pub(super) fn returns_of(mode: u8) -> Result<usize, String> {
+    match mode {
+        0x33 | 0x34 | 0x37 | 0x38 => Ok(1),
+        0x39..=0x3c | 0x3e => Ok(2),
+        0x3d => Ok(3),
+        other => Err(format!(
+            "return mode 0x{other:02x} is not one Hesai defines"
+        )),
+    }
+}
+
+/// The UTC time of a packet, ns: the tail's date and microseconds.
+pub(super) fn packet_time_ns(tail: &[u8], layout: &Layout) -> Result<u64, String> {
+    let date = &tail[layout.date_at..layout.date_at + 6];
+    let [year, month, day, hour, minute, second] = [0, 1, 2, 3, 4, 5].map(|i| date[i]);
+    if !(1..=12).contains(&month)
+        || !(1..=31).contains(&day)
+        || hour > 23
+        || minute > 59
+        || second > 60
+    {
+        return Err(format!(
+            "a packet dated {}-{month}-{day} {hour}:{minute}:{second}",
+            layout.year_base + i64::from(year)
+        ));
+    }
+    let at = layout.micros_at;
+    let microseconds = u32::from_le_bytes([tail[at], tail[at + 1], tail[at + 2], tail[at + 3]]);
+    // Days from the civil date (Howard Hinnant's algorithm), as timegm does.
+    let (y, m) = (layout.year_base + i64::from(year), i64::from(month));
+    let y = if m <= 2 { y - 1 } else { y };
+    let era = y.div_euclid(400);
+    let year_of_era = y - era * 400;
+    let day_of_year = (153 * (if m > 2 { m - 3 } else { m + 9 }) + 2) / 5 + i64::from(day) - 1;
+    let day_of_era = year_of_era * 365 + year_of_era / 4 - year_of_era / 100 + day_of_year;
+    let days = era * 146_097 + day_of_era - 719_468;
+    let seconds =
+        days * 86_400 + i64::from(hour) * 3_600 + i64::from(minute) * 60 + i64::from(second);
+    u64::try_from(seconds)
+        .map(|s| s * 1_000_000_000 + u64::from(microseconds) * 1_000)
+        .map_err(|_| "a packet dated before 1970".to_string())
+}
+
+/// The Pandar 40P's firing time of each laser, ns (nebula's `pandar_40.hpp`).
+const P40_FIRING_NS: [i64; 40] = [
+    -42_220, -28_470, -16_040, -3_620, -45_490, -31_740, -47_460, -54_670, -20_620, -33_710,
+    -40_910, -8_190, -20_620, -27_160, -50_730, -8_190, -14_740, -36_980, -45_490, -52_700,
+    -23_890, -31_740, -38_950, -11_470, -18_650, -25_190, -48_760, -6_230, -12_770, -35_010,
+    -21_920, -9_500, -43_520, -29_770, -17_350, -4_920, -42_220, -28_470, -16_040, -3_620,
+];
+
+/// The Pandar 64's (`pandar_64.hpp`).
+const P64_FIRING_NS: [i64; 64] = [
+    -23_180, -21_876, -20_572, -19_268, -17_964, -16_660, -11_444, -46_796, -7_532, -36_956,
+    -50_732, -54_668, -40_892, -44_828, -31_052, -34_988, -48_764, -52_700, -38_924, -42_860,
+    -29_084, -33_020, -46_796, -25_148, -36_956, -50_732, -27_116, -40_892, -44_828, -31_052,
+    -34_988, -48_764, -25_148, -38_924, -42_860, -29_084, -33_020, -52_700, -6_228, -54_668,
+    -15_356, -27_116, -10_140, -23_180, -4_924, -21_876, -14_052, -17_964, -8_836, -19_268, -3_620,
+    -20_572, -12_748, -16_660, -7_532, -11_444, -6_228, -15_356, -10_140, -4_924, -3_620, -14_052,
+    -8_836, -12_748,
+];
+
+/// The Pandar QT64's (`pandar_qt64.hpp`). Laser 55's 12,960 is nebula's, a digit short
+/// of its neighbours; kept, since it moves only that laser's point times.
+const QT64_FIRING_NS: [i64; 64] = [
+    12_310, 14_370, 16_430, 18_490, 20_540, 22_600, 24_660, 26_710, 29_160, 31_220, 33_280, 35_340,
+    37_390, 39_450, 41_500, 43_560, 46_610, 48_670, 50_730, 52_780, 54_840, 56_900, 58_950, 61_010,
+    63_450, 65_520, 67_580, 69_630, 71_690, 73_740, 75_800, 77_860, 80_900, 82_970, 85_020, 87_080,
+    89_140, 91_190, 93_250, 95_300, 97_750, 99_820, 101_870, 103_930, 105_980, 108_040, 110_100,
+    112_150, 115_200, 117_260, 119_320, 121_380, 123_430, 125_490, 127_540, 12_960, 132_050,
+    134_110, 136_170, 138_220, 140_280, 142_340, 144_390, 146_450,
+];
