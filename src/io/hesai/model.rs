@@ -6,6 +6,7 @@
 pub enum HesaiModel {
     PandarXt32,
     PandarXt16,
+    PandarXt32m,
     Pandar40p,
     Pandar64,
     PandarQt64,
@@ -63,11 +64,12 @@ impl HesaiModel {
             [0xFF, 0xEE, ..] => Self::Pandar40p,
             [0xEE, 0xFF, 6, _, _, _, 32, 8, ..] => Self::PandarXt32,
             [0xEE, 0xFF, 6, _, _, _, 16, 8, ..] => Self::PandarXt16,
+            [0xEE, 0xFF, 6, _, _, _, 32, 6, ..] => Self::PandarXt32m,
             [0xEE, 0xFF, 3, _, _, _, 64, 4, ..] => Self::PandarQt64,
             [0xEE, 0xFF, 64, 6, ..] => Self::Pandar64,
             [0xEE, 0xFF, a, b, _, _, c, d, ..] => {
                 return Err(format!(
-                    "a Hesai packet of header bytes {a} {b} .. {c} {d}: travmap decodes the Pandar XT32 and XT16 (protocol 6.1, 32 / 16 lasers, 8 blocks), QT64 (protocol 3.1, 64 lasers, 4 blocks), 64 (64 lasers, 6 blocks) and 40P"
+                    "a Hesai packet of header bytes {a} {b} .. {c} {d}: travmap decodes the Pandar XT32 and XT16 (protocol 6.1, 32 / 16 lasers, 8 blocks), XT32M (6.1, 32 lasers, 6 blocks), QT64 (protocol 3.1, 64 lasers, 4 blocks), 64 (64 lasers, 6 blocks) and 40P"
                 ));
             }
             _ => {
@@ -93,6 +95,7 @@ impl HesaiModel {
         match self {
             Self::PandarXt32 => "Pandar XT32",
             Self::PandarXt16 => "Pandar XT16",
+            Self::PandarXt32m => "Pandar XT32M",
             Self::Pandar40p => "Pandar 40P",
             Self::Pandar64 => "Pandar 64",
             Self::PandarQt64 => "Pandar QT64",
@@ -104,23 +107,24 @@ impl HesaiModel {
     }
 
     pub(super) fn layout(self) -> Layout {
-        let xt = |lasers| Layout {
+        let xt = |lasers, blocks, range_m| Layout {
             lasers,
-            blocks: 8,
+            blocks,
             header: 12,
             block_prefix: 2,
             unit: 4,
-            packet: 12 + 8 * (2 + 4 * lasers) + 28,
+            packet: 12 + blocks * (2 + 4 * lasers) + 28,
             mode_at: XT_TAIL.0,
             date_at: XT_TAIL.1,
             micros_at: XT_TAIL.2,
             year_base: 1900,
             unit_mm: DistanceUnit::HeaderByte(9),
-            range_m: (0.05, 120.0),
+            range_m,
         };
         match self {
-            Self::PandarXt32 => xt(32),
-            Self::PandarXt16 => xt(16),
+            Self::PandarXt32 => xt(32, 8, (0.05, 120.0)),
+            Self::PandarXt16 => xt(16, 8, (0.05, 120.0)),
+            Self::PandarXt32m => xt(32, 6, (0.5, 300.0)),
             Self::Pandar40p => Layout {
                 lasers: 40,
                 blocks: 10,
@@ -175,6 +179,14 @@ impl HesaiModel {
         match self {
             Self::PandarXt32 => 5_632 - 50_000 * before_last + 368 + 1_512 * laser as i64,
             Self::PandarXt16 => 5_632 - 50_000 * before_last + 368 + 3_024 * laser as i64,
+            // nebula counts the XT32M's groups as the XT32's 8 blocks, but for triple returns.
+            Self::PandarXt32m => {
+                let before_last = match returns {
+                    3 => (blocks - block - 1) / 3,
+                    _ => (8 - block - 1) / returns,
+                } as i64;
+                5_632 - 50_000 * before_last + 368 + 2_888 * (laser % 16) as i64
+            }
             Self::Pandar40p => -28_580 - 55_560 * before_last + P40_FIRING_NS[laser],
             Self::Pandar64 => -42_580 - 55_560 * before_last + P64_FIRING_NS[laser],
             Self::PandarQt64 => {
