@@ -162,7 +162,8 @@ impl HesaiAssembler {
             let raw_azimuth = u16::from_le_bytes([azimuth_bytes[0], azimuth_bytes[1]]);
             let block_rad =
                 (f64::from(raw_azimuth) / 100.0 * (std::f64::consts::PI / 180.0)) as f32;
-            let offset_ns = |b: usize, laser: usize| model.firing_offset_ns(b, returns, laser);
+            let offset_ns =
+                |b: usize, laser: usize| model.firing_offset_ns(blocks, b, returns, laser);
             // A scan is stamped with its first firing: the group's earliest laser.
             let first_ns = (0..lasers).map(|laser| offset_ns(first_block, laser)).min();
             let group_ns = packet_ns.saturating_add_signed(first_ns.unwrap_or(0));

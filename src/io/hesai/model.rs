@@ -170,11 +170,16 @@ impl HesaiModel {
         }
     }
 
-    /// When laser `laser` of block `block` fires, ns from the packet's time, with
-    /// `returns` returns per firing (nebula's firing-time tables, which follow the
-    /// manuals).
-    pub(super) fn firing_offset_ns(self, block: usize, returns: usize, laser: usize) -> i64 {
-        let blocks = self.layout().blocks;
+    /// When laser `laser` of block `block` of `blocks` (its layout's) fires, ns from
+    /// the packet's time, with `returns` returns per firing (nebula's firing-time
+    /// tables, which follow the manuals).
+    pub(super) fn firing_offset_ns(
+        self,
+        blocks: usize,
+        block: usize,
+        returns: usize,
+        laser: usize,
+    ) -> i64 {
         let before_last = ((blocks - block - 1) / returns) as i64;
         match self {
             Self::PandarXt32 => 5_632 - 50_000 * before_last + 368 + 1_512 * laser as i64,
