@@ -12,7 +12,7 @@ use super::bag::BagFile;
 use super::format::InputFormat;
 pub use super::log_message::{Connection, FileMap, FileMessages, LogMessage};
 use super::mcap_messages::{Damage, Messages};
-use super::mcap_records::{ChunkSpan, check_chunk_sizes};
+use super::mcap_records::check_chunk_sizes;
 use super::mcap_stored::{Release, StoredLog, stored_log};
 use super::rosbag2::{Rosbag2Directory, SqliteFile};
 use crate::error::{Error, Result};
@@ -160,11 +160,8 @@ pub struct McapFile {
     file: FileMap,
     /// The memory map, shared with chunks copied from it (see [`stored_log`]).
     map: bytes::Bytes,
-    /// See [`check_chunk_sizes`]: no record of the file is longer.
-    longest_record: usize,
     /// For a file cut short: where its last complete record ends.
     cut_at: Option<usize>,
-    chunks: Vec<ChunkSpan>,
 }
 
 impl McapFile {
@@ -180,9 +177,7 @@ impl McapFile {
             path: path.to_path_buf(),
             file,
             map,
-            longest_record: layout.longest_record,
             cut_at: layout.cut_at,
-            chunks: layout.chunks,
         })
     }
 
@@ -213,15 +208,7 @@ impl McapFile {
     fn messages(&self) -> impl Iterator<Item = std::result::Result<LogMessage, Damage>> + '_ {
         let mut connections: HashMap<u16, Arc<Connection>> = HashMap::new();
         let readable = &self.map[..self.cut_at.unwrap_or(self.map.len())];
-        let cut = self.cut_at.is_some();
-        Messages::new(
-            readable,
-            self.longest_record,
-            Some(&self.file),
-            cut,
-            &self.chunks,
-        )
-        .map(move |message| {
+        Messages::new(readable, Some(&self.file)).map(move |message| {
             let message = message?;
             let channel = &message.channel;
             let connection = connections.entry(channel.id).or_insert_with(|| {

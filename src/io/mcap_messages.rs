@@ -1,37 +1,54 @@
-//! The message pass over an MCAP file: the crate's sans-io [`LinearReader`] fed
-//! from the memory map, every record's lengths checked before it is parsed
-//! ([`check_lengths`]), and a damaged chunk stepped over rather than the end of
-//! the file.
+//! The message pass over an MCAP file: its records walked in place in the memory
+//! map, every length checked before a record is parsed ([`check_lengths`]), the
+//! chunks decompressed a batch at a time on as many threads as the pass may use,
+//! and a damaged chunk stepped over rather than the end of the file.
 
 use std::borrow::Cow;
+use std::collections::VecDeque;
+use std::io::Read;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use mcap::records::{Record, op};
-use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use mcap::{McapError, Message};
 
 use super::log_message::FileMap;
-use super::mcap_records::{ChunkSpan, check_lengths};
+use super::mcap_records::{ChunkSpan, RecordWalk, check_lengths, chunk_parts};
 
 /// Bytes a pass reads before it gives the pages behind it back.
 const RELEASE_BYTES: usize = 32 << 20;
+/// Records outside chunks queued at most before they are read (an unchunked file).
+const RECORDS_PER_BATCH: usize = 1024;
+const MAGIC: &[u8] = b"\x89MCAP0\r\n";
 
 /// The messages of `file` in file order, linked to their channels.
 pub(super) struct Messages<'a> {
-    file: &'a [u8],
-    read: usize,
-    /// The map `file` is, if it is one, and how far its pages were given back: the
-    /// reader copies what it reads, so what lies before `read` is not read again.
+    walk: RecordWalk<'a>,
+    /// The map `file` is, if it is one, and how far its pages were given back.
     map: Option<&'a FileMap>,
     released: usize,
-    reader: LinearReader,
-    options: LinearReaderOptions,
-    /// The file's chunks: a damaged one is stepped over, not the end of the file.
-    chunks: &'a [ChunkSpan],
-    /// Where reading last resumed after a damaged chunk.
-    resumed_at: usize,
+    /// The batch being read: records walked, chunks decompressed.
+    batch: VecDeque<Pending<'a>>,
+    /// Chunks per batch, each decompressed on its own thread.
+    threads: usize,
     channels: mcap::read::ChannelAccumulator<'static>,
-    past_data_end: bool,
+    /// The data section's end, or the file's, was reached.
+    walked: bool,
     done: bool,
+}
+
+enum Pending<'a> {
+    Record {
+        opcode: u8,
+        body: &'a [u8],
+    },
+    /// A chunk's records (or why they cannot be read), read on from `at`.
+    Chunk {
+        span: ChunkSpan,
+        records: Result<Cow<'a, [u8]>, String>,
+        at: usize,
+    },
+    /// Nothing can be read past this.
+    End(String),
 }
 
 /// Why a message could not be read; with `chunk`, only that chunk's messages are
@@ -43,121 +60,246 @@ pub(super) struct Damage {
 }
 
 impl<'a> Messages<'a> {
-    /// The messages of `file` (the complete records of a cut file: `cut` true reads
-    /// to its end without the summary and closing magic); `chunks` as
-    /// [`check_chunk_sizes`] found them.
-    pub(super) fn new(
-        file: &'a [u8],
-        longest_record: usize,
-        map: Option<&'a FileMap>,
-        cut: bool,
-        chunks: &'a [ChunkSpan],
-    ) -> Self {
-        // CRCs checked before a chunk's records are handed on: a damaged chunk gives
-        // no made-up messages.
-        let options = LinearReaderOptions::default()
-            .with_validate_chunk_crcs(true)
-            .with_prevalidate_chunk_crcs(true)
-            .with_record_length_limit(longest_record)
-            .with_skip_end_magic(cut)
-            .with_emit_chunks(false);
+    /// The messages of `file`: its data section, or for a cut file the complete
+    /// records `file` holds, its declared chunk sizes checked as
+    /// [`super::mcap_records::check_chunk_sizes`] does.
+    pub(super) fn new(file: &'a [u8], map: Option<&'a FileMap>) -> Self {
+        let mut batch = VecDeque::new();
+        if !file.starts_with(MAGIC) {
+            batch.push_back(Pending::End(McapError::BadMagic.to_string()));
+        }
         Self {
-            file,
-            read: 0,
+            walk: RecordWalk {
+                bytes: file,
+                offset: MAGIC.len(),
+            },
             map,
             released: 0,
-            reader: LinearReader::new_with_options(options.clone()),
-            options,
-            chunks,
-            resumed_at: 0,
+            walked: !batch.is_empty(),
+            batch,
+            threads: rayon::current_num_threads().max(1),
             channels: Default::default(),
-            past_data_end: false,
             done: false,
         }
     }
 
-    /// The damage of a failed read: the chunk being read when it failed, if any, is
-    /// stepped over; reading goes on after it with a fresh reader.
-    fn damage(&mut self, problem: String) -> Damage {
-        let read = self.read;
-        // Only forwards: a chunk that ends where reading resumed is not the culprit.
-        let resumed_at = self.resumed_at;
-        let chunk = self
-            .chunks
-            .iter()
-            .find(|chunk| {
-                chunk.bytes.start < read && read <= chunk.bytes.end && chunk.bytes.end > resumed_at
-            })
-            .cloned();
-        if let Some(chunk) = &chunk {
-            self.read = chunk.bytes.end;
-            self.resumed_at = chunk.bytes.end;
-            self.reader =
-                LinearReader::new_with_options(self.options.clone().with_skip_start_magic(true));
+    /// Walks the next records up to `threads` chunks, and decompresses those.
+    fn fill(&mut self) {
+        if let Some(map) = self.map
+            && self.walk.offset - self.released >= RELEASE_BYTES
+        {
+            map.release(self.released..self.walk.offset);
+            self.released = self.walk.offset;
         }
-        Damage { problem, chunk }
+        let mut chunks = Vec::new();
+        while !self.walked && chunks.len() < self.threads && self.batch.len() < RECORDS_PER_BATCH {
+            match self.walk.next() {
+                // A cut file's readable part ends with its last complete record.
+                None => self.walked = true,
+                Some(Err(overrun)) => {
+                    self.walked = true;
+                    self.batch.push_back(Pending::End(format!(
+                        "the record at byte {} (opcode {:#04x}) claims {} bytes, {} are left",
+                        overrun.offset, overrun.opcode, overrun.length, overrun.available
+                    )));
+                }
+                // After the data section the summary repeats schemas and channels.
+                Some(Ok((_, op::DATA_END, _))) => self.walked = true,
+                Some(Ok((offset, op::CHUNK, body))) => {
+                    let time = |at: usize| {
+                        body.get(at..at + 8)
+                            .map_or(0, |b| u64::from_le_bytes(b.try_into().unwrap_or_default()))
+                    };
+                    chunks.push(body);
+                    self.batch.push_back(Pending::Chunk {
+                        span: ChunkSpan {
+                            bytes: offset..self.walk.offset,
+                            start_ns: time(0),
+                            end_ns: time(8),
+                        },
+                        records: Ok(Cow::Borrowed(body)),
+                        at: 0,
+                    });
+                }
+                Some(Ok((_, opcode, body))) => {
+                    self.batch.push_back(Pending::Record { opcode, body })
+                }
+            }
+        }
+        let mut decompressed =
+            in_parallel(&chunks, self.threads, |body| chunk_records(body)).into_iter();
+        for pending in &mut self.batch {
+            if let Pending::Chunk { records, .. } = pending {
+                *records = decompressed.next().expect("one result per chunk");
+            }
+        }
     }
 
-    fn next_message(&mut self) -> Option<Result<Message<'static>, String>> {
+    /// The next message, or why none could be read.
+    fn next_message(&mut self) -> Option<Result<Message<'static>, Damage>> {
         loop {
-            let (opcode, data) = match self.reader.next_event()? {
-                Err(error) => return Some(Err(error.to_string())),
-                Ok(LinearReadEvent::ReadRequest(need)) => {
-                    let n = need.min(self.file.len() - self.read);
-                    self.reader
-                        .insert(n)
-                        .copy_from_slice(&self.file[self.read..self.read + n]);
-                    self.reader.notify_read(n);
-                    self.read += n;
-                    if let Some(map) = self.map
-                        && self.read - self.released >= RELEASE_BYTES
-                    {
-                        map.release(self.released..self.read);
-                        self.released = self.read;
-                    }
-                    continue;
+            if self.batch.is_empty() {
+                if self.walked {
+                    return None;
                 }
-                Ok(LinearReadEvent::Record { opcode, data }) => (opcode, data),
-            };
-            if let Err(message) = check_lengths(opcode, data) {
-                return Some(Err(message));
-            }
-            // After the data section the summary repeats schemas and channels.
-            if opcode == op::DATA_END {
-                self.past_data_end = true;
-            }
-            if self.past_data_end {
+                self.fill();
                 continue;
             }
-            let record = match mcap::parse_record(opcode, data) {
-                Ok(record) => record,
-                Err(error) => return Some(Err(error.to_string())),
-            };
-            let added = match record {
-                Record::Schema { header, data } => {
-                    self.channels.add_schema_from_slice(header, &data)
+            let read = match self.batch.pop_front()? {
+                Pending::Record { opcode, body } => {
+                    self.record(opcode, body).map_err(|problem| Damage {
+                        problem,
+                        chunk: None,
+                    })
                 }
-                Record::Channel(channel) => self.channels.add_channel(channel),
-                Record::Message { header, data } => {
-                    let Some(channel) = self.channels.get(header.channel_id) else {
-                        let error = McapError::UnknownChannel(header.sequence, header.channel_id);
-                        return Some(Err(error.to_string()));
+                Pending::End(problem) => Err(Damage {
+                    problem,
+                    chunk: None,
+                }),
+                Pending::Chunk {
+                    span,
+                    records: Err(problem),
+                    ..
+                } => Err(Damage {
+                    problem,
+                    chunk: Some(span),
+                }),
+                Pending::Chunk {
+                    span,
+                    records: Ok(records),
+                    at,
+                } => {
+                    let mut walk = RecordWalk {
+                        bytes: &records,
+                        offset: at,
                     };
-                    return Some(Ok(Message {
-                        channel,
-                        sequence: header.sequence,
-                        log_time: header.log_time,
-                        publish_time: header.publish_time,
-                        data: Cow::Owned(data.into_owned()),
-                    }));
+                    let read = match walk.next() {
+                        None if at == records.len() => continue,
+                        None => Err(McapError::UnexpectedEoc.to_string()),
+                        Some(Err(overrun)) => Err(format!(
+                            "its record at {} (opcode {:#04x}) claims {} bytes, but {} are left in the chunk",
+                            overrun.offset, overrun.opcode, overrun.length, overrun.available
+                        )),
+                        Some(Ok((_, opcode, body))) => self.record(opcode, body),
+                    };
+                    match read {
+                        Ok(message) => {
+                            let at = walk.offset;
+                            self.batch.push_front(Pending::Chunk {
+                                span,
+                                records: Ok(records),
+                                at,
+                            });
+                            Ok(message)
+                        }
+                        Err(problem) => Err(Damage {
+                            problem,
+                            chunk: Some(span),
+                        }),
+                    }
                 }
-                _ => Ok(()),
             };
-            if let Err(error) = added {
-                return Some(Err(error.to_string()));
+            match read {
+                Ok(None) => continue,
+                Ok(Some(message)) => return Some(Ok(message)),
+                Err(damage) => return Some(Err(damage)),
             }
         }
     }
+
+    /// Reads one record: a message is returned, a schema or channel remembered.
+    fn record(&mut self, opcode: u8, body: &[u8]) -> Result<Option<Message<'static>>, String> {
+        check_lengths(opcode, body)?;
+        let added = match mcap::parse_record(opcode, body).map_err(|e| e.to_string())? {
+            Record::Schema { header, data } => self.channels.add_schema_from_slice(header, &data),
+            Record::Channel(channel) => self.channels.add_channel(channel),
+            Record::Message { header, data } => {
+                let Some(channel) = self.channels.get(header.channel_id) else {
+                    let error = McapError::UnknownChannel(header.sequence, header.channel_id);
+                    return Err(error.to_string());
+                };
+                return Ok(Some(Message {
+                    channel,
+                    sequence: header.sequence,
+                    log_time: header.log_time,
+                    publish_time: header.publish_time,
+                    data: Cow::Owned(data.into_owned()),
+                }));
+            }
+            _ => Ok(()),
+        };
+        added.map(|()| None).map_err(|e| e.to_string())
+    }
+}
+
+/// A chunk's records: decompressed to the size it declares, checked against its CRC
+/// (when it has one) before any of them is read.
+fn chunk_records(body: &[u8]) -> Result<Cow<'_, [u8]>, String> {
+    let (declared, compression, data) =
+        chunk_parts(body).ok_or("its header ends before its records do")?;
+    let declared = usize::try_from(declared).map_err(|e| e.to_string())?;
+    let records = match compression {
+        "" => Cow::Borrowed(data),
+        "zstd" => Cow::Owned(
+            zstd::bulk::decompress(data, declared)
+                .map_err(|e| McapError::DecompressionError(e.to_string()).to_string())?,
+        ),
+        "lz4" => {
+            let mut out = Vec::with_capacity(declared);
+            lz4::Decoder::new(data)
+                .and_then(|decoder| decoder.take(declared as u64 + 1).read_to_end(&mut out))
+                .map_err(|e| McapError::DecompressionError(e.to_string()).to_string())?;
+            Cow::Owned(out)
+        }
+        other => return Err(McapError::UnsupportedCompression(other.to_string()).to_string()),
+    };
+    if records.len() != declared {
+        return Err(format!(
+            "its records are {} bytes uncompressed, it declares {declared}",
+            records.len()
+        ));
+    }
+    let saved = u32::from_le_bytes(body[24..28].try_into().expect("chunk_parts read past it"));
+    let calculated = crc32fast::hash(&records);
+    if saved != 0 && saved != calculated {
+        return Err(McapError::BadChunkCrc { saved, calculated }.to_string());
+    }
+    Ok(records)
+}
+
+/// `f` of every item, in order, on up to `threads` scoped threads (this one among
+/// them): not the rayon pool, which the method's frames may be keeping busy.
+fn in_parallel<T: Sync, R: Send>(
+    items: &[T],
+    threads: usize,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
+    if threads <= 1 || items.len() <= 1 {
+        return items.iter().map(f).collect();
+    }
+    let next = AtomicUsize::new(0);
+    let work = || {
+        let mut done = Vec::new();
+        loop {
+            let i = next.fetch_add(1, Ordering::Relaxed);
+            let Some(item) = items.get(i) else {
+                return done;
+            };
+            done.push((i, f(item)));
+        }
+    };
+    let mut results: Vec<(usize, R)> = std::thread::scope(|scope| {
+        let helpers: Vec<_> = (1..threads.min(items.len()))
+            .map(|_| scope.spawn(work))
+            .collect();
+        let mut results = work();
+        for helper in helpers {
+            results.extend(helper.join().expect("a decompressing thread panicked"));
+        }
+        results
+    });
+    results.sort_unstable_by_key(|&(i, _)| i);
+    results.into_iter().map(|(_, r)| r).collect()
 }
 
 impl Iterator for Messages<'_> {
@@ -169,13 +311,120 @@ impl Iterator for Messages<'_> {
         if self.done {
             return None;
         }
-        match self.next_message()? {
-            Ok(message) => Some(Ok(message)),
-            Err(problem) => {
-                let damage = self.damage(problem);
-                self.done = damage.chunk.is_none();
-                Some(Err(damage))
-            }
+        let message = self.next_message()?;
+        self.done = matches!(&message, Err(Damage { chunk: None, .. }));
+        Some(message)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An MCAP of `n` messages (payload: their index, 4 KiB of it) in chunks of
+    /// about 16 KiB.
+    fn chunked_file(n: u32, compression: Option<mcap::Compression>) -> Vec<u8> {
+        let mut writer = mcap::WriteOptions::new()
+            .compression(compression)
+            .chunk_size(Some(16 << 10))
+            .create(std::io::Cursor::new(Vec::new()))
+            .unwrap();
+        let schema = writer.add_schema("blob", "", b"").unwrap();
+        let channel = writer
+            .add_channel(schema, "/blob", "cdr", &Default::default())
+            .unwrap();
+        for i in 0..n {
+            let header = mcap::records::MessageHeader {
+                channel_id: channel,
+                sequence: i,
+                log_time: u64::from(i),
+                publish_time: u64::from(i),
+            };
+            let payload: Vec<u8> = i.to_le_bytes().iter().copied().cycle().take(4096).collect();
+            writer.write_to_known_channel(&header, &payload).unwrap();
         }
+        writer.finish().unwrap();
+        writer.into_inner().into_inner()
+    }
+
+    /// Each message's sequence number, or the damaged chunk's first byte.
+    fn read(file: &[u8], threads: usize) -> Vec<Result<u32, usize>> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            Messages::new(file, None)
+                .map(|message| match message {
+                    Ok(message) => {
+                        assert!(
+                            message
+                                .data
+                                .chunks(4)
+                                .all(|w| w == message.sequence.to_le_bytes())
+                        );
+                        Ok(message.sequence)
+                    }
+                    Err(damage) => Err(damage.chunk.expect("a chunk's damage").bytes.start),
+                })
+                .collect()
+        })
+    }
+
+    #[test]
+    fn chunks_decompressed_together_read_as_one_at_a_time() {
+        for compression in [
+            Some(mcap::Compression::Zstd),
+            Some(mcap::Compression::Lz4),
+            None,
+        ] {
+            let file = chunked_file(100, compression);
+            let one = read(&file, 1);
+            assert_eq!(one, (0..100).map(Ok).collect::<Vec<_>>());
+            assert_eq!(read(&file, 3), one);
+        }
+    }
+
+    #[test]
+    fn a_damaged_chunk_among_those_decompressed_together_is_stepped_over() {
+        let mut file = chunked_file(100, Some(mcap::Compression::Zstd));
+        let chunks: Vec<_> = RecordWalk {
+            bytes: &file,
+            offset: MAGIC.len(),
+        }
+        .map(Result::unwrap)
+        .filter(|&(_, opcode, _)| opcode == op::CHUNK)
+        .map(|(offset, _, body)| offset..offset + 9 + body.len())
+        .collect();
+        assert!(chunks.len() > 10, "{}", chunks.len());
+        let damaged = chunks[4].clone();
+        file[damaged.end - 100] ^= 0x55;
+        for threads in [1, 2, 3] {
+            let read = read(&file, threads);
+            assert_eq!(read.iter().filter(|r| r.is_err()).count(), 1);
+            assert!(read.contains(&Err(damaged.start)));
+            // Every other chunk's messages are read, in order.
+            let sequences: Vec<u32> = read.iter().filter_map(|r| r.ok()).collect();
+            assert!(sequences.windows(2).all(|w| w[0] < w[1]));
+            assert!(
+                sequences.len() > 90 && sequences.len() < 100,
+                "{}",
+                sequences.len()
+            );
+            assert!(sequences.contains(&0) && sequences.contains(&99));
+        }
+    }
+
+    #[test]
+    fn a_file_without_the_magic_is_refused() {
+        let mut file = chunked_file(3, None);
+        file[1] = b'X';
+        let damage = Messages::new(&file, None).next().unwrap().unwrap_err();
+        assert!(damage.chunk.is_none());
+        assert!(
+            damage.problem.to_lowercase().contains("magic"),
+            "{}",
+            damage.problem
+        );
     }
 }

@@ -3,11 +3,11 @@
 //!
 //! The mcap crate parses a record's strings and byte arrays by reserving each one's
 //! declared length (a u32, up to 4 GiB) before reading it, and does not bound a
-//! record's length inside a compressed chunk. So [`super::mcap_messages`] drives the
-//! crate's sans-io reader itself, with the checks that live here: the file's layout
-//! (chunks, their declared sizes, where a cut file ends), no record longer than the
-//! file allows, and every length field inside a record checked against the bytes
-//! that follow it before the record is parsed.
+//! record's length inside a compressed chunk. So [`super::mcap_messages`] walks the
+//! records itself and hands the crate one record at a time, with the checks that
+//! live here: the file's layout (its chunks' declared sizes, where a cut file ends),
+//! no record longer than the bytes that hold it, and every length field inside a
+//! record checked against the bytes that follow it before the record is parsed.
 
 use mcap::records::op;
 
@@ -129,11 +129,12 @@ const TRUSTED_CHUNK_RATIO: u64 = 64;
 const TRUSTED_CHUNK_BYTES: u64 = 64 << 20;
 
 /// A record whose length runs past the bytes that hold it.
+#[derive(Debug)]
 pub(super) struct Overrun {
-    offset: usize,
-    opcode: u8,
-    length: u64,
-    available: usize,
+    pub(super) offset: usize,
+    pub(super) opcode: u8,
+    pub(super) length: u64,
+    pub(super) available: usize,
 }
 
 /// The records of `bytes` from `offset` on, each an opcode, a u64 length and a
@@ -174,13 +175,9 @@ impl<'a> Iterator for RecordWalk<'a> {
 /// What [`check_chunk_sizes`] found of a file's layout.
 #[derive(Debug)]
 pub(super) struct Layout {
-    /// The longest record the file can hold: its own length or its largest chunk's.
-    pub(super) longest_record: usize,
     /// For a file cut short (a recorder killed before it wrote the summary, or in the
     /// middle of a record): where its last complete record ends.
     pub(super) cut_at: Option<usize>,
-    /// Every chunk of the data section, in file order.
-    pub(super) chunks: Vec<ChunkSpan>,
 }
 
 /// Where a chunk lies in the file and the log times of its messages: what a reader
@@ -200,14 +197,12 @@ pub struct ChunkSpan {
 /// ends before its data section does (no DataEnd record) is cut: its complete
 /// records are what can be read.
 pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
-    let mut longest = map.len();
     let mut walk = RecordWalk {
         bytes: map,
         offset: 8,
     };
     let mut complete = walk.offset;
     let mut data_end = false;
-    let mut chunks = Vec::new();
     // After the 8-byte magic. A malformed chunk header ends the walk, as does a
     // record header cut short.
     while let Some(record) = walk.next() {
@@ -225,13 +220,6 @@ pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
         let Some((declared, compression, records)) = chunk_parts(body) else {
             break;
         };
-        let time_at =
-            |at: usize| u64::from_le_bytes(body[at..at + 8].try_into().unwrap_or_default());
-        chunks.push(ChunkSpan {
-            bytes: offset..walk.offset,
-            start_ns: time_at(0),
-            end_ns: time_at(8),
-        });
         let present = records.len() as u64;
         let plausible = declared <= TRUSTED_CHUNK_BYTES.max(present * TRUSTED_CHUNK_RATIO);
         let actual = match compression {
@@ -256,7 +244,6 @@ pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
         if compression.is_empty() {
             check_chunk_records(records).map_err(|e| format!("chunk at byte {offset}: {e}"))?;
         }
-        longest = longest.max(usize::try_from(declared).unwrap_or(usize::MAX));
     }
     // A whole file ends with the footer and the closing magic; a recorder killed
     // after the data section leaves neither.
@@ -264,9 +251,7 @@ pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
     let footer = map.len().checked_sub(magic.len() + 29);
     let whole = map.ends_with(magic) && footer.is_some_and(|at| map[at] == op::FOOTER);
     Ok(Layout {
-        longest_record: longest,
         cut_at: (!(data_end && whole)).then_some(complete),
-        chunks,
     })
 }
 
@@ -410,13 +395,8 @@ mod tests {
             let file = one_message_file(&zeros, Some(compression));
             assert!(file.len() < 1 << 20, "{}", file.len());
             // The records may be as long as the chunk, and the message is read whole.
-            let layout = check_chunk_sizes(&file).unwrap();
-            let longest_record = layout.longest_record;
-            assert!(longest_record > 80 << 20, "{longest_record}");
-            let message = Messages::new(&file, longest_record, None, false, &layout.chunks)
-                .next()
-                .unwrap()
-                .unwrap();
+            assert!(check_chunk_sizes(&file).is_ok());
+            let message = Messages::new(&file, None).next().unwrap().unwrap();
             assert_eq!(message.data.len(), 80 << 20);
         }
     }
