@@ -105,6 +105,11 @@ impl<T> Nullable<T> {
         self.defined.push(value.is_some() as i16);
         self.values.extend(value);
     }
+
+    fn clear(&mut self) {
+        self.values.clear();
+        self.defined.clear();
+    }
 }
 
 /// The rows of one row group, by column.
@@ -139,6 +144,27 @@ impl Columns {
 
     fn len(&self) -> usize {
         self.frame.len()
+    }
+
+    /// Empties every column, keeping its buffer for the next row group: regrowing
+    /// some 80 columns from nothing for every group left the allocator's arenas
+    /// fragmented, and the process growing with the drive.
+    fn clear(&mut self) {
+        self.source.clear();
+        self.frame.clear();
+        self.stamp_ns.clear();
+        self.row.clear();
+        self.col.clear();
+        self.x_m.clear();
+        self.y_m.clear();
+        self.points.clear();
+        self.features.iter_mut().for_each(Vec::clear);
+        self.appearance.iter_mut().for_each(Vec::clear);
+        self.appearance_defined.clear();
+        self.ground_truth.clear();
+        self.predicted.clear();
+        self.footprint.clear();
+        self.pseudo_label.clear();
     }
 }
 
@@ -264,19 +290,19 @@ impl DatasetWriter {
         if rows == 0 {
             return Ok(());
         }
-        let empty = Columns::new(self.columns.features.len(), self.appearance_len);
-        let columns = std::mem::replace(&mut self.columns, empty);
+        let columns = &self.columns;
         let path = self.output_path();
         let output = &self.output;
         let fail = |e| parquet_failure(&path, output, e);
         let mut group = self.writer.next_row_group().map_err(fail)?;
         let mut index = 0;
         while let Some(mut column) = group.next_column().map_err(fail)? {
-            write_column(column.untyped(), &columns, index).map_err(fail)?;
+            write_column(column.untyped(), columns, index).map_err(fail)?;
             column.close().map_err(fail)?;
             index += 1;
         }
         group.close().map_err(fail)?;
+        self.columns.clear();
         Ok(())
     }
 
