@@ -77,7 +77,7 @@ impl RosDrive {
     pub fn read(&self, frames: &Range<usize>) -> DriveFrames<'_> {
         DriveFrames {
             drive: self,
-            stream: Box::new(self.log.messages()),
+            stream: Box::new(self.log.messages_using(1)),
             // Clouds the index left out (past a cut end) are not frames.
             frames: frames.start..frames.end.min(self.frame_count()),
             pending: None,

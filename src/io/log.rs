@@ -42,9 +42,12 @@ impl LogFile {
         }
     }
 
-    fn messages(&self) -> Box<dyn Iterator<Item = std::result::Result<LogMessage, Damage>> + '_> {
+    fn messages(
+        &self,
+        threads: usize,
+    ) -> Box<dyn Iterator<Item = std::result::Result<LogMessage, Damage>> + '_> {
         match self {
-            LogFile::Mcap(file) => Box::new(file.messages()),
+            LogFile::Mcap(file) => Box::new(file.messages(threads)),
             LogFile::Bag(file) => Box::new(file.messages().map(whole_file_damage)),
             LogFile::Sqlite(file) => Box::new(file.messages().map(whole_file_damage)),
         }
@@ -120,12 +123,20 @@ impl Log {
 
     /// Every message of every file, in order; nothing after the first error but
     /// [`Error::LogChunk`] (a damaged chunk), after which the messages that follow it.
+    /// As many chunks of an MCAP file are decompressed at once as there are threads.
     pub fn messages(&self) -> impl Iterator<Item = Result<LogMessage>> + '_ {
+        self.messages_using(rayon::current_num_threads())
+    }
+
+    /// [`Self::messages`], up to `threads` chunks decompressed at once: one beside
+    /// the method's frames, which keep the cores busy (more only held more chunks
+    /// in memory there, for no gain).
+    pub fn messages_using(&self, threads: usize) -> impl Iterator<Item = Result<LogMessage>> + '_ {
         let mut failed = false;
         self.files
             .iter()
-            .flat_map(|file| {
-                file.messages()
+            .flat_map(move |file| {
+                file.messages(threads)
                     .enumerate()
                     .map(move |(ordinal, message)| match message {
                         Ok(message) => Ok(message),
@@ -205,10 +216,13 @@ impl McapFile {
         Some(log)
     }
 
-    fn messages(&self) -> impl Iterator<Item = std::result::Result<LogMessage, Damage>> + '_ {
+    fn messages(
+        &self,
+        threads: usize,
+    ) -> impl Iterator<Item = std::result::Result<LogMessage, Damage>> + '_ {
         let mut connections: HashMap<u16, Arc<Connection>> = HashMap::new();
         let readable = &self.map[..self.cut_at.unwrap_or(self.map.len())];
-        Messages::new(readable, Some(&self.file)).map(move |message| {
+        Messages::new(readable, Some(&self.file), threads).map(move |message| {
             let message = message?;
             let channel = &message.channel;
             let connection = connections.entry(channel.id).or_insert_with(|| {

@@ -6,7 +6,6 @@
 use std::borrow::Cow;
 use std::collections::VecDeque;
 use std::io::Read;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use mcap::records::{Record, op};
 use mcap::{McapError, Message};
@@ -30,6 +29,8 @@ pub(super) struct Messages<'a> {
     batch: VecDeque<Pending<'a>>,
     /// Chunks per batch, each decompressed on its own thread.
     threads: usize,
+    /// Buffers of chunks read, for the next ones: no allocation per chunk.
+    spare: Vec<Vec<u8>>,
     channels: mcap::read::ChannelAccumulator<'static>,
     /// The data section's end, or the file's, was reached.
     walked: bool,
@@ -41,10 +42,11 @@ enum Pending<'a> {
         opcode: u8,
         body: &'a [u8],
     },
-    /// A chunk's records (or why they cannot be read), read on from `at`.
+    /// A chunk's records (or why they cannot be read, and the buffer that was to
+    /// hold them), read on from `at`.
     Chunk {
         span: ChunkSpan,
-        records: Result<Cow<'a, [u8]>, String>,
+        records: Result<Cow<'a, [u8]>, (String, Vec<u8>)>,
         at: usize,
     },
     /// Nothing can be read past this.
@@ -62,8 +64,9 @@ pub(super) struct Damage {
 impl<'a> Messages<'a> {
     /// The messages of `file`: its data section, or for a cut file the complete
     /// records `file` holds, its declared chunk sizes checked as
-    /// [`super::mcap_records::check_chunk_sizes`] does.
-    pub(super) fn new(file: &'a [u8], map: Option<&'a FileMap>) -> Self {
+    /// [`super::mcap_records::check_chunk_sizes`] does; up to `threads` chunks
+    /// decompressed at once.
+    pub(super) fn new(file: &'a [u8], map: Option<&'a FileMap>, threads: usize) -> Self {
         let mut batch = VecDeque::new();
         if !file.starts_with(MAGIC) {
             batch.push_back(Pending::End(McapError::BadMagic.to_string()));
@@ -77,7 +80,8 @@ impl<'a> Messages<'a> {
             released: 0,
             walked: !batch.is_empty(),
             batch,
-            threads: rayon::current_num_threads().max(1),
+            threads: threads.max(1),
+            spare: Vec::new(),
             channels: Default::default(),
             done: false,
         }
@@ -91,7 +95,9 @@ impl<'a> Messages<'a> {
             map.release(self.released..self.walk.offset);
             self.released = self.walk.offset;
         }
-        let mut chunks = Vec::new();
+        // Compressed chunks, and where they wait in the batch; stored ones are read
+        // in place.
+        let (mut chunks, mut waiting) = (Vec::new(), Vec::new());
         while !self.walked && chunks.len() < self.threads && self.batch.len() < RECORDS_PER_BATCH {
             match self.walk.next() {
                 // A cut file's readable part ends with its last complete record.
@@ -110,14 +116,21 @@ impl<'a> Messages<'a> {
                         body.get(at..at + 8)
                             .map_or(0, |b| u64::from_le_bytes(b.try_into().unwrap_or_default()))
                     };
-                    chunks.push(body);
+                    let stored = chunk_parts(body).is_some_and(|(_, c, _)| c.is_empty());
+                    let records = if stored {
+                        chunk_records(body, Vec::new())
+                    } else {
+                        waiting.push(self.batch.len());
+                        chunks.push((body, self.spare.pop().unwrap_or_default()));
+                        Ok(Cow::Borrowed(body))
+                    };
                     self.batch.push_back(Pending::Chunk {
                         span: ChunkSpan {
                             bytes: offset..self.walk.offset,
                             start_ns: time(0),
                             end_ns: time(8),
                         },
-                        records: Ok(Cow::Borrowed(body)),
+                        records,
                         at: 0,
                     });
                 }
@@ -126,11 +139,10 @@ impl<'a> Messages<'a> {
                 }
             }
         }
-        let mut decompressed =
-            in_parallel(&chunks, self.threads, |body| chunk_records(body)).into_iter();
-        for pending in &mut self.batch {
-            if let Pending::Chunk { records, .. } = pending {
-                *records = decompressed.next().expect("one result per chunk");
+        let decompressed = in_parallel(chunks, |(body, buffer)| chunk_records(body, buffer));
+        for (at, decompressed) in waiting.into_iter().zip(decompressed) {
+            if let Some(Pending::Chunk { records, .. }) = self.batch.get_mut(at) {
+                *records = decompressed;
             }
         }
     }
@@ -158,12 +170,15 @@ impl<'a> Messages<'a> {
                 }),
                 Pending::Chunk {
                     span,
-                    records: Err(problem),
+                    records: Err((problem, buffer)),
                     ..
-                } => Err(Damage {
-                    problem,
-                    chunk: Some(span),
-                }),
+                } => {
+                    self.spare.push(buffer);
+                    Err(Damage {
+                        problem,
+                        chunk: Some(span),
+                    })
+                }
                 Pending::Chunk {
                     span,
                     records: Ok(records),
@@ -174,7 +189,12 @@ impl<'a> Messages<'a> {
                         offset: at,
                     };
                     let read = match walk.next() {
-                        None if at == records.len() => continue,
+                        None if at == records.len() => {
+                            if let Cow::Owned(buffer) = records {
+                                self.spare.push(buffer);
+                            }
+                            continue;
+                        }
                         None => Err(McapError::UnexpectedEoc.to_string()),
                         Some(Err(overrun)) => Err(format!(
                             "its record at {} (opcode {:#04x}) claims {} bytes, but {} are left in the chunk",
@@ -192,10 +212,15 @@ impl<'a> Messages<'a> {
                             });
                             Ok(message)
                         }
-                        Err(problem) => Err(Damage {
-                            problem,
-                            chunk: Some(span),
-                        }),
+                        Err(problem) => {
+                            if let Cow::Owned(buffer) = records {
+                                self.spare.push(buffer);
+                            }
+                            Err(Damage {
+                                problem,
+                                chunk: Some(span),
+                            })
+                        }
                     }
                 }
             };
@@ -232,74 +257,76 @@ impl<'a> Messages<'a> {
     }
 }
 
-/// A chunk's records: decompressed to the size it declares, checked against its CRC
-/// (when it has one) before any of them is read.
-fn chunk_records(body: &[u8]) -> Result<Cow<'_, [u8]>, String> {
-    let (declared, compression, data) =
-        chunk_parts(body).ok_or("its header ends before its records do")?;
-    let declared = usize::try_from(declared).map_err(|e| e.to_string())?;
+/// A chunk's records: decompressed into `buffer` to the size the chunk declares,
+/// checked against its CRC (when it has one) before any of them is read.
+fn chunk_records(body: &[u8], mut buffer: Vec<u8>) -> Result<Cow<'_, [u8]>, (String, Vec<u8>)> {
+    let Some((declared, compression, data)) = chunk_parts(body) else {
+        return Err(("its header ends before its records do".into(), buffer));
+    };
+    let declared = usize::try_from(declared).unwrap_or(usize::MAX);
+    buffer.clear();
+    let decompressed = match compression {
+        "" => Ok(()),
+        "zstd" => buffer
+            .try_reserve_exact(declared)
+            .map_err(|e| e.to_string())
+            .and_then(|()| {
+                zstd::bulk::Decompressor::new()
+                    .and_then(|mut zstd| zstd.decompress_to_buffer(data, &mut buffer))
+                    .map_err(|e| McapError::DecompressionError(e.to_string()).to_string())
+            })
+            .map(|_| ()),
+        "lz4" => lz4::Decoder::new(data)
+            .and_then(|decoder| decoder.take(declared as u64 + 1).read_to_end(&mut buffer))
+            .map(|_| ())
+            .map_err(|e| McapError::DecompressionError(e.to_string()).to_string()),
+        other => Err(McapError::UnsupportedCompression(other.to_string()).to_string()),
+    };
+    if let Err(problem) = decompressed {
+        return Err((problem, buffer));
+    }
     let records = match compression {
         "" => Cow::Borrowed(data),
-        "zstd" => Cow::Owned(
-            zstd::bulk::decompress(data, declared)
-                .map_err(|e| McapError::DecompressionError(e.to_string()).to_string())?,
-        ),
-        "lz4" => {
-            let mut out = Vec::with_capacity(declared);
-            lz4::Decoder::new(data)
-                .and_then(|decoder| decoder.take(declared as u64 + 1).read_to_end(&mut out))
-                .map_err(|e| McapError::DecompressionError(e.to_string()).to_string())?;
-            Cow::Owned(out)
-        }
-        other => return Err(McapError::UnsupportedCompression(other.to_string()).to_string()),
+        _ => Cow::Owned(buffer),
     };
-    if records.len() != declared {
-        return Err(format!(
+    let problem = if records.len() != declared {
+        format!(
             "its records are {} bytes uncompressed, it declares {declared}",
             records.len()
-        ));
-    }
-    let saved = u32::from_le_bytes(body[24..28].try_into().expect("chunk_parts read past it"));
-    let calculated = crc32fast::hash(&records);
-    if saved != 0 && saved != calculated {
-        return Err(McapError::BadChunkCrc { saved, calculated }.to_string());
-    }
-    Ok(records)
+        )
+    } else {
+        let saved = u32::from_le_bytes(body[24..28].try_into().expect("chunk_parts read past it"));
+        let calculated = crc32fast::hash(&records);
+        if saved == 0 || saved == calculated {
+            return Ok(records);
+        }
+        McapError::BadChunkCrc { saved, calculated }.to_string()
+    };
+    let buffer = match records {
+        Cow::Owned(buffer) => buffer,
+        Cow::Borrowed(_) => Vec::new(),
+    };
+    Err((problem, buffer))
 }
 
-/// `f` of every item, in order, on up to `threads` scoped threads (this one among
-/// them): not the rayon pool, which the method's frames may be keeping busy.
-fn in_parallel<T: Sync, R: Send>(
-    items: &[T],
-    threads: usize,
-    f: impl Fn(&T) -> R + Sync,
-) -> Vec<R> {
-    if threads <= 1 || items.len() <= 1 {
-        return items.iter().map(f).collect();
-    }
-    let next = AtomicUsize::new(0);
-    let work = || {
-        let mut done = Vec::new();
-        loop {
-            let i = next.fetch_add(1, Ordering::Relaxed);
-            let Some(item) = items.get(i) else {
-                return done;
-            };
-            done.push((i, f(item)));
-        }
+/// `f` of every item, in order, each on its own scoped thread (the first on this
+/// one): not the rayon pool, which the method's frames may be keeping busy.
+fn in_parallel<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync) -> Vec<R> {
+    let mut items = items.into_iter();
+    let Some(first) = items.next() else {
+        return Vec::new();
     };
-    let mut results: Vec<(usize, R)> = std::thread::scope(|scope| {
-        let helpers: Vec<_> = (1..threads.min(items.len()))
-            .map(|_| scope.spawn(work))
-            .collect();
-        let mut results = work();
-        for helper in helpers {
-            results.extend(helper.join().expect("a decompressing thread panicked"));
-        }
+    std::thread::scope(|scope| {
+        let f = &f;
+        let others: Vec<_> = items.map(|item| scope.spawn(move || f(item))).collect();
+        let mut results = vec![f(first)];
+        results.extend(
+            others
+                .into_iter()
+                .map(|other| other.join().expect("a decompressing thread panicked")),
+        );
         results
-    });
-    results.sort_unstable_by_key(|&(i, _)| i);
-    results.into_iter().map(|(_, r)| r).collect()
+    })
 }
 
 impl Iterator for Messages<'_> {
@@ -349,26 +376,16 @@ mod tests {
 
     /// Each message's sequence number, or the damaged chunk's first byte.
     fn read(file: &[u8], threads: usize) -> Vec<Result<u32, usize>> {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
-            Messages::new(file, None)
-                .map(|message| match message {
-                    Ok(message) => {
-                        assert!(
-                            message
-                                .data
-                                .chunks(4)
-                                .all(|w| w == message.sequence.to_le_bytes())
-                        );
-                        Ok(message.sequence)
-                    }
-                    Err(damage) => Err(damage.chunk.expect("a chunk's damage").bytes.start),
-                })
-                .collect()
-        })
+        Messages::new(file, None, threads)
+            .map(|message| match message {
+                Ok(message) => {
+                    let sequence = message.sequence.to_le_bytes();
+                    assert!(message.data.chunks(4).all(|w| w == sequence));
+                    Ok(message.sequence)
+                }
+                Err(damage) => Err(damage.chunk.expect("a chunk's damage").bytes.start),
+            })
+            .collect()
     }
 
     #[test]
@@ -419,7 +436,7 @@ mod tests {
     fn a_file_without_the_magic_is_refused() {
         let mut file = chunked_file(3, None);
         file[1] = b'X';
-        let damage = Messages::new(&file, None).next().unwrap().unwrap_err();
+        let damage = Messages::new(&file, None, 1).next().unwrap().unwrap_err();
         assert!(damage.chunk.is_none());
         assert!(
             damage.problem.to_lowercase().contains("magic"),
