@@ -1,6 +1,6 @@
 //! `cargo bench --bench velodyne`: LiDAR packets decoded and cut into scans on one
 //! thread, on nebula's test logs (`fixtures/nebula/`: Velodyne VLP-32C and VLP-16,
-//! Hesai Pandar XT32, XT16, XT32M, 40P, 64 and QT64): the median time per packet and per second of
+//! Hesai Pandar XT32, XT16, XT32M, 40P, 64, QT64 and QT128): the median time per packet and per second of
 //! recording, and the real-time factor (seconds of recording decoded per second).
 //! Asserts nothing about time.
 
@@ -31,6 +31,7 @@ fn main() {
         "64/1673403880599376836",
         "qt64/1673401195788312575",
         "xt32m/1660893203042895158",
+        "qt128/1730273789074637152",
     ] {
         let log = Log::open(&fixtures.join(bag), InputFormat::Rosbag2).unwrap();
         let messages: Vec<_> = log.messages().map(Result::unwrap).collect();

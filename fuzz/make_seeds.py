@@ -207,6 +207,7 @@ def main() -> None:
         ("p64_dual", nebula / "64/1673403880599376836/1673403880599376836_0.db3"),
         ("qt64_dual", nebula / "qt64/1673401195788312575/1673401195788312575_0.db3"),
         ("xt32m_dual", nebula / "xt32m/1660893203042895158/1660893203042895158_0.db3"),
+        ("qt128_dual", nebula / "qt128/1730273789074637152/1730273789074637152_0.db3"),
     ]:
         scans = packet_scans(db, 1500, sized=True)
         seed("nebula_packets", f"{name}.cdr", scans.pop("nebula"))

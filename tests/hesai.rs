@@ -122,6 +122,19 @@ fn pandar_qt64_packets_decode_to_nebulas_points() {
     point_for_point("Pandar QT64", &truth, &decoded, 1e-4);
 }
 
+/// nebula's QT128 bag: two messages of 900 packets (dual return, last and strongest),
+/// the firing loops alternating packet by packet.
+#[test]
+fn pandar_qt128_packets_decode_to_nebulas_points() {
+    let (truth, decoded, before) = decode_like_nebula(
+        "qt128/1730273789074637152",
+        "qt128/1730273789174759609.pcd",
+        HesaiModel::PandarQt128,
+    );
+    assert_eq!(before, 1);
+    point_for_point("Pandar QT128", &truth, &decoded, 1e-4);
+}
+
 #[test]
 fn the_packets_name_their_model_and_a_mismatch_is_refused() {
     let log = Log::open(
@@ -234,6 +247,7 @@ fn ros1_pandar_scans_are_re_encoded_as_the_ros2_ones() {
         "p64_dual",
         "qt64_dual",
         "xt32m_dual",
+        "qt128_dual",
     ] {
         let cdr = std::fs::read(seeds.join(format!("{name}.cdr"))).unwrap();
         let ros1 = std::fs::read(seeds.join(format!("{name}.ros1"))).unwrap();
@@ -260,6 +274,7 @@ fn scans_cut_for_their_stamps_alone_are_the_decoded_scans() {
         ("64/1673403880599376836", HesaiModel::Pandar64),
         ("qt64/1673401195788312575", HesaiModel::PandarQt64),
         ("xt32m/1660893203042895158", HesaiModel::PandarXt32m),
+        ("qt128/1730273789074637152", HesaiModel::PandarQt128),
     ] {
         let calibration = HesaiCalibration::builtin(model);
         let mut decoding = HesaiAssembler::new(model, &calibration).unwrap();
@@ -281,7 +296,7 @@ fn scans_cut_for_their_stamps_alone_are_the_decoded_scans() {
                 cut.extend(cutting.push(packet, stamp_ns).unwrap());
             }
         }
-        assert!(decoded.len() >= 3, "{bag}");
+        assert!(decoded.len() >= 2, "{bag}");
         assert!(decoded.iter().all(|scan| !scan.points.is_empty()));
         assert!(cut.iter().all(|scan| scan.points.is_empty()));
         let stamps = |scans: &[travmap::io::velodyne::PacketScan]| -> Vec<u64> {

@@ -136,6 +136,7 @@ fn the_fuzz_seeds_are_nebula_packets_of_each_model() {
         ("p64_dual", "Pandar 64"),
         ("qt64_dual", "Pandar QT64"),
         ("xt32m_dual", "Pandar XT32M"),
+        ("qt128_dual", "Pandar QT128"),
     ] {
         let data = std::fs::read(seeds.join(format!("{name}.cdr"))).unwrap();
         let message = packet_message(NEBULA_PACKETS, &data, MessageEncoding::Cdr).unwrap();

@@ -141,6 +141,7 @@ impl HesaiAssembler {
             ));
         }
         let packet_ns = packet_time_ns(tail, layout)?;
+        let loop_flag = layout.loop_flag_at.map_or(0, |at| tail[at]);
         let to_log_clock_ns = match stamp_ns {
             0 => 0,
             stamp_ns => (i128::from(stamp_ns) - i128::from(packet_ns)) as i64,
@@ -162,10 +163,15 @@ impl HesaiAssembler {
             let raw_azimuth = u16::from_le_bytes([azimuth_bytes[0], azimuth_bytes[1]]);
             let block_rad =
                 (f64::from(raw_azimuth) / 100.0 * (std::f64::consts::PI / 180.0)) as f32;
-            let offset_ns =
-                |b: usize, laser: usize| model.firing_offset_ns(blocks, b, returns, laser);
-            // A scan is stamped with its first firing: the group's earliest laser.
-            let first_ns = (0..lasers).map(|laser| offset_ns(first_block, laser)).min();
+            let offset_ns = |b: usize, laser: usize| {
+                model.firing_offset_ns(blocks, b, returns, loop_flag, laser)
+            };
+            // A scan is stamped with its first firing: the group's earliest laser in
+            // any of its blocks (the QT128 times a group's two blocks apart).
+            let first_ns = (first_block..first_block + returns)
+                .flat_map(|b| (0..lasers).map(move |laser| (b, laser)))
+                .map(|(b, laser)| offset_ns(b, laser))
+                .min();
             let group_ns = packet_ns.saturating_add_signed(first_ns.unwrap_or(0));
             if let Some(scan) = self.cut(block_rad, group_ns, to_log_clock_ns) {
                 completed = Some(scan);

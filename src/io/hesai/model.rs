@@ -10,6 +10,7 @@ pub enum HesaiModel {
     Pandar40p,
     Pandar64,
     PandarQt64,
+    PandarQt128,
 }
 
 /// Where a model's distance unit is: a header byte (mm), or fixed.
@@ -39,6 +40,9 @@ pub(super) struct Layout {
     /// What the date's year counts from.
     pub(super) year_base: i64,
     pub(super) unit_mm: DistanceUnit,
+    /// In the tail: the mode flag, whose low bit says which of its two firing loops
+    /// a dual-return QT128 packet holds.
+    pub(super) loop_flag_at: Option<usize>,
     /// The range nebula keeps, metres.
     pub(super) range_m: (f32, f32),
 }
@@ -54,6 +58,8 @@ impl Layout {
 }
 
 const XT_TAIL: (usize, usize, usize) = (10, 13, 19);
+/// The QT128's packet without its optional 32 bytes of cyber security.
+const QT128_PACKET: usize = 12 + 2 * (2 + 4 * 128) + 4 + 17 + 34;
 
 impl HesaiModel {
     /// The model of a packet, from its first bytes: a 40P's blocks begin `FF EE`;
@@ -67,9 +73,14 @@ impl HesaiModel {
             [0xEE, 0xFF, 6, _, _, _, 32, 6, ..] => Self::PandarXt32m,
             [0xEE, 0xFF, 3, _, _, _, 64, 4, ..] => Self::PandarQt64,
             [0xEE, 0xFF, 64, 6, ..] => Self::Pandar64,
+            // The OT128 (Pandar128E3X / E4X) shares the header; its 3-byte units make
+            // its packets shorter.
+            [0xEE, 0xFF, 3, 2, _, _, 128, 2, ..] if packet.len() >= QT128_PACKET => {
+                Self::PandarQt128
+            }
             [0xEE, 0xFF, a, b, _, _, c, d, ..] => {
                 return Err(format!(
-                    "a Hesai packet of header bytes {a} {b} .. {c} {d}: travmap decodes the Pandar XT32 and XT16 (protocol 6.1, 32 / 16 lasers, 8 blocks), XT32M (6.1, 32 lasers, 6 blocks), QT64 (protocol 3.1, 64 lasers, 4 blocks), 64 (64 lasers, 6 blocks) and 40P"
+                    "a Hesai packet of header bytes {a} {b} .. {c} {d}: travmap decodes the Pandar XT32 and XT16 (protocol 6.1, 32 / 16 lasers, 8 blocks), XT32M (6.1, 32 lasers, 6 blocks), QT64 (protocol 3.1, 64 lasers, 4 blocks), QT128 (protocol 3.2, 128 lasers, 2 blocks of 4-byte units), 64 (64 lasers, 6 blocks) and 40P"
                 ));
             }
             _ => {
@@ -99,6 +110,7 @@ impl HesaiModel {
             Self::Pandar40p => "Pandar 40P",
             Self::Pandar64 => "Pandar 64",
             Self::PandarQt64 => "Pandar QT64",
+            Self::PandarQt128 => "Pandar QT128",
         }
     }
 
@@ -119,6 +131,7 @@ impl HesaiModel {
             micros_at: XT_TAIL.2,
             year_base: 1900,
             unit_mm: DistanceUnit::HeaderByte(9),
+            loop_flag_at: None,
             range_m,
         };
         match self {
@@ -137,6 +150,7 @@ impl HesaiModel {
                 micros_at: 10,
                 year_base: 2000,
                 unit_mm: DistanceUnit::FixedMm(4),
+                loop_flag_at: None,
                 range_m: (0.3, 200.0),
             },
             Self::Pandar64 => Layout {
@@ -151,6 +165,7 @@ impl HesaiModel {
                 micros_at: 10,
                 year_base: 2000,
                 unit_mm: DistanceUnit::HeaderByte(5),
+                loop_flag_at: None,
                 range_m: (0.3, 200.0),
             },
             Self::PandarQt64 => Layout {
@@ -165,19 +180,38 @@ impl HesaiModel {
                 micros_at: 12,
                 year_base: 1900,
                 unit_mm: DistanceUnit::HeaderByte(9),
+                loop_flag_at: None,
                 range_m: (0.1, 60.0),
+            },
+            // After the blocks: a CRC (4 bytes) and the functional safety part (17),
+            // then the tail (nebula's `pandar_qt128.hpp`).
+            Self::PandarQt128 => Layout {
+                lasers: 128,
+                blocks: 2,
+                header: 12,
+                block_prefix: 2,
+                unit: 4,
+                packet: QT128_PACKET,
+                mode_at: 21 + 12,
+                date_at: 21 + 15,
+                micros_at: 21 + 21,
+                year_base: 1900,
+                unit_mm: DistanceUnit::HeaderByte(9),
+                loop_flag_at: Some(21 + 5),
+                range_m: (0.3, 300.0),
             },
         }
     }
 
     /// When laser `laser` of block `block` of `blocks` (its layout's) fires, ns from
-    /// the packet's time, with `returns` returns per firing (nebula's firing-time
-    /// tables, which follow the manuals).
+    /// the packet's time, with `returns` returns per firing and the tail's
+    /// `loop_flag` (nebula's firing-time tables, which follow the manuals).
     pub(super) fn firing_offset_ns(
         self,
         blocks: usize,
         block: usize,
         returns: usize,
+        loop_flag: u8,
         laser: usize,
     ) -> i64 {
         let before_last = ((blocks - block - 1) / returns) as i64;
@@ -196,6 +230,20 @@ impl HesaiModel {
             Self::Pandar64 => -42_580 - 55_560 * before_last + P64_FIRING_NS[laser],
             Self::PandarQt64 => {
                 25_710 + 500_000 * (block / returns) as i64 / 3 + QT64_FIRING_NS[laser]
+            }
+            // Two firing loops take turns: by block in single return, by packet (the
+            // tail's flag) in dual. Each fires only some of the lasers.
+            Self::PandarQt128 => {
+                let first_loop = match returns {
+                    1 => block.is_multiple_of(2),
+                    _ => loop_flag & 1 == 1,
+                };
+                let table = if first_loop {
+                    &QT128_LOOP1_NS
+                } else {
+                    &QT128_LOOP2_NS
+                };
+                9_000 + 111_110 * (blocks - block - 1) as i64 / returns as i64 + table[laser]
             }
         }
     }
@@ -273,4 +321,29 @@ const QT64_FIRING_NS: [i64; 64] = [
     89_140, 91_190, 93_250, 95_300, 97_750, 99_820, 101_870, 103_930, 105_980, 108_040, 110_100,
     112_150, 115_200, 117_260, 119_320, 121_380, 123_430, 125_490, 127_540, 12_960, 132_050,
     134_110, 136_170, 138_220, 140_280, 142_340, 144_390, 146_450,
+];
+
+/// The QT128's firing times by laser in its two loops, ns (`pandar_qt128.hpp`; 0 for
+/// the lasers a loop does not fire).
+const QT128_LOOP1_NS: [i64; 128] = [
+    0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+    27_656, 53_000, 2_312, 78_344, 81_512, 5_480, 56_168, 30_824, 33_992, 59_336, 8_648, 84_680,
+    87_848, 11_816, 62_504, 37_160, 40_328, 65_672, 14_984, 91_016, 94_184, 18_152, 68_840, 43_496,
+    46_664, 72_008, 21_320, 97_352, 100_520, 24_488, 75_176, 49_832, 1_456, 77_488, 26_800, 52_144,
+    55_312, 29_968, 80_656, 4_624, 7_792, 83_824, 33_136, 58_480, 61_648, 36_304, 86_992, 10_960,
+    14_128, 90_160, 39_472, 64_816, 67_984, 42_640, 93_328, 17_296, 20_464, 96_496, 45_808, 71_152,
+    74_320, 48_976, 99_664, 23_632, 25_944, 51_288, 600, 76_632, 79_800, 3_768, 54_456, 29_112,
+    32_280, 57_624, 6_936, 82_968, 86_136, 10_104, 60_792, 35_448, 38_616, 63_960, 13_272, 89_304,
+    92_472, 16_440, 67_128, 41_784, 44_952, 70_296, 19_608, 95_640, 98_808, 22_776, 73_464, 48_120,
+];
+const QT128_LOOP2_NS: [i64; 128] = [
+    2_312, 78_344, 27_656, 53_000, 56_168, 30_824, 81_512, 5_480, 8_648, 84_680, 33_992, 59_336,
+    62_504, 37_160, 87_848, 11_816, 14_984, 91_016, 40_328, 65_672, 68_840, 43_496, 94_184, 18_152,
+    21_320, 97_352, 46_664, 72_008, 75_176, 49_832, 100_520, 24_488, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+    0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 600, 76_632, 25_944, 51_288,
+    54_456, 29_112, 79_800, 3_768, 6_936, 82_968, 32_280, 57_624, 60_792, 35_448, 86_136, 10_104,
+    13_272, 89_304, 38_616, 63_960, 67_128, 41_784, 92_472, 16_440, 19_608, 95_640, 44_952, 70_296,
+    73_464, 48_120, 98_808, 22_776, 26_800, 52_144, 1_456, 77_488, 80_656, 4_624, 55_312, 29_968,
+    33_136, 58_480, 7_792, 83_824, 86_992, 10_960, 61_648, 36_304, 39_472, 64_816, 14_128, 90_160,
+    93_328, 17_296, 67_984, 42_640, 45_808, 71_152, 20_464, 96_496, 99_664, 23_632, 74_320, 48_976,
 ];
