@@ -180,12 +180,17 @@ impl HesaiAssembler {
                 continue;
             }
             for laser in 0..lasers {
-                let azimuth = block_rad + self.azimuth_offset_rad[laser];
-                let (sin, cos) = azimuth.sin_cos();
                 let unit = |k: usize| {
                     let u = &block(first_block + k)[prefix + unit_bytes * laser..];
                     (u16::from_le_bytes([u[0], u[1]]), u[2])
                 };
+                // Lasers that saw nothing (the sky; half the QT128's, which fire in
+                // turns) cost no trigonometry.
+                if (0..returns).all(|k| unit(k).0 == 0) {
+                    continue;
+                }
+                let azimuth = block_rad + self.azimuth_offset_rad[laser];
+                let (sin, cos) = azimuth.sin_cos();
                 for k in 0..returns {
                     let (raw, reflectivity) = unit(k);
                     let distance = metres(raw);
