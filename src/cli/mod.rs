@@ -196,7 +196,7 @@ pub struct Sensors {
     cloud_topic: Vec<String>,
     /// LiDAR packet input: the sensor's calibration, Velodyne's YAML
     /// (velodyne_pointcloud / nebula format) or Hesai's angle-correction CSV; the
-    /// VLP-16, VLP-32C and Pandar XT32, XT16, XT32M, 40P, 64 and QT64 have built-in tables. With several
+    /// VLP-16, VLP-32C and Pandar XT32, XT16, XT32M, 40P, 64, QT64 and QT128 have built-in tables. With several
     /// packet topics, TOPIC=FILE gives one topic's (repeatable); a FILE alone is
     /// for every packet topic without its own.
     #[arg(long, value_name = "[TOPIC=]FILE")]

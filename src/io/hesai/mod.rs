@@ -1,4 +1,4 @@
-//! Hesai Pandar XT32, XT16, XT32M, 40P, 64 and QT64 data packets
+//! Hesai Pandar XT32, XT16, XT32M, 40P, 64, QT64 and QT128 data packets
 //! (`pandar_msgs/msg/PandarScan`), decoded into points and cut into scans as
 //! tier4/nebula (Autoware's driver) does, so that a log gives the points Autoware
 //! gives (`tests/hesai.rs` checks nebula's own ground truth point for point).

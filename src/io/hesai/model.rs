@@ -73,14 +73,10 @@ impl HesaiModel {
             [0xEE, 0xFF, 6, _, _, _, 32, 6, ..] => Self::PandarXt32m,
             [0xEE, 0xFF, 3, _, _, _, 64, 4, ..] => Self::PandarQt64,
             [0xEE, 0xFF, 64, 6, ..] => Self::Pandar64,
-            // The OT128 (Pandar128E3X / E4X) shares the header; its 3-byte units make
-            // its packets shorter.
-            [0xEE, 0xFF, 3, 2, _, _, 128, 2, ..] if packet.len() >= QT128_PACKET => {
-                Self::PandarQt128
-            }
+            [0xEE, 0xFF, 3, 2, _, _, 128, 2, ..] => Self::PandarQt128,
             [0xEE, 0xFF, a, b, _, _, c, d, ..] => {
                 return Err(format!(
-                    "a Hesai packet of header bytes {a} {b} .. {c} {d}: travmap decodes the Pandar XT32 and XT16 (protocol 6.1, 32 / 16 lasers, 8 blocks), XT32M (6.1, 32 lasers, 6 blocks), QT64 (protocol 3.1, 64 lasers, 4 blocks), QT128 (protocol 3.2, 128 lasers, 2 blocks of 4-byte units), 64 (64 lasers, 6 blocks) and 40P"
+                    "a Hesai packet of header bytes {a} {b} .. {c} {d}: travmap decodes the Pandar XT32 and XT16 (protocol 6.1, 32 / 16 lasers, 8 blocks), XT32M (6.1, 32 lasers, 6 blocks), QT64 (protocol 3.1, 64 lasers, 4 blocks), QT128 (protocol 3.2, 128 lasers, 2 blocks), 64 (64 lasers, 6 blocks) and 40P; not the OT128 or AT128"
                 ));
             }
             _ => {
