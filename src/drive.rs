@@ -251,6 +251,9 @@ impl Selection {
                 let scan_sha256 = self.fingerprint_scans.then(|| frame.content_sha256());
                 let posed = match pipeline.pose(frame) {
                     Ok(posed) => posed,
+                    // A frame read only to fill the window (not selected: a packet
+                    // log's partial first scan, say) is left out of it.
+                    Err(_) if index < first => continue,
                     Err(problem) => {
                         self.unregistered(index, problem)?;
                         continue;

@@ -327,3 +327,42 @@ fn bench_tools_times_decoding_a_packet_log() {
     );
     assert!(rows[3]["skipped"].is_string(), "{}", rows[3]);
 }
+
+/// A packet log whose recording began mid-turn: its first scan (4 of the 40P's
+/// packets, against 360 in the next) is left out by default, said in a notice, so
+/// registration starts at the first whole turn; `--frames 0..` still reads it.
+#[test]
+fn a_partial_first_scan_is_left_out_by_default() {
+    use common::{arg, json_records, stderr, success, travmap};
+    let bag = nebula_fixture("40p/1673400149412331409");
+    let output = travmap(&["run", arg(&bag), "--json"]);
+    let notice = stderr(&output);
+    assert!(
+        notice.contains("frame 0 is the part of a rotation the recording began with (4 packets, against 360 in frame 1): left out (--frames 0.. reads it)"),
+        "{notice}"
+    );
+    let (frames, _) = json_records(&success(output));
+    let indices: Vec<u64> = frames
+        .iter()
+        .map(|f| f["frame"].as_u64().unwrap())
+        .collect();
+    assert_eq!(indices, [1, 2, 3]);
+    // Asked for, frame 0 is read (alone: too few points to register).
+    let output = travmap(&[
+        "run",
+        arg(&bag),
+        "--json",
+        "--frames",
+        "0..",
+        "--poses",
+        "none",
+    ]);
+    assert!(!stderr(&output).contains("left out"));
+    let (frames, _) = json_records(&success(output));
+    assert_eq!(frames.len(), 4);
+    // A log that began with most of a turn keeps its frame 0.
+    let xt32 = nebula_fixture("xt32/1673400677802009732");
+    let output = travmap(&["run", arg(&xt32), "--json"]);
+    assert!(!stderr(&output).contains("left out"));
+    assert_eq!(json_records(&success(output)).0.len(), 4);
+}

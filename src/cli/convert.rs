@@ -77,9 +77,16 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
     let compression = args.compression.compression();
     let start_time_s = args.start_time;
     check_output(output_path, &InputFiles::of(&[&args.sequence]))?;
+    // Every scan: convert keeps a log's first, however partial.
     let frames = args.frames.clone().unwrap_or(0..usize::MAX);
     let options = args.sensors.drive_options(DriveOptions::default())?;
-    let selection = open_selection(&args.sequence, &frames, &options, args.keep_going, false)?;
+    let selection = open_selection(
+        &args.sequence,
+        Some(frames.clone()),
+        &options,
+        args.keep_going,
+        false,
+    )?;
     let selections = [selection];
     let sequence = match &selections[0].source.recording {
         Recording::Kitti(sequence) => sequence,

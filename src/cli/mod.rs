@@ -309,11 +309,13 @@ impl Inputs {
     /// Opens `paths` (some of the inputs) as [`Inputs::open`] does.
     pub fn open_paths(&self, paths: &[PathBuf], read_images: bool) -> Result<Vec<Selection>> {
         refuse_repeats(paths)?;
-        let frames = self.frames.clone().unwrap_or(0..usize::MAX);
         let options = self.drive_options()?;
         paths
             .iter()
-            .map(|path| open_selection(path, &frames, &options, self.keep_going, read_images))
+            .map(|path| {
+                let frames = self.frames.clone();
+                open_selection(path, frames, &options, self.keep_going, read_images)
+            })
             .collect()
     }
 
@@ -367,10 +369,12 @@ pub fn check_output_dir(output: &Path, inputs: &InputFiles) -> Result<()> {
     Ok(check_output_directory(output, inputs)?)
 }
 
-/// Opens one input and checks that it has frames in `frames`.
+/// Opens one input and checks that it has frames in `frames`; without `frames`,
+/// every frame but a packet log's first when the recording began mid-turn (a part
+/// of a rotation, too few points to register or to map), with a notice.
 pub fn open_selection(
     path: &Path,
-    frames: &Range<usize>,
+    frames: Option<Range<usize>>,
     options: &DriveOptions,
     keep_going: bool,
     read_images: bool,
@@ -391,6 +395,22 @@ pub fn open_selection(
     }
     source.set_read_images(read_images);
     source.set_keep_going(keep_going);
+    let partial_first_scan = match &source.recording {
+        Recording::Log(drive) => drive.partial_first_scan(),
+        _ => None,
+    };
+    let frames = match (frames, partial_first_scan) {
+        (Some(frames), _) => frames,
+        (None, None) => 0..usize::MAX,
+        (None, Some((first, second))) => {
+            eprintln!(
+                "notice: {}: frame 0 is the part of a rotation the recording began with ({first} packets, against {second} in frame 1): left out (--frames 0.. reads it)",
+                path.display()
+            );
+            1..usize::MAX
+        }
+    };
+    let frames = &frames;
     if source.frames_in(frames).is_empty() {
         let all = source.frames();
         let has = match (all.first(), all.last()) {

@@ -3,11 +3,12 @@
 //! Odometry, as `--poses` lets them count), camera intrinsics and image topics.
 
 use std::collections::{BTreeMap, HashMap};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde::Deserialize;
 
 use super::hesai::{HesaiAssembler, HesaiCalibration, PANDAR_SCAN};
+use super::lidar_calibrations::LidarCalibrations;
 use super::log::Log;
 use super::log_message::{LogMessage, ros2_type_name};
 use super::packets::{
@@ -46,51 +47,6 @@ pub struct DriveOptions {
     pub rate_hz: Option<f64>,
     /// Packet topics' calibration files (`--lidar-calibration`).
     pub lidar_calibrations: LidarCalibrations,
-}
-
-/// The calibration files given for packet topics: each for one topic, or one for
-/// every packet topic without its own.
-#[derive(Clone, Debug, Default)]
-pub struct LidarCalibrations {
-    pub any_topic: Option<PathBuf>,
-    pub by_topic: Vec<(String, PathBuf)>,
-}
-
-impl LidarCalibrations {
-    /// `--lidar-calibration`'s values: `FILE` or `TOPIC=FILE`; at most one of each
-    /// topic and one without.
-    pub fn from_arguments(values: &[String]) -> Result<Self, String> {
-        let mut calibrations = Self::default();
-        for value in values {
-            // A file whose name holds `=` is still a file.
-            let named = (!Path::new(value).exists())
-                .then(|| value.split_once('='))
-                .flatten();
-            match named {
-                Some((topic, file)) => {
-                    if calibrations.by_topic.iter().any(|(t, _)| t == topic) {
-                        return Err(format!("two calibration files for {topic}"));
-                    }
-                    calibrations.by_topic.push((topic.into(), file.into()));
-                }
-                None if calibrations.any_topic.is_some() => {
-                    return Err(
-                        "two calibration files without a topic: give them as TOPIC=FILE".into(),
-                    );
-                }
-                None => calibrations.any_topic = Some(value.into()),
-            }
-        }
-        Ok(calibrations)
-    }
-
-    /// The file for packet topic `topic`: its own, else the one for every topic.
-    pub fn for_topic(&self, topic: &str) -> Option<&Path> {
-        (self.by_topic.iter())
-            .find(|(t, _)| t == topic)
-            .map(|(_, file)| file.as_path())
-            .or(self.any_topic.as_deref())
-    }
 }
 
 /// Which other cloud topics are merged into the frames' scans.
@@ -152,6 +108,9 @@ pub(super) struct Contents {
     lidar_calibrations: LidarCalibrations,
     /// Velodyne packet topic -> the stamp of the scan being cut.
     packet_scan_start: HashMap<String, u64>,
+    /// Packet topic -> how many packets its first scans took (the first two), and
+    /// the scan being cut so far.
+    packets_per_scan: HashMap<String, (Vec<usize>, usize)>,
 }
 
 /// Where a packet topic's scans are cut, for their stamps: Velodyne's cut is on the
@@ -247,7 +206,10 @@ impl Contents {
                     .entry(topic.clone())
                     .or_insert_with(|| (scan.frame_id.clone(), Vec::new()))
                     .1;
+                let counts = self.packets_per_scan.entry(topic.clone()).or_default();
                 for (stamp_ns, packet) in &scan.packets {
+                    counts.1 += 1;
+                    let scans_before = stamps.len();
                     let packet_model = PacketModel::of_packet(&schema, packet).map_err(problem)?;
                     if packet_model != *model {
                         return Err(problem(format!(
@@ -277,6 +239,9 @@ impl Contents {
                                 stamps.push(scan.stamp_ns);
                             }
                         }
+                    }
+                    if stamps.len() > scans_before && counts.0.len() < 2 {
+                        counts.0.push(std::mem::take(&mut counts.1));
                     }
                 }
             }
@@ -471,6 +436,9 @@ pub(super) struct LogIndex {
     pub(super) merged: Vec<MergedTopic>,
     /// Chunks whose messages could not be read (see [`Error::LogChunk`]).
     pub(super) damaged_chunks: usize,
+    /// For a packet topic: the packets of its first and second scans, when the
+    /// first took fewer than half the second's (the recording began mid-turn).
+    pub(super) partial_first_scan: Option<(usize, usize)>,
 }
 
 impl LogIndex {
@@ -522,6 +490,12 @@ impl LogIndex {
             .packet_topics
             .get(&cloud_topic)
             .map(|(model, _)| *model);
+        let partial_first_scan = match contents.packets_per_scan.get(&cloud_topic) {
+            Some((counts, _)) if counts.len() == 2 && 2 * counts[0] < counts[1] => {
+                Some((counts[0], counts[1]))
+            }
+            _ => None,
+        };
         Ok(Self {
             merged,
             cloud_topic,
@@ -532,6 +506,7 @@ impl LogIndex {
             root_frame,
             packets,
             damaged_chunks,
+            partial_first_scan,
         })
     }
 
@@ -546,42 +521,5 @@ impl LogIndex {
                 self.cloud_frame
             ))
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn calibration_files_are_for_their_topic_or_for_every_topic() {
-        let values = [
-            "/rear/packets=rear.yaml",
-            "any.yaml",
-            "/top/packets=a=b.csv",
-        ];
-        let calibrations = LidarCalibrations::from_arguments(&values.map(String::from)).unwrap();
-        assert_eq!(
-            calibrations.for_topic("/rear/packets"),
-            Some(Path::new("rear.yaml"))
-        );
-        assert_eq!(
-            calibrations.for_topic("/top/packets"),
-            Some(Path::new("a=b.csv"))
-        );
-        assert_eq!(
-            calibrations.for_topic("/front/packets"),
-            Some(Path::new("any.yaml"))
-        );
-        assert_eq!(
-            LidarCalibrations::default().for_topic("/front/packets"),
-            None
-        );
-        let twice = ["a.yaml", "b.yaml"].map(String::from);
-        let err = LidarCalibrations::from_arguments(&twice).unwrap_err();
-        assert!(err.contains("give them as TOPIC=FILE"), "{err}");
-        let twice = ["/a=a.yaml", "/a=b.yaml"].map(String::from);
-        let err = LidarCalibrations::from_arguments(&twice).unwrap_err();
-        assert!(err.contains("two calibration files for /a"), "{err}");
     }
 }

@@ -15,6 +15,7 @@ pub mod image;
 pub mod kitti;
 mod kitti_text;
 pub mod las;
+pub mod lidar_calibrations;
 pub mod log;
 pub mod log_index;
 pub mod log_message;

@@ -14,9 +14,10 @@ use std::path::{Path, PathBuf};
 use nalgebra::Isometry3;
 
 use super::image::image_pixels;
+pub use super::lidar_calibrations::LidarCalibrations;
 use super::log::Log;
 use super::log_index::{CameraSource, LogIndex};
-pub use super::log_index::{DriveOptions, LidarCalibrations, MergedTopics};
+pub use super::log_index::{DriveOptions, MergedTopics};
 use super::log_message::LogMessage;
 use super::merged_clouds::{MergedSensor, median_period_ns};
 use super::packets::{PacketCalibration, PacketModel};
@@ -72,6 +73,8 @@ pub struct RosDrive {
     cloud_frame: String,
     world_frame: String,
     pub(super) stamps_ns: Vec<u64>,
+    /// See [`LogIndex`]: the packets of the first two scans, the first partial.
+    partial_first_scan: Option<(usize, usize)>,
     transforms: TransformTree,
     pub(super) camera: Option<CameraSource>,
     /// Chunks the index pass could not read: their messages are lost.
@@ -163,6 +166,7 @@ impl RosDrive {
             cloud_frame: index.cloud_frame,
             world_frame,
             stamps_ns: index.stamps_ns,
+            partial_first_scan: index.partial_first_scan,
             transforms: index.transforms,
             camera: index.camera,
             damaged_chunks: index.damaged_chunks,
@@ -370,6 +374,12 @@ impl RosDrive {
     /// message and none is damaged (for passthrough without decoding).
     pub fn stored(&self) -> Option<crate::io::mcap_stored::StoredLog> {
         (self.damaged_chunks == 0).then(|| self.log.stored())?
+    }
+
+    /// When the cloud topic carries packets and the recording began mid-turn: the
+    /// packets of frame 0 (a part of a rotation) and of frame 1.
+    pub fn partial_first_scan(&self) -> Option<(usize, usize)> {
+        self.partial_first_scan
     }
 
     /// Every message of the log in order, undecoded (for passthrough); with
