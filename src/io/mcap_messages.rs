@@ -347,31 +347,16 @@ impl Iterator for Messages<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::mcap_records::blob_file;
 
     /// An MCAP of `n` messages (payload: their index, 4 KiB of it) in chunks of
     /// about 16 KiB.
     fn chunked_file(n: u32, compression: Option<mcap::Compression>) -> Vec<u8> {
-        let mut writer = mcap::WriteOptions::new()
-            .compression(compression)
-            .chunk_size(Some(16 << 10))
-            .create(std::io::Cursor::new(Vec::new()))
-            .unwrap();
-        let schema = writer.add_schema("blob", "", b"").unwrap();
-        let channel = writer
-            .add_channel(schema, "/blob", "cdr", &Default::default())
-            .unwrap();
-        for i in 0..n {
-            let header = mcap::records::MessageHeader {
-                channel_id: channel,
-                sequence: i,
-                log_time: u64::from(i),
-                publish_time: u64::from(i),
-            };
-            let payload: Vec<u8> = i.to_le_bytes().iter().copied().cycle().take(4096).collect();
-            writer.write_to_known_channel(&header, &payload).unwrap();
-        }
-        writer.finish().unwrap();
-        writer.into_inner().into_inner()
+        let payloads: Vec<Vec<u8>> = (0..n)
+            .map(|i| i.to_le_bytes().iter().copied().cycle().take(4096).collect())
+            .collect();
+        let payloads: Vec<&[u8]> = payloads.iter().map(Vec::as_slice).collect();
+        blob_file(&payloads, compression, Some(16 << 10))
     }
 
     /// Each message's sequence number, or the damaged chunk's first byte.

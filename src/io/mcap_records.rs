@@ -307,6 +307,36 @@ fn decompressed_len(compression: &str, records: &[u8], limit: u64) -> std::io::R
     }
 }
 
+/// An MCAP in memory of one message per payload on `/blob` (sequence numbers from
+/// 0, log times from 1), in chunks of `chunk_bytes` (the crate's default when None).
+#[cfg(test)]
+pub(super) fn blob_file(
+    payloads: &[&[u8]],
+    compression: Option<mcap::Compression>,
+    chunk_bytes: Option<u64>,
+) -> Vec<u8> {
+    let mut writer = mcap::WriteOptions::new()
+        .compression(compression)
+        .chunk_size(chunk_bytes.or(Some(mcap::WriteOptions::DEFAULT_CHUNK_SIZE)))
+        .create(std::io::Cursor::new(Vec::new()))
+        .unwrap();
+    let schema = writer.add_schema("blob", "", b"").unwrap();
+    let channel = writer
+        .add_channel(schema, "/blob", "cdr", &Default::default())
+        .unwrap();
+    for (sequence, payload) in (0..).zip(payloads) {
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence,
+            log_time: u64::from(sequence) + 1,
+            publish_time: u64::from(sequence) + 1,
+        };
+        writer.write_to_known_channel(&header, payload).unwrap();
+    }
+    writer.finish().unwrap();
+    writer.into_inner().into_inner()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -352,27 +382,6 @@ mod tests {
         assert!(err.contains("shorter than its fields"), "{err}");
     }
 
-    /// An MCAP in memory holding one message of `payload`.
-    fn one_message_file(payload: &[u8], compression: Option<mcap::Compression>) -> Vec<u8> {
-        let mut writer = mcap::WriteOptions::new()
-            .compression(compression)
-            .create(std::io::Cursor::new(Vec::new()))
-            .unwrap();
-        let schema = writer.add_schema("blob", "", b"").unwrap();
-        let channel = writer
-            .add_channel(schema, "/blob", "cdr", &Default::default())
-            .unwrap();
-        let header = mcap::records::MessageHeader {
-            channel_id: channel,
-            sequence: 0,
-            log_time: 1,
-            publish_time: 1,
-        };
-        writer.write_to_known_channel(&header, payload).unwrap();
-        writer.finish().unwrap();
-        writer.into_inner().into_inner()
-    }
-
     /// The byte offset of the first chunk's declared uncompressed size.
     fn declared_size_offset(file: &[u8]) -> usize {
         let walk = RecordWalk {
@@ -392,7 +401,7 @@ mod tests {
         // claim is checked by decompressing, and holds.
         let zeros = vec![0u8; 80 << 20];
         for compression in [mcap::Compression::Zstd, mcap::Compression::Lz4] {
-            let file = one_message_file(&zeros, Some(compression));
+            let file = blob_file(&[&zeros], Some(compression), None);
             assert!(file.len() < 1 << 20, "{}", file.len());
             // The records may be as long as the chunk, and the message is read whole.
             assert!(check_chunk_sizes(&file).is_ok());
@@ -409,7 +418,7 @@ mod tests {
             Some(mcap::Compression::Lz4),
             None,
         ] {
-            let mut file = one_message_file(&payload, compression);
+            let mut file = blob_file(&[&payload], compression, None);
             assert!(check_chunk_sizes(&file).is_ok());
             let at = declared_size_offset(&file);
             file[at..at + 8].copy_from_slice(&(1u64 << 40).to_le_bytes());
