@@ -230,8 +230,8 @@ impl AppearanceVoter {
                     histogram[h as usize] += 1;
                     histogram[(bins[0] + s) as usize] += 1;
                     histogram[(bins[0] + bins[1] + v) as usize] += 1;
-                    histogram[n] += 1;
                 }
+                histogram[n] += x1 - x0;
             });
             if histogram[n] > 0 {
                 votes.keys.push(layout.world_key(cell));

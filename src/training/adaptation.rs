@@ -9,7 +9,7 @@ use std::collections::HashSet;
 
 use serde::Serialize;
 
-use super::reduced_set::fit_folded_reduced_set;
+use super::reduced_set::{fit_folded_reduced_set, fit_reduced_set};
 use super::set::TrainingSet;
 use super::{Search, train_by};
 use crate::config::{Config, Learner};
@@ -199,13 +199,20 @@ pub fn adapt(
             c: a.c,
             gamma: a.gamma,
         };
-        let mut model = train_by(cells, config, search, &|_, _| {})?;
+        // The sum's expansion folds in the prior: classifying costs about what the
+        // prior's does.
+        let weight = a.prior_weight as f32;
+        let reduce = |model: &SvmModel, fit_set: &TrainingSet| match a.learner {
+            Learner::Sum => {
+                let rows = [&set.features[..], &unknown_features].concat();
+                fit_folded_reduced_set(model, prior, weight, &rows, config)
+            }
+            Learner::Drive | Learner::DriveAndPrior => fit_reduced_set(model, fit_set, config),
+        };
+        let mut model = train_by(cells, config, search, &reduce, &|_, _| {})?;
         if a.learner == Learner::Sum {
             model.prior = Some(Box::new(prior.clone()));
-            model.prior_weight = a.prior_weight as f32;
-            // One expansion for both: classifying costs about what the prior's does.
-            let rows = [&set.features[..], &unknown_features].concat();
-            model.reduced_set = fit_folded_reduced_set(&model, prior, &rows, config);
+            model.prior_weight = weight;
             model.reduced_set_includes_prior = model.reduced_set.is_some();
         }
         Ok(model)

@@ -9,6 +9,7 @@
 use rayon::prelude::*;
 
 pub mod adaptation;
+mod columns;
 pub mod crossval;
 pub mod model_file;
 mod reduced_set;
@@ -17,7 +18,7 @@ pub mod smo;
 
 use crate::config::{ClassWeights, Config, Criterion, FeatureGroup, TrainingConfig};
 use crate::error::{Error, Result};
-use crate::method::classifier::{SearchResult, SvmModel, TrainingSummary};
+use crate::method::classifier::{ReducedSet, SearchResult, SvmModel, TrainingSummary};
 use crate::method::feature_groups::REMISSION_NAMES;
 use crate::method::features::{FEATURE_COUNT, feature_count};
 use crate::method::grid::CellClass;
@@ -121,7 +122,6 @@ fn fit(set: &TrainingSet, c: f64, gamma: f64, config: &Config) -> SvmModel {
     )
 }
 
-/// Share of `set`'s cells that `model` classifies right.
 /// The weights on C of the traversable and the non-traversable class.
 fn class_weights(set: &TrainingSet, weights: ClassWeights) -> (f64, f64) {
     match weights {
@@ -226,41 +226,92 @@ pub fn train(
     config: &Config,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SvmModel> {
-    train_by(set, config, Search::Grid, progress)
+    let reduce = |model: &SvmModel, set: &TrainingSet| fit_reduced_set(model, set, config);
+    train_by(set, config, Search::Grid, &reduce, progress)
 }
 
-/// [`train`] with C and gamma chosen as `search` says.
+/// How the model itself gets its reduced set, given the model and the cells it was
+/// fitted on (its hybrid and fallback get their own by [`fit_reduced_set`]).
+pub type Reduce<'a> = dyn Fn(&SvmModel, &TrainingSet) -> Option<ReducedSet> + Sync + 'a;
+
+/// [`train`] with C and gamma chosen as `search` says and the model's reduced set
+/// by `reduce`.
 pub fn train_by(
     set: &TrainingSet,
     config: &Config,
     search: Search,
+    reduce: &Reduce,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SvmModel> {
-    let mut model = train_one(set, config, search, progress)?;
-    if let Some(hybrid) = set.hybrid() {
-        match train_one(&hybrid, config, search, progress) {
-            Ok(hybrid) => model.hybrid = Some(Box::new(hybrid)),
-            Err(Error::Training(_)) => {}
-            Err(e) => return Err(e),
+    // The model, its hybrid and the fallback are independent fits: run side by side,
+    // the solvers' serial steps overlap.
+    // Progress is the sum over the three: each reports its own (done, total).
+    let parts = std::sync::Mutex::new([(0, 0); 3]);
+    let part = |k: usize| {
+        let parts = &parts;
+        move |done: usize, total: usize| {
+            let mut parts = parts.lock().unwrap_or_else(|e| e.into_inner());
+            parts[k] = (done, total);
+            let (done, total) = parts.iter().fold((0, 0), |s, p| (s.0 + p.0, s.1 + p.1));
+            progress(done, total);
         }
+    };
+    let (model, (hybrid, fallback)) = rayon::join(
+        || train_one(set, config, search, reduce, &part(0)),
+        || {
+            rayon::join(
+                || {
+                    let hybrid = set.hybrid()?;
+                    let reduce = |model: &SvmModel, set: &TrainingSet| {
+                        fit_reduced_set(model, set, config)
+                    };
+                    Some(train_one(&hybrid, config, search, &reduce, &part(1)))
+                },
+                || fallback_without_remission(set, config, search, &part(2)),
+            )
+        },
+    );
+    let mut model = model?;
+    match hybrid {
+        Some(Ok(hybrid)) => model.hybrid = Some(Box::new(hybrid)),
+        Some(Err(Error::Training(_))) | None => {}
+        Some(Err(e)) => return Err(e),
     }
-    // Clouds without usable intensity get the same model without remission: the
-    // same cells with the remission columns left out, so no second pass is needed.
-    if config.features.groups.contains(&FeatureGroup::Remission) {
-        let mut without = config.clone();
-        without.features = config.features.without_remission();
-        let columns = FEATURE_COUNT..FEATURE_COUNT + REMISSION_NAMES.len();
-        if set.dimension < columns.end {
-            return Err(Error::Training(format!(
-                "{} values per cell: too few for remission features ({} expected)",
-                set.dimension,
-                feature_count(&config.features.groups)
-            )));
-        }
-        let fallback = train_by(&set.without_columns(columns), &without, search, progress)?;
-        model.fallback = Some(Box::new(fallback));
-    }
+    model.fallback = fallback?.map(Box::new);
     Ok(model)
+}
+
+/// Clouds without usable intensity get the same model without remission: the same
+/// cells with the remission columns left out, so no second pass is needed. None
+/// when the model has no remission features.
+fn fallback_without_remission(
+    set: &TrainingSet,
+    config: &Config,
+    search: Search,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Option<SvmModel>> {
+    if !config.features.groups.contains(&FeatureGroup::Remission) {
+        return Ok(None);
+    }
+    let mut without = config.clone();
+    without.features = config.features.without_remission();
+    let columns = FEATURE_COUNT..FEATURE_COUNT + REMISSION_NAMES.len();
+    if set.dimension < columns.end {
+        return Err(Error::Training(format!(
+            "{} values per cell: too few for remission features ({} expected)",
+            set.dimension,
+            feature_count(&config.features.groups)
+        )));
+    }
+    let reduce = |model: &SvmModel, set: &TrainingSet| fit_reduced_set(model, set, &without);
+    train_by(
+        &set.without_columns(columns),
+        &without,
+        search,
+        &reduce,
+        progress,
+    )
+    .map(Some)
 }
 
 /// Grid search with spatially-blocked cross-validation, then a fit on all of `set`.
@@ -269,6 +320,7 @@ fn train_one(
     set: &TrainingSet,
     config: &Config,
     search: Search,
+    reduce: &Reduce,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SvmModel> {
     let started = std::time::Instant::now();
@@ -293,7 +345,7 @@ fn train_one(
     let fit_set = subset(t.max_fit_samples);
     if let Search::Fixed { c, gamma } = search {
         let mut model = fit(&fit_set, c, gamma, config);
-        model.reduced_set = fit_reduced_set(&model, &fit_set, config);
+        model.reduced_set = reduce(&model, &fit_set);
         progress(1, 1);
         model.training.seconds = started.elapsed().as_secs_f64();
         return Ok(model);
@@ -359,7 +411,7 @@ fn train_one(
         },
     );
     let mut model = fit(&fit_set, best.c, best.gamma, config);
-    model.reduced_set = fit_reduced_set(&model, &fit_set, config);
+    model.reduced_set = reduce(&model, &fit_set);
     if t.tune_threshold {
         let best_k = candidates
             .iter()

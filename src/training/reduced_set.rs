@@ -4,6 +4,7 @@
 
 use rayon::prelude::*;
 
+use super::columns::Columns;
 use super::set::TrainingSet;
 
 /// Rows of the reduced set's design matrix computed at a time.
@@ -31,18 +32,22 @@ fn k_means(
     for _ in 0..iterations {
         // The nearest centres on all cores; the sums in the points' order, so the
         // centres are the same whatever the thread count.
+        let by_column = Columns::new(&centres, d);
         let nearest: Vec<usize> = points
             .par_chunks_exact(d)
-            .map(|p| {
-                centres
-                    .chunks_exact(d)
-                    .map(|c| c.iter().zip(p).map(|(a, b)| (a - b) * (a - b)).sum::<f32>())
-                    .enumerate()
-                    .fold((0, f32::INFINITY), |best, (j, dist)| {
-                        if dist < best.1 { (j, dist) } else { best }
-                    })
-                    .0
-            })
+            .map_init(
+                || vec![0f32; k],
+                |distances, p| {
+                    by_column.sums(p, 0, distances, |q, c| (c - q) * (c - q));
+                    distances
+                        .iter()
+                        .enumerate()
+                        .fold((0, f32::INFINITY), |best, (j, &dist)| {
+                            if dist < best.1 { (j, dist) } else { best }
+                        })
+                        .0
+                },
+            )
             .collect();
         let mut sums = vec![0f64; k * d];
         let mut counts = vec![0usize; k];
@@ -90,6 +95,7 @@ pub(super) fn fit_reduced_set(
 pub(super) fn fit_folded_reduced_set(
     model: &SvmModel,
     prior: &SvmModel,
+    weight: f32,
     rows: &[f32],
     config: &Config,
 ) -> Option<ReducedSet> {
@@ -118,7 +124,6 @@ pub(super) fn fit_folded_reduced_set(
         candidates.extend_from_slice(model.standardise(row, &mut scratch));
     }
     let all_rows = [rows, &prior_raw].concat();
-    let weight = model.prior_weight;
     fit_expansion(
         model,
         &candidates,
@@ -159,6 +164,7 @@ fn fit_expansion(
     let gamma = model.gamma;
     // Rows are computed on all cores a block at a time (the matrix is column-major,
     // so a block is copied in; whole, the copy would double the matrix's memory).
+    let by_column = Columns::new(&centres, d);
     let mut design = nalgebra::DMatrix::<f64>::zeros(chosen.len(), m + 1);
     let mut target = nalgebra::DVector::<f64>::zeros(chosen.len());
     for (block, indices) in chosen.chunks(DESIGN_BLOCK_ROWS).enumerate() {
@@ -170,14 +176,11 @@ fn fit_expansion(
                     let features = &rows[i * d..(i + 1) * d];
                     let target = target_of(features, [own, other]) as f64;
                     let z = model.standardise(features, scratch);
-                    let kernel = centres
-                        .chunks_exact(d)
-                        .map(|c| {
-                            let distance: f64 =
-                                c.iter().zip(z).map(|(a, b)| ((a - b) as f64).powi(2)).sum();
-                            (-gamma * distance).exp()
-                        })
-                        .collect();
+                    let mut kernel = vec![0f64; m];
+                    by_column.sums(z, 0, &mut kernel, |q, c| ((c - q) as f64).powi(2));
+                    for k in &mut kernel {
+                        *k = (-gamma * *k).exp();
+                    }
                     (target, kernel)
                 },
             )

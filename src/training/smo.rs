@@ -11,9 +11,14 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
+use super::columns::Columns;
+
 /// A row is split across cores in pieces of at least this many entries (they are
 /// independent, so the row is the same); a shorter one stays on one thread.
 const PARALLEL_ROW_LENGTH: usize = 4096;
+
+/// Entries of a row computed together (their sums side by side in vector lanes).
+const ROW_BLOCK: usize = 1024;
 
 /// libsvm's floor on the curvature of a non-positive-definite pair.
 const TAU: f64 = 1e-12;
@@ -56,6 +61,7 @@ struct KernelRows<'a> {
     problem: &'a Problem<'a>,
     gamma: f32,
     squared_norms: Vec<f32>,
+    columns: Columns,
     rows: Vec<Option<Arc<[f32]>>>,
     last_used: Vec<u64>,
     cached: Vec<usize>,
@@ -75,6 +81,7 @@ impl<'a> KernelRows<'a> {
             problem,
             gamma: gamma as f32,
             squared_norms,
+            columns: Columns::new(problem.samples, problem.dimension),
             rows: vec![None; n],
             last_used: vec![0; n],
             cached: Vec::new(),
@@ -101,15 +108,22 @@ impl<'a> KernelRows<'a> {
         let xi = &p.samples[i * d..(i + 1) * d];
         let (yi, ni) = (p.labels[i], self.squared_norms[i]);
         let gamma = self.gamma;
-        let row: Vec<f32> = (p.samples.par_chunks_exact(d))
-            .zip(p.labels)
-            .zip(&self.squared_norms)
-            .with_min_len(PARALLEL_ROW_LENGTH)
-            .map(|((xt, &yt), &nt)| {
-                let dot: f32 = xi.iter().zip(xt).map(|(a, b)| a * b).sum();
-                yi * yt * (-gamma * (ni + nt - 2.0 * dot).max(0.0)).exp()
-            })
-            .collect();
+        let mut row = vec![0f32; p.labels.len()];
+        row.par_chunks_mut(ROW_BLOCK)
+            .with_min_len(PARALLEL_ROW_LENGTH / ROW_BLOCK)
+            .enumerate()
+            .for_each(|(block, out)| {
+                let first = block * ROW_BLOCK;
+                self.columns.sums(xi, first, out, |a, b| a * b);
+                for ((value, &yt), &nt) in out
+                    .iter_mut()
+                    .zip(&p.labels[first..])
+                    .zip(&self.squared_norms[first..])
+                {
+                    let dot = *value;
+                    *value = yi * yt * (-gamma * (ni + nt - 2.0 * dot).max(0.0)).exp();
+                }
+            });
         let row: Arc<[f32]> = row.into();
         self.rows[i] = Some(row.clone());
         self.cached.push(i);
