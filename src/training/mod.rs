@@ -262,9 +262,8 @@ pub fn train_by(
             rayon::join(
                 || {
                     let hybrid = set.hybrid()?;
-                    let reduce = |model: &SvmModel, set: &TrainingSet| {
-                        fit_reduced_set(model, set, config)
-                    };
+                    let reduce =
+                        |model: &SvmModel, set: &TrainingSet| fit_reduced_set(model, set, config);
                     Some(train_one(&hybrid, config, search, &reduce, &part(1)))
                 },
                 || fallback_without_remission(set, config, search, &part(2)),
