@@ -27,6 +27,7 @@ use parquet::data_type::ByteArray;
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
 use parquet::file::writer::SerializedFileWriter;
+use parquet::schema::types::ColumnPath;
 
 use crate::Config;
 use crate::error::{Error, Result};
@@ -40,11 +41,17 @@ use crate::outputs::atomic::{AtomicFile, parquet_failure, sync_output, write_fai
 /// groups cost memory too, as the writer keeps every group's metadata for the
 /// footer (README, "Speed": memory).
 const ROW_GROUP_ROWS: usize = 1 << 15;
+/// The columns written with a dictionary: those with few distinct values per row
+/// group. The features, almost all distinct, fit the writer's dictionary whole
+/// (1 MB a column chunk), which then doubled their size: without it, the shipped
+/// drive's 60-frame file is 26 % smaller (69.6 -> 51.1 MB) and written in 0.88x the
+/// time (README "Datasets").
+const DICTIONARY_COLUMNS: [&str; 6] = ["source", "frame", "stamp_ns", "row", "col", "points"];
 /// Rows read back per batch, from each column of a row group at once: memory stays
 /// this small whatever size of group a writer chose (pyarrow's are 2^20 rows).
 const READ_BATCH_ROWS: usize = 1 << 13;
 /// The most values (rows x columns) a dataset may declare per byte of file. Real
-/// cell tables hold about one (1.15 in travmap's zstd file of the shipped drive); run-length
+/// cell tables hold about one (1.6 in travmap's zstd file of the shipped drive); run-length
 /// encoding lets a damaged or made-up file declare billions of rows in a few bytes,
 /// which must not fill memory or run for hours.
 const MAX_VALUES_PER_FILE_BYTE: usize = 1 << 10;
@@ -197,14 +204,18 @@ impl DatasetWriter {
             parquet::schema::parser::parse_message_type(&schema(&features, &appearance, true))
                 .expect("the cell schema parses");
         let config_json = serde_json::to_string(config).expect("config serialises");
-        let properties = WriterProperties::builder()
+        let mut properties = WriterProperties::builder()
             .set_compression(Compression::ZSTD(ZstdLevel::default()))
             .set_created_by(concat!("travmap ", env!("CARGO_PKG_VERSION")).into())
             .set_key_value_metadata(Some(vec![
                 KeyValue::new(FORMAT_KEY.into(), FORMAT.to_string()),
                 KeyValue::new(CONFIG_KEY.into(), config_json),
             ]))
-            .build();
+            .set_dictionary_enabled(false);
+        for column in DICTIONARY_COLUMNS {
+            properties = properties.set_column_dictionary_enabled(ColumnPath::from(column), true);
+        }
+        let properties = properties.build();
         let (output, file) = AtomicFile::create(path)?;
         let writer = SerializedFileWriter::new(
             BufWriter::with_capacity(1 << 20, file),
