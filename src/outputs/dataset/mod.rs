@@ -14,6 +14,7 @@
 //! holds the configuration the rows were computed with, as JSON; reading checks it.
 //! Files of format 1 (before the last two columns) are read too.
 
+mod columns;
 pub mod reading;
 
 use std::fs::File;
@@ -22,12 +23,13 @@ use std::path::Path;
 use std::sync::Arc;
 
 use parquet::basic::{Compression, ZstdLevel};
-use parquet::column::writer::ColumnWriter;
 use parquet::data_type::ByteArray;
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
 use parquet::file::writer::SerializedFileWriter;
 use parquet::schema::types::ColumnPath;
+
+use columns::{Columns, write_column};
 
 use crate::Config;
 use crate::error::{Error, Result};
@@ -98,81 +100,6 @@ fn schema(features: &[String], appearance: &[String], self_labels: bool) -> Stri
         fields.extend(SELF_LABEL_COLUMNS.map(String::from));
     }
     format!("message travmap_cells {{ {}; }}", fields.join("; "))
-}
-
-/// A nullable column: values of the present rows, and 1 / 0 per row.
-#[derive(Default)]
-struct Nullable<T> {
-    values: Vec<T>,
-    defined: Vec<i16>,
-}
-
-impl<T> Nullable<T> {
-    fn push(&mut self, value: Option<T>) {
-        self.defined.push(value.is_some() as i16);
-        self.values.extend(value);
-    }
-
-    fn clear(&mut self) {
-        self.values.clear();
-        self.defined.clear();
-    }
-}
-
-/// The rows of one row group, by column.
-#[derive(Default)]
-struct Columns {
-    source: Vec<ByteArray>,
-    frame: Vec<i64>,
-    stamp_ns: Vec<i64>,
-    row: Vec<i32>,
-    col: Vec<i32>,
-    x_m: Vec<f64>,
-    y_m: Vec<f64>,
-    points: Vec<i32>,
-    features: Vec<Vec<f32>>,
-    appearance: Vec<Vec<f32>>,
-    /// Whether each row has appearance values (all of them or none).
-    appearance_defined: Vec<i16>,
-    ground_truth: Nullable<bool>,
-    predicted: Nullable<bool>,
-    footprint: Vec<bool>,
-    pseudo_label: Nullable<bool>,
-}
-
-impl Columns {
-    fn new(feature_count: usize, appearance_len: usize) -> Self {
-        Self {
-            features: vec![Vec::new(); feature_count],
-            appearance: vec![Vec::new(); appearance_len],
-            ..Default::default()
-        }
-    }
-
-    fn len(&self) -> usize {
-        self.frame.len()
-    }
-
-    /// Empties every column, keeping its buffer for the next row group: regrowing
-    /// some 80 columns from nothing for every group left the allocator's arenas
-    /// fragmented, and the process growing with the drive.
-    fn clear(&mut self) {
-        self.source.clear();
-        self.frame.clear();
-        self.stamp_ns.clear();
-        self.row.clear();
-        self.col.clear();
-        self.x_m.clear();
-        self.y_m.clear();
-        self.points.clear();
-        self.features.iter_mut().for_each(Vec::clear);
-        self.appearance.iter_mut().for_each(Vec::clear);
-        self.appearance_defined.clear();
-        self.ground_truth.clear();
-        self.predicted.clear();
-        self.footprint.clear();
-        self.pseudo_label.clear();
-    }
 }
 
 /// A cell dataset being written; atomically, like every output.
@@ -336,63 +263,6 @@ impl DatasetWriter {
         self.output.commit()?;
         Ok(self.summary)
     }
-}
-
-/// Writes column `index` of the schema from `columns`.
-fn write_column(
-    writer: &mut ColumnWriter<'_>,
-    columns: &Columns,
-    index: usize,
-) -> parquet::errors::Result<()> {
-    let features = 8..8 + columns.features.len();
-    let appearance = features.end..features.end + columns.appearance.len();
-    let written = match writer {
-        ColumnWriter::ByteArrayColumnWriter(w) => w.write_batch(&columns.source, None, None),
-        ColumnWriter::Int64ColumnWriter(w) => {
-            let values = [&columns.frame, &columns.stamp_ns][index - 1];
-            w.write_batch(values, None, None)
-        }
-        ColumnWriter::Int32ColumnWriter(w) => {
-            let values = match index {
-                3 => &columns.row,
-                4 => &columns.col,
-                _ => &columns.points,
-            };
-            w.write_batch(values, None, None)
-        }
-        ColumnWriter::DoubleColumnWriter(w) => {
-            let values = [&columns.x_m, &columns.y_m][index - 5];
-            w.write_batch(values, None, None)
-        }
-        ColumnWriter::FloatColumnWriter(w) if features.contains(&index) => {
-            w.write_batch(&columns.features[index - features.start], None, None)
-        }
-        ColumnWriter::FloatColumnWriter(w) if appearance.contains(&index) => w.write_batch(
-            &columns.appearance[index - appearance.start],
-            Some(&columns.appearance_defined),
-            None,
-        ),
-        ColumnWriter::BoolColumnWriter(w) => match index - appearance.end {
-            0 => w.write_batch(
-                &columns.ground_truth.values,
-                Some(&columns.ground_truth.defined),
-                None,
-            ),
-            1 => w.write_batch(
-                &columns.predicted.values,
-                Some(&columns.predicted.defined),
-                None,
-            ),
-            2 => w.write_batch(&columns.footprint, None, None),
-            _ => w.write_batch(
-                &columns.pseudo_label.values,
-                Some(&columns.pseudo_label.defined),
-                None,
-            ),
-        },
-        _ => unreachable!("column {index} is not in the cell schema"),
-    };
-    written.map(|_| ())
 }
 
 /// The settings that decide a cell's features and label: a dataset made with
