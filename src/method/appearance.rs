@@ -51,14 +51,23 @@ impl HsvBuckets {
         let max = r.max(g).max(b);
         let min = r.min(g).min(b);
         let delta = max - min;
-        // Hue in units of delta: [0, 6 delta), 60 degrees per unit; red wraps.
-        let hue = if max == r {
-            let h = g + 6 * delta - b;
-            if h >= 6 * delta { h - 6 * delta } else { h }
-        } else if max == g {
-            b + 2 * delta - r
+        // Hue in units of delta: [0, 6 delta), 60 degrees per unit; red wraps. All
+        // three sectors' values are computed (wrapping where unused) and one is
+        // selected: a branch per pixel on the sector was mispredicted on real images.
+        let from_red = (g + 6 * delta).wrapping_sub(b);
+        let from_red = if from_red >= 6 * delta {
+            from_red.wrapping_sub(6 * delta)
         } else {
-            r + 4 * delta - g
+            from_red
+        };
+        let from_green = (b + 2 * delta).wrapping_sub(r);
+        let from_blue = (r + 4 * delta).wrapping_sub(g);
+        let hue = if max == r {
+            from_red
+        } else if max == g {
+            from_green
+        } else {
+            from_blue
         };
         let divide = |n: u32, reciprocal: u64| ((n as u64 * reciprocal) >> 32) as u32;
         let [hue_bins, saturation_bins, value_bins] = self.bins;
