@@ -90,7 +90,7 @@ const WRITEBACK_BYTES: u64 = 8 << 20;
 /// A file that asks the kernel to start writing its bytes to the disk every
 /// [`WRITEBACK_BYTES`] (Linux's `sync_file_range`, which does not wait), so that the
 /// `fsync` at the end finds most of them written: a large output's final sync went
-/// from waiting on all of it (75 ms for annotate's 100 MB here) to its last part.
+/// from waiting on all of it (75 ms for annotate's 176 MB here, 4 ms with it) to its last part.
 /// Elsewhere a plain file.
 pub struct WritebackFile {
     file: File,

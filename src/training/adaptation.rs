@@ -9,9 +9,9 @@ use std::collections::HashSet;
 
 use serde::Serialize;
 
-use super::reduced_set::{fit_folded_reduced_set, fit_reduced_set};
+use super::reduced_set::fit_folded_reduced_set;
 use super::set::TrainingSet;
-use super::{Search, train_by};
+use super::{Reduce, Search, train_by};
 use crate::config::{Config, Learner};
 use crate::drive::Selection;
 use crate::error::{Error, Result};
@@ -202,14 +202,12 @@ pub fn adapt(
         // The sum's expansion folds in the prior: classifying costs about what the
         // prior's does.
         let weight = a.prior_weight as f32;
-        let reduce = |model: &SvmModel, fit_set: &TrainingSet| match a.learner {
-            Learner::Sum => {
-                let rows = [&set.features[..], &unknown_features].concat();
-                fit_folded_reduced_set(model, prior, weight, &rows, config)
-            }
-            Learner::Drive | Learner::DriveAndPrior => fit_reduced_set(model, fit_set, config),
+        let folded = |model: &SvmModel, _: &TrainingSet| {
+            let rows = [&set.features[..], &unknown_features].concat();
+            fit_folded_reduced_set(model, prior, weight, &rows, config)
         };
-        let mut model = train_by(cells, config, search, &reduce, &|_, _| {})?;
+        let reduce = (a.learner == Learner::Sum).then_some(&folded as &Reduce);
+        let mut model = train_by(cells, config, search, reduce, &|_, _| {})?;
         if a.learner == Learner::Sum {
             model.prior = Some(Box::new(prior.clone()));
             model.prior_weight = weight;

@@ -226,21 +226,20 @@ pub fn train(
     config: &Config,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SvmModel> {
-    let reduce = |model: &SvmModel, set: &TrainingSet| fit_reduced_set(model, set, config);
-    train_by(set, config, Search::Grid, &reduce, progress)
+    train_by(set, config, Search::Grid, None, progress)
 }
 
-/// How the model itself gets its reduced set, given the model and the cells it was
-/// fitted on (its hybrid and fallback get their own by [`fit_reduced_set`]).
+/// A reduced set fitted in place of a model's own, given the model and the cells it
+/// was fitted on (adaptation's, which folds in the prior).
 pub type Reduce<'a> = dyn Fn(&SvmModel, &TrainingSet) -> Option<ReducedSet> + Sync + 'a;
 
-/// [`train`] with C and gamma chosen as `search` says and the model's reduced set
-/// by `reduce`.
+/// [`train`] with C and gamma chosen as `search` says, and the model's reduced set
+/// by `reduce` when given (its hybrid and fallback always get their own).
 pub fn train_by(
     set: &TrainingSet,
     config: &Config,
     search: Search,
-    reduce: &Reduce,
+    reduce: Option<&Reduce>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SvmModel> {
     // The model, its hybrid and the fallback are independent fits: run side by side,
@@ -262,9 +261,7 @@ pub fn train_by(
             rayon::join(
                 || {
                     let hybrid = set.hybrid()?;
-                    let reduce =
-                        |model: &SvmModel, set: &TrainingSet| fit_reduced_set(model, set, config);
-                    Some(train_one(&hybrid, config, search, &reduce, &part(1)))
+                    Some(train_one(&hybrid, config, search, None, &part(1)))
                 },
                 || fallback_without_remission(set, config, search, &part(2)),
             )
@@ -302,12 +299,11 @@ fn fallback_without_remission(
             feature_count(&config.features.groups)
         )));
     }
-    let reduce = |model: &SvmModel, set: &TrainingSet| fit_reduced_set(model, set, &without);
     train_by(
         &set.without_columns(columns),
         &without,
         search,
-        &reduce,
+        None,
         progress,
     )
     .map(Some)
@@ -319,7 +315,7 @@ fn train_one(
     set: &TrainingSet,
     config: &Config,
     search: Search,
-    reduce: &Reduce,
+    reduce: Option<&Reduce>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SvmModel> {
     let started = std::time::Instant::now();
@@ -342,9 +338,13 @@ fn train_one(
         set.subset(&indices)
     };
     let fit_set = subset(t.max_fit_samples);
+    let reduced_set = |model: &SvmModel| match reduce {
+        Some(reduce) => reduce(model, &fit_set),
+        None => fit_reduced_set(model, &fit_set, config),
+    };
     if let Search::Fixed { c, gamma } = search {
         let mut model = fit(&fit_set, c, gamma, config);
-        model.reduced_set = reduce(&model, &fit_set);
+        model.reduced_set = reduced_set(&model);
         progress(1, 1);
         model.training.seconds = started.elapsed().as_secs_f64();
         return Ok(model);
@@ -410,7 +410,7 @@ fn train_one(
         },
     );
     let mut model = fit(&fit_set, best.c, best.gamma, config);
-    model.reduced_set = reduce(&model, &fit_set);
+    model.reduced_set = reduced_set(&model);
     if t.tune_threshold {
         let best_k = candidates
             .iter()
