@@ -148,9 +148,64 @@ impl CellPoints {
     }
 
     /// The points of `cell` from the window's newest scan.
-    pub fn newest_range(&self, cell: usize) -> std::ops::Range<usize> {
+    fn newest_range(&self, cell: usize) -> std::ops::Range<usize> {
         let all = self.cell_range(cell);
         all.end - self.newest_per_cell[cell] as usize..all.end
+    }
+
+    /// What a frame's result keeps of these points once the method is done with them.
+    pub fn kept_for_outputs(&self) -> KeptCellPoints {
+        let cell_count = self.layout.cell_count();
+        let mut newest_start = Vec::with_capacity(cell_count + 1);
+        newest_start.push(0);
+        let newest: u32 = self.newest_per_cell.iter().sum();
+        let mut newest_points_in_grid = Vec::with_capacity(newest as usize);
+        for cell in 0..cell_count {
+            newest_points_in_grid.extend_from_slice(&self.points_in_grid[self.newest_range(cell)]);
+            newest_start.push(newest_points_in_grid.len() as u32);
+        }
+        KeptCellPoints {
+            cell_start: self.cell_start.clone(),
+            newest_start,
+            newest_points_in_grid,
+        }
+    }
+}
+
+/// What a frame's result keeps of its [`CellPoints`]: each cell's point count and
+/// the points of the window's newest scan (annotate's cloud). Whole windows of
+/// points kept for every frame in flight to the outputs were most of the process's
+/// memory, and let its peak grow with the length of the drive.
+#[derive(Clone, Debug)]
+pub struct KeptCellPoints {
+    /// Cell `c` held `cell_start[c + 1] - cell_start[c]` points of the window.
+    cell_start: Vec<u32>,
+    /// Cell `c`'s newest points are `newest_start[c]..newest_start[c + 1]`.
+    newest_start: Vec<u32>,
+    /// x, y relative to the grid's min corner, z as in the world, metres.
+    newest_points_in_grid: Vec<[f32; 3]>,
+}
+
+impl KeptCellPoints {
+    /// The window's points in `cell`.
+    pub fn point_count(&self, cell: usize) -> usize {
+        (self.cell_start[cell + 1] - self.cell_start[cell]) as usize
+    }
+
+    /// The window's points in the grid.
+    pub fn window_points(&self) -> usize {
+        self.cell_start.last().map_or(0, |&n| n as usize)
+    }
+
+    /// The newest scan's points in `cell`.
+    pub fn newest(&self, cell: usize) -> &[[f32; 3]] {
+        let range = self.newest_start[cell] as usize..self.newest_start[cell + 1] as usize;
+        &self.newest_points_in_grid[range]
+    }
+
+    /// The newest scan's points in the grid.
+    pub fn newest_len(&self) -> usize {
+        self.newest_points_in_grid.len()
     }
 }
 
@@ -284,6 +339,19 @@ mod tests {
             cells.point_count(layout.cell_of_local(0.5, 0.5).unwrap()),
             1
         );
+        // A result keeps every cell's count and only the newest scan's points.
+        let kept = cells.kept_for_outputs();
+        assert_eq!(kept.window_points(), 3);
+        assert_eq!(kept.newest_len(), 1);
+        for cell in 0..layout.cell_count() {
+            assert_eq!(kept.point_count(cell), cells.point_count(cell));
+            let newest = if cell == c {
+                &[[2.6f32, 2.4, 3.0]][..]
+            } else {
+                &[]
+            };
+            assert_eq!(kept.newest(cell), newest);
+        }
     }
 
     #[test]

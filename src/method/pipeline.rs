@@ -22,7 +22,7 @@ use crate::method::classifier::{ForeignRemission, SvmModel};
 use crate::method::features::{FeatureExtractor, FeatureGrid};
 use crate::method::filter::OutlierFilter;
 use crate::method::footprint::{Footprint, PathKind, Trajectory};
-use crate::method::grid::{CellClass, CellPoints, GridLayout, grid_points};
+use crate::method::grid::{CellClass, GridLayout, KeptCellPoints, grid_points};
 use crate::method::ground_truth::{GroundTruth, UnknownLabels};
 use crate::method::integration::{
     IntegrationWindow, WorldScan, ground_normal, scale_remission_to_reference, scan_to_world,
@@ -60,8 +60,8 @@ pub struct FrameResult {
     pub world_from_velodyne: Isometry3<f64>,
     /// The sensor's position in the world.
     pub sensor_in_world: [f64; 3],
-    /// The integrated points inside the grid, by cell.
-    pub cells: CellPoints,
+    /// What the outputs read of the integrated points inside the grid.
+    pub cells: KeptCellPoints,
     /// Every point of the frame's own scan, in the world frame (shared with the
     /// integration window, not copied).
     pub scan_in_world: std::sync::Arc<Vec<[f32; 3]>>,
@@ -398,7 +398,7 @@ impl Pipeline {
                 layout,
                 world_from_velodyne: extras.world_from_velodyne,
                 sensor_in_world: current.origin_in_world,
-                cells,
+                cells: cells.kept_for_outputs(),
                 scan_in_world: current.points_in_world.clone(),
                 dropped_points: extras.dropped_points,
                 unknown_labels: extras.unknown_labels,

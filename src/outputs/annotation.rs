@@ -128,7 +128,7 @@ fn cloud_message(
         [of(classes) as u8, truth as u8, 0, 0]
     };
     let points = match which {
-        CloudPoints::Grid => result.cells.newest_per_cell.iter().sum::<u32>() as usize,
+        CloudPoints::Grid => result.cells.newest_len(),
         CloudPoints::All => result.scan_in_world.len(),
         CloudPoints::None => 0,
     };
@@ -142,9 +142,8 @@ fn cloud_message(
     match which {
         CloudPoints::None => return None,
         CloudPoints::Grid => {
-            let cells = &result.cells;
             for cell in 0..result.layout.cell_count() {
-                for p in &cells.points_in_grid[cells.newest_range(cell)] {
+                for p in result.cells.newest(cell) {
                     let x = (p[0] as f64 + min_x) as f32;
                     let y = (p[1] as f64 + min_y) as f32;
                     put([x, y, p[2]], Some(cell));

@@ -67,12 +67,13 @@ pub(super) struct Buffers(Arc<Mutex<Vec<Vec<u8>>>>);
 const KEPT_BUFFERS: usize = 8;
 
 impl Buffers {
-    /// An empty buffer with room for `bytes`.
+    /// An empty buffer with room for `bytes`, exactly: grown by doubling, the kept
+    /// buffers ratcheted up to twice a chunk each over a long drive.
     pub(super) fn take(&self, bytes: usize) -> Vec<u8> {
         let kept = self.0.lock().ok().and_then(|mut kept| kept.pop());
         let mut buffer = kept.unwrap_or_default();
         buffer.clear();
-        buffer.reserve(bytes);
+        buffer.reserve_exact(bytes);
         buffer
     }
 

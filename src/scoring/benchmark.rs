@@ -96,7 +96,7 @@ pub fn benchmark(
                 if result.index >= first_timed {
                     timings.push(result.timings);
                     cells.push(result.features.predictable.iter().filter(|p| **p).count() as f64);
-                    points.push(result.cells.points_in_grid.len() as f64);
+                    points.push(result.cells.window_points() as f64);
                 }
             })?;
         }

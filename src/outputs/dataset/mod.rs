@@ -178,6 +178,9 @@ impl DatasetWriter {
                 CellClass::Unknown => None,
             })
         };
+        // A frame adds at most a row per cell.
+        self.columns
+            .reserve(ROW_GROUP_ROWS - 1 + result.layout.cell_count());
         let c = &mut self.columns;
         let summary = &mut self.summary;
         summary.frames += 1;
