@@ -294,23 +294,49 @@ impl ColourMemory {
         });
     }
 
-    /// The normalised histograms of the grid's cells (row-major `cells x n`), and
-    /// which cells have any.
-    pub fn features(&self, layout: &GridLayout, n: usize) -> (Vec<f32>, Vec<bool>) {
-        let mut values = vec![0f32; layout.cell_count() * n];
-        let mut seen = vec![false; layout.cell_count()];
-        for cell in 0..layout.cell_count() {
+    /// The normalised histograms (`n` bins) of the grid's cells that have any.
+    pub fn features(&self, layout: &GridLayout, n: usize) -> CellAppearance {
+        let mut appearance = CellAppearance {
+            values: Vec::new(),
+            len: n,
+            row_of_cell: vec![CellAppearance::UNSEEN; layout.cell_count()],
+        };
+        for (cell, row) in appearance.row_of_cell.iter_mut().enumerate() {
             if let Some(counts) = self.counts.get(&layout.world_key(cell))
                 && let Some(&pixels) = counts.get(n)
                 && pixels > 0
             {
-                seen[cell] = true;
-                for (v, &c) in values[cell * n..(cell + 1) * n].iter_mut().zip(counts) {
-                    *v = c as f32 / pixels as f32;
-                }
+                *row = (appearance.values.len() / n) as u32;
+                let normalised = counts[..n].iter().map(|&c| c as f32 / pixels as f32);
+                appearance.values.extend(normalised);
             }
         }
-        (values, seen)
+        appearance
+    }
+}
+
+/// The appearance values of the cells an image has covered, `len` each in cell
+/// order. Stored for those cells alone: a grid's worth of them (2.9 MB on the
+/// training grid, most of it zeros) was held for every frame in flight.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CellAppearance {
+    pub values: Vec<f32>,
+    pub len: usize,
+    /// Each cell's row of `values`, or [`Self::UNSEEN`]; empty when no image was
+    /// ever seen.
+    pub row_of_cell: Vec<u32>,
+}
+
+impl CellAppearance {
+    pub const UNSEEN: u32 = u32::MAX;
+
+    /// The values of `cell`, when an image has covered it.
+    pub fn of(&self, cell: usize) -> Option<&[f32]> {
+        let row = *self.row_of_cell.get(cell)?;
+        (row != Self::UNSEEN).then(|| {
+            let start = row as usize * self.len;
+            &self.values[start..start + self.len]
+        })
     }
 }
 
@@ -432,12 +458,18 @@ mod tests {
             counts,
         });
         memory.forget_outside(&layout_now, 2);
-        let (values, seen) = memory.features(&layout_now, 4);
+        let appearance = memory.features(&layout_now, 4);
         let cell = (0..layout_now.cell_count())
             .find(|&c| layout_now.world_key(c) == key)
             .unwrap();
-        assert!(seen[cell] && seen.iter().filter(|s| **s).count() == 1);
-        assert_eq!(&values[cell * 4..cell * 4 + 4], &[0.0, 1.0, 0.0, 0.0]);
+        assert_eq!(appearance.of(cell), Some(&[0.0, 1.0, 0.0, 0.0][..]));
+        let seen = (0..layout_now.cell_count()).filter(|&c| appearance.of(c).is_some());
+        assert_eq!(seen.count(), 1);
+        assert_eq!(
+            appearance.values.len(),
+            4,
+            "only the seen cell's values are kept"
+        );
         assert_ne!(
             cell, 100,
             "the same world cell has another index in the moved grid"

@@ -9,6 +9,7 @@
 
 use crate::config::{FeatureConfig, FeatureGroup};
 use crate::geometry::Moments;
+use crate::method::appearance::CellAppearance;
 use crate::method::feature_groups;
 use crate::method::grid::CellPoints;
 
@@ -72,12 +73,8 @@ pub struct FeatureGrid {
     pub groups: Vec<FeatureGroup>,
     /// Cells with at least `min_points` points.
     pub predictable: Vec<bool>,
-    /// Appearance values (METHOD.md section 5), row-major `cells x appearance_len`;
-    /// empty when no image was ever seen.
-    pub appearance: Vec<f32>,
-    pub appearance_len: usize,
-    /// Cells that some image has covered.
-    pub seen: Vec<bool>,
+    /// Appearance values (METHOD.md section 5) of the cells some image has covered.
+    pub appearance: CellAppearance,
 }
 
 impl FeatureGrid {
@@ -87,8 +84,7 @@ impl FeatureGrid {
 
     /// The appearance values of a cell that an image has covered.
     pub fn appearance(&self, cell: usize) -> Option<&[f32]> {
-        let n = self.appearance_len;
-        (self.seen.get(cell) == Some(&true)).then(|| &self.appearance[cell * n..(cell + 1) * n])
+        self.appearance.of(cell)
     }
 
     /// The same grid without the remission values (as a cloud without usable
@@ -115,16 +111,6 @@ impl FeatureGrid {
             groups: groups.without_remission().groups,
             ..self.clone()
         })
-    }
-
-    pub fn set_appearance(&mut self, values: Vec<f32>, seen: Vec<bool>) {
-        self.appearance_len = if seen.is_empty() {
-            0
-        } else {
-            values.len() / seen.len()
-        };
-        self.appearance = values;
-        self.seen = seen;
     }
 }
 
@@ -212,9 +198,7 @@ impl FeatureExtractor {
             dimension,
             groups,
             predictable,
-            appearance: Vec::new(),
-            appearance_len: 0,
-            seen: Vec::new(),
+            appearance: CellAppearance::default(),
         }
     }
 

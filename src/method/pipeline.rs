@@ -17,7 +17,7 @@ use serde::Serialize;
 use crate::config::{ClassifierConfig, Config, RemissionScaling};
 use crate::error::Result;
 use crate::frame::{CameraImage, Frame, RemissionScale};
-use crate::method::appearance::{AppearanceVoter, ColourMemory, FrameVotes};
+use crate::method::appearance::{AppearanceVoter, CellAppearance, ColourMemory, FrameVotes};
 use crate::method::classifier::{ForeignRemission, SvmModel};
 use crate::method::features::{FeatureExtractor, FeatureGrid};
 use crate::method::filter::OutlierFilter;
@@ -422,7 +422,7 @@ impl Pipeline {
 
     /// Adds an observation's votes to the colour memory and returns the appearance
     /// features of its grid (None without appearance, or while no image has been seen).
-    fn remember_colours(&mut self, observation: &Observation) -> Option<(Vec<f32>, Vec<bool>)> {
+    fn remember_colours(&mut self, observation: &Observation) -> Option<CellAppearance> {
         let voter = self.appearance.as_ref()?;
         self.colours.add(&observation.votes);
         let layout = &observation.result.layout;
@@ -438,8 +438,8 @@ impl Pipeline {
     /// Stages 4 and 5 on an observation with its appearance features.
     fn decide(&self, observation: Observation, model: Option<&SvmModel>) -> FrameResult {
         let mut result = observation.result;
-        if let Some((values, seen)) = observation.appearance {
-            result.features.set_appearance(values, seen);
+        if let Some(appearance) = observation.appearance {
+            result.features.appearance = appearance;
         }
         let timings = &mut result.timings;
         if let Some(model) = model {
@@ -481,7 +481,7 @@ impl Pipeline {
 struct Observation {
     result: FrameResult,
     votes: FrameVotes,
-    appearance: Option<(Vec<f32>, Vec<bool>)>,
+    appearance: Option<CellAppearance>,
 }
 
 /// `f` over the frames of a batch, in parallel; a batch of one stays on this thread.

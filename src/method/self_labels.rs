@@ -70,9 +70,7 @@ mod tests {
             dimension,
             groups: Vec::<FeatureGroup>::new(),
             predictable: vec![true, true, true, true, false],
-            appearance: Vec::new(),
-            appearance_len: 0,
-            seen: Vec::new(),
+            appearance: Default::default(),
         }
     }
 
