@@ -126,10 +126,13 @@ pub fn raw_cloud_points(cloud: &PointCloud2) -> Result<(CloudPoints, Option<u8>)
     // at a fraction of the cost.
     let float32 = |field: &(usize, u8)| field.1 == datatype::FLOAT32;
     let plain = !big && xyz.iter().chain(&intensity).all(float32);
-    for row in 0..height {
-        for col in 0..width {
-            let at = row * row_step + col * step;
-            let point = &cloud.data[at..at + step];
+    // Every row lies inside `data` (checked above) once there are points, and
+    // `checked` keeps every field inside a point, so `step` is at least 1.
+    let rows = if width == 0 { 0 } else { height };
+    let row_bytes = row_bytes as usize;
+    for row in 0..rows {
+        let row_data = &cloud.data[row * row_step..row * row_step + row_bytes];
+        for point in row_data.chunks_exact(step) {
             let value =
                 |(offset, datatype_id): (usize, u8)| read_value(&point[offset..], datatype_id, big);
             let read = |field: (usize, u8)| {
@@ -140,7 +143,7 @@ pub fn raw_cloud_points(cloud: &PointCloud2) -> Result<(CloudPoints, Option<u8>)
                     value(field) as f32
                 }
             };
-            let [x, y, z] = [xyz[0], xyz[1], xyz[2]].map(read);
+            let (x, y, z) = (read(xyz[0]), read(xyz[1]), read(xyz[2]));
             if !(x.is_finite() && y.is_finite() && z.is_finite()) {
                 dropped += 1;
                 continue;
@@ -194,4 +197,58 @@ pub fn remission_scale(datatype_id: Option<u8>, largest: f32) -> (RemissionScale
         _ => 0.0,
     };
     (scale, factor)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// x, y, z, intensity float32 in a 20-byte point, rows padded to 48 bytes.
+    fn cloud(width: u32, height: u32, rows: &[&[[f32; 4]]]) -> PointCloud2 {
+        let mut fields = PointField::xyz_float32();
+        fields.push(PointField::scalar("intensity", 12, datatype::FLOAT32));
+        let mut data = Vec::new();
+        for row in rows {
+            for p in *row {
+                p.iter()
+                    .for_each(|v| data.extend_from_slice(&v.to_le_bytes()));
+                data.extend_from_slice(&[0xAB; 4]);
+            }
+            data.resize(data.len() + 48 - 20 * row.len(), 0xCD);
+        }
+        PointCloud2 {
+            height,
+            width,
+            fields,
+            point_step: 20,
+            row_step: 48,
+            data,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn points_are_read_row_by_row_past_the_padding_and_non_finite_ones_dropped() {
+        let rows: [&[[f32; 4]]; 2] = [
+            &[[1.0, 2.0, 3.0, 0.5], [f32::NAN, 0.0, 0.0, 0.1]],
+            &[[-4.0, 5.5, -6.0, 0.25], [7.0, 8.0, 9.0, 1.0]],
+        ];
+        let (read, datatype_id) = raw_cloud_points(&cloud(2, 2, &rows)).unwrap();
+        assert_eq!(datatype_id, Some(datatype::FLOAT32));
+        assert_eq!(read.dropped, 1);
+        assert_eq!(
+            read.points,
+            [
+                [1.0, 2.0, 3.0, 0.5],
+                [-4.0, 5.5, -6.0, 0.25],
+                [7.0, 8.0, 9.0, 1.0]
+            ]
+        );
+    }
+
+    #[test]
+    fn rows_of_no_points_read_as_an_empty_cloud() {
+        let (read, _) = raw_cloud_points(&cloud(0, 3, &[])).unwrap();
+        assert!(read.points.is_empty() && read.dropped == 0);
+    }
 }
