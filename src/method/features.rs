@@ -291,12 +291,24 @@ impl FeatureExtractor {
         let unevenness =
             (resultant[0].powi(2) + resultant[1].powi(2) + resultant[2].powi(2)).sqrt() / k as f64;
 
-        let mut max_horizontal_sq = 0.0f64;
-        for p in points {
+        let horizontal_sq = |p: &[f32; 3]| {
             let dx = p[0] as f64 - cell_min[0] - centroid[0];
             let dy = p[1] as f64 - cell_min[1] - centroid[1];
-            max_horizontal_sq = max_horizontal_sq.max(dx * dx + dy * dy);
+            dx * dx + dy * dy
+        };
+        // Four running maxima: with one, each point's max waited for the last one's.
+        // A maximum is exact in any order.
+        let mut maxima = [0.0f64; 4];
+        let mut quads = points.chunks_exact(4);
+        for quad in &mut quads {
+            for (m, p) in maxima.iter_mut().zip(quad) {
+                *m = m.max(horizontal_sq(p));
+            }
         }
+        for p in quads.remainder() {
+            maxima[0] = maxima[0].max(horizontal_sq(p));
+        }
+        let max_horizontal_sq = maxima.into_iter().fold(0.0f64, f64::max);
         let surface_density = ratio(k as f64, max_horizontal_sq);
 
         // Curvity: share of empty bins of the range histogram over [min, max].
