@@ -154,7 +154,7 @@ impl CellPoints {
     }
 
     /// What a frame's result keeps of these points once the method is done with them.
-    pub fn kept_for_outputs(&self) -> KeptCellPoints {
+    pub fn kept_for_outputs(self) -> KeptCellPoints {
         let cell_count = self.layout.cell_count();
         let mut newest_start = Vec::with_capacity(cell_count + 1);
         newest_start.push(0);
@@ -165,7 +165,7 @@ impl CellPoints {
             newest_start.push(newest_points_in_grid.len() as u32);
         }
         KeptCellPoints {
-            cell_start: self.cell_start.clone(),
+            cell_start: self.cell_start,
             newest_start,
             newest_points_in_grid,
         }
@@ -340,7 +340,7 @@ mod tests {
             1
         );
         // A result keeps every cell's count and only the newest scan's points.
-        let kept = cells.kept_for_outputs();
+        let kept = cells.clone().kept_for_outputs();
         assert_eq!(kept.window_points(), 3);
         assert_eq!(kept.newest_len(), 1);
         for cell in 0..layout.cell_count() {

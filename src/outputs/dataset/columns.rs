@@ -16,11 +16,6 @@ impl<T> Nullable<T> {
         self.defined.push(value.is_some() as i16);
         self.values.extend(value);
     }
-
-    fn clear(&mut self) {
-        self.values.clear();
-        self.defined.clear();
-    }
 }
 
 /// The rows of one row group, by column.
@@ -61,50 +56,58 @@ impl Columns {
     /// that takes it past its size, so doubling grew the columns to twice the rows they
     /// ever hold: 35-47 MB of them on the training grid.
     pub(super) fn reserve(&mut self, rows: usize) {
-        fn room<T>(column: &mut Vec<T>, rows: usize) {
-            column.reserve_exact(rows.saturating_sub(column.len()));
-        }
-        room(&mut self.source, rows);
-        room(&mut self.frame, rows);
-        room(&mut self.stamp_ns, rows);
-        room(&mut self.row, rows);
-        room(&mut self.col, rows);
-        room(&mut self.x_m, rows);
-        room(&mut self.y_m, rows);
-        room(&mut self.points, rows);
-        self.features.iter_mut().for_each(|c| room(c, rows));
-        self.appearance.iter_mut().for_each(|c| room(c, rows));
-        room(&mut self.appearance_defined, rows);
-        for nullable in [
-            &mut self.ground_truth,
-            &mut self.predicted,
-            &mut self.pseudo_label,
-        ] {
-            room(&mut nullable.values, rows);
-            room(&mut nullable.defined, rows);
-        }
-        room(&mut self.footprint, rows);
+        self.each_buffer(&mut |buffer| buffer.reserve_rows(rows));
     }
 
     /// Empties every column, keeping its buffer for the next row group: regrowing
     /// some 80 columns from nothing for every group left the allocator's arenas
     /// fragmented, and the process growing with the drive.
     pub(super) fn clear(&mut self) {
-        self.source.clear();
-        self.frame.clear();
-        self.stamp_ns.clear();
-        self.row.clear();
-        self.col.clear();
-        self.x_m.clear();
-        self.y_m.clear();
-        self.points.clear();
-        self.features.iter_mut().for_each(Vec::clear);
-        self.appearance.iter_mut().for_each(Vec::clear);
-        self.appearance_defined.clear();
-        self.ground_truth.clear();
-        self.predicted.clear();
-        self.footprint.clear();
-        self.pseudo_label.clear();
+        self.each_buffer(&mut |buffer| buffer.clear_rows());
+    }
+
+    /// `f` on every buffer of every column (a nullable column has two).
+    fn each_buffer(&mut self, f: &mut dyn FnMut(&mut dyn RowBuffer)) {
+        let fixed: [&mut dyn RowBuffer; 10] = [
+            &mut self.source,
+            &mut self.frame,
+            &mut self.stamp_ns,
+            &mut self.row,
+            &mut self.col,
+            &mut self.x_m,
+            &mut self.y_m,
+            &mut self.points,
+            &mut self.appearance_defined,
+            &mut self.footprint,
+        ];
+        fixed.into_iter().for_each(&mut *f);
+        for column in self.features.iter_mut().chain(&mut self.appearance) {
+            f(column);
+        }
+        for nullable in [
+            &mut self.ground_truth,
+            &mut self.predicted,
+            &mut self.pseudo_label,
+        ] {
+            f(&mut nullable.values);
+            f(&mut nullable.defined);
+        }
+    }
+}
+
+/// A column's buffer, whatever its values.
+trait RowBuffer {
+    fn reserve_rows(&mut self, rows: usize);
+    fn clear_rows(&mut self);
+}
+
+impl<T> RowBuffer for Vec<T> {
+    fn reserve_rows(&mut self, rows: usize) {
+        self.reserve_exact(rows.saturating_sub(self.len()));
+    }
+
+    fn clear_rows(&mut self) {
+        self.clear();
     }
 }
 
