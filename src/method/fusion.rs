@@ -91,6 +91,10 @@ pub struct DriveMap {
     cell_size_m: f64,
     tiles: HashMap<[i64; 2], Tile>,
     frames: usize,
+    /// The lowest and highest keys of the cells a prediction covered, kept as frames
+    /// come so that a map published every few frames costs its own size, not a walk
+    /// over the whole drive.
+    observed_bounds: Option<([i64; 2], [i64; 2])>,
 }
 
 impl DriveMap {
@@ -99,6 +103,7 @@ impl DriveMap {
             cell_size_m,
             tiles: HashMap::new(),
             frames: 0,
+            observed_bounds: None,
         }
     }
 
@@ -183,6 +188,11 @@ impl DriveMap {
                     let evidence = sign * Self::weight(distance_m, frame.margins[cell], class);
                     tile.evidence[local] += (evidence * UNITS).round() as i64;
                     tile.observations[local] += 1;
+                    let (low, high) = self.observed_bounds.get_or_insert((key, key));
+                    for axis in 0..2 {
+                        low[axis] = low[axis].min(key[axis]);
+                        high[axis] = high[axis].max(key[axis]);
+                    }
                 }
                 match truth {
                     CellClass::Traversable => tile.truth_traversable[local] += 1,
@@ -203,62 +213,62 @@ impl DriveMap {
 
     /// Every cell some frame saw or labelled, ordered by key (y, then x).
     pub fn cells(&self) -> Vec<FusedCell> {
-        let mut cells = Vec::new();
-        for (tile_key, tile) in &self.tiles {
-            for local in 0..(TILE_CELLS * TILE_CELLS) as usize {
-                let (observations, up, down) = (
-                    tile.observations[local],
-                    tile.truth_traversable[local],
-                    tile.truth_not[local],
-                );
-                if observations == 0 && up == 0 && down == 0 {
-                    continue;
-                }
-                let key = [
-                    tile_key[0] * TILE_CELLS + local as i64 % TILE_CELLS,
-                    tile_key[1] * TILE_CELLS + local as i64 / TILE_CELLS,
-                ];
-                let evidence = tile.evidence[local] as f64 / UNITS;
-                let class = match (observations, tile.evidence[local]) {
-                    (0, _) | (_, 0) => CellClass::Unknown,
-                    (_, e) if e > 0 => CellClass::Traversable,
-                    _ => CellClass::NonTraversable,
-                };
-                let ground_truth = match (up, down) {
-                    (0, 0) => CellClass::Unknown,
-                    (up, down) if up > down => CellClass::Traversable,
-                    _ => CellClass::NonTraversable,
-                };
-                let (x_m, y_m) = self.centre(key);
-                cells.push(FusedCell {
-                    key,
-                    x_m,
-                    y_m,
-                    evidence,
-                    probability: 1.0 / (1.0 + (-evidence).exp()),
-                    observations,
-                    class,
-                    ground_truth,
-                });
-            }
-        }
+        let mut cells: Vec<FusedCell> = self.each_cell().collect();
         cells.sort_by_key(|c| (c.key[1], c.key[0]));
         cells
     }
 
-    /// The smallest and largest world cell keys seen; None for an empty map.
-    pub fn bounds(&self) -> Option<([i64; 2], [i64; 2])> {
-        let cells = self.cells();
-        let first = cells.first()?;
-        let mut low = first.key;
-        let mut high = first.key;
-        for cell in &cells {
-            for axis in 0..2 {
-                low[axis] = low[axis].min(cell.key[axis]);
-                high[axis] = high[axis].max(cell.key[axis]);
-            }
+    /// Every cell some frame saw or labelled, in no particular order: for a reader
+    /// that places each cell by its key and needs no list of them.
+    pub fn each_cell(&self) -> impl Iterator<Item = FusedCell> + '_ {
+        self.tiles.iter().flat_map(move |(tile_key, tile)| {
+            (0..(TILE_CELLS * TILE_CELLS) as usize)
+                .filter_map(move |local| self.fused(*tile_key, tile, local))
+        })
+    }
+
+    /// Cell `local` of a tile, if some frame saw or labelled it.
+    fn fused(&self, tile_key: [i64; 2], tile: &Tile, local: usize) -> Option<FusedCell> {
+        let (observations, up, down) = (
+            tile.observations[local],
+            tile.truth_traversable[local],
+            tile.truth_not[local],
+        );
+        if observations == 0 && up == 0 && down == 0 {
+            return None;
         }
-        Some((low, high))
+        let key = [
+            tile_key[0] * TILE_CELLS + local as i64 % TILE_CELLS,
+            tile_key[1] * TILE_CELLS + local as i64 / TILE_CELLS,
+        ];
+        let evidence = tile.evidence[local] as f64 / UNITS;
+        let class = match (observations, tile.evidence[local]) {
+            (0, _) | (_, 0) => CellClass::Unknown,
+            (_, e) if e > 0 => CellClass::Traversable,
+            _ => CellClass::NonTraversable,
+        };
+        let ground_truth = match (up, down) {
+            (0, 0) => CellClass::Unknown,
+            (up, down) if up > down => CellClass::Traversable,
+            _ => CellClass::NonTraversable,
+        };
+        let (x_m, y_m) = self.centre(key);
+        Some(FusedCell {
+            key,
+            x_m,
+            y_m,
+            evidence,
+            probability: 1.0 / (1.0 + (-evidence).exp()),
+            observations,
+            class,
+            ground_truth,
+        })
+    }
+
+    /// The smallest and largest keys of the cells a prediction covered; None before
+    /// any did.
+    pub fn observed_bounds(&self) -> Option<([i64; 2], [i64; 2])> {
+        self.observed_bounds
     }
 }
 
@@ -368,6 +378,6 @@ mod tests {
         }
         // Two tiles, not the 313 x 313 of the bounding box.
         assert_eq!(map.tiles.len(), 2);
-        assert_eq!(map.bounds(), Some(([0, -10_000], [10_001, 1])));
+        assert_eq!(map.observed_bounds(), Some(([0, -10_000], [10_001, 1])));
     }
 }

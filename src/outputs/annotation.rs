@@ -293,8 +293,7 @@ pub fn annotate(
         frames += 1;
         if frames % DRIVE_MAP_EVERY == 0 {
             let grid = occupancy_grid(
-                &drive_map.cells(),
-                drive_map.cell_size_m(),
+                drive_map,
                 &world_frame,
                 stamp,
                 options.grid_height_m,
@@ -307,8 +306,7 @@ pub fn annotate(
     })?;
     if frames % DRIVE_MAP_EVERY != 0 {
         let grid = occupancy_grid(
-            &drive_map.cells(),
-            drive_map.cell_size_m(),
+            &drive_map,
             &world_frame,
             last_stamp_ns,
             options.grid_height_m,
@@ -320,8 +318,7 @@ pub fn annotate(
         // At z 0 in the world frame, as a map layer expects; offered transient-local so
         // that a replayed bag hands it to subscribers that join late, as map_server does.
         let map = occupancy_grid(
-            &drive_map.cells(),
-            drive_map.cell_size_m(),
+            &drive_map,
             &world_frame,
             last_stamp_ns,
             0.0,

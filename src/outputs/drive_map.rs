@@ -15,7 +15,7 @@ use parquet::file::writer::SerializedFileWriter;
 use crate::error::Result;
 use crate::frame::RgbImage;
 use crate::io::ros::{Header, MapMetaData, OccupancyGrid, Pose, Quaternion, Time, Vector3};
-use crate::method::fusion::FusedCell;
+use crate::method::fusion::{DriveMap, FusedCell};
 use crate::method::grid::CellClass;
 use crate::outputs::atomic::{AtomicFile, Staged, parquet_failure, sync_output, write_failure};
 use crate::outputs::rendering::{GAP_PX, class_colour, colour, error_colour};
@@ -31,17 +31,20 @@ const FOOTER_PX: u32 = 16;
 
 /// The cells' key range, padded with [`BORDER_CELLS`]: (lowest key, cells per side).
 fn extent(cells: &[FusedCell]) -> ([i64; 2], [usize; 2]) {
-    let mut low = [i64::MAX; 2];
-    let mut high = [i64::MIN; 2];
-    for cell in cells {
-        for axis in 0..2 {
-            low[axis] = low[axis].min(cell.key[axis]);
-            high[axis] = high[axis].max(cell.key[axis]);
-        }
-    }
-    if cells.is_empty() {
-        (low, high) = ([0, 0], [0, 0]);
-    }
+    let bounds = cells.iter().fold(None, |bounds, cell| {
+        let (low, high): ([i64; 2], [i64; 2]) = bounds.unwrap_or((cell.key, cell.key));
+        Some((
+            [low[0].min(cell.key[0]), low[1].min(cell.key[1])],
+            [high[0].max(cell.key[0]), high[1].max(cell.key[1])],
+        ))
+    });
+    padded_extent(bounds)
+}
+
+/// A key range (lowest, highest; None for no cells, read as the one cell 0, 0)
+/// padded with [`BORDER_CELLS`]: (lowest key, cells per side).
+fn padded_extent(bounds: Option<([i64; 2], [i64; 2])>) -> ([i64; 2], [usize; 2]) {
+    let (low, high) = bounds.unwrap_or(([0, 0], [0, 0]));
     let low = [low[0] - BORDER_CELLS, low[1] - BORDER_CELLS];
     let size = [
         (high[0] + BORDER_CELLS - low[0] + 1) as usize,
@@ -260,21 +263,16 @@ pub enum GridValues {
 /// The fused map as an OccupancyGrid in `frame_id` at height `height_m`: -1 where no
 /// frame saw a cell, else the cell's value as `values` says.
 pub fn occupancy_grid(
-    cells: &[FusedCell],
-    cell_size_m: f64,
+    map: &DriveMap,
     frame_id: &str,
     stamp_ns: u64,
     height_m: f64,
     values: GridValues,
 ) -> OccupancyGrid {
-    let seen: Vec<FusedCell> = cells
-        .iter()
-        .filter(|c| c.observations > 0)
-        .cloned()
-        .collect();
-    let (low, size) = extent(&seen);
+    let cell_size_m = map.cell_size_m();
+    let (low, size) = padded_extent(map.observed_bounds());
     let mut data = vec![-1i8; size[0] * size[1]];
-    for cell in &seen {
+    for cell in map.each_cell().filter(|c| c.observations > 0) {
         let col = (cell.key[0] - low[0]) as usize;
         let row = (cell.key[1] - low[1]) as usize;
         data[row * size[0] + col] = match (values, cell.class) {
