@@ -1,5 +1,6 @@
 //! `travmap map`: the fused drive map's picture cell by cell against the library's
-//! fusion, its Parquet table, and its memory on a long drive.
+//! fusion, its Parquet table, its memory on a long drive, and how often annotate
+//! writes it.
 
 mod common;
 
@@ -128,4 +129,42 @@ fn a_long_drive_costs_memory_in_proportion_to_its_area() {
         "{} bytes per seen cell",
         memory / seen
     );
+}
+
+#[test]
+fn annotate_writes_the_drive_map_as_often_as_asked_and_always_the_final_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let maps = |every: &str| {
+        let flags = ["--no-passthrough", "--drive-map-every", every];
+        let (_, out) = common::sample_annotated(dir.path(), &flags)?;
+        let bytes = std::fs::read(&out).unwrap();
+        let stamps_of = |topic: &str| -> Vec<(u64, Vec<u8>)> {
+            mcap::MessageStream::new(&bytes)
+                .unwrap()
+                .map(|m| m.unwrap())
+                .filter(|m| m.channel.topic == topic)
+                .map(|m| (m.log_time, m.data.to_vec()))
+                .collect()
+        };
+        let frames: Vec<u64> = stamps_of("/travmap/prediction")
+            .into_iter()
+            .map(|(stamp, _)| stamp)
+            .collect();
+        Some((frames, stamps_of("/travmap/drive_map")))
+    };
+    let Some((frames, every_two)) = maps("2") else {
+        return;
+    };
+    assert_eq!(frames.len(), 6);
+    // After frames 2, 4 and 6: the last is the final map, not written twice.
+    let stamps: Vec<u64> = every_two.iter().map(|(stamp, _)| *stamp).collect();
+    assert_eq!(stamps, [frames[1], frames[3], frames[5]]);
+    let (_, only_final) = maps("0").unwrap();
+    assert_eq!(only_final.len(), 1);
+    assert_eq!(only_final[0], every_two[2]);
+    // Every 4: after frame 4, and the final map after frame 6.
+    let (_, every_four) = maps("4").unwrap();
+    let stamps: Vec<u64> = every_four.iter().map(|(stamp, _)| *stamp).collect();
+    assert_eq!(stamps, [frames[3], frames[5]]);
+    assert_eq!(every_four[1], every_two[2]);
 }

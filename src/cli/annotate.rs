@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use travmap::outputs::annotation::{self, AnnotationOptions, CloudPoints};
+use travmap::outputs::annotation::{self, AnnotationOptions, CloudPoints, DRIVE_MAP_EVERY};
 
 use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;
@@ -44,6 +44,10 @@ pub struct AnnotateArgs {
     /// grid), or no cloud.
     #[arg(long, value_enum, default_value_t = CloudArg::Grid)]
     cloud: CloudArg,
+    /// Frames between two fused maps of the drive so far on /travmap/drive_map (each
+    /// covers the drive's bounding box); 0: only the final map, after the last frame.
+    #[arg(long, value_name = "FRAMES", default_value_t = DRIVE_MAP_EVERY)]
+    drive_map_every: usize,
     /// Height of the drawn grids relative to the sensor, metres.
     #[arg(long, default_value_t = -1.73, allow_negative_numbers = true, value_parser = super::parse_finite)]
     grid_height: f64,
@@ -70,6 +74,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
             CloudArg::All => CloudPoints::All,
             CloudArg::None => CloudPoints::None,
         },
+        drive_map_every: args.drive_map_every,
     };
     let (model, model_name) =
         (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;

@@ -5,8 +5,9 @@
 //! the ground truth as `nav_msgs/msg/OccupancyGrid` (0 traversable, 100 not, -1
 //! unknown), the frame's scan (by default its points inside the grid; see
 //! [`CloudPoints`]) as a PointCloud2 with each point's cell
-//! class, and `travmap_msgs/msg/FrameMetrics`; every [`DRIVE_MAP_EVERY`] frames and
-//! after the last, the fused map of the drive so far on `/travmap/drive_map` (an
+//! class, and `travmap_msgs/msg/FrameMetrics`; every few frames
+//! ([`AnnotationOptions::drive_map_every`]) and after the last, the fused map of the
+//! drive so far on `/travmap/drive_map` (an
 //! OccupancyGrid: 100 x P(not traversable), -1 unseen). With poses from registration,
 //! `/tf` carries them. By default the input's own messages are
 //! copied through (for KITTI input: what `convert` writes), so the file stands alone.
@@ -45,7 +46,7 @@ pub const METRICS_TOPIC: &str = "/travmap/metrics";
 pub const DRIVE_MAP_TOPIC: &str = "/travmap/drive_map";
 /// With [`AnnotationOptions::static_map`]: the final map once, as map_server serves it.
 pub const STATIC_MAP_TOPIC: &str = "/map";
-/// The drive map is written every this many frames, and after the last.
+/// The default of [`AnnotationOptions::drive_map_every`].
 pub const DRIVE_MAP_EVERY: usize = 10;
 
 #[derive(Clone, Debug)]
@@ -60,6 +61,10 @@ pub struct AnnotationOptions {
     pub static_map: bool,
     /// What [`CLOUD_TOPIC`] holds.
     pub cloud: CloudPoints,
+    /// Frames between two maps on [`DRIVE_MAP_TOPIC`] (default [`DRIVE_MAP_EVERY`]);
+    /// 0: only the final one. Each covers the drive's bounding box so far, so on a
+    /// long drive they grow with the square of its extent.
+    pub drive_map_every: usize,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -291,7 +296,7 @@ pub fn annotate(
         evaluation.add(&result);
         last_stamp_ns = stamp;
         frames += 1;
-        if frames % DRIVE_MAP_EVERY == 0 {
+        if options.drive_map_every > 0 && frames % options.drive_map_every == 0 {
             let grid = occupancy_grid(
                 drive_map,
                 &world_frame,
@@ -304,7 +309,7 @@ pub fn annotate(
         on_frame();
         Ok(())
     })?;
-    if frames % DRIVE_MAP_EVERY != 0 {
+    if frames > 0 && (options.drive_map_every == 0 || frames % options.drive_map_every != 0) {
         let grid = occupancy_grid(
             &drive_map,
             &world_frame,
