@@ -233,6 +233,24 @@ fn colour_separates_what_geometry_cannot() {
         from_mcap["geometry_only_report"]["confusion"],
         doc["geometry_only_report"]["confusion"]
     );
+    // annotate reads the images for the hybrid model and predicts as eval does; for
+    // the embedded geometry-only model, which they cannot change, it reads none.
+    let out = dir.path().join("a.mcap");
+    let annotated = |model: &[&str]| {
+        let args = [
+            &["annotate", seq, "-o", arg(&out), "--no-passthrough"],
+            model,
+        ]
+        .concat();
+        json_summary(&quick(&args))["evaluation"].clone()
+    };
+    let with_hybrid = annotated(&["--model", model]);
+    assert_eq!(with_hybrid["confusion"], doc["report"]["confusion"]);
+    assert_eq!(
+        with_hybrid["cells_with_appearance"],
+        doc["report"]["cells_with_appearance"]
+    );
+    assert_eq!(annotated(&[])["frames_with_images"], 0);
     // The text output shows both rows.
     let text = success(travmap(&quick(&["eval", seq, "--model", model])));
     assert!(

@@ -78,7 +78,8 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     };
     let (model, model_name) =
         (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;
-    let selection = args.inputs.open_one(config.appearance.enabled)?;
+    // Images only where the model reads them; they are copied through either way.
+    let selection = (args.inputs).open_one(config.appearance.enabled && model.uses_appearance())?;
     let mut metadata = BTreeMap::from([
         (
             "travmap_version".to_string(),

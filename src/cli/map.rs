@@ -95,7 +95,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
             }
             Selection::new(source, args.inputs.frames.clone().unwrap_or(0..usize::MAX))
         }
-        _ => args.inputs.open_one(config.appearance.enabled)?,
+        _ => (args.inputs).open_one(config.appearance.enabled && model.uses_appearance())?,
     };
     let config = &config;
     let georeference = match &selection.source.recording {

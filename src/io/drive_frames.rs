@@ -279,7 +279,7 @@ impl Iterator for DriveFrames<'_> {
     type Item = Result<Frame>;
 
     fn next(&mut self) -> Option<Result<Frame>> {
-        let camera = self.drive.camera.as_ref();
+        let camera = (self.drive.camera.as_ref()).filter(|_| self.drive.read_images);
         while let Some((index, cloud)) = self.ready.pop_front() {
             if let Some(frame) = self.hand_on(index, &cloud) {
                 return Some(frame);

@@ -77,6 +77,9 @@ pub struct RosDrive {
     partial_first_scan: Option<(usize, usize)>,
     transforms: TransformTree,
     pub(super) camera: Option<CameraSource>,
+    /// Whether frames carry the camera's images (default true): see
+    /// [`RosDrive::set_read_images`].
+    pub(super) read_images: bool,
     /// Chunks the index pass could not read: their messages are lost.
     damaged_chunks: usize,
     /// When the cloud topic carries LiDAR packets: their model and calibration.
@@ -169,6 +172,7 @@ impl RosDrive {
             partial_first_scan: index.partial_first_scan,
             transforms: index.transforms,
             camera: index.camera,
+            read_images: true,
             damaged_chunks: index.damaged_chunks,
             packets,
             period_ns,
@@ -177,6 +181,13 @@ impl RosDrive {
         };
         drive.trim_cut_end();
         Ok(drive)
+    }
+
+    /// Whether frames carry the camera's images, decoded and posed (default true).
+    /// Without, a drive with a camera reads as one without: its image messages are
+    /// not even parsed.
+    pub fn set_read_images(&mut self, read_images: bool) {
+        self.read_images = read_images;
     }
 
     /// In a file cut short, the last clouds may have lost their poses with the rest

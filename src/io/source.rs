@@ -130,10 +130,13 @@ impl Source {
         }
     }
 
-    /// See [`KittiSequence::set_read_images`].
+    /// Whether frames carry their camera images (default true): see
+    /// [`KittiSequence::set_read_images`] and [`RosDrive::set_read_images`].
     pub fn set_read_images(&mut self, read_images: bool) {
-        if let Recording::Kitti(sequence) = &mut self.recording {
-            sequence.set_read_images(read_images);
+        match &mut self.recording {
+            Recording::Kitti(sequence) => sequence.set_read_images(read_images),
+            Recording::Log(drive) => drive.set_read_images(read_images),
+            Recording::Scans(..) | Recording::Site(..) => {}
         }
     }
 

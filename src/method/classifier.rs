@@ -235,6 +235,17 @@ impl SvmModel {
         names
     }
 
+    /// Whether any cell's margin can depend on appearance features: a hybrid model
+    /// here, in the remission-less fallback or in the prior. Without, camera images
+    /// change nothing this model decides.
+    pub fn uses_appearance(&self) -> bool {
+        self.hybrid.is_some()
+            || [&self.fallback, &self.prior]
+                .into_iter()
+                .flatten()
+                .any(|model| model.uses_appearance())
+    }
+
     /// Errors when `config` would compute features differently from the training
     /// cells; the error names the first setting that differs, both values, and the
     /// `--set` that runs the model as trained. `model_name` names the model file.
