@@ -12,7 +12,7 @@ use travmap::outputs::annotation::{self, AnnotationOptions, CloudPoints, DRIVE_M
 use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;
 use super::{
-    Inputs, ModelArg, Outcome, check_output, counted, frame_count, model_json, outcome,
+    Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json, outcome,
     print_json_summary, print_wrote, with_summary,
 };
 
@@ -79,7 +79,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     let (model, model_name) =
         (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;
     // Images only where the model reads them; they are copied through either way.
-    let selection = (args.inputs).open_one(config.appearance.enabled && model.uses_appearance())?;
+    let selection = args.inputs.open_one(images_for(&model, config))?;
     let mut metadata = BTreeMap::from([
         (
             "travmap_version".to_string(),

@@ -9,7 +9,7 @@ use serde_json::json;
 use travmap::scoring::benchmark::benchmark;
 
 use super::bench_tools::{bench_tools, print_tools_table};
-use super::{Inputs, ModelArg, Outcome, model_json, outcome, print_json_summary};
+use super::{Inputs, ModelArg, Outcome, images_for, model_json, outcome, print_json_summary};
 
 /// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
 #[derive(Args)]
@@ -36,7 +36,7 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
     let output = args.inputs.output;
     let repeats = usize::from(args.repeats);
     let (model, model_name) = args.model.load(config)?;
-    let selection = args.inputs.open_one(config.appearance.enabled)?;
+    let selection = args.inputs.open_one(images_for(&model, config))?;
     // The tools first, while this process is small (a child starts with its
     // parent's peak memory as its own: `bench_tools::wait_with_peak_rss`); their
     // table at once, so that minutes of runs survive the method's bench failing.

@@ -19,7 +19,7 @@ use travmap::scoring::evaluation::Evaluation;
 use travmap::scoring::metrics::Confusion;
 
 use super::{
-    Inputs, ModelArg, Outcome, check_output, counted, frame_count, model_json,
+    Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json,
     notice_unknown_labels, outcome, print_json_summary,
 };
 
@@ -95,7 +95,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
             }
             Selection::new(source, args.inputs.frames.clone().unwrap_or(0..usize::MAX))
         }
-        _ => (args.inputs).open_one(config.appearance.enabled && model.uses_appearance())?,
+        _ => args.inputs.open_one(images_for(&model, &config))?,
     };
     let config = &config;
     let georeference = match &selection.source.recording {

@@ -514,6 +514,13 @@ pub fn load_model(path: Option<&Path>, config: &Config) -> Result<(SvmModel, Str
     Ok((model, name))
 }
 
+/// Whether a command that classifies with `model` (and shows no appearance itself)
+/// needs the frames' camera images: only when appearance is on and the model reads it
+/// (a hybrid part); decoding them costs more than the rest of the method.
+pub fn images_for(model: &SvmModel, config: &Config) -> bool {
+    config.appearance.enabled && model.uses_appearance()
+}
+
 /// Frames the selections will hand on, for progress bars.
 pub fn frame_count(selections: &[Selection]) -> u64 {
     selections

@@ -10,8 +10,8 @@ use travmap::outputs::atomic::Staged;
 use travmap::outputs::rendering;
 
 use super::{
-    Inputs, ModelArg, Outcome, check_output, check_output_dir, counted, frame_count, outcome,
-    print_json_summary, usage,
+    Inputs, ModelArg, Outcome, check_output, check_output_dir, counted, frame_count, images_for,
+    outcome, print_json_summary, usage,
 };
 
 /// Draw ground truth, prediction and errors of a frame side by side as PNG.
@@ -52,7 +52,7 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         check_output(output_path, &inputs)?;
     }
     let (model, _) = args.model.load(config)?;
-    let selection = args.inputs.open_one(config.appearance.enabled)?;
+    let selection = args.inputs.open_one(images_for(&model, config))?;
     if args.all
         && output_path
             .extension()

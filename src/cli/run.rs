@@ -10,8 +10,8 @@ use travmap::method::grid::CellClass;
 use travmap::scoring::evaluation::Evaluation;
 
 use super::{
-    Inputs, ModelArg, Outcome, counted, frame_count, model_json, outcome, print_json_frame,
-    print_json_summary,
+    Inputs, ModelArg, Outcome, counted, frame_count, images_for, model_json, outcome,
+    print_json_frame, print_json_summary,
 };
 
 /// Predict the filtered traversability grid of every frame.
@@ -30,8 +30,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let config = args.inputs.settings.load()?;
     let output = args.inputs.output;
     let (model, model_name) = args.model.load(&config)?;
-    let mut selections =
-        (args.inputs).open(config.appearance.enabled && model.uses_appearance())?;
+    let mut selections = args.inputs.open(images_for(&model, &config))?;
     // `run` prints no scores: labels it does not need cannot stop it.
     for selection in &mut selections {
         selection.source.set_read_labels(false);
