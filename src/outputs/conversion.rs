@@ -283,13 +283,14 @@ pub fn scan_to_cloud(frame: &Frame, stamp_ns: u64) -> PointCloud2 {
     }
     let point_step = if frame.labels.is_some() { 20 } else { 16 };
     let n = frame.points_in_velodyne.len();
-    let mut data = Vec::with_capacity(n * point_step);
-    for (i, p) in frame.points_in_velodyne.iter().enumerate() {
-        for v in p {
-            data.extend_from_slice(&v.to_le_bytes());
-        }
+    // Fixed-size copies into a sized buffer: appending value by value checked the
+    // capacity four times a point and took as long as encoding the whole message.
+    let mut data = vec![0u8; n * point_step];
+    let records = data.chunks_exact_mut(point_step);
+    for (i, (record, p)) in records.zip(&frame.points_in_velodyne).enumerate() {
+        record[..16].copy_from_slice(p.map(f32::to_le_bytes).as_flattened());
         if let Some(labels) = &frame.labels {
-            data.extend_from_slice(&labels[i].to_le_bytes());
+            record[16..].copy_from_slice(&labels[i].to_le_bytes());
         }
     }
     PointCloud2 {
