@@ -34,6 +34,23 @@ pub fn orthonormality_error(m: &nalgebra::Matrix4<f64>) -> f64 {
         .max()
 }
 
+/// The least `v` whose quotient `v / divisor` (positive divisor, rounded as f64
+/// division rounds) reaches `k`. The quotient never falls as `v` rises, so
+/// `v >= least_reaching(k, d)` says `v / d >= k` exactly: per-point passes compare
+/// against a few of these instead of dividing (a division costs several
+/// multiplications).
+pub fn least_reaching(k: f64, divisor: f64) -> f64 {
+    // k * divisor is within an ulp or two of the answer.
+    let mut v = k * divisor;
+    while v / divisor >= k {
+        v = v.next_down();
+    }
+    while v / divisor < k {
+        v = v.next_up();
+    }
+    v
+}
+
 /// Zeroth, first and second moments of a point set, accumulated in f64.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Moments {
@@ -197,6 +214,18 @@ impl SymmetricMatrix3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn least_reaching_is_where_the_division_reaches_k() {
+        for divisor in [0.2, 0.4, 0.1, 1.0 / 3.0, 7.3] {
+            for k in 0..40 {
+                let k = k as f64;
+                let edge = least_reaching(k, divisor);
+                assert!(edge / divisor >= k, "{edge} / {divisor} < {k}");
+                assert!(edge.next_down() / divisor < k, "{divisor} {k}");
+            }
+        }
+    }
 
     #[test]
     fn matrices_far_from_a_rotation_still_give_a_rotation() {

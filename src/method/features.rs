@@ -8,7 +8,7 @@
 //! division is guarded so that no feature is NaN.
 
 use crate::config::{FeatureConfig, FeatureGroup};
-use crate::geometry::Moments;
+use crate::geometry::{Moments, least_reaching};
 use crate::method::appearance::CellAppearance;
 use crate::method::feature_groups;
 use crate::method::grid::CellPoints;
@@ -124,8 +124,25 @@ pub struct FeatureExtractor {
 /// Per-frame scratch space of the per-cell computation.
 struct Scratch {
     subcells: Vec<Moments>,
+    /// Where `v / subcell_m` reaches 1, 2, .. per_side - 1 ([`least_reaching`]).
+    subcell_edges: Vec<f64>,
     occupied_bins: Vec<bool>,
     remission: Vec<f32>,
+}
+
+impl Scratch {
+    fn new(config: &FeatureConfig, cell_size_m: f64) -> Self {
+        let per_side = config.subcells_per_side(cell_size_m);
+        let subcell_m = cell_size_m / per_side as f64;
+        Self {
+            subcells: vec![Moments::default(); per_side * per_side],
+            subcell_edges: (1..per_side)
+                .map(|k| least_reaching(k as f64, subcell_m))
+                .collect(),
+            occupied_bins: vec![false; config.curvity_bins],
+            remission: Vec::new(),
+        }
+    }
 }
 
 impl FeatureExtractor {
@@ -138,12 +155,7 @@ impl FeatureExtractor {
     ) -> FeatureGrid {
         let layout = &cells.layout;
         let cell_count = layout.cell_count();
-        let per_side = self.config.subcells_per_side(layout.cell_size_m);
-        let mut scratch = Scratch {
-            subcells: vec![Moments::default(); per_side * per_side],
-            occupied_bins: vec![false; self.config.curvity_bins],
-            remission: Vec::new(),
-        };
+        let mut scratch = Scratch::new(&self.config, layout.cell_size_m);
         let groups = match cells.remission {
             Some(_) => feature_groups::ordered(&self.config.groups),
             None => feature_groups::ordered(&self.config.without_remission().groups),
@@ -215,7 +227,6 @@ impl FeatureExtractor {
     ) -> [f32; FEATURE_COUNT] {
         let k = points.len();
         let per_side = self.config.subcells_per_side(cell_size_m);
-        let subcell_m = cell_size_m / per_side as f64;
         scratch.subcells.fill(Moments::default());
 
         let mut zeta = (f64::INFINITY, f64::NEG_INFINITY);
@@ -245,8 +256,9 @@ impl FeatureExtractor {
                 bbox[2].min(q[1]),
                 bbox[3].max(q[1]),
             ];
-            // `as usize` saturates negatives to 0 and truncates (floor for v >= 0).
-            let sub = |v: f64| ((v / subcell_m) as usize).min(per_side - 1);
+            // `(v / subcell_m) as usize` capped at the last sub-cell (negatives
+            // saturate to 0): how many sub-cell edges v reaches.
+            let sub = |v: f64| scratch.subcell_edges.iter().filter(|&&e| v >= e).count();
             scratch.subcells[sub(q[1]) * per_side + sub(q[0])].add(q);
         }
         // The cell's moments are the sum of its sub-cells'. Coordinates relative to
@@ -388,11 +400,7 @@ mod tests {
 
     fn features_with_ranges(points: &[[f32; 3]], ranges: &[f32]) -> [f32; FEATURE_COUNT] {
         let e = extractor();
-        let mut scratch = Scratch {
-            subcells: vec![Moments::default(); 4],
-            occupied_bins: vec![false; e.config.curvity_bins],
-            remission: Vec::new(),
-        };
+        let mut scratch = Scratch::new(&e.config, 0.4);
         e.cell_features(
             points,
             ranges,
