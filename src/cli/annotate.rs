@@ -45,7 +45,9 @@ pub struct AnnotateArgs {
     #[arg(long, value_enum, default_value_t = CloudArg::Grid)]
     cloud: CloudArg,
     /// Frames between two fused maps of the drive so far on /travmap/drive_map (each
-    /// covers the drive's bounding box); 0: only the final map, after the last frame.
+    /// covers the drive's bounding box; a map of B bytes waits at least B / 32 KiB
+    /// frames, so that long drives do not fill the file with maps); 0: only the
+    /// final map, after the last frame.
     #[arg(long, value_name = "FRAMES", default_value_t = DRIVE_MAP_EVERY)]
     drive_map_every: usize,
     /// Height of the drawn grids relative to the sensor, metres.
