@@ -76,23 +76,19 @@ fn multiply_add<const FUSED: bool>(a: f32, b: f32, c: f32) -> f32 {
     if FUSED { a.mul_add(b, c) } else { a * b + c }
 }
 
+/// Blocks whose dot products are summed side by side. Each lane's dot product is one
+/// chain of `dimension` dependent multiply-adds: a block alone waits out the latency
+/// of each (classification took the chains' latency, not the units' throughput);
+/// four chains in flight keep the units busy. Each lane still adds its terms in the
+/// same order, so the sums are the same to the bit.
+const BLOCKS_AT_ONCE: usize = 4;
+
 #[inline(always)]
 fn rbf_sum<const FUSED: bool>(blocks: &SupportVectorBlocks, z: &[f32], gamma: f32) -> f32 {
-    let d = blocks.dimension;
     let z_norm: f32 = z.iter().map(|v| v * v).sum();
     let mut total = [0f32; LANES];
-    for ((rows, norms), coefficients) in blocks
-        .values
-        .chunks_exact(d)
-        .zip(&blocks.squared_norms)
-        .zip(&blocks.coefficients)
-    {
-        let mut dot = [0f32; LANES];
-        for (row, &zk) in rows.iter().zip(z) {
-            for l in 0..LANES {
-                dot[l] = multiply_add::<FUSED>(zk, row[l], dot[l]);
-            }
-        }
+    let mut add = |dot: &[f32; LANES], block: usize| {
+        let (norms, coefficients) = (&blocks.squared_norms[block], &blocks.coefficients[block]);
         for l in 0..LANES {
             let distance = (z_norm + norms[l] - 2.0 * dot[l]).max(0.0);
             total[l] = multiply_add::<FUSED>(
@@ -101,8 +97,40 @@ fn rbf_sum<const FUSED: bool>(blocks: &SupportVectorBlocks, z: &[f32], gamma: f3
                 total[l],
             );
         }
+    };
+    let count = blocks.coefficients.len();
+    let grouped = count - count % BLOCKS_AT_ONCE;
+    for first in (0..grouped).step_by(BLOCKS_AT_ONCE) {
+        let dots = dot_products::<BLOCKS_AT_ONCE, FUSED>(blocks, first, z);
+        for (g, dot) in dots.iter().enumerate() {
+            add(dot, first + g);
+        }
+    }
+    for block in grouped..count {
+        add(&dot_products::<1, FUSED>(blocks, block, z)[0], block);
     }
     total.iter().sum()
+}
+
+/// The dot products of `z` with the LANES vectors of each of blocks `first..first + G`.
+#[inline(always)]
+fn dot_products<const G: usize, const FUSED: bool>(
+    blocks: &SupportVectorBlocks,
+    first: usize,
+    z: &[f32],
+) -> [[f32; LANES]; G] {
+    let d = blocks.dimension;
+    let rows = &blocks.values[first * d..(first + G) * d];
+    let mut dots = [[0f32; LANES]; G];
+    for (k, &zk) in z.iter().take(d).enumerate() {
+        for (g, dot) in dots.iter_mut().enumerate() {
+            let row = &rows[g * d + k];
+            for l in 0..LANES {
+                dot[l] = multiply_add::<FUSED>(zk, row[l], dot[l]);
+            }
+        }
+    }
+    dots
 }
 
 /// `e^x` for `x <= 0` (0 below -87), relative error under 2e-7: `x = n ln 2 + r`,
