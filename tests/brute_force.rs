@@ -18,7 +18,7 @@ use nalgebra::{DMatrix, Matrix3, SymmetricEigen, Vector3};
 use travmap::config::FeatureConfig;
 use travmap::geometry::Moments;
 use travmap::method::features::{FEATURE_COUNT, FEATURE_NAMES, FeatureExtractor};
-use travmap::method::grid::{CellPoints, GridLayout, grid_points};
+use travmap::method::grid::{CellPoints, GridBuffers, GridLayout, grid_points};
 use travmap::method::integration::{WorldScan, ground_normal};
 use travmap::random::SplitMix64;
 
@@ -237,7 +237,7 @@ fn binned_by_hash_map(scans: &[WorldScan], layout: &GridLayout) -> HashMap<usize
 }
 
 fn check_grid_points(seed: u64, scans: &[WorldScan], layout: GridLayout, failures: &mut Failures) {
-    let fast = grid_points(scans, layout);
+    let fast = grid_points(scans, layout, &mut GridBuffers::default());
     let expected = binned_by_hash_map(scans, &layout);
     let cell_count = layout.cell_count();
     let total: usize = expected.values().map(Vec::len).sum();
@@ -369,7 +369,7 @@ fn grid_points_matches_binning_each_point_into_a_hash_map() {
 #[test]
 fn grid_points_of_an_empty_window_and_of_scans_wholly_outside() {
     let layout = GridLayout::centred_on([3.0, -7.0], 0.4, 30);
-    let empty = grid_points(&[], layout);
+    let empty = grid_points(&[], layout, &mut GridBuffers::default());
     assert_eq!(empty.cell_start, vec![0; 901]);
     assert!(empty.points_in_grid.is_empty() && empty.range_m.is_empty());
     // "Labels when every scan has them" holds vacuously for no scans.
@@ -380,7 +380,7 @@ fn grid_points_of_an_empty_window_and_of_scans_wholly_outside() {
         [0.0; 3],
         Some(vec![1, 2]),
     );
-    let cells = grid_points(&[far], layout);
+    let cells = grid_points(&[far], layout, &mut GridBuffers::default());
     assert_eq!(cells.cell_start, vec![0; 901]);
     assert_eq!(cells.labels, Some(vec![]));
 }

@@ -132,7 +132,7 @@ pub fn context(
 mod tests {
     use super::*;
     use crate::geometry::Moments;
-    use crate::method::grid::{GridLayout, grid_points};
+    use crate::method::grid::{GridBuffers, GridLayout, grid_points};
     use crate::method::integration::WorldScan;
 
     #[test]
@@ -169,7 +169,7 @@ mod tests {
             remission: None,
             moments: Moments::default(),
         };
-        let cells = grid_points(&[scan], layout);
+        let cells = grid_points(&[scan], layout, &mut GridBuffers::default());
         let predictable: Vec<bool> = (0..25).map(|c| cells.point_count(c) >= 2).collect();
         let mut values = vec![0f32; 25 * 5];
         // The sensor at world (0.5, -2.5): 3 m south of the centre cell's centre.

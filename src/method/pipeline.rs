@@ -10,6 +10,8 @@
 //! the votes in frame order, and classification and filter run in parallel again.
 //! The results are the same whatever the batch size.
 
+use std::sync::Mutex;
+
 use nalgebra::Isometry3;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -22,7 +24,7 @@ use crate::method::classifier::{ForeignRemission, SvmModel};
 use crate::method::features::{FeatureExtractor, FeatureGrid};
 use crate::method::filter::OutlierFilter;
 use crate::method::footprint::{Footprint, PathKind, Trajectory};
-use crate::method::grid::{CellClass, GridLayout, KeptCellPoints, grid_points};
+use crate::method::grid::{CellClass, GridBuffers, GridLayout, KeptCellPoints, grid_points};
 use crate::method::ground_truth::{GroundTruth, UnknownLabels};
 use crate::method::integration::{
     IntegrationWindow, WorldScan, ground_normal, scale_remission_to_reference, scan_to_world,
@@ -162,6 +164,9 @@ pub struct Pipeline {
     registration: Option<Odometry>,
     /// Footprint and self-labels (stages 6a, 6b), when following a trajectory.
     adaptation: Option<Adaptation>,
+    /// The grid stage's buffers not in use: each frame in flight takes a set and
+    /// gives it back.
+    grid_buffers: Mutex<Vec<GridBuffers>>,
 }
 
 /// What the adaptation stages need: the drive's trajectory and the vehicle.
@@ -203,6 +208,7 @@ impl Pipeline {
             registration: (posing == Posing::Registration)
                 .then(|| Odometry::new(config.registration.clone())),
             adaptation: None,
+            grid_buffers: Mutex::default(),
         })
     }
 
@@ -368,8 +374,14 @@ impl Pipeline {
             self.cell_size_m,
             self.cells_per_side,
         );
+        let spare = self
+            .grid_buffers
+            .lock()
+            .ok()
+            .and_then(|mut spare| spare.pop());
+        let mut buffers = spare.unwrap_or_default();
         let cells;
-        (cells, timings.grid_ms) = timed(|| grid_points(window, layout));
+        (cells, timings.grid_ms) = timed(|| grid_points(window, layout, &mut buffers));
         let features;
         (features, timings.features_ms) = timed(|| {
             self.features
@@ -391,6 +403,10 @@ impl Pipeline {
                 &extras.world_from_velodyne,
             )
         });
+        let kept = cells.kept_for_outputs(&mut buffers);
+        if let Ok(mut spare) = self.grid_buffers.lock() {
+            spare.push(buffers);
+        }
         Observation {
             result: FrameResult {
                 index: current.index,
@@ -398,7 +414,7 @@ impl Pipeline {
                 layout,
                 world_from_velodyne: extras.world_from_velodyne,
                 sensor_in_world: current.origin_in_world,
-                cells: cells.kept_for_outputs(),
+                cells: kept,
                 scan_in_world: current.points_in_world.clone(),
                 dropped_points: extras.dropped_points,
                 unknown_labels: extras.unknown_labels,
