@@ -48,18 +48,47 @@ pub fn names(group: FeatureGroup) -> &'static [&'static str] {
 
 /// Remission statistics of one cell; `scratch` is reused across cells.
 pub fn remission(values: &[f32], scratch: &mut Vec<f32>) -> [f32; 3] {
-    let k = values.len() as f64;
-    let mean = values.iter().map(|&v| v as f64).sum::<f64>() / k;
-    let variance = values
-        .iter()
-        .map(|&v| (v as f64 - mean).powi(2))
-        .sum::<f64>()
-        / k;
-    scratch.clear();
-    scratch.extend_from_slice(values);
-    let middle = scratch.len() / 2;
-    let (_, median, _) = scratch.select_nth_unstable_by(middle, f32::total_cmp);
-    [mean as f32, variance.sqrt() as f32, *median]
+    remission_of_two([values, &[]], scratch)[0]
+}
+
+/// [`remission`] of two cells at once (zeros for an empty one). Each sum is a chain
+/// of dependent f64 additions, so a cell alone waited out the latency of each; two
+/// cells' chains run side by side, each adding in its own order: the same sums.
+pub fn remission_of_two(cells: [&[f32]; 2], scratch: &mut Vec<f32>) -> [[f32; 3]; 2] {
+    let counts = cells.map(|values| values.len() as f64);
+    let sums = two_sums(cells, |_, v| v as f64);
+    let means = [sums[0] / counts[0], sums[1] / counts[1]];
+    let squares = two_sums(cells, |side, v| (v as f64 - means[side]).powi(2));
+    let mut statistics = [[0f32; 3]; 2];
+    for side in 0..2 {
+        if cells[side].is_empty() {
+            continue;
+        }
+        scratch.clear();
+        scratch.extend_from_slice(cells[side]);
+        let middle = scratch.len() / 2;
+        let (_, median, _) = scratch.select_nth_unstable_by(middle, f32::total_cmp);
+        let variance = squares[side] / counts[side];
+        statistics[side] = [means[side] as f32, variance.sqrt() as f32, *median];
+    }
+    statistics
+}
+
+/// `sum over v of term(side, v)` for the values of each side, in their order.
+fn two_sums(cells: [&[f32]; 2], term: impl Fn(usize, f32) -> f64) -> [f64; 2] {
+    // As `Iterator::sum` does: from -0.0, which adds nothing.
+    let mut sums = [-0.0f64; 2];
+    let common = cells[0].len().min(cells[1].len());
+    for (&a, &b) in cells[0][..common].iter().zip(&cells[1][..common]) {
+        sums[0] += term(0, a);
+        sums[1] += term(1, b);
+    }
+    for (side, values) in cells.iter().enumerate() {
+        for &v in &values[common..] {
+            sums[side] += term(side, v);
+        }
+    }
+    sums
 }
 
 /// Writes the context values of every predictable cell at `offset` of its row of
@@ -143,6 +172,42 @@ mod tests {
         assert!((std - 0.0125f32.sqrt()).abs() < 1e-6, "{std}");
         assert_eq!(median, 0.3, "the upper median of an even count");
         assert_eq!(remission(&[0.7], &mut scratch), [0.7, 0.0, 0.7]);
+    }
+
+    #[test]
+    fn two_cells_at_once_are_each_cell_alone_to_the_bit() {
+        let mut rng = crate::random::SplitMix64(9);
+        let mut scratch = Vec::new();
+        for (n, m) in [(0, 5), (7, 0), (13, 13), (40, 3), (1, 90)] {
+            let cell = |len: usize, rng: &mut crate::random::SplitMix64| -> Vec<f32> {
+                (0..len).map(|_| rng.uniform(0.0, 1.0) as f32).collect()
+            };
+            let (a, b) = (cell(n, &mut rng), cell(m, &mut rng));
+            let alone = |values: &[f32], scratch: &mut Vec<f32>| {
+                if values.is_empty() {
+                    return [0.0; 3];
+                }
+                // The sequential statistics, as `Iterator::sum` gives them.
+                let k = values.len() as f64;
+                let mean = values.iter().map(|&v| v as f64).sum::<f64>() / k;
+                let variance = values
+                    .iter()
+                    .map(|&v| (v as f64 - mean).powi(2))
+                    .sum::<f64>()
+                    / k;
+                let median = remission(values, scratch)[2];
+                [mean as f32, variance.sqrt() as f32, median]
+            };
+            let both = remission_of_two([&a, &b], &mut scratch);
+            assert_eq!(
+                both[0].map(f32::to_bits),
+                alone(&a, &mut scratch).map(f32::to_bits)
+            );
+            assert_eq!(
+                both[1].map(f32::to_bits),
+                alone(&b, &mut scratch).map(f32::to_bits)
+            );
+        }
     }
 
     #[test]

@@ -180,16 +180,30 @@ impl FeatureExtractor {
             let row = &mut values[cell * dimension..(cell + 1) * dimension];
             row[..FEATURE_COUNT].copy_from_slice(&self.cell_features(
                 &cells.points_in_grid[range.clone()],
-                &cells.range_m[range.clone()],
+                &cells.range_m[range],
                 cell_min,
                 layout.cell_size_m,
                 ground_normal,
                 &mut scratch,
             ));
-            if let (Some(at), Some(remission)) = (remission_at, &cells.remission) {
-                row[at..at + feature_groups::REMISSION_NAMES.len()].copy_from_slice(
-                    &feature_groups::remission(&remission[range], &mut scratch.remission),
+        }
+        if let (Some(at), Some(remission)) = (remission_at, &cells.remission) {
+            let width = feature_groups::REMISSION_NAMES.len();
+            let predictable_cells: Vec<usize> =
+                (0..cell_count).filter(|&c| predictable[c]).collect();
+            for pair in predictable_cells.chunks(2) {
+                let values_of = |k: usize| {
+                    pair.get(k)
+                        .map_or(&[][..], |&c| &remission[cells.cell_range(c)])
+                };
+                let statistics = feature_groups::remission_of_two(
+                    [values_of(0), values_of(1)],
+                    &mut scratch.remission,
                 );
+                for (&cell, statistics) in pair.iter().zip(statistics) {
+                    let start = cell * dimension + at;
+                    values[start..start + width].copy_from_slice(&statistics);
+                }
             }
         }
         if groups.contains(&FeatureGroup::Context) {
