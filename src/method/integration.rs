@@ -29,22 +29,21 @@ pub struct WorldScan {
 /// Moves every point of `frame` into the world frame (the pose is applied in f64).
 pub fn scan_to_world(frame: Frame) -> WorldScan {
     let m = frame.world_from_velodyne.to_homogeneous();
+    // A loop with no call in it: around `push`'s (or a closure's) the sums went
+    // through memory at every point, each waiting for the last one's store.
     let mut moments = Moments::default();
-    let points_in_world = frame
-        .points_in_velodyne
-        .iter()
-        .map(|p| {
-            let (x, y, z) = (p[0] as f64, p[1] as f64, p[2] as f64);
-            let w = [
-                m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + m[(0, 3)],
-                m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + m[(1, 3)],
-                m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + m[(2, 3)],
-            ];
-            moments.add(w);
-            [w[0] as f32, w[1] as f32, w[2] as f32]
-        })
-        .collect::<Vec<_>>()
-        .into();
+    let mut points_in_world = vec![[0f32; 3]; frame.points_in_velodyne.len()];
+    for (p, out) in frame.points_in_velodyne.iter().zip(&mut points_in_world) {
+        let (x, y, z) = (p[0] as f64, p[1] as f64, p[2] as f64);
+        let w = [
+            m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + m[(0, 3)],
+            m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + m[(1, 3)],
+            m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + m[(2, 3)],
+        ];
+        moments.add(w);
+        *out = [w[0] as f32, w[1] as f32, w[2] as f32];
+    }
+    let points_in_world = Arc::new(points_in_world);
     WorldScan {
         index: frame.index,
         stamp_ns: frame.stamp_ns,
