@@ -50,7 +50,7 @@ pub fn names(group: FeatureGroup) -> &'static [&'static str] {
 /// once, zeros for an empty one; `scratch` is reused across cells. Each sum is a chain
 /// of dependent f64 additions, so a cell alone waited out the latency of each; two
 /// cells' chains run side by side, each adding in its own order: the same sums.
-pub fn remission_of_two(cells: [&[f32]; 2], scratch: &mut Vec<f32>) -> [[f32; 3]; 2] {
+pub fn remission_of_two(cells: [&[f32]; 2], scratch: &mut Vec<i32>) -> [[f32; 3]; 2] {
     let counts = cells.map(|values| values.len() as f64);
     let sums = two_sums(cells, |_, v| v as f64);
     let means = [sums[0] / counts[0], sums[1] / counts[1]];
@@ -61,13 +61,25 @@ pub fn remission_of_two(cells: [&[f32]; 2], scratch: &mut Vec<f32>) -> [[f32; 3]
             continue;
         }
         scratch.clear();
-        scratch.extend_from_slice(cells[side]);
+        scratch.extend(cells[side].iter().map(|&v| total_order_key(v)));
         let middle = scratch.len() / 2;
-        let (_, median, _) = scratch.select_nth_unstable_by(middle, f32::total_cmp);
+        let (_, &mut median, _) = scratch.select_nth_unstable(middle);
         let variance = squares[side] / counts[side];
-        statistics[side] = [means[side] as f32, variance.sqrt() as f32, *median];
+        statistics[side] = [
+            means[side] as f32,
+            variance.sqrt() as f32,
+            f32::from_bits(total_order_key(f32::from_bits(median as u32)) as u32),
+        ];
     }
     statistics
+}
+
+/// The integer whose order is `f32::total_cmp`'s (the transform `total_cmp` makes
+/// at every comparison, made once per value); applied to its own result (as bits),
+/// it gives the value back.
+fn total_order_key(value: f32) -> i32 {
+    let bits = value.to_bits() as i32;
+    bits ^ (((bits >> 31) as u32) >> 1) as i32
 }
 
 /// `sum over v of term(side, v)` for the values of each side, in their order.
@@ -161,10 +173,37 @@ mod tests {
     use crate::method::integration::WorldScan;
 
     #[test]
+    fn total_order_keys_order_as_total_cmp_and_give_the_value_back() {
+        let values = [
+            -1.5f32,
+            -0.25,
+            -0.0,
+            0.0,
+            1e-30,
+            0.25,
+            0.5,
+            1.0,
+            7.0,
+            -7.0,
+            f32::MIN_POSITIVE,
+        ];
+        for a in values {
+            assert_eq!(
+                f32::from_bits(total_order_key(f32::from_bits(total_order_key(a) as u32)) as u32)
+                    .to_bits(),
+                a.to_bits()
+            );
+            for b in values {
+                assert_eq!(total_order_key(a).cmp(&total_order_key(b)), a.total_cmp(&b));
+            }
+        }
+    }
+
+    #[test]
     fn remission_statistics_of_a_known_cell() {
         let mut scratch = Vec::new();
         let remission =
-            |values: &[f32], scratch: &mut Vec<f32>| remission_of_two([values, &[]], scratch)[0];
+            |values: &[f32], scratch: &mut Vec<i32>| remission_of_two([values, &[]], scratch)[0];
         let [mean, std, median] = remission(&[0.4, 0.1, 0.3, 0.2], &mut scratch);
         assert!((mean - 0.25).abs() < 1e-6);
         assert!((std - 0.0125f32.sqrt()).abs() < 1e-6, "{std}");

@@ -127,7 +127,7 @@ struct Scratch {
     /// Where `v / subcell_m` reaches 1, 2, .. per_side - 1 ([`least_reaching`]).
     subcell_edges: Vec<f64>,
     occupied_bins: Vec<bool>,
-    remission: Vec<f32>,
+    remission: Vec<i32>,
 }
 
 impl Scratch {
