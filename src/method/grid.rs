@@ -188,9 +188,9 @@ impl CellPoints {
 /// (0.4-0.5 ms of 1.9).
 #[derive(Debug, Default)]
 pub struct GridBuffers {
-    /// (cell, scan, point) of each in-grid point, in scan order; its length is the
-    /// most a frame has needed, not this frame's count.
-    in_grid: Vec<(u32, u32, u32)>,
+    /// (cell, point) of each in-grid point, scan by scan; its length is the most a
+    /// frame has needed, not this frame's count.
+    in_grid: Vec<(u32, u32)>,
     points_in_grid: Vec<[f32; 3]>,
     range_m: Vec<f32>,
     labels: Vec<u32>,
@@ -252,33 +252,35 @@ pub fn grid_points(
     let cell_count = layout.cell_count();
 
     // Pass 1: the cell of every in-grid point, and the count per cell.
-    // (cell, scan, point), written by position into a buffer kept long enough for the
-    // next scan: with `push`, whose growing is a call, the loop's values went through
-    // memory at every point.
+    // (cell, point), written by position into a buffer kept long enough for the next
+    // scan: with `push`, whose growing is a call, the loop's values went through
+    // memory at every point. Scan s's are `in_grid[scan_start[s]..scan_start[s + 1]]`.
     let in_grid = &mut buffers.in_grid;
     let mut found = 0;
+    let mut scan_start = Vec::with_capacity(scans.len() + 1);
     let mut counts = vec![0u32; cell_count];
     let mut newest_per_cell = vec![0u32; cell_count];
     for (s, scan) in scans.iter().enumerate() {
         let first_in_grid = found;
+        scan_start.push(found);
         let room = found + scan.points_in_world.len();
         if in_grid.len() < room {
-            in_grid.resize(room, (0, 0, 0));
+            in_grid.resize(room, (0, 0));
         }
         for (i, p) in scan.points_in_world.iter().enumerate() {
             if let Some(cell) = layout.cell_of_local(p[0] as f64 - min_x, p[1] as f64 - min_y) {
                 counts[cell] += 1;
-                in_grid[found] = (cell as u32, s as u32, i as u32);
+                in_grid[found] = (cell as u32, i as u32);
                 found += 1;
             }
         }
         if s + 1 == scans.len() {
-            for &(cell, _, _) in &in_grid[first_in_grid..found] {
+            for &(cell, _) in &in_grid[first_in_grid..found] {
                 newest_per_cell[cell as usize] += 1;
             }
         }
     }
-    let in_grid = &in_grid[..found];
+    scan_start.push(found);
     let mut cell_start = vec![0u32; cell_count + 1];
     for c in 0..cell_count {
         cell_start[c + 1] = cell_start[c] + counts[c];
@@ -300,21 +302,29 @@ pub fn grid_points(
     } else {
         Vec::new()
     };
+    // Scan by scan, so that what a point needs of its scan is at hand, not looked up
+    // through the scan's index at every point.
     let mut next = cell_start.clone();
-    for &(cell, s, i) in in_grid {
-        let (scan, i) = (&scans[s as usize], i as usize);
-        let at = next[cell as usize] as usize;
-        next[cell as usize] += 1;
-        let p = scan.points_in_world[i];
+    for (s, scan) in scans.iter().enumerate() {
+        let points = &scan.points_in_world[..];
         let o = scan.origin_in_world;
-        let (x, y, z) = (p[0] as f64, p[1] as f64, p[2] as f64);
-        points_in_grid[at] = [(x - min_x) as f32, (y - min_y) as f32, p[2]];
-        range_m[at] = ((x - o[0]).powi(2) + (y - o[1]).powi(2) + (z - o[2]).powi(2)).sqrt() as f32;
-        if with_labels && let Some(scan_labels) = &scan.labels {
-            labels[at] = scan_labels[i];
-        }
-        if with_remission && let Some(scan_remission) = &scan.remission {
-            remission[at] = scan_remission[i];
+        let scan_labels = scan.labels.as_deref().filter(|_| with_labels);
+        let scan_remission = scan.remission.as_deref().filter(|_| with_remission);
+        for &(cell, i) in &buffers.in_grid[scan_start[s]..scan_start[s + 1]] {
+            let i = i as usize;
+            let at = next[cell as usize] as usize;
+            next[cell as usize] += 1;
+            let p = points[i];
+            let (x, y, z) = (p[0] as f64, p[1] as f64, p[2] as f64);
+            points_in_grid[at] = [(x - min_x) as f32, (y - min_y) as f32, p[2]];
+            range_m[at] =
+                ((x - o[0]).powi(2) + (y - o[1]).powi(2) + (z - o[2]).powi(2)).sqrt() as f32;
+            if let Some(scan_labels) = scan_labels {
+                labels[at] = scan_labels[i];
+            }
+            if let Some(scan_remission) = scan_remission {
+                remission[at] = scan_remission[i];
+            }
         }
     }
     CellPoints {
