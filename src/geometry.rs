@@ -51,6 +51,20 @@ pub fn least_reaching(k: f64, divisor: f64) -> f64 {
     v
 }
 
+/// `a.min(b)` of numbers that are never NaN (a cell's points are finite): one
+/// instruction per call, where `f64::min`'s NaN handling took five in the loops over
+/// a cell's points. Ties keep `a`, as `min` does there.
+#[inline]
+pub fn lesser<T: PartialOrd>(a: T, b: T) -> T {
+    if b < a { b } else { a }
+}
+
+/// `a.max(b)` of numbers that are never NaN (see [`lesser`]).
+#[inline]
+pub fn greater<T: PartialOrd>(a: T, b: T) -> T {
+    if b > a { b } else { a }
+}
+
 /// Zeroth, first and second moments of a point set, accumulated in f64.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Moments {

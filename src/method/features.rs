@@ -8,7 +8,7 @@
 //! division is guarded so that no feature is NaN.
 
 use crate::config::{FeatureConfig, FeatureGroup};
-use crate::geometry::{Moments, least_reaching};
+use crate::geometry::{Moments, greater, least_reaching, lesser};
 use crate::method::appearance::CellAppearance;
 use crate::method::feature_groups;
 use crate::method::grid::CellPoints;
@@ -377,20 +377,6 @@ impl FeatureExtractor {
         ];
         values.map(|v| v as f32)
     }
-}
-
-/// `a.min(b)` of numbers that are never NaN (points are finite by the time they
-/// reach a cell): one instruction per call, where `f64::min`'s NaN handling took
-/// five in the loops over a cell's points. Ties keep `a`, as `min` does here.
-#[inline]
-fn lesser<T: PartialOrd>(a: T, b: T) -> T {
-    if b < a { b } else { a }
-}
-
-/// `a.max(b)` of numbers that are never NaN (see [`lesser`]).
-#[inline]
-fn greater<T: PartialOrd>(a: T, b: T) -> T {
-    if b > a { b } else { a }
 }
 
 #[cfg(test)]
