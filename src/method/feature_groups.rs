@@ -61,24 +61,26 @@ pub fn remission_of_two(cells: [&[f32]; 2], scratch: &mut Vec<i32>) -> [[f32; 3]
             continue;
         }
         scratch.clear();
-        scratch.extend(cells[side].iter().map(|&v| total_order_key(v)));
+        scratch.extend(
+            cells[side]
+                .iter()
+                .map(|&v| total_order_flip(v.to_bits() as i32)),
+        );
         let middle = scratch.len() / 2;
         let (_, &mut median, _) = scratch.select_nth_unstable(middle);
         let variance = squares[side] / counts[side];
         statistics[side] = [
             means[side] as f32,
             variance.sqrt() as f32,
-            f32::from_bits(total_order_key(f32::from_bits(median as u32)) as u32),
+            f32::from_bits(total_order_flip(median) as u32),
         ];
     }
     statistics
 }
 
-/// The integer whose order is `f32::total_cmp`'s (the transform `total_cmp` makes
-/// at every comparison, made once per value); applied to its own result (as bits),
-/// it gives the value back.
-fn total_order_key(value: f32) -> i32 {
-    let bits = value.to_bits() as i32;
+/// The transform `f32::total_cmp` makes at every comparison, made once per value:
+/// of a value's bits, an integer in its order; of that integer, the bits again.
+fn total_order_flip(bits: i32) -> i32 {
     bits ^ (((bits >> 31) as u32) >> 1) as i32
 }
 
@@ -187,14 +189,11 @@ mod tests {
             -7.0,
             f32::MIN_POSITIVE,
         ];
+        let key = |v: f32| total_order_flip(v.to_bits() as i32);
         for a in values {
-            assert_eq!(
-                f32::from_bits(total_order_key(f32::from_bits(total_order_key(a) as u32)) as u32)
-                    .to_bits(),
-                a.to_bits()
-            );
+            assert_eq!(total_order_flip(key(a)) as u32, a.to_bits());
             for b in values {
-                assert_eq!(total_order_key(a).cmp(&total_order_key(b)), a.total_cmp(&b));
+                assert_eq!(key(a).cmp(&key(b)), a.total_cmp(&b));
             }
         }
     }

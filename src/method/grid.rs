@@ -261,7 +261,6 @@ pub fn grid_points(
     let mut counts = vec![0u32; cell_count];
     let mut newest_per_cell = vec![0u32; cell_count];
     for (s, scan) in scans.iter().enumerate() {
-        let first_in_grid = found;
         scan_start.push(found);
         let room = found + scan.points_in_world.len();
         if in_grid.len() < room {
@@ -275,7 +274,7 @@ pub fn grid_points(
             }
         }
         if s + 1 == scans.len() {
-            for &(cell, _) in &in_grid[first_in_grid..found] {
+            for &(cell, _) in &in_grid[scan_start[s]..found] {
                 newest_per_cell[cell as usize] += 1;
             }
         }
