@@ -5,6 +5,7 @@
 //! `world` is the first scan's z-up velodyne frame. Every malformed input is an
 //! [`Error`] naming the file.
 
+use std::io::Read;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
@@ -215,50 +216,68 @@ impl KittiSequence {
 /// Reads a KITTI `.bin` scan: little-endian float32 x, y, z, remission per point.
 /// Every point is kept, non-finite ones too, so that labels still line up.
 pub fn read_scan(path: &Path) -> Result<Vec<[f32; 4]>> {
-    parse_scan(&std::fs::read(path).map_err(|e| Error::io(path, e))?, path)
-}
-
-/// A file of fixed-size records must be a whole number of them.
-fn check_record_size(
-    bytes: &[u8],
-    path: &Path,
-    record_bytes: u64,
-    what: &'static str,
-) -> Result<()> {
-    if (bytes.len() as u64).is_multiple_of(record_bytes) {
-        return Ok(());
+    let io_error = |e| Error::io(path, e);
+    let mut file = std::fs::File::open(path).map_err(io_error)?;
+    // Read straight into the points: a scan is 2 MB, and parsing a copy of the
+    // file's bytes cost as much as reading them.
+    let mut points = scan_buffer(file.metadata().map_err(io_error)?.len(), path)?;
+    file.read_exact(bytemuck::cast_slice_mut(&mut points))
+        .map_err(io_error)?;
+    if file.read(&mut [0u8; 1]).map_err(io_error)? != 0 {
+        return Err(Error::io(
+            path,
+            std::io::Error::other("the file grew while it was read"),
+        ));
     }
-    Err(Error::RecordSize {
-        path: path.to_path_buf(),
-        size_bytes: bytes.len() as u64,
-        record_bytes,
-        what,
-    })
+    Ok(from_little_endian(points))
 }
 
 /// [`read_scan`] on the file's bytes; `path` names it in errors.
 pub fn parse_scan(bytes: &[u8], path: &Path) -> Result<Vec<[f32; 4]>> {
-    check_record_size(bytes, path, 16, "float32 x, y, z, remission per point")?;
+    let mut points = scan_buffer(bytes.len() as u64, path)?;
+    bytemuck::cast_slice_mut(&mut points).copy_from_slice(bytes);
+    Ok(from_little_endian(points))
+}
+
+/// Room for the points of a scan file of `size_bytes`: a whole number of 16-byte
+/// records, at least one.
+fn scan_buffer(size_bytes: u64, path: &Path) -> Result<Vec<[f32; 4]>> {
+    check_record_size(size_bytes, path, 16, "float32 x, y, z, remission per point")?;
     // An empty file is a scan that was never written, not a scan of nothing.
-    if bytes.is_empty() {
+    if size_bytes == 0 {
         return Err(Error::EmptyScan {
             path: path.to_path_buf(),
         });
     }
-    Ok(bytes
-        .chunks_exact(16)
-        .map(|record| {
-            let value = |k: usize| {
-                f32::from_le_bytes([
-                    record[4 * k],
-                    record[4 * k + 1],
-                    record[4 * k + 2],
-                    record[4 * k + 3],
-                ])
-            };
-            [value(0), value(1), value(2), value(3)]
-        })
-        .collect())
+    Ok(vec![[0f32; 4]; (size_bytes / 16) as usize])
+}
+
+/// Points whose bytes were stored little-endian, as this machine's numbers.
+fn from_little_endian(mut points: Vec<[f32; 4]>) -> Vec<[f32; 4]> {
+    if cfg!(target_endian = "big") {
+        for value in points.as_flattened_mut() {
+            *value = f32::from_bits(u32::from_le(value.to_bits()));
+        }
+    }
+    points
+}
+
+/// A file of fixed-size records must be a whole number of them.
+fn check_record_size(
+    size_bytes: u64,
+    path: &Path,
+    record_bytes: u64,
+    what: &'static str,
+) -> Result<()> {
+    if size_bytes.is_multiple_of(record_bytes) {
+        return Ok(());
+    }
+    Err(Error::RecordSize {
+        path: path.to_path_buf(),
+        size_bytes,
+        record_bytes,
+        what,
+    })
 }
 
 /// Removes the points with a NaN or infinite coordinate, and their labels, so that
@@ -290,7 +309,7 @@ pub fn parse_labels(
     scan_path: &Path,
     points: usize,
 ) -> Result<Vec<u32>> {
-    check_record_size(bytes, path, 4, "uint32 label per point")?;
+    check_record_size(bytes.len() as u64, path, 4, "uint32 label per point")?;
     let labels: Vec<u32> = bytes
         .chunks_exact(4)
         .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
@@ -338,6 +357,27 @@ mod tests {
         let path = dir.join(name);
         std::fs::write(&path, bytes).unwrap();
         path
+    }
+
+    #[test]
+    fn a_scan_is_read_as_little_endian_records_and_an_empty_one_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let values = [1.5f32, -2.0, 3.25, 0.5, f32::NAN, 0.0, 1e-30, 1.0];
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let points = read_scan(&write(dir.path(), "a.bin", &bytes)).unwrap();
+        let bits = |p: &[[f32; 4]]| {
+            p.as_flattened()
+                .iter()
+                .map(|v| v.to_bits())
+                .collect::<Vec<_>>()
+        };
+        let parsed = parse_scan(&bytes, Path::new("a.bin")).unwrap();
+        assert_eq!(bits(&points), bits(&parsed));
+        assert_eq!(bits(&points), values.map(f32::to_bits));
+        let err = read_scan(&write(dir.path(), "b.bin", &[]))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("b.bin"), "{err}");
     }
 
     #[test]

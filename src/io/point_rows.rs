@@ -36,7 +36,7 @@ pub fn read_rows(
     on_chunk: &mut dyn FnMut(&PointCloud2) -> Result<(), String>,
 ) -> Result<(), String> {
     let step = rows.layout.point_step as usize;
-    let mut chunk = PointCloud2 {
+    let mut chunk: PointCloud2 = PointCloud2 {
         fields: rows.layout.fields.clone(),
         is_bigendian: rows.layout.is_bigendian,
         point_step: rows.layout.point_step,

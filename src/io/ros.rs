@@ -95,9 +95,14 @@ pub mod datatype {
     }
 }
 
-/// `sensor_msgs/msg/PointCloud2`.
+/// `sensor_msgs/msg/PointCloud2`; `Data` is owned bytes, or borrowed ones for
+/// encoding points that are already laid out as the message's (no copy first).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct PointCloud2 {
+#[serde(bound(
+    serialize = "Data: serde_bytes::Serialize",
+    deserialize = "Data: serde_bytes::Deserialize<'de>"
+))]
+pub struct PointCloud2<Data = Vec<u8>> {
     pub header: Header,
     pub height: u32,
     pub width: u32,
@@ -106,7 +111,7 @@ pub struct PointCloud2 {
     pub point_step: u32,
     pub row_step: u32,
     #[serde(with = "serde_bytes")]
-    pub data: Vec<u8>,
+    pub data: Data,
     pub is_dense: bool,
 }
 

@@ -16,6 +16,7 @@
 //! baseline in P2). Log time = header stamp = start time + times.txt. Frames are read
 //! and encoded in parallel batches, written in order.
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::ops::Range;
 use std::path::Path;
@@ -276,6 +277,11 @@ fn header(stamp_ns: u64, frame_id: &str) -> Header {
 
 /// The PointCloud2 of a scan: x, y, z, intensity (float32) and label (uint32).
 pub fn scan_to_cloud(frame: &Frame, stamp_ns: u64) -> PointCloud2 {
+    scan_cloud_with(frame, stamp_ns, scan_cloud_data(frame).into_owned())
+}
+
+/// [`scan_to_cloud`]'s message with `data` as the points' bytes.
+fn scan_cloud_with<Data>(frame: &Frame, stamp_ns: u64, data: Data) -> PointCloud2<Data> {
     let mut fields = PointField::xyz_float32();
     fields.push(PointField::scalar("intensity", 12, datatype::FLOAT32));
     if frame.labels.is_some() {
@@ -283,16 +289,6 @@ pub fn scan_to_cloud(frame: &Frame, stamp_ns: u64) -> PointCloud2 {
     }
     let point_step = if frame.labels.is_some() { 20 } else { 16 };
     let n = frame.points_in_velodyne.len();
-    // Fixed-size copies into a sized buffer: appending value by value checked the
-    // capacity four times a point and took as long as encoding the whole message.
-    let mut data = vec![0u8; n * point_step];
-    let records = data.chunks_exact_mut(point_step);
-    for (i, (record, p)) in records.zip(&frame.points_in_velodyne).enumerate() {
-        record[..16].copy_from_slice(p.map(f32::to_le_bytes).as_flattened());
-        if let Some(labels) = &frame.labels {
-            record[16..].copy_from_slice(&labels[i].to_le_bytes());
-        }
-    }
     PointCloud2 {
         header: header(stamp_ns, VELODYNE_FRAME),
         height: 1,
@@ -304,6 +300,35 @@ pub fn scan_to_cloud(frame: &Frame, stamp_ns: u64) -> PointCloud2 {
         data,
         is_dense: true,
     }
+}
+
+/// The points as [`scan_to_cloud`]'s records: borrowed when they are laid out so
+/// already (no labels, a little-endian machine), since copying a 2 MB scan into fresh
+/// memory cost `convert` more than encoding the rest of the frame.
+fn scan_cloud_data(frame: &Frame) -> Cow<'_, [u8]> {
+    let points = &frame.points_in_velodyne;
+    let Some(labels) = &frame.labels else {
+        if cfg!(target_endian = "little") {
+            return Cow::Borrowed(bytemuck::cast_slice(points));
+        }
+        return Cow::Owned(
+            points
+                .as_flattened()
+                .iter()
+                .flat_map(|v| v.to_le_bytes())
+                .collect(),
+        );
+    };
+    // Fixed-size copies into a sized buffer: appending value by value checked the
+    // capacity four times a point and took as long as encoding the whole message.
+    let point_step = 20;
+    let mut data = vec![0u8; points.len() * point_step];
+    let records = data.chunks_exact_mut(point_step);
+    for ((record, p), label) in records.zip(points).zip(labels) {
+        record[..16].copy_from_slice(p.map(f32::to_le_bytes).as_flattened());
+        record[16..].copy_from_slice(&label.to_le_bytes());
+    }
+    Cow::Owned(data)
 }
 
 /// Width and height from a PNG's IHDR chunk.
@@ -380,7 +405,7 @@ struct EncodedFrame {
 fn encode_frame(sequence: &KittiSequence, index: usize, start_ns: u64) -> Result<EncodedFrame> {
     let frame = sequence.read_frame(index)?;
     let stamp_ns = start_ns + frame.stamp_ns;
-    let cloud = scan_to_cloud(&frame, stamp_ns);
+    let cloud = scan_cloud_with(&frame, stamp_ns, scan_cloud_data(&frame));
     let tf = TfMessage {
         transforms: vec![TransformStamped {
             header: header(stamp_ns, MAP_FRAME),
