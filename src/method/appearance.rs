@@ -83,6 +83,66 @@ impl HsvBuckets {
     }
 }
 
+/// One cell's pixels counted per hue, saturation and value bucket. Pixels alternate
+/// between two sets of counts: a pixel's bucket is most often the one before it, and
+/// one set would make each count wait for the last one to be stored.
+struct PixelCounts {
+    /// [hue, saturation, value] buckets of even pixels, then of odd ones.
+    buckets: [[[u32; 256]; 3]; 2],
+    pixels: u32,
+}
+
+impl Default for PixelCounts {
+    fn default() -> Self {
+        Self {
+            buckets: [[[0; 256]; 3]; 2],
+            pixels: 0,
+        }
+    }
+}
+
+impl PixelCounts {
+    fn clear(&mut self, bins: [u32; 3]) {
+        for set in &mut self.buckets {
+            for (counts, &bins) in set.iter_mut().zip(&bins) {
+                counts[..bins as usize].fill(0);
+            }
+        }
+        self.pixels = 0;
+    }
+
+    /// Counts a run of RGB pixels.
+    fn add(&mut self, buckets: &HsvBuckets, rgb: &[u8]) {
+        let [even, odd] = &mut self.buckets;
+        let count = |set: &mut [[u32; 256]; 3], px: &[u8]| {
+            // Buckets are below 256 (`HsvBuckets::new`): as u8 the index needs no check.
+            let [h, s, v] = buckets.of(px[0], px[1], px[2]);
+            set[0][h as u8 as usize] += 1;
+            set[1][s as u8 as usize] += 1;
+            set[2][v as u8 as usize] += 1;
+        };
+        let mut pairs = rgb.chunks_exact(6);
+        for pair in &mut pairs {
+            count(even, &pair[..3]);
+            count(odd, &pair[3..]);
+        }
+        if let [r, g, b] = *pairs.remainder() {
+            count(even, &[r, g, b]);
+        }
+        self.pixels += (rgb.len() / 3) as u32;
+    }
+
+    /// Appends the hue, saturation and value counts, then the number of pixels.
+    fn append_to(&self, bins: [u32; 3], out: &mut Vec<u32>) {
+        let [even, odd] = &self.buckets;
+        for (k, &bins) in bins.iter().enumerate() {
+            let (even, odd) = (&even[k][..bins as usize], &odd[k][..bins as usize]);
+            out.extend(even.iter().zip(odd).map(|(a, b)| a + b));
+        }
+        out.push(self.pixels);
+    }
+}
+
 /// Convex hull (counter-clockwise, no repeated end) of up to a few points.
 pub fn convex_hull(points: &mut [[f64; 2]]) -> Vec<[f64; 2]> {
     points.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
@@ -189,9 +249,8 @@ impl AppearanceVoter {
             self.config.value_bins,
         ];
         let buckets = HsvBuckets::new(bins);
-        let n = self.histogram_len();
         let mut votes = FrameVotes::default();
-        let mut histogram = vec![0u32; n + 1];
+        let mut counts = PixelCounts::default();
         for cell in 0..layout.cell_count() {
             let range = cells.cell_range(cell);
             if range.len() < self.min_points {
@@ -231,20 +290,17 @@ impl AppearanceVoter {
                 continue;
             }
             let hull = convex_hull(&mut projected[..in_front]);
-            histogram.fill(0);
+            counts.clear(bins);
             rasterise(&hull, image.width, image.height, |y, x0, x1| {
                 let row = (y * image.width) as usize * 3;
-                for px in image.rgb[row + 3 * x0 as usize..row + 3 * x1 as usize].chunks_exact(3) {
-                    let [h, s, v] = buckets.of(px[0], px[1], px[2]);
-                    histogram[h as usize] += 1;
-                    histogram[(bins[0] + s) as usize] += 1;
-                    histogram[(bins[0] + bins[1] + v) as usize] += 1;
-                }
-                histogram[n] += x1 - x0;
+                counts.add(
+                    &buckets,
+                    &image.rgb[row + 3 * x0 as usize..row + 3 * x1 as usize],
+                );
             });
-            if histogram[n] > 0 {
+            if counts.pixels > 0 {
                 votes.keys.push(layout.world_key(cell));
-                votes.counts.extend_from_slice(&histogram);
+                counts.append_to(bins, &mut votes.counts);
             }
         }
         votes
