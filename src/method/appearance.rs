@@ -450,6 +450,33 @@ mod tests {
     }
 
     #[test]
+    fn pixel_counts_of_runs_are_each_pixels_buckets_counted_once() {
+        let mut rng = SplitMix64(5);
+        let buckets = HsvBuckets::new(BINS);
+        let mut counts = PixelCounts::default();
+        for _ in 0..50 {
+            counts.clear(BINS);
+            let mut expected = vec![0u32; (BINS[0] + BINS[1] + BINS[2] + 1) as usize];
+            for run_pixels in 0..8 {
+                let rgb: Vec<u8> = (0..3 * run_pixels)
+                    .map(|_| rng.uniform(0.0, 256.0) as u8)
+                    .collect();
+                counts.add(&buckets, &rgb);
+                for px in rgb.chunks_exact(3) {
+                    let [h, s, v] = reference(px[0], px[1], px[2], BINS);
+                    expected[h as usize] += 1;
+                    expected[(BINS[0] + s) as usize] += 1;
+                    expected[(BINS[0] + BINS[1] + v) as usize] += 1;
+                }
+            }
+            *expected.last_mut().unwrap() = 28;
+            let mut out = Vec::new();
+            counts.append_to(BINS, &mut out);
+            assert_eq!(out, expected);
+        }
+    }
+
+    #[test]
     fn hsv_bucket_edges() {
         // Pure red is hue 0; a red a hair towards magenta wraps to the last hue bucket.
         assert_eq!(hsv_buckets(255, 0, 0, BINS), [0, 7, 47]);
