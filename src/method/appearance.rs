@@ -352,22 +352,28 @@ impl ColourMemory {
 
     /// The normalised histograms (`n` bins) of the grid's cells that have any.
     pub fn features(&self, layout: &GridLayout, n: usize) -> CellAppearance {
-        let mut appearance = CellAppearance {
-            values: Vec::new(),
-            len: n,
-            row_of_cell: vec![CellAppearance::UNSEEN; layout.cell_count()],
-        };
-        for (cell, row) in appearance.row_of_cell.iter_mut().enumerate() {
+        let mut row_of_cell = vec![CellAppearance::UNSEEN; layout.cell_count()];
+        let mut seen = Vec::new();
+        for (cell, row) in row_of_cell.iter_mut().enumerate() {
             if let Some(counts) = self.counts.get(&layout.world_key(cell))
                 && let Some(&pixels) = counts.get(n)
                 && pixels > 0
             {
-                *row = (appearance.values.len() / n) as u32;
-                let normalised = counts[..n].iter().map(|&c| c as f32 / pixels as f32);
-                appearance.values.extend(normalised);
+                *row = seen.len() as u32;
+                seen.push((&counts[..n], pixels));
             }
         }
-        appearance
+        // Sized once: grown by doubling, a training grid's values (2.9 MB) were
+        // copied again and fresh pages touched at every growth.
+        let mut values = Vec::with_capacity(seen.len() * n);
+        for (counts, pixels) in seen {
+            values.extend(counts.iter().map(|&c| c as f32 / pixels as f32));
+        }
+        CellAppearance {
+            values,
+            len: n,
+            row_of_cell,
+        }
     }
 }
 
