@@ -285,6 +285,7 @@ pub fn annotate(
         }
         Recording::Log(drive) => {
             if options.passthrough {
+                sink.copy_chunks_by_time();
                 passthrough_messages =
                     write_log_messages(&mut sink, drive, true, &|_, _| {})?.messages;
             }

@@ -8,7 +8,7 @@
 //! the output only in [`McapSink::finish`]; dropped unfinished (an error, a panic), it
 //! deletes the temporary file, so a failed run never leaves a file that looks complete.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
@@ -87,6 +87,10 @@ pub struct McapSink {
     channel_ids: BTreeSet<u16>,
     schema_ids: BTreeSet<u16>,
     sequence: u32,
+    /// Whether copied chunks wait for the messages of their time
+    /// ([`Self::copy_chunks_by_time`]), and those still waiting, in file order.
+    chunks_by_time: bool,
+    waiting_chunks: VecDeque<StoredChunk>,
 }
 
 /// The writer thread: writes records until the queue closes, then the summary.
@@ -169,6 +173,8 @@ impl McapSink {
             channel_ids: BTreeSet::new(),
             schema_ids: BTreeSet::new(),
             sequence: 0,
+            chunks_by_time: false,
+            waiting_chunks: VecDeque::new(),
         })
     }
 
@@ -304,11 +310,37 @@ impl McapSink {
                 .entry(channel.topic.clone())
                 .or_insert(channel.id);
         }
-        for mut chunk in log.chunks {
-            on_chunk(&chunk);
-            self.send(Record::CopiedChunk(FinishedChunk::copied(&mut chunk)))?;
+        for chunk in &log.chunks {
+            on_chunk(chunk);
+        }
+        self.waiting_chunks.extend(log.chunks);
+        if !self.chunks_by_time {
+            self.send_waiting_chunks(u64::MAX)?;
         }
         Ok(true)
+    }
+
+    /// From here on, chunks copied from an input ([`Self::copy_chunks`]) wait until
+    /// a message of their start time or later is written, or the sink finishes: the
+    /// writer then copies them while the caller works (annotate's method), instead
+    /// of holding the caller back until all but the queue's last were written.
+    pub fn copy_chunks_by_time(&mut self) {
+        self.chunks_by_time = true;
+    }
+
+    /// Queues the waiting chunks that start at `until_ns` or earlier, in file order.
+    fn send_waiting_chunks(&mut self, until_ns: u64) -> Result<()> {
+        while let Some(chunk) = self.waiting_chunks.front() {
+            if chunk
+                .time_ns
+                .is_some_and(|(start_ns, _)| start_ns > until_ns)
+            {
+                break;
+            }
+            let mut chunk = self.waiting_chunks.pop_front().expect("a front chunk");
+            self.send(Record::CopiedChunk(FinishedChunk::copied(&mut chunk)))?;
+        }
+        Ok(())
     }
 
     /// Writes already-encoded bytes on a channel.
@@ -319,6 +351,7 @@ impl McapSink {
         publish_time_ns: u64,
         data: Vec<u8>,
     ) -> Result<()> {
+        self.send_waiting_chunks(log_time_ns)?;
         self.sequence += 1;
         self.send(Record::Message {
             channel_id,
@@ -365,6 +398,7 @@ impl McapSink {
     }
 
     pub fn write_metadata(&mut self, name: &str, entries: BTreeMap<String, String>) -> Result<()> {
+        self.send_waiting_chunks(u64::MAX)?;
         self.send(Record::Metadata {
             name: name.to_string(),
             entries,
@@ -373,6 +407,7 @@ impl McapSink {
 
     /// Waits for the writer, then renames the temporary file over the output.
     pub fn finish(mut self) -> Result<()> {
+        self.send_waiting_chunks(u64::MAX)?;
         let error = match self.join_writer() {
             Some(Ok(())) => None,
             Some(Err(error)) => Some(error),
