@@ -8,7 +8,7 @@
 //! from min to max) is projected with `P2 * Tr`; vertices behind the camera are
 //! dropped; every pixel whose centre lies inside the convex hull of the rest, clipped
 //! to the image, votes once. Integer arithmetic over the flat RGB buffer, no per-pixel
-//! allocation.
+//! allocation; each pixel's buckets are found once a frame (`appearance/pixels.rs`).
 
 use std::collections::HashMap;
 
@@ -18,130 +18,9 @@ use crate::config::AppearanceConfig;
 use crate::frame::CameraImage;
 use crate::method::grid::{CellPoints, GridLayout};
 
-/// The hue, saturation and value buckets of RGB pixels: `floor(p * n / range)`
-/// (METHOD.md's Decision), hue over [0, 360) degrees wrapping red, saturation over
-/// [0, 1] and value over [0, 256). Grey pixels have hue 0 and saturation 0.
-///
-/// The two divisions per pixel are multiplications by precomputed reciprocals
-/// `ceil(2^32 / d)`, exact here because numerator times divisor stays below 2^32
-/// (checked against plain division on every RGB value in the tests).
-#[derive(Clone, Debug)]
-pub struct HsvBuckets {
-    bins: [u32; 3],
-    /// Reciprocal of `6 delta` per delta = max - min.
-    hue_reciprocal: [u64; 256],
-    /// Reciprocal of `max` per max.
-    saturation_reciprocal: [u64; 256],
-}
+mod pixels;
 
-impl HsvBuckets {
-    /// `bins` (hue, saturation, value) must each be in 1..=256.
-    pub fn new(bins: [u32; 3]) -> Self {
-        let reciprocal = |d: u64| if d == 0 { 0 } else { (1u64 << 32).div_ceil(d) };
-        Self {
-            bins,
-            hue_reciprocal: std::array::from_fn(|delta| reciprocal(6 * delta as u64)),
-            saturation_reciprocal: std::array::from_fn(|max| reciprocal(max as u64)),
-        }
-    }
-
-    #[inline]
-    pub fn of(&self, r: u8, g: u8, b: u8) -> [u32; 3] {
-        let (r, g, b) = (r as u32, g as u32, b as u32);
-        let max = r.max(g).max(b);
-        let min = r.min(g).min(b);
-        let delta = max - min;
-        // Hue in units of delta: [0, 6 delta), 60 degrees per unit; red wraps. All
-        // three sectors' values are computed (wrapping where unused) and one is
-        // selected: a branch per pixel on the sector was mispredicted on real images.
-        let from_red = (g + 6 * delta).wrapping_sub(b);
-        let from_red = if from_red >= 6 * delta {
-            from_red.wrapping_sub(6 * delta)
-        } else {
-            from_red
-        };
-        let from_green = (b + 2 * delta).wrapping_sub(r);
-        let from_blue = (r + 4 * delta).wrapping_sub(g);
-        let hue = if max == r {
-            from_red
-        } else if max == g {
-            from_green
-        } else {
-            from_blue
-        };
-        let divide = |n: u32, reciprocal: u64| ((n as u64 * reciprocal) >> 32) as u32;
-        let [hue_bins, saturation_bins, value_bins] = self.bins;
-        // A zero reciprocal (grey, black) gives bucket 0.
-        let h = divide(hue * hue_bins, self.hue_reciprocal[delta as usize]).min(hue_bins - 1);
-        let s = divide(
-            delta * saturation_bins,
-            self.saturation_reciprocal[max as usize],
-        )
-        .min(saturation_bins - 1);
-        let v = max * value_bins / 256;
-        [h, s, v]
-    }
-}
-
-/// One cell's pixels counted per hue, saturation and value bucket. Pixels alternate
-/// between two sets of counts: a pixel's bucket is most often the one before it, and
-/// one set would make each count wait for the last one to be stored.
-struct PixelCounts {
-    /// [hue, saturation, value] buckets of even pixels, then of odd ones.
-    buckets: [[[u32; 256]; 3]; 2],
-    pixels: u32,
-}
-
-impl Default for PixelCounts {
-    fn default() -> Self {
-        Self {
-            buckets: [[[0; 256]; 3]; 2],
-            pixels: 0,
-        }
-    }
-}
-
-impl PixelCounts {
-    fn clear(&mut self, bins: [u32; 3]) {
-        for set in &mut self.buckets {
-            for (counts, &bins) in set.iter_mut().zip(&bins) {
-                counts[..bins as usize].fill(0);
-            }
-        }
-        self.pixels = 0;
-    }
-
-    /// Counts a run of RGB pixels.
-    fn add(&mut self, buckets: &HsvBuckets, rgb: &[u8]) {
-        let [even, odd] = &mut self.buckets;
-        let count = |set: &mut [[u32; 256]; 3], px: &[u8]| {
-            // Buckets are below 256 (`HsvBuckets::new`): as u8 the index needs no check.
-            let [h, s, v] = buckets.of(px[0], px[1], px[2]);
-            set[0][h as u8 as usize] += 1;
-            set[1][s as u8 as usize] += 1;
-            set[2][v as u8 as usize] += 1;
-        };
-        let mut pairs = rgb.chunks_exact(6);
-        for pair in &mut pairs {
-            count(even, &pair[..3]);
-            count(odd, &pair[3..]);
-        }
-        if let [r, g, b] = *pairs.remainder() {
-            count(even, &[r, g, b]);
-        }
-        self.pixels += (rgb.len() / 3) as u32;
-    }
-
-    /// Appends the hue, saturation and value counts, then the number of pixels.
-    fn append_to(&self, bins: [u32; 3], out: &mut Vec<u32>) {
-        let [even, odd] = &self.buckets;
-        for (k, &bins) in bins.iter().enumerate() {
-            let (even, odd) = (&even[k][..bins as usize], &odd[k][..bins as usize]);
-            out.extend(even.iter().zip(odd).map(|(a, b)| a + b));
-        }
-        out.push(self.pixels);
-    }
-}
+use pixels::{BucketRows, HsvBuckets, PixelCounts};
 
 /// Convex hull (counter-clockwise, no repeated end) of up to a few points.
 pub fn convex_hull(points: &mut [[f64; 2]]) -> Vec<[f64; 2]> {
@@ -249,6 +128,7 @@ impl AppearanceVoter {
             self.config.value_bins,
         ];
         let buckets = HsvBuckets::new(bins);
+        let mut bucket_rows = BucketRows::new(image, &buckets);
         let mut votes = FrameVotes::default();
         let mut counts = PixelCounts::default();
         for cell in 0..layout.cell_count() {
@@ -292,11 +172,7 @@ impl AppearanceVoter {
             let hull = convex_hull(&mut projected[..in_front]);
             counts.clear(bins);
             rasterise(&hull, image.width, image.height, |y, x0, x1| {
-                let row = (y * image.width) as usize * 3;
-                counts.add(
-                    &buckets,
-                    &image.rgb[row + 3 * x0 as usize..row + 3 * x1 as usize],
-                );
+                counts.add(bucket_rows.span(y, x0, x1));
             });
             if counts.pixels > 0 {
                 votes.keys.push(layout.world_key(cell));
@@ -406,97 +282,6 @@ impl CellAppearance {
 mod tests {
     use super::*;
     use crate::random::SplitMix64;
-
-    const BINS: [u32; 3] = [32, 8, 48];
-
-    /// The buckets by plain division, as METHOD.md writes them.
-    fn reference(r: u8, g: u8, b: u8, bins: [u32; 3]) -> [u32; 3] {
-        let (r, g, b) = (r as f64, g as f64, b as f64);
-        let max = r.max(g).max(b);
-        let delta = max - r.min(g).min(b);
-        let hue_degrees = if delta == 0.0 {
-            0.0
-        } else if max == r {
-            (60.0 * (g - b) / delta).rem_euclid(360.0)
-        } else if max == g {
-            60.0 * (b - r) / delta + 120.0
-        } else {
-            60.0 * (r - g) / delta + 240.0
-        };
-        let saturation = if max == 0.0 { 0.0 } else { delta / max };
-        let bucket =
-            |p: f64, n: u32, range: f64| ((p * n as f64 / range + 1e-9).floor() as u32).min(n - 1);
-        [
-            bucket(hue_degrees, bins[0], 360.0),
-            bucket(saturation, bins[1], 1.0),
-            bucket(max, bins[2], 256.0),
-        ]
-    }
-
-    fn hsv_buckets(r: u8, g: u8, b: u8, bins: [u32; 3]) -> [u32; 3] {
-        HsvBuckets::new(bins).of(r, g, b)
-    }
-
-    #[test]
-    fn fast_buckets_equal_plain_division_on_every_colour() {
-        for bins in [BINS, [256, 256, 256], [7, 3, 5], [1, 1, 1]] {
-            let fast = HsvBuckets::new(bins);
-            for r in 0..=255u8 {
-                for g in 0..=255u8 {
-                    for b in (0..=255u8).step_by(if bins == BINS { 1 } else { 17 }) {
-                        assert_eq!(
-                            fast.of(r, g, b),
-                            reference(r, g, b, bins),
-                            "rgb ({r}, {g}, {b}), bins {bins:?}"
-                        );
-                    }
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn pixel_counts_of_runs_are_each_pixels_buckets_counted_once() {
-        let mut rng = SplitMix64(5);
-        let buckets = HsvBuckets::new(BINS);
-        let mut counts = PixelCounts::default();
-        for _ in 0..50 {
-            counts.clear(BINS);
-            let mut expected = vec![0u32; (BINS[0] + BINS[1] + BINS[2] + 1) as usize];
-            for run_pixels in 0..8 {
-                let rgb: Vec<u8> = (0..3 * run_pixels)
-                    .map(|_| rng.uniform(0.0, 256.0) as u8)
-                    .collect();
-                counts.add(&buckets, &rgb);
-                for px in rgb.chunks_exact(3) {
-                    let [h, s, v] = reference(px[0], px[1], px[2], BINS);
-                    expected[h as usize] += 1;
-                    expected[(BINS[0] + s) as usize] += 1;
-                    expected[(BINS[0] + BINS[1] + v) as usize] += 1;
-                }
-            }
-            *expected.last_mut().unwrap() = 28;
-            let mut out = Vec::new();
-            counts.append_to(BINS, &mut out);
-            assert_eq!(out, expected);
-        }
-    }
-
-    #[test]
-    fn hsv_bucket_edges() {
-        // Pure red is hue 0; a red a hair towards magenta wraps to the last hue bucket.
-        assert_eq!(hsv_buckets(255, 0, 0, BINS), [0, 7, 47]);
-        assert_eq!(hsv_buckets(255, 0, 1, BINS)[0], 31);
-        // Green 120 degrees: bucket 120 * 32 / 360 = 10.67 -> 10; blue 240 -> 21.
-        assert_eq!(hsv_buckets(0, 255, 0, BINS)[0], 10);
-        assert_eq!(hsv_buckets(0, 0, 255, BINS)[0], 21);
-        // Greys: hue 0, saturation 0, value by brightness; black is all zero.
-        assert_eq!(hsv_buckets(128, 128, 128, BINS), [0, 0, 24]);
-        assert_eq!(hsv_buckets(0, 0, 0, BINS), [0, 0, 0]);
-        assert_eq!(hsv_buckets(255, 255, 255, BINS), [0, 0, 47]);
-        // Half saturation: delta / max = 0.5 -> bucket 4.
-        assert_eq!(hsv_buckets(200, 100, 100, BINS)[1], 4);
-    }
 
     #[test]
     fn rasteriser_matches_brute_force_point_in_polygon() {
