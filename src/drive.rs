@@ -38,6 +38,23 @@ struct Arrival {
     scan_sha256: Option<String>,
 }
 
+/// What a command makes of each frame as it is read ([`Selection::run_mapped_beside`]).
+pub type Beside<'a, B> = &'a (dyn Fn(&Frame) -> Result<B> + Sync);
+
+/// What [`Selection::run_mapped_beside`] hands on, in the order it comes.
+pub enum Handed<'a, B> {
+    /// What `beside` made of a frame as it was read.
+    Read(B),
+    /// A frame's result, with the drive map so far (it included).
+    Result(Box<FrameResult>, &'a DriveMap),
+}
+
+/// What the reading and method stages send on to the command's.
+enum Step<B> {
+    Read(B),
+    Result(Box<FrameResult>),
+}
+
 /// A scan's pose as registration estimated it.
 #[derive(Clone, Debug)]
 pub struct EstimatedPose {
@@ -113,7 +130,16 @@ impl Selection {
         model: Option<&SvmModel>,
         mut on_frame: impl FnMut(FrameResult) -> Result<(), E>,
     ) -> Result<(), E> {
-        self.run_fusing(config, model, false, |result, _| on_frame(result))?;
+        self.run_fusing(
+            config,
+            model,
+            false,
+            None::<Beside<()>>,
+            |handed| match handed {
+                Handed::Read(()) => Ok(()),
+                Handed::Result(result, _) => on_frame(*result),
+            },
+        )?;
         Ok(())
     }
 
@@ -123,18 +149,43 @@ impl Selection {
         &self,
         config: &Config,
         model: Option<&SvmModel>,
-        on_frame: impl FnMut(FrameResult, &DriveMap) -> Result<(), E>,
+        mut on_frame: impl FnMut(FrameResult, &DriveMap) -> Result<(), E>,
     ) -> Result<DriveMap, E> {
-        self.run_fusing(config, model, true, on_frame)
+        self.run_fusing(
+            config,
+            model,
+            true,
+            None::<Beside<()>>,
+            |handed| match handed {
+                Handed::Read(()) => Ok(()),
+                Handed::Result(result, map) => on_frame(*result, map),
+            },
+        )
     }
 
-    /// [`Self::run`], fusing the results into the drive map when `fuse` says so.
-    fn run_fusing<E: From<Error>>(
+    /// [`Self::run_mapped`], with `beside` made of each selected frame as it is read,
+    /// on the reading thread (annotate passes a KITTI frame's messages through
+    /// without reading it again). `on_handed` takes those and the results as they
+    /// come: each in frame order, the two interleaved as the stages run.
+    pub fn run_mapped_beside<E: From<Error>, B: Send>(
+        &self,
+        config: &Config,
+        model: Option<&SvmModel>,
+        beside: Beside<B>,
+        on_handed: impl FnMut(Handed<B>) -> Result<(), E>,
+    ) -> Result<DriveMap, E> {
+        self.run_fusing(config, model, true, Some(beside), on_handed)
+    }
+
+    /// [`Self::run_mapped_beside`], fusing the results into the drive map when
+    /// `fuse` says so.
+    fn run_fusing<E: From<Error>, B: Send>(
         &self,
         config: &Config,
         model: Option<&SvmModel>,
         fuse: bool,
-        mut on_frame: impl FnMut(FrameResult, &DriveMap) -> Result<(), E>,
+        beside: Option<Beside<B>>,
+        mut on_handed: impl FnMut(Handed<B>) -> Result<(), E>,
     ) -> Result<DriveMap, E> {
         let mut drive_map = DriveMap::new(config.grid.cell_size_m);
         let mut pipeline = self.pipeline(config)?;
@@ -145,22 +196,32 @@ impl Selection {
         let batch_size = (2 * rayon::current_num_threads()).clamp(1, 16);
         std::thread::scope(|scope| {
             let (read_frames, arrivals) = std::sync::mpsc::sync_channel(batch_size);
+            let (results, processed) = std::sync::mpsc::sync_channel(batch_size);
+            let made = results.clone();
             scope.spawn(move || {
                 let mut reading = Stopwatch::start();
                 for frame in self.source.read(&frames) {
                     let read_ms = reading.lap_ms();
+                    if let (Some(beside), Ok(frame)) = (beside, &frame)
+                        && frame.index >= self.frames.start
+                    {
+                        let beside = beside(frame).map(Step::Read);
+                        let failed = beside.is_err();
+                        if made.send(beside).is_err() || failed {
+                            return;
+                        }
+                    }
                     if read_frames.send(frame.map(|f| (f, read_ms))).is_err() {
                         return;
                     }
                 }
             });
-            let (results, processed) = std::sync::mpsc::sync_channel(batch_size);
             scope.spawn(move || {
                 let mut next = |block: bool| match block {
                     true => arrivals.recv().ok(),
                     false => arrivals.try_recv().ok(),
                 };
-                let mut emit = |result| results.send(Ok(result)).is_ok();
+                let mut emit = |result| results.send(Ok(Step::Result(Box::new(result)))).is_ok();
                 let batches = Batches {
                     first: self.frames.start,
                     size: batch_size,
@@ -170,13 +231,17 @@ impl Selection {
                     let _ = results.send(Err(error));
                 }
             });
-            // A failing `on_frame` drops `processed`, which stops the stages above.
-            for result in processed {
-                let result = result?;
-                if fuse {
-                    drive_map.add_result(&result);
+            // A failing `on_handed` drops `processed`, which stops the stages above.
+            for step in processed {
+                match step? {
+                    Step::Read(made) => on_handed(Handed::Read(made))?,
+                    Step::Result(result) => {
+                        if fuse {
+                            drive_map.add_result(&result);
+                        }
+                        on_handed(Handed::Result(result, &drive_map))?;
+                    }
                 }
-                on_frame(result, &drive_map)?;
             }
             Ok(drive_map)
         })

@@ -531,3 +531,42 @@ fn a_pipe_as_input_is_refused_at_once_not_waited_on() {
         );
     }
 }
+
+#[test]
+fn annotate_passes_kitti_frames_through_as_read_and_keep_going_skips_an_unreadable_image() {
+    let dir = sequence();
+    std::fs::create_dir_all(dir.path().join("image_2")).unwrap();
+    let mut png_bytes = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut png_bytes, 4, 2);
+        encoder.set_color(png::ColorType::Rgb);
+        let mut writer = encoder.write_header().unwrap();
+        writer.write_image_data(&[90u8; 24]).unwrap();
+    }
+    std::fs::write(dir.path().join("image_2/000000.png"), png_bytes).unwrap();
+    std::fs::write(dir.path().join("image_2/000001.png"), "not a png").unwrap();
+    let seq = arg(dir.path());
+    // The geometric model reads no image; passing frame 1 through does, and stops.
+    let out_dir = tempfile::tempdir().unwrap();
+    let stopped = out_dir.path().join("stopped.mcap");
+    let err = clean_failure(travmap(&["annotate", seq, "-o", arg(&stopped)]));
+    assert_contains(&err, &["000001.png", "not a PNG image"]);
+    assert_eq!(std::fs::read_dir(out_dir.path()).unwrap().count(), 0);
+    // --keep-going: both frames annotated, frame 1's input messages left out.
+    let kept = out_dir.path().join("kept.mcap");
+    let out = travmap(&["annotate", seq, "-o", arg(&kept), "--keep-going", "-q"]);
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
+    let bytes = std::fs::read(&kept).unwrap();
+    let mut topics = std::collections::BTreeMap::<String, Vec<u64>>::new();
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        let message = message.unwrap();
+        let stamps = topics.entry(message.channel.topic.clone()).or_default();
+        stamps.push(message.log_time);
+    }
+    assert_eq!(topics["/travmap/metrics"], [0, 100_000_000]);
+    assert_eq!(topics["/velodyne_points"], [0]);
+    assert_eq!(topics["/camera_2/image/compressed"], [0]);
+    assert_eq!(topics["/tf_static"], [0]);
+    let metadata = common::travmap_metadata(&bytes);
+    assert_contains(&metadata["skipped_frames"], &["\"frame\":1", "000001.png"]);
+}

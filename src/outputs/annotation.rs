@@ -20,8 +20,9 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::config::Config;
-use crate::drive::Selection;
+use crate::drive::{Handed, Selection};
 use crate::error::{Error, Result};
+use crate::frame::Frame;
 use crate::io::Recording;
 use crate::io::ros::{
     FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion,
@@ -30,7 +31,9 @@ use crate::io::ros::{
 use crate::method::classifier::SvmModel;
 use crate::method::grid::CellClass;
 use crate::method::pipeline::FrameResult;
-use crate::outputs::conversion::{transform_from_pose, write_kitti_frames, write_log_messages};
+use crate::outputs::conversion::{
+    EncodedFrame, KittiFrameWriter, encode_kitti_frame, transform_from_pose, write_log_messages,
+};
 use crate::outputs::drive_map::{GridValues, occupancy_grid};
 use crate::outputs::mcap_writer::Compression;
 use crate::outputs::writing::McapSink;
@@ -275,24 +278,25 @@ pub fn annotate(
 ) -> Result<AnnotationSummary> {
     let mut sink = McapSink::create(output, options.compression)?;
     let mut passthrough_messages = 0;
+    // A KITTI frame's messages are made from the frame as the method's reader reads
+    // it (not read a second time), and written as they come, ahead of its results.
+    let mut kitti_passthrough = None;
     match &selection.source.recording {
-        Recording::Kitti(sequence) => {
-            if options.passthrough {
-                let written =
-                    write_kitti_frames(&mut sink, sequence, &selection.frames, 0, &|| {})?;
-                passthrough_messages = written.frames * 2 + written.images * 2 + 1;
-            }
+        Recording::Kitti(sequence) if options.passthrough => {
+            kitti_passthrough = Some(KittiFrameWriter::new(sequence));
         }
-        Recording::Log(drive) => {
-            if options.passthrough {
-                sink.copy_chunks_by_time();
-                passthrough_messages =
-                    write_log_messages(&mut sink, drive, true, &|_, _| {})?.messages;
-            }
+        Recording::Log(drive) if options.passthrough => {
+            sink.copy_chunks_by_time();
+            passthrough_messages = write_log_messages(&mut sink, drive, true, &|_, _| {})?.messages;
         }
         // A folder of scans or a site cloud has no messages to pass through.
-        Recording::Scans(..) | Recording::Site(..) => {}
+        _ => {}
     }
+    let kitti_passes = kitti_passthrough.is_some();
+    let encode_passthrough = |frame: &Frame| match &selection.source.recording {
+        Recording::Kitti(sequence) if kitti_passes => encode_kitti_frame(sequence, frame, 0),
+        _ => Ok(None),
+    };
     let world_frame = selection.source.world_frame().to_string();
     let posing = selection.source.posing();
     // Estimated poses go on /tf, unless passthrough writes KITTI's recorded ones there.
@@ -304,7 +308,16 @@ pub fn annotate(
     let mut frames = 0;
     let mut last_stamp_ns = 0;
     let mut cadence = DriveMapCadence::new(options.drive_map_every);
-    let drive_map = selection.run_mapped::<Error>(config, Some(model), |result, drive_map| {
+    let on_handed = |handed: Handed<'_, Option<EncodedFrame>>| {
+        let (result, drive_map) = match handed {
+            Handed::Read(encoded) => {
+                return match (&mut kitti_passthrough, encoded) {
+                    (Some(writer), Some(frame)) => writer.write(&mut sink, frame),
+                    _ => Ok(()),
+                };
+            }
+            Handed::Result(result, drive_map) => (result, drive_map),
+        };
         let classes = result.filtered.as_deref().unwrap_or(&[]);
         let stamp = result.stamp_ns;
         if write_estimated_tf {
@@ -356,7 +369,17 @@ pub fn annotate(
         }
         on_frame();
         Ok(())
-    })?;
+    };
+    let drive_map = selection.run_mapped_beside::<Error, _>(
+        config,
+        Some(model),
+        &encode_passthrough,
+        on_handed,
+    )?;
+    if let Some(writer) = &kitti_passthrough {
+        let written = &writer.summary;
+        passthrough_messages = written.frames * 2 + written.images * 2 + 1;
+    }
     if cadence.final_due() {
         let grid = occupancy_grid(
             &drive_map,

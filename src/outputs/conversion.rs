@@ -392,8 +392,8 @@ fn static_transforms(sequence: &KittiSequence, stamp_ns: u64) -> TfMessage {
     TfMessage { transforms }
 }
 
-/// One frame's messages, CDR-encoded.
-struct EncodedFrame {
+/// One KITTI frame's messages as `convert` writes them, CDR-encoded.
+pub struct EncodedFrame {
     stamp_ns: u64,
     cloud: Vec<u8>,
     tf: Vec<u8>,
@@ -402,10 +402,37 @@ struct EncodedFrame {
     dropped_points: usize,
 }
 
-fn encode_frame(sequence: &KittiSequence, index: usize, start_ns: u64) -> Result<EncodedFrame> {
-    let frame = sequence.read_frame(index)?;
+/// The messages of `frame`, read from `sequence` (its image from its file, as
+/// recorded); None when they cannot be made and the sequence keeps going past
+/// unreadable frames, which records the skip.
+pub fn encode_kitti_frame(
+    sequence: &KittiSequence,
+    frame: &Frame,
+    start_ns: u64,
+) -> Result<Option<EncodedFrame>> {
+    kept(
+        sequence,
+        frame.index,
+        encode_frame(sequence, frame, start_ns),
+    )
+}
+
+/// `encoded`, or None for a frame the sequence skips (`--keep-going`).
+fn kept(
+    sequence: &KittiSequence,
+    index: usize,
+    encoded: Result<EncodedFrame>,
+) -> Result<Option<EncodedFrame>> {
+    match encoded {
+        Ok(encoded) => Ok(Some(encoded)),
+        Err(error) => sequence.skip_log().handle(index, error).map(|()| None),
+    }
+}
+
+fn encode_frame(sequence: &KittiSequence, frame: &Frame, start_ns: u64) -> Result<EncodedFrame> {
+    let index = frame.index;
     let stamp_ns = start_ns + frame.stamp_ns;
-    let cloud = scan_cloud_with(&frame, stamp_ns, scan_cloud_data(&frame));
+    let cloud = scan_cloud_with(frame, stamp_ns, scan_cloud_data(frame));
     let tf = TfMessage {
         transforms: vec![TransformStamped {
             header: header(stamp_ns, MAP_FRAME),
@@ -443,63 +470,51 @@ fn encode_frame(sequence: &KittiSequence, index: usize, start_ns: u64) -> Result
     })
 }
 
-/// Writes the frames of `sequence` in `frames` into `sink` as `convert` does, and
-/// returns the counts (output_bytes 0: the sink is not finished here).
-pub fn write_kitti_frames(
-    sink: &mut McapSink,
-    sequence: &KittiSequence,
-    frames: &Range<usize>,
-    start_ns: u64,
-    on_frame: &(dyn Fn() + Sync),
-) -> Result<ConversionSummary> {
-    let indices = sequence.frames_in(frames);
-    let mut summary = ConversionSummary {
-        frames: 0,
-        images: 0,
-        labelled_frames: 0,
-        dropped_points: 0,
-        output_bytes: 0,
-    };
-    for batch in indices.chunks(BATCH) {
-        // A frame whose files are unreadable stops the conversion, unless the
-        // sequence keeps going (annotate --keep-going), which skips and records it.
-        let encoded: Vec<Option<EncodedFrame>> = batch
-            .par_iter()
-            .map(|&index| match encode_frame(sequence, index, start_ns) {
-                Ok(frame) => Ok(Some(frame)),
-                Err(error) => sequence.skip_log().handle(index, error).map(|()| None),
-            })
-            .collect::<Result<_>>()?;
-        for frame in encoded.into_iter().flatten() {
-            let EncodedFrame {
-                stamp_ns,
-                cloud,
-                tf,
-                image,
-                labelled,
-                dropped_points,
-            } = frame;
-            if summary.frames == 0 {
-                sink.write(
-                    "/tf_static",
-                    stamp_ns,
-                    &static_transforms(sequence, stamp_ns),
-                )?;
-            }
-            sink.write_encoded::<PointCloud2>(CLOUD_TOPIC, stamp_ns, cloud)?;
-            sink.write_encoded::<TfMessage>("/tf", stamp_ns, tf)?;
-            if let Some((image, info)) = image {
-                sink.write_encoded::<CompressedImage>(IMAGE_TOPIC, stamp_ns, image)?;
-                sink.write_encoded::<CameraInfo>(CAMERA_INFO_TOPIC, stamp_ns, info)?;
-                summary.images += 1;
-            }
-            summary.frames += 1;
-            summary.labelled_frames += labelled as usize;
-            summary.dropped_points += dropped_points as u64;
-            on_frame();
-        }
+/// Writes KITTI frames' messages into a sink in frame order, `/tf_static` before
+/// the first, and counts them.
+pub struct KittiFrameWriter<'a> {
+    sequence: &'a KittiSequence,
+    pub summary: ConversionSummary,
+}
+
+impl<'a> KittiFrameWriter<'a> {
+    pub fn new(sequence: &'a KittiSequence) -> Self {
+        let summary = ConversionSummary {
+            frames: 0,
+            images: 0,
+            labelled_frames: 0,
+            dropped_points: 0,
+            output_bytes: 0,
+        };
+        Self { sequence, summary }
     }
-    Ok(summary)
+
+    pub fn write(&mut self, sink: &mut McapSink, frame: EncodedFrame) -> Result<()> {
+        let EncodedFrame {
+            stamp_ns,
+            cloud,
+            tf,
+            image,
+            labelled,
+            dropped_points,
+        } = frame;
+        let summary = &mut self.summary;
+        if summary.frames == 0 {
+            let transforms = static_transforms(self.sequence, stamp_ns);
+            sink.write("/tf_static", stamp_ns, &transforms)?;
+        }
+        sink.write_encoded::<PointCloud2>(CLOUD_TOPIC, stamp_ns, cloud)?;
+        sink.write_encoded::<TfMessage>("/tf", stamp_ns, tf)?;
+        if let Some((image, info)) = image {
+            sink.write_encoded::<CompressedImage>(IMAGE_TOPIC, stamp_ns, image)?;
+            sink.write_encoded::<CameraInfo>(CAMERA_INFO_TOPIC, stamp_ns, info)?;
+            summary.images += 1;
+        }
+        summary.frames += 1;
+        summary.labelled_frames += labelled as usize;
+        summary.dropped_points += dropped_points as u64;
+        Ok(())
+    }
 }
 
 /// Converts the frames of `sequence` in `frames` into `output`. `on_frame` is called
@@ -513,8 +528,25 @@ pub fn convert_kitti(
     on_frame: &(dyn Fn() + Sync),
 ) -> Result<ConversionSummary> {
     let mut sink = McapSink::create(output, compression)?;
-    let mut summary = write_kitti_frames(&mut sink, sequence, frames, start_ns, on_frame)?;
+    let mut writer = KittiFrameWriter::new(sequence);
+    for batch in sequence.frames_in(frames).chunks(BATCH) {
+        // A frame whose files are unreadable stops the conversion, unless the
+        // sequence keeps going, which skips and records it.
+        let encoded: Vec<Option<EncodedFrame>> = batch
+            .par_iter()
+            .map(|&index| {
+                let frame = sequence.read_frame(index);
+                let encoded = frame.and_then(|frame| encode_frame(sequence, &frame, start_ns));
+                kept(sequence, index, encoded)
+            })
+            .collect::<Result<_>>()?;
+        for frame in encoded.into_iter().flatten() {
+            writer.write(&mut sink, frame)?;
+            on_frame();
+        }
+    }
     sink.finish()?;
+    let mut summary = writer.summary;
     summary.output_bytes = std::fs::metadata(output)
         .map_err(|e| Error::io(output, e))?
         .len();
