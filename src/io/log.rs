@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use super::bag::BagFile;
 use super::format::InputFormat;
-pub use super::log_message::{Connection, FileMap, FileMessages, LogMessage};
+pub use super::log_message::{Connection, FileMap, FileMessages, HeadersOnly, LogMessage};
 use super::mcap_messages::{Damage, Messages};
 use super::mcap_records::check_chunk_sizes;
 use super::mcap_stored::{Release, StoredLog, stored_log};
@@ -42,12 +42,13 @@ impl LogFile {
         }
     }
 
-    fn messages(
-        &self,
+    fn messages<'a>(
+        &'a self,
         threads: usize,
-    ) -> Box<dyn Iterator<Item = std::result::Result<LogMessage, Damage>> + '_> {
+        headers_only: Option<HeadersOnly<'a>>,
+    ) -> Box<dyn Iterator<Item = std::result::Result<LogMessage, Damage>> + 'a> {
         match self {
-            LogFile::Mcap(file) => Box::new(file.messages(threads)),
+            LogFile::Mcap(file) => Box::new(file.messages(threads, headers_only)),
             LogFile::Bag(file) => Box::new(file.messages().map(whole_file_damage)),
             LogFile::Sqlite(file) => Box::new(file.messages().map(whole_file_damage)),
         }
@@ -132,11 +133,28 @@ impl Log {
     /// the method's frames, which keep the cores busy (more only held more chunks
     /// in memory there, for no gain).
     pub fn messages_using(&self, threads: usize) -> impl Iterator<Item = Result<LogMessage>> + '_ {
+        self.messages_with(threads, None)
+    }
+
+    /// [`Self::messages`], the messages of the types `headers_only` names cut to
+    /// their headers ([`HeadersOnly`]; those of bags and SQLite files whole).
+    pub fn message_headers<'a>(
+        &'a self,
+        headers_only: HeadersOnly<'a>,
+    ) -> impl Iterator<Item = Result<LogMessage>> + 'a {
+        self.messages_with(rayon::current_num_threads(), Some(headers_only))
+    }
+
+    fn messages_with<'a>(
+        &'a self,
+        threads: usize,
+        headers_only: Option<HeadersOnly<'a>>,
+    ) -> impl Iterator<Item = Result<LogMessage>> + 'a {
         let mut failed = false;
         self.files
             .iter()
             .flat_map(move |file| {
-                file.messages(threads)
+                file.messages(threads, headers_only)
                     .enumerate()
                     .map(move |(ordinal, message)| match message {
                         Ok(message) => Ok(message),
@@ -216,13 +234,14 @@ impl McapFile {
         Some(log)
     }
 
-    fn messages(
-        &self,
+    fn messages<'a>(
+        &'a self,
         threads: usize,
-    ) -> impl Iterator<Item = std::result::Result<LogMessage, Damage>> + '_ {
+        headers_only: Option<HeadersOnly<'a>>,
+    ) -> impl Iterator<Item = std::result::Result<LogMessage, Damage>> + 'a {
         let mut connections: HashMap<u16, Arc<Connection>> = HashMap::new();
         let readable = &self.map[..self.cut_at.unwrap_or(self.map.len())];
-        Messages::new(readable, Some(&self.file), threads).map(move |message| {
+        Messages::new(readable, Some(&self.file), threads, headers_only).map(move |message| {
             let message = message?;
             let channel = &message.channel;
             let connection = connections.entry(channel.id).or_insert_with(|| {

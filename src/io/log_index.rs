@@ -452,7 +452,12 @@ impl LogIndex {
             ..Default::default()
         };
         let (mut damaged_chunks, mut first_damage) = (0, None);
-        for message in log.messages() {
+        // Of clouds and images this pass reads the header alone.
+        let headers_only = |schema_name: &str| {
+            let name = ros2_type_name(schema_name);
+            matches!(name.as_ref(), POINT_CLOUD | COMPRESSED_IMAGE | RAW_IMAGE)
+        };
+        for message in log.message_headers(&headers_only) {
             match message {
                 Ok(message) => contents.add(path, &message)?,
                 // Its clouds are not indexed; reading the frames says so (or stops).

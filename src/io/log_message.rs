@@ -46,6 +46,14 @@ pub fn ros2_type_name(schema_name: &str) -> Cow<'_, str> {
     }
 }
 
+/// Of a pass that reads only some messages' headers: whether a message of this type
+/// (its schema name, as recorded) is one of them. An MCAP pass then copies only its
+/// first [`HEADER_BYTES`], not a cloud's or an image's megabytes.
+pub type HeadersOnly<'a> = &'a (dyn Fn(&str) -> bool + Sync);
+
+/// What a header-only message keeps of its bytes: more than any header needs.
+pub const HEADER_BYTES: usize = 64 * 1024;
+
 /// One recorded message, undecoded.
 #[derive(Debug)]
 pub struct LogMessage {

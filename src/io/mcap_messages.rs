@@ -10,7 +10,7 @@ use std::io::Read;
 use mcap::records::{Record, op};
 use mcap::{McapError, Message};
 
-use super::log_message::FileMap;
+use super::log_message::{FileMap, HEADER_BYTES, HeadersOnly};
 use super::mcap_records::{ChunkSpan, RecordWalk, check_lengths, chunk_parts};
 
 /// Bytes a pass reads before it gives the pages behind it back.
@@ -32,6 +32,8 @@ pub(super) struct Messages<'a> {
     /// Buffers of chunks read, for the next ones: no allocation per chunk.
     spare: Vec<Vec<u8>>,
     channels: mcap::read::ChannelAccumulator<'static>,
+    /// The message types whose headers alone are copied.
+    headers_only: Option<HeadersOnly<'a>>,
     /// The data section's end, or the file's, was reached.
     walked: bool,
     done: bool,
@@ -65,8 +67,13 @@ impl<'a> Messages<'a> {
     /// The messages of `file`: its data section, or for a cut file the complete
     /// records `file` holds, its declared chunk sizes checked as
     /// [`super::mcap_records::check_chunk_sizes`] does; up to `threads` chunks
-    /// decompressed at once.
-    pub(super) fn new(file: &'a [u8], map: Option<&'a FileMap>, threads: usize) -> Self {
+    /// decompressed at once; of the types `headers_only` names, only the headers.
+    pub(super) fn new(
+        file: &'a [u8],
+        map: Option<&'a FileMap>,
+        threads: usize,
+        headers_only: Option<HeadersOnly<'a>>,
+    ) -> Self {
         let mut batch = VecDeque::new();
         if !file.starts_with(MAGIC) {
             batch.push_back(Pending::End(McapError::BadMagic.to_string()));
@@ -83,6 +90,7 @@ impl<'a> Messages<'a> {
             threads: threads.max(1),
             spare: Vec::new(),
             channels: Default::default(),
+            headers_only,
             done: false,
         }
     }
@@ -243,12 +251,19 @@ impl<'a> Messages<'a> {
                     let error = McapError::UnknownChannel(header.sequence, header.channel_id);
                     return Err(error.to_string());
                 };
+                let header_only = self.headers_only.is_some_and(|headers_only| {
+                    (channel.schema.as_ref()).is_some_and(|schema| headers_only(&schema.name))
+                });
+                let data = match header_only {
+                    true => data[..data.len().min(HEADER_BYTES)].to_vec(),
+                    false => data.into_owned(),
+                };
                 return Ok(Some(Message {
                     channel,
                     sequence: header.sequence,
                     log_time: header.log_time,
                     publish_time: header.publish_time,
-                    data: Cow::Owned(data.into_owned()),
+                    data: Cow::Owned(data),
                 }));
             }
             _ => Ok(()),
@@ -361,7 +376,7 @@ mod tests {
 
     /// Each message's sequence number, or the damaged chunk's first byte.
     fn read(file: &[u8], threads: usize) -> Vec<Result<u32, usize>> {
-        Messages::new(file, None, threads)
+        Messages::new(file, None, threads, None)
             .map(|message| match message {
                 Ok(message) => {
                     let sequence = message.sequence.to_le_bytes();
@@ -418,10 +433,40 @@ mod tests {
     }
 
     #[test]
+    fn messages_of_a_type_read_for_its_headers_keep_only_their_first_bytes() {
+        let large: Vec<u8> = (0..100_000u32).map(|i| i as u8).collect();
+        let small = vec![7u8; 100];
+        let file = blob_file(&[&large, &small], Some(mcap::Compression::Zstd), None);
+        let lengths = |headers_only: Option<HeadersOnly>| -> Vec<usize> {
+            Messages::new(&file, None, 2, headers_only)
+                .map(|message| {
+                    let data = message.unwrap().data;
+                    let whole = if data.len() == small.len() {
+                        &small
+                    } else {
+                        &large
+                    };
+                    assert_eq!(data[..], whole[..data.len()]);
+                    data.len()
+                })
+                .collect()
+        };
+        assert_eq!(lengths(None), [100_000, 100]);
+        assert_eq!(
+            lengths(Some(&|name: &str| name == "blob")),
+            [HEADER_BYTES, 100]
+        );
+        assert_eq!(lengths(Some(&|name: &str| name == "other")), [100_000, 100]);
+    }
+
+    #[test]
     fn a_file_without_the_magic_is_refused() {
         let mut file = chunked_file(3, None);
         file[1] = b'X';
-        let damage = Messages::new(&file, None, 1).next().unwrap().unwrap_err();
+        let damage = Messages::new(&file, None, 1, None)
+            .next()
+            .unwrap()
+            .unwrap_err();
         assert!(damage.chunk.is_none());
         assert!(
             damage.problem.to_lowercase().contains("magic"),

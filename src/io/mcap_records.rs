@@ -405,7 +405,7 @@ mod tests {
             assert!(file.len() < 1 << 20, "{}", file.len());
             // The records may be as long as the chunk, and the message is read whole.
             assert!(check_chunk_sizes(&file).is_ok());
-            let message = Messages::new(&file, None, 2).next().unwrap().unwrap();
+            let message = Messages::new(&file, None, 2, None).next().unwrap().unwrap();
             assert_eq!(message.data.len(), 80 << 20);
         }
     }
