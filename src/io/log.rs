@@ -50,7 +50,7 @@ impl LogFile {
         match self {
             LogFile::Mcap(file) => Box::new(file.messages(threads, headers_only)),
             LogFile::Bag(file) => Box::new(file.messages().map(whole_file_damage)),
-            LogFile::Sqlite(file) => Box::new(file.messages().map(whole_file_damage)),
+            LogFile::Sqlite(file) => Box::new(file.messages(headers_only).map(whole_file_damage)),
         }
     }
 }
@@ -137,7 +137,7 @@ impl Log {
     }
 
     /// [`Self::messages`], the messages of the types `headers_only` names cut to
-    /// their headers ([`HeadersOnly`]; those of bags and SQLite files whole).
+    /// their headers ([`HeadersOnly`]; those of ROS 1 bags whole).
     pub fn message_headers<'a>(
         &'a self,
         headers_only: HeadersOnly<'a>,

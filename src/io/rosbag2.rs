@@ -11,11 +11,11 @@ use std::collections::{HashMap, VecDeque};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use rusqlite::{OpenFlags, params};
+use rusqlite::{MAIN_DB, OpenFlags, params};
 use serde::Deserialize;
 
 use super::format::{InputFormat, detect};
-use super::log_message::{Connection, FileMessages, LogMessage};
+use super::log_message::{Connection, FileMessages, HEADER_BYTES, HeadersOnly, LogMessage};
 use crate::error::{Error, Result};
 
 /// The part of `metadata.yaml` that says where the messages are.
@@ -85,8 +85,11 @@ impl Rosbag2Directory {
     }
 }
 
-/// Rows read from the `messages` table per query.
+/// Rows read from the `messages` table per query, at most.
 const PAGE_ROWS: usize = 256;
+/// Message bytes a page holds at most (past it, the next row begins the next page):
+/// 256 rows of LiDAR scans and images held several hundred MB at once.
+const PAGE_BYTES: usize = 16 << 20;
 
 /// A rosbag2 sqlite3 file: its topics read at open, its messages streamed.
 pub struct SqliteFile {
@@ -113,20 +116,28 @@ impl SqliteFile {
 
     /// The messages in row order, a page at a time: each page is its own query, so
     /// no statement outlives a call (the database handle is not shared between
-    /// threads either).
-    pub fn messages(&self) -> FileMessages<'_> {
+    /// threads either). Of the types `headers_only` names, only the first
+    /// [`HEADER_BYTES`] are read: SQLite then leaves the rest of a blob on disk.
+    pub fn messages<'a>(&'a self, headers_only: Option<HeadersOnly<'a>>) -> FileMessages<'a> {
         let database = match open_database(&self.path) {
             Ok(database) => database,
             Err(error) => return Box::new(std::iter::once(Err(error.to_string()))),
         };
+        let mut header_topics: Vec<i64> = self
+            .connections
+            .iter()
+            .filter(|(_, c)| headers_only.is_some_and(|headers_only| headers_only(&c.schema_name)))
+            .map(|(&id, _)| id)
+            .collect();
+        header_topics.sort_unstable();
         let mut page: VecDeque<std::result::Result<LogMessage, String>> = VecDeque::new();
         let mut after_id = i64::MIN;
         let mut done = false;
         Box::new(std::iter::from_fn(move || {
             if page.is_empty() && !done {
-                match self.page(&database, after_id) {
-                    Ok((rows, last_id)) => {
-                        done = rows.len() < PAGE_ROWS;
+                match self.page(&database, after_id, &header_topics) {
+                    Ok((rows, last_id, exhausted)) => {
+                        done = exhausted;
                         after_id = last_id.unwrap_or(after_id);
                         page.extend(rows.into_iter().map(Ok));
                     }
@@ -140,22 +151,31 @@ impl SqliteFile {
         }))
     }
 
-    /// Up to [`PAGE_ROWS`] messages after row `after_id`, and the last row's id.
+    /// Up to [`PAGE_ROWS`] messages (and about [`PAGE_BYTES`]) after row `after_id`,
+    /// the last row's id, and whether the table ended there; of the rows on
+    /// `header_topics` only the first [`HEADER_BYTES`] of the data.
     fn page(
         &self,
         database: &rusqlite::Connection,
         after_id: i64,
-    ) -> std::result::Result<(Vec<LogMessage>, Option<i64>), String> {
-        let sql =
-            "SELECT id, topic_id, timestamp, data FROM messages WHERE id > ?1 ORDER BY id LIMIT ?2";
+        header_topics: &[i64],
+    ) -> std::result::Result<(Vec<LogMessage>, Option<i64>, bool), String> {
+        // SQLite reads a column only when it is used: a header row's blob is left
+        // unread here, and its first bytes read below.
+        let ids: Vec<String> = header_topics.iter().map(i64::to_string).collect();
+        let sql = format!(
+            "SELECT id, topic_id, timestamp, CASE WHEN topic_id IN ({}) THEN NULL ELSE data END, \
+             rowid FROM messages WHERE id > ?1 ORDER BY id LIMIT ?2",
+            ids.join(",")
+        );
         let mut statement = database
-            .prepare_cached(sql)
+            .prepare_cached(&sql)
             .map_err(|e| format!("cannot read the messages table: {e}"))?;
         let mut rows = statement
             .query(params![after_id, PAGE_ROWS as i64])
             .map_err(|e| format!("cannot read the messages table: {e}"))?;
         let mut messages = Vec::with_capacity(PAGE_ROWS);
-        let mut last_id = None;
+        let (mut last_id, mut bytes) = (None, 0);
         while let Some(row) = rows
             .next()
             .map_err(|e| format!("the messages table after row {after_id}: {e}"))?
@@ -164,7 +184,14 @@ impl SqliteFile {
             let id: i64 = row.get(0).map_err(read)?;
             let topic_id: i64 = row.get(1).map_err(read)?;
             let timestamp: i64 = row.get(2).map_err(read)?;
-            let data: Vec<u8> = row.get(3).map_err(read)?;
+            let data: Vec<u8> = match header_topics.binary_search(&topic_id) {
+                Ok(_) => {
+                    let rowid: i64 = row.get(4).map_err(read)?;
+                    header_of(database, rowid).map_err(read)?
+                }
+                Err(_) => row.get(3).map_err(read)?,
+            };
+            bytes += data.len();
             let connection = self.connections.get(&topic_id).ok_or_else(|| {
                 format!("message row {id} is on topic id {topic_id}, which the topics table does not list")
             })?;
@@ -177,9 +204,21 @@ impl SqliteFile {
                 data,
             });
             last_id = Some(id);
+            if bytes >= PAGE_BYTES {
+                return Ok((messages, last_id, false));
+            }
         }
-        Ok((messages, last_id))
+        let exhausted = messages.len() < PAGE_ROWS;
+        Ok((messages, last_id, exhausted))
     }
+}
+
+/// The first [`HEADER_BYTES`] of the data of row `rowid`, read from the blob alone.
+fn header_of(database: &rusqlite::Connection, rowid: i64) -> rusqlite::Result<Vec<u8>> {
+    let blob = database.blob_open(MAIN_DB, c"messages", c"data", rowid, true)?;
+    let mut header = vec![0; blob.len().min(HEADER_BYTES)];
+    blob.read_at_exact(&mut header, 0)?;
+    Ok(header)
 }
 
 /// `path` opened read-only and immutable (see the module's comment).
@@ -291,6 +330,57 @@ mod tests {
     }
 
     #[test]
+    fn large_rows_are_paged_by_bytes_and_header_types_read_only_in_part() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("drive.db3");
+        let database = rusqlite::Connection::open(&path).unwrap();
+        database
+            .execute_batch(
+                "CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT, type TEXT,
+                     serialization_format TEXT, offered_qos_profiles TEXT);
+                 CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER,
+                     timestamp INTEGER, data BLOB);
+                 INSERT INTO topics VALUES (1, '/points', 'sensor_msgs/msg/PointCloud2', 'cdr', '');
+                 INSERT INTO topics VALUES (2, '/tf', 'tf2_msgs/msg/TFMessage', 'cdr', '');",
+            )
+            .unwrap();
+        // 400 KB scans, 40 MB in all (pages of 16 MiB), a small message after each.
+        let scan = |i: i64| -> Vec<u8> { (0..400_000).map(|j| (i + j) as u8).collect() };
+        for i in 0..100i64 {
+            let insert = "INSERT INTO messages (topic_id, timestamp, data) VALUES (?1, ?2, ?3)";
+            database
+                .execute(insert, params![1, 2 * i, scan(i)])
+                .unwrap();
+            database
+                .execute(insert, params![2, 2 * i + 1, vec![i as u8; 5]])
+                .unwrap();
+        }
+        drop(database);
+        let file = SqliteFile::open(&path).unwrap();
+        let headers_only = |name: &str| name == "sensor_msgs/msg/PointCloud2";
+        for cut in [false, true] {
+            let filter: Option<HeadersOnly> = if cut { Some(&headers_only) } else { None };
+            let messages: Vec<_> = file
+                .messages(filter)
+                .collect::<std::result::Result<_, _>>()
+                .unwrap();
+            assert_eq!(messages.len(), 200);
+            for (i, message) in (0..).zip(&messages) {
+                assert_eq!(message.log_time_ns, i as u64);
+                let expected = match i % 2 {
+                    0 => scan(i / 2),
+                    _ => vec![(i / 2) as u8; 5],
+                };
+                let kept = match (cut, i % 2) {
+                    (true, 0) => HEADER_BYTES,
+                    _ => expected.len(),
+                };
+                assert_eq!(message.data, expected[..kept], "message {i}");
+            }
+        }
+    }
+
+    #[test]
     fn a_database_is_read_without_writing_beside_it() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("drive.db3");
@@ -321,7 +411,7 @@ mod tests {
             .collect();
         let file = SqliteFile::open(&path).unwrap();
         let messages: Vec<_> = file
-            .messages()
+            .messages(None)
             .collect::<std::result::Result<_, _>>()
             .unwrap();
         assert_eq!(messages.len(), 600);
