@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use super::format::BAG_MAGIC;
-use super::log_message::{Connection, LogMessage, map_file};
+use super::log_message::{Connection, FileMap, LogMessage};
 use crate::error::{Error, Result};
 
 /// Record opcodes (the `op` header field).
@@ -183,7 +183,8 @@ fn connection(record: &Record) -> std::result::Result<(u32, Connection), String>
 /// An opened bag: where its chunks are and the connections its index lists.
 pub struct BagFile {
     path: PathBuf,
-    map: memmap2::Mmap,
+    /// Its pages given back once a chunk is read (see [`FileMap`]).
+    map: FileMap,
     chunks: Vec<usize>,
     connections: HashMap<u32, Arc<Connection>>,
     notice: Option<String>,
@@ -191,15 +192,15 @@ pub struct BagFile {
 
 impl BagFile {
     pub fn open(path: &Path) -> Result<Self> {
-        let map = map_file(path)?;
+        let map = FileMap::open(path)?;
         let container = |problem: String| Error::LogContainer {
             path: path.to_path_buf(),
             problem,
         };
-        if !map.starts_with(BAG_MAGIC) {
+        if !map.as_ref().starts_with(BAG_MAGIC) {
             return Err(container("not a ROS 1 bag of format 2.0".into()));
         }
-        let header = Record::at(&map, BAG_MAGIC.len()).map_err(container)?;
+        let header = Record::at(map.as_ref(), BAG_MAGIC.len()).map_err(container)?;
         if header.op().map_err(container)? != op::BAG_HEADER {
             return Err(container(format!(
                 "the first record (byte {}) is not the bag header",
@@ -222,11 +223,11 @@ impl BagFile {
         }
         let index_pos = usize::try_from(index_pos)
             .ok()
-            .filter(|pos| *pos >= header_end && *pos <= bag.map.len())
+            .filter(|pos| *pos >= header_end && *pos <= bag.map.as_ref().len())
             .ok_or_else(|| {
                 container(format!(
                     "its index should start at byte {index_pos} but the file ends at byte {}: the bag was cut off (copy it again, or run `rosbag reindex` on a copy)",
-                    bag.map.len()
+                    bag.map.as_ref().len()
                 ))
             })?;
         bag.read_index(index_pos).map_err(|problem| {
@@ -255,8 +256,8 @@ impl BagFile {
     /// Connections and chunk positions from the index section at `index_pos`.
     fn read_index(&mut self, index_pos: usize) -> std::result::Result<(), String> {
         let mut offset = index_pos;
-        while offset < self.map.len() {
-            let record = Record::at(&self.map, offset)?;
+        while offset < self.map.as_ref().len() {
+            let record = Record::at(self.map.as_ref(), offset)?;
             match record.op()? {
                 op::CONNECTION => {
                     let (id, connection) = connection(&record)?;
@@ -286,14 +287,14 @@ impl BagFile {
     /// without an index; an incomplete last record is left out, and said.
     fn scan(&mut self, start: usize) -> std::result::Result<(), String> {
         let mut offset = start;
-        while offset < self.map.len() {
-            let record = match Record::at(&self.map, offset) {
+        while offset < self.map.as_ref().len() {
+            let record = match Record::at(self.map.as_ref(), offset) {
                 Ok(record) => record,
                 Err(problem) => {
                     self.notice = Some(format!(
                         "{}: the bag has no index (its recording was cut off?): read by a linear scan, which left out the last {} bytes ({problem})",
                         self.path.display(),
-                        self.map.len() - offset
+                        self.map.as_ref().len() - offset
                     ));
                     return Ok(());
                 }
@@ -324,7 +325,7 @@ impl BagFile {
 
     /// The records of the chunk at `offset`, decompressed into `out`.
     fn chunk(&self, offset: usize, out: &mut Vec<u8>) -> std::result::Result<(), String> {
-        let record = Record::at(&self.map, offset)?;
+        let record = Record::at(self.map.as_ref(), offset)?;
         if record.op()? != op::CHUNK {
             return Err(format!("the record at byte {offset} is not a chunk"));
         }
@@ -353,6 +354,8 @@ impl BagFile {
                 ));
             }
         };
+        // Its records are copied out: the file's pages may leave the resident set.
+        self.map.release(offset..record.end);
         match read {
             Ok(n) if n == size => Ok(()),
             Ok(n) => Err(format!(
