@@ -7,7 +7,7 @@ use std::ops::Range;
 
 use super::cloud::{CloudPoints, check_some_finite, cloud_points};
 use super::log_index::HeaderOnly;
-use super::log_message::LogMessage;
+use super::log_message::{LogMessage, Part};
 use super::merged_clouds::{MergedCloud, MergedContent, merge};
 use super::packets::{PacketAssembler, PacketCalibration, PacketModel};
 use super::ros::PointCloud2;
@@ -75,9 +75,20 @@ impl RosDrive {
     /// camera image nearest in time (within 50 ms) when the drive has a camera. With
     /// `--keep-going`, unreadable frames are recorded in the skip log and left out.
     pub fn read(&self, frames: &Range<usize>) -> DriveFrames<'_> {
+        // Only the topics frames are made of are read: a log's other cameras, say,
+        // are not copied (nor, from SQLite, read).
+        let camera = (self.camera.as_ref()).filter(|_| self.read_images);
+        let wanted: Vec<String> = std::iter::once(self.cloud_topic.clone())
+            .chain(self.merged.iter().map(|sensor| sensor.topic.clone()))
+            .chain(camera.map(|camera| camera.topic.clone()))
+            .collect();
+        let parts = move |topic: &str, _: &str| match wanted.iter().any(|w| w == topic) {
+            true => Part::Whole,
+            false => Part::Nothing,
+        };
         DriveFrames {
             drive: self,
-            stream: Box::new(self.log.messages_using(1)),
+            stream: Box::new(self.log.messages_in_parts(1, std::sync::Arc::new(parts))),
             // Clouds the index left out (past a cut end) are not frames.
             frames: frames.start..frames.end.min(self.frame_count()),
             pending: None,

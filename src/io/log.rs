@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use super::bag::BagFile;
 use super::format::InputFormat;
-pub use super::log_message::{Connection, FileMap, FileMessages, HeadersOnly, LogMessage};
+pub use super::log_message::{Connection, FileMap, FileMessages, LogMessage, Part, Parts};
 use super::mcap_messages::{Damage, Messages};
 use super::mcap_records::check_chunk_sizes;
 use super::mcap_stored::{Release, StoredLog, stored_log};
@@ -45,12 +45,12 @@ impl LogFile {
     fn messages<'a>(
         &'a self,
         threads: usize,
-        headers_only: Option<HeadersOnly<'a>>,
+        parts: Option<Parts<'a>>,
     ) -> Box<dyn Iterator<Item = std::result::Result<LogMessage, Damage>> + 'a> {
         match self {
-            LogFile::Mcap(file) => Box::new(file.messages(threads, headers_only)),
+            LogFile::Mcap(file) => Box::new(file.messages(threads, parts)),
             LogFile::Bag(file) => Box::new(file.messages().map(whole_file_damage)),
-            LogFile::Sqlite(file) => Box::new(file.messages(headers_only).map(whole_file_damage)),
+            LogFile::Sqlite(file) => Box::new(file.messages(parts).map(whole_file_damage)),
         }
     }
 }
@@ -126,35 +126,31 @@ impl Log {
     /// [`Error::LogChunk`] (a damaged chunk), after which the messages that follow it.
     /// As many chunks of an MCAP file are decompressed at once as there are threads.
     pub fn messages(&self) -> impl Iterator<Item = Result<LogMessage>> + '_ {
-        self.messages_using(rayon::current_num_threads())
+        self.messages_with(rayon::current_num_threads(), None)
     }
 
-    /// [`Self::messages`], up to `threads` chunks decompressed at once: one beside
-    /// the method's frames, which keep the cores busy (more only held more chunks
-    /// in memory there, for no gain).
-    pub fn messages_using(&self, threads: usize) -> impl Iterator<Item = Result<LogMessage>> + '_ {
-        self.messages_with(threads, None)
-    }
-
-    /// [`Self::messages`], the messages of the types `headers_only` names cut to
-    /// their headers ([`HeadersOnly`]; those of ROS 1 bags whole).
-    pub fn message_headers<'a>(
+    /// [`Self::messages`], up to `threads` chunks decompressed at once (one beside
+    /// the method's frames, which keep the cores busy: more only held more chunks
+    /// in memory there, for no gain), and of each message the [`Part`] `parts`
+    /// says (of a ROS 1 bag's, all).
+    pub fn messages_in_parts<'a>(
         &'a self,
-        headers_only: HeadersOnly<'a>,
+        threads: usize,
+        parts: Parts<'a>,
     ) -> impl Iterator<Item = Result<LogMessage>> + 'a {
-        self.messages_with(rayon::current_num_threads(), Some(headers_only))
+        self.messages_with(threads, Some(parts))
     }
 
     fn messages_with<'a>(
         &'a self,
         threads: usize,
-        headers_only: Option<HeadersOnly<'a>>,
+        parts: Option<Parts<'a>>,
     ) -> impl Iterator<Item = Result<LogMessage>> + 'a {
         let mut failed = false;
         self.files
             .iter()
             .flat_map(move |file| {
-                file.messages(threads, headers_only)
+                file.messages(threads, parts.clone())
                     .enumerate()
                     .map(move |(ordinal, message)| match message {
                         Ok(message) => Ok(message),
@@ -237,11 +233,11 @@ impl McapFile {
     fn messages<'a>(
         &'a self,
         threads: usize,
-        headers_only: Option<HeadersOnly<'a>>,
+        parts: Option<Parts<'a>>,
     ) -> impl Iterator<Item = std::result::Result<LogMessage, Damage>> + 'a {
         let mut connections: HashMap<u16, Arc<Connection>> = HashMap::new();
         let readable = &self.map[..self.cut_at.unwrap_or(self.map.len())];
-        Messages::new(readable, Some(&self.file), threads, headers_only).map(move |message| {
+        Messages::new(readable, Some(&self.file), threads, parts).map(move |message| {
             let message = message?;
             let channel = &message.channel;
             let connection = connections.entry(channel.id).or_insert_with(|| {

@@ -10,7 +10,7 @@ use serde::Deserialize;
 use super::hesai::{HesaiAssembler, HesaiCalibration, PANDAR_SCAN};
 use super::lidar_calibrations::LidarCalibrations;
 use super::log::Log;
-use super::log_message::{LogMessage, ros2_type_name};
+use super::log_message::{LogMessage, Part, ros2_type_name};
 use super::packets::{
     NEBULA_PACKETS, PACKET_MESSAGES, PacketCalibration, PacketModel, packet_message,
 };
@@ -452,12 +452,16 @@ impl LogIndex {
             ..Default::default()
         };
         let (mut damaged_chunks, mut first_damage) = (0, None);
-        // Of clouds and images this pass reads the header alone.
-        let headers_only = |schema_name: &str| {
-            let name = ros2_type_name(schema_name);
-            matches!(name.as_ref(), POINT_CLOUD | COMPRESSED_IMAGE | RAW_IMAGE)
+        // Of clouds and images this pass reads the header alone, of the types it does
+        // not decode nothing.
+        let parts = |_: &str, schema_name: &str| match ros2_type_name(schema_name).as_ref() {
+            POINT_CLOUD | COMPRESSED_IMAGE | RAW_IMAGE => Part::Header,
+            TF_MESSAGE | TF1_MESSAGE | ODOMETRY | CAMERA_INFO => Part::Whole,
+            name if PACKET_MESSAGES.contains(&name) => Part::Whole,
+            _ => Part::Nothing,
         };
-        for message in log.message_headers(&headers_only) {
+        let threads = rayon::current_num_threads();
+        for message in log.messages_in_parts(threads, std::sync::Arc::new(parts)) {
             match message {
                 Ok(message) => contents.add(path, &message)?,
                 // Its clouds are not indexed; reading the frames says so (or stops).

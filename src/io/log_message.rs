@@ -46,12 +46,23 @@ pub fn ros2_type_name(schema_name: &str) -> Cow<'_, str> {
     }
 }
 
-/// Of a pass that reads only some messages' headers: whether a message of this type
-/// (its schema name, as recorded) is one of them. An MCAP pass then copies only its
-/// first [`HEADER_BYTES`], not a cloud's or an image's megabytes.
-pub type HeadersOnly<'a> = &'a (dyn Fn(&str) -> bool + Sync);
+/// How much of a message a pass reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    Whole,
+    /// Its first [`HEADER_BYTES`]: a pass that needs a cloud's or an image's header
+    /// need not copy (or, from SQLite, read) its megabytes.
+    Header,
+    /// None of its bytes (the message comes with empty data): a topic the pass
+    /// does not use.
+    Nothing,
+}
 
-/// What a header-only message keeps of its bytes: more than any header needs.
+/// Of a pass: how much of each message to read, by its topic and its type (the
+/// schema name as recorded).
+pub type Parts<'a> = Arc<dyn Fn(&str, &str) -> Part + Send + Sync + 'a>;
+
+/// What a [`Part::Header`] message keeps of its bytes: more than any header needs.
 pub const HEADER_BYTES: usize = 64 * 1024;
 
 /// One recorded message, undecoded.

@@ -10,7 +10,7 @@ use std::io::Read;
 use mcap::records::{Record, op};
 use mcap::{McapError, Message};
 
-use super::log_message::{FileMap, HEADER_BYTES, HeadersOnly};
+use super::log_message::{FileMap, HEADER_BYTES, Part, Parts};
 use super::mcap_records::{ChunkSpan, RecordWalk, check_lengths, chunk_parts};
 
 /// Bytes a pass reads before it gives the pages behind it back.
@@ -32,8 +32,8 @@ pub(super) struct Messages<'a> {
     /// Buffers of chunks read, for the next ones: no allocation per chunk.
     spare: Vec<Vec<u8>>,
     channels: mcap::read::ChannelAccumulator<'static>,
-    /// The message types whose headers alone are copied.
-    headers_only: Option<HeadersOnly<'a>>,
+    /// How much of each message to copy (all of every one without).
+    parts: Option<Parts<'a>>,
     /// The data section's end, or the file's, was reached.
     walked: bool,
     done: bool,
@@ -67,12 +67,12 @@ impl<'a> Messages<'a> {
     /// The messages of `file`: its data section, or for a cut file the complete
     /// records `file` holds, its declared chunk sizes checked as
     /// [`super::mcap_records::check_chunk_sizes`] does; up to `threads` chunks
-    /// decompressed at once; of the types `headers_only` names, only the headers.
+    /// decompressed at once; of each message, the [`Part`] `parts` says.
     pub(super) fn new(
         file: &'a [u8],
         map: Option<&'a FileMap>,
         threads: usize,
-        headers_only: Option<HeadersOnly<'a>>,
+        parts: Option<Parts<'a>>,
     ) -> Self {
         let mut batch = VecDeque::new();
         if !file.starts_with(MAGIC) {
@@ -90,7 +90,7 @@ impl<'a> Messages<'a> {
             threads: threads.max(1),
             spare: Vec::new(),
             channels: Default::default(),
-            headers_only,
+            parts,
             done: false,
         }
     }
@@ -251,12 +251,15 @@ impl<'a> Messages<'a> {
                     let error = McapError::UnknownChannel(header.sequence, header.channel_id);
                     return Err(error.to_string());
                 };
-                let header_only = self.headers_only.is_some_and(|headers_only| {
-                    (channel.schema.as_ref()).is_some_and(|schema| headers_only(&schema.name))
-                });
-                let data = match header_only {
-                    true => data[..data.len().min(HEADER_BYTES)].to_vec(),
-                    false => data.into_owned(),
+                let schema = channel.schema.as_ref().map_or("", |schema| &schema.name);
+                let data = match self
+                    .parts
+                    .as_ref()
+                    .map(|parts| parts(&channel.topic, schema))
+                {
+                    None | Some(Part::Whole) => data.into_owned(),
+                    Some(Part::Header) => data[..data.len().min(HEADER_BYTES)].to_vec(),
+                    Some(Part::Nothing) => Vec::new(),
                 };
                 return Ok(Some(Message {
                     channel,
@@ -433,12 +436,12 @@ mod tests {
     }
 
     #[test]
-    fn messages_of_a_type_read_for_its_headers_keep_only_their_first_bytes() {
+    fn messages_are_read_whole_to_their_headers_or_not_at_all_as_asked() {
         let large: Vec<u8> = (0..100_000u32).map(|i| i as u8).collect();
         let small = vec![7u8; 100];
         let file = blob_file(&[&large, &small], Some(mcap::Compression::Zstd), None);
-        let lengths = |headers_only: Option<HeadersOnly>| -> Vec<usize> {
-            Messages::new(&file, None, 2, headers_only)
+        let lengths = |parts: Option<Parts>| -> Vec<usize> {
+            Messages::new(&file, None, 2, parts)
                 .map(|message| {
                     let data = message.unwrap().data;
                     let whole = if data.len() == small.len() {
@@ -452,11 +455,16 @@ mod tests {
                 .collect()
         };
         assert_eq!(lengths(None), [100_000, 100]);
-        assert_eq!(
-            lengths(Some(&|name: &str| name == "blob")),
-            [HEADER_BYTES, 100]
-        );
-        assert_eq!(lengths(Some(&|name: &str| name == "other")), [100_000, 100]);
+        let of_blobs = |part: Part| {
+            move |_: &str, schema: &str| match schema {
+                "blob" => part,
+                _ => Part::Whole,
+            }
+        };
+        let lengths_of_blobs = |part| lengths(Some(std::sync::Arc::new(of_blobs(part))));
+        assert_eq!(lengths_of_blobs(Part::Whole), [100_000, 100]);
+        assert_eq!(lengths_of_blobs(Part::Header), [HEADER_BYTES, 100]);
+        assert_eq!(lengths_of_blobs(Part::Nothing), [0, 0]);
     }
 
     #[test]

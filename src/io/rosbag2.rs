@@ -15,7 +15,7 @@ use rusqlite::{MAIN_DB, OpenFlags, params};
 use serde::Deserialize;
 
 use super::format::{InputFormat, detect};
-use super::log_message::{Connection, FileMessages, HEADER_BYTES, HeadersOnly, LogMessage};
+use super::log_message::{Connection, FileMessages, HEADER_BYTES, LogMessage, Part, Parts};
 use crate::error::{Error, Result};
 
 /// The part of `metadata.yaml` that says where the messages are.
@@ -116,26 +116,25 @@ impl SqliteFile {
 
     /// The messages in row order, a page at a time: each page is its own query, so
     /// no statement outlives a call (the database handle is not shared between
-    /// threads either). Of the types `headers_only` names, only the first
-    /// [`HEADER_BYTES`] are read: SQLite then leaves the rest of a blob on disk.
-    pub fn messages<'a>(&'a self, headers_only: Option<HeadersOnly<'a>>) -> FileMessages<'a> {
+    /// threads either). Of each message, the [`Part`] `parts` says: SQLite leaves
+    /// the rest of a blob on disk.
+    pub fn messages<'a>(&'a self, parts: Option<Parts<'a>>) -> FileMessages<'a> {
         let database = match open_database(&self.path) {
             Ok(database) => database,
             Err(error) => return Box::new(std::iter::once(Err(error.to_string()))),
         };
-        let mut header_topics: Vec<i64> = self
-            .connections
-            .iter()
-            .filter(|(_, c)| headers_only.is_some_and(|headers_only| headers_only(&c.schema_name)))
-            .map(|(&id, _)| id)
+        // The topics not read whole, by id, and how much of them is.
+        let mut partial_topics: Vec<(i64, Part)> = (self.connections.iter())
+            .filter_map(|(&id, c)| Some((id, parts.as_ref()?(&c.topic, &c.schema_name))))
+            .filter(|&(_, part)| part != Part::Whole)
             .collect();
-        header_topics.sort_unstable();
+        partial_topics.sort_unstable_by_key(|&(id, _)| id);
         let mut page: VecDeque<std::result::Result<LogMessage, String>> = VecDeque::new();
         let mut after_id = i64::MIN;
         let mut done = false;
         Box::new(std::iter::from_fn(move || {
             if page.is_empty() && !done {
-                match self.page(&database, after_id, &header_topics) {
+                match self.page(&database, after_id, &partial_topics) {
                     Ok((rows, last_id, exhausted)) => {
                         done = exhausted;
                         after_id = last_id.unwrap_or(after_id);
@@ -153,16 +152,19 @@ impl SqliteFile {
 
     /// Up to [`PAGE_ROWS`] messages (and about [`PAGE_BYTES`]) after row `after_id`,
     /// the last row's id, and whether the table ended there; of the rows on
-    /// `header_topics` only the first [`HEADER_BYTES`] of the data.
+    /// `partial_topics` only the part of the data they say.
     fn page(
         &self,
         database: &rusqlite::Connection,
         after_id: i64,
-        header_topics: &[i64],
+        partial_topics: &[(i64, Part)],
     ) -> std::result::Result<(Vec<LogMessage>, Option<i64>, bool), String> {
-        // SQLite reads a column only when it is used: a header row's blob is left
-        // unread here, and its first bytes read below.
-        let ids: Vec<String> = header_topics.iter().map(i64::to_string).collect();
+        // SQLite reads a column only when it is used: a partial row's blob is left
+        // unread here, and its header read below.
+        let ids: Vec<String> = partial_topics
+            .iter()
+            .map(|(id, _)| id.to_string())
+            .collect();
         let sql = format!(
             "SELECT id, topic_id, timestamp, CASE WHEN topic_id IN ({}) THEN NULL ELSE data END, \
              rowid FROM messages WHERE id > ?1 ORDER BY id LIMIT ?2",
@@ -184,12 +186,13 @@ impl SqliteFile {
             let id: i64 = row.get(0).map_err(read)?;
             let topic_id: i64 = row.get(1).map_err(read)?;
             let timestamp: i64 = row.get(2).map_err(read)?;
-            let data: Vec<u8> = match header_topics.binary_search(&topic_id) {
-                Ok(_) => {
-                    let rowid: i64 = row.get(4).map_err(read)?;
-                    header_of(database, rowid).map_err(read)?
-                }
-                Err(_) => row.get(3).map_err(read)?,
+            let part = partial_topics
+                .binary_search_by_key(&topic_id, |&(id, _)| id)
+                .map_or(Part::Whole, |at| partial_topics[at].1);
+            let data: Vec<u8> = match part {
+                Part::Whole => row.get(3).map_err(read)?,
+                Part::Header => header_of(database, row.get(4).map_err(read)?).map_err(read)?,
+                Part::Nothing => Vec::new(),
             };
             bytes += data.len();
             let connection = self.connections.get(&topic_id).ok_or_else(|| {
@@ -357,11 +360,19 @@ mod tests {
         }
         drop(database);
         let file = SqliteFile::open(&path).unwrap();
-        let headers_only = |name: &str| name == "sensor_msgs/msg/PointCloud2";
-        for cut in [false, true] {
-            let filter: Option<HeadersOnly> = if cut { Some(&headers_only) } else { None };
+        for part in [
+            None,
+            Some(Part::Whole),
+            Some(Part::Header),
+            Some(Part::Nothing),
+        ] {
+            let of_scans = |_: &str, schema: &str| match schema {
+                "sensor_msgs/msg/PointCloud2" => part.unwrap_or(Part::Whole),
+                _ => Part::Whole,
+            };
+            let parts: Option<Parts> = part.map(|_| Arc::new(of_scans) as Parts);
             let messages: Vec<_> = file
-                .messages(filter)
+                .messages(parts)
                 .collect::<std::result::Result<_, _>>()
                 .unwrap();
             assert_eq!(messages.len(), 200);
@@ -371,8 +382,9 @@ mod tests {
                     0 => scan(i / 2),
                     _ => vec![(i / 2) as u8; 5],
                 };
-                let kept = match (cut, i % 2) {
-                    (true, 0) => HEADER_BYTES,
+                let kept = match (part, i % 2) {
+                    (Some(Part::Header), 0) => HEADER_BYTES,
+                    (Some(Part::Nothing), 0) => 0,
                     _ => expected.len(),
                 };
                 assert_eq!(message.data, expected[..kept], "message {i}");
