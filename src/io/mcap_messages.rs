@@ -104,9 +104,13 @@ impl<'a> Messages<'a> {
             self.released = self.walk.offset;
         }
         // Compressed chunks, and where they wait in the batch; stored ones are read
-        // in place.
-        let (mut chunks, mut waiting) = (Vec::new(), Vec::new());
-        while !self.walked && chunks.len() < self.threads && self.batch.len() < RECORDS_PER_BATCH {
+        // in place. A stored chunk counts as one of the batch's too, or a file of them
+        // (rosbag2's MCAP) would be walked, its pages read, in one batch.
+        let (mut chunks, mut waiting, mut stored_chunks) = (Vec::new(), Vec::new(), 0);
+        while !self.walked
+            && chunks.len() + stored_chunks < self.threads
+            && self.batch.len() < RECORDS_PER_BATCH
+        {
             match self.walk.next() {
                 // A cut file's readable part ends with its last complete record.
                 None => self.walked = true,
@@ -126,6 +130,7 @@ impl<'a> Messages<'a> {
                     };
                     let stored = chunk_parts(body).is_some_and(|(_, c, _)| c.is_empty());
                     let records = if stored {
+                        stored_chunks += 1;
                         chunk_records(body, Vec::new())
                     } else {
                         waiting.push(self.batch.len());
