@@ -15,15 +15,21 @@ use travmap::io::format::{InputFormat, detect};
 use travmap::io::log::Log;
 
 /// The routes `ros_routes.py` writes, by name.
-const ROUTES: [&str; 8] = [
+const ROUTES: [&str; 13] = [
     "ros1-none.bag",
     "ros1-bz2.bag",
     "ros1-lz4.bag",
     "ros1.mcap",
     "rosbag2-sqlite3",
     "rosbag2-mcap",
+    "rosbag2-sqlite3-zstd",
+    "rosbag2-mcap-zstd",
+    "rosbag2-sqlite3-zstd-file",
+    "rosbag2-mcap-zstd-file",
     "rosbag2-from-bag",
     "rosbag2-sqlite3/rosbag2-sqlite3.db3",
+    // Its compression read from the metadata the file keeps itself.
+    "rosbag2-sqlite3-zstd/rosbag2-sqlite3-zstd.db3",
 ];
 
 /// `drive` (a ROS 2 MCAP) written in every other format into `dir/routes`, or None
@@ -117,14 +123,21 @@ fn convert_brings_every_route_back_to_the_same_ros2_messages() {
     ];
     let original = messages_on(&drive, &known);
     assert_eq!(original.len(), 5);
-    for route in ["ros1-lz4.bag", "ros1.mcap", "rosbag2-sqlite3"] {
+    // The zstd route's chunks hold compressed messages: they are not copied as stored.
+    for route in [
+        "ros1-lz4.bag",
+        "ros1.mcap",
+        "rosbag2-sqlite3",
+        "rosbag2-mcap-zstd",
+        "rosbag2-sqlite3-zstd-file",
+    ] {
         let out = dir.path().join(format!("{route}.converted.mcap"));
         let json = common::json_summary(&["convert", arg(&routes.join(route)), "-o", arg(&out)]);
         // Byte for byte the messages travmap wrote from the KITTI frame.
         assert!(messages_on(&out, &known) == original, "{route}");
         let summary = &json;
         assert_eq!(summary["messages"], 6, "{route}: {summary}");
-        let ros1 = route != "rosbag2-sqlite3";
+        let ros1 = route.starts_with("ros1");
         assert_eq!(summary["translated_messages"], if ros1 { 5 } else { 0 });
         let as_recorded: &[&str] = if ros1 { &["/chatter"] } else { &[] };
         assert_eq!(
@@ -260,6 +273,41 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
     });
     let err = clean_failure(travmap(&["run", arg(&corrupt)]));
     assert_contains(&err, &["corrupt.db3"]);
+
+    // A storage file compressed whole and cut short: named, and its partial
+    // decompression removed.
+    let zstd_file = dir.path().join("cut-zstd-file");
+    std::fs::create_dir(&zstd_file).unwrap();
+    let from = routes.join("rosbag2-sqlite3-zstd-file");
+    std::fs::copy(from.join("metadata.yaml"), zstd_file.join("metadata.yaml")).unwrap();
+    let compressed = "rosbag2-sqlite3-zstd-file.db3.zstd";
+    let bytes = std::fs::read(from.join(compressed)).unwrap();
+    std::fs::write(zstd_file.join(compressed), &bytes[..bytes.len() / 2]).unwrap();
+    let temp = dir.path().join("temp");
+    std::fs::create_dir(&temp).unwrap();
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_travmap"))
+        .args(["run", arg(&zstd_file)])
+        .env("TMPDIR", &temp)
+        .output()
+        .unwrap();
+    let err = clean_failure(output);
+    assert_contains(&err, &[compressed, "does not decompress (zstd)"]);
+    assert_eq!(std::fs::read_dir(&temp).unwrap().count(), 0, "{err}");
+
+    // A message compressed on its own whose frame is cut.
+    let zstd_messages = routes.join("rosbag2-sqlite3-zstd/rosbag2-sqlite3-zstd.db3");
+    let cut_message = dir.path().join("cut-message.db3");
+    std::fs::copy(&zstd_messages, &cut_message).unwrap();
+    let database = rusqlite::Connection::open(&cut_message).unwrap();
+    database
+        .execute(
+            "UPDATE messages SET data = substr(data, 1, 8) WHERE id = 2",
+            [],
+        )
+        .unwrap();
+    drop(database);
+    let err = clean_failure(travmap(&["run", arg(&cut_message)]));
+    assert_contains(&err, &["cut-message.db3", "does not decompress (zstd)"]);
 
     // metadata.yaml naming a file that is not there.
     let rosbag2 = dir.path().join("missing-file");

@@ -5,11 +5,13 @@
 //! type, encodings).
 
 use std::collections::HashMap;
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use super::bag::BagFile;
 use super::format::InputFormat;
+use super::log_message::HEADER_BYTES;
 pub use super::log_message::{Connection, FileMap, FileMessages, LogMessage, Part, Parts};
 use super::mcap_messages::{Damage, Messages};
 use super::mcap_records::check_chunk_sizes;
@@ -71,20 +73,30 @@ pub struct Log {
     files: Vec<LogFile>,
     /// What the reader noticed and worked around (an unindexed bag, ...).
     notices: Vec<String>,
+    /// Each message's data is a zstd frame (rosbag2's message compression).
+    zstd_messages: bool,
+    /// Storage files decompressed for reading (rosbag2's file compression), kept
+    /// while the files are open.
+    _decompressed: Option<tempfile::TempDir>,
 }
 
 impl Log {
     /// Opens the log at `path`, of a format [`super::format::detect`] found.
     pub fn open(path: &Path, format: InputFormat) -> Result<Self> {
-        let files = match format {
-            InputFormat::Rosbag2 => Rosbag2Directory::open(path)?
-                .storage
-                .iter()
-                .map(|(file, format)| LogFile::open(file, *format))
-                .collect::<Result<Vec<_>>>()?,
-            _ => vec![LogFile::open(path, format)?],
-        };
         let mut notices = Vec::new();
+        let (files, zstd_messages, decompressed) = match format {
+            InputFormat::Rosbag2 => {
+                let directory = Rosbag2Directory::open(path)?;
+                let files = (directory.storage.iter())
+                    .map(|(file, format)| LogFile::open(file, *format))
+                    .collect::<Result<Vec<_>>>()?;
+                notices.extend(directory.notice);
+                (files, directory.zstd_messages, directory.decompressed)
+            }
+            _ => (vec![LogFile::open(path, format)?], false, None),
+        };
+        let zstd_messages = zstd_messages
+            || (files.iter()).any(|file| matches!(file, LogFile::Sqlite(db3) if db3.zstd_messages));
         for file in &files {
             match file {
                 LogFile::Bag(bag) => notices.extend(bag.notice().map(str::to_string)),
@@ -96,6 +108,8 @@ impl Log {
             path: path.to_path_buf(),
             files,
             notices,
+            zstd_messages,
+            _decompressed: decompressed,
         })
     }
 
@@ -114,10 +128,11 @@ impl Log {
             .any(|file| matches!(file, LogFile::Mcap(mcap) if mcap.cut_at.is_some()))
     }
 
-    /// A one-file MCAP log's chunks as stored, when they hold every message.
+    /// A one-file MCAP log's chunks as stored, when they hold every message as
+    /// it reads (not compressed one by one).
     pub fn stored(&self) -> Option<StoredLog> {
         match self.files.as_slice() {
-            [LogFile::Mcap(file)] => file.stored(),
+            [LogFile::Mcap(file)] if !self.zstd_messages => file.stored(),
             _ => None,
         }
     }
@@ -147,12 +162,38 @@ impl Log {
         parts: Option<Parts<'a>>,
     ) -> impl Iterator<Item = Result<LogMessage>> + 'a {
         let mut failed = false;
+        // A compressed message is read whole (its header is inside the frame), then
+        // decompressed as far as its part asks.
+        let stored_parts: Option<Parts<'a>> = match (self.zstd_messages, &parts) {
+            (true, Some(parts)) => {
+                let parts = parts.clone();
+                Some(Arc::new(move |topic: &str, schema: &str| {
+                    match parts(topic, schema) {
+                        Part::Nothing => Part::Nothing,
+                        _ => Part::Whole,
+                    }
+                }))
+            }
+            _ => parts.clone(),
+        };
         self.files
             .iter()
             .flat_map(move |file| {
-                file.messages(threads, parts.clone())
+                let parts = parts.clone();
+                file.messages(threads, stored_parts.clone())
                     .enumerate()
                     .map(move |(ordinal, message)| match message {
+                        Ok(message) if self.zstd_messages => {
+                            let connection = &message.connection;
+                            let part = (parts.as_ref()).map_or(Part::Whole, |p| {
+                                p(&connection.topic, &connection.schema_name)
+                            });
+                            decompressed(message, part).map_err(|problem| Error::LogRecord {
+                                path: file.path().to_path_buf(),
+                                ordinal,
+                                problem,
+                            })
+                        }
                         Ok(message) => Ok(message),
                         Err(Damage {
                             problem,
@@ -177,6 +218,31 @@ impl Log {
                 go_on
             })
     }
+}
+
+/// The most a compressed message may decompress to.
+const LARGEST_MESSAGE: u64 = 1 << 30;
+
+/// A message of a log compressed message by message (rosbag2's zstd message mode),
+/// its data decompressed as far as `part` asks.
+fn decompressed(mut message: LogMessage, part: Part) -> std::result::Result<LogMessage, String> {
+    let limit = match part {
+        Part::Nothing => return Ok(message),
+        Part::Header => HEADER_BYTES as u64,
+        Part::Whole => LARGEST_MESSAGE + 1,
+    };
+    let mut data = Vec::new();
+    let topic = &message.connection.topic;
+    zstd::stream::read::Decoder::new(&message.data[..])
+        .and_then(|decoder| decoder.take(limit).read_to_end(&mut data))
+        .map_err(|e| format!("a message on {topic} does not decompress (zstd): {e}"))?;
+    if data.len() as u64 > LARGEST_MESSAGE {
+        return Err(format!(
+            "a message on {topic} decompresses to more than {LARGEST_MESSAGE} bytes"
+        ));
+    }
+    message.data = data;
+    Ok(message)
 }
 
 /// An MCAP file, memory-mapped, its chunk sizes checked at open.

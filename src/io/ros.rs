@@ -526,6 +526,14 @@ pub fn decode<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, String> {
     let decoded = match header[..2] {
         [0x00, 0x01] => cdr_encoding::from_bytes::<T, LittleEndian>(body),
         [0x00, 0x00] => cdr_encoding::from_bytes::<T, BigEndian>(body),
+        // rosbag2's message compression: the metadata that says so was not read.
+        [0x28, 0xb5] if header[2..] == [0x2f, 0xfd] => {
+            return Err(
+                "the message is a zstd frame (rosbag2 compresses each message in \
+                 message mode): open the bag's directory, whose metadata.yaml says so"
+                    .into(),
+            );
+        }
         _ => {
             return Err(format!(
                 "CDR encapsulation {:02x} {:02x} is not plain CDR",

@@ -28,6 +28,7 @@ struct Metadata {
 struct Information {
     #[serde(default)]
     storage_identifier: String,
+    #[serde(default)]
     relative_file_paths: Vec<String>,
     #[serde(default)]
     compression_format: String,
@@ -35,10 +36,41 @@ struct Information {
     compression_mode: String,
 }
 
+/// How a rosbag2 bag is compressed, as its metadata says.
+#[derive(Debug, PartialEq)]
+enum Compression {
+    None,
+    /// Each message's data is a zstd frame (`--compression-mode message`).
+    ZstdMessages,
+    /// Each storage file is zstd-compressed whole (`--compression-mode file`).
+    ZstdFiles,
+}
+
+impl Information {
+    fn compression(&self) -> std::result::Result<Compression, String> {
+        let (mode, format) = (&self.compression_mode, &self.compression_format);
+        match (mode.to_lowercase().as_str(), format.as_str()) {
+            ("" | "none", _) => Ok(Compression::None),
+            ("message", "zstd") => Ok(Compression::ZstdMessages),
+            ("file", "zstd") => Ok(Compression::ZstdFiles),
+            _ => Err(format!(
+                "the bag is compressed ({mode} mode, `{format}`); travmap reads uncompressed rosbag2 files and zstd compression (message or file mode): run `ros2 bag decompress` (or `ros2 bag convert`) on a copy first"
+            )),
+        }
+    }
+}
+
 /// A rosbag2 directory: its storage files in order, each with its format (sqlite3
 /// or MCAP), for [`super::log`] to open.
 pub struct Rosbag2Directory {
     pub storage: Vec<(PathBuf, InputFormat)>,
+    /// Each message's data is a zstd frame (`ros2 bag record --compression-mode
+    /// message`).
+    pub zstd_messages: bool,
+    /// Where storage files compressed whole (`--compression-mode file`) were
+    /// decompressed to: removed when the directory is dropped.
+    pub decompressed: Option<tempfile::TempDir>,
+    pub notice: Option<String>,
 }
 
 impl Rosbag2Directory {
@@ -53,24 +85,32 @@ impl Rosbag2Directory {
         let metadata: Metadata = serde_yaml_ng::from_str(&text)
             .map_err(|e| problem(format!("not rosbag2 metadata: {e}")))?;
         let information = metadata.rosbag2_bagfile_information;
-        let compressed = !matches!(information.compression_mode.as_str(), "" | "NONE" | "none");
-        if compressed {
-            return Err(problem(format!(
-                "the bag is compressed ({} mode, `{}`); travmap reads uncompressed rosbag2 files: run `ros2 bag decompress` (or `ros2 bag convert`) on a copy first",
-                information.compression_mode, information.compression_format
-            )));
-        }
+        let compression = information.compression().map_err(problem)?;
+        let zstd_files = compression == Compression::ZstdFiles;
         if information.relative_file_paths.is_empty() {
             return Err(problem("it lists no storage files".into()));
         }
+        let mut decompressed = None;
         let mut storage = Vec::new();
         for relative in &information.relative_file_paths {
-            let path = directory.join(relative);
+            let mut path = directory.join(relative);
             if !path.exists() {
                 return Err(problem(format!(
                     "it lists the storage file `{relative}`, which is missing ({})",
                     path.display()
                 )));
+            }
+            if zstd_files && relative.ends_with(".zstd") {
+                let into = match &mut decompressed {
+                    Some(into) => into,
+                    empty => empty.insert(
+                        tempfile::Builder::new()
+                            .prefix("travmap-rosbag2-")
+                            .tempdir()
+                            .map_err(|e| Error::io(std::env::temp_dir(), e))?,
+                    ),
+                };
+                path = decompress_file(&path, into.path())?;
             }
             let format = detect(&path)?;
             if !matches!(format, InputFormat::Sqlite | InputFormat::Mcap) {
@@ -81,8 +121,40 @@ impl Rosbag2Directory {
             }
             storage.push((path, format));
         }
-        Ok(Self { storage })
+        let notice = decompressed.as_ref().map(|into| {
+            let bytes: u64 = (storage.iter())
+                .filter_map(|(path, _)| std::fs::metadata(path).ok())
+                .map(|metadata| metadata.len())
+                .sum();
+            format!(
+                "the bag's storage files are zstd-compressed whole (file mode): decompressed to {} ({:.1} MB, removed at exit)",
+                into.path().display(),
+                bytes as f64 / 1e6
+            )
+        });
+        Ok(Self {
+            storage,
+            zstd_messages: compression == Compression::ZstdMessages,
+            decompressed,
+            notice,
+        })
     }
+}
+
+/// `compressed` (a storage file zstd-compressed whole) decompressed into the
+/// directory `into`, under its name without `.zstd`.
+fn decompress_file(compressed: &Path, into: &Path) -> Result<PathBuf> {
+    let name = compressed.file_stem().unwrap_or(compressed.as_os_str());
+    let path = into.join(name);
+    let source = std::fs::File::open(compressed).map_err(|e| Error::io(compressed, e))?;
+    let mut target = std::fs::File::create(&path).map_err(|e| Error::io(&path, e))?;
+    let mut decoder =
+        zstd::stream::read::Decoder::new(source).map_err(|e| Error::io(compressed, e))?;
+    std::io::copy(&mut decoder, &mut target).map_err(|e| Error::LogContainer {
+        path: compressed.to_path_buf(),
+        problem: format!("it does not decompress (zstd) into {}: {e}", path.display()),
+    })?;
+    Ok(path)
 }
 
 /// Rows read from the `messages` table per query, at most.
@@ -95,18 +167,27 @@ const PAGE_BYTES: usize = 16 << 20;
 pub struct SqliteFile {
     path: PathBuf,
     connections: HashMap<i64, Arc<Connection>>,
+    /// Its own metadata (rosbag2 Iron and later keep a copy in the file) says each
+    /// message is a zstd frame: read when the file is given without its directory.
+    pub zstd_messages: bool,
 }
 
 impl SqliteFile {
     pub fn open(path: &Path) -> Result<Self> {
         let database = open_database(path)?;
-        let connections = topics(&database).map_err(|problem| Error::LogContainer {
+        let container = |problem| Error::LogContainer {
             path: path.to_path_buf(),
             problem,
-        })?;
+        };
+        let connections = topics(&database).map_err(container)?;
+        let compression = own_metadata(&database)
+            .map(|information| information.compression())
+            .transpose()
+            .map_err(container)?;
         Ok(Self {
             path: path.to_path_buf(),
             connections,
+            zstd_messages: compression == Some(Compression::ZstdMessages),
         })
     }
 
@@ -236,6 +317,20 @@ fn open_database(path: &Path) -> Result<rusqlite::Connection> {
     })
 }
 
+/// The bag's metadata a `.db3` holds in its `metadata` table, when it has one that
+/// reads: rosbag2 writes it as in `metadata.yaml`, rosbags without the outer key.
+fn own_metadata(database: &rusqlite::Connection) -> Option<Information> {
+    let text: String = database
+        .query_row("SELECT metadata FROM metadata LIMIT 1", [], |row| {
+            row.get(0)
+        })
+        .ok()?;
+    serde_yaml_ng::from_str::<Metadata>(&text)
+        .map(|metadata| metadata.rosbag2_bagfile_information)
+        .or_else(|_| serde_yaml_ng::from_str(&text))
+        .ok()
+}
+
 /// An absolute path percent-encoded for an SQLite URI.
 fn uri_path(path: &Path) -> String {
     let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
@@ -330,6 +425,36 @@ mod tests {
             uri_path(Path::new("/d/a b?c#d%e.db3")),
             "/d/a%20b%3Fc%23d%25e.db3"
         );
+    }
+
+    #[test]
+    fn compression_is_read_from_either_form_of_the_metadata() {
+        let database = rusqlite::Connection::open_in_memory().unwrap();
+        assert!(own_metadata(&database).is_none(), "no metadata table");
+        database
+            .execute_batch(
+                "CREATE TABLE metadata(id INTEGER, metadata_version INTEGER, metadata TEXT)",
+            )
+            .unwrap();
+        let compression = |text: &str| {
+            database.execute("DELETE FROM metadata", []).unwrap();
+            database
+                .execute("INSERT INTO metadata VALUES (1, 9, ?1)", [text])
+                .unwrap();
+            own_metadata(&database).map(|information| information.compression())
+        };
+        let message = "compression_mode: MESSAGE\ncompression_format: zstd\n";
+        assert!(compression(message) == Some(Ok(Compression::ZstdMessages)));
+        let wrapped = "rosbag2_bagfile_information:\n  compression_mode: message\n  compression_format: zstd\n";
+        assert!(compression(wrapped) == Some(Ok(Compression::ZstdMessages)));
+        let file = "compression_mode: FILE\ncompression_format: zstd\n";
+        assert!(compression(file) == Some(Ok(Compression::ZstdFiles)));
+        assert!(compression("compression_mode: ''\n") == Some(Ok(Compression::None)));
+        let Some(Err(refused)) = compression("compression_mode: file\ncompression_format: lz4\n")
+        else {
+            panic!("lz4 is not a rosbag2 compression travmap reads");
+        };
+        assert!(refused.contains("file mode, `lz4`"), "{refused}");
     }
 
     #[test]

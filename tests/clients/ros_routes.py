@@ -4,6 +4,9 @@ recorded-log format travmap reads, with real writers and no travmap code:
   ros1-none.bag, ros1-bz2.bag, ros1-lz4.bag  rosbags' ROS 1 bag writer (chunk compression)
   ros1.mcap                                  Python mcap's writer, ros1msg schemas, ros1 messages
   rosbag2-sqlite3/, rosbag2-mcap/            rosbags' rosbag2 writer (storage plugins)
+  rosbag2-sqlite3-zstd/, rosbag2-mcap-zstd/  the same, each message zstd-compressed (message mode)
+  rosbag2-sqlite3-zstd-file/, rosbag2-mcap-zstd-file/
+                                             the same, each storage file zstd-compressed (file mode)
   rosbag2-from-bag/                          rosbags-convert of ros1-none.bag (ROS 1 -> ROS 2)
 
 Messages become ROS 1 with rosbags' CDR -> ROS 1 conversion (which adds the Header's
@@ -21,7 +24,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer as McapWriter
 from rosbags.rosbag1 import Writer as Bag1Writer
 from rosbags.rosbag2 import Writer as Bag2Writer
-from rosbags.rosbag2.enums import StoragePlugin
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 ROS2 = get_typestore(Stores.ROS2_HUMBLE)
@@ -75,8 +78,11 @@ def ros1_mcap(messages, path):
         writer.finish()
 
 
-def rosbag2(messages, path, storage):
-    with Bag2Writer(path, version=9, storage_plugin=storage) as writer:
+def rosbag2(messages, path, storage, compression=None):
+    writer = Bag2Writer(path, version=9, storage_plugin=storage)
+    if compression:
+        writer.set_compression(compression, CompressionFormat.ZSTD)
+    with writer:
         connections = {}
         for topic, msgtype, stamp, cdr in messages:
             if topic not in connections:
@@ -94,6 +100,9 @@ def main():
     ros1_mcap(messages, out / "ros1.mcap")
     rosbag2(messages, out / "rosbag2-sqlite3", StoragePlugin.SQLITE3)
     rosbag2(messages, out / "rosbag2-mcap", StoragePlugin.MCAP)
+    for mode, suffix in [(CompressionMode.MESSAGE, ""), (CompressionMode.FILE, "-file")]:
+        for storage, name in [(StoragePlugin.SQLITE3, "sqlite3"), (StoragePlugin.MCAP, "mcap")]:
+            rosbag2(messages, out / f"rosbag2-{name}-zstd{suffix}", storage, mode)
     if len(sys.argv) > 3:
         subprocess.run(
             [sys.argv[3], "--src", str(out / "ros1-none.bag"), "--dst", str(out / "rosbag2-from-bag")],
