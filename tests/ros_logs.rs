@@ -15,7 +15,7 @@ use travmap::io::format::{InputFormat, detect};
 use travmap::io::log::Log;
 
 /// The routes `ros_routes.py` writes, by name.
-const ROUTES: [&str; 13] = [
+const ROUTES: [&str; 14] = [
     "ros1-none.bag",
     "ros1-bz2.bag",
     "ros1-lz4.bag",
@@ -28,8 +28,9 @@ const ROUTES: [&str; 13] = [
     "rosbag2-mcap-zstd-file",
     "rosbag2-from-bag",
     "rosbag2-sqlite3/rosbag2-sqlite3.db3",
-    // Its compression read from the metadata the file keeps itself.
+    // Their compression read from the metadata each file keeps itself.
     "rosbag2-sqlite3-zstd/rosbag2-sqlite3-zstd.db3",
+    "rosbag2-mcap-zstd/rosbag2-mcap-zstd.mcap",
 ];
 
 /// `drive` (a ROS 2 MCAP) written in every other format into `dir/routes`, or None

@@ -16,7 +16,7 @@ pub use super::log_message::{Connection, FileMap, FileMessages, LogMessage, Part
 use super::mcap_messages::{Damage, Messages};
 use super::mcap_records::check_chunk_sizes;
 use super::mcap_stored::{Release, StoredLog, stored_log};
-use super::rosbag2::{Rosbag2Directory, SqliteFile};
+use super::rosbag2::{Rosbag2Directory, SqliteFile, says_zstd_messages};
 use crate::error::{Error, Result};
 
 /// One file of a log.
@@ -96,7 +96,11 @@ impl Log {
             _ => (vec![LogFile::open(path, format)?], false, None),
         };
         let zstd_messages = zstd_messages
-            || (files.iter()).any(|file| matches!(file, LogFile::Sqlite(db3) if db3.zstd_messages));
+            || (files.iter()).any(|file| match file {
+                LogFile::Sqlite(db3) => db3.zstd_messages,
+                LogFile::Mcap(mcap) => mcap.zstd_messages,
+                LogFile::Bag(_) => false,
+            });
         for file in &files {
             match file {
                 LogFile::Bag(bag) => notices.extend(bag.notice().map(str::to_string)),
@@ -253,6 +257,8 @@ pub struct McapFile {
     map: bytes::Bytes,
     /// For a file cut short: where its last complete record ends.
     cut_at: Option<usize>,
+    /// Its own copy of a rosbag2 bag's metadata says each message is a zstd frame.
+    zstd_messages: bool,
 }
 
 impl McapFile {
@@ -264,11 +270,19 @@ impl McapFile {
             problem,
         })?;
         file.release(0..map.len());
+        let zstd_messages = (layout.rosbag2_metadata.as_deref())
+            .map(says_zstd_messages)
+            .transpose()
+            .map_err(|problem| Error::LogContainer {
+                path: path.to_path_buf(),
+                problem,
+            })?;
         Ok(Self {
             path: path.to_path_buf(),
             file,
             map,
             cut_at: layout.cut_at,
+            zstd_messages: zstd_messages.unwrap_or(false),
         })
     }
 

@@ -178,6 +178,9 @@ pub(super) struct Layout {
     /// For a file cut short (a recorder killed before it wrote the summary, or in the
     /// middle of a record): where its last complete record ends.
     pub(super) cut_at: Option<usize>,
+    /// The bag's metadata a rosbag2 MCAP keeps (its `rosbag2` metadata record's
+    /// `serialized_metadata`): whether its messages are compressed one by one.
+    pub(super) rosbag2_metadata: Option<String>,
 }
 
 /// Where a chunk lies in the file and the log times of its messages: what a reader
@@ -203,6 +206,7 @@ pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
     };
     let mut complete = walk.offset;
     let mut data_end = false;
+    let mut rosbag2_metadata = None;
     // After the 8-byte magic. A malformed chunk header ends the walk, as does a
     // record header cut short.
     while let Some(record) = walk.next() {
@@ -213,6 +217,9 @@ pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
         if opcode == op::DATA_END {
             data_end = true;
             break;
+        }
+        if opcode == op::METADATA && rosbag2_metadata.is_none() {
+            rosbag2_metadata = metadata_value(body, "rosbag2", "serialized_metadata");
         }
         if opcode != op::CHUNK {
             continue;
@@ -252,7 +259,33 @@ pub(super) fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
     let whole = map.ends_with(magic) && footer.is_some_and(|at| map[at] == op::FOOTER);
     Ok(Layout {
         cut_at: (!(data_end && whole)).then_some(complete),
+        rosbag2_metadata,
     })
+}
+
+/// The value of `key` in a metadata record's body, when the record is `name`'s and
+/// its lengths hold.
+fn metadata_value(body: &[u8], name: &str, key: &str) -> Option<String> {
+    check_lengths(op::METADATA, body).ok()?;
+    // A u32 length and that many bytes, from the front of `rest`.
+    fn take<'a>(rest: &mut &'a [u8]) -> Option<&'a [u8]> {
+        let (length, after) = rest.split_first_chunk::<4>()?;
+        let (field, after) = after.split_at_checked(u32::from_le_bytes(*length) as usize)?;
+        *rest = after;
+        Some(field)
+    }
+    let mut rest = body;
+    if take(&mut rest)? != name.as_bytes() {
+        return None;
+    }
+    let mut entries = take(&mut rest)?;
+    while !entries.is_empty() {
+        let (entry_key, value) = (take(&mut entries)?, take(&mut entries)?);
+        if entry_key == key.as_bytes() {
+            return String::from_utf8(value.to_vec()).ok();
+        }
+    }
+    None
 }
 
 /// A chunk's declared uncompressed size, compression and records: after the start
@@ -354,6 +387,28 @@ mod tests {
         body.extend_from_slice(&string("cdr"));
         body.extend_from_slice(metadata);
         body
+    }
+
+    #[test]
+    fn a_metadata_records_value_is_found_by_name_and_key() {
+        let entry = |key: &str, value: &str| [string(key), string(value)].concat();
+        let map = [entry("other", "x"), entry("serialized_metadata", "mode: m")].concat();
+        let body = [
+            string("rosbag2"),
+            (map.len() as u32).to_le_bytes().to_vec(),
+            map.clone(),
+        ]
+        .concat();
+        let value = |body: &[u8]| metadata_value(body, "rosbag2", "serialized_metadata");
+        assert_eq!(value(&body).as_deref(), Some("mode: m"));
+        let other_name = [
+            string("other"),
+            (map.len() as u32).to_le_bytes().to_vec(),
+            map,
+        ]
+        .concat();
+        assert_eq!(value(&other_name), None);
+        assert_eq!(value(&body[..body.len() - 1]), None, "cut short");
     }
 
     #[test]

@@ -37,7 +37,7 @@ struct Information {
 }
 
 /// How a rosbag2 bag is compressed, as its metadata says.
-#[derive(Debug, PartialEq)]
+#[derive(PartialEq)]
 enum Compression {
     None,
     /// Each message's data is a zstd frame (`--compression-mode message`).
@@ -180,14 +180,14 @@ impl SqliteFile {
             problem,
         };
         let connections = topics(&database).map_err(container)?;
-        let compression = own_metadata(&database)
-            .map(|information| information.compression())
+        let zstd_messages = (own_metadata(&database).as_deref())
+            .map(says_zstd_messages)
             .transpose()
             .map_err(container)?;
         Ok(Self {
             path: path.to_path_buf(),
             connections,
-            zstd_messages: compression == Some(Compression::ZstdMessages),
+            zstd_messages: zstd_messages.unwrap_or(false),
         })
     }
 
@@ -317,18 +317,28 @@ fn open_database(path: &Path) -> Result<rusqlite::Connection> {
     })
 }
 
-/// The bag's metadata a `.db3` holds in its `metadata` table, when it has one that
-/// reads: rosbag2 writes it as in `metadata.yaml`, rosbags without the outer key.
-fn own_metadata(database: &rusqlite::Connection) -> Option<Information> {
-    let text: String = database
+/// The bag's metadata a `.db3` holds in its `metadata` table, when it has one.
+fn own_metadata(database: &rusqlite::Connection) -> Option<String> {
+    database
         .query_row("SELECT metadata FROM metadata LIMIT 1", [], |row| {
             row.get(0)
         })
-        .ok()?;
-    serde_yaml_ng::from_str::<Metadata>(&text)
-        .map(|metadata| metadata.rosbag2_bagfile_information)
-        .or_else(|_| serde_yaml_ng::from_str(&text))
         .ok()
+}
+
+/// Whether the copy of a bag's metadata a storage file keeps (rosbag2 Iron and
+/// later, and `rosbags`, write one into each `.db3` and MCAP) says each message is
+/// a zstd frame: how a file given without its directory is read. rosbag2 writes it
+/// as `metadata.yaml` reads, `rosbags` without the outer key; text that is neither
+/// says nothing.
+pub(super) fn says_zstd_messages(text: &str) -> std::result::Result<bool, String> {
+    let information = serde_yaml_ng::from_str::<Metadata>(text)
+        .map(|metadata| metadata.rosbag2_bagfile_information)
+        .or_else(|_| serde_yaml_ng::from_str::<Information>(text));
+    match information {
+        Ok(information) => Ok(information.compression()? == Compression::ZstdMessages),
+        Err(_) => Ok(false),
+    }
 }
 
 /// An absolute path percent-encoded for an SQLite URI.
@@ -431,30 +441,26 @@ mod tests {
     fn compression_is_read_from_either_form_of_the_metadata() {
         let database = rusqlite::Connection::open_in_memory().unwrap();
         assert!(own_metadata(&database).is_none(), "no metadata table");
+        let message = "compression_mode: MESSAGE\ncompression_format: zstd\n";
         database
             .execute_batch(
                 "CREATE TABLE metadata(id INTEGER, metadata_version INTEGER, metadata TEXT)",
             )
             .unwrap();
-        let compression = |text: &str| {
-            database.execute("DELETE FROM metadata", []).unwrap();
-            database
-                .execute("INSERT INTO metadata VALUES (1, 9, ?1)", [text])
-                .unwrap();
-            own_metadata(&database).map(|information| information.compression())
-        };
-        let message = "compression_mode: MESSAGE\ncompression_format: zstd\n";
-        assert!(compression(message) == Some(Ok(Compression::ZstdMessages)));
+        database
+            .execute("INSERT INTO metadata VALUES (1, 9, ?1)", [message])
+            .unwrap();
+        assert_eq!(own_metadata(&database).as_deref(), Some(message));
+        assert_eq!(says_zstd_messages(message), Ok(true));
         let wrapped = "rosbag2_bagfile_information:\n  compression_mode: message\n  compression_format: zstd\n";
-        assert!(compression(wrapped) == Some(Ok(Compression::ZstdMessages)));
+        assert_eq!(says_zstd_messages(wrapped), Ok(true));
+        // A file decompressed from file mode keeps the metadata of the compressed bag.
         let file = "compression_mode: FILE\ncompression_format: zstd\n";
-        assert!(compression(file) == Some(Ok(Compression::ZstdFiles)));
-        assert!(compression("compression_mode: ''\n") == Some(Ok(Compression::None)));
-        let Some(Err(refused)) = compression("compression_mode: file\ncompression_format: lz4\n")
-        else {
-            panic!("lz4 is not a rosbag2 compression travmap reads");
-        };
-        assert!(refused.contains("file mode, `lz4`"), "{refused}");
+        assert_eq!(says_zstd_messages(file), Ok(false));
+        assert_eq!(says_zstd_messages("compression_mode: ''\n"), Ok(false));
+        assert_eq!(says_zstd_messages("[not, metadata]"), Ok(false));
+        let refused = says_zstd_messages("compression_mode: message\ncompression_format: lz4\n");
+        assert!(refused.unwrap_err().contains("message mode, `lz4`"));
     }
 
     #[test]
