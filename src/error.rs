@@ -152,6 +152,11 @@ pub enum Error {
         problem: String,
     },
 
+    /// One message that does not read, in a container that reads on past it (a
+    /// zstd frame of rosbag2's message compression).
+    #[error("{0}")]
+    LogMessageLost(LostMessage),
+
     #[error("{path}: unreadable from cloud {cloud} on: {problem}")]
     LogUnreadableFrom {
         path: PathBuf,
@@ -392,7 +397,29 @@ impl std::fmt::Display for CloudTopicProblem {
 /// Result with the library's error type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
+/// A message that does not read ([`Error::LogMessageLost`]), kept as data so that
+/// the pass that needs it can report it when the pass that met it cannot.
+#[derive(Clone, Debug, thiserror::Error)]
+#[error(
+    "{}: message {ordinal} (on {topic}, log time {:.3} s) is damaged ({problem}): it is lost (--keep-going reads on past it)",
+    path.display(),
+    *log_time_ns as f64 * 1e-9
+)]
+pub struct LostMessage {
+    pub path: PathBuf,
+    pub ordinal: usize,
+    pub topic: String,
+    pub log_time_ns: u64,
+    pub problem: String,
+}
+
 impl Error {
+    /// A stretch of a log lost (a damaged chunk or message) that reading goes on
+    /// past: with `--keep-going` a skip, not the end.
+    pub fn is_lost_stretch(&self) -> bool {
+        matches!(self, Error::LogChunk { .. } | Error::LogMessageLost(_))
+    }
+
     /// The file the error is about, when there is one (for `--json` errors).
     pub fn path(&self) -> Option<&std::path::Path> {
         match self {
@@ -433,6 +460,7 @@ impl Error {
             | Error::OutputInsideInput { output, .. }
             | Error::SameOutputTwice { first: output, .. }
             | Error::NoOutputDirectory { output, .. } => Some(output),
+            Error::LogMessageLost(lost) => Some(&lost.path),
             _ => None,
         }
     }

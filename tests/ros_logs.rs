@@ -300,15 +300,39 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
     let cut_message = dir.path().join("cut-message.db3");
     std::fs::copy(&zstd_messages, &cut_message).unwrap();
     let database = rusqlite::Connection::open(&cut_message).unwrap();
-    database
-        .execute(
-            "UPDATE messages SET data = substr(data, 1, 8) WHERE id = 2",
-            [],
-        )
-        .unwrap();
+    // The second cloud's frame, and a String, which `run` does not read again.
+    for schema in ["sensor_msgs/msg/PointCloud2", "std_msgs/msg/String"] {
+        let cut = "UPDATE messages SET data = substr(data, 1, 8) WHERE id = (SELECT id FROM
+             messages WHERE topic_id = (SELECT id FROM topics WHERE type = ?1) ORDER BY id
+             LIMIT 1 OFFSET 1)";
+        assert_eq!(database.execute(cut, [schema]).unwrap(), 1, "{schema}");
+    }
     drop(database);
     let err = clean_failure(travmap(&["run", arg(&cut_message)]));
-    assert_contains(&err, &["cut-message.db3", "does not decompress (zstd)"]);
+    assert_contains(
+        &err,
+        &[
+            "cut-message.db3",
+            "is damaged",
+            "does not decompress (zstd)",
+        ],
+    );
+    // Read on past them: the damaged cloud's frame is left out, and named; `run`
+    // does not read the String, annotate's passthrough does and names it too.
+    let output = travmap(&["run", arg(&cut_message), "--keep-going", "--json"]);
+    assert_eq!(output.status.code(), Some(3), "{}", common::stderr(&output));
+    let (frames, summary) = common::json_records(&common::stdout(&output));
+    assert_eq!(frames.len(), 2, "{summary}");
+    let skipped = summary["skipped"].to_string();
+    assert_contains(&skipped, &["message 4 (on /velodyne_points", "is damaged"]);
+    let annotated = dir.path().join("cut-message.mcap");
+    let args = ["annotate", arg(&cut_message), "-o", arg(&annotated)];
+    let output = travmap(&[&args[..], &["--keep-going", "--json"]].concat());
+    assert_eq!(output.status.code(), Some(3), "{}", common::stderr(&output));
+    let summary = common::json_records(&common::stdout(&output)).1;
+    assert_eq!(summary["frames"], 2, "{summary}");
+    let skipped = summary["skipped"].to_string();
+    assert_contains(&skipped, &["on /velodyne_points", "on /chatter"]);
 
     // metadata.yaml naming a file that is not there.
     let rosbag2 = dir.path().join("missing-file");

@@ -13,7 +13,7 @@ use super::packets::{PacketAssembler, PacketCalibration, PacketModel};
 use super::ros::PointCloud2;
 use super::ros_drive::{IMAGE_PAIRING_NS, RosDrive};
 use super::velodyne::{PacketScan, VelodynePoint};
-use crate::error::{Error, Result};
+use crate::error::{Error, LostMessage, Result};
 use crate::frame::{Frame, RemissionScale};
 
 /// A scan cut from a packet topic's packets.
@@ -82,12 +82,19 @@ impl RosDrive {
             .chain(self.merged.iter().map(|sensor| sensor.topic.clone()))
             .chain(camera.map(|camera| camera.topic.clone()))
             .collect();
+        // Messages of other topics the index pass lost are not met again: reported
+        // before the first frame.
+        let unreported = (self.lost_messages.iter())
+            .filter(|lost| !wanted.contains(&lost.topic))
+            .cloned()
+            .collect();
         let parts = move |topic: &str, _: &str| match wanted.iter().any(|w| w == topic) {
             true => Part::Whole,
             false => Part::Nothing,
         };
         DriveFrames {
             drive: self,
+            unreported,
             stream: Box::new(self.log.messages_in_parts(1, std::sync::Arc::new(parts))),
             // Clouds the index left out (past a cut end) are not frames.
             frames: frames.start..frames.end.min(self.frame_count()),
@@ -220,6 +227,8 @@ enum Cloud {
 /// found too.
 pub struct DriveFrames<'a> {
     drive: &'a RosDrive,
+    /// Lost messages of topics this pass does not read, to report first.
+    unreported: Vec<LostMessage>,
     stream: Box<dyn Iterator<Item = Result<LogMessage>> + 'a>,
     frames: Range<usize>,
     /// The cloud waiting for the next one: (frame number, cloud).
@@ -290,6 +299,16 @@ impl Iterator for DriveFrames<'_> {
     type Item = Result<Frame>;
 
     fn next(&mut self) -> Option<Result<Frame>> {
+        for lost in std::mem::take(&mut self.unreported) {
+            // At the cloud that follows it, as a damaged chunk is.
+            let stamps_ns = &self.drive.stamps_ns;
+            let cloud = stamps_ns.partition_point(|&stamp_ns| stamp_ns <= lost.log_time_ns);
+            if let Err(error) = (self.drive.skips).handle(cloud, Error::LogMessageLost(lost)) {
+                self.stream_ended = true;
+                self.ready.clear();
+                return Some(Err(error));
+            }
+        }
         let camera = (self.drive.camera.as_ref()).filter(|_| self.drive.read_images);
         while let Some((index, cloud)) = self.ready.pop_front() {
             if let Some(frame) = self.hand_on(index, &cloud) {
@@ -302,7 +321,7 @@ impl Iterator for DriveFrames<'_> {
                 None => break,
                 // A corrupt stretch of the file: with --keep-going, what came before counts.
                 // A damaged chunk: its clouds were never indexed, the rest follows.
-                Some(Err(error @ Error::LogChunk { .. })) => {
+                Some(Err(error)) if error.is_lost_stretch() => {
                     if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
                         self.stream_ended = true;
                         return Some(Err(error));

@@ -17,7 +17,7 @@ use super::mcap_messages::{Damage, Messages};
 use super::mcap_records::check_chunk_sizes;
 use super::mcap_stored::{Release, StoredLog, stored_log};
 use super::rosbag2::{Rosbag2Directory, SqliteFile, says_zstd_messages};
-use crate::error::{Error, Result};
+use crate::error::{Error, LostMessage, Result};
 
 /// One file of a log.
 pub enum LogFile {
@@ -141,8 +141,9 @@ impl Log {
         }
     }
 
-    /// Every message of every file, in order; nothing after the first error but
-    /// [`Error::LogChunk`] (a damaged chunk), after which the messages that follow it.
+    /// Every message of every file, in order; nothing after the first error but a
+    /// lost stretch ([`Error::is_lost_stretch`]: a damaged chunk or message), after
+    /// which the messages that follow it.
     /// As many chunks of an MCAP file are decompressed at once as there are threads.
     pub fn messages(&self) -> impl Iterator<Item = Result<LogMessage>> + '_ {
         self.messages_with(rayon::current_num_threads(), None)
@@ -188,14 +189,19 @@ impl Log {
                     .enumerate()
                     .map(move |(ordinal, message)| match message {
                         Ok(message) if self.zstd_messages => {
-                            let connection = &message.connection;
+                            let (connection, log_time_ns) =
+                                (message.connection.clone(), message.log_time_ns);
                             let part = (parts.as_ref()).map_or(Part::Whole, |p| {
                                 p(&connection.topic, &connection.schema_name)
                             });
-                            decompressed(message, part).map_err(|problem| Error::LogRecord {
-                                path: file.path().to_path_buf(),
-                                ordinal,
-                                problem,
+                            decompressed(message, part).map_err(|problem| {
+                                Error::LogMessageLost(LostMessage {
+                                    path: file.path().to_path_buf(),
+                                    ordinal,
+                                    topic: connection.topic.clone(),
+                                    log_time_ns,
+                                    problem,
+                                })
                             })
                         }
                         Ok(message) => Ok(message),
@@ -218,7 +224,7 @@ impl Log {
             })
             .take_while(move |message| {
                 let go_on = !failed;
-                failed |= matches!(message, Err(error) if !matches!(error, Error::LogChunk { .. }));
+                failed |= matches!(message, Err(error) if !error.is_lost_stretch());
                 go_on
             })
     }
@@ -236,13 +242,12 @@ fn decompressed(mut message: LogMessage, part: Part) -> std::result::Result<LogM
         Part::Whole => LARGEST_MESSAGE + 1,
     };
     let mut data = Vec::new();
-    let topic = &message.connection.topic;
     zstd::stream::read::Decoder::new(&message.data[..])
         .and_then(|decoder| decoder.take(limit).read_to_end(&mut data))
-        .map_err(|e| format!("a message on {topic} does not decompress (zstd): {e}"))?;
+        .map_err(|e| format!("it does not decompress (zstd): {e}"))?;
     if data.len() as u64 > LARGEST_MESSAGE {
         return Err(format!(
-            "a message on {topic} decompresses to more than {LARGEST_MESSAGE} bytes"
+            "it decompresses to more than {LARGEST_MESSAGE} bytes"
         ));
     }
     message.data = data;

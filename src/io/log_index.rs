@@ -18,7 +18,7 @@ use super::ros::{Header, MessageEncoding, Odometry, TfMessage, Transform};
 use super::transforms::{TransformTree, isometry};
 use super::velodyne::{DecoderSettings, ScanCutter, VELODYNE_SCAN};
 use crate::config::PoseSource;
-use crate::error::{CloudTopicProblem, Error, Result};
+use crate::error::{CloudTopicProblem, Error, LostMessage, Result};
 use crate::posing::PoseRecord;
 
 const POINT_CLOUD: &str = "sensor_msgs/msg/PointCloud2";
@@ -434,8 +434,11 @@ pub(super) struct LogIndex {
     pub(super) packets: Option<PacketModel>,
     /// Other sensors' topics merged into each scan.
     pub(super) merged: Vec<MergedTopic>,
-    /// Chunks whose messages could not be read (see [`Error::LogChunk`]).
+    /// Chunks or messages that could not be read ([`Error::is_lost_stretch`]).
     pub(super) damaged_chunks: usize,
+    /// Of those, the single messages: the frames' pass meets again only those of the
+    /// topics it reads, and reports the others from here.
+    pub(super) lost_messages: Vec<LostMessage>,
     /// For a packet topic: the packets of its first and second scans, when the
     /// first took fewer than half the second's (the recording began mid-turn).
     pub(super) partial_first_scan: Option<(usize, usize)>,
@@ -451,7 +454,7 @@ impl LogIndex {
             lidar_calibrations: options.lidar_calibrations.clone(),
             ..Default::default()
         };
-        let (mut damaged_chunks, mut first_damage) = (0, None);
+        let (mut damaged_chunks, mut first_damage, mut lost_messages) = (0, None, Vec::new());
         // Of clouds and images this pass reads the header alone, of the types it does
         // not decode nothing.
         let parts = |_: &str, schema_name: &str| match ros2_type_name(schema_name).as_ref() {
@@ -465,8 +468,11 @@ impl LogIndex {
             match message {
                 Ok(message) => contents.add(path, &message)?,
                 // Its clouds are not indexed; reading the frames says so (or stops).
-                Err(error @ Error::LogChunk { .. }) => {
+                Err(error) if error.is_lost_stretch() => {
                     damaged_chunks += 1;
+                    if let Error::LogMessageLost(lost) = &error {
+                        lost_messages.push(lost.clone());
+                    }
                     first_damage.get_or_insert(error);
                 }
                 Err(error) => return Err(error),
@@ -515,6 +521,7 @@ impl LogIndex {
             root_frame,
             packets,
             damaged_chunks,
+            lost_messages,
             partial_first_scan,
         })
     }

@@ -23,7 +23,7 @@ use super::merged_clouds::{MergedSensor, median_period_ns};
 use super::packets::{PacketCalibration, PacketModel};
 use super::skips::SkipLog;
 use super::transforms::TransformTree;
-use crate::error::{Error, Result};
+use crate::error::{Error, LostMessage, Result};
 use crate::frame::CameraImage;
 use crate::posing::{Posing, decide};
 
@@ -82,6 +82,8 @@ pub struct RosDrive {
     pub(super) read_images: bool,
     /// Chunks the index pass could not read: their messages are lost.
     damaged_chunks: usize,
+    /// Single messages the index pass could not read (see [`LogIndex`]).
+    pub(super) lost_messages: Vec<LostMessage>,
     /// When the cloud topic carries LiDAR packets: their model and calibration.
     pub(super) packets: Option<(PacketModel, PacketCalibration)>,
     /// Where the world frame lies on the Earth: a frame of [`GEO_FRAMES`] and
@@ -174,6 +176,7 @@ impl RosDrive {
             camera: index.camera,
             read_images: true,
             damaged_chunks: index.damaged_chunks,
+            lost_messages: index.lost_messages,
             packets,
             period_ns,
             merged,
@@ -406,7 +409,7 @@ impl RosDrive {
                     Some(Ok(message))
                 }
                 // Recorded as reading the frames records it: at the cloud that follows.
-                Err(error @ Error::LogChunk { .. }) => {
+                Err(error) if error.is_lost_stretch() => {
                     self.skips.handle(clouds, error).err().map(Err)
                 }
                 Err(error) => Some(Err(error)),
