@@ -130,27 +130,52 @@ pub fn raw_cloud_points(cloud: &PointCloud2) -> Result<(CloudPoints, Option<u8>)
     // `checked` keeps every field inside a point, so `step` is at least 1.
     let rows = if width == 0 { 0 } else { height };
     let row_bytes = row_bytes as usize;
-    for row in 0..rows {
-        let row_data = &cloud.data[row * row_step..row * row_step + row_bytes];
-        for point in row_data.chunks_exact(step) {
-            let value =
-                |(offset, datatype_id): (usize, u8)| read_value(&point[offset..], datatype_id, big);
-            let read = |field: (usize, u8)| {
-                if plain {
-                    let bytes = &point[field.0..field.0 + 4];
-                    f32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]])
-                } else {
-                    value(field) as f32
+    // The common layout (x, y, z one after another, intensity anywhere, no label):
+    // each point's coordinates are read as one 12-byte array.
+    let contiguous = xyz[1].0 == xyz[0].0 + 4 && xyz[2].0 == xyz[0].0 + 8;
+    if plain && contiguous && label.is_none() {
+        let (at, intensity_at) = (xyz[0].0, intensity.map(|(offset, _)| offset));
+        let le = |bytes: &[u8]| f32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
+        for row in 0..rows {
+            let row_data = &cloud.data[row * row_step..row * row_step + row_bytes];
+            for point in row_data.chunks_exact(step) {
+                let coordinates: &[u8; 12] = point[at..at + 12].try_into().expect("12 bytes");
+                let (x, y, z) = (
+                    le(&coordinates[0..4]),
+                    le(&coordinates[4..8]),
+                    le(&coordinates[8..12]),
+                );
+                if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                    dropped += 1;
+                    continue;
                 }
-            };
-            let (x, y, z) = (read(xyz[0]), read(xyz[1]), read(xyz[2]));
-            if !(x.is_finite() && y.is_finite() && z.is_finite()) {
-                dropped += 1;
-                continue;
+                points.push([x, y, z, intensity_at.map_or(0.0, |i| le(&point[i..i + 4]))]);
             }
-            points.push([x, y, z, intensity.map_or(0.0, read)]);
-            if let (Some(labels), Some(field)) = (labels.as_mut(), label) {
-                labels.push(value(field) as u32);
+        }
+    } else {
+        for row in 0..rows {
+            let row_data = &cloud.data[row * row_step..row * row_step + row_bytes];
+            for point in row_data.chunks_exact(step) {
+                let value = |(offset, datatype_id): (usize, u8)| {
+                    read_value(&point[offset..], datatype_id, big)
+                };
+                let read = |field: (usize, u8)| {
+                    if plain {
+                        let bytes = &point[field.0..field.0 + 4];
+                        f32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]])
+                    } else {
+                        value(field) as f32
+                    }
+                };
+                let (x, y, z) = (read(xyz[0]), read(xyz[1]), read(xyz[2]));
+                if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                    dropped += 1;
+                    continue;
+                }
+                points.push([x, y, z, intensity.map_or(0.0, read)]);
+                if let (Some(labels), Some(field)) = (labels.as_mut(), label) {
+                    labels.push(value(field) as u32);
+                }
             }
         }
     }
@@ -243,6 +268,34 @@ mod tests {
                 [-4.0, 5.5, -6.0, 0.25],
                 [7.0, 8.0, 9.0, 1.0]
             ]
+        );
+    }
+
+    #[test]
+    fn the_common_layouts_reading_agrees_with_the_general_one() {
+        let rows: [&[[f32; 4]]; 2] = [
+            &[[1.5, -2.0, 3.0, 0.5], [0.0, f32::INFINITY, 0.0, 0.1]],
+            &[[-4.0, 5.5, -6.0, 0.25], [7.0, 8.0, 9.0, 1.0]],
+        ];
+        let common = cloud(2, 2, &rows);
+        // A label field (the padding bytes) sends the same points the general way.
+        let mut labelled = common.clone();
+        (labelled.fields).push(PointField::scalar("label", 16, datatype::UINT32));
+        let (fast, _) = raw_cloud_points(&common).unwrap();
+        let (general, _) = raw_cloud_points(&labelled).unwrap();
+        assert_eq!(fast.points, general.points);
+        assert_eq!((fast.dropped, general.dropped), (1, 1));
+        assert_eq!(general.labels, Some(vec![0xABAB_ABAB; 3]));
+        // Without an intensity field, intensity 0.
+        let mut bare = common.clone();
+        bare.fields.truncate(3);
+        let (bare, datatype_id) = raw_cloud_points(&bare).unwrap();
+        assert_eq!(datatype_id, None);
+        assert!(
+            bare.points
+                .iter()
+                .zip(&fast.points)
+                .all(|(b, f)| b[..3] == f[..3] && b[3] == 0.0)
         );
     }
 
