@@ -334,6 +334,55 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
     let skipped = summary["skipped"].to_string();
     assert_contains(&skipped, &["on /velodyne_points", "on /chatter"]);
 
+    // A recording that was not closed: its last messages still in the write-ahead
+    // log beside the file. All are read, from a copy; the input stays as it was.
+    let killed = dir.path().join("killed");
+    std::fs::create_dir(&killed).unwrap();
+    let (closed, open) = (dir.path().join("closed.db3"), killed.join("killed.db3"));
+    std::fs::copy(&db3, &closed).unwrap();
+    let database = rusqlite::Connection::open(&closed).unwrap();
+    let rows: i64 =
+        (database.query_row("SELECT count(*) FROM messages", [], |r| r.get(0))).unwrap();
+    database
+        .execute_batch(
+            "CREATE TABLE later AS SELECT * FROM messages WHERE id > 2;
+             DELETE FROM messages WHERE id > 2; VACUUM;
+             PRAGMA journal_mode = WAL; PRAGMA wal_autocheckpoint = 0;
+             INSERT INTO messages SELECT * FROM later; DROP TABLE later;",
+        )
+        .unwrap();
+    // Copied while the writer holds them: as a killed recorder leaves them.
+    std::fs::copy(&closed, &open).unwrap();
+    std::fs::copy(
+        dir.path().join("closed.db3-wal"),
+        killed.join("killed.db3-wal"),
+    )
+    .unwrap();
+    drop(database);
+    let input_bytes = |dir: &Path| {
+        let mut files: Vec<_> = (std::fs::read_dir(dir).unwrap())
+            .map(|entry| std::fs::read(entry.unwrap().path()).unwrap())
+            .collect();
+        files.sort();
+        files
+    };
+    let before = input_bytes(&killed);
+    assert!(
+        std::fs::metadata(killed.join("killed.db3-wal"))
+            .unwrap()
+            .len()
+            > 0
+    );
+    let output = travmap(&["run", arg(&open)]);
+    let stderr = common::stderr(&output);
+    success(output);
+    assert_contains(
+        &stderr,
+        &["notice:", "killed.db3-wal", "not yet in the file"],
+    );
+    assert_eq!(run_frames(&open), run_frames(&db3), "{rows} messages");
+    assert_eq!(input_bytes(&killed), before, "the input is left as it was");
+
     // metadata.yaml naming a file that is not there.
     let rosbag2 = dir.path().join("missing-file");
     std::fs::create_dir(&rosbag2).unwrap();

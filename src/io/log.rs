@@ -105,7 +105,7 @@ impl Log {
             match file {
                 LogFile::Bag(bag) => notices.extend(bag.notice().map(str::to_string)),
                 LogFile::Mcap(mcap) => notices.extend(mcap.notice()),
-                LogFile::Sqlite(_) => {}
+                LogFile::Sqlite(db3) => notices.extend(db3.notice().map(str::to_string)),
             }
         }
         Ok(Self {

@@ -4,7 +4,8 @@
 //!
 //! SQLite is the bundled library (no system one needed), and a `.db3` is opened
 //! immutable and read-only: reading never creates a journal or `-shm` file beside an
-//! input. Messages come in the order they were written (their row ids), as they do
+//! input (one with a write-ahead log beside it is read from a copy:
+//! [`super::sqlite_wal`]). Messages come in the order they were written (their row ids), as they do
 //! from an MCAP file.
 
 use std::collections::{HashMap, VecDeque};
@@ -16,6 +17,7 @@ use serde::Deserialize;
 
 use super::format::{InputFormat, detect};
 use super::log_message::{Connection, FileMessages, HEADER_BYTES, LogMessage, Part, Parts};
+use super::sqlite_wal::Readable;
 use crate::error::{Error, Result};
 
 /// The part of `metadata.yaml` that says where the messages are.
@@ -166,6 +168,8 @@ const PAGE_BYTES: usize = 16 << 20;
 /// A rosbag2 sqlite3 file: its topics read at open, its messages streamed.
 pub struct SqliteFile {
     path: PathBuf,
+    /// Where its messages are read from: the file, or a copy with its log.
+    readable: Readable,
     connections: HashMap<i64, Arc<Connection>>,
     /// Its own metadata (rosbag2 Iron and later keep a copy in the file) says each
     /// message is a zstd frame: read when the file is given without its directory.
@@ -174,7 +178,8 @@ pub struct SqliteFile {
 
 impl SqliteFile {
     pub fn open(path: &Path) -> Result<Self> {
-        let database = open_database(path)?;
+        let readable = Readable::of(path)?;
+        let database = open_database(path, &readable)?;
         let container = |problem| Error::LogContainer {
             path: path.to_path_buf(),
             problem,
@@ -186,6 +191,7 @@ impl SqliteFile {
             .map_err(container)?;
         Ok(Self {
             path: path.to_path_buf(),
+            readable,
             connections,
             zstd_messages: zstd_messages.unwrap_or(false),
         })
@@ -195,12 +201,17 @@ impl SqliteFile {
         &self.path
     }
 
+    /// Said when its messages are read from a copy (see [`Readable`]).
+    pub fn notice(&self) -> Option<&str> {
+        self.readable.notice.as_deref()
+    }
+
     /// The messages in row order, a page at a time: each page is its own query, so
     /// no statement outlives a call (the database handle is not shared between
     /// threads either). Of each message, the [`Part`] `parts` says: SQLite leaves
     /// the rest of a blob on disk.
     pub fn messages<'a>(&'a self, parts: Option<Parts<'a>>) -> FileMessages<'a> {
-        let database = match open_database(&self.path) {
+        let database = match open_database(&self.path, &self.readable) {
             Ok(database) => database,
             Err(error) => return Box::new(std::iter::once(Err(error.to_string()))),
         };
@@ -305,12 +316,21 @@ fn header_of(database: &rusqlite::Connection, rowid: i64) -> rusqlite::Result<Ve
     Ok(header)
 }
 
-/// `path` opened read-only and immutable (see the module's comment).
-fn open_database(path: &Path) -> Result<rusqlite::Connection> {
-    let uri = format!("file:{}?immutable=1", uri_path(path));
-    let flags = OpenFlags::SQLITE_OPEN_READ_ONLY
-        | OpenFlags::SQLITE_OPEN_URI
-        | OpenFlags::SQLITE_OPEN_NO_MUTEX;
+/// `path` opened read-only and immutable (see the module's comment); or, for a
+/// file with a write-ahead log, its copy, as SQLite opens a file with a log (it
+/// writes the `-shm` index of the log beside the copy).
+fn open_database(path: &Path, readable: &Readable) -> Result<rusqlite::Connection> {
+    let (uri, flags) = match readable.immutable {
+        true => (
+            format!("file:{}?immutable=1", uri_path(&readable.path)),
+            OpenFlags::SQLITE_OPEN_READ_ONLY,
+        ),
+        false => (
+            format!("file:{}", uri_path(&readable.path)),
+            OpenFlags::SQLITE_OPEN_READ_WRITE,
+        ),
+    };
+    let flags = flags | OpenFlags::SQLITE_OPEN_URI | OpenFlags::SQLITE_OPEN_NO_MUTEX;
     rusqlite::Connection::open_with_flags(uri, flags).map_err(|e| Error::LogContainer {
         path: path.to_path_buf(),
         problem: format!("cannot open as sqlite3: {e}"),
