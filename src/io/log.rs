@@ -16,7 +16,8 @@ pub use super::log_message::{Connection, FileMap, FileMessages, LogMessage, Part
 use super::mcap_messages::{Damage, Messages};
 use super::mcap_records::check_chunk_sizes;
 use super::mcap_stored::{Release, StoredLog, stored_log};
-use super::rosbag2::{Rosbag2Directory, SqliteFile, says_zstd_messages};
+use super::rosbag2::{Rosbag2Directory, says_zstd_messages};
+use super::sqlite::SqliteFile;
 use crate::error::{Error, LostMessage, Result};
 
 /// One file of a log.

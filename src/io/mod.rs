@@ -35,6 +35,7 @@ pub mod scan_folder;
 pub mod site_cloud;
 mod skips;
 mod source;
+pub mod sqlite;
 mod sqlite_wal;
 pub mod transforms;
 pub mod velodyne;
