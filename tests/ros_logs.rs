@@ -383,6 +383,19 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
     assert_eq!(run_frames(&open), run_frames(&db3), "{rows} messages");
     assert_eq!(input_bytes(&killed), before, "the input is left as it was");
 
+    // A bag directory without metadata.yaml: its storage files read, with a notice.
+    let unlisted = dir.path().join("unlisted");
+    std::fs::create_dir(&unlisted).unwrap();
+    std::fs::copy(&db3, unlisted.join("unlisted_0.db3")).unwrap();
+    let output = travmap(&["run", arg(&unlisted)]);
+    let stderr = common::stderr(&output);
+    success(output);
+    assert_contains(
+        &stderr,
+        &["notice:", "no metadata.yaml", "unlisted_0.db3", "reindex"],
+    );
+    assert_eq!(run_frames(&unlisted), run_frames(&db3));
+
     // metadata.yaml naming a file that is not there.
     let rosbag2 = dir.path().join("missing-file");
     std::fs::create_dir(&rosbag2).unwrap();

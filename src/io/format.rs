@@ -3,7 +3,7 @@
 //! diagnoses; this names what a file is even when travmap cannot read it.
 
 use std::io::Read;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 
@@ -153,10 +153,10 @@ pub fn detect(path: &Path) -> Result<InputFormat> {
         ));
     }
     if metadata.is_dir() {
-        return Ok(if path.join("metadata.yaml").is_file() {
-            InputFormat::Rosbag2
-        } else {
-            InputFormat::Kitti
+        let rosbag2 = path.join("metadata.yaml").is_file() || !storage_files(path).is_empty();
+        return Ok(match rosbag2 {
+            true => InputFormat::Rosbag2,
+            false => InputFormat::Kitti,
         });
     }
     let mut first = Vec::with_capacity(16);
@@ -200,9 +200,55 @@ fn unsupported(path: &Path, what: String) -> Error {
     }
 }
 
+/// A rosbag2 directory's storage files (`.db3`, `.mcap`) in the order rosbag2
+/// writes them: `bag_0`, `bag_1`, ... `bag_10` by the number after the last `_`,
+/// then by name. How a directory without `metadata.yaml` is read.
+pub fn storage_files(directory: &Path) -> Vec<PathBuf> {
+    let entries = std::fs::read_dir(directory).into_iter().flatten().flatten();
+    let mut files: Vec<PathBuf> = (entries.map(|entry| entry.path()))
+        .filter(|path| path.is_file())
+        .filter(|path| path.extension().is_some_and(|e| e == "db3" || e == "mcap"))
+        .collect();
+    // (bag name, index, stem) of `bag_3.db3`; a name without an index by itself.
+    let key = |path: &PathBuf| -> (String, Option<u64>, String) {
+        let stem = path.file_stem().unwrap_or_default().to_string_lossy();
+        let indexed = (stem.rsplit_once('_'))
+            .and_then(|(bag, n)| Some((bag.to_string(), n.parse::<u64>().ok()?)));
+        match indexed {
+            Some((bag, index)) => (bag, Some(index), stem.into_owned()),
+            None => (stem.to_string(), None, stem.into_owned()),
+        }
+    };
+    files.sort_by_cached_key(key);
+    files
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn storage_files_come_in_rosbag2s_order() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in [
+            "b_10.db3",
+            "b_2.db3",
+            "b_0.db3",
+            "notes.txt",
+            "a.mcap",
+            "b_1.db3",
+        ] {
+            std::fs::write(dir.path().join(name), "").unwrap();
+        }
+        std::fs::create_dir(dir.path().join("c_0.db3")).unwrap();
+        let names: Vec<_> = (storage_files(dir.path()).iter())
+            .map(|path| path.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(
+            names,
+            ["a.mcap", "b_0.db3", "b_1.db3", "b_2.db3", "b_10.db3"]
+        );
+    }
 
     fn detect_bytes(name: &str, bytes: &[u8]) -> std::result::Result<InputFormat, String> {
         let dir = tempfile::tempdir().unwrap();

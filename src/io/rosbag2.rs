@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use super::format::{InputFormat, detect};
+use super::format::{InputFormat, detect, storage_files};
 use crate::error::{Error, Result};
 
 /// The part of `metadata.yaml` that says where the messages are.
@@ -67,6 +67,9 @@ pub struct Rosbag2Directory {
 impl Rosbag2Directory {
     pub fn open(directory: &Path) -> Result<Self> {
         let metadata_path = directory.join("metadata.yaml");
+        if !metadata_path.exists() {
+            return Self::without_metadata(directory);
+        }
         let problem = |problem: String| Error::LogContainer {
             path: metadata_path.clone(),
             problem,
@@ -128,6 +131,38 @@ impl Rosbag2Directory {
             zstd_messages: compression == Compression::ZstdMessages,
             decompressed,
             notice,
+        })
+    }
+
+    /// A directory of storage files without `metadata.yaml` (a recording that was
+    /// not closed, or copied without it): its files in rosbag2's order, each read as
+    /// it says of itself (compression included, from the metadata each file keeps).
+    fn without_metadata(directory: &Path) -> Result<Self> {
+        let mut storage = Vec::new();
+        for path in storage_files(directory) {
+            let format = detect(&path)?;
+            if !matches!(format, InputFormat::Sqlite | InputFormat::Mcap) {
+                return Err(Error::LogContainer {
+                    path,
+                    problem: "a storage file of a rosbag2 directory, but neither sqlite3 nor MCAP"
+                        .into(),
+                });
+            }
+            storage.push((path, format));
+        }
+        let names: Vec<_> = (storage.iter())
+            .filter_map(|(path, _)| Some(path.file_name()?.to_string_lossy()))
+            .collect();
+        let notice = format!(
+            "{}: no metadata.yaml (a recording that was not closed, or a copy without it): its storage files read in rosbag2's order, {}; `ros2 bag reindex` writes the metadata",
+            directory.display(),
+            names.join(", ")
+        );
+        Ok(Self {
+            storage,
+            zstd_messages: false,
+            decompressed: None,
+            notice: Some(notice),
         })
     }
 }

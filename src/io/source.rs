@@ -314,15 +314,5 @@ fn misplaced(path: &Path, options: &DriveOptions) -> Option<String> {
             sequence.display()
         ));
     }
-    let storage = std::fs::read_dir(path)
-        .into_iter()
-        .flatten()
-        .flatten()
-        .any(|e| {
-            let p = e.path();
-            p.extension().is_some_and(|x| x == "db3" || x == "mcap")
-        });
-    storage.then(|| {
-        "a rosbag2 directory without metadata.yaml: pass its .db3 or .mcap file itself, or restore the metadata with `ros2 bag reindex`".into()
-    })
+    None
 }
