@@ -142,7 +142,8 @@ pub enum Error {
     },
 
     #[error(
-        "{path}: the chunk at byte {offset} (log time {start_s:.3} to {end_s:.3} s) is damaged ({problem}): its messages are lost (--keep-going reads on past it; `mcap recover` rewrites what can be read)"
+        "{path}: the chunk at byte {offset} (log time {start_s:.3} to {end_s:.3} s) is damaged ({problem}): its messages are lost (--keep-going reads on past it{})",
+        recover_hint(path)
     )]
     LogChunk {
         path: PathBuf,
@@ -530,6 +531,14 @@ pub(crate) fn contain_panics<T>(f: impl FnOnce() -> T) -> std::result::Result<T,
 
 /// Where in a log reading stopped, in words a user can check against `mcap cat`:
 /// the count of messages read before the problem (none: nothing to say).
+/// What rewrites a file with a damaged chunk, when a common tool does.
+fn recover_hint(path: &std::path::Path) -> &'static str {
+    match path.extension().is_some_and(|e| e == "mcap") {
+        true => "; `mcap recover` rewrites what can be read",
+        false => "",
+    }
+}
+
 fn messages_before(ordinal: usize) -> String {
     match ordinal {
         0 => String::new(),

@@ -263,7 +263,15 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
         }
     });
     let err = clean_failure(travmap(&["run", arg(&damaged)]));
-    assert_contains(&err, &["damaged.bag", "chunk at byte"]);
+    assert_contains(&err, &["damaged.bag", "chunk at byte", "is damaged"]);
+    // Its chunk alone is lost: the index gives its log times, and the chunks after
+    // it are read.
+    let output = travmap(&["run", arg(&damaged), "--keep-going", "--json"]);
+    assert_eq!(output.status.code(), Some(3), "{}", common::stderr(&output));
+    let (frames, summary) = common::json_records(&common::stdout(&output));
+    let all = run_frames(&lz4);
+    assert!(!frames.is_empty() && frames.len() < all.len(), "{summary}");
+    assert_contains(&summary["skipped"].to_string(), &["damaged.bag", "log time"]);
 
     // A .db3 whose pages are garbage after the SQLite header.
     let db3 = routes.join("rosbag2-sqlite3/rosbag2-sqlite3.db3");

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use super::format::BAG_MAGIC;
-use super::log_message::{Connection, FileMap, LogMessage};
+use super::log_message::{ChunkSpan, Connection, Damage, FileMap, LogMessage};
 use crate::error::{Error, Result};
 
 /// Record opcodes (the `op` header field).
@@ -185,7 +185,8 @@ pub struct BagFile {
     path: PathBuf,
     /// Its pages given back once a chunk is read (see [`FileMap`]).
     map: FileMap,
-    chunks: Vec<usize>,
+    /// Where each chunk starts, and its messages' log times when the index says.
+    chunks: Vec<(usize, Option<(u64, u64)>)>,
     connections: HashMap<u32, Arc<Connection>>,
     notice: Option<String>,
 }
@@ -273,13 +274,15 @@ impl BagFile {
                                 "the chunk info at byte {offset} places a chunk at byte {position}, outside the data before the index"
                             )
                         })?;
-                    self.chunks.push(position);
+                    let times = (record.u64("start_time")?, record.u64("end_time")?);
+                    self.chunks
+                        .push((position, Some((stamp_ns(times.0), stamp_ns(times.1)))));
                 }
                 _ => {}
             }
             offset = record.end;
         }
-        self.chunks.sort_unstable();
+        self.chunks.sort_unstable_by_key(|&(position, _)| position);
         Ok(())
     }
 
@@ -300,7 +303,7 @@ impl BagFile {
                 }
             };
             if record.op()? == op::CHUNK {
-                self.chunks.push(offset);
+                self.chunks.push((offset, None));
             }
             offset = record.end;
         }
@@ -381,10 +384,30 @@ pub struct BagMessages<'a> {
 }
 
 impl BagMessages<'_> {
-    fn next_message(&mut self) -> Option<std::result::Result<LogMessage, String>> {
+    /// A chunk's damage: with its log times from the index, the rest of the chunk
+    /// is lost and reading goes on after it; without, it is the end.
+    fn damage(&mut self, problem: String) -> Damage {
+        let (offset, times) = self.bag.chunks[self.next_chunk - 1];
+        self.chunk.clear();
+        Damage {
+            problem,
+            chunk: times.map(|(start_ns, end_ns)| ChunkSpan {
+                bytes: offset..offset,
+                start_ns,
+                end_ns,
+            }),
+        }
+    }
+
+    fn next_message(&mut self) -> Option<std::result::Result<LogMessage, Damage>> {
+        self.next_in_chunk()
+            .map(|message| message.map_err(|problem| self.damage(problem)))
+    }
+
+    fn next_in_chunk(&mut self) -> Option<std::result::Result<LogMessage, String>> {
         loop {
             if self.at >= self.chunk.len() {
-                let offset = *self.bag.chunks.get(self.next_chunk)?;
+                let (offset, _) = *self.bag.chunks.get(self.next_chunk)?;
                 self.next_chunk += 1;
                 self.at = 0;
                 if let Err(problem) = self.bag.chunk(offset, &mut self.chunk) {
@@ -392,7 +415,7 @@ impl BagMessages<'_> {
                 }
                 continue;
             }
-            let chunk_offset = self.bag.chunks[self.next_chunk - 1];
+            let (chunk_offset, _) = self.bag.chunks[self.next_chunk - 1];
             let in_chunk =
                 |problem: String| format!("in the chunk at byte {chunk_offset}, {problem}");
             let record = match Record::at(&self.chunk, self.at) {
@@ -424,9 +447,7 @@ impl BagMessages<'_> {
                 record.offset
             )
         })?;
-        let time = record.u64("time")?;
-        // `time`: uint32 seconds, then uint32 nanoseconds.
-        let stamp_ns = (time & 0xffff_ffff) * 1_000_000_000 + (time >> 32);
+        let stamp_ns = stamp_ns(record.u64("time")?);
         Ok(LogMessage {
             connection: connection.clone(),
             log_time_ns: stamp_ns,
@@ -436,16 +457,21 @@ impl BagMessages<'_> {
     }
 }
 
-impl Iterator for BagMessages<'_> {
-    type Item = std::result::Result<LogMessage, String>;
+/// A bag's `time` (uint32 seconds, then uint32 nanoseconds) in nanoseconds.
+fn stamp_ns(time: u64) -> u64 {
+    (time & 0xffff_ffff) * 1_000_000_000 + (time >> 32)
+}
 
-    /// Nothing after the first error.
+impl Iterator for BagMessages<'_> {
+    type Item = std::result::Result<LogMessage, Damage>;
+
+    /// Nothing after the first error but a damaged chunk's (see [`Damage`]).
     fn next(&mut self) -> Option<Self::Item> {
         if self.failed {
             return None;
         }
         let next = self.next_message();
-        self.failed = matches!(next, Some(Err(_)));
+        self.failed = matches!(next, Some(Err(Damage { chunk: None, .. })));
         next
     }
 }
@@ -564,10 +590,7 @@ mod tests {
             + 5;
         bytes[size_at] += 1;
         let bag = open(&bytes).unwrap();
-        let err = bag.messages().next().unwrap().unwrap_err();
-        assert!(
-            err.contains("decompresses to") && err.contains("claims"),
-            "{err}"
-        );
+        let err = bag.messages().next().unwrap().unwrap_err().problem;
+        assert!(err.contains("decompresses to") && err.contains("claims"));
     }
 }

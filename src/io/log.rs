@@ -12,8 +12,8 @@ use std::sync::Arc;
 use super::bag::BagFile;
 use super::format::InputFormat;
 use super::log_message::HEADER_BYTES;
-pub use super::log_message::{Connection, FileMap, FileMessages, LogMessage, Part, Parts};
-use super::mcap_messages::{Damage, Messages};
+pub use super::log_message::{Connection, Damage, FileMap, FileMessages, LogMessage, Part, Parts};
+use super::mcap_messages::Messages;
 use super::mcap_records::check_chunk_sizes;
 use super::mcap_stored::{Release, StoredLog, stored_log};
 use super::rosbag2::{Rosbag2Directory, says_zstd_messages};
@@ -52,7 +52,7 @@ impl LogFile {
     ) -> Box<dyn Iterator<Item = std::result::Result<LogMessage, Damage>> + 'a> {
         match self {
             LogFile::Mcap(file) => Box::new(file.messages(threads, parts)),
-            LogFile::Bag(file) => Box::new(file.messages().map(whole_file_damage)),
+            LogFile::Bag(file) => Box::new(file.messages()),
             LogFile::Sqlite(file) => Box::new(file.messages(parts).map(whole_file_damage)),
         }
     }

@@ -74,6 +74,23 @@ pub struct LogMessage {
     pub data: Vec<u8>,
 }
 
+/// Where a chunk lies in the file and the log times of its messages: what a reader
+/// needs to step over a damaged one and name it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChunkSpan {
+    pub bytes: std::ops::Range<usize>,
+    pub start_ns: u64,
+    pub end_ns: u64,
+}
+
+/// Why a message could not be read; with `chunk`, only that chunk's messages are
+/// lost and reading goes on after it.
+#[derive(Debug)]
+pub struct Damage {
+    pub problem: String,
+    pub chunk: Option<ChunkSpan>,
+}
+
 /// A stream of messages of one file; an error names where in the file it is.
 pub type FileMessages<'a> = Box<dyn Iterator<Item = std::result::Result<LogMessage, String>> + 'a>;
 

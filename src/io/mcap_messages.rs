@@ -10,8 +10,8 @@ use std::io::Read;
 use mcap::records::{Record, op};
 use mcap::{McapError, Message};
 
-use super::log_message::{FileMap, HEADER_BYTES, Part, Parts};
-use super::mcap_records::{ChunkSpan, RecordWalk, check_lengths, chunk_parts};
+use super::log_message::{ChunkSpan, Damage, FileMap, HEADER_BYTES, Part, Parts};
+use super::mcap_records::{RecordWalk, check_lengths, chunk_parts};
 
 /// Bytes a pass reads before it gives the pages behind it back.
 const RELEASE_BYTES: usize = 32 << 20;
@@ -53,14 +53,6 @@ enum Pending<'a> {
     },
     /// Nothing can be read past this.
     End(String),
-}
-
-/// Why a message could not be read; with `chunk`, only that chunk's messages are
-/// lost and reading goes on after it.
-#[derive(Debug)]
-pub(super) struct Damage {
-    pub(super) problem: String,
-    pub(super) chunk: Option<ChunkSpan>,
 }
 
 impl<'a> Messages<'a> {

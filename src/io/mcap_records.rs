@@ -183,15 +183,6 @@ pub(super) struct Layout {
     pub(super) rosbag2_metadata: Option<String>,
 }
 
-/// Where a chunk lies in the file and the log times of its messages: what a reader
-/// needs to step over a damaged one and name it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ChunkSpan {
-    pub bytes: std::ops::Range<usize>,
-    pub start_ns: u64,
-    pub end_ns: u64,
-}
-
 /// Checks every chunk's declared uncompressed size before the mcap crate, which
 /// reserves that size up front, sees it: an uncompressed chunk must declare its own
 /// length, and a compressed one claiming more than `TRUSTED_CHUNK_RATIO` times its
