@@ -271,7 +271,10 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
     let (frames, summary) = common::json_records(&common::stdout(&output));
     let all = run_frames(&lz4);
     assert!(!frames.is_empty() && frames.len() < all.len(), "{summary}");
-    assert_contains(&summary["skipped"].to_string(), &["damaged.bag", "log time"]);
+    assert_contains(
+        &summary["skipped"].to_string(),
+        &["damaged.bag", "log time"],
+    );
 
     // A .db3 whose pages are garbage after the SQLite header.
     let db3 = routes.join("rosbag2-sqlite3/rosbag2-sqlite3.db3");
