@@ -410,6 +410,13 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
         &["notice:", "no metadata.yaml", "unlisted_0.db3", "reindex"],
     );
     assert_eq!(run_frames(&unlisted), run_frames(&db3));
+    // ... and one compressed whole (file mode), decompressed first.
+    let unlisted_zstd = dir.path().join("unlisted-zstd");
+    std::fs::create_dir(&unlisted_zstd).unwrap();
+    let compressed = "rosbag2-sqlite3-zstd-file.db3.zstd";
+    let from = routes.join("rosbag2-sqlite3-zstd-file").join(compressed);
+    std::fs::copy(from, unlisted_zstd.join(compressed)).unwrap();
+    assert_eq!(run_frames(&unlisted_zstd), run_frames(&db3));
 
     // metadata.yaml naming a file that is not there.
     let rosbag2 = dir.path().join("missing-file");

@@ -200,23 +200,30 @@ fn unsupported(path: &Path, what: String) -> Error {
     }
 }
 
-/// A rosbag2 directory's storage files (`.db3`, `.mcap`) in the order rosbag2
+/// A rosbag2 directory's storage files (`.db3`, `.mcap`, either `.zstd`) in the order rosbag2
 /// writes them: `bag_0`, `bag_1`, ... `bag_10` by the number after the last `_`,
 /// then by name. How a directory without `metadata.yaml` is read.
 pub fn storage_files(directory: &Path) -> Vec<PathBuf> {
+    // The name without its storage extension (and `.zstd`, compressed whole).
+    let stem = |path: &Path| {
+        let name = path.file_name()?.to_str()?;
+        let name = name.strip_suffix(".zstd").unwrap_or(name);
+        name.strip_suffix(".db3")
+            .or_else(|| name.strip_suffix(".mcap"))
+            .map(str::to_string)
+    };
     let entries = std::fs::read_dir(directory).into_iter().flatten().flatten();
     let mut files: Vec<PathBuf> = (entries.map(|entry| entry.path()))
-        .filter(|path| path.is_file())
-        .filter(|path| path.extension().is_some_and(|e| e == "db3" || e == "mcap"))
+        .filter(|path| path.is_file() && stem(path).is_some())
         .collect();
     // (bag name, index, stem) of `bag_3.db3`; a name without an index by itself.
     let key = |path: &PathBuf| -> (String, Option<u64>, String) {
-        let stem = path.file_stem().unwrap_or_default().to_string_lossy();
+        let stem = stem(path).unwrap_or_default();
         let indexed = (stem.rsplit_once('_'))
             .and_then(|(bag, n)| Some((bag.to_string(), n.parse::<u64>().ok()?)));
         match indexed {
-            Some((bag, index)) => (bag, Some(index), stem.into_owned()),
-            None => (stem.to_string(), None, stem.into_owned()),
+            Some((bag, index)) => (bag, Some(index), stem),
+            None => (stem.clone(), None, stem),
         }
     };
     files.sort_by_cached_key(key);
@@ -232,7 +239,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         for name in [
             "b_10.db3",
-            "b_2.db3",
+            "b_2.db3.zstd",
             "b_0.db3",
             "notes.txt",
             "a.mcap",
@@ -246,7 +253,7 @@ mod tests {
             .collect();
         assert_eq!(
             names,
-            ["a.mcap", "b_0.db3", "b_1.db3", "b_2.db3", "b_10.db3"]
+            ["a.mcap", "b_0.db3", "b_1.db3", "b_2.db3.zstd", "b_10.db3"]
         );
     }
 

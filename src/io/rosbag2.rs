@@ -95,16 +95,7 @@ impl Rosbag2Directory {
                 )));
             }
             if zstd_files && relative.ends_with(".zstd") {
-                let into = match &mut decompressed {
-                    Some(into) => into,
-                    empty => empty.insert(
-                        tempfile::Builder::new()
-                            .prefix("travmap-rosbag2-")
-                            .tempdir()
-                            .map_err(|e| Error::io(std::env::temp_dir(), e))?,
-                    ),
-                };
-                path = decompress_file(&path, into.path())?;
+                path = decompress_file(&path, &mut decompressed)?;
             }
             let format = detect(&path)?;
             if !matches!(format, InputFormat::Sqlite | InputFormat::Mcap) {
@@ -115,22 +106,11 @@ impl Rosbag2Directory {
             }
             storage.push((path, format));
         }
-        let notice = decompressed.as_ref().map(|into| {
-            let bytes: u64 = (storage.iter())
-                .filter_map(|(path, _)| std::fs::metadata(path).ok())
-                .map(|metadata| metadata.len())
-                .sum();
-            format!(
-                "the bag's storage files are zstd-compressed whole (file mode): decompressed to {} ({:.1} MB, removed at exit)",
-                into.path().display(),
-                bytes as f64 / 1e6
-            )
-        });
         Ok(Self {
+            notice: decompressed_notice(&decompressed, &storage),
             storage,
             zstd_messages: compression == Compression::ZstdMessages,
             decompressed,
-            notice,
         })
     }
 
@@ -138,8 +118,15 @@ impl Rosbag2Directory {
     /// not closed, or copied without it): its files in rosbag2's order, each read as
     /// it says of itself (compression included, from the metadata each file keeps).
     fn without_metadata(directory: &Path) -> Result<Self> {
-        let mut storage = Vec::new();
-        for path in storage_files(directory) {
+        let (mut storage, mut decompressed, mut names) = (Vec::new(), None, Vec::new());
+        for mut path in storage_files(directory) {
+            names.extend(
+                path.file_name()
+                    .map(|name| name.to_string_lossy().into_owned()),
+            );
+            if path.extension().is_some_and(|e| e == "zstd") {
+                path = decompress_file(&path, &mut decompressed)?;
+            }
             let format = detect(&path)?;
             if !matches!(format, InputFormat::Sqlite | InputFormat::Mcap) {
                 return Err(Error::LogContainer {
@@ -150,28 +137,53 @@ impl Rosbag2Directory {
             }
             storage.push((path, format));
         }
-        let names: Vec<_> = (storage.iter())
-            .filter_map(|(path, _)| Some(path.file_name()?.to_string_lossy()))
-            .collect();
         let notice = format!(
             "{}: no metadata.yaml (a recording that was not closed, or a copy without it): its storage files read in rosbag2's order, {}; `ros2 bag reindex` writes the metadata",
             directory.display(),
             names.join(", ")
         );
+        let notices = [Some(notice), decompressed_notice(&decompressed, &storage)];
         Ok(Self {
             storage,
             zstd_messages: false,
-            decompressed: None,
-            notice: Some(notice),
+            decompressed,
+            notice: Some(notices.into_iter().flatten().collect::<Vec<_>>().join("; ")),
         })
     }
 }
 
-/// `compressed` (a storage file zstd-compressed whole) decompressed into the
-/// directory `into`, under its name without `.zstd`.
-fn decompress_file(compressed: &Path, into: &Path) -> Result<PathBuf> {
+/// What is said of storage files decompressed into `decompressed`.
+fn decompressed_notice(
+    decompressed: &Option<tempfile::TempDir>,
+    storage: &[(PathBuf, InputFormat)],
+) -> Option<String> {
+    let into = decompressed.as_ref()?;
+    let bytes: u64 = (storage.iter())
+        .filter(|(path, _)| path.starts_with(into.path()))
+        .filter_map(|(path, _)| std::fs::metadata(path).ok())
+        .map(|metadata| metadata.len())
+        .sum();
+    Some(format!(
+        "the bag's storage files are zstd-compressed whole (file mode): decompressed to {} ({:.1} MB, removed at exit)",
+        into.path().display(),
+        bytes as f64 / 1e6
+    ))
+}
+
+/// `compressed` (a storage file zstd-compressed whole) decompressed into a
+/// temporary directory (made at the first), under its name without `.zstd`.
+fn decompress_file(compressed: &Path, into: &mut Option<tempfile::TempDir>) -> Result<PathBuf> {
+    let into = match into {
+        Some(into) => into,
+        empty => empty.insert(
+            tempfile::Builder::new()
+                .prefix("travmap-rosbag2-")
+                .tempdir()
+                .map_err(|e| Error::io(std::env::temp_dir(), e))?,
+        ),
+    };
     let name = compressed.file_stem().unwrap_or(compressed.as_os_str());
-    let path = into.join(name);
+    let path = into.path().join(name);
     let source = std::fs::File::open(compressed).map_err(|e| Error::io(compressed, e))?;
     let mut target = std::fs::File::create(&path).map_err(|e| Error::io(&path, e))?;
     let mut decoder =
