@@ -15,6 +15,7 @@ pub mod model_file;
 mod reduced_set;
 mod set;
 pub mod smo;
+mod working_set;
 
 use crate::config::{ClassWeights, Config, Criterion, FeatureGroup, TrainingConfig};
 use crate::error::{Error, Result};
