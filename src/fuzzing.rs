@@ -8,7 +8,7 @@ use std::path::Path;
 use crate::Config;
 use crate::io::Source;
 use crate::io::cloud::cloud_points;
-use crate::io::image::image_pixels;
+use crate::io::image::{image_pixels, jpeg_pixels};
 use crate::io::kitti::{
     drop_non_finite, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
 };
@@ -94,8 +94,10 @@ pub fn ros_point_cloud(data: &[u8]) {
     }
 }
 
-/// A `CompressedImage` (png) and a raw `Image` message, decoded to pixels.
+/// A `CompressedImage` (PNG or JPEG) and a raw `Image` message, decoded to pixels;
+/// and the bytes as a JPEG file themselves.
 pub fn ros_image(data: &[u8]) {
+    let _ = jpeg_pixels(data);
     for encoding in [MessageEncoding::Cdr, MessageEncoding::Ros1] {
         let _ = image_pixels(data, true, encoding);
         let _ = image_pixels(data, false, encoding);

@@ -464,3 +464,92 @@ fn files_travmap_does_not_read_are_named_not_misdiagnosed() {
     }
     assert_eq!(detect(&sample).unwrap(), InputFormat::Kitti);
 }
+
+/// Every cell's appearance values (None where no image covers it) of each frame of
+/// `input`, on the training grid, through the library.
+fn appearance_of(input: &Path) -> Vec<Option<Vec<f32>>> {
+    let mut config = travmap::Config::default();
+    config.grid.size_m = config.training.grid_size_m;
+    let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
+    let source = travmap::io::Source::open(input, &Default::default(), &|_| {}).unwrap();
+    let selection = travmap::drive::Selection::new(source, 0..usize::MAX);
+    let mut cells = Vec::new();
+    selection
+        .run::<travmap::Error>(&config, Some(&model), |result| {
+            let features = &result.features;
+            cells.extend(
+                (0..result.layout.cell_count())
+                    .map(|c| features.appearance(c).map(<[f32]>::to_vec)),
+            );
+            Ok(())
+        })
+        .unwrap();
+    cells
+}
+
+#[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
+fn a_jpeg_camera_is_read_as_its_png_original_less_the_jpeg_loss() {
+    let Some((dir, seq)) = common::one_frame_with_image() else {
+        return;
+    };
+    let drive = dir.path().join("drive.mcap");
+    write_output("convert", &seq, &drive, &[]);
+    let Some(routes) = routes(&drive, dir.path()) else {
+        return;
+    };
+    let jpeg = routes.join("rosbag2-mcap-jpeg");
+    // The route's camera is what fleets record: JPEG, named as image_transport names it.
+    let camera = messages_on(&jpeg, &["/camera_2/image/compressed"]);
+    assert_eq!(camera.len(), 1);
+    let message: travmap::io::ros::CompressedImage =
+        travmap::io::ros::decode(&camera[0].2).unwrap();
+    assert_eq!(message.format, "rgb8; jpeg compressed bgr8");
+    assert!(message.data.starts_with(&[0xFF, 0xD8, 0xFF]));
+
+    let eval = |input: &Path| {
+        let report = common::json_summary(&["eval", arg(input)])["report"].clone();
+        (
+            report["frames_with_images"].clone(),
+            report["cells_with_appearance"].clone(),
+        )
+    };
+    assert_eq!(eval(&jpeg), eval(&drive));
+    assert_eq!(eval(&drive).0, 1);
+
+    // The same cells are seen; their HSV histograms move by JPEG's loss (hue is
+    // unsteady in the road's grey pixels), far less than from one cell to another.
+    let (png_cells, jpeg_cells) = (appearance_of(&drive), appearance_of(&jpeg));
+    assert_eq!(png_cells.len(), jpeg_cells.len());
+    let l1 = |a: &[f32], b: &[f32]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs() as f64)
+            .sum::<f64>()
+    };
+    let seen: Vec<(&[f32], &[f32])> = png_cells
+        .iter()
+        .zip(&jpeg_cells)
+        .filter_map(|(p, j)| {
+            assert_eq!(p.is_some(), j.is_some(), "a cell seen in one camera only");
+            Some((p.as_deref()?, j.as_deref()?))
+        })
+        .collect();
+    assert!(seen.len() > 500, "{} cells seen", seen.len());
+    let mean = |pairs: &mut dyn Iterator<Item = f64>| {
+        let values: Vec<f64> = pairs.collect();
+        values.iter().sum::<f64>() / values.len() as f64
+    };
+    let jpeg_loss = mean(&mut seen.iter().map(|(p, j)| l1(p, j)));
+    let between_cells = mean(
+        &mut seen
+            .iter()
+            .zip(seen.iter().skip(7))
+            .map(|(a, b)| l1(a.0, b.0)),
+    );
+    // Measured: 1.59 against 3.00 (L1 over the 88 values, 644 cells).
+    assert!(
+        jpeg_loss < 0.6 * between_cells,
+        "JPEG against PNG {jpeg_loss:.3}, between cells {between_cells:.3}"
+    );
+}

@@ -8,6 +8,9 @@ recorded-log format travmap reads, with real writers and no travmap code:
   rosbag2-sqlite3-zstd-file/, rosbag2-mcap-zstd-file/
                                              the same, each storage file zstd-compressed (file mode)
   rosbag2-from-bag/                          rosbags-convert of ros1-none.bag (ROS 1 -> ROS 2)
+  rosbag2-mcap-jpeg/                         rosbags' rosbag2 writer, every camera image made
+                                             a JPEG (Pillow, quality 90) named as image_transport
+                                             names it, `rgb8; jpeg compressed bgr8`
 
 Messages become ROS 1 with rosbags' CDR -> ROS 1 conversion (which adds the Header's
 seq); ROS 1 message definitions and md5sums come from rosbags' Noetic type store.
@@ -16,10 +19,14 @@ not read, to check that it is copied as recorded.
 
 usage: python ros_routes.py DRIVE.mcap OUT_DIR [ROSBAGS_CONVERT]
 """
+import io
 import subprocess
 import sys
 from pathlib import Path
 
+from PIL import Image
+
+import numpy as np
 from mcap.reader import make_reader
 from mcap.writer import Writer as McapWriter
 from rosbags.rosbag1 import Writer as Bag1Writer
@@ -32,6 +39,7 @@ ROS1 = get_typestore(Stores.ROS1_NOETIC)
 # Noetic's store lacks tf2_msgs; its TFMessage is one field over the Noetic types.
 ROS1.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
 CHATTER = "std_msgs/msg/String"
+COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 
 
 def recorded(path):
@@ -90,6 +98,21 @@ def rosbag2(messages, path, storage, compression=None):
             writer.write(connections[topic], stamp, cdr)
 
 
+def as_jpeg(messages):
+    """`messages` with every CompressedImage's PNG re-encoded as a JPEG."""
+    out = []
+    for topic, msgtype, stamp, cdr in messages:
+        if msgtype == COMPRESSED_IMAGE:
+            image = ROS2.deserialize_cdr(cdr, msgtype)
+            jpeg = io.BytesIO()
+            Image.open(io.BytesIO(bytes(image.data))).convert("RGB").save(jpeg, "JPEG", quality=90)
+            image.format = "rgb8; jpeg compressed bgr8"
+            image.data = np.frombuffer(jpeg.getvalue(), dtype=np.uint8)
+            cdr = bytes(ROS2.serialize_cdr(image, msgtype))
+        out.append((topic, msgtype, stamp, cdr))
+    return out
+
+
 def main():
     drive, out = Path(sys.argv[1]), Path(sys.argv[2])
     out.mkdir(parents=True, exist_ok=True)
@@ -103,6 +126,7 @@ def main():
     for mode, suffix in [(CompressionMode.MESSAGE, ""), (CompressionMode.FILE, "-file")]:
         for storage, name in [(StoragePlugin.SQLITE3, "sqlite3"), (StoragePlugin.MCAP, "mcap")]:
             rosbag2(messages, out / f"rosbag2-{name}-zstd{suffix}", storage, mode)
+    rosbag2(as_jpeg(messages), out / "rosbag2-mcap-jpeg", StoragePlugin.MCAP)
     if len(sys.argv) > 3:
         subprocess.run(
             [sys.argv[3], "--src", str(out / "ros1-none.bag"), "--dst", str(out / "rosbag2-from-bag")],
