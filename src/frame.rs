@@ -3,6 +3,8 @@
 
 use nalgebra::{Isometry3, Matrix3, Matrix3x4, Matrix4};
 
+use crate::lens::Distortion;
+
 /// One LiDAR scan with everything the method needs about it.
 #[derive(Clone, Debug)]
 pub struct Frame {
@@ -81,9 +83,21 @@ pub struct RgbImage {
 /// The colour camera of a frame and its image.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CameraImage {
-    /// `P2 * Tr`: homogeneous velodyne coordinates to homogeneous pixels.
+    /// `P2 * Tr`: homogeneous velodyne coordinates to homogeneous pixels, as a
+    /// pinhole camera (a rectified image) sees them.
     pub image_from_velodyne: Matrix3x4<f64>,
+    /// A raw image's lens, when it bends rays: then points are projected through it.
+    pub lens: Option<Lens>,
     pub image: RgbImage,
+}
+
+/// A camera whose lens distorts: its pose, intrinsics and distortion, applied in
+/// that order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lens {
+    pub camera_from_velodyne: Matrix3x4<f64>,
+    pub k: Matrix3<f64>,
+    pub distortion: Distortion,
 }
 
 impl CameraImage {
@@ -95,14 +109,16 @@ impl CameraImage {
         let p = projection * cam0_from_velodyne;
         Self {
             image_from_velodyne: p.fixed_view::<3, 4>(0, 0).into_owned(),
+            lens: None,
             image,
         }
     }
 
-    /// From intrinsics K and the camera's pose: `K [R | t]` with `[R | t]` =
-    /// `camera_from_velodyne`.
+    /// From intrinsics K, the lens's distortion (None: a pinhole) and the camera's
+    /// pose: `K [R | t]` with `[R | t]` = `camera_from_velodyne`.
     pub fn from_intrinsics(
         k: &Matrix3<f64>,
+        distortion: Option<Distortion>,
         camera_from_velodyne: &Isometry3<f64>,
         image: RgbImage,
     ) -> Self {
@@ -112,16 +128,34 @@ impl CameraImage {
             .into_owned();
         Self {
             image_from_velodyne: k * extrinsics,
+            lens: distortion.map(|distortion| Lens {
+                camera_from_velodyne: extrinsics,
+                k: *k,
+                distortion,
+            }),
             image,
         }
     }
 
     /// Pixel coordinates (x right, y down; pixel (i, j) spans [i, i+1) x [j, j+1)) of a
-    /// velodyne point, None behind (or within 1 mm of) the camera plane.
+    /// velodyne point, None behind (or within 1 mm of) the camera plane, or where
+    /// the lens model folds back.
     pub fn project(&self, p: [f64; 3]) -> Option<[f64; 2]> {
-        let m = &self.image_from_velodyne;
+        let (m, lens) = match &self.lens {
+            None => (&self.image_from_velodyne, None),
+            Some(lens) => (&lens.camera_from_velodyne, Some(lens)),
+        };
         let row = |r: usize| m[(r, 0)] * p[0] + m[(r, 1)] * p[1] + m[(r, 2)] * p[2] + m[(r, 3)];
         let w = row(2);
-        (w > 1e-3).then(|| [row(0) / w, row(1) / w])
+        (w > 1e-3).then_some(())?;
+        let Some(lens) = lens else {
+            return Some([row(0) / w, row(1) / w]);
+        };
+        let [x, y] = lens.distortion.distort([row(0) / w, row(1) / w])?;
+        let k = &lens.k;
+        Some([
+            k[(0, 0)] * x + k[(0, 1)] * y + k[(0, 2)],
+            k[(1, 1)] * y + k[(1, 2)],
+        ])
     }
 }

@@ -20,6 +20,7 @@ pub mod frame;
 pub mod fuzzing;
 pub mod geometry;
 pub mod io;
+pub mod lens;
 pub mod method;
 pub mod outputs;
 pub mod posing;

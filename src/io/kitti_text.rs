@@ -49,6 +49,7 @@ impl Calibration {
         let velodyne_from_camera_2 = self.velodyne_from_camera_0() * camera_0_from_camera_2;
         Some(CameraImage::from_intrinsics(
             &k,
+            None,
             &velodyne_from_camera_2.inverse(),
             image,
         ))

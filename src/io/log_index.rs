@@ -7,6 +7,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
+use super::camera_model::Projection;
 use super::hesai::{HesaiAssembler, HesaiCalibration, PANDAR_SCAN};
 use super::lidar_calibrations::LidarCalibrations;
 use super::log::Log;
@@ -14,7 +15,7 @@ use super::log_message::{LogMessage, Part, ros2_type_name};
 use super::packets::{
     NEBULA_PACKETS, PACKET_MESSAGES, PacketCalibration, PacketModel, packet_message,
 };
-use super::ros::{Header, MessageEncoding, Odometry, TfMessage, Transform};
+use super::ros::{CameraInfo, Header, MessageEncoding, Odometry, TfMessage, Transform};
 use super::transforms::{TransformTree, isometry};
 use super::velodyne::{DecoderSettings, ScanCutter, VELODYNE_SCAN};
 use crate::config::PoseSource;
@@ -77,9 +78,11 @@ pub(super) struct CameraSource {
     pub(super) compressed: bool,
     pub(super) encoding: MessageEncoding,
     pub(super) frame: String,
-    pub(super) intrinsics: nalgebra::Matrix3<f64>,
+    pub(super) projection: Projection,
     /// Width and height the CameraInfo gives; images must match.
     pub(super) size: (u32, u32),
+    /// Said once when the CameraInfo's lens cannot be modelled.
+    pub(super) notice: Option<String>,
 }
 
 /// Only the header of a message, decoded without the rest.
@@ -96,8 +99,8 @@ pub(super) struct Contents {
     /// Cloud topic -> (frame, stamps).
     cloud_stamps: HashMap<String, (String, Vec<u64>)>,
     transforms: TransformTree,
-    /// Per camera frame: K and the image size (width, height).
-    intrinsics: HashMap<String, (nalgebra::Matrix3<f64>, (u32, u32))>,
+    /// Per camera frame: its first CameraInfo.
+    camera_infos: HashMap<String, CameraInfo>,
     /// Which recorded poses count (`--poses`).
     poses: PoseSource,
     /// Image topic -> (compressed, encoding, frame).
@@ -278,15 +281,10 @@ impl Contents {
                 );
             }
             CAMERA_INFO => {
-                let info: crate::io::ros::CameraInfo = encoding.decode(data).map_err(problem)?;
-                self.intrinsics
+                let info: CameraInfo = encoding.decode(data).map_err(problem)?;
+                self.camera_infos
                     .entry(info.header.frame_id.clone())
-                    .or_insert_with(|| {
-                        (
-                            nalgebra::Matrix3::from_row_slice(&info.k),
-                            (info.width, info.height),
-                        )
-                    });
+                    .or_insert(info);
             }
             COMPRESSED_IMAGE | RAW_IMAGE if !self.image_topics.contains_key(&connection.topic) => {
                 let header: HeaderOnly = encoding.decode(data).map_err(problem)?;
@@ -380,17 +378,19 @@ impl Contents {
     /// CameraInfo; None without one.
     fn camera(&self, options: &DriveOptions) -> Result<Option<CameraSource>, String> {
         let source = |topic: &str, compressed: bool, encoding: MessageEncoding, frame: &str| {
-            let (k, size) = self
-                .intrinsics
+            let info = self
+                .camera_infos
                 .get(frame)
                 .ok_or_else(|| format!("no CameraInfo for frame `{frame}` of {topic}"))?;
+            let (projection, notice) = Projection::of(topic, info);
             Ok(Some(CameraSource {
                 topic: topic.to_string(),
                 compressed,
                 encoding,
                 frame: frame.to_string(),
-                intrinsics: *k,
-                size: *size,
+                projection,
+                size: (info.width, info.height),
+                notice,
             }))
         };
         if let Some(topic) = &options.camera_topic {
@@ -409,7 +409,7 @@ impl Contents {
         let usable: Vec<(&String, &(bool, MessageEncoding, String))> = self
             .image_topics
             .iter()
-            .filter(|(_, (_, _, frame))| self.intrinsics.contains_key(frame))
+            .filter(|(_, (_, _, frame))| self.camera_infos.contains_key(frame))
             .collect();
         match usable.as_slice() {
             [(topic, (compressed, encoding, frame))] => {

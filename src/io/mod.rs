@@ -7,6 +7,7 @@
 
 pub mod bag;
 mod bucket_store;
+mod camera_model;
 pub mod cloud;
 pub mod drive_frames;
 pub mod format;

@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
 
+use super::camera_model::Projection;
 use super::image::image_pixels;
 pub use super::lidar_calibrations::LidarCalibrations;
 use super::log::Log;
@@ -161,6 +162,10 @@ impl RosDrive {
             index.stamps_ns.first().copied().unwrap_or(0),
         );
         let period_ns = median_period_ns(&index.stamps_ns);
+        if let Some(lens) = index.camera.as_ref().and_then(|c| c.notice.as_ref()) {
+            let said = notice.take().map(|n| format!("{n}; ")).unwrap_or_default();
+            notice = Some(format!("{said}{}: {lens}", log.path().display()));
+        }
         let mut drive = Self {
             path: log.path().to_path_buf(),
             log,
@@ -377,11 +382,15 @@ impl RosDrive {
                     self.world_from_cloud(cloud_stamp_ns)?.inverse() * world_from_camera
                 }
             };
-        Ok(CameraImage::from_intrinsics(
-            &camera.intrinsics,
-            &velodyne_from_camera.inverse(),
-            image,
-        ))
+        let camera_from_velodyne = velodyne_from_camera.inverse();
+        Ok(match &camera.projection {
+            Projection::Raw { k, distortion } => {
+                CameraImage::from_intrinsics(k, distortion.clone(), &camera_from_velodyne, image)
+            }
+            Projection::Rectified(projection) => {
+                CameraImage::new(projection, &camera_from_velodyne.to_homogeneous(), image)
+            }
+        })
     }
 
     /// The log's chunks as stored, when it is one MCAP file whose chunks hold every
