@@ -307,6 +307,7 @@ const SHARED: &[&str] = &[
     "error",
     "frame",
     "geometry",
+    "lens",
     "posing",
     "random",
     "stopwatch",
