@@ -193,59 +193,130 @@ fn compressed_pixels(format: &str, data: &[u8]) -> std::result::Result<RgbImage,
     }
 }
 
-/// An RGB image from a raw `sensor_msgs/msg/Image` (rgb8, bgr8, rgba8, bgra8, mono8,
-/// or 8-bit Bayer).
+/// How a raw `Image` encoding lays out its pixels.
+enum Layout {
+    /// `bytes` per pixel, R, G and B at these of them (8-bit RGB, BGR, RGBA, BGRA,
+    /// mono).
+    Bytes { bytes: usize, rgb_at: [usize; 3] },
+    /// 16-bit channels (`channels` of them), R, G and B at these: their high bytes.
+    Wide { channels: usize, rgb_at: [usize; 3] },
+    /// An 8-bit Bayer mosaic: where red and blue lie in each 2x2 tile.
+    Bayer([(usize, usize); 2]),
+    /// 4:2:2 YUV, two pixels in four bytes: where their Ys, U and V lie.
+    Yuv422 {
+        y_at: [usize; 2],
+        u_at: usize,
+        v_at: usize,
+    },
+}
+
+/// The raw encodings read, for messages.
+const RAW_ENCODINGS: &str = "rgb8, bgr8, rgba8, bgra8, mono8, rgb16, bgr16, rgba16, bgra16, mono16, bayer_rggb8, bayer_bggr8, bayer_gbrg8, bayer_grbg8, yuv422 (UYVY) and yuv422_yuy2 (YUYV)";
+
+impl Layout {
+    fn of(encoding: &str) -> Option<Self> {
+        let bytes = |bytes, rgb_at| Some(Self::Bytes { bytes, rgb_at });
+        let wide = |channels, rgb_at| Some(Self::Wide { channels, rgb_at });
+        match encoding {
+            "rgb8" => bytes(3, [0, 1, 2]),
+            "bgr8" => bytes(3, [2, 1, 0]),
+            "rgba8" => bytes(4, [0, 1, 2]),
+            "bgra8" => bytes(4, [2, 1, 0]),
+            "mono8" => bytes(1, [0, 0, 0]),
+            "rgb16" => wide(3, [0, 1, 2]),
+            "bgr16" => wide(3, [2, 1, 0]),
+            "rgba16" => wide(4, [0, 1, 2]),
+            "bgra16" => wide(4, [2, 1, 0]),
+            "mono16" => wide(1, [0, 0, 0]),
+            "yuv422" | "uyvy" => Some(Self::Yuv422 {
+                y_at: [1, 3],
+                u_at: 0,
+                v_at: 2,
+            }),
+            "yuv422_yuy2" | "yuyv" => Some(Self::Yuv422 {
+                y_at: [0, 2],
+                u_at: 1,
+                v_at: 3,
+            }),
+            other => bayer_red_and_blue(other).map(Self::Bayer),
+        }
+    }
+
+    /// Bytes a row of `width` pixels takes.
+    fn row_bytes(&self, width: usize) -> usize {
+        match self {
+            Self::Bytes { bytes, .. } => width * bytes,
+            Self::Wide { channels, .. } => width * channels * 2,
+            Self::Bayer(_) => width,
+            Self::Yuv422 { .. } => width.div_ceil(2) * 4,
+        }
+    }
+}
+
+/// An RGB image from a raw `sensor_msgs/msg/Image` in one of [`RAW_ENCODINGS`].
 fn raw_image(message: &crate::io::ros::Image) -> Result<RgbImage, String> {
     let (width, height, step) = (
         message.width as usize,
         message.height as usize,
         message.step as usize,
     );
-    let bayer = bayer_red_and_blue(&message.encoding);
-    let channels = match message.encoding.as_str() {
-        "rgb8" | "bgr8" => 3,
-        "rgba8" | "bgra8" => 4,
-        "mono8" => 1,
-        _ if bayer.is_some() => 1,
-        other => {
-            return Err(format!(
-                "image encoding `{other}`: travmap reads rgb8, bgr8, rgba8, bgra8, mono8 and bayer_rggb8, bayer_bggr8, bayer_gbrg8, bayer_grbg8"
-            ));
-        }
-    };
-    if width == 0 || height == 0 || (bayer.is_some() && (width < 2 || height < 2)) {
+    let encoding = &message.encoding;
+    let layout = Layout::of(encoding)
+        .ok_or_else(|| format!("image encoding `{encoding}`: travmap reads {RAW_ENCODINGS}"))?;
+    let bayer = matches!(layout, Layout::Bayer(_));
+    if width == 0 || height == 0 || (bayer && (width < 2 || height < 2)) {
         return Err(format!("an empty {width}x{height} image"));
     }
-    if step < width * channels || message.data.len() < step * height {
+    if step < layout.row_bytes(width) || message.data.len() < step * height {
         return Err(format!(
-            "{} bytes for {width}x{height} {} with step {step}",
-            message.data.len(),
-            message.encoding
+            "{} bytes for {width}x{height} {encoding} with step {step}",
+            message.data.len()
         ));
     }
-    if let Some(red_and_blue) = bayer {
-        return Ok(RgbImage {
-            width: message.width,
-            height: message.height,
-            rgb: debayered(&message.data, width, height, step, red_and_blue),
-        });
-    }
-    let bgr = message.encoding.starts_with("bgr");
-    let mut rgb = Vec::with_capacity(width * height * 3);
-    for row in message.data.chunks_exact(step).take(height) {
-        for px in row[..width * channels].chunks_exact(channels) {
-            match (channels, bgr) {
-                (1, _) => rgb.extend_from_slice(&[px[0], px[0], px[0]]),
-                (_, true) => rgb.extend_from_slice(&[px[2], px[1], px[0]]),
-                _ => rgb.extend_from_slice(&px[..3]),
-            }
+    let rows = || message.data.chunks_exact(step).take(height);
+    let rgb = match layout {
+        Layout::Bayer(red_and_blue) => debayered(&message.data, width, height, step, red_and_blue),
+        Layout::Bytes { bytes, rgb_at } => rows()
+            .flat_map(|row| row[..width * bytes].chunks_exact(bytes))
+            .flat_map(|px| rgb_at.map(|at| px[at]))
+            .collect(),
+        Layout::Wide { channels, rgb_at } => {
+            // The high byte of each 16-bit value, wherever the message's order puts it.
+            let high = if message.is_bigendian != 0 { 0 } else { 1 };
+            rows()
+                .flat_map(|row| row[..width * channels * 2].chunks_exact(channels * 2))
+                .flat_map(|px| rgb_at.map(|at| px[2 * at + high]))
+                .collect()
         }
-    }
+        Layout::Yuv422 { y_at, u_at, v_at } => rows()
+            .flat_map(|row| {
+                row[..width.div_ceil(2) * 4]
+                    .chunks_exact(4)
+                    .flat_map(move |pair| {
+                        y_at.map(|at| yuv_to_rgb(pair[at], pair[u_at], pair[v_at]))
+                    })
+                    .take(width)
+            })
+            .flatten()
+            .collect(),
+    };
     Ok(RgbImage {
         width: message.width,
         height: message.height,
         rgb,
     })
+}
+
+/// RGB of a video-range BT.601 YUV pixel, as OpenCV's `COLOR_YUV2RGB_UYVY` /
+/// `_YUY2` (and so cv_bridge) convert it: Y from 16 to 235, U and V centred on 128.
+fn yuv_to_rgb(y: u8, u: u8, v: u8) -> [u8; 3] {
+    let (y, u, v) = (
+        1.164 * (y as f32 - 16.0),
+        u as f32 - 128.0,
+        v as f32 - 128.0,
+    );
+    [y + 1.596 * v, y - 0.391 * u - 0.813 * v, y + 2.018 * u]
+        .map(|c| c.round().clamp(0.0, 255.0) as u8)
 }
 
 #[cfg(test)]
@@ -386,6 +457,70 @@ mod tests {
         assert_eq!(raw_image(&image).unwrap().rgb, [9, 101, 7].repeat(4));
         image.width = 1;
         assert!(raw_image(&image).unwrap_err().contains("empty 1x2"));
+    }
+
+    fn raw(
+        encoding: &str,
+        width: u32,
+        height: u32,
+        step: u32,
+        data: Vec<u8>,
+    ) -> crate::io::ros::Image {
+        crate::io::ros::Image {
+            header: Default::default(),
+            height,
+            width,
+            encoding: encoding.into(),
+            is_bigendian: 0,
+            step,
+            data,
+        }
+    }
+
+    #[test]
+    fn yuv_and_16_bit_images_are_read_as_their_colours() {
+        // Video range: Y 16 black, 235 white; a red (BT.601: Y 81, U 90, V 240).
+        assert_eq!(yuv_to_rgb(16, 128, 128), [0, 0, 0]);
+        assert_eq!(yuv_to_rgb(235, 128, 128), [255, 255, 255]);
+        let red = yuv_to_rgb(81, 90, 240);
+        assert!(red[0] >= 250 && red[1] <= 5 && red[2] <= 5, "{red:?}");
+        // UYVY and YUYV of the same two pixels (white, then black), odd width 3
+        // (the last pair half used).
+        let uyvy = raw(
+            "yuv422",
+            3,
+            1,
+            8,
+            vec![128, 235, 128, 16, 128, 235, 128, 16],
+        );
+        let yuyv = raw(
+            "yuv422_yuy2",
+            3,
+            1,
+            8,
+            vec![235, 128, 16, 128, 235, 128, 16, 128],
+        );
+        let expected = [255, 255, 255, 0, 0, 0, 255, 255, 255];
+        assert_eq!(raw_image(&uyvy).unwrap().rgb, expected);
+        assert_eq!(raw_image(&yuyv).unwrap().rgb, expected);
+        // 16-bit: the high byte, in either byte order.
+        let mut wide = raw("bgr16", 1, 1, 6, vec![0x11, 0x10, 0x22, 0x20, 0x33, 0x30]);
+        assert_eq!(raw_image(&wide).unwrap().rgb, [0x30, 0x20, 0x10]);
+        wide.is_bigendian = 1;
+        assert_eq!(raw_image(&wide).unwrap().rgb, [0x33, 0x22, 0x11]);
+        let mono = raw("mono16", 2, 1, 4, vec![0, 0x80, 0xFF, 0x01]);
+        assert_eq!(raw_image(&mono).unwrap().rgb, [0x80, 0x80, 0x80, 1, 1, 1]);
+        // Too few bytes for the rows, and an encoding travmap does not read.
+        assert!(
+            raw_image(&raw("yuv422", 4, 1, 6, vec![0; 6]))
+                .unwrap_err()
+                .contains("with step 6")
+        );
+        let error = raw_image(&raw("32FC1", 1, 1, 4, vec![0; 4])).unwrap_err();
+        assert!(
+            error.contains("`32FC1`") && error.contains("yuv422_yuy2"),
+            "{error}"
+        );
     }
 
     #[test]
