@@ -7,13 +7,15 @@ use std::path::Path;
 
 use crate::Config;
 use crate::io::Source;
-use crate::io::cloud::cloud_points;
+use crate::io::cloud::{cloud_points, decode_cloud};
 use crate::io::image::{image_pixels, jpeg_pixels};
 use crate::io::kitti::{
     drop_non_finite, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
 };
 use crate::io::ros::MessageEncoding;
-use crate::io::ros::{CameraInfo, Odometry, PointCloud2, TfMessage, Transform, decode};
+use crate::io::ros::{
+    CameraInfo, LIVOX_CUSTOM_MESSAGES, Odometry, PointCloud2, TfMessage, Transform, decode,
+};
 use crate::io::ros_drive::DriveOptions;
 use crate::io::ros1;
 use crate::io::transforms::isometry;
@@ -87,10 +89,17 @@ pub fn kitti_labels(data: &[u8]) {
     }
 }
 
-/// A `sensor_msgs/msg/PointCloud2` message, decoded and read into points.
+/// A `sensor_msgs/msg/PointCloud2` message (or a Livox CustomMsg), decoded and read
+/// into points.
 pub fn ros_point_cloud(data: &[u8]) {
     if let Ok(cloud) = decode::<PointCloud2>(data) {
         let _ = cloud_points(&cloud);
+    }
+    // And as a Livox CustomMsg, read as a PointCloud2.
+    for encoding in [MessageEncoding::Cdr, MessageEncoding::Ros1] {
+        if let Ok(cloud) = decode_cloud(LIVOX_CUSTOM_MESSAGES[0], encoding, data) {
+            let _ = cloud_points(&cloud);
+        }
     }
 }
 

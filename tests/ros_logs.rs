@@ -185,6 +185,39 @@ fn convert_brings_every_route_back_to_the_same_ros2_messages() {
     assert_eq!(images(&routes.join("ros1-bz2.bag")), through_ros2);
 }
 
+#[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
+fn a_livox_custom_msg_reads_as_the_pointcloud2_of_its_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+        return;
+    };
+    let Some(routes) = routes(&drive, dir.path()) else {
+        return;
+    };
+    let livox = routes.join("rosbag2-mcap-livox");
+    // Written as FAST-LIO's users record a Livox: no PointCloud2 at all.
+    let schemas: Vec<String> = Log::open(&livox, detect(&livox).unwrap())
+        .unwrap()
+        .messages()
+        .map(|m| m.unwrap().connection.schema_name.clone())
+        .collect();
+    assert!(schemas.contains(&"livox_ros_driver2/msg/CustomMsg".to_string()));
+    assert!(!schemas.iter().any(|s| s.contains("PointCloud2")));
+    // The grids and clouds of the same points, each reflectivity as a uint8
+    // intensity of a PointCloud2 (a byte-scale remission, as the Livox's).
+    let annotated = |input: &Path, name: &str| {
+        let out = dir.path().join(format!("{name}.annotated.mcap"));
+        let json =
+            common::json_summary(&["annotate", arg(input), "-o", arg(&out), "--no-passthrough"]);
+        assert_eq!(json["frames"], 6, "{name}: {json}");
+        messages_on(&out, &["/travmap/prediction", "/travmap/cloud"])
+    };
+    let reference = annotated(&routes.join("rosbag2-mcap-uint8"), "uint8");
+    assert_eq!(reference.len(), 12);
+    assert!(annotated(&livox, "livox") == reference);
+}
+
 /// A copy of `from` in `dir` with `edit` applied to its bytes.
 fn edited(from: &Path, dir: &Path, name: &str, edit: impl FnOnce(&mut Vec<u8>)) -> PathBuf {
     let mut bytes = std::fs::read(from).unwrap();

@@ -5,12 +5,11 @@
 use std::collections::VecDeque;
 use std::ops::Range;
 
-use super::cloud::{CloudPoints, check_some_finite, cloud_points};
+use super::cloud::{CloudPoints, check_some_finite, cloud_points, decode_cloud};
 use super::log_index::HeaderOnly;
 use super::log_message::{LogMessage, Part};
 use super::merged_clouds::{MergedCloud, MergedContent, merge};
 use super::packets::{PacketAssembler, PacketCalibration, PacketModel};
-use super::ros::PointCloud2;
 use super::ros_drive::{IMAGE_PAIRING_NS, RosDrive};
 use super::velodyne::{PacketScan, VelodynePoint};
 use crate::error::{Error, LostMessage, Result};
@@ -128,7 +127,8 @@ impl RosDrive {
                         message.connection.message_encoding
                     ))
                 })?;
-                let cloud: PointCloud2 = encoding.decode(&message.data).map_err(fail)?;
+                let type_name = message.connection.type_name();
+                let cloud = decode_cloud(&type_name, encoding, &message.data).map_err(fail)?;
                 let points = cloud_points(&cloud).map_err(fail)?;
                 check_some_finite(points.points.len(), points.dropped).map_err(fail)?;
                 points

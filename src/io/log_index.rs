@@ -15,7 +15,9 @@ use super::log_message::{LogMessage, Part, ros2_type_name};
 use super::packets::{
     NEBULA_PACKETS, PACKET_MESSAGES, PacketCalibration, PacketModel, packet_message,
 };
-use super::ros::{CameraInfo, Header, MessageEncoding, Odometry, TfMessage, Transform};
+use super::ros::{
+    CameraInfo, Header, LIVOX_CUSTOM_MESSAGES, MessageEncoding, Odometry, TfMessage, Transform,
+};
 use super::transforms::{TransformTree, isometry};
 use super::velodyne::{DecoderSettings, ScanCutter, VELODYNE_SCAN};
 use crate::config::PoseSource;
@@ -139,6 +141,7 @@ impl Contents {
             problem,
         };
         let known = PACKET_MESSAGES.contains(&schema.as_ref())
+            || LIVOX_CUSTOM_MESSAGES.contains(&schema.as_ref())
             || matches!(
                 schema.as_ref(),
                 POINT_CLOUD
@@ -164,7 +167,7 @@ impl Contents {
         };
         let data = &message.data;
         match schema.as_ref() {
-            POINT_CLOUD => {
+            name if name == POINT_CLOUD || LIVOX_CUSTOM_MESSAGES.contains(&name) => {
                 let header: HeaderOnly = encoding.decode(data).map_err(problem)?;
                 let stamp = match header.header.stamp.to_ns() {
                     0 => message.log_time_ns,
@@ -362,7 +365,10 @@ impl Contents {
                 .iter()
                 .filter(|(_, s)| {
                     let type_name = ros2_type_name(s);
-                    type_name == POINT_CLOUD || PACKET_MESSAGES.contains(&type_name.as_ref())
+                    let type_name = type_name.as_ref();
+                    type_name == POINT_CLOUD
+                        || PACKET_MESSAGES.contains(&type_name)
+                        || LIVOX_CUSTOM_MESSAGES.contains(&type_name)
                 })
                 .map(|(t, _)| t.clone())
                 .collect(),
@@ -459,6 +465,7 @@ impl LogIndex {
         // not decode nothing.
         let parts = |_: &str, schema_name: &str| match ros2_type_name(schema_name).as_ref() {
             POINT_CLOUD | COMPRESSED_IMAGE | RAW_IMAGE => Part::Header,
+            name if LIVOX_CUSTOM_MESSAGES.contains(&name) => Part::Header,
             TF_MESSAGE | TF1_MESSAGE | ODOMETRY | CAMERA_INFO => Part::Whole,
             name if PACKET_MESSAGES.contains(&name) => Part::Whole,
             _ => Part::Nothing,

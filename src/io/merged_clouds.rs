@@ -5,10 +5,9 @@
 
 use nalgebra::{Isometry3, Point3};
 
-use super::cloud::{CloudPoints, cloud_points};
+use super::cloud::{CloudPoints, cloud_points, decode_cloud};
 use super::log_message::LogMessage;
 use super::packets::{PacketCalibration, PacketModel};
-use super::ros::PointCloud2;
 use crate::error::{Error, Result};
 
 /// Another sensor's topic merged into the frames' scans.
@@ -74,7 +73,8 @@ pub(super) fn merge(
             MergedContent::Message(message) => {
                 let encoding = (message.connection.encoding())
                     .ok_or_else(|| fail("an encoding travmap does not read".into()))?;
-                let cloud: PointCloud2 = encoding.decode(&message.data).map_err(fail)?;
+                let type_name = message.connection.type_name();
+                let cloud = decode_cloud(&type_name, encoding, &message.data).map_err(fail)?;
                 decoded = cloud_points(&cloud).map_err(fail)?;
                 &decoded
             }

@@ -8,6 +8,11 @@ recorded-log format travmap reads, with real writers and no travmap code:
   rosbag2-sqlite3-zstd-file/, rosbag2-mcap-zstd-file/
                                              the same, each storage file zstd-compressed (file mode)
   rosbag2-from-bag/                          rosbags-convert of ros1-none.bag (ROS 1 -> ROS 2)
+  rosbag2-mcap-livox/                        rosbags' rosbag2 writer, every cloud as a Livox
+                                             livox_ros_driver2/msg/CustomMsg (reflectivity = the
+                                             intensity x 255, rounded)
+  rosbag2-mcap-uint8/                        the same points as PointCloud2s with that reflectivity
+                                             as a uint8 intensity (what the Livox route must read as)
   rosbag2-mcap-jpeg/                         rosbags' rosbag2 writer, every camera image made
                                              a JPEG (Pillow, quality 90) named as image_transport
                                              names it, `rgb8; jpeg compressed bgr8`
@@ -98,6 +103,65 @@ def rosbag2(messages, path, storage, compression=None):
             writer.write(connections[topic], stamp, cdr)
 
 
+LIVOX = "livox_ros_driver2/msg/CustomMsg"
+ROS2.register(
+    get_types_from_msg(
+        "uint32 offset_time\nfloat32 x\nfloat32 y\nfloat32 z\nuint8 reflectivity\nuint8 tag\nuint8 line",
+        "livox_ros_driver2/msg/CustomPoint",
+    )
+)
+ROS2.register(
+    get_types_from_msg(
+        "std_msgs/Header header\nuint64 timebase\nuint32 point_num\nuint8 lidar_id\nuint8[3] rsvd\n"
+        "livox_ros_driver2/CustomPoint[] points",
+        LIVOX,
+    )
+)
+
+
+def cloud_rows(cloud):
+    """(x, y, z, reflectivity) of a PointCloud2 as travmap convert writes it (x, y, z,
+    intensity float32)."""
+    rows = np.frombuffer(bytes(cloud.data), dtype="<f4").reshape(-1, cloud.point_step // 4)
+    reflectivity = np.clip(np.rint(rows[:, 3] * 255.0), 0, 255).astype(np.uint8)
+    return rows[:, :3], reflectivity
+
+
+def as_livox(messages, livox):
+    """`messages` with every PointCloud2 a Livox CustomMsg (`livox`), or a PointCloud2 of
+    the same points with a uint8 intensity."""
+    out = []
+    point = ROS2.types["livox_ros_driver2/msg/CustomPoint"]
+    for topic, msgtype, stamp, cdr in messages:
+        if msgtype == "sensor_msgs/msg/PointCloud2":
+            cloud = ROS2.deserialize_cdr(cdr, msgtype)
+            xyz, reflectivity = cloud_rows(cloud)
+            if livox:
+                points = [
+                    point(offset_time=0, x=float(p[0]), y=float(p[1]), z=float(p[2]), reflectivity=int(r), tag=0, line=0)
+                    for p, r in zip(xyz, reflectivity)
+                ]
+                stamp_ns = cloud.header.stamp.sec * 1_000_000_000 + cloud.header.stamp.nanosec
+                message = ROS2.types[LIVOX](
+                    header=cloud.header, timebase=stamp_ns, point_num=len(points), lidar_id=0,
+                    rsvd=np.zeros(3, dtype=np.uint8), points=points,
+                )
+                out.append((topic, LIVOX, stamp, bytes(ROS2.serialize_cdr(message, LIVOX))))
+                continue
+            rows = np.zeros(len(xyz), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "u1")])
+            rows["x"], rows["y"], rows["z"], rows["intensity"] = xyz[:, 0], xyz[:, 1], xyz[:, 2], reflectivity
+            field = ROS2.types["sensor_msgs/msg/PointField"]
+            cloud.fields = [
+                field(name="x", offset=0, datatype=7, count=1), field(name="y", offset=4, datatype=7, count=1),
+                field(name="z", offset=8, datatype=7, count=1), field(name="intensity", offset=12, datatype=2, count=1),
+            ]
+            cloud.point_step, cloud.row_step = 13, 13 * len(rows) // max(cloud.height, 1)
+            cloud.data = np.frombuffer(rows.tobytes(), dtype=np.uint8)
+            cdr = bytes(ROS2.serialize_cdr(cloud, msgtype))
+        out.append((topic, msgtype, stamp, cdr))
+    return out
+
+
 def as_jpeg(messages):
     """`messages` with every CompressedImage's PNG re-encoded as a JPEG."""
     out = []
@@ -127,6 +191,8 @@ def main():
         for storage, name in [(StoragePlugin.SQLITE3, "sqlite3"), (StoragePlugin.MCAP, "mcap")]:
             rosbag2(messages, out / f"rosbag2-{name}-zstd{suffix}", storage, mode)
     rosbag2(as_jpeg(messages), out / "rosbag2-mcap-jpeg", StoragePlugin.MCAP)
+    rosbag2(as_livox(messages, True), out / "rosbag2-mcap-livox", StoragePlugin.MCAP)
+    rosbag2(as_livox(messages, False), out / "rosbag2-mcap-uint8", StoragePlugin.MCAP)
     if len(sys.argv) > 3:
         subprocess.run(
             [sys.argv[3], "--src", str(out / "ros1-none.bag"), "--dst", str(out / "rosbag2-from-bag")],
