@@ -7,15 +7,14 @@ use std::path::Path;
 
 use crate::Config;
 use crate::io::Source;
-use crate::io::cloud::{cloud_points, decode_cloud};
+use crate::io::cloud::cloud_points;
 use crate::io::image::{image_pixels, jpeg_pixels};
 use crate::io::kitti::{
     drop_non_finite, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
 };
+use crate::io::livox::{LIVOX_CUSTOM_MESSAGES, decode_cloud};
 use crate::io::ros::MessageEncoding;
-use crate::io::ros::{
-    CameraInfo, LIVOX_CUSTOM_MESSAGES, Odometry, PointCloud2, TfMessage, Transform, decode,
-};
+use crate::io::ros::{CameraInfo, Odometry, PointCloud2, TfMessage, Transform, decode};
 use crate::io::ros_drive::DriveOptions;
 use crate::io::ros1;
 use crate::io::transforms::isometry;

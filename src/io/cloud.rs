@@ -3,44 +3,7 @@
 //! reserved.
 
 use crate::frame::RemissionScale;
-use crate::io::ros::{
-    LIVOX_CUSTOM_MESSAGES, LivoxCustomMsg, MessageEncoding, PointCloud2, PointField, datatype,
-};
-
-/// The cloud of a message of type `type_name`: a PointCloud2, or a Livox CustomMsg's
-/// points as one (x, y, z float32, the 0..255 reflectivity as a uint8 `intensity`,
-/// which reads as a byte-scale remission).
-pub fn decode_cloud(
-    type_name: &str,
-    encoding: MessageEncoding,
-    data: &[u8],
-) -> Result<PointCloud2, String> {
-    if !LIVOX_CUSTOM_MESSAGES.contains(&type_name) {
-        return encoding.decode(data);
-    }
-    let livox: LivoxCustomMsg = encoding.decode(data)?;
-    const STEP: usize = 13;
-    let mut bytes = Vec::with_capacity(livox.points.len() * STEP);
-    for p in &livox.points {
-        for v in [p.x, p.y, p.z] {
-            bytes.extend_from_slice(&v.to_le_bytes());
-        }
-        bytes.push(p.reflectivity);
-    }
-    let mut fields = PointField::xyz_float32();
-    fields.push(PointField::scalar("intensity", 12, datatype::UINT8));
-    Ok(PointCloud2 {
-        header: livox.header,
-        height: 1,
-        width: livox.points.len() as u32,
-        fields,
-        is_bigendian: false,
-        point_step: STEP as u32,
-        row_step: (STEP * livox.points.len()) as u32,
-        data: bytes,
-        is_dense: true,
-    })
-}
+use crate::io::ros::{PointCloud2, PointField, datatype};
 
 /// Reads one numeric value of a field as f64.
 fn read_value(bytes: &[u8], datatype_id: u8, big_endian: bool) -> f64 {
@@ -264,31 +227,6 @@ pub fn remission_scale(datatype_id: Option<u8>, largest: f32) -> (RemissionScale
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A CustomMsg as rosbags 0.11.9 serialises it (fuzz/seeds/ros_point_cloud).
-    #[test]
-    fn a_livox_custom_msg_reads_as_a_cloud_with_byte_remission() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("fuzz/seeds/ros_point_cloud/livox_custom_msg.cdr");
-        let data = std::fs::read(path).unwrap();
-        let cloud = decode_cloud(LIVOX_CUSTOM_MESSAGES[0], MessageEncoding::Cdr, &data).unwrap();
-        assert_eq!(cloud.header.frame_id, "livox_frame");
-        assert_eq!(cloud.header.stamp.to_ns(), 5_000_000_006);
-        let read = cloud_points(&cloud).unwrap();
-        assert_eq!(read.remission, RemissionScale::Byte);
-        let expected = [
-            [1.5, -2.0, 0.25, 37.0 / 255.0],
-            [3.0, 0.5, -1.0, 200.0 / 255.0],
-        ];
-        assert_eq!(read.points.len(), 2);
-        for (point, expected) in read.points.iter().zip(expected) {
-            assert_eq!(point[..3], expected[..3]);
-            assert!((point[3] - expected[3]).abs() < 1e-6, "{point:?}");
-        }
-        // A PointCloud2's type reads as one; a cut CustomMsg is an error.
-        assert!(decode_cloud("sensor_msgs/msg/PointCloud2", MessageEncoding::Cdr, &data).is_err());
-        assert!(decode_cloud(LIVOX_CUSTOM_MESSAGES[1], MessageEncoding::Cdr, &data[..60]).is_err());
-    }
 
     /// x, y, z, intensity float32 in a 20-byte point, rows padded to 48 bytes.
     fn cloud(width: u32, height: u32, rows: &[&[[f32; 4]]]) -> PointCloud2 {

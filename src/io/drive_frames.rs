@@ -5,7 +5,8 @@
 use std::collections::VecDeque;
 use std::ops::Range;
 
-use super::cloud::{CloudPoints, check_some_finite, cloud_points, decode_cloud};
+use super::cloud::{CloudPoints, check_some_finite, cloud_points};
+use super::livox::decode_cloud;
 use super::log_index::HeaderOnly;
 use super::log_message::{LogMessage, Part};
 use super::merged_clouds::{MergedCloud, MergedContent, merge};

@@ -10,14 +10,13 @@ use serde::Deserialize;
 use super::camera_model::Projection;
 use super::hesai::{HesaiAssembler, HesaiCalibration, PANDAR_SCAN};
 use super::lidar_calibrations::LidarCalibrations;
+use super::livox::LIVOX_CUSTOM_MESSAGES;
 use super::log::Log;
 use super::log_message::{LogMessage, Part, ros2_type_name};
 use super::packets::{
     NEBULA_PACKETS, PACKET_MESSAGES, PacketCalibration, PacketModel, packet_message,
 };
-use super::ros::{
-    CameraInfo, Header, LIVOX_CUSTOM_MESSAGES, MessageEncoding, Odometry, TfMessage, Transform,
-};
+use super::ros::{CameraInfo, Header, MessageEncoding, Odometry, TfMessage, Transform};
 use super::transforms::{TransformTree, isometry};
 use super::velodyne::{DecoderSettings, ScanCutter, VELODYNE_SCAN};
 use crate::config::PoseSource;

@@ -5,7 +5,8 @@
 
 use nalgebra::{Isometry3, Point3};
 
-use super::cloud::{CloudPoints, cloud_points, decode_cloud};
+use super::cloud::{CloudPoints, cloud_points};
+use super::livox::decode_cloud;
 use super::log_message::LogMessage;
 use super::packets::{PacketCalibration, PacketModel};
 use crate::error::{Error, Result};

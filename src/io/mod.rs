@@ -17,6 +17,7 @@ pub mod kitti;
 mod kitti_text;
 pub mod las;
 pub mod lidar_calibrations;
+pub mod livox;
 pub mod log;
 pub mod log_index;
 pub mod log_message;

@@ -115,40 +115,6 @@ pub struct PointCloud2<Data = Vec<u8>> {
     pub is_dense: bool,
 }
 
-/// `livox_ros_driver2/msg/CustomMsg` (ROS 1's `livox_ros_driver/CustomMsg` has the same
-/// fields): a Livox LiDAR's points as its driver publishes them for FAST-LIO and other
-/// LiDAR odometry, in place of a PointCloud2.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct LivoxCustomMsg {
-    pub header: Header,
-    /// The first point's time, ns.
-    pub timebase: u64,
-    pub point_num: u32,
-    pub lidar_id: u8,
-    pub rsvd: [u8; 3],
-    pub points: Vec<LivoxPoint>,
-}
-
-/// `livox_ros_driver2/msg/CustomPoint`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct LivoxPoint {
-    /// After `timebase`, ns.
-    pub offset_time: u32,
-    pub x: f32,
-    pub y: f32,
-    pub z: f32,
-    /// 0..255.
-    pub reflectivity: u8,
-    pub tag: u8,
-    pub line: u8,
-}
-
-/// Livox CustomMsg's type names, of its ROS 2 and ROS 1 drivers.
-pub const LIVOX_CUSTOM_MESSAGES: [&str; 2] = [
-    "livox_ros_driver2/msg/CustomMsg",
-    "livox_ros_driver/msg/CustomMsg",
-];
-
 /// `sensor_msgs/msg/CompressedImage`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CompressedImage {
@@ -434,11 +400,6 @@ ros_message!(
     "sensor_msgs__PointCloud2.msg"
 );
 ros_message!(Image, "sensor_msgs/msg/Image", "sensor_msgs__Image.msg");
-ros_message!(
-    LivoxCustomMsg,
-    "livox_ros_driver2/msg/CustomMsg",
-    "livox_ros_driver2__CustomMsg.msg"
-);
 ros_message!(Odometry, "nav_msgs/msg/Odometry", "nav_msgs__Odometry.msg");
 ros_message!(
     CompressedImage,
