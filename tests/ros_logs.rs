@@ -47,6 +47,28 @@ fn routes(drive: &Path, dir: &Path) -> Option<PathBuf> {
     Some(out)
 }
 
+/// The KITTI frame with its camera image, converted by travmap (in the directory's
+/// `drive.mcap`) and written in every other format; None without the data or the
+/// client venv.
+fn one_frame_routes() -> Option<(tempfile::TempDir, PathBuf, PathBuf)> {
+    let (dir, seq) = common::one_frame_with_image()?;
+    let drive = dir.path().join("drive.mcap");
+    write_output("convert", &seq, &drive, &[]);
+    let routes = routes(&drive, dir.path())?;
+    Some((dir, drive, routes))
+}
+
+/// What reaches the method of `input`'s camera (`eval` reads images whatever the
+/// model; annotate only for a model that uses them): frames with an image, and
+/// cells with appearance values.
+fn images(input: &Path) -> (Value, Value) {
+    let report = common::json_summary(&["eval", arg(input)])["report"].clone();
+    (
+        report["frames_with_images"].clone(),
+        report["cells_with_appearance"].clone(),
+    )
+}
+
 /// Every message of `topics` in a file travmap wrote: (topic, log time, bytes).
 fn messages_on(path: &Path, topics: &[&str]) -> Vec<(String, u64, Vec<u8>)> {
     let format = detect(path).unwrap();
@@ -107,12 +129,7 @@ fn every_route_gives_the_ros2_grids_cell_for_cell_and_the_same_scores() {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn convert_brings_every_route_back_to_the_same_ros2_messages() {
-    let Some((dir, seq)) = common::one_frame_with_image() else {
-        return;
-    };
-    let drive = dir.path().join("drive.mcap");
-    write_output("convert", &seq, &drive, &[]);
-    let Some(routes) = routes(&drive, dir.path()) else {
+    let Some((dir, drive, routes)) = one_frame_routes() else {
         return;
     };
     let known = [
@@ -170,16 +187,7 @@ fn convert_brings_every_route_back_to_the_same_ros2_messages() {
         );
         assert!(String::from_utf8_lossy(&schema.data).contains("string data"));
     }
-    // And the image reaches the method through a ROS 1 bag as through ROS 2 (eval
-    // reads images whatever the model; annotate only for a model that uses them).
-    let images = |input: &Path| {
-        let json = common::json_summary(&["eval", arg(input)]);
-        let report = &json["report"];
-        (
-            report["frames_with_images"].clone(),
-            report["cells_with_appearance"].clone(),
-        )
-    };
+    // And the image reaches the method through a ROS 1 bag as through ROS 2.
     let through_ros2 = images(&drive);
     assert_eq!(through_ros2.0, 1);
     assert_eq!(images(&routes.join("ros1-bz2.bag")), through_ros2);
@@ -523,12 +531,7 @@ fn appearance_of(input: &Path) -> Vec<Option<Vec<f32>>> {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn a_jpeg_camera_is_read_as_its_png_original_less_the_jpeg_loss() {
-    let Some((dir, seq)) = common::one_frame_with_image() else {
-        return;
-    };
-    let drive = dir.path().join("drive.mcap");
-    write_output("convert", &seq, &drive, &[]);
-    let Some(routes) = routes(&drive, dir.path()) else {
+    let Some((_dir, drive, routes)) = one_frame_routes() else {
         return;
     };
     let jpeg = routes.join("rosbag2-mcap-jpeg");
@@ -540,15 +543,8 @@ fn a_jpeg_camera_is_read_as_its_png_original_less_the_jpeg_loss() {
     assert_eq!(message.format, "rgb8; jpeg compressed bgr8");
     assert!(message.data.starts_with(&[0xFF, 0xD8, 0xFF]));
 
-    let eval = |input: &Path| {
-        let report = common::json_summary(&["eval", arg(input)])["report"].clone();
-        (
-            report["frames_with_images"].clone(),
-            report["cells_with_appearance"].clone(),
-        )
-    };
-    assert_eq!(eval(&jpeg), eval(&drive));
-    assert_eq!(eval(&drive).0, 1);
+    assert_eq!(images(&jpeg), images(&drive));
+    assert_eq!(images(&drive).0, 1);
 
     // The same cells are seen; their HSV histograms move by JPEG's loss (hue is
     // unsteady in the road's grey pixels), far less than from one cell to another.

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::ros::{Header, MessageEncoding, PointCloud2, PointField, RosMessage, datatype};
+use super::ros::{Header, MessageEncoding, PointCloud2, PointField, datatype};
 
 /// `livox_ros_driver2/msg/CustomMsg` (ROS 1's `livox_ros_driver/CustomMsg` has the same
 /// fields): a Livox LiDAR's points as its driver publishes them for FAST-LIO and other
@@ -38,11 +38,6 @@ pub const LIVOX_CUSTOM_MESSAGES: [&str; 2] = [
     "livox_ros_driver2/msg/CustomMsg",
     "livox_ros_driver/msg/CustomMsg",
 ];
-
-impl RosMessage for LivoxCustomMsg {
-    const NAME: &'static str = "livox_ros_driver2/msg/CustomMsg";
-    const SCHEMA: &'static str = include_str!("../../schemas/livox_ros_driver2__CustomMsg.msg");
-}
 
 /// The cloud of a message of type `type_name`: a PointCloud2, or a Livox CustomMsg's
 /// points as one (x, y, z float32, the 0..255 reflectivity as a uint8 `intensity`,

@@ -12,7 +12,7 @@
 const LANES: usize = 4;
 
 /// libsvm's floor on the curvature of a non-positive-definite pair.
-pub(super) const TAU: f64 = 1e-12;
+const TAU: f64 = 1e-12;
 
 #[inline(always)]
 pub(super) fn positive_curvature(a: f64) -> f64 {
