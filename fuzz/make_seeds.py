@@ -243,6 +243,15 @@ def main() -> None:
         for name in ("ros1-none.bag", "ros1-bz2.bag", "ros1-lz4.bag"):
             seed("bag_file", name, (routes / name).read_bytes())
         seed("mcap_file", "ros1.mcap", (routes / "ros1.mcap").read_bytes())
+        # Foxglove's schemas in protobuf, as the Foxglove SDK writes them.
+        foxglove = first_message_per_topic(routes / "foxglove.mcap")
+        for topic, name in (
+            ("/velodyne_points", "point_cloud"),
+            ("/tf", "frame_transforms"),
+            ("/camera_2/image/compressed", "compressed_image"),
+            ("/camera_2/camera_info", "camera_calibration"),
+        ):
+            seed("foxglove_message", f"{name}.pb", foxglove[topic])
         for storage in ("sqlite3", "mcap"):
             metadata = (routes / f"rosbag2-{storage}" / "metadata.yaml").read_text()
             # The fuzz target's directory holds one (empty) storage file, drive_0.mcap.

@@ -8,11 +8,13 @@ use std::path::Path;
 use crate::Config;
 use crate::io::Source;
 use crate::io::cloud::cloud_points;
+use crate::io::foxglove;
 use crate::io::image::{image_pixels, jpeg_pixels};
 use crate::io::kitti::{
     drop_non_finite, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
 };
 use crate::io::livox::{LIVOX_CUSTOM_MESSAGES, decode_cloud};
+use crate::io::log_message::Part;
 use crate::io::ros::MessageEncoding;
 use crate::io::ros::{CameraInfo, Odometry, PointCloud2, TfMessage, Transform, decode};
 use crate::io::ros_drive::DriveOptions;
@@ -29,7 +31,7 @@ pub type Target = fn(&[u8]);
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 20] = [
+pub const TARGETS: [(&str, Target); 21] = [
     ("kitti_calib", kitti_calib),
     ("kitti_poses", kitti_poses),
     ("kitti_scan", kitti_scan),
@@ -50,6 +52,7 @@ pub const TARGETS: [(&str, Target); 20] = [
     ("velodyne_scan", velodyne_scan),
     ("pandar_scan", pandar_scan),
     ("nebula_packets", nebula_packets),
+    ("foxglove_message", foxglove_message),
 ];
 
 const NAMED: &str = "fuzzed";
@@ -98,6 +101,20 @@ pub fn ros_point_cloud(data: &[u8]) {
     for encoding in [MessageEncoding::Cdr, MessageEncoding::Ros1] {
         if let Ok(cloud) = decode_cloud(LIVOX_CUSTOM_MESSAGES[0], encoding, data) {
             let _ = cloud_points(&cloud);
+        }
+    }
+}
+
+/// A protobuf message as each Foxglove schema travmap reads, whole and its header
+/// alone; a point cloud read into points.
+pub fn foxglove_message(data: &[u8]) {
+    for schema in foxglove::SCHEMAS {
+        for part in [Part::Whole, Part::Header] {
+            if let Ok(cdr) = foxglove::to_cdr(schema, data, part)
+                && let Ok(cloud) = decode::<PointCloud2>(&cdr)
+            {
+                let _ = cloud_points(&cloud);
+            }
         }
     }
 }

@@ -226,6 +226,73 @@ fn a_livox_custom_msg_reads_as_the_pointcloud2_of_its_points() {
     assert!(annotated(&livox, "livox") == reference);
 }
 
+#[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
+fn a_foxglove_protobuf_log_reads_as_its_ros2_original() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+        return;
+    };
+    let Some(routes) = routes(&drive, dir.path()) else {
+        return;
+    };
+    let foxglove = routes.join("foxglove.mcap");
+    // Written as nuScenes' MCAPs are: Foxglove's schemas in protobuf, no ROS type.
+    let channels: Vec<(String, String)> = Log::open(&foxglove, detect(&foxglove).unwrap())
+        .unwrap()
+        .messages()
+        .map(|m| m.unwrap().connection)
+        .map(|c| (c.schema_name.clone(), c.message_encoding.clone()))
+        .collect();
+    assert!(channels.contains(&("foxglove.PointCloud".into(), "protobuf".into())));
+    assert!(channels.contains(&("foxglove.FrameTransforms".into(), "protobuf".into())));
+    assert!(channels.iter().all(|(_, encoding)| encoding == "protobuf"));
+    // The same grids, cell for cell, and the same scores (labels are a field of
+    // the points).
+    let grids = ["/travmap/prediction", "/travmap/ground_truth", "/travmap/cloud"];
+    let annotated = |input: &Path, name: &str| {
+        let out = dir.path().join(format!("{name}.annotated.mcap"));
+        write_output("annotate", input, &out, &["--no-passthrough"]);
+        messages_on(&out, &grids)
+    };
+    let reference = annotated(&drive, "ros2");
+    assert_eq!(reference.len(), 6 + 3 + 6);
+    assert!(annotated(&foxglove, "foxglove") == reference);
+    assert_eq!(scores(&foxglove), scores(&drive));
+    // convert makes ROS 2 of it: the same clouds and transforms as the original,
+    // up to what Foxglove's schemas do not carry (is_dense) and /tf_static's stamp.
+    let converted = dir.path().join("converted.mcap");
+    let json = common::json_summary(&["convert", arg(&foxglove), "-o", arg(&converted)]);
+    assert_eq!(json["translated_messages"], json["messages"], "{json}");
+    assert_eq!(json["topics_as_recorded"], serde_json::json!([]));
+    let clouds = |path: &Path| -> Vec<(u64, travmap::io::ros::PointCloud2)> {
+        (messages_on(path, &["/velodyne_points"]).into_iter())
+            .map(|(_, t, data)| (t, travmap::io::ros::decode(&data).unwrap()))
+            .map(|(t, mut cloud): (u64, travmap::io::ros::PointCloud2)| {
+                cloud.is_dense = false;
+                (t, cloud)
+            })
+            .collect()
+    };
+    assert_eq!(clouds(&converted), clouds(&drive));
+    assert!(messages_on(&converted, &["/tf"]) == messages_on(&drive, &["/tf"]));
+}
+
+#[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
+fn a_foxglove_camera_reads_as_its_ros2_original() {
+    let Some((_dir, drive, routes)) = one_frame_routes() else {
+        return;
+    };
+    let foxglove = routes.join("foxglove.mcap");
+    let camera = messages_on(&foxglove, &["/camera_2/image/compressed"]);
+    assert_eq!(camera.len(), 1);
+    let through_ros2 = images(&drive);
+    assert_eq!(through_ros2.0, 1);
+    assert_eq!(images(&foxglove), through_ros2);
+    assert!(appearance_of(&foxglove) == appearance_of(&drive));
+}
+
 /// A copy of `from` in `dir` with `edit` applied to its bytes.
 fn edited(from: &Path, dir: &Path, name: &str, edit: impl FnOnce(&mut Vec<u8>)) -> PathBuf {
     let mut bytes = std::fs::read(from).unwrap();

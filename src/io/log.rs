@@ -11,6 +11,7 @@ use std::sync::Arc;
 
 use super::bag::BagFile;
 use super::format::InputFormat;
+use super::foxglove;
 use super::log_message::HEADER_BYTES;
 pub use super::log_message::{Connection, Damage, FileMap, FileMessages, LogMessage, Part, Parts};
 use super::mcap_messages::Messages;
@@ -153,7 +154,9 @@ impl Log {
     /// [`Self::messages`], up to `threads` chunks decompressed at once (one beside
     /// the method's frames, which keep the cores busy: more only held more chunks
     /// in memory there, for no gain), and of each message the [`Part`] `parts`
-    /// says (of a ROS 1 bag's, all).
+    /// says (of a ROS 1 bag's, all). A message of a Foxglove schema in protobuf
+    /// comes as its ROS 2 equivalent ([`foxglove::to_cdr`]; `parts` is asked by
+    /// that type's name); one that does not read is lost, as a damaged one is.
     pub fn messages_in_parts<'a>(
         &'a self,
         threads: usize,
@@ -170,22 +173,26 @@ impl Log {
         let mut failed = false;
         // A compressed message is read whole (its header is inside the frame), then
         // decompressed as far as its part asks.
-        let stored_parts: Option<Parts<'a>> = match (self.zstd_messages, &parts) {
-            (true, Some(parts)) => {
-                let parts = parts.clone();
-                Some(Arc::new(move |topic: &str, schema: &str| {
-                    match parts(topic, schema) {
-                        Part::Nothing => Part::Nothing,
-                        _ => Part::Whole,
-                    }
-                }))
-            }
-            _ => parts.clone(),
-        };
+        // So is a Foxglove one: its header may follow its payload.
+        let stored_parts: Option<Parts<'a>> = parts.clone().map(|parts| -> Parts<'a> {
+            let zstd_messages = self.zstd_messages;
+            Arc::new(move |topic: &str, schema: &str| {
+                let (part, foxglove) = match foxglove::ros_equivalent(schema) {
+                    Some((ros, _)) => (parts(topic, ros), true),
+                    None => (parts(topic, schema), false),
+                };
+                match part {
+                    Part::Header if zstd_messages || foxglove => Part::Whole,
+                    part => part,
+                }
+            })
+        });
         self.files
             .iter()
             .flat_map(move |file| {
                 let parts = parts.clone();
+                let translating = parts.clone();
+                let mut translated = HashMap::new();
                 file.messages(threads, stored_parts.clone())
                     .enumerate()
                     .map(move |(ordinal, message)| match message {
@@ -222,6 +229,23 @@ impl Log {
                             problem,
                         }),
                     })
+                    .enumerate()
+                    .map(move |(ordinal, message)| match (message, &translating) {
+                        (Ok(message), Some(parts))
+                            if message.connection.message_encoding == foxglove::PROTOBUF =>
+                        {
+                            as_ros2(message, parts, &mut translated).map_err(|problem| {
+                                Error::LogMessageLost(LostMessage {
+                                    path: file.path().to_path_buf(),
+                                    ordinal,
+                                    topic: problem.0,
+                                    log_time_ns: problem.1,
+                                    problem: problem.2,
+                                })
+                            })
+                        }
+                        (message, _) => message,
+                    })
             })
             .take_while(move |message| {
                 let go_on = !failed;
@@ -229,6 +253,42 @@ impl Log {
                 go_on
             })
     }
+}
+
+/// A message of a Foxglove schema as its ROS 2 equivalent, as much of it as `parts`
+/// asks, on a connection made once per topic (`connections`); another protobuf
+/// message as it is. Else (topic, log time, problem).
+fn as_ros2(
+    message: LogMessage,
+    parts: &Parts<'_>,
+    connections: &mut HashMap<String, Arc<Connection>>,
+) -> std::result::Result<LogMessage, (String, u64, String)> {
+    let recorded = &message.connection;
+    let Some((name, schema)) = foxglove::ros_equivalent(&recorded.schema_name) else {
+        return Ok(message);
+    };
+    let part = parts(&recorded.topic, name);
+    let data = match part {
+        Part::Nothing => Vec::new(),
+        part => foxglove::to_cdr(&recorded.schema_name, &message.data, part)
+            .map_err(|problem| (recorded.topic.clone(), message.log_time_ns, problem))?,
+    };
+    let connection = (connections.entry(recorded.topic.clone()))
+        .or_insert_with(|| {
+            Arc::new(Connection {
+                topic: recorded.topic.clone(),
+                schema_name: name.into(),
+                schema_encoding: "ros2msg".into(),
+                schema_data: schema.as_bytes().to_vec(),
+                message_encoding: "cdr".into(),
+            })
+        })
+        .clone();
+    Ok(LogMessage {
+        connection,
+        data,
+        ..message
+    })
 }
 
 /// The most a compressed message may decompress to.

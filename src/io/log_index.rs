@@ -8,6 +8,7 @@ use std::path::Path;
 use serde::Deserialize;
 
 use super::camera_model::Projection;
+use super::foxglove;
 use super::hesai::{HesaiAssembler, HesaiCalibration, PANDAR_SCAN};
 use super::lidar_calibrations::LidarCalibrations;
 use super::livox::LIVOX_CUSTOM_MESSAGES;
@@ -141,6 +142,7 @@ impl Contents {
         };
         let known = PACKET_MESSAGES.contains(&schema.as_ref())
             || LIVOX_CUSTOM_MESSAGES.contains(&schema.as_ref())
+            || foxglove::ros_equivalent(&schema).is_some()
             || matches!(
                 schema.as_ref(),
                 POINT_CLOUD

@@ -2,9 +2,9 @@
 //! convert`).
 //!
 //! A log ([`convert_log`]): every message in order, the types travmap knows
-//! re-encoded as ROS 2 CDR when they were recorded in ROS 1 (same topics, stamps and
-//! frames), everything else copied as recorded with its own encoding and schema (an
-//! MCAP file holds mixed encodings).
+//! re-encoded as ROS 2 CDR when they were recorded in ROS 1 or as Foxglove's protobuf
+//! schemas (same topics, stamps and frames), everything else copied as recorded with
+//! its own encoding and schema (an MCAP file holds mixed encodings).
 //!
 //! A KITTI sequence:
 //! Per scan: a `sensor_msgs/msg/PointCloud2` (x, y, z, intensity float32, plus a
@@ -28,6 +28,7 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::io::KittiSequence;
+use crate::io::foxglove;
 use crate::io::ros::{
     CameraInfo, CompressedImage, Header, MessageEncoding, PointCloud2, PointField, Quaternion,
     RegionOfInterest, TfMessage, Time, Transform, TransformStamped, Vector3, datatype, encode,
@@ -63,7 +64,8 @@ pub struct ConversionSummary {
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct LogCopySummary {
     pub messages: usize,
-    /// ROS 1 messages of the types travmap knows, re-encoded as ROS 2 CDR.
+    /// ROS 1 and Foxglove messages of the types travmap knows, re-encoded as ROS 2
+    /// CDR.
     pub translated_messages: usize,
     /// Topics copied as recorded, in an encoding other than ROS 2 CDR.
     pub topics_as_recorded: Vec<String>,
@@ -91,12 +93,13 @@ pub fn write_log_messages(
 ) -> Result<LogCopySummary> {
     let mut summary = LogCopySummary::default();
     let stored = drive.stored().filter(|stored| {
-        let encoding =
-            |c: &&mcap::records::Channel| MessageEncoding::from_name(&c.message_encoding);
-        stored
-            .channels
-            .iter()
-            .all(|c| encoding(&c) != Some(MessageEncoding::Ros1))
+        let schema_name = |id| stored.schemas.iter().find(|(s, _)| s.id == id);
+        let translated = |c: &mcap::records::Channel| match c.message_encoding.as_str() {
+            foxglove::PROTOBUF => schema_name(c.schema_id)
+                .is_some_and(|(s, _)| foxglove::ros_equivalent(&s.name).is_some()),
+            encoding => MessageEncoding::from_name(encoding) == Some(MessageEncoding::Ros1),
+        };
+        !stored.channels.iter().any(translated)
     });
     if let Some(stored) = stored {
         let topics: HashMap<u16, String> = stored
@@ -131,7 +134,11 @@ pub fn write_log_messages(
         let connection = &message.connection;
         let translated = match connection.encoding() {
             Some(MessageEncoding::Ros1) => ros1_to_cdr(&connection.type_name(), &message.data),
-            _ => None,
+            _ => foxglove::to_ros2(
+                &connection.schema_name,
+                &connection.message_encoding,
+                &message.data,
+            ),
         };
         let (channel, data) = match translated {
             Some(Ok(ros2)) => {

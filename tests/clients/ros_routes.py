@@ -16,6 +16,10 @@ recorded-log format travmap reads, with real writers and no travmap code:
   rosbag2-mcap-jpeg/                         rosbags' rosbag2 writer, every camera image made
                                              a JPEG (Pillow, quality 90) named as image_transport
                                              names it, `rgb8; jpeg compressed bgr8`
+  foxglove.mcap                              the Foxglove SDK's MCAP writer, every message of a
+                                             type Foxglove has a schema for as that schema in
+                                             protobuf (PointCloud, FrameTransforms, CompressedImage,
+                                             CameraCalibration), as nuScenes' MCAPs are written
 
 Messages become ROS 1 with rosbags' CDR -> ROS 1 conversion (which adds the Header's
 seq); ROS 1 message definitions and md5sums come from rosbags' Noetic type store.
@@ -177,6 +181,57 @@ def as_jpeg(messages):
     return out
 
 
+def as_foxglove(messages, path):
+    """`messages` written by the Foxglove SDK as Foxglove's schemas, on the same topics
+    and log times; types without a Foxglove schema (/chatter) are left out."""
+    import foxglove
+    from foxglove import messages as fg
+
+    numeric = {
+        1: fg.PackedElementFieldNumericType.Int8, 2: fg.PackedElementFieldNumericType.Uint8,
+        3: fg.PackedElementFieldNumericType.Int16, 4: fg.PackedElementFieldNumericType.Uint16,
+        5: fg.PackedElementFieldNumericType.Int32, 6: fg.PackedElementFieldNumericType.Uint32,
+        7: fg.PackedElementFieldNumericType.Float32, 8: fg.PackedElementFieldNumericType.Float64,
+    }
+
+    def stamp(header):
+        return fg.Timestamp(sec=header.stamp.sec, nsec=header.stamp.nanosec)
+
+    def transform(t):
+        v, q = t.transform.translation, t.transform.rotation
+        return fg.FrameTransform(
+            timestamp=stamp(t.header), parent_frame_id=t.header.frame_id, child_frame_id=t.child_frame_id,
+            translation=fg.Vector3(x=v.x, y=v.y, z=v.z), rotation=fg.Quaternion(x=q.x, y=q.y, z=q.z, w=q.w),
+        )
+
+    # foxglove.log makes each topic's channel typed by its first message's schema.
+    with foxglove.open_mcap(str(path), allow_overwrite=True):
+        for topic, msgtype, log_time, cdr in messages:
+            if msgtype == CHATTER:
+                continue
+            m = ROS2.deserialize_cdr(cdr, msgtype)
+            if msgtype == "sensor_msgs/msg/PointCloud2":
+                message = fg.PointCloud(
+                    timestamp=stamp(m.header), frame_id=m.header.frame_id, point_stride=m.point_step,
+                    fields=[fg.PackedElementField(name=f.name, offset=f.offset, type=numeric[f.datatype]) for f in m.fields],
+                    data=bytes(m.data),
+                )
+            elif msgtype == "tf2_msgs/msg/TFMessage":
+                message = fg.FrameTransforms(transforms=[transform(t) for t in m.transforms])
+            elif msgtype == COMPRESSED_IMAGE:
+                message = fg.CompressedImage(
+                    timestamp=stamp(m.header), frame_id=m.header.frame_id, data=bytes(m.data), format=m.format,
+                )
+            elif msgtype == "sensor_msgs/msg/CameraInfo":
+                message = fg.CameraCalibration(
+                    timestamp=stamp(m.header), frame_id=m.header.frame_id, width=m.width, height=m.height,
+                    distortion_model=m.distortion_model, D=list(m.d), K=list(m.k), R=list(m.r), P=list(m.p),
+                )
+            else:
+                raise SystemExit(f"{topic}: no Foxglove schema for {msgtype}")
+            foxglove.log(topic, message, log_time=log_time)
+
+
 def main():
     drive, out = Path(sys.argv[1]), Path(sys.argv[2])
     out.mkdir(parents=True, exist_ok=True)
@@ -193,6 +248,7 @@ def main():
     rosbag2(as_jpeg(messages), out / "rosbag2-mcap-jpeg", StoragePlugin.MCAP)
     rosbag2(as_livox(messages, True), out / "rosbag2-mcap-livox", StoragePlugin.MCAP)
     rosbag2(as_livox(messages, False), out / "rosbag2-mcap-uint8", StoragePlugin.MCAP)
+    as_foxglove(messages, out / "foxglove.mcap")
     if len(sys.argv) > 3:
         subprocess.run(
             [sys.argv[3], "--src", str(out / "ros1-none.bag"), "--dst", str(out / "rosbag2-from-bag")],

@@ -1,0 +1,401 @@
+//! Foxglove's message schemas (`foxglove.PointCloud`, `foxglove.FrameTransform`, ...)
+//! in protobuf, as the Foxglove SDK and `mcap-protobuf-support` write them (nuScenes
+//! and many fleets' MCAPs), read as the ROS 2 messages they stand for: [`to_cdr`]
+//! gives the CDR bytes of the equivalent, so everything past the log reads a Foxglove
+//! log as a ROS 2 one.
+
+mod cameras;
+mod point_cloud;
+
+use super::log_message::Part;
+use super::protobuf::{Value, fields};
+use super::ros::{
+    CameraInfo, CompressedImage, FixedArray, Header, Image, Odometry, PointCloud2, Pose,
+    PoseWithCovariance, Quaternion, Ros2Message, RosMessage, TfMessage, Time, Transform,
+    TransformStamped, Twist, TwistWithCovariance, Vector3, encode,
+};
+use cameras::{camera_calibration, compressed_image, raw_image};
+use point_cloud::point_cloud;
+
+/// The message encoding of the schemas read here.
+pub const PROTOBUF: &str = "protobuf";
+
+/// Each Foxglove schema read, with its ROS 2 equivalent's name and schema text.
+const EQUIVALENTS: [(&str, &str, &str); 7] = [
+    (
+        "foxglove.PointCloud",
+        PointCloud2::NAME,
+        PointCloud2::SCHEMA,
+    ),
+    (
+        "foxglove.FrameTransform",
+        TfMessage::NAME,
+        TfMessage::SCHEMA,
+    ),
+    (
+        "foxglove.FrameTransforms",
+        TfMessage::NAME,
+        TfMessage::SCHEMA,
+    ),
+    (
+        "foxglove.CompressedImage",
+        CompressedImage::NAME,
+        CompressedImage::SCHEMA,
+    ),
+    ("foxglove.RawImage", Image::NAME, Image::SCHEMA),
+    (
+        "foxglove.CameraCalibration",
+        CameraInfo::NAME,
+        CameraInfo::SCHEMA,
+    ),
+    ("foxglove.Odometry", Odometry::NAME, Odometry::SCHEMA),
+];
+
+/// The Foxglove schemas read.
+pub const SCHEMAS: [&str; EQUIVALENTS.len()] = {
+    let mut names = [""; EQUIVALENTS.len()];
+    let mut i = 0;
+    while i < names.len() {
+        names[i] = EQUIVALENTS[i].0;
+        i += 1;
+    }
+    names
+};
+
+/// The ROS 2 equivalent of a Foxglove schema: its type name and schema text.
+pub fn ros_equivalent(schema_name: &str) -> Option<(&'static str, &'static str)> {
+    (EQUIVALENTS.iter())
+        .find(|(name, ..)| *name == schema_name)
+        .map(|&(_, ros, schema)| (ros, schema))
+}
+
+/// A protobuf message of a Foxglove schema travmap reads (`schema_name`, in
+/// `message_encoding`) re-encoded as its ROS 2 equivalent; None for other messages.
+pub fn to_ros2(
+    schema_name: &str,
+    message_encoding: &str,
+    data: &[u8],
+) -> Option<Result<Ros2Message, String>> {
+    let (name, schema) = ros_equivalent(schema_name).filter(|_| message_encoding == PROTOBUF)?;
+    let data = to_cdr(schema_name, data, Part::Whole);
+    Some(data.map(|data| Ros2Message { name, schema, data }))
+}
+
+/// `data`, a protobuf message of the Foxglove schema `schema_name`, as the CDR bytes
+/// of its ROS 2 equivalent; with [`Part::Header`] without its payload (points,
+/// pixels), which the pass does not read.
+pub fn to_cdr(schema_name: &str, data: &[u8], part: Part) -> Result<Vec<u8>, String> {
+    let whole = part == Part::Whole;
+    let read = || -> Result<Vec<u8>, String> {
+        Ok(match schema_name {
+            "foxglove.PointCloud" => point_cloud(data, whole)?,
+            "foxglove.FrameTransform" => encode(
+                &TfMessage {
+                    transforms: vec![frame_transform(data)?],
+                },
+                256,
+            ),
+            "foxglove.FrameTransforms" => {
+                let mut transforms = Vec::new();
+                for field in fields(data) {
+                    if let (1, value) = field? {
+                        transforms.push(frame_transform(value.bytes(1)?)?);
+                    }
+                }
+                encode(&TfMessage { transforms }, 256)
+            }
+            "foxglove.CompressedImage" => {
+                let image = compressed_image(data, whole)?;
+                encode(&image, image.data.len())
+            }
+            "foxglove.RawImage" => {
+                let image = raw_image(data, whole)?;
+                encode(&image, image.data.len())
+            }
+            "foxglove.CameraCalibration" => encode(&camera_calibration(data)?, 512),
+            "foxglove.Odometry" => encode(&odometry(data)?, 512),
+            other => return Err(format!("{other} is not a schema travmap reads")),
+        })
+    };
+    read().map_err(|problem| format!("{schema_name} ({PROTOBUF}): {problem}"))
+}
+
+/// For each field of `message`, `on_field(number, value)`.
+fn each_field<'a>(
+    message: &'a [u8],
+    mut on_field: impl FnMut(u32, Value<'a>) -> Result<(), String>,
+) -> Result<(), String> {
+    for field in fields(message) {
+        let (number, value) = field?;
+        on_field(number, value)?;
+    }
+    Ok(())
+}
+
+/// `google.protobuf.Timestamp`.
+fn timestamp(message: &[u8]) -> Result<Time, String> {
+    let (mut seconds, mut nanos) = (0i64, 0i64);
+    each_field(message, |n, v| {
+        // int64 and int32 travel as two's complement varints.
+        match n {
+            1 => seconds = v.varint(n)? as i64,
+            2 => nanos = v.varint(n)? as i64,
+            _ => {}
+        }
+        Ok(())
+    })?;
+    if !(0..1_000_000_000).contains(&nanos) {
+        return Err(format!("a timestamp's nanos of {nanos}"));
+    }
+    Ok(Time {
+        sec: seconds.clamp(i32::MIN.into(), i32::MAX.into()) as i32,
+        nanosec: nanos as u32,
+    })
+}
+
+fn vector3(message: &[u8]) -> Result<Vector3, String> {
+    let mut v = Vector3::default();
+    each_field(message, |n, value| {
+        match n {
+            1 => v.x = value.double(n)?,
+            2 => v.y = value.double(n)?,
+            3 => v.z = value.double(n)?,
+            _ => {}
+        }
+        Ok(())
+    })?;
+    Ok(v)
+}
+
+/// A quaternion as written: every component absent is 0 (so an absent one is no
+/// rotation only where the caller says so).
+fn quaternion(message: &[u8]) -> Result<Quaternion, String> {
+    let mut q = Quaternion {
+        w: 0.0,
+        ..Quaternion::default()
+    };
+    each_field(message, |n, value| {
+        match n {
+            1 => q.x = value.double(n)?,
+            2 => q.y = value.double(n)?,
+            3 => q.z = value.double(n)?,
+            4 => q.w = value.double(n)?,
+            _ => {}
+        }
+        Ok(())
+    })?;
+    Ok(q)
+}
+
+/// `foxglove.Pose`; without an orientation, none.
+fn pose(message: &[u8]) -> Result<Pose, String> {
+    let mut pose = Pose::default();
+    each_field(message, |n, value| {
+        match n {
+            1 => pose.position = vector3(value.bytes(n)?)?,
+            2 => pose.orientation = quaternion(value.bytes(n)?)?,
+            _ => {}
+        }
+        Ok(())
+    })?;
+    Ok(pose)
+}
+
+/// `foxglove.FrameTransform`: the pose of `child_frame_id` in `parent_frame_id`,
+/// as ROS's TransformStamped says it; without a rotation, none.
+fn frame_transform(message: &[u8]) -> Result<TransformStamped, String> {
+    let mut t = TransformStamped {
+        header: Header::default(),
+        child_frame_id: String::new(),
+        transform: Transform::default(),
+    };
+    each_field(message, |n, value| {
+        match n {
+            1 => t.header.stamp = timestamp(value.bytes(n)?)?,
+            2 => t.header.frame_id = value.string(n)?,
+            3 => t.child_frame_id = value.string(n)?,
+            4 => t.transform.translation = vector3(value.bytes(n)?)?,
+            5 => t.transform.rotation = quaternion(value.bytes(n)?)?,
+            _ => {}
+        }
+        Ok(())
+    })?;
+    Ok(t)
+}
+
+/// `foxglove.Odometry`: the pose of `body_frame_id` in `frame_id`.
+fn odometry(message: &[u8]) -> Result<Odometry, String> {
+    let (mut header, mut body, mut body_pose) = (Header::default(), String::new(), Pose::default());
+    each_field(message, |n, value| {
+        match n {
+            1 => header.stamp = timestamp(value.bytes(n)?)?,
+            2 => header.frame_id = value.string(n)?,
+            3 => body = value.string(n)?,
+            4 => body_pose = pose(value.bytes(n)?)?,
+            _ => {}
+        }
+        Ok(())
+    })?;
+    let zero = Vector3::default();
+    Ok(Odometry {
+        header,
+        child_frame_id: body,
+        pose: PoseWithCovariance {
+            pose: body_pose,
+            covariance: FixedArray(vec![0.0; 36]),
+        },
+        twist: TwistWithCovariance {
+            twist: Twist {
+                linear: zero,
+                angular: zero,
+            },
+            covariance: FixedArray(vec![0.0; 36]),
+        },
+    })
+}
+
+/// Protobuf as proto3 writers write it, for the tests: fields in number order,
+/// zeros left out.
+#[cfg(test)]
+mod wire {
+    pub fn key(field: u32, wire: u8, out: &mut Vec<u8>) {
+        varint(u64::from(field) << 3 | u64::from(wire), out);
+    }
+    pub fn varint(mut v: u64, out: &mut Vec<u8>) {
+        while v >= 0x80 {
+            out.push(v as u8 | 0x80);
+            v >>= 7;
+        }
+        out.push(v as u8);
+    }
+    pub fn bytes(field: u32, value: &[u8], out: &mut Vec<u8>) {
+        key(field, 2, out);
+        varint(value.len() as u64, out);
+        out.extend(value);
+    }
+    pub fn double(field: u32, value: f64, out: &mut Vec<u8>) {
+        key(field, 1, out);
+        out.extend(value.to_le_bytes());
+    }
+    pub fn fixed32(field: u32, value: u32, out: &mut Vec<u8>) {
+        key(field, 5, out);
+        out.extend(value.to_le_bytes());
+    }
+    pub fn message(write: impl FnOnce(&mut Vec<u8>)) -> Vec<u8> {
+        let mut out = Vec::new();
+        write(&mut out);
+        out
+    }
+    pub fn stamp(seconds: u64, nanos: u64) -> Vec<u8> {
+        message(|m| {
+            key(1, 0, m);
+            varint(seconds, m);
+            key(2, 0, m);
+            varint(nanos, m);
+        })
+    }
+    pub fn vector(x: f64, y: f64, z: f64) -> Vec<u8> {
+        message(|m| {
+            [x, y, z]
+                .iter()
+                .zip(1..)
+                .for_each(|(v, n)| double(n, *v, m))
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::wire::*;
+    use super::*;
+    use crate::io::ros::decode;
+
+    #[test]
+    fn frame_transforms_read_as_a_tf_message() {
+        let moved = message(|m| {
+            bytes(1, &stamp(9, 0), m);
+            bytes(2, b"map", m);
+            bytes(3, b"base_link", m);
+            bytes(4, &vector(1.0, -2.0, 0.5), m);
+            bytes(5, &message(|q| double(4, 1.0, q)), m);
+        });
+        let unturned = message(|m| {
+            bytes(2, b"base_link", m);
+            bytes(3, b"lidar", m);
+        });
+        let both = message(|m| {
+            bytes(1, &moved, m);
+            bytes(1, &unturned, m);
+        });
+        let read: TfMessage =
+            decode(&to_cdr("foxglove.FrameTransforms", &both, Part::Whole).unwrap()).unwrap();
+        let [first, second] = &read.transforms[..] else {
+            panic!("{read:?}")
+        };
+        assert_eq!(
+            (
+                first.header.frame_id.as_str(),
+                first.child_frame_id.as_str()
+            ),
+            ("map", "base_link")
+        );
+        assert_eq!(first.header.stamp.sec, 9);
+        assert_eq!(
+            first.transform.translation,
+            Vector3 {
+                x: 1.0,
+                y: -2.0,
+                z: 0.5
+            }
+        );
+        assert_eq!(
+            second.transform,
+            Transform::default(),
+            "no rotation written: none"
+        );
+        let one: TfMessage =
+            decode(&to_cdr("foxglove.FrameTransform", &moved, Part::Whole).unwrap()).unwrap();
+        assert_eq!(one.transforms, std::slice::from_ref(first));
+    }
+
+    #[test]
+    fn odometry_reads_as_the_pose_of_its_body() {
+        let odometry = message(|m| {
+            bytes(1, &stamp(2, 0), m);
+            bytes(2, b"odom", m);
+            bytes(3, b"base_link", m);
+            bytes(4, &message(|p| bytes(1, &vector(4.0, 5.0, 6.0), p)), m);
+        });
+        let read: Odometry =
+            decode(&to_cdr("foxglove.Odometry", &odometry, Part::Whole).unwrap()).unwrap();
+        assert_eq!(
+            (read.header.frame_id.as_str(), read.child_frame_id.as_str()),
+            ("odom", "base_link")
+        );
+        assert_eq!(
+            read.pose.pose.position,
+            Vector3 {
+                x: 4.0,
+                y: 5.0,
+                z: 6.0
+            }
+        );
+        assert_eq!(read.pose.pose.orientation, Quaternion::default());
+    }
+
+    #[test]
+    fn messages_that_do_not_read_say_why() {
+        let error = |schema: &str, data: &[u8]| to_cdr(schema, data, Part::Whole).unwrap_err();
+        let late = message(|m| bytes(1, &stamp(1, 1_000_000_000), m));
+        assert!(
+            error("foxglove.FrameTransform", &late).contains("a timestamp's nanos of 1000000000")
+        );
+        let wrong_type = message(|m| fixed32(2, 1, m));
+        assert!(error("foxglove.FrameTransform", &wrong_type).contains("field 2: expected bytes"));
+        assert_eq!(
+            ros_equivalent("foxglove.PointCloud"),
+            Some((PointCloud2::NAME, PointCloud2::SCHEMA))
+        );
+        assert_eq!(ros_equivalent("foxglove.SceneUpdate"), None);
+    }
+}
