@@ -249,7 +249,11 @@ fn a_foxglove_protobuf_log_reads_as_its_ros2_original() {
     assert!(channels.iter().all(|(_, encoding)| encoding == "protobuf"));
     // The same grids, cell for cell, and the same scores (labels are a field of
     // the points).
-    let grids = ["/travmap/prediction", "/travmap/ground_truth", "/travmap/cloud"];
+    let grids = [
+        "/travmap/prediction",
+        "/travmap/ground_truth",
+        "/travmap/cloud",
+    ];
     let annotated = |input: &Path, name: &str| {
         let out = dir.path().join(format!("{name}.annotated.mcap"));
         write_output("annotate", input, &out, &["--no-passthrough"]);
