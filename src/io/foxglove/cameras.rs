@@ -1,7 +1,7 @@
 //! Foxglove's cameras: `foxglove.CompressedImage`, `foxglove.RawImage` and
 //! `foxglove.CameraCalibration`.
 
-use super::{each_field, timestamp};
+use super::basics::{each_field, timestamp};
 use crate::io::ros::{CameraInfo, CompressedImage, Header, Image, RegionOfInterest};
 
 pub(super) fn compressed_image(message: &[u8], whole: bool) -> Result<CompressedImage, String> {
@@ -106,11 +106,8 @@ pub(super) fn camera_calibration(message: &[u8]) -> Result<CameraInfo, String> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::to_cdr;
-    use super::super::wire::*;
+    use super::super::basics::wire::*;
     use super::*;
-    use crate::io::log_message::Part;
-    use crate::io::ros::decode;
 
     #[test]
     fn cameras_read_as_ros_images_and_camera_infos() {
@@ -121,15 +118,13 @@ mod tests {
             bytes(3, b"png", m);
             bytes(4, b"camera", m);
         });
-        let read: CompressedImage =
-            decode(&to_cdr("foxglove.CompressedImage", &image, Part::Whole).unwrap()).unwrap();
+        let read = compressed_image(&image, true).unwrap();
         assert_eq!(
             (read.header.frame_id.as_str(), read.format.as_str()),
             ("camera", "png")
         );
         assert_eq!(read.data, b"\x89PNG...");
-        let header: CompressedImage =
-            decode(&to_cdr("foxglove.CompressedImage", &image, Part::Header).unwrap()).unwrap();
+        let header = compressed_image(&image, false).unwrap();
         assert_eq!((header.header, header.data.len()), (read.header, 0));
         let raw = message(|m| {
             fixed32(2, 2, m);
@@ -139,7 +134,7 @@ mod tests {
             bytes(6, &[1, 2, 3, 4, 5, 6], m);
             bytes(7, b"camera", m);
         });
-        let read: Image = decode(&to_cdr("foxglove.RawImage", &raw, Part::Whole).unwrap()).unwrap();
+        let read = raw_image(&raw, true).unwrap();
         assert_eq!(
             (read.width, read.height, read.step, read.encoding.as_str()),
             (2, 1, 6, "rgb8")
@@ -164,9 +159,7 @@ mod tests {
                 bytes(9, b"camera", m);
             })
         };
-        let read: CameraInfo =
-            decode(&to_cdr("foxglove.CameraCalibration", &calibration(&k), Part::Whole).unwrap())
-                .unwrap();
+        let read = camera_calibration(&calibration(&k)).unwrap();
         assert_eq!(
             (read.width, read.height, read.distortion_model.as_str()),
             (640, 480, "equidistant")
@@ -183,14 +176,7 @@ mod tests {
                 500.0, 0.0, 320.0, 0.0, 0.0, 500.0, 240.0, 0.0, 0.0, 0.0, 1.0, 0.0
             ]
         );
-        let short = to_cdr(
-            "foxglove.CameraCalibration",
-            &calibration(&k[..4]),
-            Part::Whole,
-        );
-        assert_eq!(
-            short.unwrap_err(),
-            "foxglove.CameraCalibration (protobuf): K of 4 values (9 expected)"
-        );
+        let short = camera_calibration(&calibration(&k[..4]));
+        assert_eq!(short.unwrap_err(), "K of 4 values (9 expected)");
     }
 }

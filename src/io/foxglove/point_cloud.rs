@@ -3,7 +3,7 @@
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 
-use super::{each_field, pose, timestamp};
+use super::basics::{each_field, pose, timestamp};
 use crate::io::ros::{PointCloud2, PointField, Pose, datatype, encode};
 
 /// The ROS datatype of a `foxglove.PackedElementField.NumericType`; None for
@@ -126,10 +126,8 @@ fn moved_points(cloud: &PointCloud2<&[u8]>, origin: &Pose) -> Result<Vec<u8>, St
 
 #[cfg(test)]
 mod tests {
-    use super::super::to_cdr;
-    use super::super::wire::*;
+    use super::super::basics::wire::*;
     use super::*;
-    use crate::io::log_message::Part;
     use crate::io::ros::{Time, decode};
 
     fn field(name: &str, offset: u32, kind: u64) -> Vec<u8> {
@@ -174,7 +172,7 @@ mod tests {
 
     #[test]
     fn a_point_cloud_reads_as_the_pointcloud2_of_its_points() {
-        let cdr = to_cdr("foxglove.PointCloud", &cloud(None), Part::Whole).unwrap();
+        let cdr = point_cloud(&cloud(None), true).unwrap();
         let read: PointCloud2 = decode(&cdr).unwrap();
         assert_eq!(read.header.stamp, Time { sec: 5, nanosec: 7 });
         assert_eq!(read.header.frame_id, "lidar");
@@ -199,7 +197,7 @@ mod tests {
         assert_eq!(xyz(&read), [[1.0, 0.0, 0.0], [0.0, 2.0, -1.0]]);
         assert_eq!(read.data[12], 200);
         // A pass after the header alone gets no points, but their count.
-        let cdr = to_cdr("foxglove.PointCloud", &cloud(None), Part::Header).unwrap();
+        let cdr = point_cloud(&cloud(None), false).unwrap();
         let header: PointCloud2 = decode(&cdr).unwrap();
         assert_eq!((header.width, header.data.len()), (2, 0));
     }
@@ -216,7 +214,7 @@ mod tests {
             bytes(1, &vector(1.0, 2.0, 3.0), m);
             bytes(2, &turn, m);
         });
-        let cdr = to_cdr("foxglove.PointCloud", &cloud(Some(origin)), Part::Whole).unwrap();
+        let cdr = point_cloud(&cloud(Some(origin)), true).unwrap();
         let read: PointCloud2 = decode(&cdr).unwrap();
         let expected = [[1.0, 3.0, 3.0], [-1.0, 2.0, 2.0]];
         for (p, e) in xyz(&read).iter().zip(expected) {
@@ -224,7 +222,7 @@ mod tests {
         }
         assert_eq!(read.data[12], 200, "other fields stay");
         // An origin at zero with no orientation written is no move.
-        let unmoved = to_cdr("foxglove.PointCloud", &cloud(Some(Vec::new())), Part::Whole);
+        let unmoved = point_cloud(&cloud(Some(Vec::new())), true);
         assert_eq!(
             xyz(&decode(&unmoved.unwrap()).unwrap()),
             [[1.0, 0.0, 0.0], [0.0, 2.0, -1.0]]
@@ -233,7 +231,7 @@ mod tests {
 
     #[test]
     fn point_clouds_that_do_not_read_say_why() {
-        let error = |data: &[u8]| to_cdr("foxglove.PointCloud", data, Part::Whole).unwrap_err();
+        let error = |data: &[u8]| point_cloud(data, true).unwrap_err();
         let whole = cloud(None);
         assert!(error(&whole[..whole.len() - 3]).contains("bytes, 29 left in the message"));
         let uneven = message(|m| {
