@@ -22,6 +22,10 @@ struct Edge {
     /// (stamp, parent_from_child), sorted by stamp; one sample for static edges.
     samples: Vec<(u64, Isometry3<f64>)>,
     is_static: bool,
+    /// Recorded more than once and always the same: a fixed mount re-published on
+    /// /tf (ROS 1's `static_transform_publisher`, Foxglove loggers, nuScenes'
+    /// MCAPs), held past either end of its record as a static one is.
+    constant: bool,
 }
 
 /// Every edge of a drive's tree, by child frame.
@@ -50,6 +54,8 @@ impl TransformTree {
     pub fn sort(&mut self) {
         for edge in self.edges.values_mut() {
             edge.samples.sort_by_key(|s| s.0);
+            edge.constant = edge.samples.len() > 1
+                && (edge.samples.windows(2)).all(|pair| pair[0].1 == pair[1].1);
         }
     }
 
@@ -111,9 +117,10 @@ impl TransformTree {
 /// interpolated between the two around it (linear, slerp).
 fn edge_at(child: &str, edge: &Edge, stamp_ns: u64) -> Result<Isometry3<f64>, TransformError> {
     let samples = &edge.samples;
-    if (edge.is_static || samples.len() == 1)
+    let held = edge.is_static || edge.constant;
+    if (held || samples.len() == 1)
         && let Some((t, pose)) = samples.first()
-        && (edge.is_static || t.abs_diff(stamp_ns) <= EXTRAPOLATION_NS)
+        && (held || t.abs_diff(stamp_ns) <= EXTRAPOLATION_NS)
     {
         return Ok(*pose);
     }
@@ -170,4 +177,56 @@ pub fn isometry(t: &Transform) -> Result<Isometry3<f64>, TransformError> {
         Translation3::new(p.x, p.y, p.z),
         rotation,
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SECOND_NS: u64 = 1_000_000_000;
+
+    fn moved(x: f64) -> Isometry3<f64> {
+        Isometry3::translation(x, 0.0, 0.0)
+    }
+
+    fn tree(samples: &[(u64, f64)]) -> TransformTree {
+        let mut tree = TransformTree::default();
+        for &(stamp_ns, x) in samples {
+            tree.add("base_link", "lidar", stamp_ns, moved(x), false);
+        }
+        tree.sort();
+        tree
+    }
+
+    fn x_at(tree: &TransformTree, stamp_ns: u64) -> Result<f64, TransformError> {
+        let pose = tree.ancestor_from("base_link", "lidar", stamp_ns)?.unwrap();
+        Ok(pose.translation.x)
+    }
+
+    #[test]
+    fn a_moving_edge_is_interpolated_and_not_extrapolated_past_100_ms() {
+        let tree = tree(&[(SECOND_NS, 1.0), (2 * SECOND_NS, 3.0)]);
+        assert_eq!(x_at(&tree, SECOND_NS + SECOND_NS / 4).unwrap(), 1.5);
+        assert_eq!(x_at(&tree, 2 * SECOND_NS + SECOND_NS / 20).unwrap(), 3.0);
+        let late = x_at(&tree, 3 * SECOND_NS).unwrap_err();
+        assert!(matches!(late, TransformError::NoSample { .. }), "{late}");
+        // One sample: only near it.
+        let once = self::tree(&[(SECOND_NS, 1.0)]);
+        assert_eq!(x_at(&once, SECOND_NS + SECOND_NS / 20).unwrap(), 1.0);
+        assert!(x_at(&once, 2 * SECOND_NS).is_err());
+    }
+
+    #[test]
+    fn an_edge_recorded_the_same_every_time_is_held_as_a_static_one() {
+        // A mount published on /tf at keyframes (nuScenes, every 0.5 s): clouds
+        // before the first and after the last keep it.
+        let tree = tree(&[(SECOND_NS, 2.0), (SECOND_NS + SECOND_NS / 2, 2.0)]);
+        for stamp_ns in [0, SECOND_NS, 5 * SECOND_NS] {
+            assert_eq!(x_at(&tree, stamp_ns).unwrap(), 2.0);
+        }
+        let mut on_tf_static = TransformTree::default();
+        on_tf_static.add("base_link", "lidar", SECOND_NS, moved(2.0), true);
+        on_tf_static.sort();
+        assert_eq!(x_at(&on_tf_static, 9 * SECOND_NS).unwrap(), 2.0);
+    }
 }
