@@ -23,8 +23,8 @@ pub struct Frame {
     pub labels: Option<Vec<u32>>,
     /// The colour camera's image of this frame, when the input has one.
     pub camera: Option<CameraImage>,
-    /// Points the reader dropped for a non-finite coordinate (MCAP clouds with
-    /// `is_dense` false; a KITTI scan with one is an error instead).
+    /// Points the reader dropped as no return: a NaN or infinite coordinate, or the
+    /// sensor's origin (`io::cloud::is_return`).
     pub dropped_points: usize,
     /// The cloud topics whose points the frame holds, when several sensors are
     /// merged (`--cloud-topic all`); empty for an input of one sensor.

@@ -11,7 +11,7 @@ use crate::io::cloud::cloud_points;
 use crate::io::foxglove;
 use crate::io::image::{image_pixels, jpeg_pixels};
 use crate::io::kitti::{
-    drop_non_finite, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
+    drop_non_returns, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
 };
 use crate::io::livox::{LIVOX_CUSTOM_MESSAGES, decode_cloud};
 use crate::io::log_message::Part;
@@ -75,11 +75,11 @@ pub fn kitti_poses(data: &[u8]) {
     }
 }
 
-/// A `.bin` scan, then the dropping of its non-finite points beside labels.
+/// A `.bin` scan, then the dropping of its points that are no return beside labels.
 pub fn kitti_scan(data: &[u8]) {
     if let Ok(mut points) = parse_scan(data, Path::new(NAMED)) {
         let mut labels: Vec<u32> = (0..points.len() as u32).collect();
-        drop_non_finite(&mut points, Some(&mut labels));
+        drop_non_returns(&mut points, Some(&mut labels));
         assert_eq!(points.len(), labels.len());
     }
 }

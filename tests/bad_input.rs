@@ -147,25 +147,29 @@ fn run_json(dir: &Path) -> Vec<serde_json::Value> {
 }
 
 #[test]
-fn non_finite_points_are_dropped_and_counted() {
+fn points_without_a_return_are_dropped_and_counted() {
     let dir = sequence();
     let mut points = scene_points();
     points[17][1] = f32::NAN;
     points[30][2] = f32::INFINITY;
+    // A beam without a return, as an Ouster scan records it.
+    points[41] = [0.0, 0.0, 0.0, 0.0];
     write_scan(&dir.path().join("velodyne/000001.bin"), &points);
     let out = success(eval(dir.path()));
     assert_contains(
         &out,
-        &["2 points with a non-finite coordinate were dropped"],
+        &[
+            "3 points without a return (a NaN or infinite coordinate, or the sensor's origin) were dropped",
+        ],
     );
     let with_bad_points = run_json(dir.path());
     assert_eq!(with_bad_points[0]["dropped_points"], 0);
-    assert_eq!(with_bad_points[1]["dropped_points"], 2);
+    assert_eq!(with_bad_points[1]["dropped_points"], 3);
 
     // The same as a sequence without those points: the labels stay aligned.
     let clean = sequence();
     let kept: Vec<[f32; 4]> = (0..points.len())
-        .filter(|i| ![17, 30].contains(i))
+        .filter(|i| ![17, 30, 41].contains(i))
         .map(|i| points[i])
         .collect();
     write_scan(&clean.path().join("velodyne/000001.bin"), &kept);
@@ -173,12 +177,12 @@ fn non_finite_points_are_dropped_and_counted() {
     let kept_labels: Vec<u8> = labels
         .chunks(4)
         .enumerate()
-        .filter(|(i, _)| ![17, 30].contains(i))
+        .filter(|(i, _)| ![17, 30, 41].contains(i))
         .flat_map(|(_, b)| b.to_vec())
         .collect();
     std::fs::write(clean.path().join("labels/000001.label"), kept_labels).unwrap();
     let mut without = run_json(clean.path());
-    without[1]["dropped_points"] = 2.into();
+    without[1]["dropped_points"] = 3.into();
     assert_eq!(with_bad_points, without);
 }
 

@@ -120,7 +120,7 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
         output_bytes: summary.output_bytes,
         note: (summary.dropped_points > 0).then(|| {
             format!(
-                "{} points with a non-finite coordinate were left out",
+                "{} points without a return (a NaN or infinite coordinate, or the sensor's origin) were left out",
                 summary.dropped_points
             )
         }),

@@ -169,7 +169,7 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     if report.dropped_points > 0 {
         writeln!(
             out,
-            "{} with a non-finite coordinate {} dropped",
+            "{} without a return (a NaN or infinite coordinate, or the sensor's origin) {} dropped",
             counted(report.dropped_points, "point"),
             if report.dropped_points == 1 {
                 "was"

@@ -20,7 +20,7 @@ use super::skips::SkipLog;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, RemissionScale};
 use crate::geometry::rigid;
-use crate::io::cloud::check_some_finite;
+use crate::io::cloud::{check_some_finite, is_return};
 
 /// An opened sequence: calibration, poses and times are read at once, scans on demand.
 #[derive(Clone, Debug)]
@@ -163,7 +163,7 @@ impl KittiSequence {
         } else {
             None
         };
-        let dropped_points = drop_non_finite(&mut points_in_velodyne, labels.as_mut());
+        let dropped_points = drop_non_returns(&mut points_in_velodyne, labels.as_mut());
         check_some_finite(points_in_velodyne.len(), dropped_points).map_err(|message| {
             Error::Sequence {
                 path: scan_path.clone(),
@@ -280,10 +280,11 @@ fn check_record_size(
     })
 }
 
-/// Removes the points with a NaN or infinite coordinate, and their labels, so that
-/// one bad return costs one point, not the frame. Returns how many were removed.
-pub fn drop_non_finite(points: &mut Vec<[f32; 4]>, labels: Option<&mut Vec<u32>>) -> usize {
-    let finite = |p: &[f32; 4]| p[0].is_finite() && p[1].is_finite() && p[2].is_finite();
+/// Removes the points that are no return ([`is_return`]: a NaN or infinite
+/// coordinate, or the sensor's origin), and their labels, so that one bad return
+/// costs one point, not the frame. Returns how many were removed.
+pub fn drop_non_returns(points: &mut Vec<[f32; 4]>, labels: Option<&mut Vec<u32>>) -> usize {
+    let finite = |p: &[f32; 4]| is_return(p[0], p[1], p[2]);
     if let Some(labels) = labels {
         let mut index = 0;
         labels.retain(|_| {
@@ -392,7 +393,7 @@ mod tests {
     }
 
     #[test]
-    fn non_finite_points_are_dropped_with_their_labels() {
+    fn points_that_are_no_return_are_dropped_with_their_labels() {
         let mut points = vec![
             [1.0, 2.0, 3.0, 0.5],
             [1.0, f32::NAN, 3.0, 0.5],
@@ -400,12 +401,16 @@ mod tests {
             [f32::INFINITY, 0.0, 0.0, 0.5],
             // A NaN remission is harmless: the method never reads it.
             [7.0, 8.0, 9.0, f32::NAN],
+            // A beam without a return, as an Ouster scan records it; the origin
+            // on one axis only is a return.
+            [0.0, -0.0, 0.0, 0.0],
+            [0.0, 0.0, 1.5, 0.0],
         ];
-        let mut labels = vec![10, 11, 12, 13, 14];
-        assert_eq!(drop_non_finite(&mut points, Some(&mut labels)), 2);
-        assert_eq!(labels, [10, 12, 14]);
+        let mut labels = vec![10, 11, 12, 13, 14, 15, 16];
+        assert_eq!(drop_non_returns(&mut points, Some(&mut labels)), 3);
+        assert_eq!(labels, [10, 12, 14, 16]);
         assert_eq!(points[1], [4.0, 5.0, 6.0, 0.5]);
-        assert_eq!(points.len(), 3);
+        assert_eq!(points.len(), 4);
     }
 
     #[test]

@@ -381,7 +381,8 @@ pub struct FrameMetrics {
     pub miou: f32,
     pub f1: f32,
     pub latency_ms: f32,
-    /// Points of the scan dropped for a non-finite coordinate.
+    /// Points of the scan dropped as no return (a NaN or infinite coordinate, or
+    /// the sensor's origin).
     pub dropped_points: u32,
 }
 

@@ -7,7 +7,8 @@
 //! every transform; [`RosDrive::read`] (`drive_frames.rs`) streams again and decodes
 //! only the clouds asked for. Any PointCloud2 layout is accepted: fields at any
 //! offset and order, float32 or float64 coordinates, extra fields, big-endian data,
-//! organised clouds; points with a non-finite coordinate are dropped.
+//! organised clouds; points that are no return (a NaN or infinite coordinate, or
+//! the sensor's origin) are dropped.
 
 use std::path::{Path, PathBuf};
 

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::Isometry3;
 
 use super::cloud::{check_some_finite, cloud_points};
-use super::kitti::{drop_non_finite, parse_scan};
+use super::kitti::{drop_non_returns, parse_scan};
 use super::pcd::parse_pcd;
 use super::skips::SkipLog;
 use crate::error::{Error, Result};
@@ -142,7 +142,7 @@ impl ScanFolder {
         let (points, remission, dropped_points) = match self.format {
             ScanFormat::Bin => {
                 let mut points = parse_scan(&bytes, path)?;
-                let dropped = drop_non_finite(&mut points, None);
+                let dropped = drop_non_returns(&mut points, None);
                 (points, RemissionScale::Unit, dropped)
             }
             ScanFormat::Pcd => {

@@ -55,7 +55,7 @@ pub struct ConversionSummary {
     pub frames: usize,
     pub images: usize,
     pub labelled_frames: usize,
-    /// Scan points left out for a non-finite coordinate.
+    /// Scan points left out as no return (`io::cloud::is_return`).
     pub dropped_points: u64,
     pub output_bytes: u64,
 }

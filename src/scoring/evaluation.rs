@@ -76,7 +76,7 @@ pub struct EvaluationReport {
     /// Frames with a camera image, and their predictable cells that some image covered.
     pub frames_with_images: usize,
     pub cells_with_appearance: u64,
-    /// Points the readers dropped for a non-finite coordinate, over all frames.
+    /// Points the readers dropped as no return, over all frames.
     pub dropped_points: u64,
     /// Labelled points whose id the label set does not define, over all frames,
     /// and how many frames held them.
