@@ -294,7 +294,10 @@ mod tests {
         let (fast, _) = raw_cloud_points(&common).unwrap();
         let (general, _) = raw_cloud_points(&labelled).unwrap();
         assert_eq!(fast.points, general.points);
-        assert_eq!(fast.points, [[1.5, -2.0, 3.0, 0.5], [-4.0, 5.5, -6.0, 0.25]]);
+        assert_eq!(
+            fast.points,
+            [[1.5, -2.0, 3.0, 0.5], [-4.0, 5.5, -6.0, 0.25]]
+        );
         assert_eq!((fast.dropped, general.dropped), (2, 2));
         assert_eq!(general.labels, Some(vec![0xABAB_ABAB; 2]));
         // Without an intensity field, intensity 0.

@@ -191,60 +191,57 @@ impl Log {
             .iter()
             .flat_map(move |file| {
                 let parts = parts.clone();
-                let translating = parts.clone();
                 let mut translated = HashMap::new();
+                let lost = move |ordinal, (topic, log_time_ns), problem| {
+                    Error::LogMessageLost(LostMessage {
+                        path: file.path().to_path_buf(),
+                        ordinal,
+                        topic,
+                        log_time_ns,
+                        problem,
+                    })
+                };
                 file.messages(threads, stored_parts.clone())
                     .enumerate()
-                    .map(move |(ordinal, message)| match message {
-                        Ok(message) if self.zstd_messages => {
-                            let (connection, log_time_ns) =
-                                (message.connection.clone(), message.log_time_ns);
-                            let part = (parts.as_ref()).map_or(Part::Whole, |p| {
-                                p(&connection.topic, &connection.schema_name)
-                            });
-                            decompressed(message, part).map_err(|problem| {
-                                Error::LogMessageLost(LostMessage {
+                    .map(move |(ordinal, message)| {
+                        let mut message = match message {
+                            Ok(message) => message,
+                            Err(Damage {
+                                problem,
+                                chunk: Some(chunk),
+                            }) => {
+                                return Err(Error::LogChunk {
                                     path: file.path().to_path_buf(),
-                                    ordinal,
-                                    topic: connection.topic.clone(),
-                                    log_time_ns,
+                                    offset: chunk.bytes.start,
+                                    start_s: chunk.start_ns as f64 * 1e-9,
+                                    end_s: chunk.end_ns as f64 * 1e-9,
                                     problem,
-                                })
-                            })
-                        }
-                        Ok(message) => Ok(message),
-                        Err(Damage {
-                            problem,
-                            chunk: Some(chunk),
-                        }) => Err(Error::LogChunk {
-                            path: file.path().to_path_buf(),
-                            offset: chunk.bytes.start,
-                            start_s: chunk.start_ns as f64 * 1e-9,
-                            end_s: chunk.end_ns as f64 * 1e-9,
-                            problem,
-                        }),
-                        Err(Damage { problem, .. }) => Err(Error::LogRecord {
-                            path: file.path().to_path_buf(),
-                            ordinal,
-                            problem,
-                        }),
-                    })
-                    .enumerate()
-                    .map(move |(ordinal, message)| match (message, &translating) {
-                        (Ok(message), Some(parts))
-                            if message.connection.message_encoding == foxglove::PROTOBUF =>
-                        {
-                            as_ros2(message, parts, &mut translated).map_err(|problem| {
-                                Error::LogMessageLost(LostMessage {
+                                });
+                            }
+                            Err(Damage { problem, .. }) => {
+                                return Err(Error::LogRecord {
                                     path: file.path().to_path_buf(),
                                     ordinal,
-                                    topic: problem.0,
-                                    log_time_ns: problem.1,
-                                    problem: problem.2,
-                                })
-                            })
+                                    problem,
+                                });
+                            }
+                        };
+                        let recorded = message.connection.clone();
+                        if self.zstd_messages {
+                            let part = (parts.as_ref())
+                                .map_or(Part::Whole, |p| p(&recorded.topic, &recorded.schema_name));
+                            let at = (recorded.topic.clone(), message.log_time_ns);
+                            message = decompressed(message, part)
+                                .map_err(|problem| lost(ordinal, at, problem))?;
                         }
-                        (message, _) => message,
+                        match &parts {
+                            Some(parts) if recorded.message_encoding == foxglove::PROTOBUF => {
+                                let at = (recorded.topic.clone(), message.log_time_ns);
+                                as_ros2(message, parts, &mut translated)
+                                    .map_err(|problem| lost(ordinal, at, problem))
+                            }
+                            _ => Ok(message),
+                        }
                     })
             })
             .take_while(move |message| {
@@ -257,21 +254,19 @@ impl Log {
 
 /// A message of a Foxglove schema as its ROS 2 equivalent, as much of it as `parts`
 /// asks, on a connection made once per topic (`connections`); another protobuf
-/// message as it is. Else (topic, log time, problem).
+/// message as it is.
 fn as_ros2(
     message: LogMessage,
     parts: &Parts<'_>,
     connections: &mut HashMap<String, Arc<Connection>>,
-) -> std::result::Result<LogMessage, (String, u64, String)> {
+) -> std::result::Result<LogMessage, String> {
     let recorded = &message.connection;
     let Some((name, schema)) = foxglove::ros_equivalent(&recorded.schema_name) else {
         return Ok(message);
     };
-    let part = parts(&recorded.topic, name);
-    let data = match part {
+    let data = match parts(&recorded.topic, name) {
         Part::Nothing => Vec::new(),
-        part => foxglove::to_cdr(&recorded.schema_name, &message.data, part)
-            .map_err(|problem| (recorded.topic.clone(), message.log_time_ns, problem))?,
+        part => foxglove::to_cdr(&recorded.schema_name, &message.data, part)?,
     };
     let connection = (connections.entry(recorded.topic.clone()))
         .or_insert_with(|| {
@@ -410,5 +405,67 @@ impl McapFile {
                 data: message.data.into_owned(),
             })
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn foxglove_message(schema_name: &str, data: Vec<u8>) -> LogMessage {
+        LogMessage {
+            connection: Arc::new(Connection {
+                topic: "/tf".into(),
+                schema_name: schema_name.into(),
+                schema_encoding: foxglove::PROTOBUF.into(),
+                schema_data: Vec::new(),
+                message_encoding: foxglove::PROTOBUF.into(),
+            }),
+            log_time_ns: 7,
+            publish_time_ns: 7,
+            data,
+        }
+    }
+
+    #[test]
+    fn foxglove_messages_come_as_ros2_ones_on_one_connection_per_topic() {
+        let parts: Parts = Arc::new(|_: &str, _: &str| Part::Whole);
+        let mut connections = HashMap::new();
+        // FrameTransforms holding one transform map -> base_link.
+        let transform = [0x12, 3, b'm', b'a', b'p', 0x1a, 1, b'b'];
+        let mut data = vec![0x0a, transform.len() as u8];
+        data.extend(transform);
+        let read = |data: Vec<u8>, connections: &mut HashMap<_, _>| {
+            as_ros2(
+                foxglove_message("foxglove.FrameTransforms", data),
+                &parts,
+                connections,
+            )
+        };
+        let first = read(data.clone(), &mut connections).unwrap();
+        let second = read(data, &mut connections).unwrap();
+        assert_eq!(first.connection.schema_name, "tf2_msgs/msg/TFMessage");
+        assert_eq!(first.connection.message_encoding, "cdr");
+        assert!(Arc::ptr_eq(&first.connection, &second.connection));
+        let tf: crate::io::ros::TfMessage = crate::io::ros::decode(&first.data).unwrap();
+        assert_eq!(tf.transforms[0].header.frame_id, "map");
+        assert_eq!(first.log_time_ns, 7);
+        // A message cut inside a field does not read (the pass loses it, naming
+        // the file, the message, its topic and log time).
+        let problem = read(vec![0x0a, 40, 0x12], &mut connections).unwrap_err();
+        assert!(
+            problem.starts_with("foxglove.FrameTransforms (protobuf): field 1: 40 bytes"),
+            "{problem}"
+        );
+        // Protobuf of a schema travmap does not read passes as it is.
+        let other = as_ros2(
+            foxglove_message("foxglove.SceneUpdate", vec![1]),
+            &parts,
+            &mut connections,
+        );
+        assert_eq!(
+            other.unwrap().connection.schema_name,
+            "foxglove.SceneUpdate"
+        );
     }
 }
