@@ -252,6 +252,9 @@ def main() -> None:
             ("/camera_2/camera_info", "camera_calibration"),
         ):
             seed("foxglove_message", f"{name}.pb", foxglove[topic])
+        foxglove_json = first_message_per_topic(routes / "foxglove-json.mcap")
+        for topic, name in (("/velodyne_points", "point_cloud"), ("/camera_2/camera_info", "camera_calibration")):
+            seed("foxglove_message", f"{name}.json", foxglove_json[topic])
         for storage in ("sqlite3", "mcap"):
             metadata = (routes / f"rosbag2-{storage}" / "metadata.yaml").read_text()
             # The fuzz target's directory holds one (empty) storage file, drive_0.mcap.

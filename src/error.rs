@@ -219,7 +219,7 @@ pub enum Error {
     },
 
     #[error(
-        "{path}: channel {topic} ({schema}) has message encoding `{encoding}`; travmap reads `cdr` (ROS 2), `ros1` and, of Foxglove's schemas, `protobuf`"
+        "{path}: channel {topic} ({schema}) has message encoding `{encoding}`; travmap reads `cdr` (ROS 2), `ros1` and, of Foxglove's schemas, `protobuf` and `json`"
     )]
     LogEncoding {
         path: PathBuf,

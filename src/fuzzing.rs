@@ -105,12 +105,15 @@ pub fn ros_point_cloud(data: &[u8]) {
     }
 }
 
-/// A protobuf message as each Foxglove schema travmap reads, whole and its header
-/// alone; a point cloud read into points.
+/// A protobuf and a JSON message as each Foxglove schema travmap reads, whole and
+/// its header alone; a point cloud read into points.
 pub fn foxglove_message(data: &[u8]) {
-    for schema in foxglove::SCHEMAS {
+    for (schema, encoding) in foxglove::SCHEMAS
+        .iter()
+        .flat_map(|schema| [(schema, foxglove::PROTOBUF), (schema, foxglove::JSON)])
+    {
         for part in [Part::Whole, Part::Header] {
-            if let Ok(cdr) = foxglove::to_cdr(schema, data, part)
+            if let Ok(cdr) = foxglove::to_cdr(schema, encoding, data, part)
                 && let Ok(cloud) = decode::<PointCloud2>(&cdr)
             {
                 let _ = cloud_points(&cloud);

@@ -284,17 +284,47 @@ fn a_foxglove_protobuf_log_reads_as_its_ros2_original() {
 
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
+fn foxglove_schemas_in_json_read_as_in_protobuf() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+        return;
+    };
+    let Some(routes) = routes(&drive, dir.path()) else {
+        return;
+    };
+    let grids = [
+        "/travmap/prediction",
+        "/travmap/ground_truth",
+        "/travmap/cloud",
+    ];
+    let annotated = |input: &Path, name: &str| {
+        let out = dir.path().join(format!("{name}.annotated.mcap"));
+        write_output("annotate", input, &out, &["--no-passthrough"]);
+        messages_on(&out, &grids)
+    };
+    let json = routes.join("foxglove-json.mcap");
+    let reference = annotated(&drive, "ros2");
+    assert_eq!(reference.len(), 6 + 3 + 6);
+    assert!(annotated(&json, "json") == reference);
+    assert_eq!(scores(&json), scores(&drive));
+}
+
+#[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn a_foxglove_camera_reads_as_its_ros2_original() {
     let Some((_dir, drive, routes)) = one_frame_routes() else {
         return;
     };
-    let foxglove = routes.join("foxglove.mcap");
-    let camera = messages_on(&foxglove, &["/camera_2/image/compressed"]);
-    assert_eq!(camera.len(), 1);
     let through_ros2 = images(&drive);
     assert_eq!(through_ros2.0, 1);
-    assert_eq!(images(&foxglove), through_ros2);
-    assert!(appearance_of(&foxglove) == appearance_of(&drive));
+    let cells = appearance_of(&drive);
+    for route in ["foxglove.mcap", "foxglove-json.mcap"] {
+        let foxglove = routes.join(route);
+        let camera = messages_on(&foxglove, &["/camera_2/image/compressed"]);
+        assert_eq!(camera.len(), 1);
+        assert_eq!(images(&foxglove), through_ros2, "{route}");
+        assert!(appearance_of(&foxglove) == cells, "{route}");
+    }
 }
 
 /// A copy of `from` in `dir` with `edit` applied to its bytes.

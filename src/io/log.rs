@@ -235,7 +235,7 @@ impl Log {
                                 .map_err(|problem| lost(ordinal, at, problem))?;
                         }
                         match &parts {
-                            Some(parts) if recorded.message_encoding == foxglove::PROTOBUF => {
+                            Some(parts) if foxglove::reads(&recorded.message_encoding) => {
                                 let at = (recorded.topic.clone(), message.log_time_ns);
                                 as_ros2(message, parts, &mut translated)
                                     .map_err(|problem| lost(ordinal, at, problem))
@@ -266,7 +266,12 @@ fn as_ros2(
     };
     let data = match parts(&recorded.topic, name) {
         Part::Nothing => Vec::new(),
-        part => foxglove::to_cdr(&recorded.schema_name, &message.data, part)?,
+        part => foxglove::to_cdr(
+            &recorded.schema_name,
+            &recorded.message_encoding,
+            &message.data,
+            part,
+        )?,
     };
     let connection = (connections.entry(recorded.topic.clone()))
         .or_insert_with(|| {

@@ -95,7 +95,7 @@ pub fn write_log_messages(
     let stored = drive.stored().filter(|stored| {
         let schema_name = |id| stored.schemas.iter().find(|(s, _)| s.id == id);
         let translated = |c: &mcap::records::Channel| match c.message_encoding.as_str() {
-            foxglove::PROTOBUF => schema_name(c.schema_id)
+            encoding if foxglove::reads(encoding) => schema_name(c.schema_id)
                 .is_some_and(|(s, _)| foxglove::ros_equivalent(&s.name).is_some()),
             encoding => MessageEncoding::from_name(encoding) == Some(MessageEncoding::Ros1),
         };

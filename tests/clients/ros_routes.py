@@ -20,6 +20,9 @@ recorded-log format travmap reads, with real writers and no travmap code:
                                              type Foxglove has a schema for as that schema in
                                              protobuf (PointCloud, FrameTransforms, CompressedImage,
                                              CameraCalibration), as nuScenes' MCAPs are written
+  foxglove-json.mcap                         Python mcap's writer, the same schemas in JSON (json
+                                             messages, jsonschema schemas, bytes in base64), as the
+                                             MCAP examples write them
 
 Messages become ROS 1 with rosbags' CDR -> ROS 1 conversion (which adds the Header's
 seq); ROS 1 message definitions and md5sums come from rosbags' Noetic type store.
@@ -232,6 +235,62 @@ def as_foxglove(messages, path):
             foxglove.log(topic, message, log_time=log_time)
 
 
+def as_foxglove_json(messages, path):
+    """`messages` as Foxglove's schemas in JSON, written by Python mcap; types without
+    a Foxglove schema (/chatter) are left out."""
+    import base64
+    import json
+
+    # Foxglove numbers a point field's type differently from ROS.
+    numeric = {1: 2, 2: 1, 3: 4, 4: 3, 5: 6, 6: 5, 7: 7, 8: 8}
+
+    def stamp(header):
+        return {"sec": header.stamp.sec, "nsec": header.stamp.nanosec}
+
+    def transform(t):
+        v, q = t.transform.translation, t.transform.rotation
+        return {
+            "timestamp": stamp(t.header), "parent_frame_id": t.header.frame_id, "child_frame_id": t.child_frame_id,
+            "translation": {"x": v.x, "y": v.y, "z": v.z}, "rotation": {"x": q.x, "y": q.y, "z": q.z, "w": q.w},
+        }
+
+    with open(path, "wb") as f:
+        writer = McapWriter(f)
+        writer.start()
+        channels = {}
+        for topic, msgtype, log_time, cdr in messages:
+            if msgtype == CHATTER:
+                continue
+            m = ROS2.deserialize_cdr(cdr, msgtype)
+            if msgtype == "sensor_msgs/msg/PointCloud2":
+                schema, message = "foxglove.PointCloud", {
+                    "timestamp": stamp(m.header), "frame_id": m.header.frame_id, "point_stride": m.point_step,
+                    "fields": [{"name": f.name, "offset": f.offset, "type": numeric[f.datatype]} for f in m.fields],
+                    "data": base64.b64encode(bytes(m.data)).decode(),
+                }
+            elif msgtype == "tf2_msgs/msg/TFMessage":
+                schema, message = "foxglove.FrameTransforms", {"transforms": [transform(t) for t in m.transforms]}
+            elif msgtype == COMPRESSED_IMAGE:
+                schema, message = "foxglove.CompressedImage", {
+                    "timestamp": stamp(m.header), "frame_id": m.header.frame_id, "format": m.format,
+                    "data": base64.b64encode(bytes(m.data)).decode(),
+                }
+            elif msgtype == "sensor_msgs/msg/CameraInfo":
+                schema, message = "foxglove.CameraCalibration", {
+                    "timestamp": stamp(m.header), "frame_id": m.header.frame_id, "width": m.width,
+                    "height": m.height, "distortion_model": m.distortion_model,
+                    "D": list(m.d), "K": list(m.k), "R": list(m.r), "P": list(m.p),
+                }
+            else:
+                raise SystemExit(f"{topic}: no Foxglove schema for {msgtype}")
+            if topic not in channels:
+                text = json.dumps({"title": schema, "type": "object"}).encode()
+                schema_id = writer.register_schema(name=schema, encoding="jsonschema", data=text)
+                channels[topic] = writer.register_channel(topic=topic, message_encoding="json", schema_id=schema_id)
+            writer.add_message(channels[topic], log_time=log_time, data=json.dumps(message).encode(), publish_time=log_time)
+        writer.finish()
+
+
 def main():
     drive, out = Path(sys.argv[1]), Path(sys.argv[2])
     out.mkdir(parents=True, exist_ok=True)
@@ -249,6 +308,7 @@ def main():
     rosbag2(as_livox(messages, True), out / "rosbag2-mcap-livox", StoragePlugin.MCAP)
     rosbag2(as_livox(messages, False), out / "rosbag2-mcap-uint8", StoragePlugin.MCAP)
     as_foxglove(messages, out / "foxglove.mcap")
+    as_foxglove_json(messages, out / "foxglove-json.mcap")
     if len(sys.argv) > 3:
         subprocess.run(
             [sys.argv[3], "--src", str(out / "ros1-none.bag"), "--dst", str(out / "rosbag2-from-bag")],

@@ -2,7 +2,10 @@
 //! `foxglove.Vector3`, `Quaternion` and `Pose`, and the loop over a message's fields.
 
 use crate::io::protobuf::{Value, fields};
-use crate::io::ros::{Pose, Quaternion, Time, Vector3};
+use crate::io::ros::{
+    FixedArray, Header, Odometry, Pose, PoseWithCovariance, Quaternion, Time, Twist,
+    TwistWithCovariance, Vector3,
+};
 
 /// For each field of `message`, `on_field(number, value)`.
 pub(super) fn each_field<'a>(
@@ -28,6 +31,11 @@ pub(super) fn timestamp(message: &[u8]) -> Result<Time, String> {
         }
         Ok(())
     })?;
+    time(seconds, nanos)
+}
+
+/// A time of whole seconds and nanoseconds (0 to 1e9 - 1), as ROS holds it.
+pub(super) fn time(seconds: i64, nanos: i64) -> Result<Time, String> {
     if !(0..1_000_000_000).contains(&nanos) {
         return Err(format!("a timestamp's nanos of {nanos}"));
     }
@@ -87,6 +95,27 @@ pub(super) fn pose(message: &[u8]) -> Result<Pose, String> {
 
 /// Protobuf as proto3 writers write it, for the tests: fields in number order,
 /// zeros left out.
+/// `foxglove.Odometry`'s pose of `body_frame_id` as a ROS Odometry (no twist, no
+/// covariance: Foxglove's are not read).
+pub(super) fn odometry_of(header: Header, body_frame_id: String, pose: Pose) -> Odometry {
+    let zero = Vector3::default();
+    Odometry {
+        header,
+        child_frame_id: body_frame_id,
+        pose: PoseWithCovariance {
+            pose,
+            covariance: FixedArray(vec![0.0; 36]),
+        },
+        twist: TwistWithCovariance {
+            twist: Twist {
+                linear: zero,
+                angular: zero,
+            },
+            covariance: FixedArray(vec![0.0; 36]),
+        },
+    }
+}
+
 #[cfg(test)]
 pub(super) mod wire {
     pub fn key(field: u32, wire: u8, out: &mut Vec<u8>) {

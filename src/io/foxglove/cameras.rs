@@ -49,59 +49,88 @@ pub(super) fn raw_image(message: &[u8], whole: bool) -> Result<Image, String> {
     Ok(image)
 }
 
-/// `foxglove.CameraCalibration`; Foxglove's `kannala_brandt` is ROS's `equidistant`
-/// (OpenCV's fisheye model). Without R, none; without P, K's `[K | 0]`.
+/// `foxglove.CameraCalibration` as read, in either encoding.
+#[derive(Default)]
+pub(super) struct Calibration {
+    pub header: Header,
+    pub width: u32,
+    pub height: u32,
+    pub model: String,
+    pub d: Vec<f64>,
+    pub k: Vec<f64>,
+    pub r: Vec<f64>,
+    pub p: Vec<f64>,
+}
+
+/// `foxglove.CameraCalibration` in protobuf.
 pub(super) fn camera_calibration(message: &[u8]) -> Result<CameraInfo, String> {
-    let (mut header, mut width, mut height, mut model) = (Header::default(), 0, 0, String::new());
-    let (mut d, mut k, mut r, mut p) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut c = Calibration::default();
     each_field(message, |n, value| {
         match n {
-            1 => header.stamp = timestamp(value.bytes(n)?)?,
-            2 => width = value.fixed32(n)?,
-            3 => height = value.fixed32(n)?,
-            4 => model = value.string(n)?,
-            5 => value.doubles(n, &mut d)?,
-            6 => value.doubles(n, &mut k)?,
-            7 => value.doubles(n, &mut r)?,
-            8 => value.doubles(n, &mut p)?,
-            9 => header.frame_id = value.string(n)?,
+            1 => c.header.stamp = timestamp(value.bytes(n)?)?,
+            2 => c.width = value.fixed32(n)?,
+            3 => c.height = value.fixed32(n)?,
+            4 => c.model = value.string(n)?,
+            5 => value.doubles(n, &mut c.d)?,
+            6 => value.doubles(n, &mut c.k)?,
+            7 => value.doubles(n, &mut c.r)?,
+            8 => value.doubles(n, &mut c.p)?,
+            9 => c.header.frame_id = value.string(n)?,
             _ => {}
         }
         Ok(())
     })?;
-    if model == "kannala_brandt" {
-        model = "equidistant".into();
+    c.camera_info()
+}
+
+impl Calibration {
+    /// As a CameraInfo: Foxglove's `kannala_brandt` is ROS's `equidistant` (OpenCV's
+    /// fisheye model); without R, none; without P, K's `[K | 0]`.
+    pub(super) fn camera_info(self) -> Result<CameraInfo, String> {
+        let Calibration {
+            header,
+            width,
+            height,
+            mut model,
+            d,
+            k,
+            r,
+            p,
+        } = self;
+        if model == "kannala_brandt" {
+            model = "equidistant".into();
+        }
+        let k: [f64; 9] = k
+            .try_into()
+            .map_err(|k: Vec<f64>| format!("K of {} values (9 expected)", k.len()))?;
+        let r: [f64; 9] = match r.len() {
+            0 => [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            _ => r
+                .try_into()
+                .map_err(|r: Vec<f64>| format!("R of {} values (9 expected)", r.len()))?,
+        };
+        let p: [f64; 12] = match p.len() {
+            0 => [
+                k[0], k[1], k[2], 0.0, k[3], k[4], k[5], 0.0, k[6], k[7], k[8], 0.0,
+            ],
+            _ => p
+                .try_into()
+                .map_err(|p: Vec<f64>| format!("P of {} values (12 expected)", p.len()))?,
+        };
+        Ok(CameraInfo {
+            header,
+            height,
+            width,
+            distortion_model: model,
+            d,
+            k,
+            r,
+            p,
+            binning_x: 0,
+            binning_y: 0,
+            roi: RegionOfInterest::default(),
+        })
     }
-    let k: [f64; 9] = k
-        .try_into()
-        .map_err(|k: Vec<f64>| format!("K of {} values (9 expected)", k.len()))?;
-    let r: [f64; 9] = match r.len() {
-        0 => [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-        _ => r
-            .try_into()
-            .map_err(|r: Vec<f64>| format!("R of {} values (9 expected)", r.len()))?,
-    };
-    let p: [f64; 12] = match p.len() {
-        0 => [
-            k[0], k[1], k[2], 0.0, k[3], k[4], k[5], 0.0, k[6], k[7], k[8], 0.0,
-        ],
-        _ => p
-            .try_into()
-            .map_err(|p: Vec<f64>| format!("P of {} values (12 expected)", p.len()))?,
-    };
-    Ok(CameraInfo {
-        header,
-        height,
-        width,
-        distortion_model: model,
-        d,
-        k,
-        r,
-        p,
-        binning_x: 0,
-        binning_y: 0,
-        roi: RegionOfInterest::default(),
-    })
 }
 
 #[cfg(test)]

@@ -1,26 +1,32 @@
 //! Foxglove's message schemas (`foxglove.PointCloud`, `foxglove.FrameTransform`, ...)
 //! in protobuf, as the Foxglove SDK and `mcap-protobuf-support` write them (nuScenes
-//! and many fleets' MCAPs), read as the ROS 2 messages they stand for: [`to_cdr`]
+//! and many fleets' MCAPs), and in JSON (`json.rs`), read as the ROS 2 messages they stand for: [`to_cdr`]
 //! gives the CDR bytes of the equivalent, so everything past the log reads a Foxglove
 //! log as a ROS 2 one.
 
 mod basics;
 mod cameras;
+mod json;
 mod point_cloud;
 
 use super::log_message::Part;
 use super::protobuf::fields;
 use super::ros::{
-    CameraInfo, CompressedImage, FixedArray, Header, Image, Odometry, PointCloud2, Pose,
-    PoseWithCovariance, Ros2Message, RosMessage, TfMessage, Transform, TransformStamped, Twist,
-    TwistWithCovariance, Vector3, encode,
+    CameraInfo, CompressedImage, Header, Image, Odometry, PointCloud2, Pose, Ros2Message,
+    RosMessage, TfMessage, Transform, TransformStamped, encode,
 };
-use basics::{each_field, pose, quaternion, timestamp, vector3};
+use basics::{each_field, odometry_of, pose, quaternion, timestamp, vector3};
 use cameras::{camera_calibration, compressed_image, raw_image};
 use point_cloud::point_cloud;
 
-/// The message encoding of the schemas read here.
+/// The message encodings of the schemas read here.
 pub const PROTOBUF: &str = "protobuf";
+pub const JSON: &str = "json";
+
+/// Whether travmap reads Foxglove's schemas in `message_encoding`.
+pub fn reads(message_encoding: &str) -> bool {
+    message_encoding == PROTOBUF || message_encoding == JSON
+}
 
 /// Each Foxglove schema read, with its ROS 2 equivalent's name and schema text.
 const EQUIVALENTS: [(&str, &str, &str); 7] = [
@@ -71,55 +77,70 @@ pub fn ros_equivalent(schema_name: &str) -> Option<(&'static str, &'static str)>
         .map(|&(_, ros, schema)| (ros, schema))
 }
 
-/// A protobuf message of a Foxglove schema travmap reads (`schema_name`, in
+/// A message of a Foxglove schema travmap reads (`schema_name`, in
 /// `message_encoding`) re-encoded as its ROS 2 equivalent; None for other messages.
 pub fn to_ros2(
     schema_name: &str,
     message_encoding: &str,
     data: &[u8],
 ) -> Option<Result<Ros2Message, String>> {
-    let (name, schema) = ros_equivalent(schema_name).filter(|_| message_encoding == PROTOBUF)?;
-    let data = to_cdr(schema_name, data, Part::Whole);
+    let (name, schema) = ros_equivalent(schema_name).filter(|_| reads(message_encoding))?;
+    let data = to_cdr(schema_name, message_encoding, data, Part::Whole);
     Some(data.map(|data| Ros2Message { name, schema, data }))
 }
 
-/// `data`, a protobuf message of the Foxglove schema `schema_name`, as the CDR bytes
-/// of its ROS 2 equivalent; with [`Part::Header`] without its payload (points,
-/// pixels), which the pass does not read.
-pub fn to_cdr(schema_name: &str, data: &[u8], part: Part) -> Result<Vec<u8>, String> {
+/// `data`, a message of the Foxglove schema `schema_name` in `message_encoding`
+/// (protobuf or JSON), as the CDR bytes of its ROS 2 equivalent; with
+/// [`Part::Header`] without its payload (points, pixels), which the pass does not
+/// read.
+pub fn to_cdr(
+    schema_name: &str,
+    message_encoding: &str,
+    data: &[u8],
+    part: Part,
+) -> Result<Vec<u8>, String> {
     let whole = part == Part::Whole;
-    let read = || -> Result<Vec<u8>, String> {
-        Ok(match schema_name {
-            "foxglove.PointCloud" => point_cloud(data, whole)?,
-            "foxglove.FrameTransform" => encode(
-                &TfMessage {
-                    transforms: vec![frame_transform(data)?],
-                },
-                256,
-            ),
-            "foxglove.FrameTransforms" => {
-                let mut transforms = Vec::new();
-                for field in fields(data) {
-                    if let (1, value) = field? {
-                        transforms.push(frame_transform(value.bytes(1)?)?);
-                    }
-                }
-                encode(&TfMessage { transforms }, 256)
-            }
-            "foxglove.CompressedImage" => {
-                let image = compressed_image(data, whole)?;
-                encode(&image, image.data.len())
-            }
-            "foxglove.RawImage" => {
-                let image = raw_image(data, whole)?;
-                encode(&image, image.data.len())
-            }
-            "foxglove.CameraCalibration" => encode(&camera_calibration(data)?, 512),
-            "foxglove.Odometry" => encode(&odometry(data)?, 512),
-            other => return Err(format!("{other} is not a schema travmap reads")),
-        })
+    let read = match message_encoding {
+        PROTOBUF => from_protobuf(schema_name, data, whole),
+        JSON => json::to_cdr(schema_name, data, whole),
+        other => Err(format!(
+            "travmap reads these in {PROTOBUF} and {JSON}, not {other}"
+        )),
     };
-    read().map_err(|problem| format!("{schema_name} ({PROTOBUF}): {problem}"))
+    read.map_err(|problem| format!("{schema_name} ({message_encoding}): {problem}"))
+}
+
+/// [`to_cdr`] of a protobuf message.
+fn from_protobuf(schema_name: &str, data: &[u8], whole: bool) -> Result<Vec<u8>, String> {
+    Ok(match schema_name {
+        "foxglove.PointCloud" => point_cloud(data, whole)?,
+        "foxglove.FrameTransform" => encode(
+            &TfMessage {
+                transforms: vec![frame_transform(data)?],
+            },
+            256,
+        ),
+        "foxglove.FrameTransforms" => {
+            let mut transforms = Vec::new();
+            for field in fields(data) {
+                if let (1, value) = field? {
+                    transforms.push(frame_transform(value.bytes(1)?)?);
+                }
+            }
+            encode(&TfMessage { transforms }, 256)
+        }
+        "foxglove.CompressedImage" => {
+            let image = compressed_image(data, whole)?;
+            encode(&image, image.data.len())
+        }
+        "foxglove.RawImage" => {
+            let image = raw_image(data, whole)?;
+            encode(&image, image.data.len())
+        }
+        "foxglove.CameraCalibration" => encode(&camera_calibration(data)?, 512),
+        "foxglove.Odometry" => encode(&odometry(data)?, 512),
+        other => return Err(format!("{other} is not a schema travmap reads")),
+    })
 }
 
 /// `foxglove.FrameTransform`: the pose of `child_frame_id` in `parent_frame_id`,
@@ -157,29 +178,14 @@ fn odometry(message: &[u8]) -> Result<Odometry, String> {
         }
         Ok(())
     })?;
-    let zero = Vector3::default();
-    Ok(Odometry {
-        header,
-        child_frame_id: body,
-        pose: PoseWithCovariance {
-            pose: body_pose,
-            covariance: FixedArray(vec![0.0; 36]),
-        },
-        twist: TwistWithCovariance {
-            twist: Twist {
-                linear: zero,
-                angular: zero,
-            },
-            covariance: FixedArray(vec![0.0; 36]),
-        },
-    })
+    Ok(odometry_of(header, body, body_pose))
 }
 
 #[cfg(test)]
 mod tests {
     use super::basics::wire::*;
     use super::*;
-    use crate::io::ros::{Quaternion, decode};
+    use crate::io::ros::{Quaternion, Vector3, decode};
 
     #[test]
     fn frame_transforms_read_as_a_tf_message() {
@@ -199,7 +205,8 @@ mod tests {
             bytes(1, &unturned, m);
         });
         let read: TfMessage =
-            decode(&to_cdr("foxglove.FrameTransforms", &both, Part::Whole).unwrap()).unwrap();
+            decode(&to_cdr("foxglove.FrameTransforms", PROTOBUF, &both, Part::Whole).unwrap())
+                .unwrap();
         let [first, second] = &read.transforms[..] else {
             panic!("{read:?}")
         };
@@ -225,7 +232,8 @@ mod tests {
             "no rotation written: none"
         );
         let one: TfMessage =
-            decode(&to_cdr("foxglove.FrameTransform", &moved, Part::Whole).unwrap()).unwrap();
+            decode(&to_cdr("foxglove.FrameTransform", PROTOBUF, &moved, Part::Whole).unwrap())
+                .unwrap();
         assert_eq!(one.transforms, std::slice::from_ref(first));
     }
 
@@ -238,7 +246,8 @@ mod tests {
             bytes(4, &message(|p| bytes(1, &vector(4.0, 5.0, 6.0), p)), m);
         });
         let read: Odometry =
-            decode(&to_cdr("foxglove.Odometry", &odometry, Part::Whole).unwrap()).unwrap();
+            decode(&to_cdr("foxglove.Odometry", PROTOBUF, &odometry, Part::Whole).unwrap())
+                .unwrap();
         assert_eq!(
             (read.header.frame_id.as_str(), read.child_frame_id.as_str()),
             ("odom", "base_link")
@@ -256,7 +265,8 @@ mod tests {
 
     #[test]
     fn messages_that_do_not_read_say_why() {
-        let error = |schema: &str, data: &[u8]| to_cdr(schema, data, Part::Whole).unwrap_err();
+        let error =
+            |schema: &str, data: &[u8]| to_cdr(schema, PROTOBUF, data, Part::Whole).unwrap_err();
         let late = message(|m| bytes(1, &stamp(1, 1_000_000_000), m));
         assert!(
             error("foxglove.FrameTransform", &late).contains("a timestamp's nanos of 1000000000")

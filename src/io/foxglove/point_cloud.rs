@@ -8,7 +8,7 @@ use crate::io::ros::{PointCloud2, PointField, Pose, datatype, encode};
 
 /// The ROS datatype of a `foxglove.PackedElementField.NumericType`; None for
 /// `UNKNOWN` (0), a field Foxglove's own viewers leave out.
-fn numeric_type(value: u64) -> Result<Option<u8>, String> {
+pub(super) fn numeric_type(value: u64) -> Result<Option<u8>, String> {
     Ok(Some(match value {
         0 => return Ok(None),
         1 => datatype::UINT8,
@@ -55,6 +55,16 @@ pub(super) fn point_cloud(message: &[u8], whole: bool) -> Result<Vec<u8>, String
         }
         Ok(())
     })?;
+    finish(cloud, origin, whole)
+}
+
+/// A Foxglove cloud as read (one row, its fields and stride set) as CDR bytes: its
+/// size checked, its points moved by `origin`; with `whole` false, without them.
+pub(super) fn finish(
+    mut cloud: PointCloud2<&[u8]>,
+    origin: Option<Pose>,
+    whole: bool,
+) -> Result<Vec<u8>, String> {
     let (bytes, step) = (cloud.data.len(), cloud.point_step as usize);
     if step == 0 && bytes > 0 || step > 0 && bytes % step != 0 {
         return Err(format!("{bytes} bytes of points of stride {step}"));
@@ -64,16 +74,15 @@ pub(super) fn point_cloud(message: &[u8], whole: bool) -> Result<Vec<u8>, String
         .map_err(|_| format!("{bytes} bytes of points"))?;
     cloud.row_step = u32::try_from(bytes).map_err(|_| format!("{bytes} bytes of points"))?;
     let moved = match origin {
-        Some(origin) if whole && !is_identity(&origin) => Some(moved_points(&cloud, &origin)?),
-        _ => None,
+        Some(origin) if whole && !is_identity(&origin) => moved_points(&cloud, &origin)?,
+        _ => Vec::new(),
     };
-    if !whole {
-        cloud.data = &[];
-    }
-    if let Some(moved) = &moved {
-        cloud.data = moved;
-    }
-    Ok(encode(&cloud, cloud.data.len() + 256))
+    let data = match whole {
+        true if !moved.is_empty() => &moved[..],
+        true => cloud.data,
+        false => &[],
+    };
+    Ok(encode(&PointCloud2 { data, ..cloud }, data.len() + 256))
 }
 
 fn is_identity(pose: &Pose) -> bool {
