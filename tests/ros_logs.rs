@@ -224,6 +224,15 @@ fn a_livox_custom_msg_reads_as_the_pointcloud2_of_its_points() {
     let reference = annotated(&routes.join("rosbag2-mcap-uint8"), "uint8");
     assert_eq!(reference.len(), 12);
     assert!(annotated(&livox, "livox") == reference);
+    // And from a ROS 1 bag of livox_ros_driver/CustomMsg, as FAST-LIO's users record.
+    let ros1 = routes.join("ros1-livox.bag");
+    let types: Vec<String> = Log::open(&ros1, detect(&ros1).unwrap())
+        .unwrap()
+        .messages()
+        .map(|m| m.unwrap().connection.schema_name.clone())
+        .collect();
+    assert!(types.contains(&"livox_ros_driver/CustomMsg".to_string()), "{types:?}");
+    assert!(annotated(&ros1, "ros1-livox") == reference);
 }
 
 #[test]

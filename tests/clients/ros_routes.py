@@ -13,6 +13,8 @@ recorded-log format travmap reads, with real writers and no travmap code:
                                              intensity x 255, rounded)
   rosbag2-mcap-uint8/                        the same points as PointCloud2s with that reflectivity
                                              as a uint8 intensity (what the Livox route must read as)
+  ros1-livox.bag                             rosbags' ROS 1 bag writer, the Livox route's clouds as
+                                             ROS 1's livox_ros_driver/CustomMsg (FAST-LIO's bags)
   rosbag2-mcap-jpeg/                         rosbags' rosbag2 writer, every camera image made
                                              a JPEG (Pillow, quality 90) named as image_transport
                                              names it, `rgb8; jpeg compressed bgr8`
@@ -111,19 +113,23 @@ def rosbag2(messages, path, storage, compression=None):
 
 
 LIVOX = "livox_ros_driver2/msg/CustomMsg"
-ROS2.register(
-    get_types_from_msg(
-        "uint32 offset_time\nfloat32 x\nfloat32 y\nfloat32 z\nuint8 reflectivity\nuint8 tag\nuint8 line",
-        "livox_ros_driver2/msg/CustomPoint",
-    )
-)
-ROS2.register(
-    get_types_from_msg(
-        "std_msgs/Header header\nuint64 timebase\nuint32 point_num\nuint8 lidar_id\nuint8[3] rsvd\n"
-        "livox_ros_driver2/CustomPoint[] points",
-        LIVOX,
-    )
-)
+# ROS 1's driver (livox_ros_driver, FAST-LIO's bags) has the same fields.
+LIVOX1 = "livox_ros_driver/msg/CustomMsg"
+for store in (ROS2, ROS1):
+    for package in ("livox_ros_driver2", "livox_ros_driver"):
+        store.register(
+            get_types_from_msg(
+                "uint32 offset_time\nfloat32 x\nfloat32 y\nfloat32 z\nuint8 reflectivity\nuint8 tag\nuint8 line",
+                f"{package}/msg/CustomPoint",
+            )
+        )
+        store.register(
+            get_types_from_msg(
+                "std_msgs/Header header\nuint64 timebase\nuint32 point_num\nuint8 lidar_id\nuint8[3] rsvd\n"
+                f"{package}/CustomPoint[] points",
+                f"{package}/msg/CustomMsg",
+            )
+        )
 
 
 def cloud_rows(cloud):
@@ -305,7 +311,10 @@ def main():
         for storage, name in [(StoragePlugin.SQLITE3, "sqlite3"), (StoragePlugin.MCAP, "mcap")]:
             rosbag2(messages, out / f"rosbag2-{name}-zstd{suffix}", storage, mode)
     rosbag2(as_jpeg(messages), out / "rosbag2-mcap-jpeg", StoragePlugin.MCAP)
-    rosbag2(as_livox(messages, True), out / "rosbag2-mcap-livox", StoragePlugin.MCAP)
+    livox = as_livox(messages, True)
+    rosbag2(livox, out / "rosbag2-mcap-livox", StoragePlugin.MCAP)
+    # The same bytes under ROS 1's package name (the layout does not depend on it).
+    ros1_bag([(t, LIVOX1 if m == LIVOX else m, s, c) for t, m, s, c in livox], out / "ros1-livox.bag", None)
     rosbag2(as_livox(messages, False), out / "rosbag2-mcap-uint8", StoragePlugin.MCAP)
     as_foxglove(messages, out / "foxglove.mcap")
     as_foxglove_json(messages, out / "foxglove-json.mcap")
