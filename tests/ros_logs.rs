@@ -231,7 +231,10 @@ fn a_livox_custom_msg_reads_as_the_pointcloud2_of_its_points() {
         .messages()
         .map(|m| m.unwrap().connection.schema_name.clone())
         .collect();
-    assert!(types.contains(&"livox_ros_driver/CustomMsg".to_string()), "{types:?}");
+    assert!(
+        types.contains(&"livox_ros_driver/CustomMsg".to_string()),
+        "{types:?}"
+    );
     assert!(annotated(&ros1, "ros1-livox") == reference);
 }
 

@@ -1,8 +1,8 @@
 //! Foxglove's message schemas (`foxglove.PointCloud`, `foxglove.FrameTransform`, ...)
 //! in protobuf, as the Foxglove SDK and `mcap-protobuf-support` write them (nuScenes
-//! and many fleets' MCAPs), and in JSON (`json.rs`), read as the ROS 2 messages they stand for: [`to_cdr`]
-//! gives the CDR bytes of the equivalent, so everything past the log reads a Foxglove
-//! log as a ROS 2 one.
+//! and many fleets' MCAPs), and in JSON (`json.rs`), read as the ROS 2 messages they
+//! stand for: [`to_cdr`] gives the CDR bytes of the equivalent, so everything past the
+//! log reads a Foxglove log as a ROS 2 one.
 
 mod basics;
 mod cameras;
