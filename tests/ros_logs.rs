@@ -296,6 +296,37 @@ fn a_foxglove_protobuf_log_reads_as_its_ros2_original() {
 
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
+fn a_log_laid_out_as_nuscenes_reads_with_its_mounts_on_tf() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+        return;
+    };
+    let Some(routes) = routes(&drive, dir.path()) else {
+        return;
+    };
+    let nuscenes = routes.join("foxglove-nuscenes.mcap");
+    // A LiDAR and a radar: the LiDAR is to be named, and the error names both.
+    let err = clean_failure(travmap(&["eval", arg(&nuscenes)]));
+    assert_contains(
+        &err,
+        &["several PointCloud2 topics", "/lidar_top", "/radar_front"],
+    );
+    // The mounts are on /tf at the second and fourth clouds only, the same each
+    // time: held as static ones are, so the first and last clouds keep their pose,
+    // and the scores are the original's.
+    let chosen = ["--cloud-topic", "/lidar_top"];
+    let summary = common::json_summary(&[&["eval", arg(&nuscenes)][..], &chosen].concat());
+    let original = common::json_summary(&["eval", arg(&drive)]);
+    assert_eq!(summary["report"]["frames"], 3);
+    assert_eq!(
+        summary["report"]["confusion"],
+        original["report"]["confusion"]
+    );
+    assert_eq!(summary["report"]["scores"], original["report"]["scores"]);
+}
+
+#[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn foxglove_schemas_in_json_read_as_in_protobuf() {
     let dir = tempfile::tempdir().unwrap();
     let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {

@@ -22,6 +22,10 @@ recorded-log format travmap reads, with real writers and no travmap code:
                                              type Foxglove has a schema for as that schema in
                                              protobuf (PointCloud, FrameTransforms, CompressedImage,
                                              CameraCalibration), as nuScenes' MCAPs are written
+  foxglove-nuscenes.mcap                     the Foxglove SDK's writer, laid out as nuScenes' MCAPs
+                                             are: the LiDAR in `lidar_top` on a vehicle `base_link`,
+                                             each mount on /tf (not /tf_static) at a few key frames
+                                             only, and a radar's small clouds beside it
   foxglove-json.mcap                         Python mcap's writer, the same schemas in JSON (json
                                              messages, jsonschema schemas, bytes in base64), as the
                                              MCAP examples write them
@@ -190,18 +194,20 @@ def as_jpeg(messages):
     return out
 
 
+def foxglove_types():
+    """ROS datatype -> the Foxglove SDK's numeric type (numbered differently)."""
+    from foxglove.messages import PackedElementFieldNumericType as T
+
+    return {1: T.Int8, 2: T.Uint8, 3: T.Int16, 4: T.Uint16, 5: T.Int32, 6: T.Uint32, 7: T.Float32, 8: T.Float64}
+
+
 def as_foxglove(messages, path):
     """`messages` written by the Foxglove SDK as Foxglove's schemas, on the same topics
     and log times; types without a Foxglove schema (/chatter) are left out."""
     import foxglove
     from foxglove import messages as fg
 
-    numeric = {
-        1: fg.PackedElementFieldNumericType.Int8, 2: fg.PackedElementFieldNumericType.Uint8,
-        3: fg.PackedElementFieldNumericType.Int16, 4: fg.PackedElementFieldNumericType.Uint16,
-        5: fg.PackedElementFieldNumericType.Int32, 6: fg.PackedElementFieldNumericType.Uint32,
-        7: fg.PackedElementFieldNumericType.Float32, 8: fg.PackedElementFieldNumericType.Float64,
-    }
+    types = foxglove_types()
 
     def stamp(header):
         return fg.Timestamp(sec=header.stamp.sec, nsec=header.stamp.nanosec)
@@ -222,7 +228,7 @@ def as_foxglove(messages, path):
             if msgtype == "sensor_msgs/msg/PointCloud2":
                 message = fg.PointCloud(
                     timestamp=stamp(m.header), frame_id=m.header.frame_id, point_stride=m.point_step,
-                    fields=[fg.PackedElementField(name=f.name, offset=f.offset, type=numeric[f.datatype]) for f in m.fields],
+                    fields=[fg.PackedElementField(name=f.name, offset=f.offset, type=types[f.datatype]) for f in m.fields],
                     data=bytes(m.data),
                 )
             elif msgtype == "tf2_msgs/msg/TFMessage":
@@ -239,6 +245,58 @@ def as_foxglove(messages, path):
             else:
                 raise SystemExit(f"{topic}: no Foxglove schema for {msgtype}")
             foxglove.log(topic, message, log_time=log_time)
+
+
+def as_nuscenes_like(messages, path):
+    """`messages`' clouds and poses as nuScenes' MCAPs hold theirs: map -> base_link
+    per cloud, base_link -> lidar_top and -> radar_front (identity mounts) on /tf at
+    the second and fourth clouds only, /lidar_top and a 4-point /radar_front cloud."""
+    import foxglove
+    from foxglove import messages as fg
+
+    types = foxglove_types()
+
+    def stamp(header):
+        return fg.Timestamp(sec=header.stamp.sec, nsec=header.stamp.nanosec)
+
+    def transform(timestamp, parent, child, v=None, q=None):
+        return fg.FrameTransform(
+            timestamp=timestamp, parent_frame_id=parent, child_frame_id=child,
+            translation=fg.Vector3(x=v.x, y=v.y, z=v.z) if v else fg.Vector3(x=0, y=0, z=0),
+            rotation=fg.Quaternion(x=q.x, y=q.y, z=q.z, w=q.w) if q else fg.Quaternion(x=0, y=0, z=0, w=1),
+        )
+
+    def cloud(header, frame, m):
+        return fg.PointCloud(
+            timestamp=stamp(header), frame_id=frame, point_stride=m.point_step,
+            fields=[fg.PackedElementField(name=f.name, offset=f.offset, type=types[f.datatype]) for f in m.fields],
+            data=bytes(m.data),
+        )
+
+    # A context of its own: /tf carries single FrameTransforms here, as in nuScenes.
+    from foxglove.channels import FrameTransformChannel, PointCloudChannel
+
+    context = foxglove.Context()
+    tf = FrameTransformChannel("/tf", context=context)
+    lidar = PointCloudChannel("/lidar_top", context=context)
+    radar = PointCloudChannel("/radar_front", context=context)
+    clouds = 0
+    with foxglove.open_mcap(str(path), allow_overwrite=True, context=context):
+        for topic, msgtype, log_time, cdr in messages:
+            if topic == "/tf":
+                for t in ROS2.deserialize_cdr(cdr, msgtype).transforms:
+                    v, q = t.transform.translation, t.transform.rotation
+                    tf.log(transform(stamp(t.header), "map", "base_link", v, q), log_time=log_time)
+            elif msgtype == "sensor_msgs/msg/PointCloud2":
+                m = ROS2.deserialize_cdr(cdr, msgtype)
+                if clouds in (1, 3):
+                    for mount in ("lidar_top", "radar_front"):
+                        tf.log(transform(stamp(m.header), "base_link", mount), log_time=log_time)
+                lidar.log(cloud(m.header, "lidar_top", m), log_time=log_time)
+                few = ROS2.deserialize_cdr(cdr, msgtype)
+                few.data = few.data[: 4 * few.point_step]
+                radar.log(cloud(m.header, "radar_front", few), log_time=log_time)
+                clouds += 1
 
 
 def as_foxglove_json(messages, path):
@@ -317,6 +375,7 @@ def main():
     ros1_bag([(t, LIVOX1 if m == LIVOX else m, s, c) for t, m, s, c in livox], out / "ros1-livox.bag", None)
     rosbag2(as_livox(messages, False), out / "rosbag2-mcap-uint8", StoragePlugin.MCAP)
     as_foxglove(messages, out / "foxglove.mcap")
+    as_nuscenes_like(messages, out / "foxglove-nuscenes.mcap")
     as_foxglove_json(messages, out / "foxglove-json.mcap")
     if len(sys.argv) > 3:
         subprocess.run(
