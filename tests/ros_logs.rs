@@ -47,6 +47,29 @@ fn routes(drive: &Path, dir: &Path) -> Option<PathBuf> {
     Some(out)
 }
 
+/// The shipped drive (six frames, three labelled) converted by travmap (in the
+/// directory's `drive.mcap`) and written in every other format; None without the data
+/// or the client venv.
+fn sample_routes() -> Option<(tempfile::TempDir, PathBuf, PathBuf)> {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, drive) = common::sample_as_mcap(dir.path(), &[])?;
+    let routes = routes(&drive, dir.path())?;
+    Some((dir, drive, routes))
+}
+
+/// The grids and clouds `annotate --no-passthrough` writes of `input` (into `dir`,
+/// named after `name`): (topic, log time, bytes).
+fn annotated_grids(dir: &Path, input: &Path, name: &str) -> Vec<(String, u64, Vec<u8>)> {
+    let out = dir.join(format!("{name}.annotated.mcap"));
+    write_output("annotate", input, &out, &["--no-passthrough"]);
+    let grids = [
+        "/travmap/prediction",
+        "/travmap/ground_truth",
+        "/travmap/cloud",
+    ];
+    messages_on(&out, &grids)
+}
+
 /// The KITTI frame with its camera image, converted by travmap (in the directory's
 /// `drive.mcap`) and written in every other format; None without the data or the
 /// client venv.
@@ -95,23 +118,10 @@ fn scores(input: &Path) -> Value {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn every_route_gives_the_ros2_grids_cell_for_cell_and_the_same_scores() {
-    let dir = tempfile::tempdir().unwrap();
-    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+    let Some((dir, drive, routes)) = sample_routes() else {
         return;
     };
-    let Some(routes) = routes(&drive, dir.path()) else {
-        return;
-    };
-    let grids = [
-        "/travmap/prediction",
-        "/travmap/ground_truth",
-        "/travmap/cloud",
-    ];
-    let annotated = |input: &Path, name: &str| {
-        let out = dir.path().join(format!("{name}.annotated.mcap"));
-        write_output("annotate", input, &out, &["--no-passthrough"]);
-        messages_on(&out, &grids)
-    };
+    let annotated = |input: &Path, name: &str| annotated_grids(dir.path(), input, name);
     let reference = annotated(&drive, "ros2");
     assert_eq!(reference.len(), 6 + 3 + 6);
     let reference_scores = scores(&drive);
@@ -196,11 +206,7 @@ fn convert_brings_every_route_back_to_the_same_ros2_messages() {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn a_livox_custom_msg_reads_as_the_pointcloud2_of_its_points() {
-    let dir = tempfile::tempdir().unwrap();
-    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
-        return;
-    };
-    let Some(routes) = routes(&drive, dir.path()) else {
+    let Some((dir, _, routes)) = sample_routes() else {
         return;
     };
     let livox = routes.join("rosbag2-mcap-livox");
@@ -241,11 +247,7 @@ fn a_livox_custom_msg_reads_as_the_pointcloud2_of_its_points() {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn a_foxglove_protobuf_log_reads_as_its_ros2_original() {
-    let dir = tempfile::tempdir().unwrap();
-    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
-        return;
-    };
-    let Some(routes) = routes(&drive, dir.path()) else {
+    let Some((dir, drive, routes)) = sample_routes() else {
         return;
     };
     let foxglove = routes.join("foxglove.mcap");
@@ -261,16 +263,7 @@ fn a_foxglove_protobuf_log_reads_as_its_ros2_original() {
     assert!(channels.iter().all(|(_, encoding)| encoding == "protobuf"));
     // The same grids, cell for cell, and the same scores (labels are a field of
     // the points).
-    let grids = [
-        "/travmap/prediction",
-        "/travmap/ground_truth",
-        "/travmap/cloud",
-    ];
-    let annotated = |input: &Path, name: &str| {
-        let out = dir.path().join(format!("{name}.annotated.mcap"));
-        write_output("annotate", input, &out, &["--no-passthrough"]);
-        messages_on(&out, &grids)
-    };
+    let annotated = |input: &Path, name: &str| annotated_grids(dir.path(), input, name);
     let reference = annotated(&drive, "ros2");
     assert_eq!(reference.len(), 6 + 3 + 6);
     assert!(annotated(&foxglove, "foxglove") == reference);
@@ -297,11 +290,7 @@ fn a_foxglove_protobuf_log_reads_as_its_ros2_original() {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn a_log_laid_out_as_nuscenes_reads_with_its_mounts_on_tf() {
-    let dir = tempfile::tempdir().unwrap();
-    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
-        return;
-    };
-    let Some(routes) = routes(&drive, dir.path()) else {
+    let Some((_dir, drive, routes)) = sample_routes() else {
         return;
     };
     let nuscenes = routes.join("foxglove-nuscenes.mcap");
@@ -328,23 +317,10 @@ fn a_log_laid_out_as_nuscenes_reads_with_its_mounts_on_tf() {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn foxglove_schemas_in_json_read_as_in_protobuf() {
-    let dir = tempfile::tempdir().unwrap();
-    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+    let Some((dir, drive, routes)) = sample_routes() else {
         return;
     };
-    let Some(routes) = routes(&drive, dir.path()) else {
-        return;
-    };
-    let grids = [
-        "/travmap/prediction",
-        "/travmap/ground_truth",
-        "/travmap/cloud",
-    ];
-    let annotated = |input: &Path, name: &str| {
-        let out = dir.path().join(format!("{name}.annotated.mcap"));
-        write_output("annotate", input, &out, &["--no-passthrough"]);
-        messages_on(&out, &grids)
-    };
+    let annotated = |input: &Path, name: &str| annotated_grids(dir.path(), input, name);
     let json = routes.join("foxglove-json.mcap");
     let reference = annotated(&drive, "ros2");
     assert_eq!(reference.len(), 6 + 3 + 6);

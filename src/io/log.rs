@@ -273,17 +273,20 @@ fn as_ros2(
             part,
         )?,
     };
-    let connection = (connections.entry(recorded.topic.clone()))
-        .or_insert_with(|| {
-            Arc::new(Connection {
+    let connection = match connections.get(&recorded.topic) {
+        Some(connection) => connection.clone(),
+        None => {
+            let connection = Arc::new(Connection {
                 topic: recorded.topic.clone(),
                 schema_name: name.into(),
                 schema_encoding: "ros2msg".into(),
                 schema_data: schema.as_bytes().to_vec(),
                 message_encoding: "cdr".into(),
-            })
-        })
-        .clone();
+            });
+            connections.insert(recorded.topic.clone(), connection.clone());
+            connection
+        }
+    };
     Ok(LogMessage {
         connection,
         data,
