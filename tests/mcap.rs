@@ -685,7 +685,7 @@ fn shared_mcap_files_give_clear_errors() {
     assert_contains(
         &err,
         &[
-            "no recorded pose reaches the clouds' frame `test_frame`",
+            "no recorded pose moves the clouds' frame `test_frame`",
             "poses estimated by scan registration",
             "cloud 0: every one of its 3 points",
             "lies at the sensor's origin (no return)",
@@ -695,7 +695,7 @@ fn shared_mcap_files_give_clear_errors() {
     assert_contains(
         &err,
         &[
-            "--poses tf: no recorded pose reaches the clouds' frame `test_frame`",
+            "--poses tf: no recorded pose moves the clouds' frame `test_frame`",
             "--poses registration estimates poses from the scans",
         ],
     );

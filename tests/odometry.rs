@@ -209,7 +209,7 @@ fn pose_less_drives_map_with_no_flag_and_the_grids_of_registration() {
         &common::stderr(&output),
         &[
             "notice:",
-            "no recorded pose reaches the clouds' frame `velodyne`",
+            "no recorded pose moves the clouds' frame `velodyne`",
             "scan registration",
         ],
     );
@@ -219,7 +219,7 @@ fn pose_less_drives_map_with_no_flag_and_the_grids_of_registration() {
     let err = clean_failure(travmap(&["run", arg(&no_tf), "--poses", "tf"]));
     assert_contains(
         &err,
-        &["--poses tf: no recorded pose reaches the clouds' frame `velodyne`"],
+        &["--poses tf: no recorded pose moves the clouds' frame `velodyne`"],
     );
 
     // A single cloud.

@@ -13,6 +13,7 @@ use common::{arg, assert_contains, clean_failure, run_client, success, travmap, 
 use serde_json::Value;
 use travmap::io::format::{InputFormat, detect};
 use travmap::io::log::Log;
+use travmap::io::ros::{OccupancyGrid, decode};
 
 /// The routes `ros_routes.py` writes, by name.
 const ROUTES: [&str; 14] = [
@@ -701,4 +702,55 @@ fn a_jpeg_camera_is_read_as_its_png_original_less_the_jpeg_loss() {
         jpeg_loss < 0.6 * between_cells,
         "JPEG against PNG {jpeg_loss:.3}, between cells {between_cells:.3}"
     );
+}
+
+#[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
+fn a_pose_topic_poses_a_log_without_moving_tf() {
+    let Some((dir, drive, routes)) = sample_routes() else {
+        return;
+    };
+    let reference = annotated_grids(dir.path(), &drive, "ros2");
+    // PoseStamped (rosbag2) and PoseWithCovarianceStamped (ROS 1): the pose of
+    // base_link, which carries the LiDAR on /tf_static, and no moving /tf.
+    for (route, message_type) in [
+        ("rosbag2-mcap-pose", "PoseStamped"),
+        ("ros1-pose.bag", "PoseWithCovarianceStamped"),
+    ] {
+        let input = routes.join(route);
+        let out = travmap(&["eval", arg(&input)]);
+        assert!(out.status.success(), "{}", common::stderr(&out));
+        assert_contains(
+            &common::stderr(&out),
+            &[
+                "poses from /pose",
+                message_type,
+                "the pose of `base_link`",
+                "in `map`",
+            ],
+        );
+        let annotated = annotated_grids(dir.path(), &input, route);
+        assert_eq!(annotated.len(), reference.len(), "{route}");
+        for ((topic, time, bytes), (_, reference_time, reference_bytes)) in
+            annotated.iter().zip(&reference)
+        {
+            assert_eq!(time, reference_time, "{route} {topic}");
+            if topic != "/travmap/prediction" {
+                assert!(bytes == reference_bytes, "{route} {topic} at {time}");
+                continue;
+            }
+            // The same cells; the grid's height may differ in the last bit, the
+            // vehicle's pose composed with the mount.
+            let (grid, expected): (OccupancyGrid, OccupancyGrid) =
+                (decode(bytes).unwrap(), decode(reference_bytes).unwrap());
+            assert_eq!(grid.data, expected.data, "{route} at {time}");
+            let (z, expected_z) = (grid.info.origin.position.z, expected.info.origin.position.z);
+            assert!((z - expected_z).abs() < 1e-9, "{route}: {z} {expected_z}");
+        }
+        assert_eq!(scores(&input), scores(&drive), "{route}");
+    }
+    // Asked for /tf alone, the log has none that moves the clouds.
+    let input = routes.join("rosbag2-mcap-pose");
+    let err = clean_failure(travmap(&["eval", arg(&input), "--poses", "tf"]));
+    assert_contains(&err, &["--poses tf", "PoseStamped"]);
 }

@@ -1,6 +1,6 @@
 //! The one pass over a recorded log that [`super::ros_drive::RosDrive`] opens with:
 //! the topics, the chosen cloud topic's stamps, every transform (/tf, /tf_static,
-//! Odometry, as `--poses` lets them count), camera intrinsics and image topics.
+//! Odometry, a pose topic (`pose_topics.rs`), as `--poses` lets them count), camera intrinsics and image topics.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -17,6 +17,7 @@ use super::log_message::{LogMessage, Part, ros2_type_name};
 use super::packets::{
     NEBULA_PACKETS, PACKET_MESSAGES, PacketCalibration, PacketModel, packet_message,
 };
+use super::pose_topics::{POSE_MESSAGES, PoseTopic, VehiclePoses, add_vehicle_poses};
 use super::ros::{CameraInfo, Header, MessageEncoding, Odometry, TfMessage, Transform};
 use super::transforms::{TransformTree, isometry};
 use super::velodyne::{DecoderSettings, ScanCutter, VELODYNE_SCAN};
@@ -101,6 +102,8 @@ pub(super) struct Contents {
     /// Cloud topic -> (frame, stamps).
     cloud_stamps: HashMap<String, (String, Vec<u64>)>,
     transforms: TransformTree,
+    /// Pose topic -> its poses (PoseStamped, PoseWithCovarianceStamped).
+    pose_topics: BTreeMap<String, PoseTopic>,
     /// Per camera frame: its first CameraInfo.
     camera_infos: HashMap<String, CameraInfo>,
     /// Which recorded poses count (`--poses`).
@@ -284,6 +287,16 @@ impl Contents {
                     false,
                 );
             }
+            name if POSE_MESSAGES.contains(&name)
+                && matches!(self.poses, PoseSource::Auto | PoseSource::Odometry) =>
+            {
+                (self
+                    .pose_topics
+                    .entry(connection.topic.clone())
+                    .or_default())
+                .add(name, data, encoding)
+                .map_err(problem)?;
+            }
             CAMERA_INFO => {
                 let info: CameraInfo = encoding.decode(data).map_err(problem)?;
                 self.camera_infos
@@ -437,6 +450,8 @@ pub(super) struct LogIndex {
     pub(super) camera: Option<CameraSource>,
     /// The root of the transform tree above the clouds' frame.
     pub(super) root_frame: String,
+    /// Whether a pose topic poses the clouds, and what the user is told.
+    pub(super) vehicle_poses: VehiclePoses,
     /// The model, when the cloud topic carries LiDAR packets.
     pub(super) packets: Option<PacketModel>,
     /// Other sensors' topics merged into each scan.
@@ -468,7 +483,7 @@ impl LogIndex {
             POINT_CLOUD | COMPRESSED_IMAGE | RAW_IMAGE => Part::Header,
             name if LIVOX_CUSTOM_MESSAGES.contains(&name) => Part::Header,
             TF_MESSAGE | TF1_MESSAGE | ODOMETRY | CAMERA_INFO => Part::Whole,
-            name if PACKET_MESSAGES.contains(&name) => Part::Whole,
+            name if PACKET_MESSAGES.contains(&name) || POSE_MESSAGES.contains(&name) => Part::Whole,
             _ => Part::Nothing,
         };
         let threads = rayon::current_num_threads();
@@ -496,6 +511,15 @@ impl LogIndex {
             .cloud_stamps
             .remove(&cloud_topic)
             .unwrap_or_default();
+        let vehicle_poses = add_vehicle_poses(
+            &mut contents.transforms,
+            &cloud_frame,
+            &contents.pose_topics,
+        )
+        .map_err(|problem| Error::Transform {
+            path: path.to_path_buf(),
+            problem,
+        })?;
         let root_frame = contents
             .transforms
             .root_above(&cloud_frame)
@@ -527,6 +551,7 @@ impl LogIndex {
             transforms: contents.transforms,
             camera,
             root_frame,
+            vehicle_poses,
             packets,
             damaged_chunks,
             lost_messages,
@@ -534,16 +559,29 @@ impl LogIndex {
         })
     }
 
-    /// Whether the log's poses reach the clouds: a world frame named, or a tree
-    /// of transforms above their frame.
+    /// Whether the log's poses reach the clouds: a world frame named, or a moving
+    /// transform above their frame (fixed mounts alone would give every scan the
+    /// same pose).
     pub(super) fn pose_record(&self, options: &DriveOptions) -> PoseRecord {
-        if options.world_frame.is_some() || self.root_frame != self.cloud_frame {
-            PoseRecord::Reaches
-        } else {
-            PoseRecord::Missing(format!(
-                "no recorded pose reaches the clouds' frame `{}` (/tf and /tf_static or an Odometry topic must link it to a world frame)",
-                self.cloud_frame
-            ))
+        // A cycle was refused when the root was found.
+        let moves = self.transforms.moves(&self.cloud_frame).unwrap_or(false);
+        if options.world_frame.is_some() || moves {
+            return PoseRecord::Reaches;
         }
+        let why = match &self.vehicle_poses {
+            VehiclePoses::Unusable(why) => format!("; {why}"),
+            _ => String::new(),
+        };
+        let held = match self.root_frame == self.cloud_frame {
+            true => String::new(),
+            false => format!(
+                " (the transforms up to `{}` are fixed mounts)",
+                self.root_frame
+            ),
+        };
+        PoseRecord::Missing(format!(
+            "no recorded pose moves the clouds' frame `{}`{held}: a moving /tf, an Odometry topic or one PoseStamped / PoseWithCovarianceStamped topic must link it to a world frame{why}",
+            self.cloud_frame
+        ))
     }
 }

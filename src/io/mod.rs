@@ -30,6 +30,7 @@ pub mod packets;
 pub mod pcd;
 pub mod ply;
 mod point_rows;
+pub mod pose_topics;
 pub mod protobuf;
 pub mod ros;
 pub mod ros1;

@@ -23,6 +23,7 @@ pub use super::log_index::{DriveOptions, MergedTopics};
 use super::log_message::LogMessage;
 use super::merged_clouds::{MergedSensor, median_period_ns};
 use super::packets::{PacketCalibration, PacketModel};
+use super::pose_topics::VehiclePoses;
 use super::skips::SkipLog;
 use super::transforms::TransformTree;
 use crate::error::{Error, LostMessage, Result};
@@ -127,6 +128,11 @@ impl RosDrive {
             .collect::<Result<Vec<_>>>()?;
         let decision = decide(log.path(), options.poses, &index.pose_record(options))?;
         let mut notice = decision.notice;
+        if let (VehiclePoses::Used(said), Posing::Recorded) =
+            (&index.vehicle_poses, decision.posing)
+        {
+            notice = Some(format!("{}: {said}", log.path().display()));
+        }
         let world_frame = match (&options.world_frame, decision.posing) {
             (Some(frame), _) => frame.clone(),
             // A tree rooted on the Earth: the drive is mapped in the frame below

@@ -1,4 +1,4 @@
-//! The transform tree of a drive: `/tf`, `/tf_static` and Odometry samples per
+//! The transform tree of a drive: `/tf`, `/tf_static`, Odometry and pose-topic samples per
 //! edge, each edge interpolated at a stamp (linear, slerp) and composed up the tree.
 //! ROS names frames child -> parent; a pose here is `parent_from_child`.
 
@@ -66,6 +66,22 @@ impl TransformTree {
             match self.edges.get(current) {
                 Some(edge) => current = &edge.parent,
                 None => return Ok(current.to_string()),
+            }
+        }
+        Err(TransformError::Cycle {
+            frame: frame.to_string(),
+        })
+    }
+
+    /// Whether an edge on the way up from `frame` moves: one that is neither static
+    /// nor recorded the same every time.
+    pub fn moves(&self, frame: &str) -> Result<bool, TransformError> {
+        let mut current = frame;
+        for _ in 0..=MAX_DEPTH {
+            match self.edges.get(current) {
+                Some(edge) if !(edge.is_static || edge.constant) => return Ok(true),
+                Some(edge) => current = &edge.parent,
+                None => return Ok(false),
             }
         }
         Err(TransformError::Cycle {

@@ -18,6 +18,12 @@ recorded-log format travmap reads, with real writers and no travmap code:
   rosbag2-mcap-jpeg/                         rosbags' rosbag2 writer, every camera image made
                                              a JPEG (Pillow, quality 90) named as image_transport
                                              names it, `rgb8; jpeg compressed bgr8`
+  rosbag2-mcap-pose/                         rosbags' rosbag2 writer, the drive as a localisation
+                                             records it: no moving /tf, the pose of the vehicle's
+                                             base_link (the LiDAR mounted on it on /tf_static) as
+                                             a PoseStamped on /pose, naming no child frame
+  ros1-pose.bag                              rosbags' ROS 1 bag writer, the same poses as
+                                             PoseWithCovarianceStamped (as amcl_pose is)
   foxglove.mcap                              the Foxglove SDK's MCAP writer, every message of a
                                              type Foxglove has a schema for as that schema in
                                              protobuf (PointCloud, FrameTransforms, CompressedImage,
@@ -355,6 +361,57 @@ def as_foxglove_json(messages, path):
         writer.finish()
 
 
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+POSE_WITH_COVARIANCE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+# The vehicle's base_link carries the LiDAR 1.5 m up and 0.8 m forward, level.
+MOUNT = np.array([0.8, 0.0, 1.5])
+
+
+def as_pose_topic(messages, msgtype):
+    """The drive as a localisation or a motion-capture system records it: no moving
+    /tf, the vehicle's pose on /pose (`msgtype`, in the map frame, naming no child
+    frame), and the LiDAR's mount on base_link added to /tf_static."""
+    T = ROS2.types
+    out = []
+    for topic, t, stamp, cdr in messages:
+        if topic == "/tf_static":
+            tf = ROS2.deserialize_cdr(cdr, t)
+            mount = T["geometry_msgs/msg/TransformStamped"](
+                header=T["std_msgs/msg/Header"](stamp=tf.transforms[0].header.stamp, frame_id="base_link"),
+                child_frame_id="velodyne",
+                transform=T["geometry_msgs/msg/Transform"](
+                    translation=T["geometry_msgs/msg/Vector3"](x=MOUNT[0], y=MOUNT[1], z=MOUNT[2]),
+                    rotation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                ),
+            )
+            tf = T[t](transforms=[mount, *tf.transforms])
+            out.append((topic, t, stamp, bytes(ROS2.serialize_cdr(tf, t))))
+            continue
+        if topic != "/tf":
+            out.append((topic, t, stamp, cdr))
+            continue
+        for transform in ROS2.deserialize_cdr(cdr, t).transforms:
+            q, v = transform.transform.rotation, transform.transform.translation
+            # map_from_base_link = map_from_velodyne x velodyne_from_base_link
+            w, x, y, z = q.w, q.x, q.y, q.z
+            rotation = np.array([
+                [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+            ])
+            p = np.array([v.x, v.y, v.z]) - rotation @ MOUNT
+            pose = T["geometry_msgs/msg/Pose"](
+                position=T["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]), orientation=q
+            )
+            if msgtype == POSE_STAMPED:
+                message = T[msgtype](header=transform.header, pose=pose)
+            else:
+                covariance = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36))
+                message = T[msgtype](header=transform.header, pose=covariance)
+            out.append(("/pose", msgtype, stamp, bytes(ROS2.serialize_cdr(message, msgtype))))
+    return out
+
+
 def main():
     drive, out = Path(sys.argv[1]), Path(sys.argv[2])
     out.mkdir(parents=True, exist_ok=True)
@@ -374,6 +431,8 @@ def main():
     # The same bytes under ROS 1's package name (the layout does not depend on it).
     ros1_bag([(t, LIVOX1 if m == LIVOX else m, s, c) for t, m, s, c in livox], out / "ros1-livox.bag", None)
     rosbag2(as_livox(messages, False), out / "rosbag2-mcap-uint8", StoragePlugin.MCAP)
+    rosbag2(as_pose_topic(messages, POSE_STAMPED), out / "rosbag2-mcap-pose", StoragePlugin.MCAP)
+    ros1_bag(as_pose_topic(messages, POSE_WITH_COVARIANCE), out / "ros1-pose.bag", None)
     as_foxglove(messages, out / "foxglove.mcap")
     as_nuscenes_like(messages, out / "foxglove-nuscenes.mcap")
     as_foxglove_json(messages, out / "foxglove-json.mcap")

@@ -1,0 +1,241 @@
+//! Pose topics: `geometry_msgs/PoseStamped` and `PoseWithCovarianceStamped`, the
+//! vehicle's pose in `header.frame_id` as a localisation (`amcl_pose`, Autoware's
+//! pose estimators), a motion-capture system (`vrpn_client_node/*/pose`) or PX4
+//! (`mavros/local_position/pose`) publishes it. They name no child frame, so the
+//! vehicle's frame is taken to be the top of the clouds' chain of fixed mounts
+//! (`base_link` above `velodyne` on /tf_static), or the clouds' frame itself when
+//! nothing holds it. A frame has one parent: when /tf or an Odometry already moves
+//! the clouds, the pose topics are not used.
+
+use std::collections::BTreeMap;
+
+use nalgebra::Isometry3;
+use serde::Deserialize;
+
+use super::ros::{Header, MessageEncoding, Pose, PoseWithCovariance, Transform};
+use super::transforms::{TransformError, TransformTree, isometry};
+
+pub const POSE_STAMPED: &str = "geometry_msgs/msg/PoseStamped";
+pub const POSE_WITH_COVARIANCE_STAMPED: &str = "geometry_msgs/msg/PoseWithCovarianceStamped";
+/// The message types read as the vehicle's pose.
+pub const POSE_MESSAGES: [&str; 2] = [POSE_STAMPED, POSE_WITH_COVARIANCE_STAMPED];
+
+#[derive(Deserialize)]
+struct PoseStamped {
+    header: Header,
+    pose: Pose,
+}
+
+#[derive(Deserialize)]
+struct PoseWithCovarianceStamped {
+    header: Header,
+    pose: PoseWithCovariance,
+}
+
+/// One pose topic's poses.
+#[derive(Clone, Debug, Default)]
+pub struct PoseTopic {
+    /// Its message type (one of [`POSE_MESSAGES`]).
+    pub type_name: String,
+    /// The frame its poses are given in.
+    pub frame: String,
+    /// (stamp, frame_from_vehicle).
+    pub samples: Vec<(u64, Isometry3<f64>)>,
+}
+
+impl PoseTopic {
+    /// Adds one message of type `type_name` (one of [`POSE_MESSAGES`]).
+    pub fn add(
+        &mut self,
+        type_name: &str,
+        data: &[u8],
+        encoding: MessageEncoding,
+    ) -> Result<(), String> {
+        let (header, pose) = if type_name == POSE_STAMPED {
+            let message: PoseStamped = encoding.decode(data)?;
+            (message.header, message.pose)
+        } else {
+            let message: PoseWithCovarianceStamped = encoding.decode(data)?;
+            (message.header, message.pose.pose)
+        };
+        if !self.samples.is_empty() && header.frame_id != self.frame {
+            return Err(format!(
+                "the poses' frame changes from `{}` to `{}`",
+                self.frame, header.frame_id
+            ));
+        }
+        let transform = Transform {
+            translation: pose.position,
+            rotation: pose.orientation,
+        };
+        let pose = isometry(&transform).map_err(|e| e.to_string())?;
+        self.type_name = type_name.to_string();
+        self.frame = header.frame_id;
+        self.samples.push((header.stamp.to_ns(), pose));
+        Ok(())
+    }
+}
+
+/// What the log's pose topics did for its clouds.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum VehiclePoses {
+    /// No pose topic, or /tf or an Odometry already moves the clouds.
+    #[default]
+    NotUsed,
+    /// One topic's poses pose the clouds; what the user is told.
+    Used(String),
+    /// Pose topics that cannot pose the clouds; why.
+    Unusable(String),
+}
+
+/// Adds the one pose topic of `topics` to `transforms` as the edge from its frame
+/// to the vehicle's (the root above `cloud_frame`) when no edge above `cloud_frame`
+/// moves (see the module documentation); `transforms` is sorted again.
+pub fn add_vehicle_poses(
+    transforms: &mut TransformTree,
+    cloud_frame: &str,
+    topics: &BTreeMap<String, PoseTopic>,
+) -> Result<VehiclePoses, TransformError> {
+    if topics.is_empty() || transforms.moves(cloud_frame)? {
+        return Ok(VehiclePoses::NotUsed);
+    }
+    let [(name, topic)] = topics.iter().collect::<Vec<_>>()[..] else {
+        let names: Vec<&str> = topics.keys().map(String::as_str).collect();
+        return Ok(VehiclePoses::Unusable(format!(
+            "{} pose topics ({}): travmap cannot tell which is the vehicle's",
+            names.len(),
+            names.join(", ")
+        )));
+    };
+    let vehicle = transforms.root_above(cloud_frame)?;
+    if topic.frame.is_empty() || transforms.root_above(&topic.frame)? == vehicle {
+        return Ok(VehiclePoses::Unusable(format!(
+            "the poses of {name} are given in `{}`, not in a frame above the vehicle's `{vehicle}`",
+            topic.frame
+        )));
+    }
+    for (stamp_ns, pose) in &topic.samples {
+        transforms.add(&topic.frame, &vehicle, *stamp_ns, *pose, false);
+    }
+    transforms.sort();
+    Ok(VehiclePoses::Used(format!(
+        "poses from {name} ({}, {} poses): the pose of `{vehicle}` (the top of the clouds' frame's fixed mounts) in `{}`",
+        topic.type_name,
+        topic.samples.len(),
+        topic.frame
+    )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::ros::{Quaternion, Time, Vector3, encode};
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    fn pose_stamped(frame: &str, stamp_s: i32, x: f64) -> Vec<u8> {
+        #[derive(serde::Serialize)]
+        struct Written {
+            header: Header,
+            pose: Pose,
+        }
+        encode(
+            &Written {
+                header: Header {
+                    stamp: Time {
+                        sec: stamp_s,
+                        nanosec: 0,
+                    },
+                    frame_id: frame.to_string(),
+                },
+                pose: Pose {
+                    position: Vector3 { x, y: 0.0, z: 0.0 },
+                    orientation: Quaternion {
+                        x: 0.0,
+                        y: 0.0,
+                        z: 0.0,
+                        w: 1.0,
+                    },
+                },
+            },
+            64,
+        )
+    }
+
+    fn topic(frame: &str) -> PoseTopic {
+        let mut topic = PoseTopic::default();
+        for (s, x) in [(1, 0.0), (2, 10.0)] {
+            let data = pose_stamped(frame, s, x);
+            topic
+                .add(POSE_STAMPED, &data, MessageEncoding::Cdr)
+                .unwrap();
+        }
+        topic
+    }
+
+    fn mounted() -> TransformTree {
+        let mut tree = TransformTree::default();
+        let mount =
+            Isometry3::from_parts(Translation3::new(1.0, 0.0, 2.0), UnitQuaternion::identity());
+        tree.add("base_link", "velodyne", 0, mount, true);
+        tree.sort();
+        tree
+    }
+
+    #[test]
+    fn a_pose_topic_poses_the_top_of_the_clouds_mounts() {
+        let mut tree = mounted();
+        let topics = BTreeMap::from([("/pose".to_string(), topic("map"))]);
+        let used = add_vehicle_poses(&mut tree, "velodyne", &topics).unwrap();
+        assert!(
+            matches!(&used, VehiclePoses::Used(said) if said.contains("`base_link`") && said.contains("`map`")),
+            "{used:?}"
+        );
+        // Halfway between the two poses, plus the mount.
+        let pose = tree
+            .ancestor_from("map", "velodyne", 1_500_000_000)
+            .unwrap()
+            .unwrap();
+        assert!((pose.translation.vector - nalgebra::Vector3::new(6.0, 0.0, 2.0)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn recorded_motion_wins_and_ambiguity_is_said() {
+        let topics = BTreeMap::from([("/pose".to_string(), topic("map"))]);
+        let mut moving = mounted();
+        moving.add("odom", "base_link", 0, Isometry3::identity(), false);
+        moving.add(
+            "odom",
+            "base_link",
+            1,
+            Isometry3::translation(1.0, 0.0, 0.0),
+            false,
+        );
+        moving.sort();
+        assert_eq!(
+            add_vehicle_poses(&mut moving, "velodyne", &topics).unwrap(),
+            VehiclePoses::NotUsed
+        );
+        let two = BTreeMap::from([
+            ("/a".to_string(), topic("map")),
+            ("/b".to_string(), topic("map")),
+        ]);
+        let said = add_vehicle_poses(&mut mounted(), "velodyne", &two).unwrap();
+        assert!(
+            matches!(&said, VehiclePoses::Unusable(why) if why.contains("/a, /b")),
+            "{said:?}"
+        );
+        let own = BTreeMap::from([("/pose".to_string(), topic("velodyne"))]);
+        let said = add_vehicle_poses(&mut mounted(), "velodyne", &own).unwrap();
+        assert!(matches!(said, VehiclePoses::Unusable(_)), "{said:?}");
+    }
+
+    #[test]
+    fn a_topic_whose_frame_changes_is_refused() {
+        let mut topic = topic("map");
+        let data = pose_stamped("odom", 3, 0.0);
+        let error = topic
+            .add(POSE_STAMPED, &data, MessageEncoding::Cdr)
+            .unwrap_err();
+        assert!(error.contains("`map` to `odom`"), "{error}");
+    }
+}
