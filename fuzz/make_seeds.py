@@ -293,6 +293,12 @@ def main() -> None:
     seed("ros_camera_info", "rosbags_camera_info.cdr", others["/test/sensor_msgs/camera_info"])
     seed("ros_tf", "rosbags_tf.cdr", others["/test/tf2_msgs/tf_message"])
     seed("ros_tf", "rosbags_odometry.cdr", others["/test/nav_msgs/odometry"])
+    seed("ros_tf", "rosbags_pose_stamped.cdr", others["/test/geometry_msgs/pose_stamped"])
+    seed(
+        "ros_tf",
+        "rosbags_pose_with_covariance_stamped.cdr",
+        others["/test/geometry_msgs/pose_with_covariance_stamped"],
+    )
 
     # The embedded model cut to three support vectors and three reduced-set centres:
     # the whole structure, small enough to mutate quickly.

@@ -154,6 +154,10 @@ pub fn ros_tf(data: &[u8]) {
             rotation: pose.orientation,
         });
     }
+    for type_name in crate::io::pose_topics::POSE_MESSAGES {
+        let mut topic = crate::io::pose_topics::PoseTopic::default();
+        let _ = topic.add(type_name, data, crate::io::ros::MessageEncoding::Cdr);
+    }
 }
 
 /// A whole MCAP file: opened as a drive, then every frame read, images included;

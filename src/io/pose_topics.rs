@@ -230,6 +230,30 @@ mod tests {
     }
 
     #[test]
+    fn poses_written_by_rosbags_rs_read() {
+        // The fuzz seeds: messages of the shared all-types MCAP (rosbags-rs).
+        let seeds = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/ros_tf");
+        for (file, type_name) in [
+            ("rosbags_pose_stamped.cdr", POSE_STAMPED),
+            (
+                "rosbags_pose_with_covariance_stamped.cdr",
+                POSE_WITH_COVARIANCE_STAMPED,
+            ),
+        ] {
+            let data = std::fs::read(seeds.join(file)).unwrap();
+            let mut topic = PoseTopic::default();
+            topic.add(type_name, &data, MessageEncoding::Cdr).unwrap();
+            assert_eq!(topic.frame, "test_frame");
+            let (stamp_ns, pose) = topic.samples[0];
+            assert_eq!(stamp_ns / 1_000_000_000, 1_749_315_324, "{file}");
+            assert_eq!(
+                pose.translation.vector,
+                nalgebra::Vector3::new(1.0, 2.0, 3.0)
+            );
+        }
+    }
+
+    #[test]
     fn a_topic_whose_frame_changes_is_refused() {
         let mut topic = topic("map");
         let data = pose_stamped("odom", 3, 0.0);
