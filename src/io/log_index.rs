@@ -1,6 +1,7 @@
 //! The one pass over a recorded log that [`super::ros_drive::RosDrive`] opens with:
 //! the topics, the chosen cloud topic's stamps, every transform (/tf, /tf_static,
-//! Odometry, a pose topic (`pose_topics.rs`), as `--poses` lets them count), camera intrinsics and image topics.
+//! Odometry, a pose topic (`pose_topics.rs`), as `--poses` lets them count), camera
+//! intrinsics and image topics.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;

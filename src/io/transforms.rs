@@ -1,5 +1,6 @@
-//! The transform tree of a drive: `/tf`, `/tf_static`, Odometry and pose-topic samples per
-//! edge, each edge interpolated at a stamp (linear, slerp) and composed up the tree.
+//! The transform tree of a drive: `/tf`, `/tf_static`, Odometry and pose-topic
+//! samples per edge, each edge interpolated at a stamp (linear, slerp) and composed
+//! up the tree.
 //! ROS names frames child -> parent; a pose here is `parent_from_child`.
 
 use std::collections::HashMap;
