@@ -58,8 +58,9 @@ pub struct Settings {
     #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
     sets: Vec<String>,
     /// Where the scans' poses come from (integration.poses): the input's own (auto
-    /// falls back to registration, with a notice), only /tf, only Odometry,
-    /// estimated by registration, or none (each scan alone).
+    /// falls back to registration, with a notice), only /tf, only Odometry or a
+    /// PoseStamped / PoseWithCovarianceStamped topic, estimated by registration, or
+    /// none (each scan alone).
     #[arg(long, value_parser = ["auto", "tf", "odometry", "registration", "none"])]
     poses: Option<String>,
 }

@@ -6,13 +6,14 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PoseSource {
-    /// The input's recorded poses (KITTI `poses.txt`, a log's /tf or Odometry) when
-    /// they reach the scans' frame, else registration, said in a notice.
+    /// The input's recorded poses (KITTI `poses.txt`, a log's /tf, Odometry or pose
+    /// topic) when they move the scans' frame, else registration, said in a notice.
     #[default]
     Auto,
     /// A log's /tf and /tf_static only (KITTI: `poses.txt`).
     Tf,
-    /// A log's `nav_msgs/Odometry` (with /tf_static) only (KITTI: `poses.txt`).
+    /// A log's `nav_msgs/Odometry`, or one PoseStamped / PoseWithCovarianceStamped
+    /// topic (with /tf_static) only (KITTI: `poses.txt`).
     Odometry,
     /// Estimated by scan registration, whatever the input records.
     Registration,
