@@ -209,6 +209,9 @@ pub enum Error {
     #[error("{path}: {problem}")]
     LogCamera { path: PathBuf, problem: String },
 
+    #[error("{path}: {problem}")]
+    LogPoseTopic { path: PathBuf, problem: String },
+
     #[error("{path}: channel {topic} ({schema}), message at log time {log_time_ns} ns: {problem}")]
     UndecodableMessage {
         path: PathBuf,
@@ -449,6 +452,7 @@ impl Error {
             | Error::LogCloud { path, .. }
             | Error::LogImage { path, .. }
             | Error::LogCamera { path, .. }
+            | Error::LogPoseTopic { path, .. }
             | Error::UndecodableMessage { path, .. }
             | Error::LogEncoding { path, .. }
             | Error::Registration { path, .. }

@@ -754,3 +754,47 @@ fn a_pose_topic_poses_a_log_without_moving_tf() {
     let err = clean_failure(travmap(&["eval", arg(&input), "--poses", "tf"]));
     assert_contains(&err, &["--poses tf", "PoseStamped"]);
 }
+
+#[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
+fn several_pose_topics_are_chosen_between_by_name() {
+    let Some((_dir, drive, routes)) = sample_routes() else {
+        return;
+    };
+    let two = routes.join("rosbag2-mcap-two-poses");
+    // Not guessed: registration, saying why.
+    let out = travmap(&["eval", arg(&two)]);
+    assert_contains(
+        &common::stderr(&out),
+        &[
+            "2 pose topics (/pose, /vision_pose)",
+            "poses estimated by scan registration",
+        ],
+    );
+    success(out);
+    // Named: the original's scores.
+    let out = travmap(&["eval", arg(&two), "--pose-topic", "/pose", "--json"]);
+    assert_contains(&common::stderr(&out), &["poses from /pose"]);
+    let (_, summary) = common::json_records(&success(out));
+    assert_eq!(
+        summary["report"]["scores"],
+        common::json_summary(&["eval", arg(&drive)])["report"]["scores"]
+    );
+    let err = clean_failure(travmap(&["eval", arg(&two), "--pose-topic", "/gnss"]));
+    assert_contains(
+        &err,
+        &[
+            "--pose-topic /gnss: no PoseStamped or PoseWithCovarianceStamped topic of that name",
+            "/pose (geometry_msgs/msg/PoseStamped), /vision_pose (geometry_msgs/msg/PoseStamped)",
+        ],
+    );
+    // A moving /tf poses the clouds, whatever the pose topics; naming one says so.
+    let with_tf = routes.join("rosbag2-mcap-poses-and-tf");
+    assert_eq!(scores(&with_tf), scores(&drive));
+    let out = travmap(&["eval", arg(&with_tf), "--pose-topic", "/pose"]);
+    assert_contains(
+        &common::stderr(&out),
+        &["--pose-topic /pose is not used: a moving /tf or an Odometry already poses the clouds"],
+    );
+    success(out);
+}

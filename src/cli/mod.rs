@@ -250,6 +250,10 @@ pub struct Inputs {
     /// several with a CameraInfo).
     #[arg(long)]
     camera_topic: Option<String>,
+    /// Recorded log input: the PoseStamped or PoseWithCovarianceStamped topic that
+    /// poses the vehicle, when there are several and nothing else moves the clouds.
+    #[arg(long)]
+    pose_topic: Option<String>,
     /// Frames to use: A..B (B excluded), A..=B, A.. or N. Default: all.
     #[arg(long, value_parser = parse_frame_range)]
     pub frames: Option<Range<usize>>,
@@ -272,6 +276,7 @@ impl Inputs {
         self.sensors.drive_options(DriveOptions {
             world_frame: self.world_frame.clone(),
             camera_topic: self.camera_topic.clone(),
+            pose_topic: self.pose_topic.clone(),
             poses: self.settings.load()?.integration.poses,
             rate_hz: self.rate,
             ..Default::default()
@@ -296,6 +301,7 @@ impl Inputs {
                 "--camera-topic",
                 self.camera_topic.clone().map(OsString::from),
             ),
+            ("--pose-topic", self.pose_topic.clone().map(OsString::from)),
             ("--rate", self.rate.map(|hz| hz.to_string().into())),
         ]));
         arguments.extend(self.settings.as_arguments());
@@ -386,6 +392,7 @@ pub fn open_selection(
             ("--cloud-topic", &options.cloud_topic),
             ("--world-frame", &options.world_frame),
             ("--camera-topic", &options.camera_topic),
+            ("--pose-topic", &options.pose_topic),
         ];
         for (flag, _) in mcap_only.iter().filter(|(_, value)| value.is_some()) {
             eprintln!(

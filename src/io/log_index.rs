@@ -18,7 +18,9 @@ use super::log_message::{LogMessage, Part, ros2_type_name};
 use super::packets::{
     NEBULA_PACKETS, PACKET_MESSAGES, PacketCalibration, PacketModel, packet_message,
 };
-use super::pose_topics::{POSE_MESSAGES, PoseTopic, VehiclePoses, add_vehicle_poses};
+use super::pose_topics::{
+    POSE_MESSAGES, PoseTopic, VehiclePoses, add_vehicle_poses, named_pose_topic, unposed,
+};
 use super::ros::{CameraInfo, Header, MessageEncoding, Odometry, TfMessage, Transform};
 use super::transforms::{TransformTree, isometry};
 use super::velodyne::{DecoderSettings, ScanCutter, VELODYNE_SCAN};
@@ -47,6 +49,9 @@ pub struct DriveOptions {
     pub camera_topic: Option<String>,
     /// Where the clouds' poses come from.
     pub poses: PoseSource,
+    /// The pose topic (PoseStamped / PoseWithCovarianceStamped) that poses the
+    /// vehicle, when there are several.
+    pub pose_topic: Option<String>,
     /// Folders of scans: the rate stamps are made at when the file names are not
     /// times (10 Hz when None).
     pub rate_hz: Option<f64>,
@@ -103,8 +108,10 @@ pub(super) struct Contents {
     /// Cloud topic -> (frame, stamps).
     cloud_stamps: HashMap<String, (String, Vec<u64>)>,
     transforms: TransformTree,
-    /// Pose topic -> its poses (PoseStamped, PoseWithCovarianceStamped).
+    /// Pose topic -> its poses (PoseStamped, PoseWithCovarianceStamped): every one,
+    /// or the one `--pose-topic` names.
     pose_topics: BTreeMap<String, PoseTopic>,
+    pose_topic: Option<String>,
     /// Per camera frame: its first CameraInfo.
     camera_infos: HashMap<String, CameraInfo>,
     /// Which recorded poses count (`--poses`).
@@ -289,7 +296,8 @@ impl Contents {
                 );
             }
             name if POSE_MESSAGES.contains(&name)
-                && matches!(self.poses, PoseSource::Auto | PoseSource::Odometry) =>
+                && matches!(self.poses, PoseSource::Auto | PoseSource::Odometry)
+                && (self.pose_topic.as_ref()).is_none_or(|t| *t == connection.topic) =>
             {
                 (self
                     .pose_topics
@@ -474,6 +482,7 @@ impl LogIndex {
         let path = log.path();
         let mut contents = Contents {
             poses: options.poses,
+            pose_topic: options.pose_topic.clone(),
             lidar_calibrations: options.lidar_calibrations.clone(),
             ..Default::default()
         };
@@ -512,6 +521,15 @@ impl LogIndex {
             .cloud_stamps
             .remove(&cloud_topic)
             .unwrap_or_default();
+        if matches!(options.poses, PoseSource::Auto | PoseSource::Odometry) {
+            let named = options.pose_topic.as_deref();
+            (named_pose_topic(named, &contents.pose_topics, &contents.topics)).map_err(
+                |problem| Error::LogPoseTopic {
+                    path: path.to_path_buf(),
+                    problem,
+                },
+            )?;
+        }
         let vehicle_poses = add_vehicle_poses(
             &mut contents.transforms,
             &cloud_frame,
@@ -569,20 +587,10 @@ impl LogIndex {
         if options.world_frame.is_some() || moves {
             return PoseRecord::Reaches;
         }
-        let why = match &self.vehicle_poses {
-            VehiclePoses::Unusable(why) => format!("; {why}"),
-            _ => String::new(),
-        };
-        let held = match self.root_frame == self.cloud_frame {
-            true => String::new(),
-            false => format!(
-                " (the transforms up to `{}` are fixed mounts)",
-                self.root_frame
-            ),
-        };
-        PoseRecord::Missing(format!(
-            "no recorded pose moves the clouds' frame `{}`{held}: a moving /tf, an Odometry topic or one PoseStamped / PoseWithCovarianceStamped topic must link it to a world frame{why}",
-            self.cloud_frame
+        PoseRecord::Missing(unposed(
+            &self.cloud_frame,
+            &self.root_frame,
+            &self.vehicle_poses,
         ))
     }
 }

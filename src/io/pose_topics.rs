@@ -12,6 +12,7 @@ use std::collections::BTreeMap;
 use nalgebra::Isometry3;
 use serde::Deserialize;
 
+use super::log_message::ros2_type_name;
 use super::ros::{Header, MessageEncoding, Pose, PoseWithCovariance, Transform};
 use super::transforms::{TransformError, TransformTree, isometry};
 
@@ -74,6 +75,45 @@ impl PoseTopic {
         self.samples.push((header.stamp.to_ns(), pose));
         Ok(())
     }
+}
+
+/// Why nothing recorded poses the clouds in `cloud_frame` (`root_frame` the root of
+/// the transform tree above it), as a person reads it.
+pub fn unposed(cloud_frame: &str, root_frame: &str, vehicle_poses: &VehiclePoses) -> String {
+    let held = match root_frame == cloud_frame {
+        true => String::new(),
+        false => format!(" (the transforms up to `{root_frame}` are fixed mounts)"),
+    };
+    let why = match vehicle_poses {
+        VehiclePoses::Unusable(why) => format!("; {why}"),
+        _ => String::new(),
+    };
+    format!(
+        "no recorded pose moves the clouds' frame `{cloud_frame}`{held}: a moving /tf, an Odometry topic or one PoseStamped / PoseWithCovarianceStamped topic must link it to a world frame{why}"
+    )
+}
+
+/// An error when `named` (`--pose-topic`) is not among the pose topics read,
+/// listing the log's (`topics`: each topic's schema name).
+pub fn named_pose_topic(
+    named: Option<&str>,
+    read: &BTreeMap<String, PoseTopic>,
+    topics: &BTreeMap<String, String>,
+) -> Result<(), String> {
+    let Some(named) = named.filter(|topic| !read.contains_key(*topic)) else {
+        return Ok(());
+    };
+    let found: Vec<String> = (topics.iter())
+        .filter(|(_, schema)| POSE_MESSAGES.contains(&ros2_type_name(schema).as_ref()))
+        .map(|(topic, schema)| format!("{topic} ({schema})"))
+        .collect();
+    let found = match found.is_empty() {
+        true => "none".to_string(),
+        false => found.join(", "),
+    };
+    Err(format!(
+        "--pose-topic {named}: no PoseStamped or PoseWithCovarianceStamped topic of that name; the log's pose topics: {found}"
+    ))
 }
 
 /// What the log's pose topics did for its clouds.

@@ -128,10 +128,17 @@ impl RosDrive {
             .collect::<Result<Vec<_>>>()?;
         let decision = decide(log.path(), options.poses, &index.pose_record(options))?;
         let mut notice = decision.notice;
-        if let (VehiclePoses::Used(said), Posing::Recorded) =
-            (&index.vehicle_poses, decision.posing)
-        {
-            notice = Some(format!("{}: {said}", log.path().display()));
+        match (&index.vehicle_poses, decision.posing, &options.pose_topic) {
+            (VehiclePoses::Used(said), Posing::Recorded, _) => {
+                notice = Some(format!("{}: {said}", log.path().display()));
+            }
+            (VehiclePoses::NotUsed, Posing::Recorded, Some(topic)) => {
+                notice = Some(format!(
+                    "{}: --pose-topic {topic} is not used: a moving /tf or an Odometry already poses the clouds (a frame has one parent; --poses odometry leaves /tf's moving transforms out)",
+                    log.path().display()
+                ));
+            }
+            _ => {}
         }
         let world_frame = match (&options.world_frame, decision.posing) {
             (Some(frame), _) => frame.clone(),

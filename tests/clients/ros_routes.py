@@ -24,6 +24,10 @@ recorded-log format travmap reads, with real writers and no travmap code:
                                              a PoseStamped on /pose, naming no child frame
   ros1-pose.bag                              rosbags' ROS 1 bag writer, the same poses as
                                              PoseWithCovarianceStamped (as amcl_pose is)
+  rosbag2-mcap-two-poses/                    rosbag2-mcap-pose/ with a second PoseStamped topic,
+                                             /vision_pose (the poses 5 m off, in `odom`)
+  rosbag2-mcap-poses-and-tf/                 the drive as recorded (its moving /tf), and both
+                                             pose topics
   foxglove.mcap                              the Foxglove SDK's MCAP writer, every message of a
                                              type Foxglove has a schema for as that schema in
                                              protobuf (PointCloud, FrameTransforms, CompressedImage,
@@ -412,6 +416,24 @@ def as_pose_topic(messages, msgtype):
     return out
 
 
+def with_second_pose_topic(messages):
+    """`messages` with a second PoseStamped topic beside /pose, /vision_pose: the same
+    poses 5 m off in x, in `odom` (as PX4's logs carry the vision input beside
+    mavros/local_position/pose)."""
+    T = ROS2.types
+    out = list(messages)
+    for topic, t, stamp, cdr in messages:
+        if topic != "/pose":
+            continue
+        message = ROS2.deserialize_cdr(cdr, t)
+        pose = message.pose.pose if t == POSE_WITH_COVARIANCE else message.pose
+        pose.position.x += 5.0
+        header = T["std_msgs/msg/Header"](stamp=message.header.stamp, frame_id="odom")
+        vision = T[POSE_STAMPED](header=header, pose=pose)
+        out.append(("/vision_pose", POSE_STAMPED, stamp, bytes(ROS2.serialize_cdr(vision, POSE_STAMPED))))
+    return out
+
+
 def main():
     drive, out = Path(sys.argv[1]), Path(sys.argv[2])
     out.mkdir(parents=True, exist_ok=True)
@@ -433,6 +455,10 @@ def main():
     rosbag2(as_livox(messages, False), out / "rosbag2-mcap-uint8", StoragePlugin.MCAP)
     rosbag2(as_pose_topic(messages, POSE_STAMPED), out / "rosbag2-mcap-pose", StoragePlugin.MCAP)
     ros1_bag(as_pose_topic(messages, POSE_WITH_COVARIANCE), out / "ros1-pose.bag", None)
+    two_poses = with_second_pose_topic(as_pose_topic(messages, POSE_STAMPED))
+    rosbag2(two_poses, out / "rosbag2-mcap-two-poses", StoragePlugin.MCAP)
+    poses_and_tf = messages + [m for m in two_poses if m[0] in ("/pose", "/vision_pose")]
+    rosbag2(sorted(poses_and_tf, key=lambda m: m[2]), out / "rosbag2-mcap-poses-and-tf", StoragePlugin.MCAP)
     as_foxglove(messages, out / "foxglove.mcap")
     as_nuscenes_like(messages, out / "foxglove-nuscenes.mcap")
     as_foxglove_json(messages, out / "foxglove-json.mcap")
