@@ -534,6 +534,8 @@ impl LogIndex {
             &mut contents.transforms,
             &cloud_frame,
             &contents.pose_topics,
+            &stamps_ns,
+            options.pose_topic.is_some(),
         )
         .map_err(|problem| Error::Transform {
             path: path.to_path_buf(),

@@ -33,6 +33,13 @@ struct PoseWithCovarianceStamped {
     pose: PoseWithCovariance,
 }
 
+/// How far before its first pose and past its last a topic poses clouds (as far as
+/// a /tf edge is extrapolated).
+const POSE_REACH_NS: u64 = 100_000_000;
+/// The longest gap between poses, among the clouds, of a topic that poses them: a
+/// goal or an initial pose (RViz's, nav2's) is no trajectory.
+const POSE_GAP_NS: u64 = 1_000_000_000;
+
 /// One pose topic's poses.
 #[derive(Clone, Debug, Default)]
 pub struct PoseTopic {
@@ -116,6 +123,46 @@ pub fn named_pose_topic(
     ))
 }
 
+impl PoseTopic {
+    /// Why these poses cannot pose clouds stamped `clouds_ns`: they must reach the
+    /// first and the last cloud and leave no gap of over a second among them.
+    fn unfit_for(&self, clouds_ns: &[u64]) -> Option<String> {
+        let mut stamps: Vec<u64> = self.samples.iter().map(|s| s.0).collect();
+        stamps.sort_unstable();
+        let (Some(&first), Some(&last)) = (stamps.first(), stamps.last()) else {
+            return Some("no pose".to_string());
+        };
+        let (Some(&first_cloud), Some(&last_cloud)) =
+            (clouds_ns.iter().min(), clouds_ns.iter().max())
+        else {
+            return None;
+        };
+        let seconds = |ns: u64| ns as f64 * 1e-9;
+        if first > first_cloud + POSE_REACH_NS || last + POSE_REACH_NS < last_cloud {
+            return Some(format!(
+                "{} poses from {:.3} to {:.3} s do not reach the clouds' {:.3} to {:.3} s",
+                stamps.len(),
+                seconds(first),
+                seconds(last),
+                seconds(first_cloud),
+                seconds(last_cloud)
+            ));
+        }
+        let gap = (stamps.windows(2))
+            .filter(|pair| pair[1] > first_cloud && pair[0] < last_cloud)
+            .map(|pair| pair[1] - pair[0])
+            .max()
+            .unwrap_or(0);
+        (gap > POSE_GAP_NS).then(|| {
+            format!(
+                "{} poses with a gap of {:.1} s among the clouds (at most 1 s)",
+                stamps.len(),
+                seconds(gap)
+            )
+        })
+    }
+}
+
 /// What the log's pose topics did for its clouds.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub enum VehiclePoses {
@@ -128,24 +175,37 @@ pub enum VehiclePoses {
     Unusable(String),
 }
 
-/// Adds the one pose topic of `topics` to `transforms` as the edge from its frame
+/// Adds the one pose topic of `topics` that poses clouds stamped `clouds_ns` (the
+/// one `--pose-topic` named, when `named`) to `transforms` as the edge from its frame
 /// to the vehicle's (the root above `cloud_frame`) when no edge above `cloud_frame`
 /// moves (see the module documentation); `transforms` is sorted again.
 pub fn add_vehicle_poses(
     transforms: &mut TransformTree,
     cloud_frame: &str,
     topics: &BTreeMap<String, PoseTopic>,
+    clouds_ns: &[u64],
+    named: bool,
 ) -> Result<VehiclePoses, TransformError> {
     if topics.is_empty() || transforms.moves(cloud_frame)? {
         return Ok(VehiclePoses::NotUsed);
     }
-    let [(name, topic)] = topics.iter().collect::<Vec<_>>()[..] else {
-        let names: Vec<&str> = topics.keys().map(String::as_str).collect();
-        return Ok(VehiclePoses::Unusable(format!(
-            "{} pose topics ({}): travmap cannot tell which is the vehicle's",
-            names.len(),
-            names.join(", ")
-        )));
+    let (fit, unfit): (Vec<_>, Vec<_>) = (topics.iter())
+        .map(|(name, topic)| (name, topic, topic.unfit_for(clouds_ns)))
+        .partition(|(.., unfit)| named || unfit.is_none());
+    let [(name, topic, _)] = fit[..] else {
+        let why: Vec<String> = match fit.is_empty() {
+            true => (unfit.iter())
+                .map(|(name, _, why)| format!("{name}: {}", why.as_deref().unwrap_or("")))
+                .collect(),
+            false => vec![format!(
+                "{} pose topics ({}): travmap cannot tell which is the vehicle's (--pose-topic to choose)",
+                fit.len(),
+                (fit.iter().map(|(name, ..)| name.as_str()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )],
+        };
+        return Ok(VehiclePoses::Unusable(why.join("; ")));
     };
     let vehicle = transforms.root_above(cloud_frame)?;
     if topic.frame.is_empty() || transforms.root_above(&topic.frame)? == vehicle {
@@ -201,6 +261,9 @@ mod tests {
         )
     }
 
+    /// Clouds between the test topics' two poses.
+    const CLOUDS_NS: [u64; 2] = [1_100_000_000, 1_900_000_000];
+
     fn topic(frame: &str) -> PoseTopic {
         let mut topic = PoseTopic::default();
         for (s, x) in [(1, 0.0), (2, 10.0)] {
@@ -225,7 +288,7 @@ mod tests {
     fn a_pose_topic_poses_the_top_of_the_clouds_mounts() {
         let mut tree = mounted();
         let topics = BTreeMap::from([("/pose".to_string(), topic("map"))]);
-        let used = add_vehicle_poses(&mut tree, "velodyne", &topics).unwrap();
+        let used = add_vehicle_poses(&mut tree, "velodyne", &topics, &CLOUDS_NS, false).unwrap();
         assert!(
             matches!(&used, VehiclePoses::Used(said) if said.contains("`base_link`") && said.contains("`map`")),
             "{used:?}"
@@ -252,21 +315,67 @@ mod tests {
         );
         moving.sort();
         assert_eq!(
-            add_vehicle_poses(&mut moving, "velodyne", &topics).unwrap(),
+            add_vehicle_poses(&mut moving, "velodyne", &topics, &CLOUDS_NS, false).unwrap(),
             VehiclePoses::NotUsed
         );
         let two = BTreeMap::from([
             ("/a".to_string(), topic("map")),
             ("/b".to_string(), topic("map")),
         ]);
-        let said = add_vehicle_poses(&mut mounted(), "velodyne", &two).unwrap();
+        let said = add_vehicle_poses(&mut mounted(), "velodyne", &two, &CLOUDS_NS, false).unwrap();
         assert!(
             matches!(&said, VehiclePoses::Unusable(why) if why.contains("/a, /b")),
             "{said:?}"
         );
         let own = BTreeMap::from([("/pose".to_string(), topic("velodyne"))]);
-        let said = add_vehicle_poses(&mut mounted(), "velodyne", &own).unwrap();
+        let said = add_vehicle_poses(&mut mounted(), "velodyne", &own, &CLOUDS_NS, false).unwrap();
         assert!(matches!(said, VehiclePoses::Unusable(_)), "{said:?}");
+    }
+
+    #[test]
+    fn a_goal_or_an_initial_pose_is_no_trajectory() {
+        let sparse = |stamps: &[i32]| {
+            let mut topic = PoseTopic::default();
+            for &s in stamps {
+                let data = pose_stamped("map", s, 0.0);
+                topic
+                    .add(POSE_STAMPED, &data, MessageEncoding::Cdr)
+                    .unwrap();
+            }
+            topic
+        };
+        // One pose (a goal), and poses 4 s apart around clouds 5 s long.
+        let clouds = [2_000_000_000, 7_000_000_000];
+        for (stamps, said) in [
+            (
+                &[3][..],
+                "1 poses from 3.000 to 3.000 s do not reach the clouds' 2.000 to 7.000 s",
+            ),
+            (
+                &[1, 5, 9][..],
+                "3 poses with a gap of 4.0 s among the clouds",
+            ),
+        ] {
+            let topics = BTreeMap::from([("/goal_pose".to_string(), sparse(stamps))]);
+            let unused = add_vehicle_poses(&mut mounted(), "velodyne", &topics, &clouds, false);
+            assert!(
+                matches!(&unused, Ok(VehiclePoses::Unusable(why)) if why.contains(said) && why.starts_with("/goal_pose: ")),
+                "{unused:?}"
+            );
+            // Named, it is used all the same.
+            let named = add_vehicle_poses(&mut mounted(), "velodyne", &topics, &clouds, true);
+            assert!(matches!(named, Ok(VehiclePoses::Used(_))), "{named:?}");
+        }
+        // Beside a trajectory, a goal does not make the choice ambiguous.
+        let topics = BTreeMap::from([
+            ("/goal_pose".to_string(), sparse(&[3])),
+            ("/pose".to_string(), sparse(&[1, 2, 3, 4, 5, 6, 7, 8])),
+        ]);
+        let used = add_vehicle_poses(&mut mounted(), "velodyne", &topics, &clouds, false);
+        assert!(
+            matches!(&used, Ok(VehiclePoses::Used(said)) if said.starts_with("poses from /pose")),
+            "{used:?}"
+        );
     }
 
     #[test]
