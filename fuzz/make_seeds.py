@@ -252,6 +252,7 @@ def main() -> None:
             ("/camera_2/camera_info", "camera_calibration"),
         ):
             seed("foxglove_message", f"{name}.pb", foxglove[topic])
+        seed("foxglove_message", "pose_in_frame.pb", first_message_per_topic(routes / "foxglove-pose.mcap")["/pose"])
         foxglove_json = first_message_per_topic(routes / "foxglove-json.mcap")
         for topic, name in (("/velodyne_points", "point_cloud"), ("/camera_2/camera_info", "camera_calibration")):
             seed("foxglove_message", f"{name}.json", foxglove_json[topic])

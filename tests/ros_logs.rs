@@ -713,9 +713,11 @@ fn a_pose_topic_poses_a_log_without_moving_tf() {
     let reference = annotated_grids(dir.path(), &drive, "ros2");
     // PoseStamped (rosbag2) and PoseWithCovarianceStamped (ROS 1): the pose of
     // base_link, which carries the LiDAR on /tf_static, and no moving /tf.
+    // And a Foxglove PoseInFrame (the Foxglove SDK), read as a PoseStamped.
     for (route, message_type) in [
         ("rosbag2-mcap-pose", "PoseStamped"),
         ("ros1-pose.bag", "PoseWithCovarianceStamped"),
+        ("foxglove-pose.mcap", "PoseStamped"),
     ] {
         let input = routes.join(route);
         let out = travmap(&["eval", arg(&input)]);

@@ -223,7 +223,7 @@ fn convert_whole_log(
     let written = Written {
         frames: drive.frame_count(),
         contents: format!(
-            "{} messages, {} of them re-encoded from ROS 1",
+            "{} messages, {} of them re-encoded as ROS 2 (from ROS 1 or Foxglove's schemas)",
             summary.messages, summary.translated_messages
         ),
         output_bytes: summary.output_bytes,

@@ -10,10 +10,10 @@
 use std::collections::BTreeMap;
 
 use nalgebra::Isometry3;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use super::log_message::ros2_type_name;
-use super::ros::{Header, MessageEncoding, Pose, PoseWithCovariance, Transform};
+use super::ros::{Header, MessageEncoding, Pose, PoseWithCovariance, RosMessage, Transform};
 use super::transforms::{TransformError, TransformTree, isometry};
 
 pub const POSE_STAMPED: &str = "geometry_msgs/msg/PoseStamped";
@@ -21,10 +21,16 @@ pub const POSE_WITH_COVARIANCE_STAMPED: &str = "geometry_msgs/msg/PoseWithCovari
 /// The message types read as the vehicle's pose.
 pub const POSE_MESSAGES: [&str; 2] = [POSE_STAMPED, POSE_WITH_COVARIANCE_STAMPED];
 
-#[derive(Deserialize)]
-struct PoseStamped {
-    header: Header,
-    pose: Pose,
+/// `geometry_msgs/msg/PoseStamped` (what Foxglove's `PoseInFrame` is read as).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseStamped {
+    pub header: Header,
+    pub pose: Pose,
+}
+
+impl RosMessage for PoseStamped {
+    const NAME: &'static str = POSE_STAMPED;
+    const SCHEMA: &'static str = include_str!("../../schemas/geometry_msgs__PoseStamped.msg");
 }
 
 #[derive(Deserialize)]
@@ -233,13 +239,8 @@ mod tests {
     use nalgebra::{Translation3, UnitQuaternion};
 
     fn pose_stamped(frame: &str, stamp_s: i32, x: f64) -> Vec<u8> {
-        #[derive(serde::Serialize)]
-        struct Written {
-            header: Header,
-            pose: Pose,
-        }
         encode(
-            &Written {
+            &PoseStamped {
                 header: Header {
                     stamp: Time {
                         sec: stamp_s,

@@ -32,6 +32,8 @@ recorded-log format travmap reads, with real writers and no travmap code:
                                              type Foxglove has a schema for as that schema in
                                              protobuf (PointCloud, FrameTransforms, CompressedImage,
                                              CameraCalibration), as nuScenes' MCAPs are written
+  foxglove-pose.mcap                         the Foxglove SDK's writer, rosbag2-mcap-pose/'s messages:
+                                             the vehicle's pose as a foxglove.PoseInFrame on /pose
   foxglove-nuscenes.mcap                     the Foxglove SDK's writer, laid out as nuScenes' MCAPs
                                              are: the LiDAR in `lidar_top` on a vehicle `base_link`,
                                              each mount on /tf (not /tf_static) at a few key frames
@@ -252,6 +254,12 @@ def as_foxglove(messages, path):
                     timestamp=stamp(m.header), frame_id=m.header.frame_id, width=m.width, height=m.height,
                     distortion_model=m.distortion_model, D=list(m.d), K=list(m.k), R=list(m.r), P=list(m.p),
                 )
+            elif msgtype == POSE_STAMPED:
+                p, q = m.pose.position, m.pose.orientation
+                message = fg.PoseInFrame(
+                    timestamp=stamp(m.header), frame_id=m.header.frame_id,
+                    pose=fg.Pose(position=fg.Vector3(x=p.x, y=p.y, z=p.z), orientation=fg.Quaternion(x=q.x, y=q.y, z=q.z, w=q.w)),
+                )
             else:
                 raise SystemExit(f"{topic}: no Foxglove schema for {msgtype}")
             foxglove.log(topic, message, log_time=log_time)
@@ -460,6 +468,7 @@ def main():
     poses_and_tf = messages + [m for m in two_poses if m[0] in ("/pose", "/vision_pose")]
     rosbag2(sorted(poses_and_tf, key=lambda m: m[2]), out / "rosbag2-mcap-poses-and-tf", StoragePlugin.MCAP)
     as_foxglove(messages, out / "foxglove.mcap")
+    as_foxglove(as_pose_topic(messages, POSE_STAMPED), out / "foxglove-pose.mcap")
     as_nuscenes_like(messages, out / "foxglove-nuscenes.mcap")
     as_foxglove_json(messages, out / "foxglove-json.mcap")
     if len(sys.argv) > 3:

@@ -8,6 +8,7 @@ use serde::de::DeserializeOwned;
 use super::basics::{odometry_of, time};
 use super::cameras::Calibration;
 use super::point_cloud::{finish, numeric_type};
+use crate::io::pose_topics::PoseStamped;
 use crate::io::ros::{
     CompressedImage, Header, Image, PointCloud2, PointField, Pose, Quaternion, TfMessage, Time,
     Transform, TransformStamped, Vector3, encode,
@@ -205,6 +206,14 @@ struct Odometry {
     pose: JsonPose,
 }
 
+#[derive(Default, Deserialize)]
+#[serde(default)]
+struct PoseInFrame {
+    timestamp: Timestamp,
+    frame_id: String,
+    pose: JsonPose,
+}
+
 fn parse<T: DeserializeOwned>(data: &[u8]) -> Result<T, String> {
     serde_json::from_slice(data).map_err(|e| e.to_string())
 }
@@ -296,6 +305,14 @@ pub(super) fn to_cdr(schema_name: &str, data: &[u8], whole: bool) -> Result<Vec<
                 &odometry_of(header, json.body_frame_id, json.pose.pose()),
                 512,
             )
+        }
+        "foxglove.PoseInFrame" => {
+            let json: PoseInFrame = parse(data)?;
+            let stamped = PoseStamped {
+                header: header(&json.timestamp, json.frame_id)?,
+                pose: json.pose.pose(),
+            };
+            encode(&stamped, 128)
         }
         other => return Err(format!("{other} is not a schema travmap reads")),
     })
@@ -442,6 +459,15 @@ mod tests {
             r#"{"frame_id": "odom", "body_frame_id": "base_link", "pose": {"position": {"x": 4, "y": 5, "z": 6}}}"#,
         );
         assert_eq!(odometry.child_frame_id, "base_link");
+        let stamped: PoseStamped = read(
+            "foxglove.PoseInFrame",
+            r#"{"timestamp": {"sec": 4, "nsec": 2}, "frame_id": "map", "pose": {"position": {"x": 1, "y": 2, "z": 3}}}"#,
+        );
+        assert_eq!(
+            (stamped.header.frame_id.as_str(), stamped.header.stamp.sec),
+            ("map", 4)
+        );
+        assert_eq!(stamped.pose.position.y, 2.0);
         assert_eq!(
             odometry.pose.pose.position,
             Vector3 {

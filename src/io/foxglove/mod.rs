@@ -10,6 +10,7 @@ mod json;
 mod point_cloud;
 
 use super::log_message::Part;
+use super::pose_topics::PoseStamped;
 use super::protobuf::fields;
 use super::ros::{
     CameraInfo, CompressedImage, Header, Image, Odometry, PointCloud2, Pose, Ros2Message,
@@ -29,7 +30,7 @@ pub fn reads(message_encoding: &str) -> bool {
 }
 
 /// Each Foxglove schema read, with its ROS 2 equivalent's name and schema text.
-const EQUIVALENTS: [(&str, &str, &str); 7] = [
+const EQUIVALENTS: [(&str, &str, &str); 8] = [
     (
         "foxglove.PointCloud",
         PointCloud2::NAME,
@@ -57,6 +58,11 @@ const EQUIVALENTS: [(&str, &str, &str); 7] = [
         CameraInfo::SCHEMA,
     ),
     ("foxglove.Odometry", Odometry::NAME, Odometry::SCHEMA),
+    (
+        "foxglove.PoseInFrame",
+        PoseStamped::NAME,
+        PoseStamped::SCHEMA,
+    ),
 ];
 
 /// The Foxglove schemas read.
@@ -139,6 +145,7 @@ fn from_protobuf(schema_name: &str, data: &[u8], whole: bool) -> Result<Vec<u8>,
         }
         "foxglove.CameraCalibration" => encode(&camera_calibration(data)?, 512),
         "foxglove.Odometry" => encode(&odometry(data)?, 512),
+        "foxglove.PoseInFrame" => encode(&pose_in_frame(data)?, 128),
         other => return Err(format!("{other} is not a schema travmap reads")),
     })
 }
@@ -179,6 +186,25 @@ fn odometry(message: &[u8]) -> Result<Odometry, String> {
         Ok(())
     })?;
     Ok(odometry_of(header, body, body_pose))
+}
+
+/// `foxglove.PoseInFrame`: a pose in `frame_id`, read as a PoseStamped (a pose
+/// topic, `pose_topics.rs`).
+fn pose_in_frame(message: &[u8]) -> Result<PoseStamped, String> {
+    let mut stamped = PoseStamped {
+        header: Header::default(),
+        pose: Pose::default(),
+    };
+    each_field(message, |n, value| {
+        match n {
+            1 => stamped.header.stamp = timestamp(value.bytes(n)?)?,
+            2 => stamped.header.frame_id = value.string(n)?,
+            3 => stamped.pose = pose(value.bytes(n)?)?,
+            _ => {}
+        }
+        Ok(())
+    })?;
+    Ok(stamped)
 }
 
 #[cfg(test)]
@@ -261,6 +287,20 @@ mod tests {
             }
         );
         assert_eq!(read.pose.pose.orientation, Quaternion::default());
+        // A PoseInFrame names no body: a PoseStamped, read as a pose topic.
+        let in_frame = message(|m| {
+            bytes(1, &stamp(3, 5), m);
+            bytes(2, b"map", m);
+            bytes(3, &message(|p| bytes(1, &vector(7.0, 8.0, 9.0), p)), m);
+        });
+        let read: PoseStamped =
+            decode(&to_cdr("foxglove.PoseInFrame", PROTOBUF, &in_frame, Part::Whole).unwrap())
+                .unwrap();
+        assert_eq!(
+            (read.header.frame_id.as_str(), read.header.stamp.nanosec),
+            ("map", 5)
+        );
+        assert_eq!(read.pose.position.z, 9.0);
     }
 
     #[test]
