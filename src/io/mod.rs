@@ -10,6 +10,7 @@ mod bucket_store;
 mod camera_model;
 pub mod cloud;
 pub mod drive_frames;
+mod fixed_array;
 pub mod format;
 pub mod foxglove;
 pub mod hesai;

@@ -10,34 +10,15 @@
 use std::collections::BTreeMap;
 
 use nalgebra::Isometry3;
-use serde::{Deserialize, Serialize};
 
 use super::log_message::ros2_type_name;
-use super::ros::{Header, MessageEncoding, Pose, PoseWithCovariance, RosMessage, Transform};
+use super::ros::{MessageEncoding, PoseStamped, PoseWithCovarianceStamped, RosMessage, Transform};
 use super::transforms::{TransformError, TransformTree, isometry};
 
-pub const POSE_STAMPED: &str = "geometry_msgs/msg/PoseStamped";
+pub const POSE_STAMPED: &str = PoseStamped::NAME;
 pub const POSE_WITH_COVARIANCE_STAMPED: &str = "geometry_msgs/msg/PoseWithCovarianceStamped";
 /// The message types read as the vehicle's pose.
 pub const POSE_MESSAGES: [&str; 2] = [POSE_STAMPED, POSE_WITH_COVARIANCE_STAMPED];
-
-/// `geometry_msgs/msg/PoseStamped` (what Foxglove's `PoseInFrame` is read as).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct PoseStamped {
-    pub header: Header,
-    pub pose: Pose,
-}
-
-impl RosMessage for PoseStamped {
-    const NAME: &'static str = POSE_STAMPED;
-    const SCHEMA: &'static str = include_str!("../../schemas/geometry_msgs__PoseStamped.msg");
-}
-
-#[derive(Deserialize)]
-struct PoseWithCovarianceStamped {
-    header: Header,
-    pose: PoseWithCovariance,
-}
 
 /// How far before its first pose and past its last a topic poses clouds (as far as
 /// a /tf edge is extrapolated).
@@ -235,7 +216,7 @@ pub fn add_vehicle_poses(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::ros::{Quaternion, Time, Vector3, encode};
+    use crate::io::ros::{Header, Pose, Quaternion, Time, Vector3, encode};
     use nalgebra::{Translation3, UnitQuaternion};
 
     fn pose_stamped(frame: &str, stamp_s: i32, x: f64) -> Vec<u8> {

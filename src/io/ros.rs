@@ -6,6 +6,8 @@
 use byteorder::{BigEndian, LittleEndian};
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 
+pub use super::fixed_array::FixedArray;
+
 /// A message type: its ROS name and the `ros2msg` schema text written to MCAP.
 pub trait RosMessage: Serialize + DeserializeOwned {
     const NAME: &'static str;
@@ -269,54 +271,23 @@ pub struct Odometry {
     pub twist: TwistWithCovariance,
 }
 
+/// `geometry_msgs/msg/PoseStamped`: a pose in `header.frame_id` (a pose topic's,
+/// `super::pose_topics`; Foxglove's `PoseInFrame` is read as one).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseStamped {
+    pub header: Header,
+    pub pose: Pose,
+}
+
+/// `geometry_msgs/msg/PoseWithCovarianceStamped`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseWithCovarianceStamped {
+    pub header: Header,
+    pub pose: PoseWithCovariance,
+}
+
 /// A `float64[36]` (a 6 x 6 covariance, row-major).
 pub type Covariance6 = FixedArray<f64, 36>;
-
-/// A ROS fixed-length array `T[N]`: serde derives arrays only up to 32; CDR and ROS 1
-/// write it as N values and no length. Holds exactly N values.
-#[derive(Clone, Debug, PartialEq)]
-pub struct FixedArray<T, const N: usize>(pub Vec<T>);
-
-impl<T: Serialize, const N: usize> Serialize for FixedArray<T, N> {
-    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        use serde::ser::{Error, SerializeTuple};
-        if self.0.len() != N {
-            return Err(S::Error::custom(format!(
-                "{} values in an array of {N}",
-                self.0.len()
-            )));
-        }
-        let mut tuple = serializer.serialize_tuple(N)?;
-        for v in &self.0 {
-            tuple.serialize_element(v)?;
-        }
-        tuple.end()
-    }
-}
-
-impl<'de, T: Deserialize<'de>, const N: usize> Deserialize<'de> for FixedArray<T, N> {
-    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        struct Values<T, const N: usize>(std::marker::PhantomData<T>);
-        impl<'de, T: Deserialize<'de>, const N: usize> serde::de::Visitor<'de> for Values<T, N> {
-            type Value = FixedArray<T, N>;
-            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                write!(f, "{N} values")
-            }
-            fn visit_seq<A: serde::de::SeqAccess<'de>>(
-                self,
-                mut seq: A,
-            ) -> Result<FixedArray<T, N>, A::Error> {
-                let mut out = Vec::with_capacity(N);
-                for i in 0..N {
-                    let value = seq.next_element()?;
-                    out.push(value.ok_or_else(|| serde::de::Error::invalid_length(i, &self))?);
-                }
-                Ok(FixedArray(out))
-            }
-        }
-        deserializer.deserialize_tuple(N, Values::<T, N>(std::marker::PhantomData))
-    }
-}
 
 /// `velodyne_msgs/msg/VelodyneScan`: a turn's raw packets. Read in place for
 /// decoding ([`super::velodyne::scan_message`]); this type re-encodes ROS 1 scans as
@@ -402,6 +373,11 @@ ros_message!(
 );
 ros_message!(Image, "sensor_msgs/msg/Image", "sensor_msgs__Image.msg");
 ros_message!(Odometry, "nav_msgs/msg/Odometry", "nav_msgs__Odometry.msg");
+ros_message!(
+    PoseStamped,
+    "geometry_msgs/msg/PoseStamped",
+    "geometry_msgs__PoseStamped.msg"
+);
 ros_message!(
     CompressedImage,
     "sensor_msgs/msg/CompressedImage",

@@ -8,10 +8,9 @@ use serde::de::DeserializeOwned;
 use super::basics::{odometry_of, time};
 use super::cameras::Calibration;
 use super::point_cloud::{finish, numeric_type};
-use crate::io::pose_topics::PoseStamped;
 use crate::io::ros::{
-    CompressedImage, Header, Image, PointCloud2, PointField, Pose, Quaternion, TfMessage, Time,
-    Transform, TransformStamped, Vector3, encode,
+    CompressedImage, Header, Image, PointCloud2, PointField, Pose, PoseStamped, Quaternion,
+    TfMessage, Time, Transform, TransformStamped, Vector3, encode,
 };
 
 #[derive(Default, Deserialize)]

@@ -10,11 +10,10 @@ mod json;
 mod point_cloud;
 
 use super::log_message::Part;
-use super::pose_topics::PoseStamped;
 use super::protobuf::fields;
 use super::ros::{
-    CameraInfo, CompressedImage, Header, Image, Odometry, PointCloud2, Pose, Ros2Message,
-    RosMessage, TfMessage, Transform, TransformStamped, encode,
+    CameraInfo, CompressedImage, Header, Image, Odometry, PointCloud2, Pose, PoseStamped,
+    Ros2Message, RosMessage, TfMessage, Transform, TransformStamped, encode,
 };
 use basics::{each_field, odometry_of, pose, quaternion, timestamp, vector3};
 use cameras::{camera_calibration, compressed_image, raw_image};
