@@ -5,7 +5,9 @@
 //! vehicle's frame is taken to be the top of the clouds' chain of fixed mounts
 //! (`base_link` above `velodyne` on /tf_static), or the clouds' frame itself when
 //! nothing holds it. A frame has one parent: when /tf or an Odometry already moves
-//! the clouds, the pose topics are not used.
+//! the clouds, the pose topics are not used. Poses that are no trajectory (a goal,
+//! an initial pose) are left out, and several topics are not guessed between, unless
+//! `--pose-topic` names one.
 
 use std::collections::BTreeMap;
 
