@@ -63,7 +63,7 @@ fn main() {
                 for m in &messages {
                     let encoding = m.connection.encoding().unwrap();
                     for scan in assembler
-                        .push_message(message_type, &m.data, encoding)
+                        .push_message(message_type, &m.data, encoding, m.log_time_ns)
                         .unwrap()
                     {
                         points += scan.points.len();

@@ -386,7 +386,7 @@ pub fn nebula_packets(data: &[u8]) {
     };
     let mut assembler =
         PacketAssembler::new(model, &calibration).expect("a built-in table fits its model");
-    if let Ok(scans) = assembler.push_message(NEBULA_PACKETS, data, MessageEncoding::Cdr) {
+    if let Ok(scans) = assembler.push_message(NEBULA_PACKETS, data, MessageEncoding::Cdr, 0) {
         let points = scans.iter().flat_map(|scan| &scan.points);
         assert!(points.flat_map(|p| p.xyz_m).all(f32::is_finite));
     }

@@ -435,5 +435,10 @@ fn push_message(
         .connection
         .encoding()
         .ok_or_else(|| format!("message encoding `{}`", message.connection.message_encoding))?;
-    assembler.push_message(&message.connection.type_name(), &message.data, encoding)
+    assembler.push_message(
+        &message.connection.type_name(),
+        &message.data,
+        encoding,
+        message.log_time_ns,
+    )
 }

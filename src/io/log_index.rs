@@ -10,20 +10,17 @@ use serde::Deserialize;
 
 use super::camera_model::Projection;
 use super::foxglove;
-use super::hesai::{HesaiAssembler, HesaiCalibration, PANDAR_SCAN};
 use super::lidar_calibrations::LidarCalibrations;
 use super::livox::LIVOX_CUSTOM_MESSAGES;
 use super::log::Log;
 use super::log_message::{LogMessage, Part, ros2_type_name};
-use super::packets::{
-    NEBULA_PACKETS, PACKET_MESSAGES, PacketCalibration, PacketModel, packet_message,
-};
+use super::packet_topics::PacketTopics;
+use super::packets::{PACKET_MESSAGES, PacketCalibration, PacketModel};
 use super::pose_topics::{
     POSE_MESSAGES, PoseTopic, VehiclePoses, add_vehicle_poses, named_pose_topic, unposed,
 };
 use super::ros::{CameraInfo, Header, MessageEncoding, Odometry, TfMessage, Transform};
 use super::transforms::{TransformTree, isometry};
-use super::velodyne::{DecoderSettings, ScanCutter, VELODYNE_SCAN};
 use crate::config::PoseSource;
 use crate::error::{CloudTopicProblem, Error, LostMessage, Result};
 use crate::posing::PoseRecord;
@@ -118,22 +115,8 @@ pub(super) struct Contents {
     poses: PoseSource,
     /// Image topic -> (compressed, encoding, frame).
     image_topics: BTreeMap<String, (bool, MessageEncoding, String)>,
-    /// Packet topic -> the model and where its scans are cut.
-    packet_topics: HashMap<String, (PacketModel, PacketCut)>,
-    /// The packets' calibration files (`--lidar-calibration`).
-    lidar_calibrations: LidarCalibrations,
-    /// Velodyne packet topic -> the stamp of the scan being cut.
-    packet_scan_start: HashMap<String, u64>,
-    /// Packet topic -> how many packets its first scans took (the first two), and
-    /// the scan being cut so far.
-    packets_per_scan: HashMap<String, (Vec<usize>, usize)>,
-}
-
-/// Where a packet topic's scans are cut, for their stamps: Velodyne's cut is on the
-/// packets' azimuths alone; Hesai's is per laser, on the points' corrected azimuths.
-enum PacketCut {
-    Velodyne(ScanCutter),
-    Hesai(Box<HesaiAssembler>),
+    /// Packet topics: models, cuts, an Ouster's metadata.
+    packets: PacketTopics,
 }
 
 impl Contents {
@@ -191,77 +174,23 @@ impl Contents {
                     .or_insert_with(|| (header.header.frame_id.clone(), Vec::new()));
                 entry.1.push(stamp);
             }
-            VELODYNE_SCAN | PANDAR_SCAN | NEBULA_PACKETS => {
-                let scan = packet_message(&schema, data, encoding).map_err(problem)?;
-                let Some(first) = scan.packets.first() else {
-                    return Ok(());
-                };
+            name if PACKET_MESSAGES.contains(&name) => {
                 let topic = &connection.topic;
-                if !self.packet_topics.contains_key(topic) {
-                    let model = PacketModel::of_packet(&schema, first.1).map_err(problem)?;
-                    let cut = match model {
-                        PacketModel::Velodyne(_) => PacketCut::Velodyne(ScanCutter::new(
-                            DecoderSettings::default().cut_angle_deg,
-                        )),
-                        PacketModel::Hesai(hesai) => {
-                            // A file that does not fit is refused by name when the
-                            // drive opens; the factory table cuts until then.
-                            let file = self.lidar_calibrations.for_topic(topic);
-                            let calibration = match PacketCalibration::for_model(model, file) {
-                                Ok(PacketCalibration::Hesai(calibration)) => calibration,
-                                _ => HesaiCalibration::builtin(hesai),
-                            };
-                            let assembler =
-                                HesaiAssembler::new(hesai, &calibration).map_err(problem)?;
-                            PacketCut::Hesai(Box::new(assembler.stamps_only()))
-                        }
-                    };
-                    self.packet_topics.insert(topic.clone(), (model, cut));
-                }
-                let (model, cut) = self.packet_topics.get_mut(topic).expect("inserted above");
-                let stamps = &mut self
-                    .cloud_stamps
-                    .entry(topic.clone())
-                    .or_insert_with(|| (scan.frame_id.clone(), Vec::new()))
-                    .1;
-                let counts = self.packets_per_scan.entry(topic.clone()).or_default();
-                for (stamp_ns, packet) in &scan.packets {
-                    counts.1 += 1;
-                    let scans_before = stamps.len();
-                    let packet_model = PacketModel::of_packet(&schema, packet).map_err(problem)?;
-                    if packet_model != *model {
-                        return Err(problem(format!(
-                            "a {} packet on a topic of {} packets",
-                            packet_model.name(),
-                            model.name()
-                        )));
-                    }
-                    match cut {
-                        PacketCut::Velodyne(cutter) => {
-                            // A scan is stamped as ScanAssembler stamps it: the first
-                            // scan with its first packet, the others with the packet
-                            // that cut the scan before (it carries points past the
-                            // cut into them).
-                            let scan_start = self.packet_scan_start.entry(topic.clone());
-                            let start = *scan_start.or_insert(*stamp_ns);
-                            if cutter.completes(packet) {
-                                stamps.push(start);
-                                self.packet_scan_start.insert(topic.clone(), *stamp_ns);
-                            }
-                        }
-                        // Stamped as the drive's frames are: by the same assembler.
-                        PacketCut::Hesai(assembler) => {
-                            if let Some(scan) =
-                                assembler.push(packet, *stamp_ns).map_err(problem)?
-                            {
-                                stamps.push(scan.stamp_ns);
-                            }
-                        }
-                    }
-                    if stamps.len() > scans_before && counts.0.len() < 2 {
-                        counts.0.push(std::mem::take(&mut counts.1));
-                    }
-                }
+                (self.packets)
+                    .add(
+                        topic,
+                        name,
+                        data,
+                        encoding,
+                        message.log_time_ns,
+                        &mut self.cloud_stamps,
+                    )
+                    .map_err(problem)?;
+            }
+            name if PacketTopics::reads(&connection.topic, name) => {
+                (self.packets)
+                    .add_metadata(&connection.topic, data, encoding, &mut self.cloud_stamps)
+                    .map_err(problem)?;
             }
             TF_MESSAGE | TF1_MESSAGE => {
                 let is_static = connection.topic == "/tf_static";
@@ -372,7 +301,7 @@ impl Contents {
             };
             merged.push(MergedTopic {
                 frame: frame.clone(),
-                packets: self.packet_topics.get(&topic).map(|(model, _)| *model),
+                packets: self.packets.model(&topic),
                 topic,
             });
         }
@@ -473,6 +402,8 @@ pub(super) struct LogIndex {
     /// For a packet topic: the packets of its first and second scans, when the
     /// first took fewer than half the second's (the recording began mid-turn).
     pub(super) partial_first_scan: Option<(usize, usize)>,
+    /// Packet topics' calibrations recorded in the log (an Ouster's metadata).
+    pub(super) recorded_calibrations: HashMap<String, PacketCalibration>,
 }
 
 impl LogIndex {
@@ -483,17 +414,18 @@ impl LogIndex {
         let mut contents = Contents {
             poses: options.poses,
             pose_topic: options.pose_topic.clone(),
-            lidar_calibrations: options.lidar_calibrations.clone(),
+            packets: PacketTopics::new(options.lidar_calibrations.clone()),
             ..Default::default()
         };
         let (mut damaged_chunks, mut first_damage, mut lost_messages) = (0, None, Vec::new());
         // Of clouds and images this pass reads the header alone, of the types it does
         // not decode nothing.
-        let parts = |_: &str, schema_name: &str| match ros2_type_name(schema_name).as_ref() {
+        let parts = |topic: &str, schema_name: &str| match ros2_type_name(schema_name).as_ref() {
             POINT_CLOUD | COMPRESSED_IMAGE | RAW_IMAGE => Part::Header,
             name if LIVOX_CUSTOM_MESSAGES.contains(&name) => Part::Header,
             TF_MESSAGE | TF1_MESSAGE | ODOMETRY | CAMERA_INFO => Part::Whole,
             name if PACKET_MESSAGES.contains(&name) || POSE_MESSAGES.contains(&name) => Part::Whole,
+            name if PacketTopics::reads(topic, name) => Part::Whole,
             _ => Part::Nothing,
         };
         let threads = rayon::current_num_threads();
@@ -513,9 +445,17 @@ impl LogIndex {
         }
         contents.transforms.sort();
         // Without the clouds the damage took, the damage is the error to report.
-        let cloud_topic = contents
-            .cloud_topic(path, options)
-            .map_err(|error| first_damage.unwrap_or(error))?;
+        let cloud_topic = contents.cloud_topic(path, options).map_err(|error| {
+            // Ouster packets that could not be read are why no cloud topic is.
+            match (first_damage, contents.packets.unread()) {
+                (Some(damage), _) => damage,
+                (None, Some((topic, problem))) => Error::LogContainer {
+                    path: path.to_path_buf(),
+                    problem: format!("{topic}: {problem}"),
+                },
+                (None, None) => error,
+            }
+        })?;
         let merged = contents.merged_topics(path, options, &cloud_topic)?;
         let (cloud_frame, stamps_ns) = contents
             .cloud_stamps
@@ -554,16 +494,12 @@ impl LogIndex {
                 path: path.to_path_buf(),
                 problem,
             })?;
-        let packets = contents
-            .packet_topics
-            .get(&cloud_topic)
-            .map(|(model, _)| *model);
-        let partial_first_scan = match contents.packets_per_scan.get(&cloud_topic) {
-            Some((counts, _)) if counts.len() == 2 && 2 * counts[0] < counts[1] => {
-                Some((counts[0], counts[1]))
-            }
-            _ => None,
-        };
+        let packets = contents.packets.model(&cloud_topic);
+        let partial_first_scan = contents.packets.partial_first_scan(&cloud_topic);
+        let recorded_calibrations = (std::iter::once(&cloud_topic)
+            .chain(merged.iter().map(|m| &m.topic)))
+        .filter_map(|t| Some((t.clone(), contents.packets.recorded_calibration(t)?)))
+        .collect();
         Ok(Self {
             merged,
             cloud_topic,
@@ -577,6 +513,7 @@ impl LogIndex {
             damaged_chunks,
             lost_messages,
             partial_first_scan,
+            recorded_calibrations,
         })
     }
 

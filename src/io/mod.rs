@@ -27,6 +27,8 @@ pub mod mcap_messages;
 pub mod mcap_records;
 pub mod mcap_stored;
 mod merged_clouds;
+pub mod ouster;
+mod packet_topics;
 pub mod packets;
 pub mod pcd;
 pub mod ply;

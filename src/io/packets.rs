@@ -1,12 +1,16 @@
 //! LiDAR packet topics whatever the vendor: Velodyne's `VelodyneScan`, Hesai's
-//! `PandarScan` and nebula's vendor-neutral `NebulaPackets`, each with its model
-//! (read from the packets), its calibration and its scan assembler, behind one face
-//! for the log index and the drive's frames.
+//! `PandarScan`, nebula's vendor-neutral `NebulaPackets` and ouster_ros's
+//! `PacketMsg`, each with its model (read from the packets; an Ouster's from its
+//! metadata), its calibration and its scan assembler, behind one face for the log
+//! index and the drive's frames.
 
 use std::path::Path;
 
 use super::hesai::{
     HesaiAssembler, HesaiCalibration, HesaiModel, PANDAR_SCAN, pandar_scan_message,
+};
+use super::ouster::{
+    OUSTER_PACKET_MESSAGES, OusterAssembler, OusterMetadata, OusterModel, packet_msg_message,
 };
 use super::ros::MessageEncoding;
 use super::velodyne::{
@@ -19,22 +23,33 @@ use super::velodyne::{
 pub const NEBULA_PACKETS: &str = "nebula_msgs/msg/NebulaPackets";
 
 /// The message types that carry packets.
-pub const PACKET_MESSAGES: [&str; 3] = [VELODYNE_SCAN, PANDAR_SCAN, NEBULA_PACKETS];
+pub const PACKET_MESSAGES: [&str; 6] = [
+    VELODYNE_SCAN,
+    PANDAR_SCAN,
+    NEBULA_PACKETS,
+    OUSTER_PACKET_MESSAGES[0],
+    OUSTER_PACKET_MESSAGES[1],
+    OUSTER_PACKET_MESSAGES[2],
+];
 
 /// A LiDAR whose packets travmap decodes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PacketModel {
     Velodyne(VelodyneModel),
     Hesai(HesaiModel),
+    Ouster(OusterModel),
 }
 
 impl PacketModel {
     /// The model of a packet of a message of type `message_type`. A NebulaPackets
     /// packet is Hesai's if Hesai's header and length fit it (a Pandar 40P begins
     /// `FF EE` as Velodyne's blocks do, but is 1,262 bytes to their 1,206), else
-    /// Velodyne's.
+    /// Velodyne's. An Ouster's packets do not tell it: its metadata does.
     pub fn of_packet(message_type: &str, packet: &[u8]) -> Result<Self, String> {
         match message_type {
+            name if OUSTER_PACKET_MESSAGES.contains(&name) => {
+                Err("an Ouster packet's layout is in the sensor's metadata".into())
+            }
             PANDAR_SCAN => HesaiModel::of_packet(packet).map(Self::Hesai),
             NEBULA_PACKETS => HesaiModel::of_packet(packet)
                 .map(Self::Hesai)
@@ -53,6 +68,7 @@ impl PacketModel {
         match self {
             Self::Velodyne(model) => model.name(),
             Self::Hesai(model) => model.name(),
+            Self::Ouster(model) => model.name(),
         }
     }
 }
@@ -64,6 +80,7 @@ pub fn packet_message<'a>(
     encoding: MessageEncoding,
 ) -> Result<ScanMessage<'a>, String> {
     match message_type {
+        name if OUSTER_PACKET_MESSAGES.contains(&name) => packet_msg_message(data, encoding),
         PANDAR_SCAN => pandar_scan_message(data, encoding),
         NEBULA_PACKETS => packets_message(data, encoding, PacketField::Sequence),
         _ => scan_message(data, encoding),
@@ -71,17 +88,34 @@ pub fn packet_message<'a>(
 }
 
 /// A packet model's calibration: the file given (`--lidar-calibration`: the
-/// velodyne_pointcloud / nebula YAML, or Hesai's angle-correction CSV), else the
-/// model's built-in table.
+/// velodyne_pointcloud / nebula YAML, Hesai's angle-correction CSV, or an Ouster's
+/// metadata JSON), else the model's built-in table (an Ouster has none: its
+/// metadata is read from the log).
 #[derive(Clone, Debug)]
 pub enum PacketCalibration {
     Velodyne(Calibration),
     Hesai(HesaiCalibration),
+    Ouster(Box<OusterMetadata>),
 }
 
 impl PacketCalibration {
     pub fn for_model(model: PacketModel, file: Option<&Path>) -> Result<Self, String> {
         match model {
+            PacketModel::Ouster(model) => {
+                let file = file.ok_or("no metadata: record the sensor's metadata topic, or give its JSON with --lidar-calibration")?;
+                let metadata = ouster_metadata_file(file)?;
+                if metadata.model != model {
+                    return Err(format!(
+                        "{}: metadata of {} {} packets, where the log's are {} {}",
+                        file.display(),
+                        metadata.model.name(),
+                        metadata.model.profile.name(),
+                        model.name(),
+                        model.profile.name()
+                    ));
+                }
+                Ok(Self::Ouster(Box::new(metadata)))
+            }
             PacketModel::Velodyne(model) => Calibration::for_model(model, file).map(Self::Velodyne),
             PacketModel::Hesai(model) => {
                 let calibration = match file {
@@ -101,10 +135,17 @@ impl PacketCalibration {
     }
 }
 
+/// An Ouster's metadata JSON file (`--lidar-calibration`).
+pub fn ouster_metadata_file(file: &Path) -> Result<OusterMetadata, String> {
+    let text = std::fs::read_to_string(file).map_err(|e| format!("{}: {e}", file.display()))?;
+    OusterMetadata::from_json(&text).map_err(|e| format!("{}: {e}", file.display()))
+}
+
 /// Packets in, scans out, whichever vendor.
 pub enum PacketAssembler {
     Velodyne(ScanAssembler),
     Hesai(Box<HesaiAssembler>),
+    Ouster(Box<OusterAssembler>),
 }
 
 impl PacketAssembler {
@@ -117,6 +158,11 @@ impl PacketAssembler {
             (PacketModel::Hesai(model), PacketCalibration::Hesai(calibration)) => {
                 Self::Hesai(Box::new(HesaiAssembler::new(model, calibration)?))
             }
+            (PacketModel::Ouster(model), PacketCalibration::Ouster(metadata))
+                if metadata.model == model =>
+            {
+                Self::Ouster(Box::new(OusterAssembler::new(metadata)))
+            }
             _ => {
                 return Err(format!(
                     "a calibration of another vendor than the {}'s",
@@ -126,21 +172,24 @@ impl PacketAssembler {
         })
     }
 
-    /// Adds the packets of a message of type `message_type`; the scans they complete.
+    /// Adds the packets of a message of type `message_type`, recorded at
+    /// `log_time_ns`; the scans they complete.
     pub fn push_message(
         &mut self,
         message_type: &str,
         data: &[u8],
         encoding: MessageEncoding,
+        log_time_ns: u64,
     ) -> Result<Vec<PacketScan>, String> {
         let message = packet_message(message_type, data, encoding)?;
         let mut scans = Vec::new();
         for (stamp_ns, packet) in message.packets {
-            let scan = match self {
-                Self::Velodyne(assembler) => assembler.push(packet, stamp_ns)?,
-                Self::Hesai(assembler) => assembler.push(packet, stamp_ns)?,
-            };
-            scans.extend(scan);
+            match self {
+                Self::Velodyne(assembler) => scans.extend(assembler.push(packet, stamp_ns)?),
+                Self::Hesai(assembler) => scans.extend(assembler.push(packet, stamp_ns)?),
+                // Its message has no stamp: the log's time is the packet's.
+                Self::Ouster(assembler) => scans.extend(assembler.push(packet, log_time_ns)?),
+            }
         }
         Ok(scans)
     }

@@ -110,6 +110,10 @@ impl RosDrive {
                 .count();
         let calibrated = |topic: &str, model: Option<PacketModel>| {
             (model.map(|model| {
+                // An Ouster's metadata was chosen (log or file) by the index.
+                if let Some(recorded) = index.recorded_calibrations.get(topic) {
+                    return Ok((model, recorded.clone()));
+                }
                 let calibrations = &options.lidar_calibrations;
                 packet_calibration(log.path(), topic, model, calibrations, packet_topics)
                     .map(|c| (model, c))

@@ -1,0 +1,217 @@
+//! Ouster packets against Ouster's own SDK: `tests/clients/ouster_packets.py` writes
+//! RELLIS-3D's real OS1-64 scan as the packets of each UDP profile with the SDK's
+//! `frame_to_packets`, recorded as ouster_ros records them (rosbag2 and ROS 1), and
+//! the points the SDK's `XYZLut` makes of them; travmap must decode the same points
+//! and read the logs as drives. Needs `TRAVMAP_OUSTER_PYTHON` (a Python with
+//! ouster-sdk 1.0.1, which pins an older rosbags than the client venv's, so it has
+//! its own venv: `.ci/clients.sh`).
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::{assert_contains, clean_failure, run_client, write_output};
+use travmap::io::format::InputFormat;
+use travmap::io::log::Log;
+use travmap::io::ouster::OusterMetadata;
+use travmap::io::packets::{PacketAssembler, PacketCalibration, PacketModel};
+
+const PROFILES: [&str; 4] = [
+    "LEGACY",
+    "RNG19_RFL8_SIG16_NIR16",
+    "RNG19_RFL8_SIG16_NIR16_DUAL",
+    "RNG15_RFL8_NIR8",
+];
+const LOG_START_NS: u64 = 1_700_000_000_000_000_000;
+
+/// The routes written into a temporary directory, or None without the data or the
+/// SDK's Python.
+fn routes() -> Option<(tempfile::TempDir, PathBuf)> {
+    let scan = common::shared_data("rellis3d-000104/sequences/00/velodyne/000000.bin")?;
+    let python = common::env_var("TRAVMAP_OUSTER_PYTHON", "a Python with ouster-sdk")?;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ouster");
+    run_client(
+        Command::new(python)
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/ouster_packets.py"))
+            .arg(&scan)
+            .arg(&out),
+    );
+    Some((dir, out))
+}
+
+/// The scans travmap cuts from a log's lidar packets, read with `metadata`.
+fn decoded_scans(
+    log: &Path,
+    format: InputFormat,
+    metadata: &OusterMetadata,
+) -> Vec<(u64, Vec<[f32; 4]>)> {
+    let calibration = PacketCalibration::Ouster(Box::new(metadata.clone()));
+    let mut assembler =
+        PacketAssembler::new(PacketModel::Ouster(metadata.model), &calibration).unwrap();
+    let mut scans = Vec::new();
+    for message in Log::open(log, format).unwrap().messages() {
+        let message = message.unwrap();
+        if message.connection.topic != "/ouster/lidar_packets" {
+            continue;
+        }
+        let type_name = message.connection.type_name();
+        let encoding = message.connection.encoding().unwrap();
+        let completed =
+            (assembler.push_message(&type_name, &message.data, encoding, message.log_time_ns))
+                .unwrap();
+        scans.extend(completed.into_iter().map(|scan| {
+            let points = scan.points.iter().map(|p| {
+                let [x, y, z] = p.xyz_m;
+                [x, y, z, f32::from(p.intensity)]
+            });
+            (scan.stamp_ns, points.collect())
+        }));
+    }
+    scans
+}
+
+fn sdk_points(routes: &Path, profile: &str) -> Vec<[f32; 4]> {
+    let bytes = std::fs::read(routes.join(format!("{profile}.points"))).unwrap();
+    bytes
+        .chunks_exact(16)
+        .map(|p| {
+            std::array::from_fn(|k| f32::from_le_bytes(p[4 * k..4 * k + 4].try_into().unwrap()))
+        })
+        .collect()
+}
+
+#[test]
+#[ignore = "needs ouster-sdk: source .ci/clients.sh && cargo test --release -- --ignored"]
+fn ouster_packets_decode_to_the_sdks_points() {
+    let Some((_dir, routes)) = routes() else {
+        return;
+    };
+    let logs = PROFILES
+        .map(|p| (p, routes.join(format!("ouster-{p}")), InputFormat::Rosbag2))
+        .into_iter()
+        .chain([("LEGACY", routes.join("ouster-legacy.bag"), InputFormat::Bag)]);
+    for (profile, log, format) in logs {
+        let text = std::fs::read_to_string(routes.join(format!("{profile}.json"))).unwrap();
+        let metadata = OusterMetadata::from_json(&text).unwrap();
+        let scans = decoded_scans(&log, format, &metadata);
+        let stamps: Vec<u64> = scans.iter().map(|(stamp, _)| *stamp).collect();
+        // Each scan stamped with its first column, on the log's clock.
+        let expected: Vec<u64> = (0..3).map(|k| LOG_START_NS + k * 100_000_000).collect();
+        assert_eq!(stamps, expected, "{}", log.display());
+        let truth = sdk_points(&routes, profile);
+        for (_, points) in &scans {
+            assert_eq!(points.len(), truth.len(), "{}: points", log.display());
+            let worst = (truth.iter().zip(points))
+                .map(|(t, p)| (0..3).map(|k| (t[k] - p[k]).abs()).fold(0.0, f32::max))
+                .fold(0.0, f32::max);
+            assert!(
+                worst < 1e-5,
+                "{}: a point {worst} m from the SDK's",
+                log.display()
+            );
+            let reflectivity =
+                |points: &[[f32; 4]]| points.iter().map(|p| p[3]).collect::<Vec<_>>();
+            assert_eq!(
+                reflectivity(points),
+                reflectivity(&truth),
+                "{}",
+                log.display()
+            );
+        }
+        println!(
+            "{}: 3 scans of {} points, each within 1e-5 m of the SDK's, the same reflectivity",
+            log.display(),
+            truth.len()
+        );
+    }
+}
+
+/// The grids and clouds `annotate --no-passthrough` writes of `input`, and what it
+/// printed.
+fn annotated(dir: &Path, input: &Path, name: &str, extra: &[&str]) -> Vec<(String, u64, Vec<u8>)> {
+    let out = dir.join(format!("{name}.annotated.mcap"));
+    let mut args = vec!["--no-passthrough"];
+    args.extend_from_slice(extra);
+    write_output("annotate", input, &out, &args);
+    let log = Log::open(&out, InputFormat::Mcap).unwrap();
+    let grids = ["/travmap/prediction", "/travmap/cloud"];
+    let messages = log.messages().map(Result::unwrap);
+    let on_grids = messages.filter(|m| grids.contains(&m.connection.topic.as_str()));
+    let grids: Vec<_> = on_grids
+        .map(|m| (m.connection.topic.clone(), m.log_time_ns, m.data.to_vec()))
+        .collect();
+    assert_eq!(
+        grids.len(),
+        6,
+        "{name}: 3 frames of a prediction and a cloud"
+    );
+    grids
+}
+
+#[test]
+#[ignore = "needs ouster-sdk: source .ci/clients.sh && cargo test --release -- --ignored"]
+fn an_ouster_log_is_a_drive_however_it_was_recorded() {
+    let Some((dir, routes)) = routes() else {
+        return;
+    };
+    let dir = dir.path();
+    let route = |name: &str| routes.join(name);
+    // LEGACY and RNG19 carry the same ranges and reflectivity: the same drive.
+    let rng19 = annotated(dir, &route("ouster-RNG19_RFL8_SIG16_NIR16"), "rng19", &[]);
+    let same = [
+        ("ouster-LEGACY", "legacy", vec![]),
+        ("ouster-legacy.bag", "ros1", vec![]),
+        ("ouster-late-metadata", "late", vec![]),
+    ];
+    for (input, name, extra) in same {
+        assert_eq!(
+            annotated(dir, &route(input), name, &extra),
+            rng19,
+            "{input}"
+        );
+    }
+    // Without its metadata: the JSON given instead, or an error saying so.
+    let json = route("RNG19_RFL8_SIG16_NIR16.json");
+    let given = ["--lidar-calibration", json.to_str().unwrap()];
+    assert_eq!(
+        annotated(dir, &route("ouster-no-metadata"), "given", &given),
+        rng19
+    );
+    let out = dir.join("none.mcap");
+    let error = clean_failure(common::travmap(&[
+        "annotate",
+        route("ouster-no-metadata").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]));
+    assert_contains(
+        &error,
+        &["/ouster/lidar_packets", "metadata", "--lidar-calibration"],
+    );
+    assert!(!out.exists());
+    // Another profile's metadata names both layouts.
+    let legacy = route("LEGACY.json");
+    let error = clean_failure(common::travmap(&[
+        "annotate",
+        route("ouster-RNG19_RFL8_SIG16_NIR16").to_str().unwrap(),
+        "--lidar-calibration",
+        legacy.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]));
+    assert_contains(
+        &error,
+        &[
+            "/ouster/lidar_packets",
+            "12544 bytes",
+            "LEGACY packets are 12608",
+        ],
+    );
+    // The coarser and the dual-return profiles: drives of their own.
+    for profile in ["RNG15_RFL8_NIR8", "RNG19_RFL8_SIG16_NIR16_DUAL"] {
+        let grids = annotated(dir, &route(&format!("ouster-{profile}")), profile, &[]);
+        assert_ne!(grids, rng19, "{profile}");
+    }
+}
