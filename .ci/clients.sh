@@ -1,7 +1,7 @@
 # The real clients the ignored tests run against what travmap writes (pinned), set
 # up and exported for the shell that sources this file:
 #   source .ci/clients.sh && cargo test --release -- --ignored
-# Python mcap + mcap-ros2-support, rosbags, the Foxglove SDK, rerun-sdk, pyarrow, DuckDB,
+# Python mcap + mcap-ros2-support, rosbags, the Foxglove SDK, Ouster's SDK, rerun-sdk, pyarrow, DuckDB,
 # Polars and jsonschema; Ray and pytest for the fleet script's tests (fleet/); Node @mcap/core +
 # @foxglove/rosmsg2-serialization (tests/clients/package-lock.json); Chromium for
 # rerun's web viewer (tests/viewer.rs), from Debian, as root or through sudo.
@@ -12,6 +12,11 @@ target/client-venv/bin/pip install --quiet --disable-pip-version-check \
     "ray==2.60.0" "pytest==9.2.0" "jsonschema==4.26.0" "plyfile==1.1.5" "laspy==2.7.0" "lazrs==0.8.2"
 export TRAVMAP_CLIENT_PYTHON="$PWD/target/client-venv/bin/python"
 export TRAVMAP_RERUN="$PWD/target/client-venv/bin/rerun"
+# Ouster's SDK writes the Ouster packets tests/ouster.rs decodes; it pins an older
+# rosbags than the client venv's, so it has a venv of its own.
+python3 -m venv target/ouster-venv
+target/ouster-venv/bin/pip install --quiet --disable-pip-version-check "ouster-sdk==1.0.1"
+export TRAVMAP_OUSTER_PYTHON="$PWD/target/ouster-venv/bin/python"
 npm ci --prefix tests/clients --no-audit --no-fund --silent
 if ! command -v chromium >/dev/null 2>&1; then
     apt_get="apt-get"

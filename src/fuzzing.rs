@@ -31,7 +31,7 @@ pub type Target = fn(&[u8]);
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 21] = [
+pub const TARGETS: [(&str, Target); 22] = [
     ("kitti_calib", kitti_calib),
     ("kitti_poses", kitti_poses),
     ("kitti_scan", kitti_scan),
@@ -52,6 +52,7 @@ pub const TARGETS: [(&str, Target); 21] = [
     ("velodyne_scan", velodyne_scan),
     ("pandar_scan", pandar_scan),
     ("nebula_packets", nebula_packets),
+    ("ouster_packets", ouster_packets),
     ("foxglove_message", foxglove_message),
 ];
 
@@ -389,5 +390,30 @@ pub fn nebula_packets(data: &[u8]) {
     if let Ok(scans) = assembler.push_message(NEBULA_PACKETS, data, MessageEncoding::Cdr, 0) {
         let points = scans.iter().flat_map(|scan| &scan.points);
         assert!(points.flat_map(|p| p.xyz_m).all(f32::is_finite));
+    }
+}
+
+/// Ouster packets: the sensor's metadata JSON (its length in the first two bytes,
+/// little-endian), then packets of the metadata's packet size; the metadata read
+/// and the packets cut into scans, every point finite.
+pub fn ouster_packets(data: &[u8]) {
+    use crate::io::ouster::{OusterAssembler, OusterMetadata};
+    let Some((length, rest)) = data.split_first_chunk::<2>() else {
+        return;
+    };
+    let Some((json, packets)) = rest.split_at_checked(usize::from(u16::from_le_bytes(*length)))
+    else {
+        return;
+    };
+    let Ok(metadata) = OusterMetadata::from_json(&String::from_utf8_lossy(json)) else {
+        return;
+    };
+    let mut assembler = OusterAssembler::new(&metadata);
+    let packet_bytes = metadata.model.packet_bytes();
+    for (k, packet) in packets.chunks(packet_bytes).enumerate() {
+        if let Ok(scans) = assembler.push(packet, k as u64 * 1_000_000) {
+            let points = scans.iter().flat_map(|scan| &scan.points);
+            assert!(points.flat_map(|p| p.xyz_m).all(f32::is_finite));
+        }
     }
 }

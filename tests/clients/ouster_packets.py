@@ -26,6 +26,8 @@ first column).
                          frame's packets
   ouster-no-metadata/    the RNG19 route without its metadata topic
   PROFILE.json           the metadata alone (for --lidar-calibration)
+  PROFILE.seed           the fuzz target ouster_packets' input (fuzz/seeds/ouster_packets/):
+                         the metadata's length (u16), the metadata, a frame's first two packets
   PROFILE.points         the SDK's points of one frame, float32 x, y, z (metres, sensor
                          frame) and reflectivity, column by column (in the order the
                          packets carry them), beam by beam, each pixel's first return
@@ -195,7 +197,10 @@ def main():
         info.format.udp_profile_lidar = getattr(core.UDPProfileLidar, profile)
         range_mm, reflectivity = scene(bin_path, info, core.XYZLut(info))
         packets, points = frames(info, range_mm, reflectivity, profile)
-        (out / f"{profile}.json").write_text(info.to_json_string())
+        metadata = info.to_json_string().encode()
+        (out / f"{profile}.json").write_bytes(metadata)
+        seed = len(metadata).to_bytes(2, "little") + metadata + packets[0][1] + packets[1][1]
+        (out / f"{profile}.seed").write_bytes(seed)
         points.tofile(out / f"{profile}.points")
         write("ros2", out / f"ouster-{profile}", info, packets)
         if profile == "LEGACY":

@@ -65,10 +65,15 @@ impl OusterMetadata {
                 "packet header type {header}: only the STANDARD header is read"
             ));
         }
-        if !(1..=256).contains(&pixels_per_column) {
-            return Err(format!("{pixels_per_column} pixels per column"));
+        // Ouster's sensors have 16 to 128 beams and 512 to 4,096 columns a turn.
+        if !(1..=128).contains(&pixels_per_column) {
+            return Err(format!(
+                "{pixels_per_column} pixels per column (at most 128)"
+            ));
         }
-        if columns_per_frame == 0 || !(1..=columns_per_frame).contains(&columns_per_packet) {
+        if !(1..=4096).contains(&columns_per_frame)
+            || !(1..=columns_per_frame).contains(&columns_per_packet)
+        {
             return Err(format!(
                 "{columns_per_packet} columns per packet of {columns_per_frame} per frame"
             ));
