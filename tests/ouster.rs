@@ -2,9 +2,10 @@
 //! RELLIS-3D's real OS1-64 scan as the packets of each UDP profile with the SDK's
 //! `frame_to_packets`, recorded as ouster_ros records them (rosbag2 and ROS 1), and
 //! the points the SDK's `XYZLut` makes of them; travmap must decode the same points
-//! and read the logs as drives. Needs `TRAVMAP_OUSTER_PYTHON` (a Python with
-//! ouster-sdk 1.0.1, which pins an older rosbags than the client venv's, so it has
-//! its own venv: `.ci/clients.sh`).
+//! and read the logs as drives. The fixture (`fixtures/ouster/`, one profile, written
+//! once) is checked in every run; the other routes need `TRAVMAP_OUSTER_PYTHON` (a
+//! Python with ouster-sdk 1.0.1, which pins an older rosbags than the client venv's,
+//! so it has its own venv: `.ci/clients.sh`).
 
 mod common;
 
@@ -14,7 +15,7 @@ use std::process::Command;
 use common::{assert_contains, clean_failure, run_client, write_output};
 use travmap::io::format::InputFormat;
 use travmap::io::log::Log;
-use travmap::io::ouster::OusterMetadata;
+use travmap::io::ouster::{OusterMetadata, string_message};
 use travmap::io::packets::{PacketAssembler, PacketCalibration, PacketModel};
 
 const PROFILES: [&str; 4] = [
@@ -72,8 +73,85 @@ fn decoded_scans(
     scans
 }
 
-fn sdk_points(routes: &Path, profile: &str) -> Vec<[f32; 4]> {
-    let bytes = std::fs::read(routes.join(format!("{profile}.points"))).unwrap();
+/// The metadata a log records on `/ouster/metadata`.
+fn recorded_metadata(log: &Path) -> OusterMetadata {
+    let log = Log::open(log, InputFormat::Rosbag2).unwrap();
+    let message = (log.messages().map(Result::unwrap))
+        .find(|m| m.connection.topic == "/ouster/metadata")
+        .unwrap();
+    let text = string_message(&message.data, message.connection.encoding().unwrap()).unwrap();
+    OusterMetadata::from_json(&text).unwrap()
+}
+
+/// The scans of `log` are three, stamped with their first columns on the log's
+/// clock, each the SDK's `points` within 1e-5 m, with the same reflectivity; the
+/// farthest coordinate from the SDK's.
+fn assert_sdks_points(
+    log: &Path,
+    format: InputFormat,
+    metadata: &OusterMetadata,
+    truth: &[[f32; 4]],
+) -> f32 {
+    let scans = decoded_scans(log, format, metadata);
+    let stamps: Vec<u64> = scans.iter().map(|(stamp, _)| *stamp).collect();
+    let expected: Vec<u64> = (0..3).map(|k| LOG_START_NS + k * 100_000_000).collect();
+    assert_eq!(stamps, expected, "{}", log.display());
+    let mut farthest = 0.0f32;
+    for (_, points) in &scans {
+        assert_eq!(points.len(), truth.len(), "{}: points", log.display());
+        let worst = (truth.iter().zip(points))
+            .map(|(t, p)| (0..3).map(|k| (t[k] - p[k]).abs()).fold(0.0, f32::max))
+            .fold(0.0, f32::max);
+        assert!(
+            worst < 1e-5,
+            "{}: a point {worst} m from the SDK's",
+            log.display()
+        );
+        let reflectivity = |points: &[[f32; 4]]| points.iter().map(|p| p[3]).collect::<Vec<_>>();
+        assert_eq!(
+            reflectivity(points),
+            reflectivity(truth),
+            "{}",
+            log.display()
+        );
+        farthest = farthest.max(worst);
+    }
+    println!(
+        "{}: 3 scans of {} points, the farthest coordinate {farthest:e} m from the SDK's, the same reflectivity",
+        log.display(),
+        truth.len()
+    );
+    farthest
+}
+
+#[test]
+fn the_fixture_decodes_to_the_sdks_points_and_is_a_drive() {
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ouster");
+    let bag = fixtures.join("os1-64-1024x10");
+    let metadata = recorded_metadata(&bag);
+    assert_eq!(metadata.model.profile.name(), "RNG19_RFL8_SIG16_NIR16");
+    let truth = points_file(&fixtures.join("os1-64-1024x10.points"));
+    assert_sdks_points(&bag, InputFormat::Rosbag2, &metadata, &truth);
+    // A drive: three frames, posed by /tf (the vehicle moves 0.5 m a frame), with no
+    // notice.
+    let output = common::travmap(&["run", bag.to_str().unwrap(), "--json"]);
+    assert!(
+        common::stderr(&output).is_empty(),
+        "{}",
+        common::stderr(&output)
+    );
+    let (frames, summary) = common::json_records(&common::success(output));
+    assert_eq!(frames.len(), 3, "{summary}");
+    // The grid follows the vehicle along x; the reflectivity is read on the byte scale.
+    let corner_x: Vec<f64> = (frames.iter())
+        .map(|f| f["min_corner_in_world"][0].as_f64().unwrap())
+        .collect();
+    assert!(corner_x.windows(2).all(|w| w[1] > w[0]), "{corner_x:?}");
+    assert!(frames.iter().all(|f| f["remission"] == "byte"));
+}
+
+fn points_file(path: &Path) -> Vec<[f32; 4]> {
+    let bytes = std::fs::read(path).unwrap();
     bytes
         .chunks_exact(16)
         .map(|p| {
@@ -95,36 +173,8 @@ fn ouster_packets_decode_to_the_sdks_points() {
     for (profile, log, format) in logs {
         let text = std::fs::read_to_string(routes.join(format!("{profile}.json"))).unwrap();
         let metadata = OusterMetadata::from_json(&text).unwrap();
-        let scans = decoded_scans(&log, format, &metadata);
-        let stamps: Vec<u64> = scans.iter().map(|(stamp, _)| *stamp).collect();
-        // Each scan stamped with its first column, on the log's clock.
-        let expected: Vec<u64> = (0..3).map(|k| LOG_START_NS + k * 100_000_000).collect();
-        assert_eq!(stamps, expected, "{}", log.display());
-        let truth = sdk_points(&routes, profile);
-        for (_, points) in &scans {
-            assert_eq!(points.len(), truth.len(), "{}: points", log.display());
-            let worst = (truth.iter().zip(points))
-                .map(|(t, p)| (0..3).map(|k| (t[k] - p[k]).abs()).fold(0.0, f32::max))
-                .fold(0.0, f32::max);
-            assert!(
-                worst < 1e-5,
-                "{}: a point {worst} m from the SDK's",
-                log.display()
-            );
-            let reflectivity =
-                |points: &[[f32; 4]]| points.iter().map(|p| p[3]).collect::<Vec<_>>();
-            assert_eq!(
-                reflectivity(points),
-                reflectivity(&truth),
-                "{}",
-                log.display()
-            );
-        }
-        println!(
-            "{}: 3 scans of {} points, each within 1e-5 m of the SDK's, the same reflectivity",
-            log.display(),
-            truth.len()
-        );
+        let truth = points_file(&routes.join(format!("{profile}.points")));
+        assert_sdks_points(&log, format, &metadata, &truth);
     }
 }
 

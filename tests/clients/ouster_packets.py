@@ -6,8 +6,8 @@ The scene is RELLIS-3D's real OS1-64 scan (../shared/data/rellis3d-000104: 2,048
 columns of 64 beams, column by column, as the sensor sent them, in the lidar frame):
 each return's range from its beam's origin, in an OS1-64 at 2048x10 with the SDK's
 default beam angles (a beam's default direction is within 0.32 degrees of the
-scan's return, median). RELLIS-3D's intensity (uint16 counts,
-stored / 65536) clipped to 0..255 stands in for reflectivity. Three frames of the
+scan's return, median). Reflectivity is the .bin's intensity (0..1, as travmap
+reads it; RELLIS-3D stored uint16 counts / 65536, so nearly all 0) times 255. Three frames of the
 same scan (frame ids 100-102), the sensor's clock since boot (5 s at the first
 column), each packet recorded when its last column was measured, 100 ms apart, on
 a vehicle moving 0.5 m along x per frame (/tf: map -> os_sensor at each scan's
@@ -28,12 +28,15 @@ first column).
   PROFILE.json           the metadata alone (for --lidar-calibration)
   PROFILE.seed           the fuzz target ouster_packets' input (fuzz/seeds/ouster_packets/):
                          the metadata's length (u16), the metadata, a frame's first two packets
+  fixture/               with --fixture, only fixtures/ouster/ (see fixtures/README.md): the
+                         RNG19 route at 1024x10 (RELLIS-3D's every other column) and its
+                         points, as above
   PROFILE.points         the SDK's points of one frame, float32 x, y, z (metres, sensor
                          frame) and reflectivity, column by column (in the order the
                          packets carry them), beam by beam, each pixel's first return
                          then a second one 0.1 m or more from it, returns of range 0 left out
 
-usage: python ouster_packets.py RELLIS_BIN OUT_DIR
+usage: python ouster_packets.py RELLIS_BIN OUT_DIR [--fixture]
 """
 import json
 import sys
@@ -54,8 +57,10 @@ PROFILES = ["LEGACY", "RNG19_RFL8_SIG16_NIR16", "RNG19_RFL8_SIG16_NIR16_DUAL", "
 
 
 def scene(bin_path, info, lut):
-    """RELLIS-3D's scan as staggered range (mm) and reflectivity images."""
+    """RELLIS-3D's scan as staggered range (mm) and reflectivity images (at 1024
+    columns a turn, every other column: the same encoder angles)."""
     points = np.fromfile(bin_path, dtype=np.float32).reshape(2048, 64, 4)
+    points = points[:: 2048 // info.format.columns_per_frame]
     xyz = np.ascontiguousarray(points[:, :, :3].transpose(1, 0, 2)).astype(np.float64)
     returned = np.abs(xyz).sum(axis=2) > 0
     # RELLIS-3D's clouds are in the lidar frame (measurement id 0 along +x); the
@@ -74,8 +79,9 @@ def scene(bin_path, info, lut):
     off_deg = np.degrees(np.arccos(np.clip(cos[returned], -1, 1)))
     assert np.median(off_deg) < 1.5, f"not the sensor's columns: median {np.median(off_deg):.2f} degrees off"
     range_mm = np.where(returned, np.round(range_m * 1000), 0).astype(np.uint32)
-    counts = points[:, :, 3].T * 65536
-    reflectivity = np.clip(np.round(counts), 0, 255).astype(np.uint8)
+    # The .bin's intensity on the 0..1 scale, as a byte: the remission travmap reads
+    # from these packets is what it reads from the .bin, to the byte.
+    reflectivity = np.clip(np.round(points[:, :, 3].T * 255), 0, 255).astype(np.uint8)
     return range_mm, reflectivity
 
 
@@ -189,9 +195,21 @@ def write(writer_kind, path, info, packets, **kwargs):
             writer.write(connections[topic], t, serialize(message(kind, payload), types[kind]))
 
 
+def fixture(bin_path, out):
+    info = core.SensorInfo.from_default(core.LidarMode._1024x10)
+    info.format.udp_profile_lidar = core.UDPProfileLidar.RNG19_RFL8_SIG16_NIR16
+    range_mm, reflectivity = scene(bin_path, info, core.XYZLut(info))
+    packets, points = frames(info, range_mm, reflectivity, "RNG19_RFL8_SIG16_NIR16")
+    points.tofile(out / "os1-64-1024x10.points")
+    write("ros2", out / "os1-64-1024x10", info, packets)
+    print(len(packets), "packets of", len(packets[0][1]), "bytes;", len(points), "points in a frame")
+
+
 def main():
     bin_path, out = Path(sys.argv[1]), Path(sys.argv[2])
     out.mkdir(parents=True, exist_ok=True)
+    if sys.argv[3:] == ["--fixture"]:
+        return fixture(bin_path, out)
     for profile in PROFILES:
         info = core.SensorInfo.from_default(core.LidarMode._2048x10)
         info.format.udp_profile_lidar = getattr(core.UDPProfileLidar, profile)
