@@ -9,15 +9,28 @@ use std::time::Instant;
 
 use travmap::io::format::InputFormat;
 use travmap::io::log::Log;
-use travmap::io::packets::{PacketAssembler, PacketCalibration, PacketModel, packet_message};
+use travmap::io::log_message::LogMessage;
+use travmap::io::ouster::{OusterMetadata, string_message};
+use travmap::io::packets::{
+    PACKET_MESSAGES, PacketAssembler, PacketCalibration, PacketModel, packet_message,
+};
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
 }
 
+/// The Ouster metadata a log records, if it does.
+fn ouster_metadata(messages: &[LogMessage]) -> Option<OusterMetadata> {
+    let message = messages
+        .iter()
+        .find(|m| m.connection.topic.ends_with("/metadata"))?;
+    let text = string_message(&message.data, message.connection.encoding()?).ok()?;
+    OusterMetadata::from_json(&text).ok()
+}
+
 fn main() {
-    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/nebula");
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
     println!(
         "{:<12} {:>8} {:>10} {:>12} {:>14} {:>10}",
         "model", "packets", "points", "us/packet", "recorded s", "x realtime"
@@ -32,9 +45,19 @@ fn main() {
         "qt64/1673401195788312575",
         "xt32m/1660893203042895158",
         "qt128/1730273789074637152",
-    ] {
+    ]
+    .map(|bag| format!("nebula/{bag}"))
+    .into_iter()
+    .chain(["ouster/os1-64-1024x10".to_string()])
+    {
         let log = Log::open(&fixtures.join(bag), InputFormat::Rosbag2).unwrap();
-        let messages: Vec<_> = log.messages().map(Result::unwrap).collect();
+        let all: Vec<_> = log.messages().map(Result::unwrap).collect();
+        let ouster = ouster_metadata(&all);
+        let is_lidar = |m: &&LogMessage| {
+            PACKET_MESSAGES.contains(&m.connection.type_name().as_ref())
+                && !m.connection.topic.contains("imu")
+        };
+        let messages: Vec<_> = all.iter().filter(is_lidar).collect();
         let message_type = messages[0].connection.type_name().into_owned();
         let message_type = message_type.as_str();
         let stamps: Vec<u64> = messages
@@ -42,18 +65,28 @@ fn main() {
             .flat_map(|m| {
                 let encoding = m.connection.encoding().unwrap();
                 let scan = packet_message(message_type, &m.data, encoding).unwrap();
+                // An Ouster packet's time is the log's.
                 scan.packets
                     .into_iter()
-                    .map(|(stamp, _)| stamp)
+                    .map(|(stamp, _)| if stamp == 0 { m.log_time_ns } else { stamp })
                     .collect::<Vec<_>>()
             })
             .collect();
         let recorded_s = (stamps.last().unwrap() - stamps.first().unwrap()) as f64 * 1e-9;
-        // The model as the drive finds it: from the first packet.
-        let encoding = messages[0].connection.encoding().unwrap();
-        let first = packet_message(message_type, &messages[0].data, encoding).unwrap();
-        let model = PacketModel::of_packet(message_type, first.packets[0].1).unwrap();
-        let calibration = PacketCalibration::for_model(model, None).unwrap();
+        // The model as the drive finds it: from the first packet, or an Ouster's
+        // metadata.
+        let (model, calibration) = match ouster {
+            Some(metadata) => (
+                PacketModel::Ouster(metadata.model),
+                PacketCalibration::Ouster(Box::new(metadata)),
+            ),
+            None => {
+                let encoding = messages[0].connection.encoding().unwrap();
+                let first = packet_message(message_type, &messages[0].data, encoding).unwrap();
+                let model = PacketModel::of_packet(message_type, first.packets[0].1).unwrap();
+                (model, PacketCalibration::for_model(model, None).unwrap())
+            }
+        };
         let mut points = 0;
         let seconds: Vec<f64> = (0..50)
             .map(|_| {
