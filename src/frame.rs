@@ -60,8 +60,8 @@ pub enum RemissionScale {
     Byte,
     /// No intensity field.
     Missing,
-    /// An intensity field on a scale travmap does not know (e.g. Ouster's uint16
-    /// reflectivity): not used.
+    /// An intensity field on a scale travmap does not know (e.g. a uint16 photon
+    /// count): not used.
     Unknown,
 }
 

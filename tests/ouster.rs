@@ -178,24 +178,40 @@ fn ouster_packets_decode_to_the_sdks_points() {
     }
 }
 
-/// The grids and clouds `annotate --no-passthrough` writes of `input`, and what it
-/// printed.
+/// The grids and clouds `annotate --no-passthrough` writes of `input`.
 fn annotated(dir: &Path, input: &Path, name: &str, extra: &[&str]) -> Vec<(String, u64, Vec<u8>)> {
+    annotated_on(
+        dir,
+        input,
+        name,
+        extra,
+        &["/travmap/prediction", "/travmap/cloud"],
+    )
+}
+
+/// The messages on `topics` that `annotate --no-passthrough` writes of `input`:
+/// one a frame each.
+fn annotated_on(
+    dir: &Path,
+    input: &Path,
+    name: &str,
+    extra: &[&str],
+    topics: &[&str],
+) -> Vec<(String, u64, Vec<u8>)> {
     let out = dir.join(format!("{name}.annotated.mcap"));
     let mut args = vec!["--no-passthrough"];
     args.extend_from_slice(extra);
     write_output("annotate", input, &out, &args);
     let log = Log::open(&out, InputFormat::Mcap).unwrap();
-    let grids = ["/travmap/prediction", "/travmap/cloud"];
     let messages = log.messages().map(Result::unwrap);
-    let on_grids = messages.filter(|m| grids.contains(&m.connection.topic.as_str()));
+    let on_grids = messages.filter(|m| topics.contains(&m.connection.topic.as_str()));
     let grids: Vec<_> = on_grids
         .map(|m| (m.connection.topic.clone(), m.log_time_ns, m.data.to_vec()))
         .collect();
     assert_eq!(
         grids.len(),
-        6,
-        "{name}: 3 frames of a prediction and a cloud"
+        3 * topics.len(),
+        "{name}: 3 frames of {topics:?}"
     );
     grids
 }
@@ -259,6 +275,15 @@ fn an_ouster_log_is_a_drive_however_it_was_recorded() {
             "LEGACY packets are 12608",
         ],
     );
+    // ouster_ros's own clouds of the same frames (the SDK's points, the reflectivity
+    // beside a photon count as `intensity`): the same predictions.
+    let prediction = ["/travmap/prediction"];
+    let of_clouds = annotated_on(dir, &route("ouster-points"), "points", &[], &prediction);
+    let rng19_predictions: Vec<_> = (rng19.iter())
+        .filter(|(topic, _, _)| topic == "/travmap/prediction")
+        .cloned()
+        .collect();
+    assert_eq!(of_clouds, rng19_predictions);
     // The coarser and the dual-return profiles: drives of their own.
     for profile in ["RNG15_RFL8_NIR8", "RNG19_RFL8_SIG16_NIR16_DUAL"] {
         let grids = annotated(dir, &route(&format!("ouster-{profile}")), profile, &[]);

@@ -100,8 +100,11 @@ pub fn raw_cloud_points(cloud: &PointCloud2) -> Result<(CloudPoints, Option<u8>)
         })?;
         xyz.push(checked(name, f)?);
     }
-    let intensity = field(&["intensity", "remission", "i"])
-        .map(|f| checked("intensity", f))
+    // Ouster's driver writes the calibrated 8-bit reflectivity (the packets' own, in
+    // a uint16) beside an `intensity` that is the return's photon count.
+    let intensity = field(&["reflectivity"])
+        .or_else(|| field(&["intensity", "remission", "i"]))
+        .map(|f| checked(&f.name, f))
         .transpose()?;
     let label = field(&["label"]).map(|f| checked("label", f)).transpose()?;
     let (width, height) = (cloud.width as usize, cloud.height as usize);
@@ -199,9 +202,10 @@ pub fn raw_cloud_points(cloud: &PointCloud2) -> Result<(CloudPoints, Option<u8>)
     ))
 }
 
-/// Brings the intensity of `points` to 0..1 by its field's type and range: uint8
-/// and floats up to 255 are Velodyne's 0..255; floats up to 1 are KITTI's own; any
-/// other scale is not guessed at (zeroed, and said so by the returned scale).
+/// Brings the intensity of `points` to 0..1 by its field's type and range: uint8,
+/// uint16 and floats up to 255 are Velodyne's (and Ouster's reflectivity's) 0..255;
+/// floats up to 1 are KITTI's own; any other scale is not guessed at (zeroed, and
+/// said so by the returned scale).
 fn normalise_remission(points: &mut [[f32; 4]], datatype_id: Option<u8>) -> RemissionScale {
     let largest = points.iter().map(|p| p[3]).fold(0.0f32, f32::max);
     let (scale, factor) = remission_scale(datatype_id, largest);
@@ -221,6 +225,7 @@ pub fn remission_scale(datatype_id: Option<u8>, largest: f32) -> (RemissionScale
     };
     let scale = match datatype_id {
         datatype::UINT8 => RemissionScale::Byte,
+        datatype::UINT16 if largest <= 255.0 => RemissionScale::Byte,
         datatype::FLOAT32 | datatype::FLOAT64 if largest <= 1.0 => RemissionScale::Unit,
         datatype::FLOAT32 | datatype::FLOAT64 if largest <= 255.0 => RemissionScale::Byte,
         _ => RemissionScale::Unknown,
@@ -310,6 +315,33 @@ mod tests {
                 .iter()
                 .zip(&fast.points)
                 .all(|(b, f)| b[..3] == f[..3] && b[3] == 0.0)
+        );
+    }
+
+    #[test]
+    fn an_ouster_clouds_reflectivity_is_its_remission() {
+        // ouster_ros's point: x, y, z, intensity (the photon count) float32, then
+        // reflectivity uint16 (the calibrated 0..255).
+        let mut ouster = cloud(2, 1, &[&[[1.0, 2.0, 3.0, 3000.0], [4.0, 5.0, 6.0, 700.0]]]);
+        ouster
+            .fields
+            .push(PointField::scalar("reflectivity", 16, datatype::UINT16));
+        let reflectivity = [51u16, 255];
+        for (point, value) in ouster.data.chunks_mut(20).zip(reflectivity) {
+            point[16..18].copy_from_slice(&value.to_le_bytes());
+        }
+        let read = cloud_points(&ouster).unwrap();
+        assert_eq!(read.remission, RemissionScale::Byte);
+        let byte = 1.0f32 / 255.0;
+        assert_eq!(
+            read.points,
+            [[1.0, 2.0, 3.0, 51.0 * byte], [4.0, 5.0, 6.0, 255.0 * byte]]
+        );
+        // A uint16 field past 255 is on a scale travmap does not know.
+        (ouster.data[36..38]).copy_from_slice(&256u16.to_le_bytes());
+        assert_eq!(
+            cloud_points(&ouster).unwrap().remission,
+            RemissionScale::Unknown
         );
     }
 

@@ -25,6 +25,12 @@ first column).
   ouster-late-metadata/  the RNG19 route with its metadata recorded after the first
                          frame's packets
   ouster-no-metadata/    the RNG19 route without its metadata topic
+  ouster-points/         the RNG19 route's frames as ouster_ros publishes them: organised
+                         PointCloud2s on /ouster/points (64 x 2048, destaggered, a beam
+                         without a return at the origin) of its point layout (x, y, z,
+                         intensity float32 = a photon count, t uint32, reflectivity,
+                         ring, ambient uint16, range uint32; 48-byte points), the SDK's
+                         points, stamped with each frame's first column, and /tf
   PROFILE.json           the metadata alone (for --lidar-calibration)
   PROFILE.seed           the fuzz target ouster_packets' input (fuzz/seeds/ouster_packets/):
                          the metadata's length (u16), the metadata, a frame's first two packets
@@ -146,6 +152,73 @@ def messages(info, packets, with_metadata=True, metadata_after=0):
     return sorted(out, key=lambda m: (m[1], m[0]))
 
 
+def write_points(path, info, range_mm, reflectivity):
+    """The frames as ouster_ros's organised clouds of the SDK's points."""
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    h, w = info.format.pixels_per_column, info.format.columns_per_frame
+    xyz = core.XYZLut(info)(range_mm)
+    layout = np.dtype(
+        {
+            "names": ["x", "y", "z", "intensity", "t", "reflectivity", "ring", "ambient", "range"],
+            "formats": ["<f4", "<f4", "<f4", "<f4", "<u4", "<u2", "<u2", "<u2", "<u4"],
+            "offsets": [0, 4, 8, 16, 20, 24, 26, 28, 32],
+            "itemsize": 48,
+        }
+    )
+    points = np.zeros((h, w), dtype=layout)
+    for k, name in enumerate("xyz"):
+        points[name] = xyz[:, :, k]
+    points["intensity"] = 1000.0 + 10.0 * reflectivity  # photons: never the 0..255 scale
+    points["t"] = np.arange(w)[None, :] * PERIOD_NS // w
+    points["reflectivity"] = reflectivity
+    points["ring"] = np.arange(h)[:, None]
+    points["range"] = range_mm
+    points = np.ascontiguousarray(core.destagger(info, points.view(np.uint8).reshape(h, w, 48)))
+    datatypes = {"<f4": 7, "<u4": 6, "<u2": 4}
+    PointField = store.types["sensor_msgs/msg/PointField"]
+    fields = [
+        PointField(name=n, offset=layout.fields[n][1], datatype=datatypes[layout.fields[n][0].str], count=1)
+        for n in layout.names
+    ]
+    PointCloud2 = store.types["sensor_msgs/msg/PointCloud2"]
+    Header = store.types["std_msgs/msg/Header"]
+    Time = store.types["builtin_interfaces/msg/Time"]
+    with Ros2Writer(path) as writer:
+        clouds = writer.add_connection("/ouster/points", "sensor_msgs/msg/PointCloud2", typestore=store)
+        tf = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=store)
+        for k in range(FRAMES):
+            ns = LOG_START_NS + k * PERIOD_NS
+            writer.write(tf, ns, store.serialize_cdr(transform(store, k), "tf2_msgs/msg/TFMessage"))
+            stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+            cloud = PointCloud2(
+                header=Header(stamp=stamp, frame_id="os_sensor"),
+                height=h,
+                width=w,
+                fields=fields,
+                is_bigendian=False,
+                point_step=48,
+                row_step=48 * w,
+                data=points.reshape(-1),
+                is_dense=False,
+            )
+            writer.write(clouds, ns + PERIOD_NS, store.serialize_cdr(cloud, "sensor_msgs/msg/PointCloud2"))
+
+
+def transform(store, k):
+    """/tf at frame k: the vehicle 0.5 m further along x."""
+    ns = LOG_START_NS + k * PERIOD_NS
+    types = store.types
+    stamp = types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    header = types["std_msgs/msg/Header"]
+    header = header(stamp=stamp, frame_id="map") if "seq" not in header.__dataclass_fields__ else header(seq=0, stamp=stamp, frame_id="map")
+    t = types["geometry_msgs/msg/Transform"](
+        translation=types["geometry_msgs/msg/Vector3"](x=0.5 * k, y=0.0, z=0.0),
+        rotation=types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+    )
+    stamped = types["geometry_msgs/msg/TransformStamped"](header=header, child_frame_id="os_sensor", transform=t)
+    return types["tf2_msgs/msg/TFMessage"](transforms=[stamped])
+
+
 def write(writer_kind, path, info, packets, **kwargs):
     if writer_kind == "ros2":
         store = get_typestore(Stores.ROS2_HUMBLE)
@@ -158,32 +231,14 @@ def write(writer_kind, path, info, packets, **kwargs):
         store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
     PacketMsg = store.types[packet_type]
     String = store.types["std_msgs/msg/String"]
-    TFMessage = store.types["tf2_msgs/msg/TFMessage"]
-    TransformStamped = store.types["geometry_msgs/msg/TransformStamped"]
-    Transform = store.types["geometry_msgs/msg/Transform"]
-    Vector3 = store.types["geometry_msgs/msg/Vector3"]
-    Quaternion = store.types["geometry_msgs/msg/Quaternion"]
-    Header = store.types["std_msgs/msg/Header"]
-    Time = store.types["builtin_interfaces/msg/Time"]
     types = {"packet": packet_type, "metadata": "std_msgs/msg/String", "tf": "tf2_msgs/msg/TFMessage"}
-
-    def header(ns, frame):
-        stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-        if writer_kind == "ros2":
-            return Header(stamp=stamp, frame_id=frame)
-        return Header(seq=0, stamp=stamp, frame_id=frame)
 
     def message(kind, payload):
         if kind == "packet":
             return PacketMsg(buf=np.frombuffer(payload, dtype=np.uint8))
         if kind == "metadata":
             return String(data=payload)
-        ns = LOG_START_NS + payload * PERIOD_NS
-        t = Transform(
-            translation=Vector3(x=0.5 * payload, y=0.0, z=0.0),
-            rotation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
-        )
-        return TFMessage(transforms=[TransformStamped(header=header(ns, "map"), child_frame_id="os_sensor", transform=t)])
+        return transform(store, payload)
 
     serialize = store.serialize_cdr if writer_kind == "ros2" else store.serialize_ros1
     Writer = Ros2Writer if writer_kind == "ros2" else Ros1Writer
@@ -226,6 +281,7 @@ def main():
         if profile == "RNG19_RFL8_SIG16_NIR16":
             write("ros2", out / "ouster-late-metadata", info, packets, metadata_after=PERIOD_NS + 1)
             write("ros2", out / "ouster-no-metadata", info, packets, with_metadata=False)
+            write_points(out / "ouster-points", info, range_mm, reflectivity)
         print(profile, len(packets), "packets of", len(packets[0][1]), "bytes;", len(points), "points in a frame")
 
 
