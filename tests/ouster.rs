@@ -284,6 +284,19 @@ fn an_ouster_log_is_a_drive_however_it_was_recorded() {
         .cloned()
         .collect();
     assert_eq!(of_clouds, rng19_predictions);
+    // Two sensors, in namespaces and frames of their own, merged: the packets'
+    // frames are found in the tree (front/os_sensor, rear/os_sensor) and give the
+    // predictions of the same sensors' clouds.
+    let all = ["--cloud-topic", "all"];
+    let two = annotated_on(dir, &route("ouster-two"), "two", &all, &prediction);
+    let two_clouds = annotated_on(
+        dir,
+        &route("ouster-two-points"),
+        "two-points",
+        &all,
+        &prediction,
+    );
+    assert_eq!(two, two_clouds);
     // The coarser and the dual-return profiles: drives of their own.
     for profile in ["RNG15_RFL8_NIR8", "RNG19_RFL8_SIG16_NIR16_DUAL"] {
         let grids = annotated(dir, &route(&format!("ouster-{profile}")), profile, &[]);

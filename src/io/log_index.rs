@@ -444,6 +444,8 @@ impl LogIndex {
             }
         }
         contents.transforms.sort();
+        (contents.packets)
+            .name_ouster_frames(contents.transforms.children(), &mut contents.cloud_stamps);
         // Without the clouds the damage took, the damage is the error to report.
         let cloud_topic = contents.cloud_topic(path, options).map_err(|error| {
             // Ouster packets that could not be read are why no cloud topic is.

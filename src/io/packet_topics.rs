@@ -272,6 +272,36 @@ impl PacketTopics {
         ))
     }
 
+    /// Names the frame of each Ouster topic's points in `cloud_stamps`: ouster_ros's
+    /// `os_sensor`, unless the log names its sensors' frames apart (several
+    /// sensors): then the one frame of `frames` holding both `os_sensor` and a part
+    /// of the topic's namespace (`/front/lidar_packets` -> `front/os_sensor`), or the
+    /// only frame holding `os_sensor`.
+    pub(super) fn name_ouster_frames<'a>(
+        &self,
+        frames: impl Iterator<Item = &'a str> + Clone,
+        cloud_stamps: &mut HashMap<String, (String, Vec<u64>)>,
+    ) {
+        let sensors = frames.filter(|f| f.contains(OUSTER_FRAME));
+        for topic in self.ouster_calibrations.keys() {
+            let Some((frame, _)) = cloud_stamps.get_mut(topic) else {
+                continue;
+            };
+            let namespace: Vec<&str> = topic.split('/').filter(|p| !p.is_empty()).collect();
+            let namespace = &namespace[..namespace.len().saturating_sub(1)];
+            let of_namespace: Vec<&str> = (sensors.clone())
+                .filter(|f| namespace.iter().any(|part| f.contains(part)))
+                .collect();
+            let all: Vec<&str> = sensors.clone().collect();
+            *frame = match (of_namespace.as_slice(), all.as_slice()) {
+                ([one], _) => one.to_string(),
+                _ if all.contains(&OUSTER_FRAME) => OUSTER_FRAME.to_string(),
+                (_, [one]) => one.to_string(),
+                _ => OUSTER_FRAME.to_string(),
+            };
+        }
+    }
+
     pub(super) fn model(&self, topic: &str) -> Option<PacketModel> {
         self.topics.get(topic).map(|(model, _)| *model)
     }

@@ -52,6 +52,11 @@ impl TransformTree {
     }
 
     /// Orders every edge's samples by stamp.
+    /// Every frame that has a parent.
+    pub fn children(&self) -> impl Iterator<Item = &str> + Clone {
+        self.edges.keys().map(String::as_str)
+    }
+
     pub fn sort(&mut self) {
         for edge in self.edges.values_mut() {
             edge.samples.sort_by_key(|s| s.0);

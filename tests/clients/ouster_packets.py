@@ -31,6 +31,12 @@ first column).
                          intensity float32 = a photon count, t uint32, reflectivity,
                          ring, ambient uint16, range uint32; 48-byte points), the SDK's
                          points, stamped with each frame's first column, and /tf
+  ouster-two/            two sensors' packets, the RNG19 route's, in namespaces /front and
+                         /rear (each with its metadata), their frames front/os_sensor
+                         and rear/os_sensor mounted on /tf_static on a base_link (1 m
+                         forward; 1 m back, turned half a turn) that /tf moves
+  ouster-two-points/     the same two sensors as ouster_ros clouds (/front/points,
+                         /rear/points)
   PROFILE.json           the metadata alone (for --lidar-calibration)
   PROFILE.seed           the fuzz target ouster_packets' input (fuzz/seeds/ouster_packets/):
                          the metadata's length (u16), the metadata, a frame's first two packets
@@ -140,19 +146,29 @@ def oracle(info, frame, fmt):
     return np.asarray(rows, dtype=np.float32)
 
 
-def messages(info, packets, with_metadata=True, metadata_after=0):
+ONE_SENSOR = [("/ouster", "os_sensor", None)]
+# Two sensors on a vehicle's base_link: one 1 m forward, one 1 m back turned half a turn.
+TWO_SENSORS = [("/front", "front/os_sensor", (1.0, 0.0)), ("/rear", "rear/os_sensor", (-1.0, np.pi))]
+
+
+def messages(info, packets, with_metadata=True, metadata_after=0, sensors=ONE_SENSOR):
     """(topic, log time, kind, payload) in time order."""
-    out = [("/ouster/lidar_packets", t, "packet", p) for t, p in packets]
-    end = packets[-1][0]
-    out += [("/ouster/imu_packets", t, "packet", bytes(48)) for t in range(LOG_START_NS, end, 10_000_000)]
+    out = []
+    for namespace, frame, mount in sensors:
+        out += [(f"{namespace}/lidar_packets", t, "packet", p) for t, p in packets]
+        end = packets[-1][0]
+        out += [(f"{namespace}/imu_packets", t, "packet", bytes(48)) for t in range(LOG_START_NS, end, 10_000_000)]
+        if with_metadata:
+            out.append((f"{namespace}/metadata", LOG_START_NS - 1 + metadata_after, "metadata", info.to_json_string()))
+        if mount is not None:
+            out.append(("/tf_static", LOG_START_NS - 1, "mount", (frame, mount)))
+    moving = "os_sensor" if sensors == ONE_SENSOR else "base_link"
     for k in range(FRAMES):
-        out.append(("/tf", LOG_START_NS + k * PERIOD_NS, "tf", k))
-    if with_metadata:
-        out.append(("/ouster/metadata", LOG_START_NS - 1 + metadata_after, "metadata", info.to_json_string()))
+        out.append(("/tf", LOG_START_NS + k * PERIOD_NS, "tf", (moving, k)))
     return sorted(out, key=lambda m: (m[1], m[0]))
 
 
-def write_points(path, info, range_mm, reflectivity):
+def write_points(path, info, range_mm, reflectivity, sensors=ONE_SENSOR):
     """The frames as ouster_ros's organised clouds of the SDK's points."""
     store = get_typestore(Stores.ROS2_HUMBLE)
     h, w = info.format.pixels_per_column, info.format.columns_per_frame
@@ -184,38 +200,48 @@ def write_points(path, info, range_mm, reflectivity):
     Header = store.types["std_msgs/msg/Header"]
     Time = store.types["builtin_interfaces/msg/Time"]
     with Ros2Writer(path) as writer:
-        clouds = writer.add_connection("/ouster/points", "sensor_msgs/msg/PointCloud2", typestore=store)
         tf = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=store)
+        if sensors != ONE_SENSOR:
+            tf_static = writer.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=store)
+            for _, frame, (x, yaw) in sensors:
+                mount = transform(store, 0, frame, "base_link", x, yaw)
+                writer.write(tf_static, LOG_START_NS - 1, store.serialize_cdr(mount, "tf2_msgs/msg/TFMessage"))
+        clouds = {
+            frame: writer.add_connection(f"{namespace}/points", "sensor_msgs/msg/PointCloud2", typestore=store)
+            for namespace, frame, _ in sensors
+        }
+        moving = "os_sensor" if sensors == ONE_SENSOR else "base_link"
         for k in range(FRAMES):
             ns = LOG_START_NS + k * PERIOD_NS
-            writer.write(tf, ns, store.serialize_cdr(transform(store, k), "tf2_msgs/msg/TFMessage"))
+            writer.write(tf, ns, store.serialize_cdr(transform(store, k, moving), "tf2_msgs/msg/TFMessage"))
             stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-            cloud = PointCloud2(
-                header=Header(stamp=stamp, frame_id="os_sensor"),
-                height=h,
-                width=w,
-                fields=fields,
-                is_bigendian=False,
-                point_step=48,
-                row_step=48 * w,
-                data=points.reshape(-1),
-                is_dense=False,
-            )
-            writer.write(clouds, ns + PERIOD_NS, store.serialize_cdr(cloud, "sensor_msgs/msg/PointCloud2"))
+            for frame, connection in clouds.items():
+                cloud = PointCloud2(
+                    header=Header(stamp=stamp, frame_id=frame),
+                    height=h,
+                    width=w,
+                    fields=fields,
+                    is_bigendian=False,
+                    point_step=48,
+                    row_step=48 * w,
+                    data=points.reshape(-1),
+                    is_dense=False,
+                )
+                writer.write(connection, ns + PERIOD_NS, store.serialize_cdr(cloud, "sensor_msgs/msg/PointCloud2"))
 
 
-def transform(store, k):
-    """/tf at frame k: the vehicle 0.5 m further along x."""
+def transform(store, k, child="os_sensor", parent="map", x=None, yaw=0.0):
+    """A transform at frame k's time: by default the vehicle 0.5 m further along x."""
     ns = LOG_START_NS + k * PERIOD_NS
     types = store.types
     stamp = types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
     header = types["std_msgs/msg/Header"]
-    header = header(stamp=stamp, frame_id="map") if "seq" not in header.__dataclass_fields__ else header(seq=0, stamp=stamp, frame_id="map")
+    header = header(stamp=stamp, frame_id=parent) if "seq" not in header.__dataclass_fields__ else header(seq=0, stamp=stamp, frame_id=parent)
     t = types["geometry_msgs/msg/Transform"](
-        translation=types["geometry_msgs/msg/Vector3"](x=0.5 * k, y=0.0, z=0.0),
-        rotation=types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        translation=types["geometry_msgs/msg/Vector3"](x=0.5 * k if x is None else x, y=0.0, z=0.0),
+        rotation=types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=np.sin(yaw / 2), w=np.cos(yaw / 2)),
     )
-    stamped = types["geometry_msgs/msg/TransformStamped"](header=header, child_frame_id="os_sensor", transform=t)
+    stamped = types["geometry_msgs/msg/TransformStamped"](header=header, child_frame_id=child, transform=t)
     return types["tf2_msgs/msg/TFMessage"](transforms=[stamped])
 
 
@@ -231,14 +257,19 @@ def write(writer_kind, path, info, packets, **kwargs):
         store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
     PacketMsg = store.types[packet_type]
     String = store.types["std_msgs/msg/String"]
-    types = {"packet": packet_type, "metadata": "std_msgs/msg/String", "tf": "tf2_msgs/msg/TFMessage"}
+    tf = "tf2_msgs/msg/TFMessage"
+    types = {"packet": packet_type, "metadata": "std_msgs/msg/String", "tf": tf, "mount": tf}
 
     def message(kind, payload):
         if kind == "packet":
             return PacketMsg(buf=np.frombuffer(payload, dtype=np.uint8))
         if kind == "metadata":
             return String(data=payload)
-        return transform(store, payload)
+        if kind == "mount":
+            frame, (x, yaw) = payload
+            return transform(store, 0, frame, "base_link", x, yaw)
+        child, k = payload
+        return transform(store, k, child)
 
     serialize = store.serialize_cdr if writer_kind == "ros2" else store.serialize_ros1
     Writer = Ros2Writer if writer_kind == "ros2" else Ros1Writer
@@ -282,6 +313,8 @@ def main():
             write("ros2", out / "ouster-late-metadata", info, packets, metadata_after=PERIOD_NS + 1)
             write("ros2", out / "ouster-no-metadata", info, packets, with_metadata=False)
             write_points(out / "ouster-points", info, range_mm, reflectivity)
+            write("ros2", out / "ouster-two", info, packets, sensors=TWO_SENSORS)
+            write_points(out / "ouster-two-points", info, range_mm, reflectivity, sensors=TWO_SENSORS)
         print(profile, len(packets), "packets of", len(packets[0][1]), "bytes;", len(points), "points in a frame")
 
 
