@@ -16,6 +16,8 @@ pub struct OusterAssembler {
     /// frame (metres).
     directions: Vec<[f32; 3]>,
     origins: Vec<[f32; 3]>,
+    /// Per beam: its ring, 0 the lowest (Ouster numbers its beams from the top).
+    rings: Vec<u16>,
     /// The frame id being gathered, and the last one handed on.
     frame_id: Option<u16>,
     handed_on: Option<u16>,
@@ -30,11 +32,16 @@ pub struct OusterAssembler {
 impl OusterAssembler {
     pub fn new(metadata: &OusterMetadata) -> Self {
         let (directions, origins) = metadata.beams();
+        let altitudes = &metadata.beam_altitude_deg;
+        let rings = (altitudes.iter())
+            .map(|a| altitudes.iter().filter(|b| b < &a).count() as u16)
+            .collect();
         Self {
             model: metadata.model,
             last_column: metadata.column_window.1,
             directions,
             origins,
+            rings,
             frame_id: None,
             handed_on: None,
             points: Vec::new(),
@@ -122,7 +129,7 @@ impl OusterAssembler {
                     self.points.push(VelodynePoint {
                         xyz_m: std::array::from_fn(|k| origin[k] + range_m * direction[k]),
                         intensity: reflectivity,
-                        ring: beam as u16,
+                        ring: self.rings[beam],
                         azimuth_centideg: azimuth_centideg(
                             column.measurement_id,
                             self.model.columns_per_frame,
@@ -229,7 +236,8 @@ mod tests {
         assert_eq!(scan.points.len(), 45);
         let (directions, origins) = metadata.beams();
         for point in &scan.points {
-            let (id, beam) = (point.azimuth_centideg, usize::from(point.ring));
+            // Beams are numbered from the top, rings from the bottom.
+            let (id, beam) = (point.azimuth_centideg, 3 - usize::from(point.ring));
             let id = ((u32::from(id) + 18_000) % 36_000 * 16 / 36_000) as usize;
             let k = id * 4 + beam;
             let expected: [f32; 3] =
