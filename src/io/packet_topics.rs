@@ -274,15 +274,17 @@ impl PacketTopics {
 
     /// Names the frame of each Ouster topic's points in `cloud_stamps`: ouster_ros's
     /// `os_sensor`, unless the log names its sensors' frames apart (several
-    /// sensors): then the one frame of `frames` holding both `os_sensor` and a part
-    /// of the topic's namespace (`/front/lidar_packets` -> `front/os_sensor`), or the
-    /// only frame holding `os_sensor`.
+    /// sensors, or the older driver's `os1_sensor`): then the one frame of `frames`
+    /// holding both `os_sensor` and a part of the topic's namespace
+    /// (`/front/lidar_packets` -> `front/os_sensor`), or the only frame holding
+    /// `os_sensor`.
     pub(super) fn name_ouster_frames<'a>(
         &self,
         frames: impl Iterator<Item = &'a str> + Clone,
         cloud_stamps: &mut HashMap<String, (String, Vec<u64>)>,
     ) {
-        let sensors = frames.filter(|f| f.contains(OUSTER_FRAME));
+        // ouster_ros 0.8 and before named it `os1_sensor`.
+        let sensors = frames.filter(|f| f.contains(OUSTER_FRAME) || f.contains("os1_sensor"));
         for topic in self.ouster_calibrations.keys() {
             let Some((frame, _)) = cloud_stamps.get_mut(topic) else {
                 continue;
@@ -334,5 +336,63 @@ fn check_model(model: PacketModel, type_name: &str, packet: &[u8]) -> Result<(),
             packet_model.name(),
             model.name()
         )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_ouster_topics_frame_is_found_in_the_transform_tree() {
+        let metadata = OusterMetadata::from_json(
+            r#"{"beam_altitude_angles": [1, -1], "beam_azimuth_angles": [0, 0],
+                "lidar_origin_to_beam_origin_mm": 0,
+                "lidar_to_sensor_transform": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1],
+                "data_format": {"columns_per_frame": 512, "columns_per_packet": 16,
+                                "pixels_per_column": 2}}"#,
+        )
+        .unwrap();
+        let mut topics = PacketTopics::default();
+        for topic in [
+            "/front/lidar_packets",
+            "/rear/lidar_packets",
+            "/os1_node/lidar_packets",
+        ] {
+            (topics.ouster_calibrations).insert(topic.into(), metadata.clone());
+        }
+        let frame_of = |frames: &[&str], topic: &str| {
+            let mut stamps = HashMap::from([(topic.to_string(), (OUSTER_FRAME.into(), vec![]))]);
+            topics.name_ouster_frames(frames.iter().copied(), &mut stamps);
+            stamps[topic].0.clone()
+        };
+        let two = [
+            "front/os_sensor",
+            "front/os_lidar",
+            "rear/os_sensor",
+            "base_link",
+        ];
+        assert_eq!(frame_of(&two, "/front/lidar_packets"), "front/os_sensor");
+        assert_eq!(frame_of(&two, "/rear/lidar_packets"), "rear/os_sensor");
+        let suffixed = ["os_sensor_rear", "os_sensor_front"];
+        assert_eq!(frame_of(&suffixed, "/rear/lidar_packets"), "os_sensor_rear");
+        // One sensor: ouster_ros's own name, the older driver's, or the only one.
+        assert_eq!(
+            frame_of(&["os_sensor", "os_lidar"], "/front/lidar_packets"),
+            "os_sensor"
+        );
+        assert_eq!(
+            frame_of(&["os1_sensor", "os1_lidar"], "/os1_node/lidar_packets"),
+            "os1_sensor"
+        );
+        assert_eq!(
+            frame_of(&["top/os_sensor"], "/front/lidar_packets"),
+            "top/os_sensor"
+        );
+        // Nothing in the tree: `os_sensor`, which the posing then finds unposed.
+        assert_eq!(
+            frame_of(&["base_link"], "/front/lidar_packets"),
+            OUSTER_FRAME
+        );
     }
 }
