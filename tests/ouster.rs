@@ -297,6 +297,22 @@ fn an_ouster_log_is_a_drive_however_it_was_recorded() {
         &prediction,
     );
     assert_eq!(two, two_clouds);
+    // A recording that began mid-turn: its first frame is left out, with a notice.
+    let mid_turn = common::travmap(&["run", route("ouster-mid-turn").to_str().unwrap(), "--json"]);
+    assert_contains(
+        &common::stderr(&mid_turn),
+        &[
+            "frame 0 is the part of a rotation the recording began with (48 packets, against 128 in frame 1)",
+        ],
+    );
+    let (frames, _) = common::json_records(&common::success(mid_turn));
+    assert_eq!(
+        frames
+            .iter()
+            .map(|f| f["frame"].as_u64().unwrap())
+            .collect::<Vec<_>>(),
+        [1, 2]
+    );
     // The coarser and the dual-return profiles: drives of their own.
     for profile in ["RNG15_RFL8_NIR8", "RNG19_RFL8_SIG16_NIR16_DUAL"] {
         let grids = annotated(dir, &route(&format!("ouster-{profile}")), profile, &[]);

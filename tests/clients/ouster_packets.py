@@ -31,6 +31,8 @@ first column).
                          intensity float32 = a photon count, t uint32, reflectivity,
                          ring, ambient uint16, range uint32; 48-byte points), the SDK's
                          points, stamped with each frame's first column, and /tf
+  ouster-mid-turn/       the RNG19 route recorded from its first frame's 81st packet on
+                         (the recording began mid-turn: frame 100 is 48 of its 128 packets)
   ouster-two/            two sensors' packets, the RNG19 route's, in namespaces /front and
                          /rear (each with its metadata), their frames front/os_sensor
                          and rear/os_sensor mounted on /tf_static on a base_link (1 m
@@ -313,6 +315,7 @@ def main():
             write("ros2", out / "ouster-late-metadata", info, packets, metadata_after=PERIOD_NS + 1)
             write("ros2", out / "ouster-no-metadata", info, packets, with_metadata=False)
             write_points(out / "ouster-points", info, range_mm, reflectivity)
+            write("ros2", out / "ouster-mid-turn", info, packets[80:])
             write("ros2", out / "ouster-two", info, packets, sensors=TWO_SENSORS)
             write_points(out / "ouster-two-points", info, range_mm, reflectivity, sensors=TWO_SENSORS)
         print(profile, len(packets), "packets of", len(packets[0][1]), "bytes;", len(points), "points in a frame")
