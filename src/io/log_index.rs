@@ -14,6 +14,7 @@ use super::lidar_calibrations::LidarCalibrations;
 use super::livox::LIVOX_CUSTOM_MESSAGES;
 use super::log::Log;
 use super::log_message::{LogMessage, Part, ros2_type_name};
+use super::ouster::OUSTER_PACKET_MESSAGES;
 use super::packet_topics::PacketTopics;
 use super::packets::{PACKET_MESSAGES, PacketCalibration, PacketModel};
 use super::pose_topics::{
@@ -315,11 +316,14 @@ impl Contents {
             cloud_topics: self
                 .topics
                 .iter()
-                .filter(|(_, s)| {
+                .filter(|(topic, s)| {
                     let type_name = ros2_type_name(s);
                     let type_name = type_name.as_ref();
+                    // An Ouster's IMU packets share its lidar packets' type.
+                    let imu = OUSTER_PACKET_MESSAGES.contains(&type_name)
+                        && !self.cloud_stamps.contains_key(*topic);
                     type_name == POINT_CLOUD
-                        || PACKET_MESSAGES.contains(&type_name)
+                        || (PACKET_MESSAGES.contains(&type_name) && !imu)
                         || LIVOX_CUSTOM_MESSAGES.contains(&type_name)
                 })
                 .map(|(t, _)| t.clone())
