@@ -2,14 +2,14 @@
 # up and exported for the shell that sources this file:
 #   source .ci/clients.sh && cargo test --release -- --ignored
 # Python mcap + mcap-ros2-support, rosbags, the Foxglove SDK, Ouster's SDK, rerun-sdk, pyarrow, DuckDB,
-# Polars and jsonschema; Ray and pytest for the fleet script's tests (fleet/); Node @mcap/core +
+# Polars, jsonschema and scapy (packet captures); Ray and pytest for the fleet script's tests (fleet/); Node @mcap/core +
 # @foxglove/rosmsg2-serialization (tests/clients/package-lock.json); Chromium for
 # rerun's web viewer (tests/viewer.rs), from Debian, as root or through sudo.
 python3 -m venv target/client-venv
 target/client-venv/bin/pip install --quiet --disable-pip-version-check \
     "mcap==1.6.0" "mcap-ros2-support==0.6.0" "rosbags==0.11.9" "foxglove-sdk==0.30.3" "rerun-sdk==0.41.0" \
     "pyarrow==26.0.1" "duckdb==2.0.0" "polars==2.1.0" \
-    "ray==2.60.0" "pytest==9.2.0" "jsonschema==4.26.0" "plyfile==1.1.5" "laspy==2.7.0" "lazrs==0.8.2"
+    "ray==2.60.0" "pytest==9.2.0" "jsonschema==4.26.0" "plyfile==1.1.5" "laspy==2.7.0" "lazrs==0.8.2" "scapy==2.6.1"
 export TRAVMAP_CLIENT_PYTHON="$PWD/target/client-venv/bin/python"
 export TRAVMAP_RERUN="$PWD/target/client-venv/bin/rerun"
 # Ouster's SDK writes the Ouster packets tests/ouster.rs decodes; it pins an older

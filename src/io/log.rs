@@ -17,6 +17,7 @@ pub use super::log_message::{Connection, Damage, FileMap, FileMessages, LogMessa
 use super::mcap_messages::Messages;
 use super::mcap_records::check_chunk_sizes;
 use super::mcap_stored::{Release, StoredLog, stored_log};
+use super::pcap::PcapFile;
 use super::rosbag2::{Rosbag2Directory, says_zstd_messages};
 use super::sqlite::SqliteFile;
 use crate::error::{Error, LostMessage, Result};
@@ -26,6 +27,7 @@ pub enum LogFile {
     Mcap(McapFile),
     Bag(BagFile),
     Sqlite(SqliteFile),
+    Pcap(PcapFile),
 }
 
 impl LogFile {
@@ -34,6 +36,7 @@ impl LogFile {
         Ok(match format {
             InputFormat::Bag => LogFile::Bag(BagFile::open(path)?),
             InputFormat::Sqlite => LogFile::Sqlite(SqliteFile::open(path)?),
+            InputFormat::Pcap => LogFile::Pcap(PcapFile::open(path)?),
             _ => LogFile::Mcap(McapFile::open(path)?),
         })
     }
@@ -43,6 +46,7 @@ impl LogFile {
             LogFile::Mcap(file) => &file.path,
             LogFile::Bag(file) => file.path(),
             LogFile::Sqlite(file) => file.path(),
+            LogFile::Pcap(file) => file.path(),
         }
     }
 
@@ -55,6 +59,7 @@ impl LogFile {
             LogFile::Mcap(file) => Box::new(file.messages(threads, parts)),
             LogFile::Bag(file) => Box::new(file.messages()),
             LogFile::Sqlite(file) => Box::new(file.messages(parts).map(whole_file_damage)),
+            LogFile::Pcap(file) => Box::new(file.messages()),
         }
     }
 }
@@ -101,13 +106,14 @@ impl Log {
             || (files.iter()).any(|file| match file {
                 LogFile::Sqlite(db3) => db3.zstd_messages,
                 LogFile::Mcap(mcap) => mcap.zstd_messages,
-                LogFile::Bag(_) => false,
+                LogFile::Bag(_) | LogFile::Pcap(_) => false,
             });
         for file in &files {
             match file {
                 LogFile::Bag(bag) => notices.extend(bag.notice().map(str::to_string)),
                 LogFile::Mcap(mcap) => notices.extend(mcap.notice()),
                 LogFile::Sqlite(db3) => notices.extend(db3.notice().map(str::to_string)),
+                LogFile::Pcap(pcap) => notices.extend(pcap.notice().map(str::to_string)),
             }
         }
         Ok(Self {

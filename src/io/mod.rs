@@ -30,6 +30,7 @@ mod merged_clouds;
 pub mod ouster;
 mod packet_topics;
 pub mod packets;
+pub mod pcap;
 pub mod pcd;
 pub mod ply;
 mod point_rows;

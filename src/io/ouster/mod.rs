@@ -30,6 +30,10 @@ pub const OUSTER_PACKET_MESSAGES: [&str; 3] = [
     "ouster_ros/msg/PacketMsg",
 ];
 
+/// `PacketMsg`'s definition, for the packets of a capture (`super::pcap`).
+pub const PACKET_MSG_SCHEMA: &str =
+    include_str!("../../../schemas/ouster_sensor_msgs__PacketMsg.msg");
+
 /// The frame the points are in.
 pub const OUSTER_FRAME: &str = "os_sensor";
 
