@@ -225,10 +225,15 @@ fn read_u32(bytes: &[u8], at: usize, big_endian: bool) -> u32 {
     }
 }
 
+/// Source, destination and identification: which datagram a fragment is of.
+type DatagramKey = ([u8; 4], [u8; 4], u16);
+
+/// A datagram's pieces by offset, and its length once the last is in.
+type Pieces = (BTreeMap<usize, Vec<u8>>, Option<usize>);
+
 /// An IPv4 packet of a captured frame.
 struct Ipv4<'a> {
-    /// Source, destination and identification: which datagram a fragment is of.
-    key: ([u8; 4], [u8; 4], u16),
+    key: DatagramKey,
     protocol: u8,
     /// Where the payload lies in the datagram, in bytes, and whether more follow.
     offset: usize,
@@ -277,8 +282,7 @@ fn ipv4(frame: &[u8], link: Link) -> Option<Ipv4<'_>> {
 /// IPv4 datagrams being put back together from their fragments.
 #[derive(Default)]
 struct Fragments {
-    /// Per datagram: its pieces by offset, and its length once the last is in.
-    partial: HashMap<([u8; 4], [u8; 4], u16), (BTreeMap<usize, Vec<u8>>, Option<usize>)>,
+    partial: HashMap<DatagramKey, Pieces>,
 }
 
 /// Datagrams missing fragments are dropped past this many in flight.
