@@ -17,6 +17,7 @@ use travmap::io::format::InputFormat;
 use travmap::io::log::Log;
 use travmap::io::ouster::{OusterMetadata, string_message};
 use travmap::io::packets::{PacketAssembler, PacketCalibration, PacketModel};
+use travmap::io::ros::{OccupancyGrid, Time, decode};
 
 const PROFILES: [&str; 4] = [
     "LEGACY",
@@ -297,6 +298,35 @@ fn an_ouster_log_is_a_drive_however_it_was_recorded() {
         &prediction,
     );
     assert_eq!(two, two_clouds);
+    // The SDK's own pcap of the packets (IP fragments), with the metadata given:
+    // the drive as the log holds it, registered (a capture has no poses).
+    let registered = ["--poses", "registration"];
+    let logged = annotated_on(
+        dir,
+        &route("ouster-RNG19_RFL8_SIG16_NIR16"),
+        "logged",
+        &registered,
+        &prediction,
+    );
+    let capture = route("RNG19_RFL8_SIG16_NIR16.pcap");
+    let captured = annotated_on(dir, &capture, "captured", &given, &prediction);
+    // The SDK's capture keeps microseconds: the stamps are the log's to within one.
+    let unstamped = |grids: &[(String, u64, Vec<u8>)]| -> Vec<OccupancyGrid> {
+        let grid = |data: &[u8]| {
+            let mut grid: OccupancyGrid = decode(data).unwrap();
+            grid.header.stamp = Time { sec: 0, nanosec: 0 };
+            grid.info.map_load_time = grid.header.stamp.clone();
+            grid
+        };
+        grids.iter().map(|(_, _, data)| grid(data)).collect()
+    };
+    assert_eq!(unstamped(&captured), unstamped(&logged));
+    for ((_, captured_ns, _), (_, logged_ns, _)) in captured.iter().zip(&logged) {
+        assert!(
+            captured_ns.abs_diff(*logged_ns) < 1_000,
+            "{captured_ns} for {logged_ns}"
+        );
+    }
     // A recording that began mid-turn: its first frame is left out, with a notice.
     let mid_turn = common::travmap(&["run", route("ouster-mid-turn").to_str().unwrap(), "--json"]);
     assert_contains(

@@ -33,6 +33,10 @@ first column).
                          points, stamped with each frame's first column, and /tf
   ouster-mid-turn/       the RNG19 route recorded from its first frame's 81st packet on
                          (the recording began mid-turn: frame 100 is 48 of its 128 packets)
+  RNG19_RFL8_SIG16_NIR16.pcap
+                         the RNG19 route's lidar packets as the SDK's pcap writer records
+                         them (`ouster.sdk.pcap.record`: Ethernet, IPv4 fragments, UDP port
+                         7502), each stamped with its log time
   ouster-two/            two sensors' packets, the RNG19 route's, in namespaces /front and
                          /rear (each with its metadata), their frames front/os_sensor
                          and rear/os_sensor mounted on /tf_static on a base_link (1 m
@@ -58,6 +62,7 @@ from pathlib import Path
 
 import numpy as np
 import ouster.sdk.core as core
+import ouster.sdk.pcap as pcap
 from rosbags.rosbag1 import Writer as Ros1Writer
 from rosbags.rosbag2 import Writer as Ros2Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -168,6 +173,18 @@ def messages(info, packets, with_metadata=True, metadata_after=0, sensors=ONE_SE
     for k in range(FRAMES):
         out.append(("/tf", LOG_START_NS + k * PERIOD_NS, "tf", (moving, k)))
     return sorted(out, key=lambda m: (m[1], m[0]))
+
+
+def write_pcap(path, info, packets):
+    """The packets as the SDK records a sensor's stream."""
+    fmt = core.PacketFormat.from_info(info)
+    recorded = []
+    for t, data in packets:
+        packet = core.LidarPacket(fmt)
+        packet.buf[:] = np.frombuffer(data, dtype=np.uint8)
+        packet.host_timestamp = t
+        recorded.append(packet)
+    pcap.record(recorded, str(path))
 
 
 def write_points(path, info, range_mm, reflectivity, sensors=ONE_SENSOR):
@@ -315,6 +332,7 @@ def main():
             write("ros2", out / "ouster-late-metadata", info, packets, metadata_after=PERIOD_NS + 1)
             write("ros2", out / "ouster-no-metadata", info, packets, with_metadata=False)
             write_points(out / "ouster-points", info, range_mm, reflectivity)
+            write_pcap(out / f"{profile}.pcap", info, packets)
             write("ros2", out / "ouster-mid-turn", info, packets[80:])
             write("ros2", out / "ouster-two", info, packets, sensors=TWO_SENSORS)
             write_points(out / "ouster-two-points", info, range_mm, reflectivity, sensors=TWO_SENSORS)
