@@ -315,7 +315,7 @@ fn an_ouster_log_is_a_drive_however_it_was_recorded() {
         let grid = |data: &[u8]| {
             let mut grid: OccupancyGrid = decode(data).unwrap();
             grid.header.stamp = Time { sec: 0, nanosec: 0 };
-            grid.info.map_load_time = grid.header.stamp.clone();
+            grid.info.map_load_time = grid.header.stamp;
             grid
         };
         grids.iter().map(|(_, _, data)| grid(data)).collect()
