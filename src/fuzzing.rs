@@ -31,7 +31,7 @@ pub type Target = fn(&[u8]);
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 22] = [
+pub const TARGETS: [(&str, Target); 23] = [
     ("kitti_calib", kitti_calib),
     ("kitti_poses", kitti_poses),
     ("kitti_scan", kitti_scan),
@@ -42,6 +42,7 @@ pub const TARGETS: [(&str, Target); 22] = [
     ("ros_tf", ros_tf),
     ("mcap_file", mcap_file),
     ("bag_file", bag_file),
+    ("pcap_file", pcap_file),
     ("ros1_message", ros1_message),
     ("rosbag2_metadata", rosbag2_metadata),
     ("pcd_file", pcd_file),
@@ -190,6 +191,11 @@ pub fn mcap_file(data: &[u8]) {
 /// A whole ROS 1 bag, read as [`mcap_file`] reads an MCAP file.
 pub fn bag_file(data: &[u8]) {
     with_file(data, "bag", read_drive);
+}
+
+/// A whole packet capture opened as a drive, every frame read.
+pub fn pcap_file(data: &[u8]) {
+    with_file(data, "pcap", read_drive);
 }
 
 /// The ROS 1 message types travmap reads, in ROS 1's format.

@@ -326,3 +326,120 @@ impl Fragments {
         Some((port, payload.to_vec()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An Ethernet frame (with a VLAN tag when asked) of an IPv4 packet: protocol,
+    /// identification, fragment offset in bytes, more fragments, payload.
+    fn frame(
+        vlan: bool,
+        protocol: u8,
+        id: u16,
+        offset: usize,
+        more: bool,
+        payload: &[u8],
+    ) -> Vec<u8> {
+        let mut out = vec![0xFF; 12];
+        if vlan {
+            out.extend([0x81, 0x00, 0x00, 0x07]);
+        }
+        out.extend([0x08, 0x00]);
+        let total = (20 + payload.len()) as u16;
+        let flags = (offset / 8) as u16 | if more { 0x2000 } else { 0 };
+        out.extend([0x45, 0]);
+        out.extend(total.to_be_bytes());
+        out.extend(id.to_be_bytes());
+        out.extend(flags.to_be_bytes());
+        out.extend([64, protocol, 0, 0, 10, 0, 0, 1, 10, 0, 0, 2]);
+        out.extend_from_slice(payload);
+        out
+    }
+
+    /// A UDP datagram to `port`.
+    fn udp(port: u16, payload: &[u8]) -> Vec<u8> {
+        let mut out = vec![0x1F, 0x90];
+        out.extend(port.to_be_bytes());
+        out.extend(((8 + payload.len()) as u16).to_be_bytes());
+        out.extend([0, 0]);
+        out.extend_from_slice(payload);
+        out
+    }
+
+    /// A little-endian microsecond capture of `frames` at 1 s + k ms, its last
+    /// record cut after `cut` bytes of its frame.
+    fn capture(frames: &[Vec<u8>], cut: Option<usize>) -> tempfile::NamedTempFile {
+        let mut out = vec![0xd4, 0xc3, 0xb2, 0xa1, 2, 0, 4, 0];
+        out.extend([0; 8]);
+        out.extend(65535u32.to_le_bytes());
+        out.extend(1u32.to_le_bytes());
+        for (k, frame) in frames.iter().enumerate() {
+            out.extend(1u32.to_le_bytes());
+            out.extend((k as u32 * 1_000).to_le_bytes());
+            out.extend((frame.len() as u32).to_le_bytes());
+            out.extend((frame.len() as u32).to_le_bytes());
+            out.extend(frame);
+        }
+        if let Some(cut) = cut {
+            out.truncate(out.len() - frames.last().unwrap().len() + cut);
+        }
+        let file = tempfile::NamedTempFile::new().unwrap();
+        std::fs::write(file.path(), out).unwrap();
+        file
+    }
+
+    #[test]
+    fn udp_datagrams_are_read_through_vlan_tags_and_fragments() {
+        let small = udp(2368, &[1, 2, 3]);
+        let large: Vec<u8> = udp(7502, &(0..3000).map(|i| i as u8).collect::<Vec<_>>());
+        let (first, second) = large.split_at(1480);
+        let frames = [
+            frame(true, 17, 1, 0, false, &small),
+            // TCP is not a LiDAR's.
+            frame(false, 6, 2, 0, false, &small),
+            // The large datagram's fragments, the last first.
+            frame(false, 17, 3, 1480, false, second),
+            frame(false, 17, 3, 0, true, first),
+            frame(false, 17, 4, 0, false, &small),
+        ];
+        let file = capture(&frames, Some(10));
+        let pcap = PcapFile::open(file.path()).unwrap();
+        assert!(
+            pcap.notice()
+                .unwrap()
+                .contains("ends inside the record at byte")
+        );
+        let datagrams: Vec<_> = pcap.datagrams().collect();
+        assert_eq!(datagrams.len(), 2);
+        assert_eq!(datagrams[0], (1_000_000_000, 2368, vec![1, 2, 3]));
+        let (stamp_ns, port, payload) = &datagrams[1];
+        assert_eq!(
+            (*stamp_ns, *port, payload.len()),
+            (1_003_000_000, 7502, 3000)
+        );
+        assert_eq!(payload[..], large[8..]);
+        // The large port reads as an Ouster's packets; the small one as no LiDAR's.
+        let topics: Vec<_> = (pcap.messages().map(Result::unwrap))
+            .map(|m| (m.connection.topic.clone(), m.connection.schema_name.clone()))
+            .collect();
+        assert_eq!(
+            topics,
+            [("/udp_7502".into(), OUSTER_PACKET_MESSAGES[0].to_string())]
+        );
+    }
+
+    #[test]
+    fn what_is_not_a_capture_travmap_reads_is_named() {
+        let file = tempfile::NamedTempFile::new().unwrap();
+        let mut header = vec![0xd4, 0xc3, 0xb2, 0xa1, 2, 0, 4, 0];
+        header.extend([0; 12]);
+        header.extend(105u32.to_le_bytes());
+        std::fs::write(file.path(), &header).unwrap();
+        let problem = PcapFile::open(file.path()).err().unwrap().to_string();
+        assert!(problem.contains("link type 105"), "{problem}");
+        std::fs::write(file.path(), &header[..10]).unwrap();
+        let problem = PcapFile::open(file.path()).err().unwrap().to_string();
+        assert!(problem.contains("shorter than a pcap header"), "{problem}");
+    }
+}
