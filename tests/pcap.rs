@@ -1,5 +1,5 @@
 //! Packet captures of LiDAR packets: nebula's packet logs (`fixtures/nebula/`)
-//! written again as pcap files by scapy (Ethernet, IPv4, UDP, each packet stamped
+//! written again as pcap (and pcapng) files by scapy (Ethernet, IPv4, UDP, each packet stamped
 //! with its recorded time, as tcpdump or Wireshark capture a sensor) read as the same
 //! drive, frame for frame and cell for cell. Ouster's SDK's own pcap writer is
 //! checked in `tests/ouster.rs`. Needs `TRAVMAP_CLIENT_PYTHON` (scapy).
@@ -85,6 +85,12 @@ fn a_capture_is_its_packet_log(bag: &str, extra: &[&str]) {
 #[ignore = "needs scapy: source .ci/clients.sh && cargo test --release -- --ignored"]
 fn a_velodyne_capture_reads_as_its_packet_log() {
     a_capture_is_its_packet_log("vlp16/1673400471837873222", &[]);
+}
+
+#[test]
+#[ignore = "needs scapy: source .ci/clients.sh && cargo test --release -- --ignored"]
+fn a_pcapng_capture_reads_as_its_packet_log() {
+    a_capture_is_its_packet_log("vlp16/1673400471837873222", &["--pcapng"]);
 }
 
 #[test]

@@ -39,7 +39,7 @@ impl InputFormat {
 }
 
 /// What travmap reads, for the errors that refuse something else.
-pub const READABLE: &str = "travmap reads KITTI / SemanticKITTI sequence directories, MCAP files (ROS 2 or ROS 1 messages), ROS 1 bags (format 2.0), rosbag2 directories (sqlite3 or MCAP storage), rosbag2 .db3 files, pcap captures of LiDAR packets and folders of .pcd / .bin scans";
+pub const READABLE: &str = "travmap reads KITTI / SemanticKITTI sequence directories, MCAP files (ROS 2 or ROS 1 messages), ROS 1 bags (format 2.0), rosbag2 directories (sqlite3 or MCAP storage), rosbag2 .db3 files, pcap / pcapng captures of LiDAR packets and folders of .pcd / .bin scans";
 
 /// The first bytes of a ROS 1 bag of format 2.0.
 pub const BAG_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
@@ -96,12 +96,7 @@ const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
     (b"\xa1\xb2\xc3\xd4", Ok(InputFormat::Pcap)),
     (b"\x4d\x3c\xb2\xa1", Ok(InputFormat::Pcap)),
     (b"\xa1\xb2\x3c\x4d", Ok(InputFormat::Pcap)),
-    (
-        b"\x0a\x0d\x0d\x0a",
-        Err(
-            "a pcapng capture; travmap reads classic pcap (`editcap -F pcap in.pcapng out.pcap` converts it)",
-        ),
-    ),
+    (b"\x0a\x0d\x0d\x0a", Ok(InputFormat::Pcap)),
     (
         b"#ROSBAG V1.",
         Err(

@@ -3,13 +3,13 @@ port, each packet stamped with its time), as a sensor's packets are captured by
 tcpdump or Wireshark: the input is what tests/pcap.rs extracts from a packet log,
 records of {stamp u64 ns, length u32, the packet}, little-endian.
 
-usage: python write_pcap.py PACKETS OUT.pcap PORT [--nanoseconds] [--vlan]
+usage: python write_pcap.py PACKETS OUT.pcap PORT [--nanoseconds] [--vlan] [--pcapng]
 """
 import struct
 import sys
 from decimal import Decimal
 
-from scapy.all import IP, UDP, Dot1Q, Ether, Raw, wrpcap
+from scapy.all import IP, UDP, Dot1Q, Ether, Raw, wrpcap, wrpcapng
 
 
 def main():
@@ -28,7 +28,10 @@ def main():
         frame.time = Decimal(stamp_ns) / Decimal(1_000_000_000)
         frames.append(frame)
         at += length
-    wrpcap(out, frames, nano=nanoseconds)
+    if "--pcapng" in sys.argv[4:]:
+        wrpcapng(out, frames)
+    else:
+        wrpcap(out, frames, nano=nanoseconds)
     print(len(frames), "packets")
 
 

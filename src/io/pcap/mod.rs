@@ -1,5 +1,5 @@
-//! Packet captures (classic `.pcap`, as tcpdump, Wireshark, VeloView and Ouster's
-//! SDK write them) of LiDAR packets, read as a log: each UDP port whose datagrams are
+//! Packet captures (classic `.pcap` and pcapng, as tcpdump, Wireshark, VeloView and
+//! Ouster's SDK write them) of LiDAR packets, read as a log: each UDP port whose datagrams are
 //! a LiDAR's is a topic (`/udp_2368`), each datagram a message of the packet type
 //! travmap reads it as: Velodyne's and Hesai's (told apart by their bytes) as
 //! nebula's `NebulaPackets`, an Ouster's (larger than an Ethernet frame, so IP
@@ -7,9 +7,15 @@
 //! (Velodyne's position packets, an Ouster's IMU) and other traffic are left out.
 //! The capture's time stamps each packet.
 
-use std::collections::{BTreeMap, HashMap};
+mod records;
+mod udp;
+
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+
+use records::Capture;
+use udp::{Fragments, ipv4};
 
 use super::log_message::{Connection, Damage, FileMap, LogMessage};
 use super::ouster::{OUSTER_PACKET_MESSAGES, PACKET_MSG_SCHEMA};
@@ -17,29 +23,14 @@ use super::packets::{NEBULA_PACKETS, PacketModel};
 use super::ros::{Header, NebulaPacket, NebulaPackets, RosMessage, Time, encode};
 use crate::error::{Error, Result};
 
-const GLOBAL_HEADER: usize = 24;
-const RECORD_HEADER: usize = 16;
 /// An Ethernet frame's payload: a datagram past it came in IP fragments.
 const ETHERNET_MTU: usize = 1500;
-
-/// How a capture's frames begin (its link type).
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Link {
-    Ethernet,
-    /// Linux "cooked" capture (tcpdump -i any).
-    LinuxSll,
-    /// IPv4 packets with no link header.
-    Ipv4,
-}
 
 /// A capture, memory-mapped.
 pub struct PcapFile {
     path: PathBuf,
     map: FileMap,
-    big_endian: bool,
-    /// Time stamps in nanoseconds (else microseconds).
-    nanoseconds: bool,
-    link: Link,
+    capture: Capture,
     /// Where its last whole record ends, and what was said of a cut tail.
     end: usize,
     notice: Option<String>,
@@ -48,36 +39,12 @@ pub struct PcapFile {
 impl PcapFile {
     pub fn open(path: &Path) -> Result<Self> {
         let map = FileMap::open(path)?;
-        let bytes = map.as_ref();
-        let problem = |problem: String| Error::LogContainer {
-            path: path.to_path_buf(),
-            problem,
-        };
-        let magic = bytes
-            .get(..4)
-            .ok_or_else(|| problem("shorter than a pcap header".into()))?;
-        let (big_endian, nanoseconds) = match magic {
-            [0xd4, 0xc3, 0xb2, 0xa1] => (false, false),
-            [0xa1, 0xb2, 0xc3, 0xd4] => (true, false),
-            [0x4d, 0x3c, 0xb2, 0xa1] => (false, true),
-            [0xa1, 0xb2, 0x3c, 0x4d] => (true, true),
-            _ => return Err(problem("not a pcap capture".into())),
-        };
-        if bytes.len() < GLOBAL_HEADER {
-            return Err(problem("shorter than a pcap header".into()));
-        }
-        let link = match read_u32(bytes, 20, big_endian) & 0x0FFF_FFFF {
-            1 => Link::Ethernet,
-            113 => Link::LinuxSll,
-            101 | 228 => Link::Ipv4,
-            other => {
-                return Err(problem(format!(
-                    "link type {other}: travmap reads Ethernet, Linux cooked and raw IPv4 captures"
-                )));
-            }
-        };
-        let (end, notice) = whole_records(bytes, big_endian);
-        let notice = notice.map(|at| {
+        let (capture, end, cut) =
+            records::read(map.as_ref()).map_err(|problem| Error::LogContainer {
+                path: path.to_path_buf(),
+                problem,
+            })?;
+        let notice = cut.map(|at| {
             format!(
                 "{}: the capture ends inside the record at byte {at} (cut short?): reading the records before it",
                 path.display()
@@ -86,9 +53,7 @@ impl PcapFile {
         Ok(Self {
             path: path.to_path_buf(),
             map,
-            big_endian,
-            nanoseconds,
-            link,
+            capture,
             end,
             notice,
         })
@@ -143,43 +108,14 @@ impl PcapFile {
 
     /// Every UDP datagram over IPv4: (capture time, destination port, payload).
     fn datagrams(&self) -> impl Iterator<Item = (u64, u16, Vec<u8>)> + '_ {
-        let bytes = &self.map.as_ref()[..self.end];
-        let mut at = GLOBAL_HEADER;
         let mut fragments = Fragments::default();
-        std::iter::from_fn(move || {
-            while at + RECORD_HEADER <= bytes.len() {
-                let seconds = u64::from(read_u32(bytes, at, self.big_endian));
-                let fraction = u64::from(read_u32(bytes, at + 4, self.big_endian));
-                let captured = read_u32(bytes, at + 8, self.big_endian) as usize;
-                let frame = &bytes[at + RECORD_HEADER..at + RECORD_HEADER + captured];
-                at += RECORD_HEADER + captured;
-                let stamp_ns =
-                    seconds * 1_000_000_000 + fraction * if self.nanoseconds { 1 } else { 1_000 };
-                if let Some((port, payload)) =
-                    ipv4(frame, self.link).and_then(|ip| fragments.add(ip))
-                {
-                    return Some((stamp_ns, port, payload));
-                }
-            }
-            None
-        })
+        records::records(self.map.as_ref(), self.capture, self.end).filter_map(
+            move |(stamp_ns, link, frame)| {
+                let (port, payload) = fragments.add(ipv4(frame, link)?)?;
+                Some((stamp_ns, port, payload))
+            },
+        )
     }
-}
-
-/// Where the last whole record ends, and where a cut one begins (if one is).
-fn whole_records(bytes: &[u8], big_endian: bool) -> (usize, Option<usize>) {
-    let mut at = GLOBAL_HEADER;
-    while at < bytes.len() {
-        if at + RECORD_HEADER > bytes.len() {
-            return (at, Some(at));
-        }
-        let captured = read_u32(bytes, at + 8, big_endian) as usize;
-        match (at + RECORD_HEADER).checked_add(captured) {
-            Some(next) if next <= bytes.len() => at = next,
-            _ => return (at, Some(at)),
-        }
-    }
-    (at, None)
 }
 
 /// A port's topic, by its first datagram: a Velodyne or Hesai packet's, an
@@ -214,116 +150,6 @@ fn time(ns: u64) -> Time {
     Time {
         sec: (ns / 1_000_000_000) as i32,
         nanosec: (ns % 1_000_000_000) as u32,
-    }
-}
-
-fn read_u32(bytes: &[u8], at: usize, big_endian: bool) -> u32 {
-    let word = [bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]];
-    match big_endian {
-        true => u32::from_be_bytes(word),
-        false => u32::from_le_bytes(word),
-    }
-}
-
-/// Source, destination and identification: which datagram a fragment is of.
-type DatagramKey = ([u8; 4], [u8; 4], u16);
-
-/// A datagram's pieces by offset, and its length once the last is in.
-type Pieces = (BTreeMap<usize, Vec<u8>>, Option<usize>);
-
-/// An IPv4 packet of a captured frame.
-struct Ipv4<'a> {
-    key: DatagramKey,
-    protocol: u8,
-    /// Where the payload lies in the datagram, in bytes, and whether more follow.
-    offset: usize,
-    more: bool,
-    payload: &'a [u8],
-}
-
-/// The IPv4 packet a captured frame carries, if it does.
-fn ipv4(frame: &[u8], link: Link) -> Option<Ipv4<'_>> {
-    let be16 = |b: &[u8], at: usize| Some(u16::from_be_bytes([*b.get(at)?, *b.get(at + 1)?]));
-    let packet = match link {
-        Link::Ipv4 => frame,
-        Link::Ethernet => {
-            let mut at = 12;
-            // 802.1Q and 802.1ad tags before the type.
-            while matches!(be16(frame, at)?, 0x8100 | 0x88A8) {
-                at += 4;
-            }
-            (be16(frame, at)? == 0x0800).then_some(())?;
-            frame.get(at + 2..)?
-        }
-        Link::LinuxSll => {
-            (be16(frame, 14)? == 0x0800).then_some(())?;
-            frame.get(16..)?
-        }
-    };
-    let header = usize::from(packet.first()? & 0x0F) * 4;
-    if packet[0] >> 4 != 4 || header < 20 {
-        return None;
-    }
-    let total = usize::from(be16(packet, 2)?).min(packet.len());
-    let flags_offset = be16(packet, 6)?;
-    Some(Ipv4 {
-        key: (
-            packet.get(12..16)?.try_into().ok()?,
-            packet.get(16..20)?.try_into().ok()?,
-            be16(packet, 4)?,
-        ),
-        protocol: *packet.get(9)?,
-        offset: usize::from(flags_offset & 0x1FFF) * 8,
-        more: flags_offset & 0x2000 != 0,
-        payload: packet.get(header..total)?,
-    })
-}
-
-/// IPv4 datagrams being put back together from their fragments.
-#[derive(Default)]
-struct Fragments {
-    partial: HashMap<DatagramKey, Pieces>,
-}
-
-/// Datagrams missing fragments are dropped past this many in flight.
-const PARTIAL_DATAGRAMS: usize = 64;
-
-impl Fragments {
-    /// Adds a packet; a whole UDP datagram, once it is: (destination port, payload).
-    fn add(&mut self, ip: Ipv4<'_>) -> Option<(u16, Vec<u8>)> {
-        if ip.protocol != 17 {
-            return None;
-        }
-        let datagram = if ip.offset == 0 && !ip.more {
-            ip.payload.to_vec()
-        } else {
-            if self.partial.len() >= PARTIAL_DATAGRAMS && !self.partial.contains_key(&ip.key) {
-                self.partial.clear();
-            }
-            let (pieces, length) = self.partial.entry(ip.key).or_default();
-            pieces.insert(ip.offset, ip.payload.to_vec());
-            if !ip.more {
-                *length = Some(ip.offset + ip.payload.len());
-            }
-            let length = (*length)?;
-            let mut whole = Vec::with_capacity(length);
-            for (&offset, piece) in pieces.iter() {
-                if offset != whole.len() {
-                    return None;
-                }
-                whole.extend_from_slice(piece);
-            }
-            if whole.len() != length {
-                return None;
-            }
-            self.partial.remove(&ip.key);
-            whole
-        };
-        // The UDP header: ports, length, checksum.
-        let port = u16::from_be_bytes([*datagram.get(2)?, *datagram.get(3)?]);
-        let length = usize::from(u16::from_be_bytes([*datagram.get(4)?, *datagram.get(5)?]));
-        let payload = datagram.get(8..length.clamp(8, datagram.len()))?;
-        Some((port, payload.to_vec()))
     }
 }
 

@@ -1,0 +1,315 @@
+//! A capture's records, classic pcap or pcapng, as (time, link type, frame).
+//!
+//! Classic pcap: a 24-byte header (magic, version, snap length, link type), then
+//! records of {seconds, microseconds or nanoseconds, captured length, original
+//! length} and the frame. pcapng: blocks of {type, length, body, length}: a section
+//! header (its byte order), interface descriptions (link type, time resolution) and
+//! enhanced packet blocks (interface, 64-bit time, captured length, frame).
+
+/// How a capture's frames begin (its link type).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum Link {
+    Ethernet,
+    /// Linux "cooked" capture (tcpdump -i any).
+    LinuxSll,
+    /// IPv4 packets with no link header.
+    Ipv4,
+}
+
+impl Link {
+    fn of(link_type: u32) -> Option<Self> {
+        match link_type & 0x0FFF_FFFF {
+            1 => Some(Link::Ethernet),
+            113 => Some(Link::LinuxSll),
+            101 | 228 => Some(Link::Ipv4),
+            _ => None,
+        }
+    }
+}
+
+/// Which of the two formats, and what its header says.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Capture {
+    Classic {
+        big_endian: bool,
+        nanoseconds: bool,
+        link: Link,
+    },
+    Ng,
+}
+
+const CLASSIC_HEADER: usize = 24;
+const RECORD_HEADER: usize = 16;
+const BYTE_ORDER_MAGIC: u32 = 0x1A2B_3C4D;
+
+/// The capture `bytes` holds, and where its last whole record ends (before a cut
+/// one, whose start is the second value).
+pub(super) fn read(bytes: &[u8]) -> Result<(Capture, usize, Option<usize>), String> {
+    let magic = bytes.get(..4).ok_or("shorter than a pcap header")?;
+    let (big_endian, nanoseconds) = match magic {
+        [0xd4, 0xc3, 0xb2, 0xa1] => (false, false),
+        [0xa1, 0xb2, 0xc3, 0xd4] => (true, false),
+        [0x4d, 0x3c, 0xb2, 0xa1] => (false, true),
+        [0xa1, 0xb2, 0x3c, 0x4d] => (true, true),
+        [0x0a, 0x0d, 0x0d, 0x0a] => {
+            let (end, cut) = whole_blocks(bytes)?;
+            return Ok((Capture::Ng, end, cut));
+        }
+        _ => return Err("not a pcap capture".into()),
+    };
+    if bytes.len() < CLASSIC_HEADER {
+        return Err("shorter than a pcap header".into());
+    }
+    let link_type = read_u32(bytes, 20, big_endian);
+    let link = Link::of(link_type).ok_or_else(|| {
+        format!("link type {link_type}: travmap reads Ethernet, Linux cooked and raw IPv4 captures")
+    })?;
+    let mut at = CLASSIC_HEADER;
+    while at < bytes.len() {
+        let next = (at + RECORD_HEADER <= bytes.len())
+            .then(|| read_u32(bytes, at + 8, big_endian) as usize)
+            .and_then(|captured| (at + RECORD_HEADER).checked_add(captured))
+            .filter(|&next| next <= bytes.len());
+        match next {
+            Some(next) => at = next,
+            None => break,
+        }
+    }
+    let cut = (at < bytes.len()).then_some(at);
+    let capture = Capture::Classic {
+        big_endian,
+        nanoseconds,
+        link,
+    };
+    Ok((capture, at, cut))
+}
+
+/// A pcapng capture's whole blocks: where they end, and where a cut one begins.
+fn whole_blocks(bytes: &[u8]) -> Result<(usize, Option<usize>), String> {
+    let mut at = 0;
+    let mut big_endian = false;
+    while at + 12 <= bytes.len() {
+        if bytes[at..at + 4] == [0x0a, 0x0d, 0x0d, 0x0a] {
+            big_endian = match read_u32(bytes, at + 8, false) {
+                BYTE_ORDER_MAGIC => false,
+                magic if magic.swap_bytes() == BYTE_ORDER_MAGIC => true,
+                _ => return Err(format!("a pcapng section at byte {at} of no byte order")),
+            };
+        }
+        let length = read_u32(bytes, at + 4, big_endian) as usize;
+        if length < 12 || !length.is_multiple_of(4) {
+            return Err(format!("a pcapng block at byte {at} of length {length}"));
+        }
+        match at.checked_add(length).filter(|&end| end <= bytes.len()) {
+            Some(end) => at = end,
+            None => break,
+        }
+    }
+    Ok((at, (at < bytes.len()).then_some(at)))
+}
+
+/// The records of a capture `read` checked, up to `end`: (time in ns, link, frame).
+/// Frames of a link type travmap does not read are left out.
+pub(super) fn records(
+    bytes: &[u8],
+    capture: Capture,
+    end: usize,
+) -> Box<dyn Iterator<Item = (u64, Link, &[u8])> + '_> {
+    let bytes = &bytes[..end];
+    match capture {
+        Capture::Classic {
+            big_endian,
+            nanoseconds,
+            link,
+        } => {
+            let mut at = CLASSIC_HEADER;
+            Box::new(std::iter::from_fn(move || {
+                (at < bytes.len()).then(|| {
+                    let seconds = u64::from(read_u32(bytes, at, big_endian));
+                    let fraction = u64::from(read_u32(bytes, at + 4, big_endian));
+                    let captured = read_u32(bytes, at + 8, big_endian) as usize;
+                    let frame = &bytes[at + RECORD_HEADER..at + RECORD_HEADER + captured];
+                    at += RECORD_HEADER + captured;
+                    let unit = if nanoseconds { 1 } else { 1_000 };
+                    (seconds * 1_000_000_000 + fraction * unit, link, frame)
+                })
+            }))
+        }
+        Capture::Ng => Box::new(ng_records(bytes)),
+    }
+}
+
+/// An interface of a pcapng section: its link, and its time unit.
+struct Interface {
+    link: Option<Link>,
+    resolution: Resolution,
+}
+
+/// A pcapng interface's time unit (`if_tsresol`).
+#[derive(Clone, Copy)]
+enum Resolution {
+    /// 10^-n seconds.
+    Decimal(u8),
+    /// 2^-n seconds.
+    Binary(u8),
+}
+
+impl Resolution {
+    fn nanoseconds(self, ticks: u64) -> u64 {
+        let ticks = u128::from(ticks);
+        let ns = match self {
+            Resolution::Decimal(n) if n <= 9 => ticks * 10u128.pow(9 - u32::from(n)),
+            Resolution::Decimal(n) => ticks / 10u128.pow(u32::from(n.min(38)) - 9),
+            Resolution::Binary(n) => (ticks * 1_000_000_000) >> n.min(127),
+        };
+        ns.min(u128::from(u64::MAX)) as u64
+    }
+}
+
+fn ng_records(bytes: &[u8]) -> impl Iterator<Item = (u64, Link, &[u8])> {
+    let mut at = 0;
+    let mut big_endian = false;
+    let mut interfaces: Vec<Interface> = Vec::new();
+    std::iter::from_fn(move || {
+        while at + 12 <= bytes.len() {
+            let block_type = read_u32(bytes, at, big_endian);
+            if block_type == 0x0A0D_0D0A {
+                big_endian = read_u32(bytes, at + 8, false) != BYTE_ORDER_MAGIC;
+                interfaces.clear();
+            }
+            let length = read_u32(bytes, at + 4, big_endian) as usize;
+            let body = &bytes[at + 8..at + length - 4];
+            at += length;
+            match block_type {
+                1 if body.len() >= 8 => interfaces.push(Interface {
+                    link: Link::of(u32::from(read_u16(body, 0, big_endian))),
+                    resolution: resolution(&body[8..], big_endian),
+                }),
+                6 if body.len() >= 20 => {
+                    let interface = interfaces.get(read_u32(body, 0, big_endian) as usize);
+                    let ticks = u64::from(read_u32(body, 4, big_endian)) << 32
+                        | u64::from(read_u32(body, 8, big_endian));
+                    let captured = read_u32(body, 12, big_endian) as usize;
+                    let (Some(interface), Some(frame)) = (interface, body.get(20..20 + captured))
+                    else {
+                        continue;
+                    };
+                    if let Some(link) = interface.link {
+                        return Some((interface.resolution.nanoseconds(ticks), link, frame));
+                    }
+                }
+                _ => {}
+            }
+        }
+        None
+    })
+}
+
+/// An interface description's `if_tsresol` option (code 9), else microseconds.
+fn resolution(mut options: &[u8], big_endian: bool) -> Resolution {
+    while options.len() >= 4 {
+        let (code, length) = (
+            read_u16(options, 0, big_endian),
+            usize::from(read_u16(options, 2, big_endian)),
+        );
+        if code == 0 {
+            break;
+        }
+        if code == 9
+            && length == 1
+            && let Some(&value) = options.get(4)
+        {
+            return match value & 0x80 {
+                0 => Resolution::Decimal(value),
+                _ => Resolution::Binary(value & 0x7F),
+            };
+        }
+        options = options
+            .get(4 + length.next_multiple_of(4)..)
+            .unwrap_or_default();
+    }
+    Resolution::Decimal(6)
+}
+
+fn read_u16(bytes: &[u8], at: usize, big_endian: bool) -> u16 {
+    let word = [bytes[at], bytes[at + 1]];
+    match big_endian {
+        true => u16::from_be_bytes(word),
+        false => u16::from_le_bytes(word),
+    }
+}
+
+pub(super) fn read_u32(bytes: &[u8], at: usize, big_endian: bool) -> u32 {
+    let word = [bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]];
+    match big_endian {
+        true => u32::from_be_bytes(word),
+        false => u32::from_le_bytes(word),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A pcapng block of `block_type` around `body`, little-endian.
+    fn block(block_type: u32, body: &[u8]) -> Vec<u8> {
+        let length = (12 + body.len().next_multiple_of(4)) as u32;
+        let mut out = block_type.to_le_bytes().to_vec();
+        out.extend(length.to_le_bytes());
+        out.extend(body);
+        out.resize(length as usize - 4, 0);
+        out.extend(length.to_le_bytes());
+        out
+    }
+
+    fn enhanced_packet(interface: u32, ticks: u64, frame: &[u8]) -> Vec<u8> {
+        let mut body = interface.to_le_bytes().to_vec();
+        body.extend(((ticks >> 32) as u32).to_le_bytes());
+        body.extend((ticks as u32).to_le_bytes());
+        body.extend((frame.len() as u32).to_le_bytes());
+        body.extend((frame.len() as u32).to_le_bytes());
+        body.extend(frame);
+        block(6, &body)
+    }
+
+    #[test]
+    fn pcapng_packets_keep_their_interfaces_link_and_time_unit() {
+        let mut section = BYTE_ORDER_MAGIC.to_le_bytes().to_vec();
+        section.extend([1, 0, 0, 0]);
+        section.extend(u64::MAX.to_le_bytes());
+        let mut capture = block(0x0A0D_0D0A, &section);
+        // Interface 0: Ethernet in microseconds; 1: raw IPv4 in nanoseconds (an
+        // if_tsresol option); 2: a link type travmap does not read.
+        capture.extend(block(1, &[1, 0, 0, 0, 0, 0, 4, 0]));
+        let nanoseconds = [228, 0, 0, 0, 0, 0, 4, 0, 9, 0, 1, 0, 9, 0, 0, 0, 0, 0, 0, 0];
+        capture.extend(block(1, &nanoseconds));
+        capture.extend(block(1, &[105, 0, 0, 0, 0, 0, 4, 0]));
+        capture.extend(enhanced_packet(0, 1_500_000, b"first"));
+        capture.extend(block(5, b"statistics"));
+        capture.extend(enhanced_packet(1, 2_000_000_007, b"second"));
+        capture.extend(enhanced_packet(2, 3, b"wifi"));
+        // A record cut short is not read.
+        let whole = capture.len();
+        capture.extend(&enhanced_packet(0, 9, b"cut")[..20]);
+        let (kind, end, cut) = read(&capture).unwrap();
+        assert!(matches!(kind, Capture::Ng));
+        assert_eq!((end, cut), (whole, Some(whole)));
+        let read: Vec<_> = records(&capture, kind, end).collect();
+        assert_eq!(
+            read,
+            [
+                (1_500_000_000, Link::Ethernet, &b"first"[..]),
+                (2_000_000_007, Link::Ipv4, &b"second"[..]),
+            ]
+        );
+    }
+
+    #[test]
+    fn time_units_of_every_resolution_are_nanoseconds() {
+        assert_eq!(Resolution::Decimal(6).nanoseconds(3), 3_000);
+        assert_eq!(Resolution::Decimal(9).nanoseconds(3), 3);
+        assert_eq!(Resolution::Decimal(12).nanoseconds(3_000), 3);
+        assert_eq!(Resolution::Binary(10).nanoseconds(1024), 1_000_000_000);
+        assert_eq!(Resolution::Decimal(0).nanoseconds(u64::MAX), u64::MAX);
+    }
+}
