@@ -267,7 +267,8 @@ impl PacketTopics {
             topic.clone(),
             format!(
                 "Ouster packets without the sensor's metadata (metadata topics: {metadata_topics:?}): \
-                 record it (ouster_ros's /ouster/metadata), or give its JSON with --lidar-calibration"
+                 give its JSON with --lidar-calibration (ouster_ros records it on /ouster/metadata; \
+                 Ouster Studio and the SDK save it beside a pcap)"
             ),
         ))
     }
