@@ -64,11 +64,10 @@ fn main() {
             .iter()
             .flat_map(|m| {
                 let encoding = m.connection.encoding().unwrap();
-                let scan = packet_message(message_type, &m.data, encoding).unwrap();
-                // An Ouster packet's time is the log's.
+                let scan = packet_message(message_type, &m.data, encoding, m.log_time_ns).unwrap();
                 scan.packets
                     .into_iter()
-                    .map(|(stamp, _)| if stamp == 0 { m.log_time_ns } else { stamp })
+                    .map(|(stamp, _)| stamp)
                     .collect::<Vec<_>>()
             })
             .collect();
@@ -82,7 +81,7 @@ fn main() {
             ),
             None => {
                 let encoding = messages[0].connection.encoding().unwrap();
-                let first = packet_message(message_type, &messages[0].data, encoding).unwrap();
+                let first = packet_message(message_type, &messages[0].data, encoding, 0).unwrap();
                 let model = PacketModel::of_packet(message_type, first.packets[0].1).unwrap();
                 (model, PacketCalibration::for_model(model, None).unwrap())
             }

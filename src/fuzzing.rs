@@ -376,7 +376,7 @@ pub fn nebula_packets(data: &[u8]) {
         NEBULA_PACKETS, PacketAssembler, PacketCalibration, PacketModel, packet_message,
     };
     use crate::io::ros::{MessageEncoding, NebulaPackets, decode};
-    let Ok(message) = packet_message(NEBULA_PACKETS, data, MessageEncoding::Cdr) else {
+    let Ok(message) = packet_message(NEBULA_PACKETS, data, MessageEncoding::Cdr, 0) else {
         return;
     };
     if let Ok(typed) = decode::<NebulaPackets>(data) {

@@ -29,7 +29,8 @@ fn as_nebula_packets(bag: &Path, output: &Path) {
         let message = message.unwrap();
         let encoding = message.connection.encoding().unwrap();
         let type_name = message.connection.type_name();
-        let scan = packet_message(&type_name, &message.data, encoding).unwrap();
+        let scan =
+            packet_message(&type_name, &message.data, encoding, message.log_time_ns).unwrap();
         let packets = NebulaPackets {
             header: Header {
                 stamp: time(scan.stamp_ns),
@@ -57,8 +58,13 @@ fn same_packets(bag: &Path, nebula: &Path, model: &str) {
         messages
             .flat_map(|m| {
                 let type_name = m.connection.type_name().into_owned();
-                let scan =
-                    packet_message(&type_name, &m.data, m.connection.encoding().unwrap()).unwrap();
+                let scan = packet_message(
+                    &type_name,
+                    &m.data,
+                    m.connection.encoding().unwrap(),
+                    m.log_time_ns,
+                )
+                .unwrap();
                 (scan.packets.into_iter())
                     .map(|(stamp, p)| {
                         let model = PacketModel::of_packet(&type_name, p).unwrap();
@@ -142,7 +148,7 @@ fn the_fuzz_seeds_are_nebula_packets_of_each_model() {
         ("qt128_dual", "Pandar QT128"),
     ] {
         let data = std::fs::read(seeds.join(format!("{name}.cdr"))).unwrap();
-        let message = packet_message(NEBULA_PACKETS, &data, MessageEncoding::Cdr).unwrap();
+        let message = packet_message(NEBULA_PACKETS, &data, MessageEncoding::Cdr, 0).unwrap();
         assert_eq!(message.packets.len(), 3, "{name}");
         for (_, packet) in &message.packets {
             let found = PacketModel::of_packet(NEBULA_PACKETS, packet).unwrap();

@@ -21,9 +21,10 @@ fn packets_file(log: &Path, out: &Path) {
         let message = message.unwrap();
         let type_name = message.connection.type_name().into_owned();
         let encoding = message.connection.encoding().unwrap();
-        for (stamp_ns, packet) in packet_message(&type_name, &message.data, encoding)
-            .unwrap()
-            .packets
+        for (stamp_ns, packet) in
+            packet_message(&type_name, &message.data, encoding, message.log_time_ns)
+                .unwrap()
+                .packets
         {
             bytes.extend(stamp_ns.to_le_bytes());
             bytes.extend((packet.len() as u32).to_le_bytes());

@@ -11,7 +11,7 @@ use super::ouster::{
     METADATA_MESSAGE, METADATA_TOPIC_NAME, OUSTER_FRAME, OUSTER_PACKET_MESSAGES, OusterAssembler,
     OusterMetadata, metadata_topic_of, string_message,
 };
-use super::packets::{PacketCalibration, PacketModel, ouster_metadata_file, packet_message};
+use super::packets::{PacketCalibration, PacketModel, packet_message};
 use super::ros::MessageEncoding;
 use super::velodyne::{DecoderSettings, ScanCutter};
 
@@ -105,12 +105,14 @@ impl PacketTopics {
         log_time_ns: u64,
         cloud_stamps: &mut HashMap<String, (String, Vec<u64>)>,
     ) -> Result<(), String> {
-        let message = packet_message(type_name, data, encoding)?;
-        let mut packets = message.packets;
-        if OUSTER_PACKET_MESSAGES.contains(&type_name) {
-            packets[0].0 = log_time_ns;
-        }
-        self.add_packets(topic, type_name, &packets, &message.frame_id, cloud_stamps)
+        let message = packet_message(type_name, data, encoding, log_time_ns)?;
+        self.add_packets(
+            topic,
+            type_name,
+            &message.packets,
+            &message.frame_id,
+            cloud_stamps,
+        )
     }
 
     fn add_packets(
@@ -325,6 +327,12 @@ impl PacketTopics {
             _ => None,
         }
     }
+}
+
+/// An Ouster's metadata JSON file (`--lidar-calibration`).
+fn ouster_metadata_file(file: &std::path::Path) -> Result<OusterMetadata, String> {
+    let text = std::fs::read_to_string(file).map_err(|e| format!("{}: {e}", file.display()))?;
+    OusterMetadata::from_json(&text).map_err(|e| format!("{}: {e}", file.display()))
 }
 
 /// Every packet of a topic is of the model its first one was.

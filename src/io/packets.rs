@@ -73,14 +73,19 @@ impl PacketModel {
     }
 }
 
-/// Reads a packet message of type `message_type` without copying its packets.
+/// Reads a packet message of type `message_type`, recorded at `log_time_ns` (which
+/// stamps an Ouster's packet: its message has no stamp), without copying its
+/// packets.
 pub fn packet_message<'a>(
     message_type: &str,
     data: &'a [u8],
     encoding: MessageEncoding,
+    log_time_ns: u64,
 ) -> Result<ScanMessage<'a>, String> {
     match message_type {
-        name if OUSTER_PACKET_MESSAGES.contains(&name) => packet_msg_message(data, encoding),
+        name if OUSTER_PACKET_MESSAGES.contains(&name) => {
+            packet_msg_message(data, encoding, log_time_ns)
+        }
         PANDAR_SCAN => pandar_scan_message(data, encoding),
         NEBULA_PACKETS => packets_message(data, encoding, PacketField::Sequence),
         _ => scan_message(data, encoding),
@@ -88,9 +93,9 @@ pub fn packet_message<'a>(
 }
 
 /// A packet model's calibration: the file given (`--lidar-calibration`: the
-/// velodyne_pointcloud / nebula YAML, Hesai's angle-correction CSV, or an Ouster's
-/// metadata JSON), else the model's built-in table (an Ouster has none: its
-/// metadata is read from the log).
+/// velodyne_pointcloud / nebula YAML, or Hesai's angle-correction CSV), else the
+/// model's built-in table. An Ouster's is its metadata, which the log index reads
+/// with its packets (`packet_topics.rs`).
 #[derive(Clone, Debug)]
 pub enum PacketCalibration {
     Velodyne(Calibration),
@@ -101,20 +106,8 @@ pub enum PacketCalibration {
 impl PacketCalibration {
     pub fn for_model(model: PacketModel, file: Option<&Path>) -> Result<Self, String> {
         match model {
-            PacketModel::Ouster(model) => {
-                let file = file.ok_or("no metadata: record the sensor's metadata topic, or give its JSON with --lidar-calibration")?;
-                let metadata = ouster_metadata_file(file)?;
-                if metadata.model != model {
-                    return Err(format!(
-                        "{}: metadata of {} {} packets, where the log's are {} {}",
-                        file.display(),
-                        metadata.model.name(),
-                        metadata.model.profile.name(),
-                        model.name(),
-                        model.profile.name()
-                    ));
-                }
-                Ok(Self::Ouster(Box::new(metadata)))
+            PacketModel::Ouster(_) => {
+                Err("an Ouster's metadata is read with its packets, by the log index".into())
             }
             PacketModel::Velodyne(model) => Calibration::for_model(model, file).map(Self::Velodyne),
             PacketModel::Hesai(model) => {
@@ -133,12 +126,6 @@ impl PacketCalibration {
             }
         }
     }
-}
-
-/// An Ouster's metadata JSON file (`--lidar-calibration`).
-pub fn ouster_metadata_file(file: &Path) -> Result<OusterMetadata, String> {
-    let text = std::fs::read_to_string(file).map_err(|e| format!("{}: {e}", file.display()))?;
-    OusterMetadata::from_json(&text).map_err(|e| format!("{}: {e}", file.display()))
 }
 
 /// Packets in, scans out, whichever vendor.
@@ -181,14 +168,13 @@ impl PacketAssembler {
         encoding: MessageEncoding,
         log_time_ns: u64,
     ) -> Result<Vec<PacketScan>, String> {
-        let message = packet_message(message_type, data, encoding)?;
+        let message = packet_message(message_type, data, encoding, log_time_ns)?;
         let mut scans = Vec::new();
         for (stamp_ns, packet) in message.packets {
             match self {
                 Self::Velodyne(assembler) => scans.extend(assembler.push(packet, stamp_ns)?),
                 Self::Hesai(assembler) => scans.extend(assembler.push(packet, stamp_ns)?),
-                // Its message has no stamp: the log's time is the packet's.
-                Self::Ouster(assembler) => scans.extend(assembler.push(packet, log_time_ns)?),
+                Self::Ouster(assembler) => scans.extend(assembler.push(packet, stamp_ns)?),
             }
         }
         Ok(scans)

@@ -41,10 +41,12 @@ pub const OUSTER_FRAME: &str = "os_sensor";
 pub const METADATA_MESSAGE: &str = "std_msgs/msg/String";
 pub const METADATA_TOPIC_NAME: &str = "metadata";
 
-/// Reads a PacketMsg: its one packet, unstamped (the log's time stamps it).
+/// Reads a PacketMsg recorded at `log_time_ns`: its one packet, stamped with that
+/// time (the message has no stamp of its own).
 pub fn packet_msg_message(
     data: &[u8],
     encoding: MessageEncoding,
+    log_time_ns: u64,
 ) -> Result<ScanMessage<'_>, String> {
     let body = match encoding {
         MessageEncoding::Cdr => match data {
@@ -65,8 +67,8 @@ pub fn packet_msg_message(
     })?;
     Ok(ScanMessage {
         frame_id: OUSTER_FRAME.to_string(),
-        stamp_ns: 0,
-        packets: vec![(0, packet)],
+        stamp_ns: log_time_ns,
+        packets: vec![(log_time_ns, packet)],
     })
 }
 
@@ -104,14 +106,14 @@ mod tests {
     #[test]
     fn a_packet_message_is_its_bytes_in_ros_2_and_ros_1() {
         let cdr = [0, 1, 0, 0, 3, 0, 0, 0, 7, 8, 9];
-        let message = packet_msg_message(&cdr, MessageEncoding::Cdr).unwrap();
-        assert_eq!(message.packets, vec![(0, &[7u8, 8, 9][..])]);
+        let message = packet_msg_message(&cdr, MessageEncoding::Cdr, 5).unwrap();
+        assert_eq!(message.packets, vec![(5, &[7u8, 8, 9][..])]);
         assert_eq!(message.frame_id, OUSTER_FRAME);
         let ros1 = [3, 0, 0, 0, 7, 8, 9];
-        let message = packet_msg_message(&ros1, MessageEncoding::Ros1).unwrap();
-        assert_eq!(message.packets, vec![(0, &[7u8, 8, 9][..])]);
+        let message = packet_msg_message(&ros1, MessageEncoding::Ros1, 5).unwrap();
+        assert_eq!(message.packets, vec![(5, &[7u8, 8, 9][..])]);
         let short = [0, 1, 0, 0, 9, 0, 0, 0, 7];
-        let problem = packet_msg_message(&short, MessageEncoding::Cdr)
+        let problem = packet_msg_message(&short, MessageEncoding::Cdr, 5)
             .err()
             .unwrap();
         assert!(problem.contains("9 bytes claimed in 1"), "{problem}");
