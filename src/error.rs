@@ -212,6 +212,9 @@ pub enum Error {
     #[error("{path}: {problem}")]
     LogPoseTopic { path: PathBuf, problem: String },
 
+    #[error("{path}: {problem}")]
+    LogLidarFrame { path: PathBuf, problem: String },
+
     #[error("{path}: channel {topic} ({schema}), message at log time {log_time_ns} ns: {problem}")]
     UndecodableMessage {
         path: PathBuf,
@@ -453,6 +456,7 @@ impl Error {
             | Error::LogImage { path, .. }
             | Error::LogCamera { path, .. }
             | Error::LogPoseTopic { path, .. }
+            | Error::LogLidarFrame { path, .. }
             | Error::UndecodableMessage { path, .. }
             | Error::LogEncoding { path, .. }
             | Error::Registration { path, .. }

@@ -9,7 +9,9 @@ mod common;
 
 use std::path::Path;
 
-use common::{arg, assert_contains, clean_failure, json_records, success, tf, travmap};
+use common::{
+    arg, assert_contains, clean_failure, json_records, stderr, success, tf, travmap, usage_error,
+};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use travmap::io::format::InputFormat;
 use travmap::io::log::Log;
@@ -27,8 +29,10 @@ fn rear_from_velodyne() -> Isometry3<f64> {
 }
 
 /// The shipped drive as a two-sensor log; the rear sensor falls silent for the
-/// last scan. Returns the number of points of each scan.
-fn write_two_sensor_log(seq: &Path, path: &Path) -> Vec<usize> {
+/// last scan. The clouds name `frame_ids` (front, rear) as their frames; the
+/// transforms are those of `velodyne` and `rear`. Returns the number of points of
+/// each scan.
+fn write_two_sensor_log(seq: &Path, path: &Path, frame_ids: [&str; 2]) -> Vec<usize> {
     let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
     let mut sink = McapSink::create(path, Compression::Zstd).unwrap();
     sink.write(
@@ -66,10 +70,11 @@ fn write_two_sensor_log(seq: &Path, path: &Path) -> Vec<usize> {
             labels: frame.labels.as_ref().map(|l| l[half..].to_vec()),
             ..frame.clone()
         };
-        sink.write("/front_points", stamp, &scan_to_cloud(&front, stamp))
-            .unwrap();
+        let mut front_cloud = scan_to_cloud(&front, stamp);
+        front_cloud.header.frame_id = frame_ids[0].into();
+        sink.write("/front_points", stamp, &front_cloud).unwrap();
         let mut rear_cloud = scan_to_cloud(&rear, stamp);
-        rear_cloud.header.frame_id = "rear".into();
+        rear_cloud.header.frame_id = frame_ids[1].into();
         // 20 ms after the front: within half a period.
         if i + 1 < frames.len() {
             sink.write("/rear_points", stamp + 20_000_000, &rear_cloud)
@@ -86,7 +91,7 @@ fn two_sensors_merge_into_the_scans_they_were_cut_from() {
     let Some(seq) = common::sample() else { return };
     let dir = tempfile::tempdir().unwrap();
     let log_path = dir.path().join("two.mcap");
-    let sizes = write_two_sensor_log(&seq, &log_path);
+    let sizes = write_two_sensor_log(&seq, &log_path, ["velodyne", "rear"]);
 
     // Without a choice: the two topics are named, with the hint for `all`.
     let err = clean_failure(travmap(&["run", arg(&log_path)]));
@@ -164,6 +169,92 @@ fn two_sensors_merge_into_the_scans_they_were_cut_from() {
     ]);
     let (named, _) = json_records(&success(named));
     assert_eq!(cells(&named[0]), cells(&merged[0]));
+}
+
+/// Drivers that leave `frame_id` empty (or at a default that is not the sensor's
+/// frame on /tf): `--lidar-frame` names each topic's frame, and the drive reads as
+/// the log that named them.
+#[test]
+fn lidar_frame_places_clouds_that_name_no_frame() {
+    let Some(seq) = common::sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let (named, unnamed) = (
+        dir.path().join("named.mcap"),
+        dir.path().join("unnamed.mcap"),
+    );
+    write_two_sensor_log(&seq, &named, ["velodyne", "rear"]);
+    write_two_sensor_log(&seq, &unnamed, ["", "laser"]);
+    let run = |log: &Path, more: &[&str]| {
+        let mut args = vec!["run", arg(log), "--cloud-topic", "all", "--json"];
+        args.extend(more);
+        travmap(&args)
+    };
+    let cells = |output| -> Vec<serde_json::Value> {
+        let (records, _) = json_records(&success(output));
+        records.iter().map(|r| r["cells"].clone()).collect()
+    };
+    let expected = cells(run(&named, &[]));
+    let frames = [
+        "--lidar-frame",
+        "velodyne",
+        "--lidar-frame",
+        "/rear_points=rear",
+    ];
+    assert_eq!(cells(run(&unnamed, &frames)), expected);
+    // A topic of its own for each works as well; the log's own frames can be named
+    // again without changing anything.
+    let each = [
+        "--lidar-frame",
+        "/front_points=velodyne",
+        "--lidar-frame",
+        "/rear_points=rear",
+    ];
+    assert_eq!(cells(run(&unnamed, &each)), expected);
+    assert_eq!(cells(run(&named, &each)), expected);
+    // The errors (without --json: said on stderr).
+    let fail = |log: &Path, more: &[&str]| {
+        let mut args = vec!["run", arg(log), "--cloud-topic", "all"];
+        args.extend(more);
+        clean_failure(travmap(&args))
+    };
+    // One frame for two sensors would merge them as if mounted in one place.
+    assert_contains(
+        &fail(&unnamed, &["--lidar-frame", "velodyne"]),
+        &[
+            "--lidar-frame velodyne would place 2 LiDAR topics (/front_points, /rear_points) in one frame",
+        ],
+    );
+    // Unplaced, the rear sensor's frame is not on /tf: said so, with the flag.
+    assert_contains(
+        &fail(&unnamed, &["--lidar-frame", "/front_points=velodyne"]),
+        &["no transform links `laser`", "--lidar-frame TOPIC=FRAME"],
+    );
+    // One sensor: the empty frame is not on /tf, and the notice says what to do.
+    let front_only = travmap(&["run", arg(&unnamed), "--cloud-topic", "/front_points"]);
+    assert_contains(
+        &stderr(&front_only),
+        &["the clouds' frame_id is empty: --lidar-frame names the LiDAR's frame"],
+    );
+    // A topic that is not read is named with those that are.
+    assert_contains(
+        &fail(&named, &["--lidar-frame", "/points=velodyne"]),
+        &[
+            "--lidar-frame /points=...",
+            "those are /front_points, /rear_points",
+        ],
+    );
+    let twice = [
+        "run",
+        arg(&named),
+        "--lidar-frame",
+        "a",
+        "--lidar-frame",
+        "b",
+    ];
+    assert_contains(
+        &usage_error(travmap(&twice)),
+        &["two frames without a topic: give them as TOPIC=FRAME"],
+    );
 }
 
 /// Nebula's Pandar XT32 test packets on two topics, as two sensors would record

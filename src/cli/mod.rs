@@ -34,7 +34,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use travmap::Config;
 use travmap::drive::Selection;
-use travmap::io::ros_drive::{DriveOptions, LidarCalibrations, MergedTopics};
+use travmap::io::ros_drive::{DriveOptions, LidarCalibrations, LidarFrames, MergedTopics};
 use travmap::io::{Recording, Source};
 use travmap::method::classifier::SvmModel;
 use travmap::outputs::preflight::{InputFiles, check_output_directory, check_output_file};
@@ -202,6 +202,13 @@ pub struct Sensors {
     /// for every packet topic without its own.
     #[arg(long, value_name = "[TOPIC=]FILE")]
     lidar_calibration: Vec<String>,
+    /// Log input: the frame the LiDAR's points are in, when its clouds name none or
+    /// the wrong one (a driver's empty or default frame_id), or its packets name none
+    /// (an Ouster's custom sensor_frame, a capture). With several LiDAR topics,
+    /// TOPIC=FRAME gives one topic's (repeatable); a FRAME alone is for every LiDAR
+    /// topic without its own.
+    #[arg(long, value_name = "[TOPIC=]FRAME")]
+    lidar_frame: Vec<String>,
 }
 
 impl Sensors {
@@ -218,6 +225,8 @@ impl Sensors {
             merged_topics,
             lidar_calibrations: LidarCalibrations::from_arguments(&self.lidar_calibration)
                 .map_err(|problem| usage(format!("--lidar-calibration: {problem}")))?,
+            lidar_frames: LidarFrames::from_arguments(&self.lidar_frame)
+                .map_err(|problem| usage(format!("--lidar-frame: {problem}")))?,
             ..options
         })
     }
@@ -227,7 +236,8 @@ impl Sensors {
         let topics = (self.cloud_topic.iter()).map(|t| ("--cloud-topic", Some(t.into())));
         let calibrations =
             (self.lidar_calibration.iter()).map(|file| ("--lidar-calibration", Some(file.into())));
-        topics.chain(calibrations)
+        let frames = (self.lidar_frame.iter()).map(|frame| ("--lidar-frame", Some(frame.into())));
+        topics.chain(calibrations).chain(frames)
     }
 }
 

@@ -8,9 +8,9 @@ use std::path::Path;
 
 use serde::Deserialize;
 
+use super::by_topic::{LidarCalibrations, LidarFrames};
 use super::camera_model::Projection;
 use super::foxglove;
-use super::lidar_calibrations::LidarCalibrations;
 use super::livox::LIVOX_CUSTOM_MESSAGES;
 use super::log::Log;
 use super::log_message::{LogMessage, Part, ros2_type_name};
@@ -55,6 +55,9 @@ pub struct DriveOptions {
     pub rate_hz: Option<f64>,
     /// Packet topics' calibration files (`--lidar-calibration`).
     pub lidar_calibrations: LidarCalibrations,
+    /// The frames LiDAR topics' points are in, where the log's are missing or
+    /// wrong (`--lidar-frame`).
+    pub lidar_frames: LidarFrames,
 }
 
 /// Which other cloud topics are merged into the frames' scans.
@@ -462,11 +465,24 @@ impl LogIndex {
                 (None, None) => error,
             }
         })?;
-        let merged = contents.merged_topics(path, options, &cloud_topic)?;
-        let (cloud_frame, stamps_ns) = contents
+        let mut merged = contents.merged_topics(path, options, &cloud_topic)?;
+        let (mut cloud_frame, stamps_ns) = contents
             .cloud_stamps
             .remove(&cloud_topic)
             .unwrap_or_default();
+        let read: Vec<&str> = (std::iter::once(cloud_topic.as_str()))
+            .chain(merged.iter().map(|m| m.topic.as_str()))
+            .collect();
+        let frames =
+            (options.lidar_frames.frames_for(&read)).map_err(|problem| Error::LogLidarFrame {
+                path: path.to_path_buf(),
+                problem,
+            })?;
+        let recorded =
+            (std::iter::once(&mut cloud_frame)).chain(merged.iter_mut().map(|m| &mut m.frame));
+        for (frame, given) in recorded.zip(frames) {
+            *frame = given.unwrap_or(std::mem::take(frame));
+        }
         if matches!(options.poses, PoseSource::Auto | PoseSource::Odometry) {
             let named = options.pose_topic.as_deref();
             (named_pose_topic(named, &contents.pose_topics, &contents.topics)).map_err(
@@ -536,6 +552,7 @@ impl LogIndex {
             &self.cloud_frame,
             &self.root_frame,
             &self.vehicle_poses,
+            self.transforms.children().next().is_some(),
         ))
     }
 }

@@ -7,6 +7,7 @@
 
 pub mod bag;
 mod bucket_store;
+pub mod by_topic;
 mod camera_model;
 pub mod cloud;
 pub mod drive_frames;
@@ -18,7 +19,6 @@ pub mod image;
 pub mod kitti;
 mod kitti_text;
 pub mod las;
-pub mod lidar_calibrations;
 pub mod livox;
 pub mod log;
 pub mod log_index;

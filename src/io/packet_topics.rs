@@ -5,8 +5,8 @@
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 
+use super::by_topic::LidarCalibrations;
 use super::hesai::{HesaiAssembler, HesaiCalibration};
-use super::lidar_calibrations::LidarCalibrations;
 use super::ouster::{
     METADATA_MESSAGE, METADATA_TOPIC_NAME, OUSTER_FRAME, OUSTER_PACKET_MESSAGES, OusterAssembler,
     OusterMetadata, metadata_topic_of, string_message,
@@ -209,7 +209,7 @@ impl PacketTopics {
             PacketModel::Hesai(hesai) => {
                 // A file that does not fit is refused by name when the drive opens;
                 // the factory table cuts until then.
-                let file = self.calibrations.for_topic(topic);
+                let file = self.calibrations.for_topic(topic).map(|f| f.as_path());
                 let calibration = match PacketCalibration::for_model(model, file) {
                     Ok(PacketCalibration::Hesai(calibration)) => calibration,
                     _ => HesaiCalibration::builtin(hesai),

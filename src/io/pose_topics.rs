@@ -75,10 +75,19 @@ impl PoseTopic {
 
 /// Why nothing recorded poses the clouds in `cloud_frame` (`root_frame` the root of
 /// the transform tree above it), as a person reads it.
-pub fn unposed(cloud_frame: &str, root_frame: &str, vehicle_poses: &VehiclePoses) -> String {
-    let held = match root_frame == cloud_frame {
-        true => String::new(),
-        false => format!(" (the transforms up to `{root_frame}` are fixed mounts)"),
+pub fn unposed(
+    cloud_frame: &str,
+    root_frame: &str,
+    vehicle_poses: &VehiclePoses,
+    has_transforms: bool,
+) -> String {
+    // Transforms, but none above the clouds' frame: often a driver's empty or
+    // default frame_id.
+    let held = match (root_frame == cloud_frame, cloud_frame.is_empty()) {
+        (true, true) => " (the clouds' frame_id is empty: --lidar-frame names the LiDAR's frame)".to_string(),
+        (true, false) if has_transforms => " (no transform is above it: --lidar-frame names the LiDAR's frame when the clouds' frame_id is not it)".to_string(),
+        (true, false) => String::new(),
+        (false, _) => format!(" (the transforms up to `{root_frame}` are fixed mounts)"),
     };
     let why = match vehicle_poses {
         VehiclePoses::Unusable(why) => format!("; {why}"),

@@ -14,9 +14,9 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
 
+pub use super::by_topic::{LidarCalibrations, LidarFrames};
 use super::camera_model::Projection;
 use super::image::image_pixels;
-pub use super::lidar_calibrations::LidarCalibrations;
 use super::log::Log;
 use super::log_index::{CameraSource, LogIndex};
 pub use super::log_index::{DriveOptions, MergedTopics};
@@ -335,7 +335,7 @@ impl RosDrive {
         let unlinked = || Error::LogContainer {
             path: self.path.clone(),
             problem: format!(
-                "merging clouds: no transform links `{frame}` to the clouds' frame `{}` (the sensors' mounts belong on /tf_static)",
+                "merging clouds: no transform links `{frame}` to the clouds' frame `{}` (the sensors' mounts belong on /tf_static; --lidar-frame TOPIC=FRAME names a sensor's frame when its clouds name another)",
                 self.cloud_frame
             ),
         };
@@ -452,7 +452,7 @@ fn packet_calibration(
     calibrations: &LidarCalibrations,
     packet_topics: usize,
 ) -> Result<PacketCalibration> {
-    let file = calibrations.for_topic(topic);
+    let file = calibrations.for_topic(topic).map(|f| f.as_path());
     PacketCalibration::for_model(model, file).map_err(|problem| {
         // A file given for every packet topic may fit only one of several.
         let shared =

@@ -51,12 +51,12 @@ impl TransformTree {
         edge.samples.push((stamp_ns, pose));
     }
 
-    /// Orders every edge's samples by stamp.
     /// Every frame that has a parent.
     pub fn children(&self) -> impl Iterator<Item = &str> + Clone {
         self.edges.keys().map(String::as_str)
     }
 
+    /// Orders every edge's samples by stamp.
     pub fn sort(&mut self) {
         for edge in self.edges.values_mut() {
             edge.samples.sort_by_key(|s| s.0);
