@@ -17,6 +17,10 @@ use super::mcap_records::{RecordWalk, check_lengths, chunk_parts};
 const RELEASE_BYTES: usize = 32 << 20;
 /// Records outside chunks queued at most before they are read (an unchunked file).
 const RECORDS_PER_BATCH: usize = 1024;
+/// Stored (uncompressed) chunks a batch holds at most beside its compressed ones:
+/// they are read in place, but a file of nothing else (rosbag2's MCAP) must not be
+/// walked, its pages read, in one batch.
+const STORED_PER_BATCH: usize = 8;
 const MAGIC: &[u8] = b"\x89MCAP0\r\n";
 
 /// The messages of `file` in file order, linked to their channels.
@@ -96,11 +100,13 @@ impl<'a> Messages<'a> {
             self.released = self.walk.offset;
         }
         // Compressed chunks, and where they wait in the batch; stored ones are read
-        // in place. A stored chunk counts as one of the batch's too, or a file of them
-        // (rosbag2's MCAP) would be walked, its pages read, in one batch.
+        // in place. Stored chunks do not take a compressed one's place: where they
+        // alternate (images beside clouds, as travmap writes them), a batch would
+        // hold one chunk to decompress, and decompress them one at a time.
         let (mut chunks, mut waiting, mut stored_chunks) = (Vec::new(), Vec::new(), 0);
         while !self.walked
-            && chunks.len() + stored_chunks < self.threads
+            && chunks.len() < self.threads
+            && stored_chunks < STORED_PER_BATCH
             && self.batch.len() < RECORDS_PER_BATCH
         {
             match self.walk.next() {
@@ -399,6 +405,62 @@ mod tests {
             let one = read(&file, 1);
             assert_eq!(one, (0..100).map(Ok).collect::<Vec<_>>());
             assert_eq!(read(&file, 3), one);
+        }
+    }
+
+    /// The records of `file` as (opcode, whole record), in file order.
+    fn records(file: &[u8]) -> Vec<(u8, &[u8])> {
+        let walk = RecordWalk {
+            bytes: file,
+            offset: MAGIC.len(),
+        };
+        (walk.map(Result::unwrap))
+            .map(|(offset, opcode, body)| (opcode, &file[offset..offset + 9 + body.len()]))
+            .collect()
+    }
+
+    #[test]
+    fn stored_chunks_between_compressed_ones_leave_a_batch_its_compressed_chunks() {
+        // Every other chunk stored, as travmap writes images beside clouds: the
+        // same chunk boundaries in both files, so the messages stay in order.
+        let compressed = chunked_file(100, Some(mcap::Compression::Zstd));
+        let stored = chunked_file(100, None);
+        let chunks_of = |file| -> Vec<&[u8]> {
+            (records(file).into_iter())
+                .filter(|(opcode, _)| *opcode == op::CHUNK)
+                .map(|(_, record)| record)
+                .collect()
+        };
+        let stored_chunks = chunks_of(&stored);
+        let mut file = MAGIC.to_vec();
+        let mut at = 0;
+        for (opcode, record) in records(&compressed) {
+            match (opcode, at % 2) {
+                (op::CHUNK, 1) => file.extend_from_slice(stored_chunks[at]),
+                _ => file.extend_from_slice(record),
+            }
+            at += usize::from(opcode == op::CHUNK);
+        }
+        file.extend_from_slice(MAGIC);
+        assert!(at > 10, "{at}");
+        let one = read(&file, 1);
+        assert_eq!(one, (0..100).map(Ok).collect::<Vec<_>>());
+        for threads in [2, 3] {
+            assert_eq!(read(&file, threads), one);
+            let mut messages = Messages::new(&file, None, threads, None);
+            messages.fill();
+            let decompressed = (messages.batch.iter())
+                .filter(|p| {
+                    matches!(
+                        p,
+                        Pending::Chunk {
+                            records: Ok(Cow::Owned(_)),
+                            ..
+                        }
+                    )
+                })
+                .count();
+            assert_eq!(decompressed, threads);
         }
     }
 
