@@ -15,12 +15,13 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use super::bag_messages::BagMessages;
 use super::format::BAG_MAGIC;
-use super::log_message::{ChunkSpan, Connection, Damage, FileMap, LogMessage};
+use super::log_message::{Connection, FileMap, Parts};
 use crate::error::{Error, Result};
 
 /// Record opcodes (the `op` header field).
-mod op {
+pub(super) mod op {
     pub const MESSAGE_DATA: u8 = 0x02;
     pub const BAG_HEADER: u8 = 0x03;
     pub const CHUNK: u8 = 0x05;
@@ -35,17 +36,17 @@ const LARGEST_CHUNK: usize = 1 << 30;
 type Field<'a> = (&'a [u8], &'a [u8]);
 
 /// One record: its header fields and data, and where it starts in the file.
-struct Record<'a> {
-    offset: usize,
+pub(super) struct Record<'a> {
+    pub(super) offset: usize,
     fields: Vec<Field<'a>>,
-    data: &'a [u8],
+    pub(super) data: &'a [u8],
     /// Where the next record starts.
-    end: usize,
+    pub(super) end: usize,
 }
 
 impl<'a> Record<'a> {
     /// The record at `offset` of `bytes`, checked against their length.
-    fn at(bytes: &'a [u8], offset: usize) -> std::result::Result<Self, String> {
+    pub(super) fn at(bytes: &'a [u8], offset: usize) -> std::result::Result<Self, String> {
         let mut at = offset;
         let mut take = |what: &str| -> std::result::Result<&'a [u8], String> {
             let length = read_u32(bytes, at).ok_or_else(|| {
@@ -89,7 +90,7 @@ impl<'a> Record<'a> {
             })
     }
 
-    fn op(&self) -> std::result::Result<u8, String> {
+    pub(super) fn op(&self) -> std::result::Result<u8, String> {
         match self.field("op")? {
             [op] => Ok(*op),
             other => Err(format!(
@@ -112,11 +113,11 @@ impl<'a> Record<'a> {
         })
     }
 
-    fn u32(&self, name: &str) -> std::result::Result<u32, String> {
+    pub(super) fn u32(&self, name: &str) -> std::result::Result<u32, String> {
         self.bytes(name).map(u32::from_le_bytes)
     }
 
-    fn u64(&self, name: &str) -> std::result::Result<u64, String> {
+    pub(super) fn u64(&self, name: &str) -> std::result::Result<u64, String> {
         self.bytes(name).map(u64::from_le_bytes)
     }
 
@@ -158,7 +159,7 @@ fn header_fields(mut header: &[u8]) -> std::result::Result<Vec<Field<'_>>, Strin
 }
 
 /// A connection record: `conn` and `topic` in its header, the rest in its data.
-fn connection(record: &Record) -> std::result::Result<(u32, Connection), String> {
+pub(super) fn connection(record: &Record) -> std::result::Result<(u32, Connection), String> {
     let id = record.u32("conn")?;
     let details = Record {
         offset: record.offset,
@@ -314,20 +315,23 @@ impl BagFile {
         Ok(())
     }
 
-    /// Every message in file order.
-    pub fn messages(&self) -> BagMessages<'_> {
-        BagMessages {
-            bag: self,
-            connections: self.connections.clone(),
-            next_chunk: 0,
-            chunk: Vec::new(),
-            at: 0,
-            failed: false,
-        }
+    /// Every message in file order, of each the [`Part`] `parts` says (all of it
+    /// when None); up to `threads` chunks decompressed at once.
+    pub fn messages<'a>(&'a self, threads: usize, parts: Option<Parts<'a>>) -> BagMessages<'a> {
+        BagMessages::new(self, self.connections.clone(), threads, parts)
+    }
+
+    /// Where each chunk starts, and its messages' log times when the index says.
+    pub(super) fn chunks(&self) -> &[(usize, Option<(u64, u64)>)] {
+        &self.chunks
     }
 
     /// The records of the chunk at `offset`, decompressed into `out`.
-    fn chunk(&self, offset: usize, out: &mut Vec<u8>) -> std::result::Result<(), String> {
+    pub(super) fn chunk(
+        &self,
+        offset: usize,
+        out: &mut Vec<u8>,
+    ) -> std::result::Result<(), String> {
         let record = Record::at(self.map.as_ref(), offset)?;
         if record.op()? != op::CHUNK {
             return Err(format!("the record at byte {offset} is not a chunk"));
@@ -372,113 +376,15 @@ impl BagFile {
     }
 }
 
-/// The messages of a bag, streamed chunk by chunk: see [`BagFile::messages`].
-pub struct BagMessages<'a> {
-    bag: &'a BagFile,
-    connections: HashMap<u32, Arc<Connection>>,
-    next_chunk: usize,
-    /// The current chunk's records and where the next one starts.
-    chunk: Vec<u8>,
-    at: usize,
-    failed: bool,
-}
-
-impl BagMessages<'_> {
-    /// A chunk's damage: with its log times from the index, the rest of the chunk
-    /// is lost and reading goes on after it; without, it is the end.
-    fn damage(&mut self, problem: String) -> Damage {
-        let (offset, times) = self.bag.chunks[self.next_chunk - 1];
-        self.chunk.clear();
-        Damage {
-            problem,
-            chunk: times.map(|(start_ns, end_ns)| ChunkSpan {
-                bytes: offset..offset,
-                start_ns,
-                end_ns,
-            }),
-        }
-    }
-
-    fn next_message(&mut self) -> Option<std::result::Result<LogMessage, Damage>> {
-        self.next_in_chunk()
-            .map(|message| message.map_err(|problem| self.damage(problem)))
-    }
-
-    fn next_in_chunk(&mut self) -> Option<std::result::Result<LogMessage, String>> {
-        loop {
-            if self.at >= self.chunk.len() {
-                let (offset, _) = *self.bag.chunks.get(self.next_chunk)?;
-                self.next_chunk += 1;
-                self.at = 0;
-                if let Err(problem) = self.bag.chunk(offset, &mut self.chunk) {
-                    return Some(Err(problem));
-                }
-                continue;
-            }
-            let (chunk_offset, _) = self.bag.chunks[self.next_chunk - 1];
-            let in_chunk =
-                |problem: String| format!("in the chunk at byte {chunk_offset}, {problem}");
-            let record = match Record::at(&self.chunk, self.at) {
-                Ok(record) => record,
-                Err(problem) => return Some(Err(in_chunk(problem))),
-            };
-            self.at = record.end;
-            match record.op() {
-                Ok(op::CONNECTION) => match connection(&record) {
-                    Ok((id, connection)) => {
-                        self.connections
-                            .entry(id)
-                            .or_insert_with(|| Arc::new(connection));
-                    }
-                    Err(problem) => return Some(Err(in_chunk(problem))),
-                },
-                Ok(op::MESSAGE_DATA) => return Some(self.message(&record).map_err(in_chunk)),
-                Ok(_) => {}
-                Err(problem) => return Some(Err(in_chunk(problem))),
-            }
-        }
-    }
-
-    fn message(&self, record: &Record) -> std::result::Result<LogMessage, String> {
-        let id = record.u32("conn")?;
-        let connection = self.connections.get(&id).ok_or_else(|| {
-            format!(
-                "the message at byte {} is on connection {id}, which no connection record defines",
-                record.offset
-            )
-        })?;
-        let stamp_ns = stamp_ns(record.u64("time")?);
-        Ok(LogMessage {
-            connection: connection.clone(),
-            log_time_ns: stamp_ns,
-            publish_time_ns: stamp_ns,
-            data: record.data.to_vec(),
-        })
-    }
-}
-
 /// A bag's `time` (uint32 seconds, then uint32 nanoseconds) in nanoseconds.
-fn stamp_ns(time: u64) -> u64 {
+pub(super) fn stamp_ns(time: u64) -> u64 {
     (time & 0xffff_ffff) * 1_000_000_000 + (time >> 32)
-}
-
-impl Iterator for BagMessages<'_> {
-    type Item = std::result::Result<LogMessage, Damage>;
-
-    /// Nothing after the first error but a damaged chunk's (see [`Damage`]).
-    fn next(&mut self) -> Option<Self::Item> {
-        if self.failed {
-            return None;
-        }
-        let next = self.next_message();
-        self.failed = matches!(next, Some(Err(Damage { chunk: None, .. })));
-        next
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::log_message::Part;
 
     fn field(name: &str, value: &[u8]) -> Vec<u8> {
         let mut out = ((name.len() + 1 + value.len()) as u32)
@@ -501,6 +407,12 @@ mod tests {
 
     /// A bag of one chunk holding one connection and one message, without an index.
     fn unindexed_bag(message: &[u8]) -> Vec<u8> {
+        unindexed_bag_of(&[message])
+    }
+
+    /// A bag without an index: a chunk per message, each holding the connection
+    /// and its message.
+    fn unindexed_bag_of(messages: &[&[u8]]) -> Vec<u8> {
         let connection = record(
             &[
                 field("op", &[op::CONNECTION]),
@@ -517,23 +429,25 @@ mod tests {
         );
         // uint32 seconds (7), then uint32 nanoseconds (5).
         let time = (5u64 << 32) | 7;
-        let message = record(
-            &[
-                field("op", &[op::MESSAGE_DATA]),
-                field("conn", &0u32.to_le_bytes()),
-                field("time", &time.to_le_bytes()),
-            ],
-            message,
-        );
-        let records = [connection, message].concat();
-        let chunk = record(
-            &[
-                field("op", &[op::CHUNK]),
-                field("compression", b"none"),
-                field("size", &(records.len() as u32).to_le_bytes()),
-            ],
-            &records,
-        );
+        let chunk = |message: &[u8]| {
+            let message = record(
+                &[
+                    field("op", &[op::MESSAGE_DATA]),
+                    field("conn", &0u32.to_le_bytes()),
+                    field("time", &time.to_le_bytes()),
+                ],
+                message,
+            );
+            let records = [connection.clone(), message].concat();
+            record(
+                &[
+                    field("op", &[op::CHUNK]),
+                    field("compression", b"none"),
+                    field("size", &(records.len() as u32).to_le_bytes()),
+                ],
+                &records,
+            )
+        };
         let header = record(
             &[
                 field("op", &[op::BAG_HEADER]),
@@ -543,7 +457,12 @@ mod tests {
             ],
             &[],
         );
-        [BAG_MAGIC.to_vec(), header, chunk].concat()
+        let chunks = messages.iter().map(|message| chunk(message));
+        [BAG_MAGIC.to_vec(), header]
+            .into_iter()
+            .chain(chunks)
+            .collect::<Vec<_>>()
+            .concat()
     }
 
     fn open(bytes: &[u8]) -> Result<BagFile> {
@@ -559,7 +478,7 @@ mod tests {
         let bag = open(&unindexed_bag(payload)).unwrap();
         assert!(bag.notice().unwrap().contains("no index"));
         let messages: Vec<_> = bag
-            .messages()
+            .messages(1, None)
             .collect::<std::result::Result<_, _>>()
             .unwrap();
         assert_eq!(messages.len(), 1);
@@ -575,7 +494,7 @@ mod tests {
         for cut in 0..bytes.len() {
             if let Ok(bag) = open(&bytes[..cut]) {
                 assert!(bag.notice().is_some());
-                bag.messages().for_each(drop);
+                bag.messages(1, None).for_each(drop);
             }
         }
     }
@@ -590,7 +509,51 @@ mod tests {
             + 5;
         bytes[size_at] += 1;
         let bag = open(&bytes).unwrap();
-        let err = bag.messages().next().unwrap().unwrap_err().problem;
+        let err = bag.messages(1, None).next().unwrap().unwrap_err().problem;
         assert!(err.contains("decompresses to") && err.contains("claims"));
+    }
+
+    #[test]
+    fn chunks_decompressed_side_by_side_read_as_one_at_a_time() {
+        let payloads: Vec<Vec<u8>> = (0..7u8)
+            .map(|i| [&[3, 0, 0, 0][..], &[b'a' + i; 3]].concat())
+            .collect();
+        let payloads: Vec<&[u8]> = payloads.iter().map(Vec::as_slice).collect();
+        let mut bytes = unindexed_bag_of(&payloads);
+        let bag = open(&bytes).unwrap();
+        let read = |bag: &BagFile, threads, parts| -> Vec<std::result::Result<Vec<u8>, String>> {
+            (bag.messages(threads, parts))
+                .map(|m| m.map(|m| m.data).map_err(|damage| damage.problem))
+                .collect()
+        };
+        let one = read(&bag, 1, None);
+        assert_eq!(
+            one,
+            payloads.iter().map(|p| Ok(p.to_vec())).collect::<Vec<_>>()
+        );
+        for threads in [2, 3] {
+            assert_eq!(read(&bag, threads, None), one);
+        }
+        let nothing: Parts = Arc::new(|_: &str, _: &str| Part::Nothing);
+        let read_nothing = read(&bag, 2, Some(nothing));
+        assert_eq!(read_nothing, vec![Ok(Vec::new()); payloads.len()]);
+        // The fifth chunk lies about its size: the same four messages, then its
+        // error, then nothing (an unindexed bag has no times to step over it by).
+        let size_at = (bytes.windows(5))
+            .enumerate()
+            .filter(|(_, w)| w == b"size=")
+            .nth(4)
+            .expect("a fifth chunk")
+            .0
+            + 5;
+        bytes[size_at] += 1;
+        let bag = open(&bytes).unwrap();
+        let one = read(&bag, 1, None);
+        assert_eq!(one.len(), 5);
+        assert!(one[..4].iter().all(Result::is_ok));
+        assert!(one[4].as_ref().unwrap_err().contains("claims"));
+        for threads in [2, 3] {
+            assert_eq!(read(&bag, threads, None), one);
+        }
     }
 }

@@ -57,7 +57,7 @@ impl LogFile {
     ) -> Box<dyn Iterator<Item = std::result::Result<LogMessage, Damage>> + 'a> {
         match self {
             LogFile::Mcap(file) => Box::new(file.messages(threads, parts)),
-            LogFile::Bag(file) => Box::new(file.messages()),
+            LogFile::Bag(file) => Box::new(file.messages(threads, parts)),
             LogFile::Sqlite(file) => Box::new(file.messages(parts).map(whole_file_damage)),
             LogFile::Pcap(file) => Box::new(file.messages()),
         }

@@ -65,6 +65,35 @@ pub type Parts<'a> = Arc<dyn Fn(&str, &str) -> Part + Send + Sync + 'a>;
 /// What a [`Part::Header`] message keeps of its bytes: more than any header needs.
 pub const HEADER_BYTES: usize = 64 * 1024;
 
+/// The bytes of a message's `data` that `part` asks for.
+pub fn part_of(data: &[u8], part: Part) -> Vec<u8> {
+    match part {
+        Part::Whole => data.to_vec(),
+        Part::Header => data[..data.len().min(HEADER_BYTES)].to_vec(),
+        Part::Nothing => Vec::new(),
+    }
+}
+
+/// `f` of every item, in order, each on its own scoped thread (the first on this
+/// one): not the rayon pool, which the method's frames may be keeping busy.
+pub fn in_parallel<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync) -> Vec<R> {
+    let mut items = items.into_iter();
+    let Some(first) = items.next() else {
+        return Vec::new();
+    };
+    std::thread::scope(|scope| {
+        let f = &f;
+        let others: Vec<_> = items.map(|item| scope.spawn(move || f(item))).collect();
+        let mut results = vec![f(first)];
+        results.extend(
+            others
+                .into_iter()
+                .map(|other| other.join().expect("a decompressing thread panicked")),
+        );
+        results
+    })
+}
+
 /// One recorded message, undecoded.
 #[derive(Debug)]
 pub struct LogMessage {

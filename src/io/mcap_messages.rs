@@ -10,7 +10,7 @@ use std::io::Read;
 use mcap::records::{Record, op};
 use mcap::{McapError, Message};
 
-use super::log_message::{ChunkSpan, Damage, FileMap, HEADER_BYTES, Part, Parts};
+use super::log_message::{ChunkSpan, Damage, FileMap, Part, Parts, in_parallel, part_of};
 use super::mcap_records::{RecordWalk, check_lengths, chunk_parts};
 
 /// Bytes a pass reads before it gives the pages behind it back.
@@ -261,8 +261,7 @@ impl<'a> Messages<'a> {
                     .map(|parts| parts(&channel.topic, schema))
                 {
                     None | Some(Part::Whole) => data.into_owned(),
-                    Some(Part::Header) => data[..data.len().min(HEADER_BYTES)].to_vec(),
-                    Some(Part::Nothing) => Vec::new(),
+                    Some(part) => part_of(&data, part),
                 };
                 return Ok(Some(Message {
                     channel,
@@ -330,26 +329,6 @@ fn chunk_records(body: &[u8], mut buffer: Vec<u8>) -> Result<Cow<'_, [u8]>, (Str
     Err((problem, buffer))
 }
 
-/// `f` of every item, in order, each on its own scoped thread (the first on this
-/// one): not the rayon pool, which the method's frames may be keeping busy.
-fn in_parallel<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync) -> Vec<R> {
-    let mut items = items.into_iter();
-    let Some(first) = items.next() else {
-        return Vec::new();
-    };
-    std::thread::scope(|scope| {
-        let f = &f;
-        let others: Vec<_> = items.map(|item| scope.spawn(move || f(item))).collect();
-        let mut results = vec![f(first)];
-        results.extend(
-            others
-                .into_iter()
-                .map(|other| other.join().expect("a decompressing thread panicked")),
-        );
-        results
-    })
-}
-
 impl Iterator for Messages<'_> {
     type Item = Result<Message<'static>, Damage>;
 
@@ -368,6 +347,7 @@ impl Iterator for Messages<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::log_message::HEADER_BYTES;
     use crate::io::mcap_records::blob_file;
 
     /// An MCAP of `n` messages (payload: their index, 4 KiB of it) in chunks of

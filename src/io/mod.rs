@@ -6,6 +6,7 @@
 //! Nothing here knows the method.
 
 pub mod bag;
+pub mod bag_messages;
 mod bucket_store;
 pub mod by_topic;
 mod camera_model;
