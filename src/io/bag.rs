@@ -15,9 +15,8 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use super::bag_messages::BagMessages;
 use super::format::BAG_MAGIC;
-use super::log_message::{Connection, FileMap, Parts};
+use super::log_message::{Connection, FileMap};
 use crate::error::{Error, Result};
 
 /// Record opcodes (the `op` header field).
@@ -315,10 +314,9 @@ impl BagFile {
         Ok(())
     }
 
-    /// Every message in file order, of each the [`Part`] `parts` says (all of it
-    /// when None); up to `threads` chunks decompressed at once.
-    pub fn messages<'a>(&'a self, threads: usize, parts: Option<Parts<'a>>) -> BagMessages<'a> {
-        BagMessages::new(self, self.connections.clone(), threads, parts)
+    /// The connections the index lists (an unindexed bag's come with its chunks).
+    pub(super) fn connections(&self) -> &HashMap<u32, Arc<Connection>> {
+        &self.connections
     }
 
     /// Where each chunk starts, and its messages' log times when the index says.
@@ -379,181 +377,4 @@ impl BagFile {
 /// A bag's `time` (uint32 seconds, then uint32 nanoseconds) in nanoseconds.
 pub(super) fn stamp_ns(time: u64) -> u64 {
     (time & 0xffff_ffff) * 1_000_000_000 + (time >> 32)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::io::log_message::Part;
-
-    fn field(name: &str, value: &[u8]) -> Vec<u8> {
-        let mut out = ((name.len() + 1 + value.len()) as u32)
-            .to_le_bytes()
-            .to_vec();
-        out.extend_from_slice(name.as_bytes());
-        out.push(b'=');
-        out.extend_from_slice(value);
-        out
-    }
-
-    fn record(fields: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
-        let header: Vec<u8> = fields.concat();
-        let mut out = (header.len() as u32).to_le_bytes().to_vec();
-        out.extend_from_slice(&header);
-        out.extend_from_slice(&(data.len() as u32).to_le_bytes());
-        out.extend_from_slice(data);
-        out
-    }
-
-    /// A bag of one chunk holding one connection and one message, without an index.
-    fn unindexed_bag(message: &[u8]) -> Vec<u8> {
-        unindexed_bag_of(&[message])
-    }
-
-    /// A bag without an index: a chunk per message, each holding the connection
-    /// and its message.
-    fn unindexed_bag_of(messages: &[&[u8]]) -> Vec<u8> {
-        let connection = record(
-            &[
-                field("op", &[op::CONNECTION]),
-                field("conn", &0u32.to_le_bytes()),
-                field("topic", b"/chatter"),
-            ],
-            &[
-                field("topic", b"/chatter"),
-                field("type", b"std_msgs/String"),
-                field("md5sum", b"992ce8a1687cec8c8bd883ec73ca41d1"),
-                field("message_definition", b"string data\n"),
-            ]
-            .concat(),
-        );
-        // uint32 seconds (7), then uint32 nanoseconds (5).
-        let time = (5u64 << 32) | 7;
-        let chunk = |message: &[u8]| {
-            let message = record(
-                &[
-                    field("op", &[op::MESSAGE_DATA]),
-                    field("conn", &0u32.to_le_bytes()),
-                    field("time", &time.to_le_bytes()),
-                ],
-                message,
-            );
-            let records = [connection.clone(), message].concat();
-            record(
-                &[
-                    field("op", &[op::CHUNK]),
-                    field("compression", b"none"),
-                    field("size", &(records.len() as u32).to_le_bytes()),
-                ],
-                &records,
-            )
-        };
-        let header = record(
-            &[
-                field("op", &[op::BAG_HEADER]),
-                field("index_pos", &0u64.to_le_bytes()),
-                field("conn_count", &0u32.to_le_bytes()),
-                field("chunk_count", &0u32.to_le_bytes()),
-            ],
-            &[],
-        );
-        let chunks = messages.iter().map(|message| chunk(message));
-        [BAG_MAGIC.to_vec(), header]
-            .into_iter()
-            .chain(chunks)
-            .collect::<Vec<_>>()
-            .concat()
-    }
-
-    fn open(bytes: &[u8]) -> Result<BagFile> {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("x.bag");
-        std::fs::write(&path, bytes).unwrap();
-        BagFile::open(&path)
-    }
-
-    #[test]
-    fn an_unindexed_bag_is_scanned_and_says_so() {
-        let payload = b"\x02\0\0\0hi";
-        let bag = open(&unindexed_bag(payload)).unwrap();
-        assert!(bag.notice().unwrap().contains("no index"));
-        let messages: Vec<_> = bag
-            .messages(1, None)
-            .collect::<std::result::Result<_, _>>()
-            .unwrap();
-        assert_eq!(messages.len(), 1);
-        assert_eq!(messages[0].connection.topic, "/chatter");
-        assert_eq!(messages[0].connection.type_name(), "std_msgs/msg/String");
-        assert_eq!(messages[0].log_time_ns, 7_000_000_005);
-        assert_eq!(messages[0].data, payload);
-    }
-
-    #[test]
-    fn every_cut_of_a_bag_is_an_error_or_a_notice_never_a_panic() {
-        let bytes = unindexed_bag(b"\x02\0\0\0hi");
-        for cut in 0..bytes.len() {
-            if let Ok(bag) = open(&bytes[..cut]) {
-                assert!(bag.notice().is_some());
-                bag.messages(1, None).for_each(drop);
-            }
-        }
-    }
-
-    #[test]
-    fn a_chunk_that_lies_about_its_size_is_refused() {
-        let mut bytes = unindexed_bag(b"\x02\0\0\0hi");
-        let size_at = bytes
-            .windows(5)
-            .position(|w| w == b"size=")
-            .expect("the chunk's size field")
-            + 5;
-        bytes[size_at] += 1;
-        let bag = open(&bytes).unwrap();
-        let err = bag.messages(1, None).next().unwrap().unwrap_err().problem;
-        assert!(err.contains("decompresses to") && err.contains("claims"));
-    }
-
-    #[test]
-    fn chunks_decompressed_side_by_side_read_as_one_at_a_time() {
-        let payloads: Vec<Vec<u8>> = (0..7u8)
-            .map(|i| [&[3, 0, 0, 0][..], &[b'a' + i; 3]].concat())
-            .collect();
-        let payloads: Vec<&[u8]> = payloads.iter().map(Vec::as_slice).collect();
-        let mut bytes = unindexed_bag_of(&payloads);
-        let bag = open(&bytes).unwrap();
-        let read = |bag: &BagFile, threads, parts| -> Vec<std::result::Result<Vec<u8>, String>> {
-            (bag.messages(threads, parts))
-                .map(|m| m.map(|m| m.data).map_err(|damage| damage.problem))
-                .collect()
-        };
-        let one = read(&bag, 1, None);
-        assert_eq!(
-            one,
-            payloads.iter().map(|p| Ok(p.to_vec())).collect::<Vec<_>>()
-        );
-        for threads in [2, 3] {
-            assert_eq!(read(&bag, threads, None), one);
-        }
-        let nothing: Parts = Arc::new(|_: &str, _: &str| Part::Nothing);
-        let read_nothing = read(&bag, 2, Some(nothing));
-        assert_eq!(read_nothing, vec![Ok(Vec::new()); payloads.len()]);
-        // The fifth chunk lies about its size: the same four messages, then its
-        // error, then nothing (an unindexed bag has no times to step over it by).
-        let size_at = (bytes.windows(5))
-            .enumerate()
-            .filter(|(_, w)| w == b"size=")
-            .nth(4)
-            .expect("a fifth chunk")
-            .0
-            + 5;
-        bytes[size_at] += 1;
-        let bag = open(&bytes).unwrap();
-        let one = read(&bag, 1, None);
-        assert_eq!(one.len(), 5);
-        assert!(one[..4].iter().all(Result::is_ok));
-        assert!(one[4].as_ref().unwrap_err().contains("claims"));
-        for threads in [2, 3] {
-            assert_eq!(read(&bag, threads, None), one);
-        }
-    }
 }

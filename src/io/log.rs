@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use super::bag::BagFile;
+use super::bag_messages::BagMessages;
 use super::format::InputFormat;
 use super::foxglove;
 use super::log_message::HEADER_BYTES;
@@ -57,7 +58,7 @@ impl LogFile {
     ) -> Box<dyn Iterator<Item = std::result::Result<LogMessage, Damage>> + 'a> {
         match self {
             LogFile::Mcap(file) => Box::new(file.messages(threads, parts)),
-            LogFile::Bag(file) => Box::new(file.messages(threads, parts)),
+            LogFile::Bag(file) => Box::new(BagMessages::new(file, threads, parts)),
             LogFile::Sqlite(file) => Box::new(file.messages(parts).map(whole_file_damage)),
             LogFile::Pcap(file) => Box::new(file.messages()),
         }
