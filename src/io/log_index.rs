@@ -481,7 +481,9 @@ impl LogIndex {
         let recorded =
             (std::iter::once(&mut cloud_frame)).chain(merged.iter_mut().map(|m| &mut m.frame));
         for (frame, given) in recorded.zip(frames) {
-            *frame = given.unwrap_or(std::mem::take(frame));
+            if let Some(given) = given {
+                *frame = given;
+            }
         }
         if matches!(options.poses, PoseSource::Auto | PoseSource::Odometry) {
             let named = options.pose_topic.as_deref();
