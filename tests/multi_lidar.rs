@@ -185,9 +185,7 @@ fn lidar_frame_places_clouds_that_name_no_frame() {
     write_two_sensor_log(&seq, &named, ["velodyne", "rear"]);
     write_two_sensor_log(&seq, &unnamed, ["", "laser"]);
     let run = |log: &Path, more: &[&str]| {
-        let mut args = vec!["run", arg(log), "--cloud-topic", "all", "--json"];
-        args.extend(more);
-        travmap(&args)
+        travmap(&[&["run", arg(log), "--cloud-topic", "all", "--json"], more].concat())
     };
     let cells = |output| -> Vec<serde_json::Value> {
         let (records, _) = json_records(&success(output));
@@ -213,9 +211,9 @@ fn lidar_frame_places_clouds_that_name_no_frame() {
     assert_eq!(cells(run(&named, &each)), expected);
     // The errors (without --json: said on stderr).
     let fail = |log: &Path, more: &[&str]| {
-        let mut args = vec!["run", arg(log), "--cloud-topic", "all"];
-        args.extend(more);
-        clean_failure(travmap(&args))
+        clean_failure(travmap(
+            &[&["run", arg(log), "--cloud-topic", "all"], more].concat(),
+        ))
     };
     // One frame for two sensors would merge them as if mounted in one place.
     assert_contains(

@@ -65,20 +65,6 @@ impl<V: Clone> ByTopic<V> {
             .map(|(_, value)| value)
             .or(self.any_topic.as_ref())
     }
-
-    /// The value for each of `topics` (the LiDAR topics read), in order: an error
-    /// when a topic named is not among them.
-    pub fn for_topics(&self, topics: &[&str], flag: &str) -> Result<Vec<Option<V>>, String> {
-        if let Some((topic, _)) =
-            (self.by_topic.iter()).find(|(t, _)| !topics.contains(&t.as_str()))
-        {
-            return Err(format!(
-                "{flag} {topic}=...: {topic} is not a LiDAR topic being read (those are {}; --cloud-topic chooses them)",
-                topics.join(", ")
-            ));
-        }
-        Ok(topics.iter().map(|t| self.for_topic(t).cloned()).collect())
-    }
 }
 
 impl LidarCalibrations {
@@ -102,11 +88,20 @@ impl LidarFrames {
         }
     }
 
-    /// The frame given for each of `topics` (the LiDAR topics read, in order). A
-    /// FRAME alone may place one of them only: two sensors in one frame would be
+    /// The frame given for each of `topics` (the LiDAR topics read, in order); an
+    /// error when a topic named is not among them. A FRAME alone may place one of
+    /// them only: two sensors in one frame would be
     /// merged as if mounted in one place.
     pub fn frames_for(&self, topics: &[&str]) -> Result<Vec<Option<String>>, String> {
-        let frames = self.for_topics(topics, "--lidar-frame")?;
+        if let Some((topic, _)) =
+            (self.by_topic.iter()).find(|(t, _)| !topics.contains(&t.as_str()))
+        {
+            return Err(format!(
+                "--lidar-frame {topic}=...: {topic} is not a LiDAR topic being read (those are {}; --cloud-topic chooses them)",
+                topics.join(", ")
+            ));
+        }
+        let frames = topics.iter().map(|t| self.for_topic(t).cloned()).collect();
         let own = |topic: &&str| self.by_topic.iter().any(|(t, _)| t == topic);
         let shared: Vec<&str> = topics.iter().filter(|t| !own(t)).copied().collect();
         match (&self.any_topic, shared.as_slice()) {
