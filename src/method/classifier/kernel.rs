@@ -120,11 +120,15 @@ fn dot_products<const G: usize, const FUSED: bool>(
     z: &[f32],
 ) -> [[f32; LANES]; G] {
     let d = blocks.dimension;
-    let rows = &blocks.values[first * d..(first + G) * d];
+    // Each block's rows sliced to the length of `z` once: indexed by position in
+    // `z`, they need no bounds check in the loop, which had one per block and term.
+    let z = &z[..d.min(z.len())];
+    let rows: [&[[f32; LANES]]; G] =
+        std::array::from_fn(|g| &blocks.values[(first + g) * d..][..z.len()]);
     let mut dots = [[0f32; LANES]; G];
-    for (k, &zk) in z.iter().take(d).enumerate() {
-        for (g, dot) in dots.iter_mut().enumerate() {
-            let row = &rows[g * d + k];
+    for (k, &zk) in z.iter().enumerate() {
+        for (dot, rows) in dots.iter_mut().zip(&rows) {
+            let row = &rows[k];
             for l in 0..LANES {
                 dot[l] = multiply_add::<FUSED>(zk, row[l], dot[l]);
             }
