@@ -120,8 +120,8 @@ fn dot_products<const G: usize, const FUSED: bool>(
     z: &[f32],
 ) -> [[f32; LANES]; G] {
     let d = blocks.dimension;
-    // Each block's rows sliced to the length of `z` once: indexed by position in
-    // `z`, they need no bounds check in the loop, which had one per block and term.
+    // Each block's rows sliced to the length of `z` once, so that indexing them by
+    // position in `z` needs no bounds check per block and term in the hot loop.
     let z = &z[..d.min(z.len())];
     let rows: [&[[f32; LANES]]; G] =
         std::array::from_fn(|g| &blocks.values[(first + g) * d..][..z.len()]);
