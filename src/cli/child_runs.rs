@@ -20,13 +20,21 @@ pub(super) struct ChildRun {
 
 /// Runs `executable arguments` on `threads` rayon threads and times it; a child
 /// that fails is an error naming the command, its exit status and the end of its
-/// stderr.
+/// stderr. `output` (the file the child writes) is removed first: a child that
+/// replaced the last run's output would be timed freeing its blocks too (0.1 s of
+/// a 0.65 s `annotate` here, for 160 MB on ext4).
 pub(super) fn run_child(
     executable: &Path,
     arguments: &[OsString],
     threads: usize,
     output: &Path,
 ) -> Result<ChildRun> {
+    match std::fs::remove_file(output) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            return Err(e).with_context(|| format!("cannot remove {}", output.display()));
+        }
+        _ => {}
+    }
     let mut command = Command::new(executable);
     command
         .args(arguments)
@@ -176,7 +184,9 @@ mod tests {
     #[test]
     fn a_failing_tool_is_named_with_its_exit_status_and_last_words() {
         let script = ["-c", "echo first >&2; echo last words >&2; exit 3"].map(OsString::from);
-        let error = run_child(Path::new("/bin/sh"), &script, 1, Path::new("out")).unwrap_err();
+        let dir = tempfile::tempdir().unwrap();
+        let error =
+            run_child(Path::new("/bin/sh"), &script, 1, &dir.path().join("out")).unwrap_err();
         let message = format!("{error:#}");
         for part in [
             "/bin/sh",
@@ -186,5 +196,22 @@ mod tests {
         ] {
             assert!(message.contains(part), "{part:?} not in {message}");
         }
+    }
+
+    /// The last run's output is gone before the next child starts, so that no run
+    /// is timed replacing it.
+    #[cfg(unix)]
+    #[test]
+    fn each_child_starts_without_the_last_output() {
+        let dir = tempfile::tempdir().unwrap();
+        let output = dir.path().join("out");
+        std::fs::write(&output, "the last run's output").unwrap();
+        let arguments: [OsString; 3] = [
+            "-c".into(),
+            "test ! -e \"$0\" && echo new > \"$0\"".into(),
+            output.clone().into(),
+        ];
+        let run = run_child(Path::new("/bin/sh"), &arguments, 1, &output).unwrap();
+        assert_eq!(run.output_bytes, 4);
     }
 }

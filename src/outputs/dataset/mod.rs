@@ -17,7 +17,6 @@
 mod columns;
 pub mod reading;
 
-use std::fs::File;
 use std::io::BufWriter;
 use std::path::Path;
 use std::sync::Arc;
@@ -36,7 +35,9 @@ use crate::error::{Error, Result};
 use crate::method::features::feature_names;
 use crate::method::grid::CellClass;
 use crate::method::pipeline::FrameResult;
-use crate::outputs::atomic::{AtomicFile, parquet_failure, sync_output, write_failure};
+use crate::outputs::atomic::{
+    AtomicFile, WritebackFile, parquet_failure, sync_output, write_failure,
+};
 
 /// Rows per row group: about 18 MB of columns in memory at a time (four frames of
 /// the 36 m training grid). 2^17 rows peaked 55 MB higher on 60 frames; smaller
@@ -104,7 +105,7 @@ fn schema(features: &[String], appearance: &[String], self_labels: bool) -> Stri
 
 /// A cell dataset being written; atomically, like every output.
 pub struct DatasetWriter {
-    writer: SerializedFileWriter<BufWriter<File>>,
+    writer: SerializedFileWriter<BufWriter<WritebackFile>>,
     output: AtomicFile,
     columns: Columns,
     appearance_len: usize,
@@ -145,7 +146,7 @@ impl DatasetWriter {
         let properties = properties.build();
         let (output, file) = AtomicFile::create(path)?;
         let writer = SerializedFileWriter::new(
-            BufWriter::with_capacity(1 << 20, file),
+            BufWriter::with_capacity(1 << 20, WritebackFile::new(file)),
             Arc::new(schema),
             Arc::new(properties),
         )
@@ -261,7 +262,8 @@ impl DatasetWriter {
             .into_inner()
             .map_err(|e| parquet_failure(&path, output, e))?
             .into_inner()
-            .map_err(|e| write_failure(&path, output, Some(e.into_error()), None))?;
+            .map_err(|e| write_failure(&path, output, Some(e.into_error()), None))?
+            .into_inner();
         sync_output(&file).map_err(|source| write_failure(&path, output, Some(source), None))?;
         self.output.commit()?;
         Ok(self.summary)
@@ -290,6 +292,8 @@ fn feature_settings(config: &Config) -> serde_json::Value {
 
 #[cfg(test)]
 mod tests {
+    use std::fs::File;
+
     use super::reading::read_training_rows;
     use super::*;
     use crate::training::TrainingSet;
