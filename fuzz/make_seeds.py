@@ -303,7 +303,7 @@ def main() -> None:
 
     # The embedded model cut to three support vectors and three reduced-set centres:
     # the whole structure, small enough to mutate quickly.
-    model = json.loads(pathlib.Path("src/training/default_model.json").read_text())
+    model = json.loads(pathlib.Path("crates/method/src/classifier/default_model.json").read_text())
 
     def cut(m: dict) -> None:
         m["dual_coefficients"] = m["dual_coefficients"][:3]

@@ -85,7 +85,7 @@ fn main() -> ExitCode {
             if json {
                 let file = error
                     .chain()
-                    .find_map(|e| e.downcast_ref::<travmap::Error>()?.path());
+                    .find_map(|e| e.downcast_ref::<travmap_core::Error>()?.path());
                 cli::print_json_error(&format!("{error:#}"), file, code);
             } else {
                 eprintln!("error: {error:#}");

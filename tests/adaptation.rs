@@ -3,11 +3,9 @@
 //! determinism, the model's record of how it was adapted, labels never read, the
 //! refusals, and the study's default against its targets (README "Adaptation").
 
-mod common;
-
 use std::path::{Path, PathBuf};
 
-use common::{
+use crate::common::{
     arg, assert_contains, clean_failure, json_summary, shared_data, stderr, success, travmap,
     travmap_metadata, write_output,
 };
@@ -76,7 +74,7 @@ fn learnt(model: &Value) -> Value {
 
 #[test]
 fn adapt_is_deterministic_records_its_provenance_and_never_reads_labels() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -126,7 +124,7 @@ fn adapt_is_deterministic_records_its_provenance_and_never_reads_labels() {
 
 #[test]
 fn drives_that_show_too_little_are_refused_with_the_reason() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -169,7 +167,7 @@ fn drives_that_show_too_little_are_refused_with_the_reason() {
 
 #[test]
 fn eval_and_annotate_adapt_in_one_call() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -203,13 +201,13 @@ fn one_scan_gets_a_straight_footprint_with_a_notice() {
             "straight along the sensor's x axis",
         ],
     );
-    let (_, summary) = common::json_records(&success(output));
+    let (_, summary) = crate::common::json_records(&success(output));
     assert_eq!(summary["counts"]["straight_path_frames"], 1);
 }
 
 #[test]
 fn datasets_carry_self_labels_that_train_learns_from() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -221,7 +219,7 @@ fn datasets_carry_self_labels_that_train_learns_from() {
     );
     assert!(footprint > 100 && pseudo > footprint, "{summary}");
     let mut set = TrainingSet::default();
-    let config = travmap::Config::default();
+    let config = travmap_core::Config::default();
     let rows = read_training_rows(&cells, &config, &mut set, Labels::Pseudo).unwrap();
     assert_eq!(rows as u64, pseudo);
     assert!(set.traversable.iter().any(|t| *t) && set.traversable.iter().any(|t| !t));
@@ -272,7 +270,7 @@ fn datasets_carry_self_labels_that_train_learns_from() {
 /// below the embedded model.
 #[test]
 fn the_default_adaptation_meets_the_study_targets() {
-    let Some(seq00) = common::sample() else {
+    let Some(seq00) = crate::common::sample() else {
         return;
     };
     let Some(seq07) = shared_data("semantickitti-07-000964/sequences/07") else {

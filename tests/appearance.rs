@@ -1,14 +1,12 @@
 //! Appearance features: the camera model on a real KITTI frame, and a scene where
 //! only colour separates the classes.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 
-use common::{arg, json_summary, success, travmap};
-use travmap::frame::CameraImage;
-use travmap::io::image::decode_png;
-use travmap::io::kitti::{read_calibration, read_scan};
+use crate::common::{arg, json_summary, success, travmap};
+use travmap_core::frame::CameraImage;
+use travmap_io::kitti::{read_calibration, read_scan};
+use travmap_io::payloads::image::decode_png;
 
 /// The matrix of `key` (3x4, or 3x3 for R0_rect) in a KITTI calib file, parsed by
 /// hand (independent of travmap).
@@ -26,7 +24,7 @@ fn calib_matrix(path: &Path, key: &str) -> Vec<f64> {
 
 #[test]
 fn every_point_of_the_camera_cropped_kitti_scan_lands_in_its_image() {
-    let Some(dir) = common::shared_data("kitti-object-000008/training") else {
+    let Some(dir) = crate::common::shared_data("kitti-object-000008/training") else {
         return;
     };
     let calib_path = dir.join("calib/000008.txt");
@@ -179,13 +177,13 @@ const QUICK: [&str; 4] = [
 
 /// `args` followed by the quick search grid.
 fn quick<'a>(args: &[&'a str]) -> Vec<&'a str> {
-    common::with_settings(args, &QUICK)
+    crate::common::with_settings(args, &QUICK)
 }
 
 /// The colour scene of `frames` frames in `<temporary directory>/seq`: the directory
 /// and the sequence; None without the shared data.
 fn colour_scene(frames: usize) -> Option<(tempfile::TempDir, PathBuf)> {
-    let meta = common::shared_data("kitti-odometry-meta/sequences/03")?;
+    let meta = crate::common::shared_data("kitti-odometry-meta/sequences/03")?;
     let dir = tempfile::tempdir().unwrap();
     let seq = dir.path().join("seq");
     write_colour_scene(&seq, &meta, frames);
@@ -222,7 +220,7 @@ fn colour_separates_what_geometry_cannot() {
     );
     // The same scene as MCAP (PNG images, CameraInfo, /tf_static) gives the same result.
     let drive = dir.path().join("scene.mcap");
-    common::write_output("convert", seq, &drive, &[]);
+    crate::common::write_output("convert", seq, &drive, &[]);
     let from_mcap = eval(arg(&drive));
     assert_eq!(
         from_mcap["report"]["cells_with_appearance"],
@@ -261,7 +259,7 @@ fn colour_separates_what_geometry_cannot() {
 
 #[test]
 fn a_cell_keeps_its_colour_five_frames_later_after_the_grid_moved() {
-    use travmap::method::pipeline::Pipeline;
+    use travmap_method::pipeline::Pipeline;
     let Some((_dir, seq)) = colour_scene(6) else {
         return;
     };
@@ -269,10 +267,10 @@ fn a_cell_keeps_its_colour_five_frames_later_after_the_grid_moved() {
     for i in 1..6 {
         std::fs::remove_file(seq.join(format!("image_2/{i:06}.png"))).unwrap();
     }
-    let mut config = travmap::Config::default();
+    let mut config = travmap_core::Config::default();
     config.grid.size_m = 24.0;
-    let sequence = travmap::io::KittiSequence::open(&seq).unwrap();
-    let mut pipeline = Pipeline::new(&config, travmap::posing::Posing::Recorded).unwrap();
+    let sequence = travmap_io::KittiSequence::open(&seq).unwrap();
+    let mut pipeline = Pipeline::new(&config, travmap_core::posing::Posing::Recorded).unwrap();
     let results: Vec<_> = (0..6)
         .map(|i| {
             let frame = sequence.read_frame(i).unwrap();

@@ -1,30 +1,78 @@
-//! The house rules of ARCHITECTURE.md, checked on the source text: no import circle
-//! between files, `error.rs` a leaf, each layer importing only what it may, no
-//! source file of 600 lines or more.
+//! The house rules of ARCHITECTURE.md that crate boundaries cannot express,
+//! checked on the source text: no import circle between the files of a crate,
+//! `error.rs` a leaf, the method free of file access, each crate depending only on
+//! the crates below it (so that no `Cargo.toml` edit quietly adds an arrow up), and no
+//! source folder of more than 25 files. That the method cannot import a reader is
+//! the compiler's to keep: `travmap-method` does not depend on `travmap-io`.
 //!
-//! Imports are read from the text: `crate::`, `super::`, `self::` and `travmap::`
-//! paths (`use` lists included) and paths through a module the file declares; tests
-//! (`#[cfg(test)] mod tests`) are left out. A path is a dependency on the longest
-//! module it names.
+//! Imports are read from the text: `crate::`, `super::` and `self::` paths (`use`
+//! lists included) and paths through a module the file declares; tests (`#[cfg(test)]
+//! mod tests`) are left out. A path is a dependency on the longest module it names.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-/// Lines a source file must stay under.
-const MAX_LINES: usize = 600;
+/// `.rs` files a source folder may hold: more, and it wants rooms of its own.
+const MAX_FILES_PER_FOLDER: usize = 25;
 
-/// A source file: its module path (the binary's files under `<bin>`) and its code.
+/// The workspace's crates, bottom up: the folder of each, its package name and the
+/// crates of the workspace it may depend on.
+const CRATES: &[(&str, &str, &[&str])] = &[
+    ("crates/core", "travmap-core", &[]),
+    ("crates/formats", "travmap-formats", &["travmap-core"]),
+    (
+        "crates/io",
+        "travmap-io",
+        &["travmap-core", "travmap-formats"],
+    ),
+    ("crates/method", "travmap-method", &["travmap-core"]),
+    (
+        "crates/travmap",
+        "travmap",
+        &[
+            "travmap-core",
+            "travmap-formats",
+            "travmap-io",
+            "travmap-method",
+        ],
+    ),
+    (
+        ".",
+        "travmap-cli",
+        &[
+            "travmap-core",
+            "travmap-formats",
+            "travmap-io",
+            "travmap-method",
+            "travmap",
+        ],
+    ),
+];
+
+/// A source file: its crate's folder, its path from the repository, its module path
+/// in its crate, and its code.
 struct SourceFile {
+    krate: &'static str,
     relative: String,
     module: Vec<String>,
     code: String,
-    lines: usize,
 }
 
+fn repository() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Every source file of every crate.
 fn source_files() -> Vec<SourceFile> {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    CRATES
+        .iter()
+        .flat_map(|(dir, _, _)| crate_files(dir))
+        .collect()
+}
+
+fn rust_files_under(src: &Path) -> Vec<PathBuf> {
     let mut paths = Vec::new();
-    let mut pending = vec![src.clone()];
+    let mut pending = vec![src.to_path_buf()];
     while let Some(dir) = pending.pop() {
         for entry in std::fs::read_dir(&dir).unwrap() {
             let path = entry.unwrap().path();
@@ -37,31 +85,37 @@ fn source_files() -> Vec<SourceFile> {
     }
     paths.sort();
     paths
+}
+
+/// The source files of the crate in `dir`, each with its module path.
+fn crate_files(dir: &'static str) -> Vec<SourceFile> {
+    let src = repository().join(dir).join("src");
+    rust_files_under(&src)
         .into_iter()
-        .map(|path: PathBuf| {
-            let relative = path
-                .strip_prefix(&src)
-                .unwrap()
-                .to_str()
-                .unwrap()
-                .to_string();
-            let mut module: Vec<String> = relative
+        .map(|path| {
+            let in_crate = path.strip_prefix(&src).unwrap().to_str().unwrap();
+            let mut module: Vec<String> = in_crate
                 .trim_end_matches(".rs")
                 .split('/')
                 .map(str::to_string)
                 .collect();
-            if module.last().is_some_and(|m| m == "mod" || m == "lib") {
+            if module
+                .last()
+                .is_some_and(|m| m == "mod" || m == "lib" || m == "main")
+            {
                 module.pop();
-            }
-            if module.first().is_some_and(|m| m == "main" || m == "cli") {
-                module.retain(|m| m != "main");
-                module.insert(0, "<bin>".into());
             }
             let text = std::fs::read_to_string(&path).unwrap();
             SourceFile {
-                lines: text.lines().count(),
+                krate: dir,
+                relative: Path::new(dir)
+                    .join("src")
+                    .join(in_crate)
+                    .to_str()
+                    .unwrap()
+                    .trim_start_matches("./")
+                    .to_string(),
                 code: code_of(&text),
-                relative,
                 module,
             }
         })
@@ -162,10 +216,6 @@ fn imports(file: &SourceFile) -> Vec<Vec<String>> {
             Some(name.trim().to_string())
         })
         .collect();
-    let crate_root: Vec<String> = match file.module.first().map(String::as_str) {
-        Some("<bin>") => vec!["<bin>".into()],
-        _ => Vec::new(),
-    };
     let mut paths = Vec::new();
     for (at, _) in code.match_indices("::") {
         let before = &code[..at];
@@ -175,8 +225,7 @@ fn imports(file: &SourceFile) -> Vec<Vec<String>> {
             continue;
         }
         let mut base = match head {
-            "crate" => crate_root.clone(),
-            "travmap" => Vec::new(),
+            "crate" => Vec::new(),
             "self" => file.module.clone(),
             "super" => file.module[..file.module.len().saturating_sub(1)].to_vec(),
             name if declared.contains(name) => {
@@ -197,11 +246,12 @@ fn imports(file: &SourceFile) -> Vec<Vec<String>> {
     paths
 }
 
-/// File -> the files it imports from (the crate roots left out: they only gather).
+/// File -> the files of its crate it imports from (the crate roots left out: they
+/// only gather).
 fn import_graph(files: &[SourceFile]) -> BTreeMap<&str, BTreeSet<&str>> {
-    let by_module: BTreeMap<&[String], &str> = files
+    let by_module: BTreeMap<(&str, &[String]), &str> = files
         .iter()
-        .map(|f| (f.module.as_slice(), f.relative.as_str()))
+        .map(|f| ((f.krate, f.module.as_slice()), f.relative.as_str()))
         .collect();
     let mut graph = BTreeMap::new();
     for file in files {
@@ -209,7 +259,7 @@ fn import_graph(files: &[SourceFile]) -> BTreeMap<&str, BTreeSet<&str>> {
         for path in imports(file) {
             let target = (1..=path.len())
                 .rev()
-                .find_map(|n| by_module.get(&path[..n]).copied());
+                .find_map(|n| by_module.get(&(file.krate, &path[..n])).copied());
             if let Some(target) = target
                 && target != file.relative
             {
@@ -281,12 +331,12 @@ fn the_circle_finder_finds_a_circle() {
 #[test]
 fn paths_are_read_from_use_lists_and_code() {
     let file = SourceFile {
-        relative: "io/x.rs".into(),
+        krate: "crates/io",
+        relative: "crates/io/src/io/x.rs".into(),
         module: vec!["io".into(), "x".into()],
         code: code_of(
             "use super::{log::Log, ros::{A, B}};\nuse crate::error::Error; // crate::config\nfn f() { crate::geometry::rigid(); \"crate::frame\"; }\n",
         ),
-        lines: 3,
     };
     let paths: BTreeSet<String> = imports(&file).iter().map(|p| p.join("::")).collect();
     let expected: BTreeSet<String> = [
@@ -301,67 +351,87 @@ fn paths_are_read_from_use_lists_and_code() {
     assert_eq!(paths, expected);
 }
 
-/// The shared layer: what every layer may import.
-const SHARED: &[&str] = &[
-    "config",
-    "error",
-    "frame",
-    "geometry",
-    "lens",
-    "posing",
-    "random",
-    "stopwatch",
-];
-
-/// Whether a file of `layer` may import from the top-level module `top`, by
-/// ARCHITECTURE.md (None: the layer may import every layer above it).
-fn may_import(layer: &str, top: &str) -> Option<bool> {
-    match layer {
-        _ if SHARED.contains(&layer) => Some(SHARED.contains(&top)),
-        "io" | "method" => Some(SHARED.contains(&top) || top == layer),
-        _ => None,
+/// The `travmap-*` crates a manifest's `[dependencies]` name.
+fn workspace_dependencies(manifest: &str) -> BTreeSet<String> {
+    let mut names = BTreeSet::new();
+    let mut in_dependencies = false;
+    for line in manifest.lines() {
+        let line = line.trim();
+        if line.starts_with('[') {
+            in_dependencies = line == "[dependencies]";
+            continue;
+        }
+        let name = line.split(['.', '=', ' ']).next().unwrap_or_default();
+        if in_dependencies && (name == "travmap" || name.starts_with("travmap-")) {
+            names.insert(name.to_string());
+        }
     }
+    names
 }
 
 #[test]
-fn each_layer_imports_only_what_it_may() {
-    let files = source_files();
+fn each_crate_depends_only_on_the_crates_below_it() {
     let mut broken = Vec::new();
-    for file in &files {
-        let Some(layer) = file.module.first() else {
-            continue;
+    for (dir, name, allowed) in CRATES {
+        let manifest = std::fs::read_to_string(repository().join(dir).join("Cargo.toml")).unwrap();
+        let manifest = match *dir {
+            // The root manifest is the workspace's too: its package section on.
+            "." => manifest[manifest.find("[package]").unwrap()..].to_string(),
+            _ => manifest,
         };
-        for path in imports(file) {
-            let Some(top) = path.first() else { continue };
-            if may_import(layer, top) == Some(false) {
-                broken.push(format!("{} imports {}", file.relative, path.join("::")));
+        for dependency in workspace_dependencies(&manifest) {
+            if !allowed.contains(&dependency.as_str()) {
+                broken.push(format!("{name} depends on {dependency}"));
             }
         }
     }
-    // error.rs is the leaf every layer stands on.
-    let error = files.iter().find(|f| f.relative == "error.rs").unwrap();
+    assert!(broken.is_empty(), "{}", broken.join("\n"));
+    // The method's crate reaches no reader, not even through another crate.
+    let method = CRATES.iter().find(|c| c.1 == "travmap-method").unwrap();
+    assert!(method.2.iter().all(|d| *d == "travmap-core"));
+}
+
+#[test]
+fn error_rs_is_a_leaf_and_the_method_reads_no_file() {
+    let files = source_files();
+    let mut broken = Vec::new();
+    // error.rs is the leaf every crate stands on.
+    let error = files
+        .iter()
+        .find(|f| f.relative == "crates/core/src/error.rs")
+        .unwrap();
     broken.extend(
         imports(error)
             .iter()
             .map(|p| format!("error.rs imports {}", p.join("::"))),
     );
-    // The method knows no file format, command line or progress bar.
-    for file in files.iter().filter(|f| f.relative.starts_with("method/")) {
-        for outside in ["mcap::", "clap::", "indicatif::", "anyhow::", "std::fs::"] {
-            if file.code.contains(outside) {
-                broken.push(format!("{} uses {outside}", file.relative));
-            }
+    // The method knows no file: what it needs is handed to it.
+    for file in files.iter().filter(|f| f.krate == "crates/method") {
+        if file.code.contains("std::fs::") {
+            broken.push(format!("{} uses std::fs", file.relative));
         }
     }
     assert!(broken.is_empty(), "{}", broken.join("\n"));
 }
 
 #[test]
-fn every_source_file_stays_under_600_lines() {
-    let long: Vec<String> = source_files()
+fn no_source_folder_holds_more_than_25_files() {
+    let mut by_folder: BTreeMap<PathBuf, usize> = BTreeMap::new();
+    for (dir, _, _) in CRATES {
+        for path in rust_files_under(&repository().join(dir).join("src")) {
+            *by_folder
+                .entry(path.parent().unwrap().to_path_buf())
+                .or_default() += 1;
+        }
+    }
+    let crowded: Vec<String> = by_folder
         .iter()
-        .filter(|f| f.lines >= MAX_LINES)
-        .map(|f| format!("{}: {} lines", f.relative, f.lines))
+        .filter(|(_, files)| **files > MAX_FILES_PER_FOLDER)
+        .map(|(folder, files)| format!("{}: {files} files", folder.display()))
         .collect();
-    assert!(long.is_empty(), "split along a seam: {}", long.join(", "));
+    assert!(
+        crowded.is_empty(),
+        "give them rooms: {}",
+        crowded.join(", ")
+    );
 }

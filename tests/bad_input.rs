@@ -2,11 +2,9 @@
 //! exit code 1 and never a panic. The sequences are synthetic, written here, so
 //! these tests need no shared data.
 
-mod common;
-
 use std::path::Path;
 
-use common::{arg, assert_contains, clean_failure, stderr, success, travmap, usage_error};
+use crate::common::{arg, assert_contains, clean_failure, stderr, success, travmap, usage_error};
 
 const IDENTITY_3X4: &str = "1 0 0 0 0 1 0 0 0 0 1 0";
 /// Sequence 00's velodyne -> cam0.
@@ -134,7 +132,7 @@ fn malformed_pose_line() {
 /// The frame lines of `run --json` on `dir`, without the input's name and the
 /// timings, which vary from run to run.
 fn run_json(dir: &Path) -> Vec<serde_json::Value> {
-    common::json_records(&success(travmap(&["run", arg(dir), "--json"])))
+    crate::common::json_records(&success(travmap(&["run", arg(dir), "--json"])))
         .0
         .into_iter()
         .map(|mut value| {
@@ -249,7 +247,7 @@ fn a_tr_or_pose_that_is_not_rigid() {
 #[test]
 fn a_model_file_of_another_version() {
     let dir = sequence();
-    let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
+    let model = travmap_method::classifier::SvmModel::embedded_default().unwrap();
     let mut json: serde_json::Value = serde_json::from_slice(&model.to_json()).unwrap();
     json["version"] = 99.into();
     let path = dir.path().join("old-model.json");
@@ -350,8 +348,13 @@ fn keep_going_skips_a_corrupt_frame_and_exits_3() {
     // Without --keep-going the first bad frame stops the run.
     clean_failure(travmap(&["eval", seq]));
     let out = travmap(&["eval", seq, "--keep-going"]);
-    assert_eq!(out.status.code(), Some(3), "{}", common::stderr(&out));
-    let err = common::stderr(&out);
+    assert_eq!(
+        out.status.code(),
+        Some(3),
+        "{}",
+        crate::common::stderr(&out)
+    );
+    let err = crate::common::stderr(&out);
     assert_contains(
         &err,
         &[
@@ -360,7 +363,7 @@ fn keep_going_skips_a_corrupt_frame_and_exits_3() {
             "completed with 1 skipped frame",
         ],
     );
-    assert_contains(&common::stdout(&out), &["over 1 frame\n"]);
+    assert_contains(&crate::common::stdout(&out), &["over 1 frame\n"]);
     // Without it, an annotation that fails at frame 1, after frame 0 was written,
     // leaves no output and no temporary file.
     let out_dir = tempfile::tempdir().unwrap();
@@ -372,7 +375,7 @@ fn keep_going_skips_a_corrupt_frame_and_exits_3() {
     let mcap_path = dir.path().join("a.mcap");
     let out = travmap(&["annotate", seq, "-o", arg(&mcap_path), "--keep-going", "-q"]);
     assert_eq!(out.status.code(), Some(3));
-    let metadata = common::travmap_metadata(&std::fs::read(&mcap_path).unwrap());
+    let metadata = crate::common::travmap_metadata(&std::fs::read(&mcap_path).unwrap());
     assert_contains(&metadata["skipped_frames"], &["\"frame\":1"]);
 }
 
@@ -497,9 +500,9 @@ fn commands_that_need_no_labels_ignore_a_broken_label_file() {
     let output = travmap(&["odometry", arg(dir.path()), "-o", arg(&poses), "-q"]);
     // The synthetic scans may not register; what matters is that labels did not stop it.
     assert!(
-        !common::stderr(&output).contains("labels for"),
+        !crate::common::stderr(&output).contains("labels for"),
         "{}",
-        common::stderr(&output)
+        crate::common::stderr(&output)
     );
     let err = clean_failure(eval(dir.path()));
     assert_contains(&err, &["000001.label", "labels for"]);
@@ -573,6 +576,6 @@ fn annotate_passes_kitti_frames_through_as_read_and_keep_going_skips_an_unreadab
     assert_eq!(topics["/velodyne_points"], [0]);
     assert_eq!(topics["/camera_2/image/compressed"], [0]);
     assert_eq!(topics["/tf_static"], [0]);
-    let metadata = common::travmap_metadata(&bytes);
+    let metadata = crate::common::travmap_metadata(&bytes);
     assert_contains(&metadata["skipped_frames"], &["\"frame\":1", "000001.png"]);
 }

@@ -15,12 +15,12 @@
 use std::collections::HashMap;
 
 use nalgebra::{DMatrix, Matrix3, SymmetricEigen, Vector3};
-use travmap::config::FeatureConfig;
-use travmap::geometry::Moments;
-use travmap::method::features::{FEATURE_COUNT, FEATURE_NAMES, FeatureExtractor};
-use travmap::method::grid::{CellPoints, GridBuffers, GridLayout, grid_points};
-use travmap::method::integration::{WorldScan, ground_normal};
-use travmap::random::SplitMix64;
+use travmap_core::config::FeatureConfig;
+use travmap_core::geometry::Moments;
+use travmap_core::random::SplitMix64;
+use travmap_method::features::{FEATURE_COUNT, FEATURE_NAMES, FeatureExtractor};
+use travmap_method::grid::{CellPoints, GridBuffers, GridLayout, grid_points};
+use travmap_method::integration::{WorldScan, ground_normal};
 
 // ---------------------------------------------------------------------------------
 // Shared helpers.

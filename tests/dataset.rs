@@ -4,20 +4,18 @@
 //! the sequence itself, and reads the same rows from the file as rewritten by
 //! pyarrow (every codec), DuckDB and Polars.
 
-mod common;
-
 use std::path::Path;
 
 use serde_json::Value;
 use travmap::drive::Selection;
-use travmap::io::Source;
-use travmap::io::ros_drive::DriveOptions;
-use travmap::method::classifier::SvmModel;
-use travmap::method::grid::CellClass;
 use travmap::outputs::dataset::reading::{Labels, read_training_rows};
 use travmap::training::TrainingSet;
+use travmap_io::Source;
+use travmap_io::ros_drive::DriveOptions;
+use travmap_method::classifier::SvmModel;
+use travmap_method::grid::CellClass;
 
-use common::{arg, assert_contains, clean_failure, json_summary, travmap};
+use crate::common::{arg, assert_contains, clean_failure, json_summary, travmap};
 
 /// A grid search small enough for a test (`--set` settings): the point is the comparison.
 const QUICK_TRAINING: [&str; 3] = [
@@ -41,8 +39,10 @@ fn train_error(input: &Path, model: &Path, extra: &[&str]) -> String {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
-    let Some(seq) = common::sample() else { return };
-    let Some(python) = common::env_var(
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
+    let Some(python) = crate::common::env_var(
         "TRAVMAP_CLIENT_PYTHON",
         "a Python with pyarrow, duckdb and polars",
     ) else {
@@ -60,7 +60,7 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/read_parquet.py");
     let rewrites = dir.path().join("rewrites");
     std::fs::create_dir(&rewrites).unwrap();
-    let out = common::run_client(
+    let out = crate::common::run_client(
         std::process::Command::new(&python)
             .arg(&script)
             .arg(&cells)
@@ -88,14 +88,14 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     assert_eq!(polars_types[columns.len() - 1], "Boolean");
 
     // The same frame through the library, on the training grid the command uses.
-    let mut config = travmap::Config::default();
+    let mut config = travmap_core::Config::default();
     config.grid.size_m = config.training.grid_size_m;
     let source = Source::open(&seq, &DriveOptions::default(), &|_| {}).unwrap();
     let mut selection = Selection::new(source, frame..frame + 1);
     selection.follow_trajectory(&config).unwrap();
     let mut results = Vec::new();
     selection
-        .run::<travmap::Error>(&config, Some(&model), |r| {
+        .run::<travmap_core::Error>(&config, Some(&model), |r| {
             results.push(r);
             Ok(())
         })
@@ -120,7 +120,7 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
         assert_eq!(row["y_m"].as_f64().unwrap(), y);
         assert_eq!(row["stamp_ns"], result.stamp_ns);
         assert_eq!(row["points"], result.cells.point_count(cell));
-        for (name, &value) in travmap::method::features::FEATURE_NAMES
+        for (name, &value) in travmap_method::features::FEATURE_NAMES
             .iter()
             .zip(result.features.cell(cell))
         {
@@ -172,14 +172,16 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
 
 #[test]
 fn training_on_the_parquet_file_gives_the_model_training_on_the_sequence_gives() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let cells = dir.path().join("cells.parquet");
     dataset(&seq, &cells, &[]);
     let train = |input: &Path, name: &str| -> Value {
         let model = dir.path().join(name);
-        let quick = common::with_settings(&[], &QUICK_TRAINING);
-        common::write_output("train", input, &model, &quick);
+        let quick = crate::common::with_settings(&[], &QUICK_TRAINING);
+        crate::common::write_output("train", input, &model, &quick);
         let mut doc: Value = serde_json::from_slice(&std::fs::read(&model).unwrap()).unwrap();
         let strip = |part: &mut Value| {
             let training = part["training"].as_object_mut().unwrap();
@@ -203,7 +205,9 @@ fn training_on_the_parquet_file_gives_the_model_training_on_the_sequence_gives()
 
 #[test]
 fn datasets_from_other_settings_or_other_writers_are_refused() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let cells = dir.path().join("coarse.parquet");
     dataset(

@@ -2,18 +2,18 @@
 //! fusion, its Parquet table, its memory on a long drive, and how often annotate
 //! writes it.
 
-mod common;
-
 use std::path::Path;
 
-use common::{arg, success, travmap, write_output};
-use travmap::method::grid::CellClass;
+use crate::common::{arg, success, travmap, write_output};
 use travmap::outputs::drive_map::MapPicture;
 use travmap::outputs::rendering::{GAP_PX, colour};
+use travmap_method::grid::CellClass;
 
 #[test]
 fn the_picture_shows_the_fused_map_truth_and_errors_cell_by_cell() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let png = dir.path().join("drive.png");
     let cells_path = dir.path().join("cells.parquet");
@@ -23,8 +23,9 @@ fn the_picture_shows_the_fused_map_truth_and_errors_cell_by_cell() {
         &png,
         &["--cell-pixels", "8", "--cells", arg(&cells_path)],
     );
-    let image = travmap::io::image::decode_png(&std::fs::read(&png).unwrap(), &png).unwrap();
-    let cells = common::fused_drive(&seq);
+    let image =
+        travmap_io::payloads::image::decode_png(&std::fs::read(&png).unwrap(), &png).unwrap();
+    let cells = crate::common::fused_drive(&seq);
     let picture = MapPicture::of(&cells, 8);
     let panel = picture.cells[0] as u32 * 8;
     assert_eq!(image.width, 3 * panel + 2 * GAP_PX);
@@ -94,8 +95,10 @@ fn the_picture_shows_the_fused_map_truth_and_errors_cell_by_cell() {
 
 #[test]
 fn the_fused_map_scores_at_least_as_well_as_the_frames() {
-    let Some(seq) = common::sample() else { return };
-    let json = common::json_summary(&["eval", arg(&seq)]);
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
+    let json = crate::common::json_summary(&["eval", arg(&seq)]);
     let per_frame = &json["report"]["scores"];
     let fused = &json["drive_map"]["scores"];
     eprintln!("per frame {per_frame}\nfused {fused}");
@@ -109,12 +112,14 @@ fn the_fused_map_scores_at_least_as_well_as_the_frames() {
 
 #[test]
 fn a_long_drive_costs_memory_in_proportion_to_its_area() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
-    let long = common::long_sequence(Path::new(&seq), dir.path(), 600);
+    let long = crate::common::long_sequence(Path::new(&seq), dir.path(), 600);
     let png = dir.path().join("long.png");
     let output = travmap(&["map", arg(&long), "-o", arg(&png), "--json"]);
-    let (_, summary) = common::json_records(&success(output));
+    let (_, summary) = crate::common::json_records(&success(output));
     let (memory, seen, area) = (
         summary["memory_bytes"].as_f64().unwrap(),
         summary["seen_cells"].as_f64().unwrap(),
@@ -136,7 +141,7 @@ fn annotate_writes_the_drive_map_as_often_as_asked_and_always_the_final_one() {
     let dir = tempfile::tempdir().unwrap();
     let maps = |every: &str| {
         let flags = ["--no-passthrough", "--drive-map-every", every];
-        let (_, out) = common::sample_annotated(dir.path(), &flags)?;
+        let (_, out) = crate::common::sample_annotated(dir.path(), &flags)?;
         let bytes = std::fs::read(&out).unwrap();
         let stamps_of = |topic: &str| -> Vec<(u64, Vec<u8>)> {
             mcap::MessageStream::new(&bytes)

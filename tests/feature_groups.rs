@@ -2,15 +2,13 @@
 //! model's fallback and says so; intensity on Velodyne's 0..255 scale gives the same
 //! grids as KITTI's 0..1.
 
-mod common;
-
 use std::path::Path;
 
-use travmap::io::format::InputFormat;
-use travmap::io::log::Log;
-use travmap::io::ros::{PointCloud2, TfMessage, datatype, decode};
-use travmap::outputs::mcap_writer::Compression;
 use travmap::outputs::writing::McapSink;
+use travmap_formats::mcap::writer::Compression;
+use travmap_formats::ros::{PointCloud2, TfMessage, datatype, decode};
+use travmap_io::containers::log::Log;
+use travmap_io::format::InputFormat;
 
 /// Rewrites the converted drive `from` into `to` with each cloud's intensity
 /// changed by `edit` (clouds and transforms only).
@@ -44,27 +42,27 @@ fn intensity_offset(cloud: &PointCloud2) -> usize {
 }
 
 fn run_json(input: &Path) -> (Vec<serde_json::Value>, serde_json::Value, String) {
-    let out = common::travmap(&["run", input.to_str().unwrap(), "--json"]);
-    assert!(out.status.success(), "{}", common::stderr(&out));
-    let (frames, summary) = common::json_records(&common::stdout(&out));
-    (frames, summary, common::stderr(&out))
+    let out = crate::common::travmap(&["run", input.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{}", crate::common::stderr(&out));
+    let (frames, summary) = crate::common::json_records(&crate::common::stdout(&out));
+    (frames, summary, crate::common::stderr(&out))
 }
 
 #[test]
 fn intensity_scales_and_a_cloud_without_intensity() {
-    let Some(seq) = common::semantickitti_00() else {
+    let Some(seq) = crate::common::semantickitti_00() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
     let original = dir.path().join("original.mcap");
-    let out = common::travmap(&[
+    let out = crate::common::travmap(&[
         "convert",
         seq.to_str().unwrap(),
         "-o",
         original.to_str().unwrap(),
         "-q",
     ]);
-    assert!(out.status.success(), "{}", common::stderr(&out));
+    assert!(out.status.success(), "{}", crate::common::stderr(&out));
 
     // Velodyne's 0..255: every intensity times 255.
     let bytes = dir.path().join("byte.mcap");
@@ -115,8 +113,8 @@ fn intensity_scales_and_a_cloud_without_intensity() {
         .sum();
     assert!(agree > 6 * 900 * 9 / 10, "{agree} of 5400 cells agree");
     // In text the fallback is said on stderr.
-    let out = common::travmap(&["run", bare.to_str().unwrap()]);
-    let err = common::stderr(&out);
+    let out = crate::common::travmap(&["run", bare.to_str().unwrap()]);
+    let err = crate::common::stderr(&out);
     assert!(
         out.status.success() && err.contains("6 frames had no usable remission"),
         "{err}"
@@ -127,12 +125,12 @@ fn intensity_scales_and_a_cloud_without_intensity() {
 /// to the embedded model; classified as read by default, by the fallback on request.
 #[test]
 fn remission_on_another_sensors_scale_is_named_and_the_fallback_is_a_setting() {
-    let Some(rellis) = common::shared_data("rellis3d-000104/sequences/00") else {
+    let Some(rellis) = crate::common::shared_data("rellis3d-000104/sequences/00") else {
         return;
     };
     let eval = |extra: &[&str]| {
-        let args = [&["eval", common::arg(&rellis)], extra].concat();
-        common::json_summary(&args)["report"].clone()
+        let args = [&["eval", crate::common::arg(&rellis)], extra].concat();
+        crate::common::json_summary(&args)["report"].clone()
     };
     let as_read = eval(&[]);
     assert_eq!(as_read["frames_foreign_remission"], 1);
@@ -142,12 +140,15 @@ fn remission_on_another_sensors_scale_is_named_and_the_fallback_is_a_setting() {
     let fallback = eval(&["--set", "classifier.foreign_remission=\"fallback\""]);
     assert_eq!(fallback["frames_foreign_remission"], 1);
     assert_ne!(fallback["confusion"], as_read["confusion"]);
-    let text = common::success(common::travmap(&["eval", common::arg(&rellis)]));
-    common::assert_contains(&text, &["remission far outside the model's training range"]);
+    let text = crate::common::success(crate::common::travmap(&[
+        "eval",
+        crate::common::arg(&rellis),
+    ]));
+    crate::common::assert_contains(&text, &["remission far outside the model's training range"]);
     // KITTI's own scans are not foreign to the model trained on them.
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
-    let kitti = common::json_summary(&["eval", common::arg(&sample)]);
+    let kitti = crate::common::json_summary(&["eval", crate::common::arg(&sample)]);
     assert_eq!(kitti["report"]["frames_foreign_remission"], 0);
 }

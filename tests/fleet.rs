@@ -2,17 +2,16 @@
 //! client Python so that `cargo test` covers them: a local Ray with 2 CPUs over a
 //! handful of converted MCAP files.
 
-mod common;
-
 use std::path::Path;
 
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn the_ray_fleet_script_passes_its_tests() {
-    if common::sample().is_none() {
+    if crate::common::sample().is_none() {
         return;
     }
-    let Some(python) = common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with ray and pytest")
+    let Some(python) =
+        crate::common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with ray and pytest")
     else {
         return;
     };

@@ -1,13 +1,11 @@
 //! `foxglove/layout.json` opens what travmap writes: every topic, plotted field,
 //! colour field and frame it names exists in an annotated file of the shipped data.
 
-mod common;
-
 use std::collections::BTreeSet;
 use std::path::Path;
 
 use serde_json::Value;
-use travmap::io::ros::{PointCloud2, TfMessage, decode};
+use travmap_formats::ros::{PointCloud2, TfMessage, decode};
 
 fn layout() -> Value {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("foxglove/layout.json");
@@ -45,7 +43,7 @@ fn every_panel_in_the_tree_is_configured_and_every_configuration_is_shown() {
 #[test]
 fn the_layout_names_topics_fields_and_frames_of_an_annotated_file() {
     let dir = tempfile::tempdir().unwrap();
-    let Some((_, out)) = common::sample_annotated(dir.path(), &["--frames", "0..3"]) else {
+    let Some((_, out)) = crate::common::sample_annotated(dir.path(), &["--frames", "0..3"]) else {
         return;
     };
     let bytes = std::fs::read(&out).unwrap();

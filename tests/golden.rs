@@ -10,17 +10,15 @@
 //! `TRAVMAP_BLESS=1 cargo test --release --test golden` rewrites the fixture (see
 //! fixtures/README.md).
 
-mod common;
-
 use std::collections::BTreeMap;
 use std::path::Path;
 
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
-use travmap::io::ros::{FrameMetrics, OccupancyGrid, PointCloud2, Time, decode};
 use travmap::outputs::annotation::{
     CLOUD_TOPIC, GROUND_TRUTH_TOPIC, METRICS_TOPIC, PREDICTION_TOPIC,
 };
+use travmap_formats::ros::{FrameMetrics, OccupancyGrid, PointCloud2, Time, decode};
 
 const FIXTURE: &str = "fixtures/golden-annotate-00.json";
 const FRAMES: &str = "0..3";
@@ -123,7 +121,7 @@ fn summarise(path: &Path) -> Value {
             message.log_time
         );
     }
-    let metadata = common::travmap_metadata(&bytes);
+    let metadata = crate::common::travmap_metadata(&bytes);
     json!({
         "command": format!("travmap annotate <semantickitti-00>/sequences/00 --frames {FRAMES} --no-passthrough -q"),
         "model_sha256": metadata["model_sha256"],
@@ -227,7 +225,7 @@ fn differences(path: &str, expected: &Value, actual: &Value, out: &mut Vec<Strin
 fn annotate_of_semantickitti_00_frames_0_to_3_matches_the_golden_file() {
     let dir = tempfile::tempdir().unwrap();
     let flags = ["--frames", FRAMES, "--no-passthrough"];
-    let Some((_, output)) = common::sample_annotated(dir.path(), &flags) else {
+    let Some((_, output)) = crate::common::sample_annotated(dir.path(), &flags) else {
         return;
     };
     let actual = summarise(&output);

@@ -2,13 +2,13 @@
 //! (`fixtures/nebula/xt32`, `xt16`, see fixtures/README.md): the scan nebula's test
 //! compares, cut from the same packets, point for point in nebula's order.
 
-mod common;
+use crate::common::{nebula_fixture, nebula_ground_truth};
 
-use common::{nebula_fixture, nebula_ground_truth};
-
-use travmap::io::format::InputFormat;
-use travmap::io::hesai::{HesaiAssembler, HesaiCalibration, HesaiModel, pandar_scan_message};
-use travmap::io::log::Log;
+use travmap_io::containers::log::Log;
+use travmap_io::format::InputFormat;
+use travmap_io::packets::hesai::{
+    HesaiAssembler, HesaiCalibration, HesaiModel, pandar_scan_message,
+};
 
 /// Decodes the bag as nebula's test does: the ground truth is the scan completed
 /// while the message logged at the PCD's stamp is read. Returns (ground truth,
@@ -173,7 +173,7 @@ fn the_packets_name_their_model_and_a_mismatch_is_refused() {
 
 #[test]
 fn a_pandar_log_is_a_drive_for_every_command() {
-    use common::{arg, json_records, success, travmap};
+    use crate::common::{arg, json_records, success, travmap};
     let bag = nebula_fixture("xt32/1673400677802009732");
     let model = HesaiModel::PandarXt32;
     let mut assembler = HesaiAssembler::new(model, &HesaiCalibration::builtin(model)).unwrap();
@@ -208,15 +208,15 @@ fn a_pandar_log_is_a_drive_for_every_command() {
     // convert writes the scans as PointCloud2 beside the packets.
     let dir = tempfile::tempdir().unwrap();
     let converted = dir.path().join("converted.mcap");
-    let doc = common::json_summary(&["convert", arg(&bag), "-o", arg(&converted)]);
+    let doc = crate::common::json_summary(&["convert", arg(&bag), "-o", arg(&converted)]);
     assert_eq!(doc["decoded_topic"], "/pandar_points");
     assert_eq!(doc["decoded_scans"], scans.len());
     let log = Log::open(&converted, InputFormat::Mcap).unwrap();
-    let clouds: Vec<travmap::io::ros::PointCloud2> = log
+    let clouds: Vec<travmap_formats::ros::PointCloud2> = log
         .messages()
         .map(Result::unwrap)
         .filter(|m| m.connection.topic == "/pandar_points")
-        .map(|m| travmap::io::ros::decode(&m.data).unwrap())
+        .map(|m| travmap_formats::ros::decode(&m.data).unwrap())
         .collect();
     assert_eq!(clouds.len(), scans.len());
     for (cloud, scan) in clouds.iter().zip(&scans) {
@@ -227,7 +227,7 @@ fn a_pandar_log_is_a_drive_for_every_command() {
     // A table of another model is refused, naming both.
     let xt16 = dir.path().join("PandarXT16.csv");
     std::fs::write(&xt16, "Channel,Elevation,Azimuth\n1,15,0\n2,13,0\n").unwrap();
-    let err = common::clean_failure(travmap(&[
+    let err = crate::common::clean_failure(travmap(&[
         "run",
         arg(&bag),
         "--lidar-calibration",
@@ -238,7 +238,7 @@ fn a_pandar_log_is_a_drive_for_every_command() {
 
 #[test]
 fn ros1_pandar_scans_are_re_encoded_as_the_ros2_ones() {
-    use travmap::io::ros::MessageEncoding;
+    use travmap_formats::ros::MessageEncoding;
     let seeds = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/pandar_scan");
     for name in [
         "xt32_dual",
@@ -256,7 +256,7 @@ fn ros1_pandar_scans_are_re_encoded_as_the_ros2_ones() {
             pandar_scan_message(&ros1, MessageEncoding::Ros1).unwrap(),
         );
         assert_eq!(a.packets, b.packets, "{name}");
-        let translated = travmap::io::ros::ros1_to_cdr("pandar_msgs/msg/PandarScan", &ros1)
+        let translated = travmap_formats::ros::ros1_to_cdr("pandar_msgs/msg/PandarScan", &ros1)
             .unwrap()
             .unwrap();
         assert_eq!(translated.data, cdr, "{name}");
@@ -299,7 +299,7 @@ fn scans_cut_for_their_stamps_alone_are_the_decoded_scans() {
         assert!(decoded.len() >= 2, "{bag}");
         assert!(decoded.iter().all(|scan| !scan.points.is_empty()));
         assert!(cut.iter().all(|scan| scan.points.is_empty()));
-        let stamps = |scans: &[travmap::io::velodyne::PacketScan]| -> Vec<u64> {
+        let stamps = |scans: &[travmap_io::packets::velodyne::PacketScan]| -> Vec<u64> {
             scans.iter().map(|scan| scan.stamp_ns).collect()
         };
         assert_eq!(stamps(&cut), stamps(&decoded), "{bag}");
@@ -311,8 +311,9 @@ fn scans_cut_for_their_stamps_alone_are_the_decoded_scans() {
 #[test]
 fn bench_tools_times_decoding_a_packet_log() {
     let bag = nebula_fixture("xt32/1673400677802009732");
-    let args = ["bench", common::arg(&bag), "--repeats", "1"];
-    let doc = common::json_summary(&[&args[..], &["--tools", "--tool-repeats", "1"]].concat());
+    let args = ["bench", crate::common::arg(&bag), "--repeats", "1"];
+    let doc =
+        crate::common::json_summary(&[&args[..], &["--tools", "--tool-repeats", "1"]].concat());
     let rows = doc["tools"].as_array().unwrap();
     let convert = &rows[0];
     assert_eq!(
@@ -333,7 +334,7 @@ fn bench_tools_times_decoding_a_packet_log() {
 /// registration starts at the first whole turn; `--frames 0..` still reads it.
 #[test]
 fn a_partial_first_scan_is_left_out_by_default() {
-    use common::{arg, json_records, stderr, success, travmap};
+    use crate::common::{arg, json_records, stderr, success, travmap};
     let bag = nebula_fixture("40p/1673400149412331409");
     let output = travmap(&["run", arg(&bag), "--json"]);
     let notice = stderr(&output);

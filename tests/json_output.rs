@@ -2,16 +2,14 @@
 //! then one `summary`), an `error` object on stderr; each command's output checked
 //! against its schema in `schemas/json/` by Python's jsonschema.
 
-mod common;
-
 use std::path::Path;
 
-use common::{arg, travmap, with_settings};
+use crate::common::{arg, travmap, with_settings};
 
 /// Runs travmap with `args` (which include `--json`), validates what it printed
 /// against `command`'s schema, and returns its exit code.
 fn validate(command: &str, args: &[&str]) -> i32 {
-    let python = common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with jsonschema")
+    let python = crate::common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with jsonschema")
         .expect("checked by the caller");
     let out = travmap(args);
     let dir = tempfile::tempdir().unwrap();
@@ -43,8 +41,10 @@ fn validate(command: &str, args: &[&str]) -> i32 {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn every_command_prints_json_that_matches_its_schema() {
-    let Some(seq) = common::sample() else { return };
-    if common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with jsonschema").is_none() {
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
+    if crate::common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with jsonschema").is_none() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
@@ -146,7 +146,9 @@ fn every_command_prints_json_that_matches_its_schema() {
 
 #[test]
 fn skipped_frames_are_listed_in_the_summary() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     // Frame 1's scan is cut short: with --keep-going it is skipped, exit 3.
     let dir = tempfile::tempdir().unwrap();
     let copy = dir.path().join("seq");
@@ -161,7 +163,7 @@ fn skipped_frames_are_listed_in_the_summary() {
     std::fs::write(copy.join("velodyne/000001.bin"), [0u8; 20]).unwrap();
     let out = travmap(&["run", arg(&copy), "--json", "--keep-going"]);
     assert_eq!(out.status.code(), Some(3));
-    let (frames, summary) = common::json_records(&common::stdout(&out));
+    let (frames, summary) = crate::common::json_records(&crate::common::stdout(&out));
     assert_eq!(frames.len(), 2);
     let skipped = summary["skipped"].as_array().unwrap();
     assert_eq!(skipped.len(), 1, "{summary}");

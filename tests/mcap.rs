@@ -1,22 +1,22 @@
 //! MCAP in and out: convert, read back, annotate, round trip, and real clients
 //! (Python mcap + mcap-ros2-support, rosbags) decoding what travmap writes.
 
-mod common;
-
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{arg, assert_contains, clean_failure, json_summary, success, travmap, write_output};
+use crate::common::{
+    arg, assert_contains, clean_failure, json_summary, success, travmap, write_output,
+};
 use serde_json::Value;
-use travmap::io::KittiSequence;
-use travmap::io::cloud::{check_some_finite, cloud_points};
-use travmap::io::format::InputFormat;
-use travmap::io::log::Log;
-use travmap::io::ros::{OccupancyGrid, PointCloud2, decode};
-use travmap::io::ros_drive::{DriveOptions, RosDrive};
-use travmap::outputs::mcap_writer::Compression;
 use travmap::outputs::writing::McapSink;
+use travmap_formats::mcap::writer::Compression;
+use travmap_formats::ros::{OccupancyGrid, PointCloud2, decode};
+use travmap_io::KittiSequence;
+use travmap_io::containers::log::Log;
+use travmap_io::format::InputFormat;
+use travmap_io::payloads::cloud::{check_some_finite, cloud_points};
+use travmap_io::ros_drive::{DriveOptions, RosDrive};
 
 /// Every message of `topic` in an MCAP, decoded by travmap's own reader.
 fn messages<T: serde::de::DeserializeOwned>(path: &Path, topic: &str) -> Vec<(u64, T)> {
@@ -32,7 +32,7 @@ fn messages<T: serde::de::DeserializeOwned>(path: &Path, topic: &str) -> Vec<(u6
 #[test]
 fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
     let dir = tempfile::tempdir().unwrap();
-    let Some((seq, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+    let Some((seq, drive)) = crate::common::sample_as_mcap(dir.path(), &[]) else {
         return;
     };
 
@@ -89,11 +89,11 @@ fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
 fn annotated_grid_matches_run_and_carries_metadata() {
     let dir = tempfile::tempdir().unwrap();
     let flags = ["--frames", "1..4", "--no-passthrough"];
-    let Some((seq, out)) = common::sample_annotated(dir.path(), &flags) else {
+    let Some((seq, out)) = crate::common::sample_annotated(dir.path(), &flags) else {
         return;
     };
     let run = success(travmap(&["run", arg(&seq), "--frames", "1..4", "--json"]));
-    let (runs, _) = common::json_records(&run);
+    let (runs, _) = crate::common::json_records(&run);
     let grids = messages::<OccupancyGrid>(&out, "/travmap/prediction");
     assert_eq!(grids.len(), 3);
     for ((log_time, grid), run) in grids.iter().zip(&runs) {
@@ -120,7 +120,7 @@ fn annotated_grid_matches_run_and_carries_metadata() {
         topics.iter().all(|t| t.starts_with("/travmap/")),
         "{topics:?}"
     );
-    let metadata = common::travmap_metadata(&bytes);
+    let metadata = crate::common::travmap_metadata(&bytes);
     assert_eq!(metadata["travmap_version"], env!("CARGO_PKG_VERSION"));
     assert_eq!(metadata["model_sha256"].len(), 64);
     let config: Value = serde_json::from_str(&metadata["config"]).unwrap();
@@ -133,7 +133,7 @@ fn the_cloud_is_the_scan_in_the_grid_the_whole_scan_or_none() {
     let annotated = |cloud: &str| {
         let flags = ["--frames", "0..4", "--no-passthrough", "--cloud", cloud];
         let out = dir.path().join(format!("{cloud}.mcap"));
-        let seq = common::sample()?;
+        let seq = crate::common::sample()?;
         write_output("annotate", &seq, &out, &flags);
         Some((seq, out))
     };
@@ -271,11 +271,13 @@ fn sorted(entries: &Value) -> Vec<Value> {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn real_clients_decode_what_travmap_writes() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let python = std::env::var("TRAVMAP_CLIENT_PYTHON").ok();
     let node_modules = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/node_modules");
     if python.is_none() && !node_modules.is_dir() {
-        common::skip::<()>(
+        crate::common::skip::<()>(
             "no client installed (.ci/run sets TRAVMAP_CLIENT_PYTHON to a venv with mcap, \
              mcap-ros2-support and rosbags, and runs npm ci in tests/clients)",
         );
@@ -283,7 +285,7 @@ fn real_clients_decode_what_travmap_writes() {
     }
     let dir = tempfile::tempdir().unwrap();
     let run = success(travmap(&["run", arg(&seq), "--json"]));
-    let (runs, _) = common::json_records(&run);
+    let (runs, _) = crate::common::json_records(&run);
     for out in annotated_both_ways(dir.path(), &seq) {
         decode_with_every_client(&out, &seq, &runs, python.as_deref(), &node_modules);
     }
@@ -325,7 +327,8 @@ fn decode_with_every_client(
 ) {
     let clients = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients");
     let decode = |program: &str, script: &str| -> Value {
-        let decoded = common::run_client(Command::new(program).arg(clients.join(script)).arg(out));
+        let decoded =
+            crate::common::run_client(Command::new(program).arg(clients.join(script)).arg(out));
         serde_json::from_slice(&decoded.stdout).unwrap()
     };
     let mut summaries = Vec::new();
@@ -334,7 +337,7 @@ fn decode_with_every_client(
         summaries.push(("python mcap-ros2-support", sorted(&doc["mcap"])));
         summaries.push(("python rosbags", sorted(&doc["rosbags"])));
     } else {
-        common::skip::<()>("the Python clients: TRAVMAP_CLIENT_PYTHON is not set");
+        crate::common::skip::<()>("the Python clients: TRAVMAP_CLIENT_PYTHON is not set");
     }
     if node_modules.is_dir() {
         summaries.push((
@@ -342,7 +345,7 @@ fn decode_with_every_client(
             sorted(&decode("node", "decode_mcap.mjs")),
         ));
     } else {
-        common::skip::<()>("the Node client: run npm ci in tests/clients");
+        crate::common::skip::<()>("the Node client: run npm ci in tests/clients");
     }
     for (client, entries) in &summaries {
         check_client_summary(client, entries, seq, runs);
@@ -373,7 +376,7 @@ fn decoded(path: &Path) -> Vec<(String, u64, Vec<u8>)> {
 #[test]
 fn convert_copies_a_ros2_mcap_chunk_by_chunk_unless_asked_for_another_compression() {
     let dir = tempfile::tempdir().unwrap();
-    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+    let Some((_, drive)) = crate::common::sample_as_mcap(dir.path(), &[]) else {
         return;
     };
     let (same, none) = (dir.path().join("same.mcap"), dir.path().join("none.mcap"));
@@ -405,7 +408,9 @@ fn convert_copies_a_ros2_mcap_chunk_by_chunk_unless_asked_for_another_compressio
 
 #[test]
 fn compression_options_all_round_trip() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let mut sizes = BTreeMap::new();
     for compression in ["zstd", "lz4", "none"] {
@@ -437,7 +442,7 @@ fn compression_options_all_round_trip() {
 /// A drive of two synthetic clouds in frame `lidar`, posed by Odometry of `base`
 /// in `odom` and a static `base -> lidar`, with a second cloud topic.
 fn write_odometry_drive(path: &Path) {
-    use travmap::io::ros::*;
+    use travmap_formats::ros::*;
     let mut sink = McapSink::create(path, Compression::None).unwrap();
     let covariance = FixedArray(vec![0.0; 36]);
     for (i, x) in [(0u64, 0.0), (1, 2.0)] {
@@ -591,7 +596,7 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
     ]);
     assert!(doc["messages"].as_u64().unwrap() > 2);
     for topic in ["/points", "/other_points"] {
-        let clouds = messages::<travmap::io::ros::PointCloud2>(&out, topic);
+        let clouds = messages::<travmap_formats::ros::PointCloud2>(&out, topic);
         assert_eq!(clouds.len(), 1, "{topic}");
     }
 }
@@ -599,7 +604,7 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
 /// A zstd MCAP of the shipped drive whose second chunk (frames 4 and 5, and frame
 /// 3's pose) has one byte flipped: the chunk at `offset`.
 fn drive_with_a_damaged_chunk(dir: &Path) -> Option<(PathBuf, usize)> {
-    let (_, good) = common::sample_as_mcap(dir, &[])?;
+    let (_, good) = crate::common::sample_as_mcap(dir, &[])?;
     let mut bytes = std::fs::read(&good).unwrap();
     let mut chunks = Vec::new();
     let mut at = 8;
@@ -632,8 +637,14 @@ fn a_damaged_chunk_stops_with_its_offset_or_is_stepped_over_with_keep_going() {
     );
     // --keep-going: the intact chunk's frames are read and scored, the damage named.
     let output = travmap(&["eval", arg(&damaged), "--keep-going", "--json"]);
-    assert_eq!(output.status.code(), Some(3), "{}", common::stderr(&output));
-    let doc: Value = serde_json::from_str(common::stdout(&output).lines().last().unwrap()).unwrap();
+    assert_eq!(
+        output.status.code(),
+        Some(3),
+        "{}",
+        crate::common::stderr(&output)
+    );
+    let doc: Value =
+        serde_json::from_str(crate::common::stdout(&output).lines().last().unwrap()).unwrap();
     assert_eq!(doc["report"]["frames"], 3, "frames 0-2 carry ground truth");
     let reasons: Vec<&str> = doc["skipped"]
         .as_array()
@@ -658,8 +669,13 @@ fn a_damaged_chunk_stops_with_its_offset_or_is_stepped_over_with_keep_going() {
             "--keep-going",
             "-q",
         ]);
-        assert_eq!(output.status.code(), Some(3), "{}", common::stderr(&output));
-        assert_contains(&common::stderr(&output), &[&chunk]);
+        assert_eq!(
+            output.status.code(),
+            Some(3),
+            "{}",
+            crate::common::stderr(&output)
+        );
+        assert_contains(&crate::common::stderr(&output), &[&chunk]);
         let topic = ["--cloud-topic", "/velodyne_points", "--poses", "none"];
         success(travmap(&[&["run", arg(&out), "-q"][..], &topic].concat()));
     }
@@ -667,7 +683,7 @@ fn a_damaged_chunk_stops_with_its_offset_or_is_stepped_over_with_keep_going() {
 
 #[test]
 fn shared_mcap_files_give_clear_errors() {
-    let Some(dir) = common::shared_data("mcap") else {
+    let Some(dir) = crate::common::shared_data("mcap") else {
         return;
     };
     let all_types = dir.join("rosbags_rs_all_std_types.mcap");
@@ -711,8 +727,11 @@ fn shared_mcap_files_give_clear_errors() {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
-    let Some(seq) = common::sample() else { return };
-    let Some(rerun) = common::env_var("TRAVMAP_RERUN", ".ci/run points it at rerun-sdk's `rerun`")
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
+    let Some(rerun) =
+        crate::common::env_var("TRAVMAP_RERUN", ".ci/run points it at rerun-sdk's `rerun`")
     else {
         return;
     };
@@ -725,9 +744,10 @@ fn rerun_converts_the_annotated_file_into_points_and_grid_maps() {
 fn rerun_finds_points_and_grid_maps(rerun: &str, mcap_path: &Path, seq: &Path) {
     let rrd = mcap_path.with_extension("rrd");
     let rerun_mcap = ["mcap", "convert", arg(mcap_path), "-o", arg(&rrd)];
-    common::run_client(Command::new(rerun).args(rerun_mcap));
+    crate::common::run_client(Command::new(rerun).args(rerun_mcap));
     // `rerun mcap convert` exits 0 even on bad input: check what the .rrd holds.
-    let printed = common::run_client(Command::new(rerun).args(["rrd", "print", "-v"]).arg(&rrd));
+    let printed =
+        crate::common::run_client(Command::new(rerun).args(["rrd", "print", "-v"]).arg(&rrd));
     let text = String::from_utf8_lossy(&printed.stdout);
     // Chunk headers read "... with N rows (size) - /entity - data columns: [...]".
     let rows = |entity: &str, column: &str| -> usize {
@@ -765,7 +785,7 @@ fn rerun_finds_points_and_grid_maps(rerun: &str, mcap_path: &Path, seq: &Path) {
         "no 30 x 30 GridMap in the .rrd"
     );
     let run = success(travmap(&["run", arg(seq), "--frames", "0", "--json"]));
-    let first = common::json_records(&run).0.remove(0);
+    let first = crate::common::json_records(&run).0.remove(0);
     let corner = first["min_corner_in_world"].as_array().unwrap();
     let expected = format!(
         "[[{:?}, {:?}, ",
@@ -784,7 +804,7 @@ fn rerun_finds_points_and_grid_maps(rerun: &str, mcap_path: &Path, seq: &Path) {
 /// data.
 #[test]
 fn convert_passes_png_images_through_with_camera_info() {
-    let Some((dir, seq)) = common::one_frame_with_image() else {
+    let Some((dir, seq)) = crate::common::one_frame_with_image() else {
         return;
     };
     let out = dir.path().join("d.mcap");
@@ -792,20 +812,21 @@ fn convert_passes_png_images_through_with_camera_info() {
     let doc = json_summary(&[&["convert", arg(&seq), "-o", arg(&out)][..], &start].concat());
     assert_eq!(doc["images"], 1);
     let png = std::fs::read(seq.join("image_2/000000.png")).unwrap();
-    let images = messages::<travmap::io::ros::CompressedImage>(&out, "/camera_2/image/compressed");
+    let images =
+        messages::<travmap_formats::ros::CompressedImage>(&out, "/camera_2/image/compressed");
     assert_eq!(images.len(), 1);
     let (log_time, image) = &images[0];
     assert_eq!(image.data, png, "the PNG bytes pass through unchanged");
     assert_eq!(image.format, "png");
     assert_eq!(image.header.frame_id, "camera_2");
     assert_eq!(*log_time, 1_317_000_000_000_000_000);
-    let infos = messages::<travmap::io::ros::CameraInfo>(&out, "/camera_2/camera_info");
+    let infos = messages::<travmap_formats::ros::CameraInfo>(&out, "/camera_2/camera_info");
     let info = &infos[0].1;
     assert_eq!((info.width, info.height), (1242, 375));
     assert_eq!(info.k[0], 721.5377);
     // P = [K | 0] in camera_2's own frame; the baseline is in /tf_static.
     assert_eq!((info.p[0], info.p[3]), (721.5377, 0.0));
-    let statics = messages::<travmap::io::ros::TfMessage>(&out, "/tf_static");
+    let statics = messages::<travmap_formats::ros::TfMessage>(&out, "/tf_static");
     let frames: Vec<(&str, &str)> = statics[0]
         .1
         .transforms
@@ -820,7 +841,9 @@ fn convert_passes_png_images_through_with_camera_info() {
 
 #[test]
 fn an_output_in_a_missing_directory_is_a_clear_error() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("missing/drive.mcap");
     let (seq, out_arg) = (arg(&seq), arg(&out));
@@ -835,7 +858,7 @@ fn an_output_in_a_missing_directory_is_a_clear_error() {
 fn corrupt_mcap_files_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
     let flags = ["--frames", "0..2", "--compression", "none"];
-    let Some((_, good)) = common::sample_as_mcap(dir.path(), &flags) else {
+    let Some((_, good)) = crate::common::sample_as_mcap(dir.path(), &flags) else {
         return;
     };
     let bytes = std::fs::read(&good).unwrap();
@@ -874,7 +897,7 @@ fn corrupt_mcap_files_are_clear_errors() {
     // Cut inside the summary: the data section is whole, and every frame is read.
     let tail = write("tail.mcap", &bytes[..bytes.len() - 30]);
     let output = travmap(&["run", &tail, "-q"]);
-    assert_contains(&common::stderr(&output), &["without its summary"]);
+    assert_contains(&crate::common::stderr(&output), &["without its summary"]);
     success(output);
     // A chunk claiming a terabyte uncompressed: refused before anything is reserved.
     let mut chunk = 8;
@@ -890,7 +913,7 @@ fn corrupt_mcap_files_are_clear_errors() {
 
 #[test]
 fn clouds_whose_data_disagree_with_their_layout_are_errors() {
-    use travmap::io::ros::{Header, PointCloud2, PointField, datatype};
+    use travmap_formats::ros::{Header, PointCloud2, PointField, datatype};
     let cloud = |data_len: usize, fields: Vec<PointField>| PointCloud2 {
         header: Header::default(),
         height: 2,
@@ -947,8 +970,8 @@ fn clouds_whose_data_disagree_with_their_layout_are_errors() {
 
 #[test]
 fn an_image_that_disagrees_with_its_camera_info_and_a_non_cdr_cloud_are_errors() {
-    use travmap::io::ros::{CameraInfo, PointCloud2, RosMessage, encode};
-    let Some((dir, seq)) = common::one_frame_with_image() else {
+    use travmap_formats::ros::{CameraInfo, PointCloud2, RosMessage, encode};
+    let Some((dir, seq)) = crate::common::one_frame_with_image() else {
         return;
     };
     let good = dir.path().join("good.mcap");
@@ -1016,7 +1039,7 @@ fn an_image_that_disagrees_with_its_camera_info_and_a_non_cdr_cloud_are_errors()
 #[test]
 fn a_recording_cut_short_is_read_as_far_as_it_goes() {
     let dir = tempfile::tempdir().unwrap();
-    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+    let Some((_, drive)) = crate::common::sample_as_mcap(dir.path(), &[]) else {
         return;
     };
     let whole = std::fs::read(&drive).unwrap();
@@ -1026,12 +1049,12 @@ fn a_recording_cut_short_is_read_as_far_as_it_goes() {
         let path = dir.path().join(name);
         std::fs::write(&path, bytes).unwrap();
         let output = travmap(&["run", arg(&path), "--json"]);
-        let err = common::stderr(&output);
+        let err = crate::common::stderr(&output);
         assert_contains(
             &err,
             &["without its summary and closing magic", "mcap recover"],
         );
-        let (frames, _) = common::json_records(&success(output));
+        let (frames, _) = crate::common::json_records(&success(output));
         frames.len()
     };
     assert_eq!(

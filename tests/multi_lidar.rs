@@ -5,20 +5,18 @@
 //! and 0.25 m up on /tf_static), must give the same scans and grids as the scans
 //! themselves.
 
-mod common;
-
 use std::path::Path;
 
-use common::{
+use crate::common::{
     arg, assert_contains, clean_failure, json_records, stderr, success, tf, travmap, usage_error,
 };
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-use travmap::io::format::InputFormat;
-use travmap::io::log::Log;
-use travmap::io::ros_drive::{DriveOptions, MergedTopics, RosDrive};
 use travmap::outputs::conversion::scan_to_cloud;
-use travmap::outputs::mcap_writer::Compression;
 use travmap::outputs::writing::McapSink;
+use travmap_formats::mcap::writer::Compression;
+use travmap_io::containers::log::Log;
+use travmap_io::format::InputFormat;
+use travmap_io::ros_drive::{DriveOptions, MergedTopics, RosDrive};
 
 fn rear_from_velodyne() -> Isometry3<f64> {
     let velodyne_from_rear = Isometry3::from_parts(
@@ -33,7 +31,7 @@ fn rear_from_velodyne() -> Isometry3<f64> {
 /// transforms are those of `velodyne` and `rear`. Returns the number of points of
 /// each scan.
 fn write_two_sensor_log(seq: &Path, path: &Path, frame_ids: [&str; 2]) -> Vec<usize> {
-    let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
+    let source = travmap_io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
     let mut sink = McapSink::create(path, Compression::Zstd).unwrap();
     sink.write(
         "/tf_static",
@@ -52,13 +50,13 @@ fn write_two_sensor_log(seq: &Path, path: &Path, frame_ids: [&str; 2]) -> Vec<us
         )
         .unwrap();
         let half = frame.points_in_velodyne.len() / 2;
-        let front = travmap::frame::Frame {
+        let front = travmap_core::frame::Frame {
             points_in_velodyne: frame.points_in_velodyne[..half].to_vec(),
             labels: frame.labels.as_ref().map(|l| l[..half].to_vec()),
             ..frame.clone()
         };
         let rear_pose = rear_from_velodyne();
-        let rear = travmap::frame::Frame {
+        let rear = travmap_core::frame::Frame {
             points_in_velodyne: frame.points_in_velodyne[half..]
                 .iter()
                 .map(|p| {
@@ -88,7 +86,9 @@ fn write_two_sensor_log(seq: &Path, path: &Path, frame_ids: [&str; 2]) -> Vec<us
 
 #[test]
 fn two_sensors_merge_into_the_scans_they_were_cut_from() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let log_path = dir.path().join("two.mcap");
     let sizes = write_two_sensor_log(&seq, &log_path, ["velodyne", "rear"]);
@@ -112,7 +112,7 @@ fn two_sensors_merge_into_the_scans_they_were_cut_from() {
     };
     let drive = RosDrive::open(Log::open(&log_path, InputFormat::Mcap).unwrap(), &options).unwrap();
     assert_eq!(drive.cloud_topic(), "/front_points");
-    let source = travmap::io::Source::open(&seq, &Default::default(), &|_| {}).unwrap();
+    let source = travmap_io::Source::open(&seq, &Default::default(), &|_| {}).unwrap();
     let originals: Vec<_> = source.read(&(0..usize::MAX)).map(Result::unwrap).collect();
     let frames: Vec<_> = drive.read(&(0..usize::MAX)).map(Result::unwrap).collect();
     assert_eq!(frames.len(), sizes.len());
@@ -176,7 +176,9 @@ fn two_sensors_merge_into_the_scans_they_were_cut_from() {
 /// the log that named them.
 #[test]
 fn lidar_frame_places_clouds_that_name_no_frame() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let (named, unnamed) = (
         dir.path().join("named.mcap"),
@@ -261,7 +263,7 @@ fn lidar_frame_places_clouds_that_name_no_frame() {
 /// scans and merged as clouds are; convert decodes both.
 #[test]
 fn packet_topics_merge_as_clouds_do() {
-    let bag = common::nebula_fixture("xt32/1673400677802009732");
+    let bag = crate::common::nebula_fixture("xt32/1673400677802009732");
     let dir = tempfile::tempdir().unwrap();
     let log_path = dir.path().join("two_pandars.mcap");
     let mut sink = McapSink::create(&log_path, Compression::Zstd).unwrap();
@@ -341,7 +343,7 @@ fn packet_topics_merge_as_clouds_do() {
 
     // convert decodes every packet topic read, each in its own frame.
     let converted = dir.path().join("converted.mcap");
-    let doc = common::json_summary(&[
+    let doc = crate::common::json_summary(&[
         "convert",
         arg(&log_path),
         "--cloud-topic",
@@ -358,7 +360,9 @@ fn packet_topics_merge_as_clouds_do() {
     let frames_of = |topic: &str| -> Vec<String> {
         (log.messages().map(Result::unwrap))
             .filter(|m| m.connection.topic == topic)
-            .map(|m| travmap::io::ros::decode::<travmap::io::ros::PointCloud2>(&m.data).unwrap())
+            .map(|m| {
+                travmap_formats::ros::decode::<travmap_formats::ros::PointCloud2>(&m.data).unwrap()
+            })
             .map(|cloud| cloud.header.frame_id)
             .collect()
     };

@@ -3,18 +3,16 @@
 //! ros-navigation/navigation2 a3a9704), and every fused cell found on its pixel with
 //! its value.
 
-mod common;
-
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use common::{arg, json_summary, tf};
+use crate::common::{arg, json_summary, tf};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-use travmap::method::fusion::FusedCell;
-use travmap::method::grid::CellClass;
 use travmap::outputs::conversion::scan_to_cloud;
-use travmap::outputs::mcap_writer::Compression;
 use travmap::outputs::writing::McapSink;
+use travmap_formats::mcap::writer::Compression;
+use travmap_method::fusion::FusedCell;
+use travmap_method::grid::CellClass;
 
 /// map_server's OccupancyGrid values.
 const FREE: i8 = 0;
@@ -172,9 +170,11 @@ fn write_nav2(seq: &Path, dir: &Path, mode: &str) -> (PathBuf, serde_json::Value
 
 #[test]
 fn map_server_loads_every_fused_cell_on_its_pixel_with_its_value() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
-    let cells = common::fused_drive(&seq);
+    let cells = crate::common::fused_drive(&seq);
     let seen: Vec<&FusedCell> = cells.iter().filter(|c| c.observations > 0).collect();
     assert!(seen.len() > 1000, "{} cells seen", seen.len());
 
@@ -240,12 +240,14 @@ fn map_server_loads_every_fused_cell_on_its_pixel_with_its_value() {
 
 #[test]
 fn a_nav2_map_beside_an_input_or_twice_named_is_refused() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let png = dir.path().join("site.png");
     let yaml = dir.path().join("site.yaml");
     // --nav2-mode scale would write site.png: the picture's own name.
-    let err = common::clean_failure(common::travmap(&[
+    let err = crate::common::clean_failure(crate::common::travmap(&[
         "map",
         arg(&seq),
         "-o",
@@ -255,16 +257,18 @@ fn a_nav2_map_beside_an_input_or_twice_named_is_refused() {
         "--nav2-mode",
         "scale",
     ]));
-    common::assert_contains(&err, &["site.png"]);
+    crate::common::assert_contains(&err, &["site.png"]);
     assert!(!yaml.exists() && !png.exists());
 }
 
 #[test]
 fn annotate_writes_the_final_map_once_on_a_latched_map_topic() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("a.mcap");
-    common::write_output(
+    crate::common::write_output(
         "annotate",
         &seq,
         &out,
@@ -282,10 +286,11 @@ fn annotate_writes_the_final_map_once_on_a_latched_map_topic() {
         qos.contains("durability: 1") && qos.contains("reliability: 1"),
         "{qos}"
     );
-    let grid: travmap::io::ros::OccupancyGrid = travmap::io::ros::decode(&maps[0].data).unwrap();
+    let grid: travmap_formats::ros::OccupancyGrid =
+        travmap_formats::ros::decode(&maps[0].data).unwrap();
     assert_eq!(grid.header.frame_id, "map");
     assert_eq!(grid.info.resolution, 0.4);
-    let cells = common::fused_drive(&seq);
+    let cells = crate::common::fused_drive(&seq);
     let (ox, oy) = (grid.info.origin.position.x, grid.info.origin.position.y);
     let width = grid.info.width as usize;
     for cell in cells.iter().filter(|c| c.observations > 0) {
@@ -308,7 +313,7 @@ fn annotate_writes_the_final_map_once_on_a_latched_map_topic() {
 /// `Some(false)` as a child of `map` (robot_localization's navsat_transform
 /// default), None not at all.
 fn write_placed_log(seq: &Path, path: &Path, utm_from_map: &Isometry3<f64>, place: Option<bool>) {
-    let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
+    let source = travmap_io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
     let mut sink = McapSink::create(path, Compression::Zstd).unwrap();
     let start_ns = 1_600_000_000_000_000_000;
     match place {
@@ -341,7 +346,9 @@ fn write_placed_log(seq: &Path, path: &Path, utm_from_map: &Isometry3<f64>, plac
 
 #[test]
 fn a_log_placed_in_utm_gets_its_map_placed_there() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let yaw = 30f64.to_radians();
     let utm_from_map = Isometry3::from_parts(

@@ -3,17 +3,15 @@
 //! (same topic, stamps and bytes) read as the same packets, of the same model, and
 //! give every command the same drive as the vendor's own message.
 
-mod common;
-
 use std::path::Path;
 
-use common::{arg, json_records, nebula_fixture, success, travmap};
-use travmap::io::format::InputFormat;
-use travmap::io::log::Log;
-use travmap::io::packets::{NEBULA_PACKETS, PacketModel, packet_message};
-use travmap::io::ros::{Header, NebulaPacket, NebulaPackets, Time};
-use travmap::outputs::mcap_writer::Compression;
+use crate::common::{arg, json_records, nebula_fixture, success, travmap};
 use travmap::outputs::writing::McapSink;
+use travmap_formats::mcap::writer::Compression;
+use travmap_formats::ros::{Header, NebulaPacket, NebulaPackets, Time};
+use travmap_io::containers::log::Log;
+use travmap_io::format::InputFormat;
+use travmap_io::packets::{NEBULA_PACKETS, PacketModel, packet_message};
 
 fn time(ns: u64) -> Time {
     Time {
@@ -108,7 +106,7 @@ fn nebula_packets_are_the_vendors_drive(bag: &str, model: &str) {
         assert_eq!(a["cells"], b["cells"]);
     }
     let converted = dir.path().join("converted.mcap");
-    let doc = common::json_summary(&["convert", arg(&nebula), "-o", arg(&converted)]);
+    let doc = crate::common::json_summary(&["convert", arg(&nebula), "-o", arg(&converted)]);
     assert_eq!(doc["decoded_scans"], recorded.len());
     println!(
         "{model}: {} scans, as from the vendor's message",
@@ -134,7 +132,7 @@ fn nebula_packets_of_a_pandar_40p_are_not_taken_for_velodyne_ones() {
 
 #[test]
 fn the_fuzz_seeds_are_nebula_packets_of_each_model() {
-    use travmap::io::ros::MessageEncoding;
+    use travmap_formats::ros::MessageEncoding;
     let seeds = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/nebula_packets");
     for (name, model) in [
         ("vlp16_dual", "VLP-16"),
@@ -154,7 +152,7 @@ fn the_fuzz_seeds_are_nebula_packets_of_each_model() {
             let found = PacketModel::of_packet(NEBULA_PACKETS, packet).unwrap();
             assert_eq!(found.name(), model, "{name}");
         }
-        let typed: NebulaPackets = travmap::io::ros::decode(&data).unwrap();
+        let typed: NebulaPackets = travmap_formats::ros::decode(&data).unwrap();
         assert_eq!(typed.header.frame_id, message.frame_id);
     }
 }

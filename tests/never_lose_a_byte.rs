@@ -2,14 +2,12 @@
 //! `-o` aimed at every input however spelled, signals, a killed run's leftovers, a
 //! full disk.
 
-mod common;
-
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{arg, clean_failure, travmap};
+use crate::common::{arg, clean_failure, travmap};
 use sha2::{Digest, Sha256};
 
 /// SHA-256 of every file below `root` (links followed), by path.
@@ -54,7 +52,7 @@ fn inputs(sample: &Path, dir: &Path) -> (PathBuf, PathBuf, PathBuf, PathBuf) {
         }
     }
     let drive = dir.join("d.mcap");
-    common::write_output("convert", &seq, &drive, &[]);
+    crate::common::write_output("convert", &seq, &drive, &[]);
     let model = dir.join("model.json");
     std::fs::write(&model, travmap_model()).unwrap();
     let config = dir.join("config.toml");
@@ -63,14 +61,14 @@ fn inputs(sample: &Path, dir: &Path) -> (PathBuf, PathBuf, PathBuf, PathBuf) {
 }
 
 fn travmap_model() -> Vec<u8> {
-    travmap::method::classifier::SvmModel::embedded_default()
+    travmap_method::classifier::SvmModel::embedded_default()
         .unwrap()
         .to_json()
 }
 
 #[test]
 fn no_writing_command_can_overwrite_any_of_its_inputs() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -146,7 +144,7 @@ fn no_writing_command_can_overwrite_any_of_its_inputs() {
             args.extend(["-o", arg(target)]);
             let out = travmap(&args);
             assert_eq!(out.status.code(), Some(1), "{args:?}");
-            let err = common::stderr(&out);
+            let err = crate::common::stderr(&out);
             assert!(err.contains("would overwrite the input"), "{args:?}: {err}");
         }
     }
@@ -164,7 +162,7 @@ fn no_writing_command_can_overwrite_any_of_its_inputs() {
 
 #[test]
 fn outputs_that_cannot_be_written_are_refused_before_any_work() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -188,7 +186,7 @@ fn outputs_that_cannot_be_written_are_refused_before_any_work() {
 /// Starts a conversion of a long sequence into `out_dir`, waits until its temporary
 /// file exists, and sends `signal`. None when it finished first.
 fn interrupt_conversion(sample: &Path, dir: &Path, signal: &str) -> Option<(i32, PathBuf)> {
-    let long = common::long_sequence(sample, dir, 200);
+    let long = crate::common::long_sequence(sample, dir, 200);
     let out_dir = dir.join("out");
     std::fs::create_dir_all(&out_dir).unwrap();
     let output = out_dir.join("drive.mcap");
@@ -223,7 +221,7 @@ fn interrupt_conversion(sample: &Path, dir: &Path, signal: &str) -> Option<(i32,
 
 #[test]
 fn sigint_sigterm_and_sighup_remove_the_temporary_output() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     for (signal, code) in [("INT", 130), ("TERM", 143), ("HUP", 129)] {
@@ -239,7 +237,7 @@ fn sigint_sigterm_and_sighup_remove_the_temporary_output() {
 
 #[test]
 fn the_next_run_removes_what_a_killed_run_left() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -263,7 +261,7 @@ fn the_next_run_removes_what_a_killed_run_left() {
         arg(&output),
         "-q",
     ]);
-    let err = common::stderr(&out);
+    let err = crate::common::stderr(&out);
     assert!(out.status.success(), "{err}");
     assert!(
         err.contains("left by a travmap run that was killed"),
@@ -301,7 +299,7 @@ fn small_tmpfs(size: &str) -> Option<tempfile::TempDir> {
 
 #[test]
 fn a_full_disk_is_named_and_leaves_nothing() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     // A 1 MiB file system: the conversion of six scans (8.8 MB) fills it.
@@ -319,7 +317,7 @@ fn a_full_disk_is_named_and_leaves_nothing() {
 
 #[test]
 fn a_full_disk_leaves_nothing_of_any_command_with_several_outputs() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     // 16 KiB: two or three of render's 2 KB pictures and the map's PNG fit, the
@@ -375,7 +373,7 @@ fn a_full_disk_leaves_nothing_of_any_command_with_several_outputs() {
 
 #[test]
 fn a_closed_stdout_ends_quietly() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     // `travmap run ... | head -c 1`: the reader goes away after one byte.
@@ -408,7 +406,7 @@ fn a_closed_stdout_ends_quietly() {
 #[test]
 fn devices_and_fifos_are_written_through_not_replaced() {
     use std::os::unix::fs::FileTypeExt;
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -424,7 +422,7 @@ fn devices_and_fifos_are_written_through_not_replaced() {
         PathBuf::from("/dev/null")
     };
     for command in ["annotate", "convert", "map", "dataset"] {
-        common::write_output(command, &sample, &null, &[]);
+        crate::common::write_output(command, &sample, &null, &[]);
         let kind = std::fs::metadata(&null).unwrap().file_type();
         assert!(
             kind.is_char_device(),
@@ -445,7 +443,7 @@ fn devices_and_fifos_are_written_through_not_replaced() {
         let fifo = fifo.clone();
         std::thread::spawn(move || std::fs::read(fifo).unwrap())
     };
-    common::write_output("convert", &sample, &fifo, &[]);
+    crate::common::write_output("convert", &sample, &fifo, &[]);
     let bytes = reader.join().unwrap();
     assert!(bytes.starts_with(b"\x89MCAP0\r\n") && bytes.ends_with(b"\x89MCAP0\r\n"));
     assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
@@ -462,7 +460,7 @@ fn devices_and_fifos_are_written_through_not_replaced() {
 #[test]
 fn outputs_that_would_lose_something_are_refused() {
     use std::os::unix::fs::PermissionsExt;
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -476,23 +474,23 @@ fn outputs_that_would_lose_something_are_refused() {
         "--cells",
         arg(&same),
     ]));
-    common::assert_contains(&err, &["name the same file"]);
+    crate::common::assert_contains(&err, &["name the same file"]);
     assert!(!picture.exists());
 
-    let copy = common::long_sequence(&sample, dir.path(), 6);
+    let copy = crate::common::long_sequence(&sample, dir.path(), 6);
     let inside = copy.join("velodyne").join("m.png");
     let err = clean_failure(travmap(&["map", arg(&copy), "-o", arg(&inside)]));
-    common::assert_contains(
+    crate::common::assert_contains(
         &err,
         &["is inside the input directory", "choose another -o"],
     );
     // Beside the input's own files is fine.
-    common::write_output("map", &copy, &copy.join("m.png"), &[]);
+    crate::common::write_output("map", &copy, &copy.join("m.png"), &[]);
 
     let protected = dir.path().join("protected.png");
     std::fs::write(&protected, b"keep me").unwrap();
     std::fs::set_permissions(&protected, std::fs::Permissions::from_mode(0o444)).unwrap();
     let err = clean_failure(travmap(&["map", arg(&sample), "-o", arg(&protected)]));
-    common::assert_contains(&err, &["write-protected (mode 444)"]);
+    crate::common::assert_contains(&err, &["write-protected (mode 444)"]);
     assert_eq!(std::fs::read(&protected).unwrap(), b"keep me");
 }

@@ -2,15 +2,15 @@
 //! and every way a pose-less drive comes in (a log without /tf, a single cloud, a
 //! folder of PCD scans) mapping with no flag, with the grids registration gives.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{arg, assert_contains, clean_failure, run_client, success, travmap, write_output};
+use crate::common::{
+    arg, assert_contains, clean_failure, run_client, success, travmap, write_output,
+};
 use nalgebra::Isometry3;
 use serde_json::Value;
-use travmap::io::KittiSequence;
+use travmap_io::KittiSequence;
 
 /// The poses of a KITTI-format trajectory file.
 fn read_trajectory(path: &Path) -> Vec<Isometry3<f64>> {
@@ -26,7 +26,7 @@ fn read_trajectory(path: &Path) -> Vec<Isometry3<f64>> {
                 v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], v[10], v[11], 0.0, 0.0,
                 0.0, 1.0,
             );
-            travmap::geometry::rigid(&m)
+            travmap_core::geometry::rigid(&m)
         })
         .collect()
 }
@@ -49,7 +49,7 @@ fn step_errors(estimated: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> Vec<(f
 
 #[test]
 fn registration_tracks_the_shipped_drive_within_kiss_icp_figures() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -88,7 +88,7 @@ fn registration_tracks_the_shipped_drive_within_kiss_icp_figures() {
 /// The grid of every frame of `run --json` on `input` with `extra` flags.
 fn grids(input: &Path, extra: &[&str]) -> Vec<(u64, Value, Value)> {
     let args = [&["run", arg(input), "--json"], extra].concat();
-    let (frames, _) = common::json_records(&success(travmap(&args)));
+    let (frames, _) = crate::common::json_records(&success(travmap(&args)));
     frames
         .iter()
         .map(|f| {
@@ -103,7 +103,7 @@ fn grids(input: &Path, extra: &[&str]) -> Vec<(u64, Value, Value)> {
 
 #[test]
 fn registration_grids_agree_with_the_recorded_poses_grids() {
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     let recorded = grids(&sample, &[]);
@@ -134,7 +134,7 @@ fn registration_grids_agree_with_the_recorded_poses_grids() {
 /// `drive` rewritten by Python mcap without its `/tf` topic (and with only its first
 /// `clouds` clouds), or None without the client venv.
 fn without_tf(drive: &Path, out: &Path, clouds: usize) -> Option<()> {
-    let python = common::env_var("TRAVMAP_CLIENT_PYTHON", "the client venv's python")?;
+    let python = crate::common::env_var("TRAVMAP_CLIENT_PYTHON", "the client venv's python")?;
     let script = r#"
 import sys
 from mcap.reader import make_reader
@@ -194,7 +194,7 @@ fn pcd_folder(sample: &Path, dir: &Path) -> PathBuf {
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn pose_less_drives_map_with_no_flag_and_the_grids_of_registration() {
     let dir = tempfile::tempdir().unwrap();
-    let Some((sample, drive)) = common::sample_as_mcap(dir.path(), &[]) else {
+    let Some((sample, drive)) = crate::common::sample_as_mcap(dir.path(), &[]) else {
         return;
     };
     let reference = grids(&sample, &["--poses", "registration"]);
@@ -206,7 +206,7 @@ fn pose_less_drives_map_with_no_flag_and_the_grids_of_registration() {
     }
     let output = travmap(&["run", arg(&no_tf), "-q"]);
     assert_contains(
-        &common::stderr(&output),
+        &crate::common::stderr(&output),
         &[
             "notice:",
             "no recorded pose moves the clouds' frame `velodyne`",
@@ -231,7 +231,7 @@ fn pose_less_drives_map_with_no_flag_and_the_grids_of_registration() {
     let folder = pcd_folder(&sample, dir.path());
     let output = travmap(&["run", arg(&folder), "-q"]);
     assert_contains(
-        &common::stderr(&output),
+        &crate::common::stderr(&output),
         &[
             "a folder of PCD scans; stamps from the file names",
             "a folder of scans records no poses: poses estimated by scan registration",
@@ -244,13 +244,13 @@ fn pose_less_drives_map_with_no_flag_and_the_grids_of_registration() {
     let annotated = dir.path().join("annotated.mcap");
     write_output("annotate", &folder, &annotated, &[]);
     let bytes = std::fs::read(&annotated).unwrap();
-    let metadata = common::travmap_metadata(&bytes);
+    let metadata = crate::common::travmap_metadata(&bytes);
     assert_eq!(metadata["poses"], "estimated by scan registration");
-    let tf: Vec<travmap::io::ros::TfMessage> = mcap::MessageStream::new(&bytes)
+    let tf: Vec<travmap_formats::ros::TfMessage> = mcap::MessageStream::new(&bytes)
         .unwrap()
         .map(Result::unwrap)
         .filter(|m| m.channel.topic == "/tf")
-        .map(|m| travmap::io::ros::decode(&m.data).unwrap())
+        .map(|m| travmap_formats::ros::decode(&m.data).unwrap())
         .collect();
     assert_eq!(tf.len(), 6);
     assert_eq!(tf[0].transforms[0].header.frame_id, "map");
@@ -260,7 +260,7 @@ fn pose_less_drives_map_with_no_flag_and_the_grids_of_registration() {
 #[test]
 fn scans_that_cannot_be_registered_are_clear_errors_or_skipped() {
     let dir = tempfile::tempdir().unwrap();
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
     let folder = dir.path().join("bins");
@@ -296,8 +296,13 @@ fn scans_that_cannot_be_registered_are_clear_errors_or_skipped() {
     );
     assert!(!err.contains("RegistrationStats"), "{err}");
     let output = travmap(&["run", arg(&folder), "--keep-going", "--json"]);
-    assert_eq!(output.status.code(), Some(3), "{}", common::stderr(&output));
-    let (frames, summary) = common::json_records(&common::stdout(&output));
+    assert_eq!(
+        output.status.code(),
+        Some(3),
+        "{}",
+        crate::common::stderr(&output)
+    );
+    let (frames, summary) = crate::common::json_records(&crate::common::stdout(&output));
     assert_eq!(frames.len(), 4);
     let skipped: Vec<u64> = summary["skipped"]
         .as_array()

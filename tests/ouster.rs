@@ -7,17 +7,15 @@
 //! Python with ouster-sdk 1.0.1, which pins an older rosbags than the client venv's,
 //! so it has its own venv: `.ci/clients.sh`).
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{assert_contains, clean_failure, run_client, write_output};
-use travmap::io::format::InputFormat;
-use travmap::io::log::Log;
-use travmap::io::ouster::{OusterMetadata, string_message};
-use travmap::io::packets::{PacketAssembler, PacketCalibration, PacketModel};
-use travmap::io::ros::{OccupancyGrid, Time, decode};
+use crate::common::{assert_contains, clean_failure, run_client, write_output};
+use travmap_formats::ros::{OccupancyGrid, Time, decode};
+use travmap_io::containers::log::Log;
+use travmap_io::format::InputFormat;
+use travmap_io::packets::ouster::{OusterMetadata, string_message};
+use travmap_io::packets::{PacketAssembler, PacketCalibration, PacketModel};
 
 const PROFILES: [&str; 4] = [
     "LEGACY",
@@ -30,8 +28,8 @@ const LOG_START_NS: u64 = 1_700_000_000_000_000_000;
 /// The routes written into a temporary directory, or None without the data or the
 /// SDK's Python.
 fn routes() -> Option<(tempfile::TempDir, PathBuf)> {
-    let scan = common::shared_data("rellis3d-000104/sequences/00/velodyne/000000.bin")?;
-    let python = common::env_var("TRAVMAP_OUSTER_PYTHON", "a Python with ouster-sdk")?;
+    let scan = crate::common::shared_data("rellis3d-000104/sequences/00/velodyne/000000.bin")?;
+    let python = crate::common::env_var("TRAVMAP_OUSTER_PYTHON", "a Python with ouster-sdk")?;
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ouster");
     run_client(
@@ -135,13 +133,13 @@ fn the_fixture_decodes_to_the_sdks_points_and_is_a_drive() {
     assert_sdks_points(&bag, InputFormat::Rosbag2, &metadata, &truth);
     // A drive: three frames, posed by /tf (the vehicle moves 0.5 m a frame), with no
     // notice.
-    let output = common::travmap(&["run", bag.to_str().unwrap(), "--json"]);
+    let output = crate::common::travmap(&["run", bag.to_str().unwrap(), "--json"]);
     assert!(
-        common::stderr(&output).is_empty(),
+        crate::common::stderr(&output).is_empty(),
         "{}",
-        common::stderr(&output)
+        crate::common::stderr(&output)
     );
-    let (frames, summary) = common::json_records(&common::success(output));
+    let (frames, summary) = crate::common::json_records(&crate::common::success(output));
     assert_eq!(frames.len(), 3, "{summary}");
     // The grid follows the vehicle along x; the reflectivity is read on the byte scale.
     let corner_x: Vec<f64> = (frames.iter())
@@ -247,7 +245,7 @@ fn an_ouster_log_is_a_drive_however_it_was_recorded() {
         rng19
     );
     let out = dir.join("none.mcap");
-    let error = clean_failure(common::travmap(&[
+    let error = clean_failure(crate::common::travmap(&[
         "annotate",
         route("ouster-no-metadata").to_str().unwrap(),
         "-o",
@@ -260,7 +258,7 @@ fn an_ouster_log_is_a_drive_however_it_was_recorded() {
     assert!(!out.exists());
     // Another profile's metadata names both layouts.
     let legacy = route("LEGACY.json");
-    let error = clean_failure(common::travmap(&[
+    let error = clean_failure(crate::common::travmap(&[
         "annotate",
         route("ouster-RNG19_RFL8_SIG16_NIR16").to_str().unwrap(),
         "--lidar-calibration",
@@ -328,14 +326,15 @@ fn an_ouster_log_is_a_drive_however_it_was_recorded() {
         );
     }
     // A recording that began mid-turn: its first frame is left out, with a notice.
-    let mid_turn = common::travmap(&["run", route("ouster-mid-turn").to_str().unwrap(), "--json"]);
+    let mid_turn =
+        crate::common::travmap(&["run", route("ouster-mid-turn").to_str().unwrap(), "--json"]);
     assert_contains(
-        &common::stderr(&mid_turn),
+        &crate::common::stderr(&mid_turn),
         &[
             "frame 0 is the part of a rotation the recording began with (48 packets, against 128 in frame 1)",
         ],
     );
-    let (frames, _) = common::json_records(&common::success(mid_turn));
+    let (frames, _) = crate::common::json_records(&crate::common::success(mid_turn));
     assert_eq!(
         frames
             .iter()

@@ -4,15 +4,13 @@
 //! drive, frame for frame and cell for cell. Ouster's SDK's own pcap writer is
 //! checked in `tests/ouster.rs`. Needs `TRAVMAP_CLIENT_PYTHON` (scapy).
 
-mod common;
-
 use std::path::Path;
 use std::process::Command;
 
-use common::{nebula_fixture, run_client};
-use travmap::io::format::InputFormat;
-use travmap::io::log::Log;
-use travmap::io::packets::packet_message;
+use crate::common::{nebula_fixture, run_client};
+use travmap_io::containers::log::Log;
+use travmap_io::format::InputFormat;
+use travmap_io::packets::packet_message;
 
 /// Every packet of a packet log, as `write_pcap.py` reads them.
 fn packets_file(log: &Path, out: &Path) {
@@ -36,8 +34,8 @@ fn packets_file(log: &Path, out: &Path) {
 
 /// What `run --json` says of each frame: its stamp and its cells.
 fn frames(input: &Path) -> Vec<(serde_json::Value, serde_json::Value)> {
-    let output = common::travmap(&["run", input.to_str().unwrap(), "--json"]);
-    let (frames, _) = common::json_records(&common::success(output));
+    let output = crate::common::travmap(&["run", input.to_str().unwrap(), "--json"]);
+    let (frames, _) = crate::common::json_records(&crate::common::success(output));
     frames
         .into_iter()
         .map(|f| (f["stamp_ns"].clone(), f["cells"].clone()))
@@ -45,7 +43,8 @@ fn frames(input: &Path) -> Vec<(serde_json::Value, serde_json::Value)> {
 }
 
 fn a_capture_is_its_packet_log(bag: &str, extra: &[&str]) {
-    let Some(python) = common::env_var("TRAVMAP_CLIENT_PYTHON", "the client venv's python") else {
+    let Some(python) = crate::common::env_var("TRAVMAP_CLIENT_PYTHON", "the client venv's python")
+    else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();

@@ -4,11 +4,9 @@
 //! `TRAVMAP_BLESS=1 cargo test --release --test readme` redraws the pictures; a score
 //! that moved fails with the row the README should now show.
 
-mod common;
-
 use std::path::Path;
 
-use common::{arg, success, travmap};
+use crate::common::{arg, success, travmap};
 use serde_json::Value;
 
 fn readme() -> String {
@@ -42,7 +40,9 @@ fn check_picture(drawn: &Path, fixture: &str) {
 
 #[test]
 fn the_pictures_are_what_the_quoted_commands_draw() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let readme = readme();
     let dir = tempfile::tempdir().unwrap();
     assert_quoted(
@@ -98,7 +98,9 @@ fn table_row(label: &str, scores: &Value, cells: u64) -> String {
 /// Runs `crossval` as the README says and checks its default rows (after the filter
 /// and SVM only) against the README's table.
 fn check_crossval_rows(settings: &[&str], filtered_label: &str, svm_label: &str) {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let readme = readme();
     let quoted = match settings {
         [] => "`travmap crossval ../shared/data/semantickitti-00/sequences/00`".to_string(),
@@ -154,8 +156,8 @@ fn the_36_m_rows_are_what_crossval_prints() {
 #[test]
 fn the_held_out_scores_are_what_crossval_prints() {
     let (Some(s0), Some(s7)) = (
-        common::sample(),
-        common::shared_data("semantickitti-07-000964/sequences/07"),
+        crate::common::sample(),
+        crate::common::shared_data("semantickitti-07-000964/sequences/07"),
     ) else {
         return;
     };

@@ -1,14 +1,12 @@
 //! Frames, poses and labels of the real SemanticKITTI sample: the world frame is
 //! right when consecutive scans coincide and the road lies in the world x-y plane.
 
-mod common;
-
 use std::collections::HashMap;
 
-use travmap::geometry::Moments;
-use travmap::io::KittiSequence;
-use travmap::io::kitti::{read_labels, read_poses, read_scan};
-use travmap::method::integration::{WorldScan, scan_to_world};
+use travmap_core::geometry::Moments;
+use travmap_io::KittiSequence;
+use travmap_io::kitti::{read_labels, read_poses, read_scan};
+use travmap_method::integration::{WorldScan, scan_to_world};
 
 const VOXEL_M: f32 = 0.5;
 
@@ -61,7 +59,9 @@ fn world_scans(sequence: &KittiSequence, frames: std::ops::Range<usize>) -> Vec<
 
 #[test]
 fn consecutive_scans_coincide_in_the_world_frame() {
-    let Some(dir) = common::sample() else { return };
+    let Some(dir) = crate::common::sample() else {
+        return;
+    };
     let sequence = KittiSequence::open(&dir).unwrap();
     let scans = world_scans(&sequence, 0..6);
     for pair in scans.windows(2) {
@@ -121,7 +121,9 @@ fn consecutive_scans_coincide_in_the_world_frame() {
 
 #[test]
 fn the_road_lies_in_the_world_xy_plane() {
-    let Some(dir) = common::sample() else { return };
+    let Some(dir) = crate::common::sample() else {
+        return;
+    };
     let sequence = KittiSequence::open(&dir).unwrap();
     for scan in world_scans(&sequence, 0..3) {
         let labels = scan.labels.as_ref().expect("frames 0-2 are labelled");
@@ -149,7 +151,9 @@ fn the_road_lies_in_the_world_xy_plane() {
 
 #[test]
 fn shipped_scans_and_labels_match_their_provenance() {
-    let Some(dir) = common::sample() else { return };
+    let Some(dir) = crate::common::sample() else {
+        return;
+    };
     let sequence = KittiSequence::open(&dir).unwrap();
     assert_eq!(sequence.frames(), &[0, 1, 2, 3, 4, 5]);
     let counts: Vec<usize> = (0..6)
@@ -166,8 +170,8 @@ fn labels_join_the_right_points() {
     // The mmdetection3d 50-point subset of frame 0 with its labels, at the indices
     // PROVENANCE.md lists: each point and label must equal the full frame's.
     let (Some(full), Some(subset)) = (
-        common::sample(),
-        common::shared_data("semantickitti-mmdet3d-50pt/sequences/00"),
+        crate::common::sample(),
+        crate::common::shared_data("semantickitti-mmdet3d-50pt/sequences/00"),
     ) else {
         return;
     };
@@ -195,14 +199,16 @@ fn labels_join_the_right_points() {
 
 #[test]
 fn frames_in_batches_equal_frames_one_by_one() {
-    use travmap::frame::Frame;
-    use travmap::method::classifier::SvmModel;
-    use travmap::method::pipeline::Pipeline;
-    use travmap::posing::Posing;
-    let Some(dir) = common::sample() else { return };
+    use travmap_core::frame::Frame;
+    use travmap_core::posing::Posing;
+    use travmap_method::classifier::SvmModel;
+    use travmap_method::pipeline::Pipeline;
+    let Some(dir) = crate::common::sample() else {
+        return;
+    };
     let sequence = KittiSequence::open(&dir).unwrap();
     let model = SvmModel::embedded_default().unwrap();
-    let config = travmap::Config::default();
+    let config = travmap_core::Config::default();
     let frames: Vec<_> = (0..6).map(|i| sequence.read_frame(i).unwrap()).collect();
     let pipeline = || Pipeline::new(&config, Posing::Recorded).unwrap();
     let posed = |pipeline: &mut Pipeline, frames: &[Frame]| -> Vec<_> {

@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use travmap::fuzzing::TARGETS;
-use travmap::random::SplitMix64;
+use travmap_core::random::SplitMix64;
 
 fn iterations() -> usize {
     std::env::var("TRAVMAP_FUZZ_ITERATIONS")

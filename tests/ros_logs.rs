@@ -4,16 +4,16 @@
 //! its scores, `convert` must bring each back to ROS 2, and broken logs must be
 //! one-line errors.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{arg, assert_contains, clean_failure, run_client, success, travmap, write_output};
+use crate::common::{
+    arg, assert_contains, clean_failure, run_client, success, travmap, write_output,
+};
 use serde_json::Value;
-use travmap::io::format::{InputFormat, detect};
-use travmap::io::log::Log;
-use travmap::io::ros::{OccupancyGrid, decode};
+use travmap_formats::ros::{OccupancyGrid, decode};
+use travmap_io::containers::log::Log;
+use travmap_io::format::{InputFormat, detect};
 
 /// The routes `ros_routes.py` writes, by name.
 const ROUTES: [&str; 14] = [
@@ -37,7 +37,7 @@ const ROUTES: [&str; 14] = [
 /// `drive` (a ROS 2 MCAP) written in every other format into `dir/routes`, or None
 /// without the client venv.
 fn routes(drive: &Path, dir: &Path) -> Option<PathBuf> {
-    let python = common::env_var("TRAVMAP_CLIENT_PYTHON", "the client venv's python")?;
+    let python = crate::common::env_var("TRAVMAP_CLIENT_PYTHON", "the client venv's python")?;
     let convert = Path::new(&python).with_file_name("rosbags-convert");
     let out = dir.join("routes");
     run_client(
@@ -53,7 +53,7 @@ fn routes(drive: &Path, dir: &Path) -> Option<PathBuf> {
 /// or the client venv.
 fn sample_routes() -> Option<(tempfile::TempDir, PathBuf, PathBuf)> {
     let dir = tempfile::tempdir().unwrap();
-    let (_, drive) = common::sample_as_mcap(dir.path(), &[])?;
+    let (_, drive) = crate::common::sample_as_mcap(dir.path(), &[])?;
     let routes = routes(&drive, dir.path())?;
     Some((dir, drive, routes))
 }
@@ -75,7 +75,7 @@ fn annotated_grids(dir: &Path, input: &Path, name: &str) -> Vec<(String, u64, Ve
 /// `drive.mcap`) and written in every other format; None without the data or the
 /// client venv.
 fn one_frame_routes() -> Option<(tempfile::TempDir, PathBuf, PathBuf)> {
-    let (dir, seq) = common::one_frame_with_image()?;
+    let (dir, seq) = crate::common::one_frame_with_image()?;
     let drive = dir.path().join("drive.mcap");
     write_output("convert", &seq, &drive, &[]);
     let routes = routes(&drive, dir.path())?;
@@ -86,7 +86,7 @@ fn one_frame_routes() -> Option<(tempfile::TempDir, PathBuf, PathBuf)> {
 /// model; annotate only for a model that uses them): frames with an image, and
 /// cells with appearance values.
 fn images(input: &Path) -> (Value, Value) {
-    let report = common::json_summary(&["eval", arg(input)])["report"].clone();
+    let report = crate::common::json_summary(&["eval", arg(input)])["report"].clone();
     (
         report["frames_with_images"].clone(),
         report["cells_with_appearance"].clone(),
@@ -107,7 +107,7 @@ fn messages_on(path: &Path, topics: &[&str]) -> Vec<(String, u64, Vec<u8>)> {
 
 /// The scores of `eval --json` on `input`: confusion and filtered / unfiltered scores.
 fn scores(input: &Path) -> Value {
-    let summary = common::json_summary(&["eval", arg(input)]);
+    let summary = crate::common::json_summary(&["eval", arg(input)]);
     let report = &summary["report"];
     serde_json::json!([
         report["confusion"],
@@ -161,7 +161,8 @@ fn convert_brings_every_route_back_to_the_same_ros2_messages() {
         "rosbag2-sqlite3-zstd-file",
     ] {
         let out = dir.path().join(format!("{route}.converted.mcap"));
-        let json = common::json_summary(&["convert", arg(&routes.join(route)), "-o", arg(&out)]);
+        let json =
+            crate::common::json_summary(&["convert", arg(&routes.join(route)), "-o", arg(&out)]);
         // Byte for byte the messages travmap wrote from the KITTI frame.
         assert!(messages_on(&out, &known) == original, "{route}");
         let summary = &json;
@@ -223,8 +224,13 @@ fn a_livox_custom_msg_reads_as_the_pointcloud2_of_its_points() {
     // intensity of a PointCloud2 (a byte-scale remission, as the Livox's).
     let annotated = |input: &Path, name: &str| {
         let out = dir.path().join(format!("{name}.annotated.mcap"));
-        let json =
-            common::json_summary(&["annotate", arg(input), "-o", arg(&out), "--no-passthrough"]);
+        let json = crate::common::json_summary(&[
+            "annotate",
+            arg(input),
+            "-o",
+            arg(&out),
+            "--no-passthrough",
+        ]);
         assert_eq!(json["frames"], 6, "{name}: {json}");
         messages_on(&out, &["/travmap/prediction", "/travmap/cloud"])
     };
@@ -272,13 +278,13 @@ fn a_foxglove_protobuf_log_reads_as_its_ros2_original() {
     // convert makes ROS 2 of it: the same clouds and transforms as the original,
     // up to what Foxglove's schemas do not carry (is_dense) and /tf_static's stamp.
     let converted = dir.path().join("converted.mcap");
-    let json = common::json_summary(&["convert", arg(&foxglove), "-o", arg(&converted)]);
+    let json = crate::common::json_summary(&["convert", arg(&foxglove), "-o", arg(&converted)]);
     assert_eq!(json["translated_messages"], json["messages"], "{json}");
     assert_eq!(json["topics_as_recorded"], serde_json::json!([]));
-    let clouds = |path: &Path| -> Vec<(u64, travmap::io::ros::PointCloud2)> {
+    let clouds = |path: &Path| -> Vec<(u64, travmap_formats::ros::PointCloud2)> {
         (messages_on(path, &["/velodyne_points"]).into_iter())
-            .map(|(_, t, data)| (t, travmap::io::ros::decode(&data).unwrap()))
-            .map(|(t, mut cloud): (u64, travmap::io::ros::PointCloud2)| {
+            .map(|(_, t, data)| (t, travmap_formats::ros::decode(&data).unwrap()))
+            .map(|(t, mut cloud): (u64, travmap_formats::ros::PointCloud2)| {
                 cloud.is_dense = false;
                 (t, cloud)
             })
@@ -305,8 +311,8 @@ fn a_log_laid_out_as_nuscenes_reads_with_its_mounts_on_tf() {
     // time: held as static ones are, so the first and last clouds keep their pose,
     // and the scores are the original's.
     let chosen = ["--cloud-topic", "/lidar_top"];
-    let summary = common::json_summary(&[&["eval", arg(&nuscenes)][..], &chosen].concat());
-    let original = common::json_summary(&["eval", arg(&drive)]);
+    let summary = crate::common::json_summary(&[&["eval", arg(&nuscenes)][..], &chosen].concat());
+    let original = crate::common::json_summary(&["eval", arg(&drive)]);
     assert_eq!(summary["report"]["frames"], 3);
     assert_eq!(
         summary["report"]["confusion"],
@@ -365,7 +371,7 @@ fn field_value(bytes: &[u8], name: &[u8]) -> usize {
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() {
     let dir = tempfile::tempdir().unwrap();
-    let Some((_, drive)) = common::sample_as_mcap(dir.path(), &["--frames", "0..3"]) else {
+    let Some((_, drive)) = crate::common::sample_as_mcap(dir.path(), &["--frames", "0..3"]) else {
         return;
     };
     let Some(routes) = routes(&drive, dir.path()) else {
@@ -394,14 +400,14 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
         b[at..at + 8].fill(0);
     });
     let output = travmap(&["run", arg(&unindexed)]);
-    let stderr = common::stderr(&output);
+    let stderr = crate::common::stderr(&output);
     success(output);
     assert_contains(
         &stderr,
         &["notice:", "unindexed.bag", "no index", "linear scan"],
     );
     let run_frames = |input: &Path| {
-        common::json_records(&success(travmap(&["run", arg(input), "--json"])))
+        crate::common::json_records(&success(travmap(&["run", arg(input), "--json"])))
             .0
             .iter()
             .map(|f| (f["frame"].clone(), f["cells"].clone()))
@@ -414,7 +420,10 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
         b.truncate(length / 2)
     });
     let output = travmap(&["run", arg(&unindexed_cut), "--keep-going"]);
-    assert_contains(&common::stderr(&output), &["notice:", "left out the last"]);
+    assert_contains(
+        &crate::common::stderr(&output),
+        &["notice:", "left out the last"],
+    );
 
     // A chunk whose compressed bytes are damaged.
     let lz4 = routes.join("ros1-lz4.bag");
@@ -429,8 +438,13 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
     // Its chunk alone is lost: the index gives its log times, and the chunks after
     // it are read.
     let output = travmap(&["run", arg(&damaged), "--keep-going", "--json"]);
-    assert_eq!(output.status.code(), Some(3), "{}", common::stderr(&output));
-    let (frames, summary) = common::json_records(&common::stdout(&output));
+    assert_eq!(
+        output.status.code(),
+        Some(3),
+        "{}",
+        crate::common::stderr(&output)
+    );
+    let (frames, summary) = crate::common::json_records(&crate::common::stdout(&output));
     let all = run_frames(&lz4);
     assert!(!frames.is_empty() && frames.len() < all.len(), "{summary}");
     assert_contains(
@@ -494,8 +508,13 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
     // Read on past them: the damaged cloud's frame is left out, and named; `run`
     // does not read the String, annotate's passthrough does and names it too.
     let output = travmap(&["run", arg(&cut_message), "--keep-going", "--json"]);
-    assert_eq!(output.status.code(), Some(3), "{}", common::stderr(&output));
-    let (frames, summary) = common::json_records(&common::stdout(&output));
+    assert_eq!(
+        output.status.code(),
+        Some(3),
+        "{}",
+        crate::common::stderr(&output)
+    );
+    let (frames, summary) = crate::common::json_records(&crate::common::stdout(&output));
     assert_eq!(frames.len(), 2, "{summary}");
     let skipped = summary["skipped"].to_string();
     assert_contains(
@@ -505,8 +524,13 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
     let annotated = dir.path().join("cut-message.mcap");
     let args = ["annotate", arg(&cut_message), "-o", arg(&annotated)];
     let output = travmap(&[&args[..], &["--keep-going", "--json"]].concat());
-    assert_eq!(output.status.code(), Some(3), "{}", common::stderr(&output));
-    let summary = common::json_records(&common::stdout(&output)).1;
+    assert_eq!(
+        output.status.code(),
+        Some(3),
+        "{}",
+        crate::common::stderr(&output)
+    );
+    let summary = crate::common::json_records(&crate::common::stdout(&output)).1;
     assert_eq!(summary["frames"], 2, "{summary}");
     let skipped = summary["skipped"].to_string();
     assert_contains(&skipped, &["on /velodyne_points", "on /chatter"]);
@@ -551,7 +575,7 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
             > 0
     );
     let output = travmap(&["run", arg(&open)]);
-    let stderr = common::stderr(&output);
+    let stderr = crate::common::stderr(&output);
     success(output);
     assert_contains(
         &stderr,
@@ -565,7 +589,7 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
     std::fs::create_dir(&unlisted).unwrap();
     std::fs::copy(&db3, unlisted.join("unlisted_0.db3")).unwrap();
     let output = travmap(&["run", arg(&unlisted)]);
-    let stderr = common::stderr(&output);
+    let stderr = crate::common::stderr(&output);
     success(output);
     assert_contains(
         &stderr,
@@ -598,10 +622,10 @@ fn broken_logs_are_one_line_errors_and_an_unindexed_bag_is_read_with_a_notice() 
 #[test]
 fn files_travmap_does_not_read_are_named_not_misdiagnosed() {
     let dir = tempfile::tempdir().unwrap();
-    let Some(sample) = common::sample() else {
+    let Some(sample) = crate::common::sample() else {
         return;
     };
-    let Some(object) = common::shared_data("kitti-object-000008/training") else {
+    let Some(object) = crate::common::shared_data("kitti-object-000008/training") else {
         return;
     };
     let pcd = dir.path().join("scan.pcd");
@@ -630,14 +654,14 @@ fn files_travmap_does_not_read_are_named_not_misdiagnosed() {
 /// Every cell's appearance values (None where no image covers it) of each frame of
 /// `input`, on the training grid, through the library.
 fn appearance_of(input: &Path) -> Vec<Option<Vec<f32>>> {
-    let mut config = travmap::Config::default();
+    let mut config = travmap_core::Config::default();
     config.grid.size_m = config.training.grid_size_m;
-    let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
-    let source = travmap::io::Source::open(input, &Default::default(), &|_| {}).unwrap();
+    let model = travmap_method::classifier::SvmModel::embedded_default().unwrap();
+    let source = travmap_io::Source::open(input, &Default::default(), &|_| {}).unwrap();
     let selection = travmap::drive::Selection::new(source, 0..usize::MAX);
     let mut cells = Vec::new();
     selection
-        .run::<travmap::Error>(&config, Some(&model), |result| {
+        .run::<travmap_core::Error>(&config, Some(&model), |result| {
             let features = &result.features;
             cells.extend(
                 (0..result.layout.cell_count())
@@ -659,8 +683,8 @@ fn a_jpeg_camera_is_read_as_its_png_original_less_the_jpeg_loss() {
     // The route's camera is what fleets record: JPEG, named as image_transport names it.
     let camera = messages_on(&jpeg, &["/camera_2/image/compressed"]);
     assert_eq!(camera.len(), 1);
-    let message: travmap::io::ros::CompressedImage =
-        travmap::io::ros::decode(&camera[0].2).unwrap();
+    let message: travmap_formats::ros::CompressedImage =
+        travmap_formats::ros::decode(&camera[0].2).unwrap();
     assert_eq!(message.format, "rgb8; jpeg compressed bgr8");
     assert!(message.data.starts_with(&[0xFF, 0xD8, 0xFF]));
 
@@ -721,9 +745,9 @@ fn a_pose_topic_poses_a_log_without_moving_tf() {
     ] {
         let input = routes.join(route);
         let out = travmap(&["eval", arg(&input)]);
-        assert!(out.status.success(), "{}", common::stderr(&out));
+        assert!(out.status.success(), "{}", crate::common::stderr(&out));
         assert_contains(
-            &common::stderr(&out),
+            &crate::common::stderr(&out),
             &[
                 "poses from /pose",
                 message_type,
@@ -767,7 +791,7 @@ fn several_pose_topics_are_chosen_between_by_name() {
     // Not guessed: registration, saying why.
     let out = travmap(&["eval", arg(&two)]);
     assert_contains(
-        &common::stderr(&out),
+        &crate::common::stderr(&out),
         &[
             "2 pose topics (/pose, /vision_pose)",
             "poses estimated by scan registration",
@@ -776,11 +800,11 @@ fn several_pose_topics_are_chosen_between_by_name() {
     success(out);
     // Named: the original's scores.
     let out = travmap(&["eval", arg(&two), "--pose-topic", "/pose", "--json"]);
-    assert_contains(&common::stderr(&out), &["poses from /pose"]);
-    let (_, summary) = common::json_records(&success(out));
+    assert_contains(&crate::common::stderr(&out), &["poses from /pose"]);
+    let (_, summary) = crate::common::json_records(&success(out));
     assert_eq!(
         summary["report"]["scores"],
-        common::json_summary(&["eval", arg(&drive)])["report"]["scores"]
+        crate::common::json_summary(&["eval", arg(&drive)])["report"]["scores"]
     );
     let err = clean_failure(travmap(&["eval", arg(&two), "--pose-topic", "/gnss"]));
     assert_contains(
@@ -795,7 +819,7 @@ fn several_pose_topics_are_chosen_between_by_name() {
     assert_eq!(scores(&with_tf), scores(&drive));
     let out = travmap(&["eval", arg(&with_tf), "--pose-topic", "/pose"]);
     assert_contains(
-        &common::stderr(&out),
+        &crate::common::stderr(&out),
         &["--pose-topic /pose is not used: a moving /tf or an Odometry already poses the clouds"],
     );
     success(out);

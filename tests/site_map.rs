@@ -2,18 +2,16 @@
 //! The six shipped scans merged into one world-frame PCD (with their labels) against
 //! the drive map of the same scans.
 
-mod common;
-
 use std::collections::HashMap;
 use std::path::Path;
 
-use common::{arg, json_summary};
+use crate::common::{arg, json_summary};
 use parquet::file::reader::{FileReader, SerializedFileReader};
 
 /// The shipped drive's scans in the world frame, as one binary PCD with labels;
 /// also returns its records (float32 x y z intensity, uint32 label).
 fn write_site_pcd(seq: &Path, path: &Path) -> (usize, Vec<u8>) {
-    let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
+    let source = travmap_io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
     let mut data = Vec::new();
     let mut points = 0;
     for frame in source.read(&(0..usize::MAX)) {
@@ -63,7 +61,9 @@ fn seen_cells(path: &Path) -> HashMap<[i64; 2], (Option<bool>, Option<bool>)> {
 
 #[test]
 fn a_site_cloud_maps_the_drive_it_was_merged_from() {
-    let Some(seq) = common::sample() else { return };
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let site = dir.path().join("site.pcd");
     let (points, _) = write_site_pcd(&seq, &site);
@@ -118,8 +118,11 @@ fn a_site_cloud_maps_the_drive_it_was_merged_from() {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn ply_files_written_by_plyfile_map_as_the_same_cloud_in_pcd_does() {
-    let Some(seq) = common::sample() else { return };
-    let Some(python) = common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with plyfile") else {
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
+    let Some(python) = crate::common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with plyfile")
+    else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -130,7 +133,7 @@ fn ply_files_written_by_plyfile_map_as_the_same_cloud_in_pcd_does() {
     let cells = |input: &Path, name: &str| {
         let table = dir.path().join(format!("{name}.parquet"));
         let png = dir.path().join(format!("{name}.png"));
-        common::success(common::travmap(&[
+        crate::common::success(crate::common::travmap(&[
             "map",
             arg(input),
             "-o",
@@ -149,7 +152,11 @@ fn ply_files_written_by_plyfile_map_as_the_same_cloud_in_pcd_does() {
             .args([arg(&script), arg(&records_path), arg(&ply), encoding])
             .output()
             .unwrap();
-        assert!(written.status.success(), "{}", common::stderr(&written));
+        assert!(
+            written.status.success(),
+            "{}",
+            crate::common::stderr(&written)
+        );
         assert_eq!(cells(&ply, encoding), from_pcd, "{encoding}");
     }
 }
@@ -157,8 +164,11 @@ fn ply_files_written_by_plyfile_map_as_the_same_cloud_in_pcd_does() {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn las_and_laz_written_by_laspy_map_in_their_own_coordinates() {
-    let Some(seq) = common::sample() else { return };
-    let Some(python) = common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with laspy and lazrs")
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
+    let Some(python) =
+        crate::common::env_var("TRAVMAP_CLIENT_PYTHON", "a Python with laspy and lazrs")
     else {
         return;
     };
@@ -183,7 +193,7 @@ fn las_and_laz_written_by_laspy_map_in_their_own_coordinates() {
         let table = dir.path().join(format!("{name}.parquet"));
         let png = dir.path().join(format!("{name}.png"));
         let yaml = dir.path().join(format!("{name}.yaml"));
-        let out = common::travmap(&[
+        let out = crate::common::travmap(&[
             "map",
             arg(input),
             "-o",
@@ -193,8 +203,8 @@ fn las_and_laz_written_by_laspy_map_in_their_own_coordinates() {
             "--nav2",
             arg(&yaml),
         ]);
-        let err = common::stderr(&out);
-        common::success(out);
+        let err = crate::common::stderr(&out);
+        crate::common::success(out);
         (seen_cells(&table), err)
     };
     let (from_pcd, _) = map(&site, "pcd");
@@ -205,9 +215,13 @@ fn las_and_laz_written_by_laspy_map_in_their_own_coordinates() {
             .args([arg(&script), arg(&records_path), arg(&path)])
             .output()
             .unwrap();
-        assert!(written.status.success(), "{}", common::stderr(&written));
+        assert!(
+            written.status.success(),
+            "{}",
+            crate::common::stderr(&written)
+        );
         let (cells, notice) = map(&path, name);
-        common::assert_contains(
+        crate::common::assert_contains(
             &notice,
             &[&format!(
                 "the map's frame is the file's coordinates minus ({}, {}, ",
@@ -216,7 +230,7 @@ fn las_and_laz_written_by_laspy_map_in_their_own_coordinates() {
         );
         // The world file places the map's upper-left pixel in the file's coordinates.
         let yaml = std::fs::read_to_string(dir.path().join(format!("{name}.yaml"))).unwrap();
-        common::assert_contains(
+        crate::common::assert_contains(
             &yaml,
             &["# The frame is the source file's coordinates minus"],
         );

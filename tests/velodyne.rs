@@ -2,16 +2,14 @@
 //! (`fixtures/nebula/`, see fixtures/README.md): the same scan cut from the same
 //! packets, and its points where nebula puts them.
 
-mod common;
-
-use common::{nebula_fixture, nebula_ground_truth};
+use crate::common::{nebula_fixture, nebula_ground_truth};
 
 use std::collections::HashMap;
 use std::path::Path;
 
-use travmap::io::format::InputFormat;
-use travmap::io::log::Log;
-use travmap::io::velodyne::{
+use travmap_io::containers::log::Log;
+use travmap_io::format::InputFormat;
+use travmap_io::packets::velodyne::{
     Calibration, Decoder, DecoderSettings, ScanAssembler, VelodyneModel, scan_message,
 };
 
@@ -146,7 +144,7 @@ fn the_packets_name_their_model() {
 
 #[test]
 fn a_packet_log_is_a_drive_for_every_command() {
-    use common::{arg, assert_contains, clean_failure, json_records, success, travmap};
+    use crate::common::{arg, assert_contains, clean_failure, json_records, success, travmap};
     let bag = nebula_fixture("vlp32/1713492677464078412");
     // The scans run cuts are the scans the library assembles (cut angle 0).
     let calibration = Calibration::builtin(VelodyneModel::Vlp32c).unwrap();
@@ -200,7 +198,7 @@ fn a_packet_log_is_a_drive_for_every_command() {
     // convert writes the scans as PointCloud2 beside the packets, and they are the
     // same frames.
     let converted = dir.path().join("converted.mcap");
-    let doc = common::json_summary(&["convert", arg(&bag), "-o", arg(&converted)]);
+    let doc = crate::common::json_summary(&["convert", arg(&bag), "-o", arg(&converted)]);
     let points_topic = "/sensing/lidar/front/velodyne_points";
     assert_eq!(doc["decoded_topic"], points_topic);
     assert_eq!(doc["decoded_scans"], scans.len());
@@ -225,7 +223,8 @@ fn a_packet_log_is_a_drive_for_every_command() {
         .map(Result::unwrap)
         .find(|m| m.connection.topic == points_topic)
         .unwrap();
-    let cloud: travmap::io::ros::PointCloud2 = travmap::io::ros::decode(&cloud.data).unwrap();
+    let cloud: travmap_formats::ros::PointCloud2 =
+        travmap_formats::ros::decode(&cloud.data).unwrap();
     let names: Vec<&str> = cloud.fields.iter().map(|f| f.name.as_str()).collect();
     assert_eq!(names, ["x", "y", "z", "intensity", "ring", "t"]);
     assert_eq!(cloud.width as usize, scans[0].points.len());
@@ -259,7 +258,7 @@ fn a_packet_log_is_a_drive_for_every_command() {
 
 #[test]
 fn ros1_and_ros2_scan_messages_carry_the_same_packets() {
-    use travmap::io::ros::MessageEncoding;
+    use travmap_formats::ros::MessageEncoding;
     let seeds = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/velodyne_scan");
     let cdr = std::fs::read(seeds.join("vlp32c.cdr")).unwrap();
     let ros1 = std::fs::read(seeds.join("vlp32c.ros1")).unwrap();
@@ -275,7 +274,7 @@ fn ros1_and_ros2_scan_messages_carry_the_same_packets() {
     assert_eq!(a.packets, b.packets);
     assert_eq!(a.packets.len(), 3);
     // convert re-encodes the ROS 1 message as ROS 2, byte for byte the CDR one.
-    let translated = travmap::io::ros::ros1_to_cdr("velodyne_msgs/msg/VelodyneScan", &ros1)
+    let translated = travmap_formats::ros::ros1_to_cdr("velodyne_msgs/msg/VelodyneScan", &ros1)
         .unwrap()
         .unwrap();
     assert_eq!(translated.data, cdr);

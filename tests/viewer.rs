@@ -2,25 +2,26 @@
 //! headless Chromium with software WebGL, screenshot taken, and the grid's colours
 //! checked on screen (`tests/clients/viewer_screenshot.py`).
 
-mod common;
-
 use std::path::Path;
 use std::process::Command;
 
-use common::{arg, run_client, write_output};
+use crate::common::{arg, run_client, write_output};
 use serde_json::Value;
 
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn rerun_web_viewer_shows_the_annotated_grids() {
-    let Some(seq) = common::sample() else { return };
-    let Some(python) = common::env_var("TRAVMAP_CLIENT_PYTHON", "the client venv's python") else {
+    let Some(seq) = crate::common::sample() else {
         return;
     };
-    let Some(rerun) = common::env_var("TRAVMAP_RERUN", "rerun from rerun-sdk") else {
+    let Some(python) = crate::common::env_var("TRAVMAP_CLIENT_PYTHON", "the client venv's python")
+    else {
         return;
     };
-    let Some(chromium) = common::env_var(
+    let Some(rerun) = crate::common::env_var("TRAVMAP_RERUN", "rerun from rerun-sdk") else {
+        return;
+    };
+    let Some(chromium) = crate::common::env_var(
         "TRAVMAP_CHROMIUM",
         "a Chromium binary (apt install chromium)",
     ) else {

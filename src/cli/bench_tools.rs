@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use travmap::drive::Selection;
-use travmap::io::Recording;
 use travmap::scoring::evaluation::Spread;
+use travmap_io::Recording;
 
 use super::Inputs;
 use super::child_runs::{ChildRun, TemporaryDirectory, run_child};

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 
 use anyhow::{Context, Result, bail};
-use travmap::stopwatch::Stopwatch;
+use travmap_core::stopwatch::Stopwatch;
 
 /// One run of a child: its wall time, output size and peak memory.
 #[derive(Debug)]

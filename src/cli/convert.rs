@@ -6,12 +6,12 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use travmap::io::Recording;
-use travmap::io::ros_drive::DriveOptions;
-use travmap::io::ros_drive::RosDrive;
 use travmap::outputs::conversion::{convert_kitti, convert_log};
-use travmap::outputs::mcap_writer::Compression;
 use travmap::outputs::preflight::InputFiles;
+use travmap_formats::mcap::writer::Compression;
+use travmap_io::Recording;
+use travmap_io::ros_drive::DriveOptions;
+use travmap_io::ros_drive::RosDrive;
 
 use super::{
     Outcome, Output, Sensors, check_output, frame_count, open_selection, outcome,

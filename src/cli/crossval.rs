@@ -108,7 +108,7 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
 fn print_leave_one_out(
     report: &LeaveOneOutReport,
     selections: &[Selection],
-    config: &travmap::Config,
+    config: &travmap_core::Config,
     json: bool,
 ) -> Result<()> {
     if json {

@@ -7,12 +7,12 @@ use std::io::Write;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap::config::ForeignRemissionPolicy;
 use travmap::drive::Selection;
-use travmap::method::classifier::SvmModel;
 use travmap::scoring::evaluation::{Evaluation, EvaluationReport};
 use travmap::scoring::metrics::Confusion;
 use travmap::scoring::metrics::Scores;
+use travmap_core::config::ForeignRemissionPolicy;
+use travmap_method::classifier::SvmModel;
 
 use super::adapt::AdaptFlag;
 use super::{

@@ -6,8 +6,6 @@ use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use travmap::drive::Selection;
-use travmap::io::format::site_cloud_format;
-use travmap::io::{Recording, Source};
 use travmap::outputs::atomic::Staged;
 use travmap::outputs::drive_map::{render_drive_map, write_map_cells};
 use travmap::outputs::nav2_map::{
@@ -17,6 +15,8 @@ use travmap::outputs::preflight::check_distinct_outputs;
 use travmap::outputs::rendering::encode_png;
 use travmap::scoring::evaluation::Evaluation;
 use travmap::scoring::metrics::Confusion;
+use travmap_io::format::site_cloud_format;
+use travmap_io::{Recording, Source};
 
 use super::{
     Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json,

@@ -32,13 +32,13 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use travmap::Config;
 use travmap::drive::Selection;
-use travmap::io::ros_drive::{DriveOptions, LidarCalibrations, LidarFrames, MergedTopics};
-use travmap::io::{Recording, Source};
-use travmap::method::classifier::SvmModel;
 use travmap::outputs::preflight::{InputFiles, check_output_directory, check_output_file};
-use travmap::stopwatch::Stopwatch;
+use travmap_core::Config;
+use travmap_core::stopwatch::Stopwatch;
+use travmap_io::ros_drive::{DriveOptions, LidarCalibrations, LidarFrames, MergedTopics};
+use travmap_io::{Recording, Source};
+use travmap_method::classifier::SvmModel;
 
 /// How a command ended: exit code 0, or 3 when it completed but skipped frames
 /// (`--keep-going`), as the mcap CLI reports data loss.

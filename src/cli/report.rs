@@ -5,10 +5,10 @@ use std::path::Path;
 
 use anyhow::Result;
 use serde_json::json;
-use travmap::Config;
 use travmap::drive::Selection;
-use travmap::method::classifier::SvmModel;
 use travmap::scoring::evaluation::EvaluationReport;
+use travmap_core::Config;
+use travmap_method::classifier::SvmModel;
 
 /// The model's identity in JSON outputs.
 pub fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {

@@ -6,8 +6,8 @@ use std::io::Write;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap::method::grid::CellClass;
 use travmap::scoring::evaluation::Evaluation;
+use travmap_method::grid::CellClass;
 
 use super::{
     Inputs, ModelArg, Outcome, counted, frame_count, images_for, model_json, outcome,

@@ -1,5 +1,4 @@
 //! Helpers shared by the integration tests.
-#![allow(dead_code)] // each test binary uses its own subset of these helpers
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -268,14 +267,14 @@ pub fn one_frame_with_image() -> Option<(tempfile::TempDir, PathBuf)> {
 }
 
 /// The drive at `seq` fused by the library with the embedded model, as `map` fuses it.
-pub fn fused_drive(seq: &Path) -> Vec<travmap::method::fusion::FusedCell> {
-    let config = travmap::Config::default();
-    let model = travmap::method::classifier::SvmModel::embedded_default().unwrap();
-    let source = travmap::io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
+pub fn fused_drive(seq: &Path) -> Vec<travmap_method::fusion::FusedCell> {
+    let config = travmap_core::Config::default();
+    let model = travmap_method::classifier::SvmModel::embedded_default().unwrap();
+    let source = travmap_io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
     let selection = travmap::drive::Selection::new(source, 0..usize::MAX);
-    let mut map = travmap::method::fusion::DriveMap::new(config.grid.cell_size_m);
+    let mut map = travmap_method::fusion::DriveMap::new(config.grid.cell_size_m);
     selection
-        .run::<travmap::Error>(&config, Some(&model), |result| {
+        .run::<travmap_core::Error>(&config, Some(&model), |result| {
             map.add_result(&result);
             Ok(())
         })
@@ -289,8 +288,8 @@ pub fn tf(
     parent: &str,
     child: &str,
     pose: &nalgebra::Isometry3<f64>,
-) -> travmap::io::ros::TfMessage {
-    use travmap::io::ros::{Header, TfMessage, Time, TransformStamped};
+) -> travmap_formats::ros::TfMessage {
+    use travmap_formats::ros::{Header, TfMessage, Time, TransformStamped};
     TfMessage {
         transforms: vec![TransformStamped {
             header: Header {
@@ -315,7 +314,10 @@ pub fn nebula_fixture(relative: &str) -> PathBuf {
 pub fn nebula_ground_truth(relative: &str) -> (u64, Vec<[f32; 3]>) {
     let path = nebula_fixture(relative);
     let stamp = path.file_stem().unwrap().to_str().unwrap().parse().unwrap();
-    let cloud = travmap::io::pcd::parse_pcd(&std::fs::read(&path).unwrap(), "lidar").unwrap();
-    let points = travmap::io::cloud::cloud_points(&cloud).unwrap().points;
+    let cloud =
+        travmap_io::cloud_files::pcd::parse_pcd(&std::fs::read(&path).unwrap(), "lidar").unwrap();
+    let points = travmap_io::payloads::cloud::cloud_points(&cloud)
+        .unwrap()
+        .points;
     (stamp, points.iter().map(|p| [p[0], p[1], p[2]]).collect())
 }

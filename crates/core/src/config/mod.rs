@@ -1,0 +1,535 @@
+//! The one configuration of travmap, nested per pipeline stage.
+//!
+//! Defaults are METHOD.md's and live only in the `Default` impls below. A TOML file
+//! overrides any subset (`--config`), `--set section.key=value` overrides single
+//! fields, and `validate` checks the result once. The effective configuration is
+//! printed with `--json` and stored in every model, so a result can be reproduced.
+
+mod adaptation;
+mod labels;
+mod registration;
+mod training;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+pub use adaptation::{AdaptConfig, Learner, VehicleConfig};
+pub use labels::{ClassRule, LabelRule, LabelSet, parse_label_map};
+pub use registration::{PoseSource, RegistrationConfig};
+pub use training::{ClassWeights, Criterion, TrainingConfig};
+
+/// Every tunable of the method, one section per stage.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    pub integration: IntegrationConfig,
+    pub grid: GridConfig,
+    pub features: FeatureConfig,
+    pub appearance: AppearanceConfig,
+    pub classifier: ClassifierConfig,
+    pub filter: FilterConfig,
+    pub ground_truth: GroundTruthConfig,
+    pub training: TrainingConfig,
+    pub registration: RegistrationConfig,
+    pub vehicle: VehicleConfig,
+    pub adapt: AdaptConfig,
+}
+
+/// METHOD.md section 5.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AppearanceConfig {
+    /// Use camera images when the input has them (default true).
+    pub enabled: bool,
+    /// Hue buckets over [0, 360) degrees (#H, default 32).
+    pub hue_bins: u32,
+    /// Saturation buckets over [0, 1] (#S, default 8).
+    pub saturation_bins: u32,
+    /// Value buckets over [0, 256) (#V, default 48).
+    pub value_bins: u32,
+}
+
+/// METHOD.md section 6, prediction.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ClassifierConfig {
+    /// Predict with the model's reduced set (a few hundred kernel centres fitted to
+    /// the exact decision function) when it has one; false: all support vectors
+    /// (default true).
+    pub use_reduced_set: bool,
+    /// A frame whose remission lies far outside a model's training range (another
+    /// sensor's scale) is said in a notice and classified as read (`"notice"`,
+    /// default: it won the README's study), or classified without remission by the
+    /// model's fallback (`"fallback"`).
+    #[serde(default)]
+    pub foreign_remission: ForeignRemissionPolicy,
+}
+
+/// What a model does with remission far outside its training range.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ForeignRemissionPolicy {
+    #[default]
+    Notice,
+    Fallback,
+}
+
+/// METHOD.md section 2.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct IntegrationConfig {
+    /// Number of scans integrated per frame, the current one included (n, default 3).
+    pub scans: usize,
+    /// Where each scan's pose comes from (default `auto`).
+    pub poses: PoseSource,
+}
+
+/// METHOD.md section 3.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GridConfig {
+    /// Side of the square grid around the sensor, metres (max_range, default 12).
+    pub size_m: f64,
+    /// Cell side, metres (r, default 0.4).
+    pub cell_size_m: f64,
+    /// Cells with fewer points are unpredictable (default 2).
+    pub min_points: usize,
+}
+
+/// METHOD.md section 4.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FeatureConfig {
+    /// Side of the internal sub-cells, metres (r_i, default 0.2); must divide the cell size.
+    pub subcell_size_m: f64,
+    /// Bins of the curvity range histogram (n_b, default 160).
+    pub curvity_bins: usize,
+    /// Sub-cells with fewer points contribute no normal to unevenness (default 3).
+    pub unevenness_min_points: usize,
+    /// Feature groups beyond the paper's 20 (README "Features beyond the paper"):
+    /// `"remission"` and `"context"` (default `["remission"]`); `[]` is the paper's
+    /// method.
+    pub groups: Vec<FeatureGroup>,
+    /// What remission features see: `"as_read"` (the reader's 0..1 scale, default)
+    /// or `"scan_p95"` (each scan scaled so that its 95th percentile is KITTI's,
+    /// for sensors whose remission comes on another scale).
+    #[serde(default)]
+    pub remission_scale: RemissionScaling,
+}
+
+/// How each scan's remission is scaled before the remission features.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RemissionScaling {
+    #[default]
+    AsRead,
+    ScanP95,
+}
+
+/// A group of features beyond the paper's 20, in the order they follow them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FeatureGroup {
+    /// Per-cell statistics of the points' remission (intensity) on a 0..1 scale.
+    Remission,
+    /// What a cell's neighbourhood says: height steps, occupancy, range.
+    Context,
+}
+
+/// METHOD.md section 7.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FilterConfig {
+    /// Apply the outlier filter (default true).
+    pub enabled: bool,
+    /// Vote weight of a cell's own label against its 8 neighbours' weight 1 (w, default 3).
+    pub self_weight: u32,
+}
+
+/// METHOD.md section 8, with label presets for other datasets (README "Ground
+/// truth of other datasets").
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GroundTruthConfig {
+    /// Cells with fewer voting points have no ground truth (m, default 2).
+    pub min_points: usize,
+    /// Non-traversable points that make a cell non-traversable (default 2).
+    pub min_non_traversable_points: usize,
+    /// Whose label ids: `"semantickitti"` (default) or `"rellis3d"`.
+    pub labels: LabelSet,
+    /// `"road"` (the seed paper's classes, default) or `"offroad"` (also terrain,
+    /// grass, dirt, mud, puddles).
+    pub rule: LabelRule,
+    /// A TOML file of `[ids]` id = "traversable" | "not_traversable" | "ignored",
+    /// for any other ontology; replaces `labels` and `rule` (unset by default).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub label_map: Option<std::path::PathBuf>,
+    /// The traversable classes, replacing the preset's (unset by default).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub traversable_classes: Option<Vec<u16>>,
+    /// The classes that do not vote, replacing the preset's (unset by default).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ignored_classes: Option<Vec<u16>>,
+    /// The label map's classes, once read ([`Config::load_label_map`]).
+    #[serde(skip)]
+    pub label_map_classes: Option<ClassRule>,
+}
+
+impl GroundTruthConfig {
+    /// The classes in force: the preset of `labels` and `rule`, with the explicit
+    /// lists in their place where given (a label map gives both, see
+    /// [`Config::load_label_map`]).
+    pub fn classes(&self) -> ClassRule {
+        let mut rule = match &self.label_map_classes {
+            Some(map) => map.clone(),
+            None => self.labels.classes(self.rule),
+        };
+        if let Some(traversable) = &self.traversable_classes {
+            rule.traversable = traversable.clone();
+            rule.known = None;
+        }
+        if let Some(ignored) = &self.ignored_classes {
+            rule.ignored = ignored.clone();
+            rule.known = None;
+        }
+        rule
+    }
+}
+
+impl Default for IntegrationConfig {
+    fn default() -> Self {
+        Self {
+            scans: 3,
+            poses: PoseSource::Auto,
+        }
+    }
+}
+
+impl Default for GridConfig {
+    fn default() -> Self {
+        Self {
+            size_m: 12.0,
+            cell_size_m: 0.4,
+            min_points: 2,
+        }
+    }
+}
+
+impl Default for FeatureConfig {
+    fn default() -> Self {
+        Self {
+            subcell_size_m: 0.2,
+            curvity_bins: 160,
+            unevenness_min_points: 3,
+            // Remission wins the cross-scene numbers (README "Features beyond the paper").
+            groups: vec![FeatureGroup::Remission],
+            remission_scale: RemissionScaling::AsRead,
+        }
+    }
+}
+
+impl Default for AppearanceConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            hue_bins: 32,
+            saturation_bins: 8,
+            value_bins: 48,
+        }
+    }
+}
+
+impl Default for ClassifierConfig {
+    fn default() -> Self {
+        Self {
+            use_reduced_set: true,
+            foreign_remission: ForeignRemissionPolicy::Notice,
+        }
+    }
+}
+
+impl Default for FilterConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            self_weight: 3,
+        }
+    }
+}
+
+impl Default for GroundTruthConfig {
+    fn default() -> Self {
+        Self {
+            min_points: 2,
+            min_non_traversable_points: 2,
+            labels: LabelSet::Semantickitti,
+            rule: LabelRule::Road,
+            label_map: None,
+            traversable_classes: None,
+            ignored_classes: None,
+            label_map_classes: None,
+        }
+    }
+}
+
+impl GridConfig {
+    /// Cells per side, `l = max_range / r` rounded to the nearest integer.
+    pub fn cells_per_side(&self) -> usize {
+        (self.size_m / self.cell_size_m).round() as usize
+    }
+}
+
+impl FeatureConfig {
+    /// The groups without remission: what a cloud without usable intensity gets.
+    pub fn without_remission(&self) -> FeatureConfig {
+        FeatureConfig {
+            groups: self
+                .groups
+                .iter()
+                .copied()
+                .filter(|g| *g != FeatureGroup::Remission)
+                .collect(),
+            ..self.clone()
+        }
+    }
+
+    /// Internal sub-cells per cell side, `r / r_i`.
+    pub fn subcells_per_side(&self, cell_size_m: f64) -> usize {
+        (cell_size_m / self.subcell_size_m).round() as usize
+    }
+}
+
+/// A configuration written before `features.groups` existed used the paper's 20
+/// features only; reading one, a missing `groups` means `[]`, not today's default.
+/// `config` is the JSON of a [`Config`] as a model or dataset file stores it.
+pub fn written_before_groups(config: &mut serde_json::Value) {
+    if let Some(features) = config.get_mut("features").and_then(|f| f.as_object_mut()) {
+        features
+            .entry("groups")
+            .or_insert_with(|| serde_json::Value::Array(Vec::new()));
+    }
+}
+
+/// Fields that are unset by default, so absent from a serialised configuration.
+const OPTIONAL_FIELDS: &[(&str, &str)] = &[
+    ("ground_truth", "label_map"),
+    ("ground_truth", "traversable_classes"),
+    ("ground_truth", "ignored_classes"),
+];
+
+impl Config {
+    /// The configuration training cells are computed with: this one on the training
+    /// grid (`training.grid_size_m`), so `train`, `dataset` and `crossval` see the
+    /// same cells.
+    pub fn for_training_cells(&self) -> Config {
+        let mut config = self.clone();
+        config.grid.size_m = self.training.grid_size_m;
+        config
+    }
+
+    /// Reads the label map `ground_truth.label_map` names, if any.
+    pub fn load_label_map(&mut self) -> Result<()> {
+        let Some(path) = &self.ground_truth.label_map else {
+            return Ok(());
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let classes = parse_label_map(&text)
+            .map_err(|problem| Error::Config(format!("label map {}: {problem}", path.display())))?;
+        self.ground_truth.label_map_classes = Some(classes);
+        Ok(())
+    }
+
+    /// Reads a TOML file; fields it does not name keep their defaults.
+    pub fn from_toml_file(path: &std::path::Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        toml::from_str(&text).map_err(|e| Error::Config(format!("{}: {e}", path.display())))
+    }
+
+    /// Sets one field from `section.key=value`, the value in TOML syntax
+    /// (`grid.size_m=24`, `training.c_values=[1, 10]`).
+    pub fn set(&mut self, assignment: &str) -> Result<()> {
+        let (key, value) = assignment
+            .split_once('=')
+            .ok_or_else(|| Error::Config(format!("`{assignment}`: expected section.key=value")))?;
+        let (section, field) = key.trim().split_once('.').ok_or_else(|| {
+            Error::Config(format!("`{key}`: expected section.key, e.g. grid.size_m"))
+        })?;
+        let parsed: toml::Table = toml::from_str(&format!("v = {}", value.trim()))
+            .map_err(|e| Error::Config(format!("`{assignment}`: value is not TOML: {e}")))?;
+        let mut table = toml::Table::try_from(&*self)
+            .map_err(|e| Error::Config(format!("cannot serialise configuration: {e}")))?;
+        let section_table = table
+            .get_mut(section)
+            .and_then(|s| s.as_table_mut())
+            .ok_or_else(|| Error::Config(format!("`{key}`: no section `{section}`")))?;
+        if !section_table.contains_key(field) && !OPTIONAL_FIELDS.contains(&(section, field)) {
+            let known: Vec<&str> = section_table.keys().map(String::as_str).collect();
+            return Err(Error::Config(format!(
+                "`{key}`: section `{section}` has no field `{field}` (fields: {})",
+                known.join(", ")
+            )));
+        }
+        section_table.insert(field.to_string(), parsed["v"].clone());
+        *self = table
+            .try_into()
+            .map_err(|e| Error::Config(format!("`{assignment}`: {e}")))?;
+        Ok(())
+    }
+
+    /// Checks every field once; the stages rely on these invariants.
+    pub fn validate(&self) -> Result<()> {
+        let fail = |m: String| Err(Error::Config(m));
+        let positive = |name: &str, v: f64| -> Result<()> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(Error::Config(format!("{name} must be > 0, got {v}")))
+            }
+        };
+        if self.integration.scans == 0 || self.integration.scans > 255 {
+            return fail(format!(
+                "integration.scans must be in 1..=255, got {}",
+                self.integration.scans
+            ));
+        }
+        self.registration.validate().map_err(Error::Config)?;
+        self.adapt.validate(&self.vehicle).map_err(Error::Config)?;
+        let ground_truth = &self.ground_truth;
+        if ground_truth
+            .traversable_classes
+            .as_ref()
+            .is_some_and(Vec::is_empty)
+        {
+            return fail("ground_truth.traversable_classes is empty: nothing could be traversable (leave it unset for the preset of ground_truth.labels and rule)".into());
+        }
+        if ground_truth.label_map.is_some() && ground_truth.label_map_classes.is_none() {
+            return fail("ground_truth.label_map is set but was not read".into());
+        }
+        positive("grid.size_m", self.grid.size_m)?;
+        positive("grid.cell_size_m", self.grid.cell_size_m)?;
+        positive("features.subcell_size_m", self.features.subcell_size_m)?;
+        let groups = &self.features.groups;
+        if (1..groups.len()).any(|i| groups[..i].contains(&groups[i])) {
+            return fail(format!("features.groups names a group twice: {groups:?}"));
+        }
+        positive("training.grid_size_m", self.training.grid_size_m)?;
+        positive("training.block_size_m", self.training.block_size_m)?;
+        positive("training.tolerance", self.training.tolerance)?;
+        let cells = self.grid.cells_per_side();
+        if !(1..=4096).contains(&cells) {
+            return fail(format!(
+                "grid.size_m / grid.cell_size_m gives {cells} cells per side; expected 1..=4096"
+            ));
+        }
+        let ratio = self.grid.cell_size_m / self.features.subcell_size_m;
+        if (ratio - ratio.round()).abs() > 1e-6 || !(1.0..=16.0).contains(&ratio.round()) {
+            return fail(format!(
+                "features.subcell_size_m ({}) must divide grid.cell_size_m ({}) into 1 to 16 parts",
+                self.features.subcell_size_m, self.grid.cell_size_m
+            ));
+        }
+        if self.grid.min_points == 0 {
+            return fail("grid.min_points must be >= 1".into());
+        }
+        if self.features.curvity_bins == 0 {
+            return fail("features.curvity_bins must be >= 1".into());
+        }
+        let a = &self.appearance;
+        if [a.hue_bins, a.saturation_bins, a.value_bins]
+            .iter()
+            .any(|&b| !(1..=256).contains(&b))
+        {
+            return fail(format!(
+                "appearance bins must be in 1..=256, got {} / {} / {}",
+                a.hue_bins, a.saturation_bins, a.value_bins
+            ));
+        }
+        if self.training.folds < 2 {
+            return fail(format!(
+                "training.folds must be >= 2, got {}",
+                self.training.folds
+            ));
+        }
+        if self.training.max_fit_samples < self.training.max_search_samples {
+            return fail(format!(
+                "training.max_fit_samples ({}) must be >= training.max_search_samples ({})",
+                self.training.max_fit_samples, self.training.max_search_samples
+            ));
+        }
+        for (name, values) in [
+            ("training.c_values", &self.training.c_values),
+            ("training.gamma_values", &self.training.gamma_values),
+        ] {
+            if values.is_empty() {
+                return fail(format!("{name} must not be empty"));
+            }
+            for &v in values {
+                positive(name, v)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_methods_and_valid() {
+        let config = Config::default();
+        config.validate().unwrap();
+        assert_eq!(config.grid.cells_per_side(), 30);
+        assert_eq!(config.features.subcells_per_side(0.4), 2);
+        assert_eq!(config.integration.scans, 3);
+    }
+
+    #[test]
+    fn set_overrides_one_field_and_rejects_unknown_ones() {
+        let mut config = Config::default();
+        config.set("grid.size_m=24").unwrap();
+        config.set("training.c_values=[2.0, 20.0]").unwrap();
+        assert_eq!(config.grid.size_m, 24.0);
+        assert_eq!(config.training.c_values, vec![2.0, 20.0]);
+        let err = config.set("grid.sise_m=3").unwrap_err().to_string();
+        assert!(
+            err.contains("no field `sise_m`") && err.contains("size_m"),
+            "{err}"
+        );
+        assert!(config.set("nonsense").is_err());
+        assert!(config.set("grid.size_m=\"x\"").is_err());
+    }
+
+    #[test]
+    fn toml_file_overrides_a_subset() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.toml");
+        std::fs::write(&path, "[grid]\nsize_m = 20.0\n").unwrap();
+        let config = Config::from_toml_file(&path).unwrap();
+        assert_eq!(config.grid.size_m, 20.0);
+        assert_eq!(config.grid.cell_size_m, 0.4);
+        std::fs::write(&path, "[grid]\nbogus = 1\n").unwrap();
+        assert!(Config::from_toml_file(&path).is_err());
+    }
+
+    #[test]
+    fn validate_rejects_subcells_that_do_not_divide_the_cell() {
+        let mut config = Config::default();
+        config.features.subcell_size_m = 0.3;
+        assert!(config.validate().is_err());
+    }
+
+    #[test]
+    fn validate_rejects_a_fit_subset_smaller_than_the_search_subset() {
+        let mut config = Config::default();
+        config
+            .set("training.max_fit_samples=5000")
+            .expect("a known key");
+        let message = config.validate().unwrap_err().to_string();
+        assert!(
+            message.contains("training.max_fit_samples (5000)"),
+            "{message}"
+        );
+    }
+}

@@ -1,0 +1,17 @@
+//! The words every travmap crate shares: the one [`Config`] (nested per stage), the
+//! one [`Error`], a [`frame::Frame`] (what readers produce and the method consumes)
+//! with its camera [`lens`], [`posing`] (how a source's scans are posed, decided
+//! once), small [`geometry`], a seeded [`random`] generator and stage timing
+//! ([`stopwatch`]). It knows no file format and no stage of the method.
+
+pub mod config;
+pub mod error;
+pub mod frame;
+pub mod geometry;
+pub mod lens;
+pub mod posing;
+pub mod random;
+pub mod stopwatch;
+
+pub use config::Config;
+pub use error::{Error, Result};

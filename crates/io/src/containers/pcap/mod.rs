@@ -1,0 +1,271 @@
+//! Packet captures (classic `.pcap` and pcapng, as tcpdump, Wireshark, VeloView and
+//! Ouster's SDK write them) of LiDAR packets, read as a log: each UDP port whose datagrams are
+//! a LiDAR's is a topic (`/udp_2368`), each datagram a message of the packet type
+//! travmap reads it as: Velodyne's and Hesai's (told apart by their bytes) as
+//! nebula's `NebulaPackets`, an Ouster's (larger than an Ethernet frame, so IP
+//! fragments, put back together here) as ouster_ros's `PacketMsg`. Other ports
+//! (Velodyne's position packets, an Ouster's IMU) and other traffic are left out.
+//! The capture's time stamps each packet.
+
+mod records;
+mod udp;
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use records::Capture;
+use udp::{Fragments, ipv4};
+
+use crate::packets::ouster::{OUSTER_PACKET_MESSAGES, PACKET_MSG_SCHEMA};
+use crate::packets::{NEBULA_PACKETS, PacketModel};
+use travmap_core::error::{Error, Result};
+use travmap_formats::log_message::{Connection, Damage, FileMap, LogMessage};
+use travmap_formats::ros::{Header, NebulaPacket, NebulaPackets, RosMessage, Time, encode};
+
+/// An Ethernet frame's payload: a datagram past it came in IP fragments.
+const ETHERNET_MTU: usize = 1500;
+
+/// A capture, memory-mapped.
+pub struct PcapFile {
+    path: PathBuf,
+    map: FileMap,
+    capture: Capture,
+    /// Where its last whole record ends, and what was said of a cut tail.
+    end: usize,
+    notice: Option<String>,
+}
+
+impl PcapFile {
+    pub fn open(path: &Path) -> Result<Self> {
+        let map = FileMap::open(path)?;
+        let (capture, end, cut) =
+            records::read(map.as_ref()).map_err(|problem| Error::LogContainer {
+                path: path.to_path_buf(),
+                problem,
+            })?;
+        let notice = cut.map(|at| {
+            format!(
+                "{}: the capture ends inside the record at byte {at} (cut short?): reading the records before it",
+                path.display()
+            )
+        });
+        Ok(Self {
+            path: path.to_path_buf(),
+            map,
+            capture,
+            end,
+            notice,
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn notice(&self) -> Option<&str> {
+        self.notice.as_deref()
+    }
+
+    /// The LiDAR packets, in the capture's order.
+    pub fn messages(&self) -> impl Iterator<Item = std::result::Result<LogMessage, Damage>> + '_ {
+        let mut datagrams = self.datagrams();
+        let mut topics: HashMap<u16, Option<Arc<Connection>>> = HashMap::new();
+        std::iter::from_fn(move || {
+            for (stamp_ns, port, payload) in datagrams.by_ref() {
+                let connection = topics
+                    .entry(port)
+                    .or_insert_with(|| connection(port, &payload));
+                let Some(connection) = connection else {
+                    continue;
+                };
+                let data = match connection.schema_name.as_str() {
+                    NEBULA_PACKETS => encode(
+                        &NebulaPackets {
+                            header: Header {
+                                stamp: time(stamp_ns),
+                                frame_id: connection.topic[1..].to_string(),
+                            },
+                            packets: vec![NebulaPacket {
+                                stamp: time(stamp_ns),
+                                data: payload,
+                            }],
+                        },
+                        0,
+                    ),
+                    _ => packet_msg(&payload),
+                };
+                return Some(Ok(LogMessage {
+                    connection: connection.clone(),
+                    log_time_ns: stamp_ns,
+                    publish_time_ns: stamp_ns,
+                    data,
+                }));
+            }
+            None
+        })
+    }
+
+    /// Every UDP datagram over IPv4: (capture time, destination port, payload).
+    fn datagrams(&self) -> impl Iterator<Item = (u64, u16, Vec<u8>)> + '_ {
+        let mut fragments = Fragments::default();
+        records::records(self.map.as_ref(), self.capture, self.end).filter_map(
+            move |(stamp_ns, link, frame)| {
+                let (port, payload) = fragments.add(ipv4(frame, link)?)?;
+                Some((stamp_ns, port, payload))
+            },
+        )
+    }
+}
+
+/// A port's topic, by its first datagram: a Velodyne or Hesai packet's, an
+/// Ouster's (a datagram past an Ethernet frame), or none.
+fn connection(port: u16, first: &[u8]) -> Option<Arc<Connection>> {
+    let (schema_name, schema) = if PacketModel::of_packet(NEBULA_PACKETS, first).is_ok() {
+        (NEBULA_PACKETS, NebulaPackets::SCHEMA)
+    } else if first.len() > ETHERNET_MTU {
+        (OUSTER_PACKET_MESSAGES[0], PACKET_MSG_SCHEMA)
+    } else {
+        return None;
+    };
+    Some(Arc::new(Connection {
+        topic: format!("/udp_{port}"),
+        schema_name: schema_name.to_string(),
+        schema_encoding: "ros2msg".into(),
+        schema_data: schema.as_bytes().to_vec(),
+        message_encoding: "cdr".into(),
+    }))
+}
+
+/// An ouster_ros `PacketMsg` (`uint8[] buf`) in CDR.
+fn packet_msg(packet: &[u8]) -> Vec<u8> {
+    let mut data = Vec::with_capacity(8 + packet.len());
+    data.extend_from_slice(&[0, 1, 0, 0]);
+    data.extend_from_slice(&(packet.len() as u32).to_le_bytes());
+    data.extend_from_slice(packet);
+    data
+}
+
+fn time(ns: u64) -> Time {
+    Time {
+        sec: (ns / 1_000_000_000) as i32,
+        nanosec: (ns % 1_000_000_000) as u32,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An Ethernet frame (with a VLAN tag when asked) of an IPv4 packet: protocol,
+    /// identification, fragment offset in bytes, more fragments, payload.
+    fn frame(
+        vlan: bool,
+        protocol: u8,
+        id: u16,
+        offset: usize,
+        more: bool,
+        payload: &[u8],
+    ) -> Vec<u8> {
+        let mut out = vec![0xFF; 12];
+        if vlan {
+            out.extend([0x81, 0x00, 0x00, 0x07]);
+        }
+        out.extend([0x08, 0x00]);
+        let total = (20 + payload.len()) as u16;
+        let flags = (offset / 8) as u16 | if more { 0x2000 } else { 0 };
+        out.extend([0x45, 0]);
+        out.extend(total.to_be_bytes());
+        out.extend(id.to_be_bytes());
+        out.extend(flags.to_be_bytes());
+        out.extend([64, protocol, 0, 0, 10, 0, 0, 1, 10, 0, 0, 2]);
+        out.extend_from_slice(payload);
+        out
+    }
+
+    /// A UDP datagram to `port`.
+    fn udp(port: u16, payload: &[u8]) -> Vec<u8> {
+        let mut out = vec![0x1F, 0x90];
+        out.extend(port.to_be_bytes());
+        out.extend(((8 + payload.len()) as u16).to_be_bytes());
+        out.extend([0, 0]);
+        out.extend_from_slice(payload);
+        out
+    }
+
+    /// A little-endian microsecond capture of `frames` at 1 s + k ms, its last
+    /// record cut after `cut` bytes of its frame.
+    fn capture(frames: &[Vec<u8>], cut: Option<usize>) -> tempfile::NamedTempFile {
+        let mut out = vec![0xd4, 0xc3, 0xb2, 0xa1, 2, 0, 4, 0];
+        out.extend([0; 8]);
+        out.extend(65535u32.to_le_bytes());
+        out.extend(1u32.to_le_bytes());
+        for (k, frame) in frames.iter().enumerate() {
+            out.extend(1u32.to_le_bytes());
+            out.extend((k as u32 * 1_000).to_le_bytes());
+            out.extend((frame.len() as u32).to_le_bytes());
+            out.extend((frame.len() as u32).to_le_bytes());
+            out.extend(frame);
+        }
+        if let Some(cut) = cut {
+            out.truncate(out.len() - frames.last().unwrap().len() + cut);
+        }
+        let file = tempfile::NamedTempFile::new().unwrap();
+        std::fs::write(file.path(), out).unwrap();
+        file
+    }
+
+    #[test]
+    fn udp_datagrams_are_read_through_vlan_tags_and_fragments() {
+        let small = udp(2368, &[1, 2, 3]);
+        let large: Vec<u8> = udp(7502, &(0..3000).map(|i| i as u8).collect::<Vec<_>>());
+        let (first, second) = large.split_at(1480);
+        let frames = [
+            frame(true, 17, 1, 0, false, &small),
+            // TCP is not a LiDAR's.
+            frame(false, 6, 2, 0, false, &small),
+            // The large datagram's fragments, the last first.
+            frame(false, 17, 3, 1480, false, second),
+            frame(false, 17, 3, 0, true, first),
+            frame(false, 17, 4, 0, false, &small),
+        ];
+        let file = capture(&frames, Some(10));
+        let pcap = PcapFile::open(file.path()).unwrap();
+        assert!(
+            pcap.notice()
+                .unwrap()
+                .contains("ends inside the record at byte")
+        );
+        let datagrams: Vec<_> = pcap.datagrams().collect();
+        assert_eq!(datagrams.len(), 2);
+        assert_eq!(datagrams[0], (1_000_000_000, 2368, vec![1, 2, 3]));
+        let (stamp_ns, port, payload) = &datagrams[1];
+        assert_eq!(
+            (*stamp_ns, *port, payload.len()),
+            (1_003_000_000, 7502, 3000)
+        );
+        assert_eq!(payload[..], large[8..]);
+        // The large port reads as an Ouster's packets; the small one as no LiDAR's.
+        let topics: Vec<_> = (pcap.messages().map(Result::unwrap))
+            .map(|m| (m.connection.topic.clone(), m.connection.schema_name.clone()))
+            .collect();
+        assert_eq!(
+            topics,
+            [("/udp_7502".into(), OUSTER_PACKET_MESSAGES[0].to_string())]
+        );
+    }
+
+    #[test]
+    fn what_is_not_a_capture_travmap_reads_is_named() {
+        let file = tempfile::NamedTempFile::new().unwrap();
+        let mut header = vec![0xd4, 0xc3, 0xb2, 0xa1, 2, 0, 4, 0];
+        header.extend([0; 12]);
+        header.extend(105u32.to_le_bytes());
+        std::fs::write(file.path(), &header).unwrap();
+        let problem = PcapFile::open(file.path()).err().unwrap().to_string();
+        assert!(problem.contains("link type 105"), "{problem}");
+        std::fs::write(file.path(), &header[..10]).unwrap();
+        let problem = PcapFile::open(file.path()).err().unwrap().to_string();
+        assert!(problem.contains("shorter than a pcap header"), "{problem}");
+    }
+}

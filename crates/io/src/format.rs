@@ -1,0 +1,324 @@
+//! What an input is, by its content: the magic bytes of a file, the layout of a
+//! directory. Guessing from the name (or reading any file as MCAP) gave false
+//! diagnoses; this names what a file is even when travmap cannot read it.
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use travmap_core::error::{Error, Result};
+
+/// An input format travmap reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InputFormat {
+    /// A KITTI odometry / SemanticKITTI sequence directory.
+    Kitti,
+    /// An MCAP file, ROS 2 (CDR) or ROS 1 messages.
+    Mcap,
+    /// A ROS 1 bag, format 2.0.
+    Bag,
+    /// A rosbag2 sqlite3 file (`.db3`).
+    Sqlite,
+    /// A rosbag2 directory: `metadata.yaml` and its storage files.
+    Rosbag2,
+    /// A packet capture (classic pcap) of LiDAR packets.
+    Pcap,
+}
+
+impl InputFormat {
+    /// How a person would name it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            InputFormat::Kitti => "a KITTI sequence directory",
+            InputFormat::Mcap => "an MCAP file",
+            InputFormat::Bag => "a ROS 1 bag",
+            InputFormat::Sqlite => "a rosbag2 sqlite3 file",
+            InputFormat::Rosbag2 => "a rosbag2 directory",
+            InputFormat::Pcap => "a pcap capture",
+        }
+    }
+}
+
+/// What travmap reads, for the errors that refuse something else.
+pub const READABLE: &str = "travmap reads KITTI / SemanticKITTI sequence directories, MCAP files (ROS 2 or ROS 1 messages), ROS 1 bags (format 2.0), rosbag2 directories (sqlite3 or MCAP storage), rosbag2 .db3 files, pcap / pcapng captures of LiDAR packets and folders of .pcd / .bin scans";
+
+/// The first bytes of a ROS 1 bag of format 2.0.
+pub const BAG_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
+
+/// Formats known by their first bytes, readable (`Ok`) or named in a refusal (`Err`).
+/// How a PCD file begins: with its comment line, or straight with its version.
+const PCD_MAGICS: [&[u8]; 2] = [b"# .PCD", b"VERSION ."];
+const SINGLE_PCD: &str = "a single PCD point cloud (`travmap map` reads one as a site map; a folder of .pcd scans is a drive: put them in one)";
+/// How a PLY file begins.
+const PLY_MAGICS: [&[u8]; 2] = [b"ply\n", b"ply\r\n"];
+const SINGLE_PLY: &str = "a single PLY point cloud (`travmap map` reads one as a site map)";
+/// How a LAS or LAZ file begins.
+const LAS_MAGIC: &[u8] = b"LASF";
+const SINGLE_LAS: &str = "a single LAS / LAZ point cloud (`travmap map` reads one as a site map)";
+
+/// The kinds of one saved point cloud `travmap map` reads as a site.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SiteCloudFormat {
+    Pcd,
+    Ply,
+    /// LAS or LAZ.
+    Las,
+}
+
+/// Whether `path` is one saved point cloud (a site cloud for `travmap map`), and
+/// of which format.
+pub fn site_cloud_format(path: &Path) -> Option<SiteCloudFormat> {
+    // A regular file first: opening a pipe with no writer would block.
+    if !path.is_file() {
+        return None;
+    }
+    let mut head = [0u8; 9];
+    let read = std::fs::File::open(path).and_then(|mut file| {
+        use std::io::Read;
+        file.read(&mut head)
+    });
+    let head = &head[..read.ok()?];
+    if PCD_MAGICS.iter().any(|m| head.starts_with(m)) {
+        Some(SiteCloudFormat::Pcd)
+    } else if PLY_MAGICS.iter().any(|m| head.starts_with(m)) {
+        Some(SiteCloudFormat::Ply)
+    } else if head.starts_with(LAS_MAGIC) {
+        Some(SiteCloudFormat::Las)
+    } else {
+        None
+    }
+}
+
+const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
+    (b"\x89MCAP0\r\n", Ok(InputFormat::Mcap)),
+    (BAG_MAGIC, Ok(InputFormat::Bag)),
+    (b"SQLite format 3\0", Ok(InputFormat::Sqlite)),
+    (b"\xd4\xc3\xb2\xa1", Ok(InputFormat::Pcap)),
+    (b"\xa1\xb2\xc3\xd4", Ok(InputFormat::Pcap)),
+    (b"\x4d\x3c\xb2\xa1", Ok(InputFormat::Pcap)),
+    (b"\xa1\xb2\x3c\x4d", Ok(InputFormat::Pcap)),
+    (b"\x0a\x0d\x0d\x0a", Ok(InputFormat::Pcap)),
+    (
+        b"#ROSBAG V1.",
+        Err(
+            "a ROS 1 bag of format 1.x (before ROS C Turtle); `rosbag fix` or `rosbag reindex` brings it to 2.0",
+        ),
+    ),
+    (b"\x89MCAP", Err("an MCAP file of a version other than 0")),
+    (PCD_MAGICS[0], Err(SINGLE_PCD)),
+    (PCD_MAGICS[1], Err(SINGLE_PCD)),
+    (PLY_MAGICS[0], Err(SINGLE_PLY)),
+    (PLY_MAGICS[1], Err(SINGLE_PLY)),
+    (LAS_MAGIC, Err(SINGLE_LAS)),
+    (
+        b"PAR1",
+        Err("a Parquet file (a travmap dataset is an output, not a drive)"),
+    ),
+    (b"\x89PNG\r\n\x1a\n", Err("a PNG image")),
+    (b"\xff\xd8\xff", Err("a JPEG image")),
+    (b"BZh", Err("a bzip2-compressed file")),
+    (
+        b"\x28\xb5\x2f\xfd",
+        Err("a zstd-compressed file (a compressed rosbag2 file? decompress it first)"),
+    ),
+    (b"\x1f\x8b", Err("a gzip-compressed file")),
+    (b"PK\x03\x04", Err("a zip archive")),
+    (b"\x7fELF", Err("an executable")),
+];
+
+/// The format of `path`, or an error that says what it is instead.
+/// What a file that is neither a regular file nor a folder is, in words.
+fn special_file(file_type: &std::fs::FileType) -> Option<&'static str> {
+    use std::os::unix::fs::FileTypeExt;
+    if file_type.is_fifo() {
+        Some("a pipe (a FIFO, or a shell's <(...) or /dev/stdin)")
+    } else if file_type.is_char_device() || file_type.is_block_device() {
+        Some("a device")
+    } else if file_type.is_socket() {
+        Some("a socket")
+    } else {
+        None
+    }
+}
+
+pub fn detect(path: &Path) -> Result<InputFormat> {
+    let metadata = match std::fs::metadata(path) {
+        Ok(metadata) => metadata,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(Error::InputMissing {
+                path: path.to_path_buf(),
+            });
+        }
+        Err(e) => return Err(Error::io(path, e)),
+    };
+    // Opening a pipe with no writer blocks, and a stream cannot be memory-mapped:
+    // what is not a file or a folder is refused before it is opened.
+    if let Some(what) = special_file(&metadata.file_type()) {
+        return Err(unsupported(
+            path,
+            format!(
+                "{what}: travmap reads a log by memory-mapping it and reads it more than once; save the stream to a file first (e.g. `cat > drive.mcap`)"
+            ),
+        ));
+    }
+    if metadata.is_dir() {
+        let rosbag2 = path.join("metadata.yaml").is_file() || !storage_files(path).is_empty();
+        return Ok(match rosbag2 {
+            true => InputFormat::Rosbag2,
+            false => InputFormat::Kitti,
+        });
+    }
+    let mut first = Vec::with_capacity(16);
+    std::fs::File::open(path)
+        .and_then(|file| file.take(16).read_to_end(&mut first))
+        .map_err(|e| Error::io(path, e))?;
+    for (magic, format) in MAGICS {
+        if first.starts_with(magic) {
+            return format.map_err(|what| unsupported(path, what.to_string()));
+        }
+    }
+    let what = if first.is_empty() {
+        "an empty file".to_string()
+    } else if path.file_name().is_some_and(|name| name == "metadata.yaml") {
+        return Err(unsupported(
+            path,
+            "the metadata of a rosbag2 directory: give the directory itself".into(),
+        ));
+    } else if path.extension().is_some_and(|e| e == "bin") {
+        "a single file (a KITTI scan? give its sequence directory)".to_string()
+    } else if first
+        .iter()
+        .all(|b| b.is_ascii_graphic() || b.is_ascii_whitespace())
+    {
+        "a text file".to_string()
+    } else {
+        let hex: Vec<String> = first.iter().take(8).map(|b| format!("{b:02x}")).collect();
+        format!(
+            "of a format travmap does not know (first bytes {})",
+            hex.join(" ")
+        )
+    };
+    Err(unsupported(path, what))
+}
+
+fn unsupported(path: &Path, what: String) -> Error {
+    Error::UnsupportedInput {
+        path: path.to_path_buf(),
+        what,
+        readable: READABLE,
+    }
+}
+
+/// A rosbag2 directory's storage files (`.db3`, `.mcap`, either `.zstd`) in the order rosbag2
+/// writes them: `bag_0`, `bag_1`, ... `bag_10` by the number after the last `_`,
+/// then by name. How a directory without `metadata.yaml` is read.
+pub fn storage_files(directory: &Path) -> Vec<PathBuf> {
+    // The name without its storage extension (and `.zstd`, compressed whole).
+    let stem = |path: &Path| {
+        let name = path.file_name()?.to_str()?;
+        let name = name.strip_suffix(".zstd").unwrap_or(name);
+        name.strip_suffix(".db3")
+            .or_else(|| name.strip_suffix(".mcap"))
+            .map(str::to_string)
+    };
+    let entries = std::fs::read_dir(directory).into_iter().flatten().flatten();
+    let mut files: Vec<PathBuf> = (entries.map(|entry| entry.path()))
+        .filter(|path| path.is_file() && stem(path).is_some())
+        .collect();
+    // (bag name, index, stem) of `bag_3.db3`; a name without an index by itself.
+    let key = |path: &PathBuf| -> (String, Option<u64>, String) {
+        let stem = stem(path).unwrap_or_default();
+        let indexed = (stem.rsplit_once('_'))
+            .and_then(|(bag, n)| Some((bag.to_string(), n.parse::<u64>().ok()?)));
+        match indexed {
+            Some((bag, index)) => (bag, Some(index), stem),
+            None => (stem.clone(), None, stem),
+        }
+    };
+    files.sort_by_cached_key(key);
+    files
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn storage_files_come_in_rosbag2s_order() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in [
+            "b_10.db3",
+            "b_2.db3.zstd",
+            "b_0.db3",
+            "notes.txt",
+            "a.mcap",
+            "b_1.db3",
+        ] {
+            std::fs::write(dir.path().join(name), "").unwrap();
+        }
+        std::fs::create_dir(dir.path().join("c_0.db3")).unwrap();
+        let names: Vec<_> = (storage_files(dir.path()).iter())
+            .map(|path| path.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(
+            names,
+            ["a.mcap", "b_0.db3", "b_1.db3", "b_2.db3.zstd", "b_10.db3"]
+        );
+    }
+
+    fn detect_bytes(name: &str, bytes: &[u8]) -> std::result::Result<InputFormat, String> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).unwrap();
+        detect(&path).map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn formats_are_known_by_their_first_bytes_whatever_the_name() {
+        assert_eq!(
+            detect_bytes("x.bag", b"\x89MCAP0\r\nrest"),
+            Ok(InputFormat::Mcap)
+        );
+        assert_eq!(
+            detect_bytes("x.mcap", b"#ROSBAG V2.0\nrest"),
+            Ok(InputFormat::Bag)
+        );
+        assert_eq!(
+            detect_bytes("x", b"SQLite format 3\0rest"),
+            Ok(InputFormat::Sqlite)
+        );
+        for (bytes, what) in [
+            (&b"# .PCD v0.7"[..], "PCD point cloud"),
+            (
+                b"ply\nformat",
+                "a single PLY point cloud (`travmap map` reads one",
+            ),
+            (
+                b"LASF\0\0",
+                "a single LAS / LAZ point cloud (`travmap map` reads one",
+            ),
+            (b"PAR1\x15\x04", "a Parquet file"),
+            (b"\x89PNG\r\n\x1a\n\0", "a PNG image"),
+            (b"hello world\n", "a text file"),
+            (b"", "an empty file"),
+            (b"\x01\x02\x03", "first bytes 01 02 03"),
+        ] {
+            let err = detect_bytes("x.mcap", bytes).unwrap_err();
+            assert!(err.contains(what) && err.contains("travmap reads"), "{err}");
+        }
+    }
+
+    #[test]
+    fn directories_are_rosbag2_with_metadata_else_kitti_and_missing_paths_say_so() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(detect(dir.path()).unwrap(), InputFormat::Kitti);
+        std::fs::write(dir.path().join("metadata.yaml"), "x").unwrap();
+        assert_eq!(detect(dir.path()).unwrap(), InputFormat::Rosbag2);
+        let err = detect(&dir.path().join("nope.mcap"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("nope.mcap") && err.contains("does not exist"),
+            "{err}"
+        );
+    }
+}

@@ -1,0 +1,452 @@
+//! KITTI odometry / SemanticKITTI sequence directories (METHOD.md section 1):
+//! `velodyne/NNNNNN.bin`, optional `labels/NNNNNN.label` and `image_2/NNNNNN.png`,
+//! `calib.txt`, `poses.txt`, `times.txt`. Output: per frame the scan in the velodyne
+//! frame, its labels, its camera image, its stamp and `world_from_velodyne`, where
+//! `world` is the first scan's z-up velodyne frame. Every malformed input is an
+//! [`Error`] naming the file.
+
+pub(crate) mod text;
+
+use std::io::Read;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Isometry3, Matrix4};
+
+use super::skips::SkipLog;
+pub use crate::kitti::text::{
+    Calibration, parse_calibration, parse_poses, parse_times, read_calibration, read_poses,
+    read_times,
+};
+use crate::payloads::cloud::{check_some_finite, is_return};
+use crate::payloads::image::decode_png;
+use travmap_core::error::{Error, Result};
+use travmap_core::frame::{Frame, RemissionScale};
+use travmap_core::geometry::rigid;
+
+/// An opened sequence: calibration, poses and times are read at once, scans on demand.
+#[derive(Clone, Debug)]
+pub struct KittiSequence {
+    dir: PathBuf,
+    calibration: Calibration,
+    /// `pose_i` of poses.txt: cam0 of frame i in the first cam0 frame.
+    first_cam0_from_cam0: Vec<Matrix4<f64>>,
+    stamps_ns: Vec<u64>,
+    /// Frame numbers that have a `velodyne/NNNNNN.bin`, ascending.
+    frames: Vec<usize>,
+    /// Decode `image_2` PNGs into frames (when P2 is known).
+    read_images: bool,
+    /// Read `labels/` (false: the frames come without labels, as unlabelled drives).
+    read_labels: bool,
+    pub(crate) skips: SkipLog,
+}
+
+impl KittiSequence {
+    /// Opens `dir`, a directory holding `velodyne/`, `calib.txt`, `poses.txt`, `times.txt`.
+    pub fn open(dir: &Path) -> Result<Self> {
+        if !dir.is_dir() {
+            return Err(Error::Sequence {
+                path: dir.to_path_buf(),
+                message: "not a directory; expected a KITTI sequence directory holding \
+                          velodyne/, calib.txt, poses.txt and times.txt"
+                    .into(),
+            });
+        }
+        let calibration = read_calibration(&dir.join("calib.txt"))?;
+        let first_cam0_from_cam0 = read_poses(&dir.join("poses.txt"))?;
+        let stamps_ns = read_times(&dir.join("times.txt"))?;
+        let frames = list_scans(&dir.join("velodyne"))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            calibration,
+            first_cam0_from_cam0,
+            stamps_ns,
+            frames,
+            read_images: true,
+            read_labels: true,
+            skips: SkipLog::default(),
+        })
+    }
+
+    /// What happens to frames whose files are unreadable.
+    pub fn skip_log(&self) -> &SkipLog {
+        &self.skips
+    }
+
+    /// Whether [`Self::read_frame`] decodes `image_2` (default true); decoding costs
+    /// more than the rest of the method, so it is skipped when appearance is off.
+    pub fn set_read_images(&mut self, read_images: bool) {
+        self.read_images = read_images;
+    }
+
+    /// Whether [`Self::read_frame`] reads `labels/` (default true).
+    pub fn set_read_labels(&mut self, read_labels: bool) {
+        self.read_labels = read_labels;
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    pub fn calibration(&self) -> &Calibration {
+        &self.calibration
+    }
+
+    /// Frame numbers with a scan, ascending.
+    pub fn frames(&self) -> &[usize] {
+        &self.frames
+    }
+
+    /// Frame numbers with a scan inside `range`.
+    pub fn frames_in(&self, range: &Range<usize>) -> Vec<usize> {
+        self.frames
+            .iter()
+            .copied()
+            .filter(|f| range.contains(f))
+            .collect()
+    }
+
+    /// True when frame `index` has a label file.
+    pub fn has_labels(&self, index: usize) -> bool {
+        self.label_path(index).is_file()
+    }
+
+    /// `T_world_velo(i) = inv(Tr) * pose_i * Tr` (METHOD.md section 1): the pose file
+    /// holds cam0 poses, and the world is the first scan's velodyne frame, so that the
+    /// ground is the world x-y plane.
+    pub fn world_from_velodyne(&self, index: usize) -> Result<Isometry3<f64>> {
+        let pose = self
+            .first_cam0_from_cam0
+            .get(index)
+            .ok_or_else(|| Error::MissingPose {
+                path: self.dir.join("poses.txt"),
+                frame: index,
+                lines: self.first_cam0_from_cam0.len(),
+            })?;
+        let tr = self.calibration.cam0_from_velodyne;
+        let velodyne_from_cam0 = tr.try_inverse().ok_or_else(|| Error::Parse {
+            path: self.dir.join("calib.txt"),
+            line: 0,
+            message: "Tr is not invertible".into(),
+        })?;
+        Ok(rigid(&(velodyne_from_cam0 * pose * tr)))
+    }
+
+    /// Every pose poses.txt holds, frame number and `world_from_velodyne`: also
+    /// those of frames past the last scan here.
+    pub fn recorded_poses(&self) -> Result<Vec<(usize, Isometry3<f64>)>> {
+        (0..self.first_cam0_from_cam0.len())
+            .map(|index| Ok((index, self.world_from_velodyne(index)?)))
+            .collect()
+    }
+
+    pub fn stamp_ns(&self, index: usize) -> Result<u64> {
+        self.stamps_ns
+            .get(index)
+            .copied()
+            .ok_or_else(|| Error::MissingTime {
+                path: self.dir.join("times.txt"),
+                frame: index,
+                lines: self.stamps_ns.len(),
+            })
+    }
+
+    /// Reads frame `index`: scan, labels when present, pose and stamp.
+    pub fn read_frame(&self, index: usize) -> Result<Frame> {
+        let scan_path = self.scan_path(index);
+        let mut points_in_velodyne = read_scan(&scan_path)?;
+        let label_path = self.label_path(index);
+        let mut labels = if self.read_labels && label_path.is_file() {
+            Some(read_labels(
+                &label_path,
+                &scan_path,
+                points_in_velodyne.len(),
+            )?)
+        } else {
+            None
+        };
+        let dropped_points = drop_non_returns(&mut points_in_velodyne, labels.as_mut());
+        check_some_finite(points_in_velodyne.len(), dropped_points).map_err(|message| {
+            Error::Sequence {
+                path: scan_path.clone(),
+                message,
+            }
+        })?;
+        let camera = match (self.read_images, self.image_path(index)) {
+            (true, Some(_)) if self.calibration.projections[2].is_none() => {
+                return Err(Error::MissingCalibration {
+                    path: self.dir.join("calib.txt"),
+                    key: "P2",
+                    hint: " for the images in image_2/ (--set appearance.enabled=false ignores them)",
+                });
+            }
+            (true, Some(path)) => {
+                let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+                self.calibration.camera_2_image(decode_png(&bytes, &path)?)
+            }
+            _ => None,
+        };
+        Ok(Frame {
+            index,
+            stamp_ns: self.stamp_ns(index)?,
+            world_from_velodyne: self.world_from_velodyne(index)?,
+            points_in_velodyne,
+            // KITTI's remission is 0..1 already.
+            remission: RemissionScale::Unit,
+            labels,
+            camera,
+            dropped_points,
+            sensors: Vec::new(),
+        })
+    }
+
+    /// `image_2/NNNNNN.png` of frame `index`, when it exists.
+    pub fn image_path(&self, index: usize) -> Option<PathBuf> {
+        let path = self.dir.join("image_2").join(format!("{index:06}.png"));
+        path.is_file().then_some(path)
+    }
+
+    fn scan_path(&self, index: usize) -> PathBuf {
+        self.dir.join("velodyne").join(format!("{index:06}.bin"))
+    }
+
+    fn label_path(&self, index: usize) -> PathBuf {
+        self.dir.join("labels").join(format!("{index:06}.label"))
+    }
+}
+
+/// Reads a KITTI `.bin` scan: little-endian float32 x, y, z, remission per point.
+/// Every point is kept, non-finite ones too, so that labels still line up.
+pub fn read_scan(path: &Path) -> Result<Vec<[f32; 4]>> {
+    let io_error = |e| Error::io(path, e);
+    let mut file = std::fs::File::open(path).map_err(io_error)?;
+    // Read straight into the points: a scan is 2 MB, and parsing a copy of the
+    // file's bytes cost as much as reading them.
+    let mut points = scan_buffer(file.metadata().map_err(io_error)?.len(), path)?;
+    file.read_exact(bytemuck::cast_slice_mut(&mut points))
+        .map_err(io_error)?;
+    if file.read(&mut [0u8; 1]).map_err(io_error)? != 0 {
+        return Err(Error::io(
+            path,
+            std::io::Error::other("the file grew while it was read"),
+        ));
+    }
+    Ok(from_little_endian(points))
+}
+
+/// [`read_scan`] on the file's bytes; `path` names it in errors.
+pub fn parse_scan(bytes: &[u8], path: &Path) -> Result<Vec<[f32; 4]>> {
+    let mut points = scan_buffer(bytes.len() as u64, path)?;
+    bytemuck::cast_slice_mut(&mut points).copy_from_slice(bytes);
+    Ok(from_little_endian(points))
+}
+
+/// Room for the points of a scan file of `size_bytes`: a whole number of 16-byte
+/// records, at least one.
+fn scan_buffer(size_bytes: u64, path: &Path) -> Result<Vec<[f32; 4]>> {
+    check_record_size(size_bytes, path, 16, "float32 x, y, z, remission per point")?;
+    // An empty file is a scan that was never written, not a scan of nothing.
+    if size_bytes == 0 {
+        return Err(Error::EmptyScan {
+            path: path.to_path_buf(),
+        });
+    }
+    Ok(vec![[0f32; 4]; (size_bytes / 16) as usize])
+}
+
+/// Points whose bytes were stored little-endian, as this machine's numbers.
+fn from_little_endian(mut points: Vec<[f32; 4]>) -> Vec<[f32; 4]> {
+    if cfg!(target_endian = "big") {
+        for value in points.as_flattened_mut() {
+            *value = f32::from_bits(u32::from_le(value.to_bits()));
+        }
+    }
+    points
+}
+
+/// A file of fixed-size records must be a whole number of them.
+fn check_record_size(
+    size_bytes: u64,
+    path: &Path,
+    record_bytes: u64,
+    what: &'static str,
+) -> Result<()> {
+    if size_bytes.is_multiple_of(record_bytes) {
+        return Ok(());
+    }
+    Err(Error::RecordSize {
+        path: path.to_path_buf(),
+        size_bytes,
+        record_bytes,
+        what,
+    })
+}
+
+/// Removes the points that are no return ([`is_return`]: a NaN or infinite
+/// coordinate, or the sensor's origin), and their labels, so that one bad return
+/// costs one point, not the frame. Returns how many were removed.
+pub fn drop_non_returns(points: &mut Vec<[f32; 4]>, labels: Option<&mut Vec<u32>>) -> usize {
+    let finite = |p: &[f32; 4]| is_return(p[0], p[1], p[2]);
+    if let Some(labels) = labels {
+        let mut index = 0;
+        labels.retain(|_| {
+            index += 1;
+            finite(&points[index - 1])
+        });
+    }
+    let before = points.len();
+    points.retain(finite);
+    before - points.len()
+}
+
+/// Reads a SemanticKITTI `.label` file (uint32 per point) and checks its count.
+pub fn read_labels(path: &Path, scan_path: &Path, points: usize) -> Result<Vec<u32>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_labels(&bytes, path, scan_path, points)
+}
+
+/// [`read_labels`] on the file's bytes; `path` names it in errors.
+pub fn parse_labels(
+    bytes: &[u8],
+    path: &Path,
+    scan_path: &Path,
+    points: usize,
+) -> Result<Vec<u32>> {
+    check_record_size(bytes.len() as u64, path, 4, "uint32 label per point")?;
+    let labels: Vec<u32> = bytes
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    if labels.len() != points {
+        return Err(Error::LabelCount {
+            path: path.to_path_buf(),
+            scan: scan_path.to_path_buf(),
+            labels: labels.len(),
+            points,
+        });
+    }
+    Ok(labels)
+}
+
+/// Frame numbers of the `NNNNNN.bin` files in `velodyne_dir`, ascending.
+fn list_scans(velodyne_dir: &Path) -> Result<Vec<usize>> {
+    let entries = std::fs::read_dir(velodyne_dir).map_err(|e| Error::io(velodyne_dir, e))?;
+    let mut frames = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| Error::io(velodyne_dir, e))?;
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if let Some(stem) = name.strip_suffix(".bin")
+            && let Ok(index) = stem.parse::<usize>()
+        {
+            frames.push(index);
+        }
+    }
+    if frames.is_empty() {
+        return Err(Error::Sequence {
+            path: velodyne_dir.to_path_buf(),
+            message: "no NNNNNN.bin scans".into(),
+        });
+    }
+    frames.sort_unstable();
+    Ok(frames)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        path
+    }
+
+    #[test]
+    fn a_scan_is_read_as_little_endian_records_and_an_empty_one_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let values = [1.5f32, -2.0, 3.25, 0.5, f32::NAN, 0.0, 1e-30, 1.0];
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let points = read_scan(&write(dir.path(), "a.bin", &bytes)).unwrap();
+        let bits = |p: &[[f32; 4]]| {
+            p.as_flattened()
+                .iter()
+                .map(|v| v.to_bits())
+                .collect::<Vec<_>>()
+        };
+        let parsed = parse_scan(&bytes, Path::new("a.bin")).unwrap();
+        assert_eq!(bits(&points), bits(&parsed));
+        assert_eq!(bits(&points), values.map(f32::to_bits));
+        let err = read_scan(&write(dir.path(), "b.bin", &[]))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("b.bin"), "{err}");
+    }
+
+    #[test]
+    fn scan_size_must_be_a_multiple_of_16() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "a.bin", &[0u8; 20]);
+        let err = read_scan(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("a.bin") && err.contains("20 bytes") && err.contains("16"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn points_that_are_no_return_are_dropped_with_their_labels() {
+        let mut points = vec![
+            [1.0, 2.0, 3.0, 0.5],
+            [1.0, f32::NAN, 3.0, 0.5],
+            [4.0, 5.0, 6.0, 0.5],
+            [f32::INFINITY, 0.0, 0.0, 0.5],
+            // A NaN remission is harmless: the method never reads it.
+            [7.0, 8.0, 9.0, f32::NAN],
+            // A beam without a return, as an Ouster scan records it; the origin
+            // on one axis only is a return.
+            [0.0, -0.0, 0.0, 0.0],
+            [0.0, 0.0, 1.5, 0.0],
+        ];
+        let mut labels = vec![10, 11, 12, 13, 14, 15, 16];
+        assert_eq!(drop_non_returns(&mut points, Some(&mut labels)), 3);
+        assert_eq!(labels, [10, 12, 14, 16]);
+        assert_eq!(points[1], [4.0, 5.0, 6.0, 0.5]);
+        assert_eq!(points.len(), 4);
+    }
+
+    #[test]
+    fn label_count_must_match_point_count() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "a.label", &[0u8; 12]);
+        let err = read_labels(&path, Path::new("a.bin"), 4)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("3 labels for 4 points"), "{err}");
+    }
+
+    #[test]
+    fn calibration_without_tr_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = "P0: 1 0 0 0 0 1 0 0 0 0 1 0\n";
+        let path = write(dir.path(), "calib.txt", p.as_bytes());
+        let err = read_calibration(&path).unwrap_err().to_string();
+        assert!(err.contains("calib.txt") && err.contains("`Tr:`"), "{err}");
+        let path = write(dir.path(), "calib.txt", b"Tr: 1 0 0\n");
+        let err = read_calibration(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("calib.txt:1") && err.contains("found 3"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn times_must_increase() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "times.txt", b"0.0\n0.1\n0.1\n");
+        let err = read_times(&path).unwrap_err().to_string();
+        assert!(err.contains("times.txt:3"), "{err}");
+        let path = write(dir.path(), "times.txt", b"0.0\n1.037359e-01\n");
+        assert_eq!(read_times(&path).unwrap(), vec![0, 103_735_900]);
+    }
+}

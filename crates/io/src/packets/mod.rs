@@ -1,0 +1,186 @@
+//! LiDAR packet topics whatever the vendor: Velodyne's `VelodyneScan`, Hesai's
+//! `PandarScan`, nebula's vendor-neutral `NebulaPackets` and ouster_ros's
+//! `PacketMsg`, each with its model (read from the packets; an Ouster's from its
+//! metadata), its calibration and its scan assembler, behind one face for the log
+//! index and the drive's frames.
+
+pub mod hesai;
+pub mod ouster;
+pub mod velodyne;
+
+use std::path::Path;
+
+use crate::packets::hesai::{
+    HesaiAssembler, HesaiCalibration, HesaiModel, PANDAR_SCAN, pandar_scan_message,
+};
+use crate::packets::ouster::{
+    OUSTER_PACKET_MESSAGES, OusterAssembler, OusterMetadata, OusterModel, packet_msg_message,
+};
+use crate::packets::velodyne::{
+    Calibration, Decoder, DecoderSettings, PacketField, PacketScan, ScanAssembler, ScanMessage,
+    VELODYNE_SCAN, VelodyneModel, packets_message, scan_message,
+};
+use travmap_formats::ros::MessageEncoding;
+
+/// nebula's packet message, of any sensor: `std_msgs/Header header`,
+/// `NebulaPacket[] packets` of `builtin_interfaces/Time stamp`, `uint8[] data`.
+pub const NEBULA_PACKETS: &str = "nebula_msgs/msg/NebulaPackets";
+
+/// The message types that carry packets.
+pub const PACKET_MESSAGES: [&str; 6] = [
+    VELODYNE_SCAN,
+    PANDAR_SCAN,
+    NEBULA_PACKETS,
+    OUSTER_PACKET_MESSAGES[0],
+    OUSTER_PACKET_MESSAGES[1],
+    OUSTER_PACKET_MESSAGES[2],
+];
+
+/// A LiDAR whose packets travmap decodes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PacketModel {
+    Velodyne(VelodyneModel),
+    Hesai(HesaiModel),
+    Ouster(OusterModel),
+}
+
+impl PacketModel {
+    /// The model of a packet of a message of type `message_type`. A NebulaPackets
+    /// packet is Hesai's if Hesai's header and length fit it (a Pandar 40P begins
+    /// `FF EE` as Velodyne's blocks do, but is 1,262 bytes to their 1,206), else
+    /// Velodyne's. An Ouster's packets do not tell it: its metadata does.
+    pub fn of_packet(message_type: &str, packet: &[u8]) -> Result<Self, String> {
+        match message_type {
+            name if OUSTER_PACKET_MESSAGES.contains(&name) => {
+                Err("an Ouster packet's layout is in the sensor's metadata".into())
+            }
+            PANDAR_SCAN => HesaiModel::of_packet(packet).map(Self::Hesai),
+            NEBULA_PACKETS => HesaiModel::of_packet(packet)
+                .map(Self::Hesai)
+                .or_else(|hesai| {
+                    VelodyneModel::of_packet(packet)
+                        .map(Self::Velodyne)
+                        .map_err(|velodyne| {
+                            format!("neither Hesai's ({hesai}) nor Velodyne's ({velodyne})")
+                        })
+                }),
+            _ => VelodyneModel::of_packet(packet).map(Self::Velodyne),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Velodyne(model) => model.name(),
+            Self::Hesai(model) => model.name(),
+            Self::Ouster(model) => model.name(),
+        }
+    }
+}
+
+/// Reads a packet message of type `message_type`, recorded at `log_time_ns` (which
+/// stamps an Ouster's packet: its message has no stamp), without copying its
+/// packets.
+pub fn packet_message<'a>(
+    message_type: &str,
+    data: &'a [u8],
+    encoding: MessageEncoding,
+    log_time_ns: u64,
+) -> Result<ScanMessage<'a>, String> {
+    match message_type {
+        name if OUSTER_PACKET_MESSAGES.contains(&name) => {
+            packet_msg_message(data, encoding, log_time_ns)
+        }
+        PANDAR_SCAN => pandar_scan_message(data, encoding),
+        NEBULA_PACKETS => packets_message(data, encoding, PacketField::Sequence),
+        _ => scan_message(data, encoding),
+    }
+}
+
+/// A packet model's calibration: the file given (`--lidar-calibration`: the
+/// velodyne_pointcloud / nebula YAML, or Hesai's angle-correction CSV), else the
+/// model's built-in table. An Ouster's is its metadata, which the log index reads
+/// with its packets (`packet_topics.rs`).
+#[derive(Clone, Debug)]
+pub enum PacketCalibration {
+    Velodyne(Calibration),
+    Hesai(HesaiCalibration),
+    Ouster(Box<OusterMetadata>),
+}
+
+impl PacketCalibration {
+    pub fn for_model(model: PacketModel, file: Option<&Path>) -> Result<Self, String> {
+        match model {
+            PacketModel::Ouster(_) => {
+                Err("an Ouster's metadata is read with its packets, by the log index".into())
+            }
+            PacketModel::Velodyne(model) => Calibration::for_model(model, file).map(Self::Velodyne),
+            PacketModel::Hesai(model) => {
+                let calibration = match file {
+                    None => HesaiCalibration::builtin(model),
+                    Some(file) => {
+                        let text = std::fs::read_to_string(file)
+                            .map_err(|e| format!("{}: {e}", file.display()))?;
+                        HesaiCalibration::from_csv(&text)
+                            .map_err(|e| format!("{}: {e}", file.display()))?
+                    }
+                };
+                // A table of another model is refused here, naming both.
+                HesaiAssembler::new(model, &calibration)?;
+                Ok(Self::Hesai(calibration))
+            }
+        }
+    }
+}
+
+/// Packets in, scans out, whichever vendor.
+pub enum PacketAssembler {
+    Velodyne(ScanAssembler),
+    Hesai(Box<HesaiAssembler>),
+    Ouster(Box<OusterAssembler>),
+}
+
+impl PacketAssembler {
+    pub fn new(model: PacketModel, calibration: &PacketCalibration) -> Result<Self, String> {
+        Ok(match (model, calibration) {
+            (PacketModel::Velodyne(model), PacketCalibration::Velodyne(calibration)) => {
+                let decoder = Decoder::new(model, calibration.clone(), DecoderSettings::default())?;
+                Self::Velodyne(ScanAssembler::new(decoder))
+            }
+            (PacketModel::Hesai(model), PacketCalibration::Hesai(calibration)) => {
+                Self::Hesai(Box::new(HesaiAssembler::new(model, calibration)?))
+            }
+            (PacketModel::Ouster(model), PacketCalibration::Ouster(metadata))
+                if metadata.model == model =>
+            {
+                Self::Ouster(Box::new(OusterAssembler::new(metadata)))
+            }
+            _ => {
+                return Err(format!(
+                    "a calibration of another vendor than the {}'s",
+                    model.name()
+                ));
+            }
+        })
+    }
+
+    /// Adds the packets of a message of type `message_type`, recorded at
+    /// `log_time_ns`; the scans they complete.
+    pub fn push_message(
+        &mut self,
+        message_type: &str,
+        data: &[u8],
+        encoding: MessageEncoding,
+        log_time_ns: u64,
+    ) -> Result<Vec<PacketScan>, String> {
+        let message = packet_message(message_type, data, encoding, log_time_ns)?;
+        let mut scans = Vec::new();
+        for (stamp_ns, packet) in message.packets {
+            match self {
+                Self::Velodyne(assembler) => scans.extend(assembler.push(packet, stamp_ns)?),
+                Self::Hesai(assembler) => scans.extend(assembler.push(packet, stamp_ns)?),
+                Self::Ouster(assembler) => scans.extend(assembler.push(packet, stamp_ns)?),
+            }
+        }
+        Ok(scans)
+    }
+}

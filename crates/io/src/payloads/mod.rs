@@ -1,0 +1,3 @@
+pub mod cloud;
+pub mod image;
+pub mod livox;

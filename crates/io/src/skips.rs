@@ -1,0 +1,60 @@
+//! `--keep-going`: frames whose input is unreadable, skipped and recorded instead of
+//! ending the run.
+
+use travmap_core::error::{Error, Result};
+
+/// A frame left out because its input was unreadable (`--keep-going`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Skip {
+    pub frame: usize,
+    pub reason: String,
+}
+
+/// Whether a frame whose input is unreadable stops the run (the default) or is
+/// skipped and recorded, and the record.
+#[derive(Clone, Debug, Default)]
+pub struct SkipLog {
+    keep_going: bool,
+    skipped: std::sync::Arc<std::sync::Mutex<Vec<Skip>>>,
+}
+
+impl SkipLog {
+    /// An empty record; `keep_going` false: the first unreadable frame ends the run.
+    pub fn new(keep_going: bool) -> Self {
+        Self {
+            keep_going,
+            skipped: Default::default(),
+        }
+    }
+
+    /// Records `error` for `frame` when keeping going, else returns it.
+    pub fn handle(&self, frame: usize, error: Error) -> Result<()> {
+        if !self.keep_going {
+            return Err(error);
+        }
+        // The whole chain: "cannot read x.bin: No such file or directory".
+        let mut reason = error.to_string();
+        let mut cause = std::error::Error::source(&error);
+        while let Some(inner) = cause {
+            reason.push_str(&format!(": {inner}"));
+            cause = inner.source();
+        }
+        if let Ok(mut skipped) = self.skipped.lock()
+            && !skipped
+                .iter()
+                .any(|s| s.frame == frame && s.reason == reason)
+        {
+            // Passes over the same input (passthrough, then the method) report a frame once.
+            skipped.push(Skip { frame, reason });
+        }
+        Ok(())
+    }
+
+    pub fn keeps_going(&self) -> bool {
+        self.keep_going
+    }
+
+    pub fn skipped(&self) -> Vec<Skip> {
+        self.skipped.lock().map(|s| s.clone()).unwrap_or_default()
+    }
+}

@@ -1,0 +1,222 @@
+//! Stage 1, integration (METHOD.md section 2): a scan moved into the world frame
+//! with its own pose, keeping its sensor origin, plus the ground plane of the
+//! integrated cloud.
+//!
+//! Input: a [`Frame`]. Output: a [`WorldScan`]; the [`IntegrationWindow`] keeps the
+//! last n of them and [`ground_normal`] fits the plane of their union.
+
+use std::sync::Arc;
+
+use travmap_core::frame::Frame;
+use travmap_core::geometry::Moments;
+
+/// One scan in the world frame.
+#[derive(Clone, Debug)]
+pub struct WorldScan {
+    pub index: usize,
+    pub stamp_ns: u64,
+    /// Shared with the results of the frames that integrate it.
+    pub points_in_world: Arc<Vec<[f32; 3]>>,
+    /// Where the sensor was when it took this scan; curvity measures ranges from it.
+    pub origin_in_world: [f64; 3],
+    pub labels: Option<Vec<u32>>,
+    /// Remission per point on a 0..1 scale, when the input's is usable.
+    pub remission: Option<Vec<f32>>,
+    /// Moments of `points_in_world`, so that the plane of several scans costs O(1).
+    pub moments: Moments,
+}
+
+/// Moves every point of `frame` into the world frame (the pose is applied in f64).
+pub fn scan_to_world(frame: Frame) -> WorldScan {
+    let m = frame.world_from_velodyne.to_homogeneous();
+    // A loop with no call in it: around `push`'s (or a closure's) the sums went
+    // through memory at every point, each waiting for the last one's store.
+    let mut moments = Moments::default();
+    let mut points_in_world = vec![[0f32; 3]; frame.points_in_velodyne.len()];
+    for (p, out) in frame.points_in_velodyne.iter().zip(&mut points_in_world) {
+        let (x, y, z) = (p[0] as f64, p[1] as f64, p[2] as f64);
+        let w = [
+            m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + m[(0, 3)],
+            m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + m[(1, 3)],
+            m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + m[(2, 3)],
+        ];
+        moments.add(w);
+        *out = [w[0] as f32, w[1] as f32, w[2] as f32];
+    }
+    let points_in_world = Arc::new(points_in_world);
+    WorldScan {
+        index: frame.index,
+        stamp_ns: frame.stamp_ns,
+        points_in_world,
+        origin_in_world: [m[(0, 3)], m[(1, 3)], m[(2, 3)]],
+        labels: frame.labels,
+        remission: frame
+            .remission
+            .is_usable()
+            .then(|| frame.points_in_velodyne.iter().map(|p| p[3]).collect()),
+        moments,
+    }
+}
+
+/// KITTI's HDL-64E remission at the 95th percentile of a scan (0.52-0.55 on the
+/// shipped scans): where `features.remission_scale = "scan_p95"` brings every scan.
+pub const REFERENCE_REMISSION_P95: f32 = 0.54;
+
+/// Scales a scan's remission so that its 95th percentile is
+/// [`REFERENCE_REMISSION_P95`] (a scan without remission, or with none above 0, is
+/// left as it is).
+pub fn scale_remission_to_reference(scan: &mut WorldScan) {
+    let Some(remission) = scan.remission.as_mut() else {
+        return;
+    };
+    if remission.is_empty() {
+        return;
+    }
+    let mut sorted = remission.clone();
+    let at = (sorted.len() * 95 / 100).min(sorted.len() - 1);
+    let p95 = *sorted.select_nth_unstable_by(at, f32::total_cmp).1;
+    if p95 > 0.0 {
+        let factor = REFERENCE_REMISSION_P95 / p95;
+        remission.iter_mut().for_each(|r| *r *= factor);
+    }
+}
+
+/// The scans a frame integrates: its own and those of the n - 1 frames before it
+/// (METHOD.md section 2). The one place that says which scans those are, which frame
+/// to start reading at to fill the window, and when a window starts afresh.
+#[derive(Clone, Debug)]
+pub struct IntegrationWindow {
+    /// n, the scans integrated per frame.
+    scans_per_frame: usize,
+    /// Ascending frame indices; the last n - 1 once a batch is processed.
+    scans: Vec<WorldScan>,
+}
+
+impl IntegrationWindow {
+    pub fn new(scans_per_frame: usize) -> Self {
+        Self {
+            scans_per_frame,
+            scans: Vec::new(),
+        }
+    }
+
+    /// The first frame to read so that frame `first` has a full window.
+    pub fn warm_up_start(&self, first: usize) -> usize {
+        first.saturating_sub(self.scans_per_frame - 1)
+    }
+
+    /// The first frame of a selection starting at `first` whose window lies inside it.
+    pub fn first_full(&self, first: usize) -> usize {
+        first + self.scans_per_frame - 1
+    }
+
+    /// Whether a frame `index` starts afresh: it is not after the newest scan (a new
+    /// pass over the sequence).
+    pub fn restarts_at(&self, index: usize) -> bool {
+        self.scans.last().is_some_and(|last| last.index >= index)
+    }
+
+    pub fn clear(&mut self) {
+        self.scans.clear();
+    }
+
+    /// Adds scans of ascending frames after the newest one.
+    pub fn extend(&mut self, scans: impl IntoIterator<Item = WorldScan>) {
+        self.scans.extend(scans);
+    }
+
+    /// Every scan held, ascending.
+    pub fn scans(&self) -> &[WorldScan] {
+        &self.scans
+    }
+
+    /// The window of the scan at position `at` of [`Self::scans`]: it and the scans
+    /// of the n - 1 frames before it that are held.
+    pub fn window_of(&self, at: usize) -> &[WorldScan] {
+        let current = self.scans[at].index;
+        let start = self.scans[..=at]
+            .iter()
+            .rposition(|s| s.index + self.scans_per_frame <= current)
+            .map_or(0, |p| p + 1);
+        &self.scans[start..=at]
+    }
+
+    /// Drops the scans no later frame integrates.
+    pub fn forget_old(&mut self) {
+        if let Some(newest) = self.scans.last().map(|s| s.index) {
+            let n = self.scans_per_frame;
+            self.scans.retain(|s| s.index + n > newest);
+        }
+    }
+}
+
+/// Unit normal (z >= 0) of the plane fitted by least squares to all points of
+/// `scans`: the ground-plane normal that zeta difference projects on (section 4).
+pub fn ground_normal(scans: &[WorldScan]) -> [f64; 3] {
+    let mut all = Moments::default();
+    for scan in scans {
+        all.merge(&scan.moments);
+    }
+    all.covariance().smallest_eigen().normal
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pose_moves_points_and_origin() {
+        // 90 degrees about z (velodyne x becomes world y), 10 m along x.
+        let world_from_velodyne = nalgebra::Isometry3::new(
+            nalgebra::Vector3::new(10.0, 0.0, 0.0),
+            nalgebra::Vector3::new(0.0, 0.0, std::f64::consts::FRAC_PI_2),
+        );
+        let frame = Frame {
+            index: 4,
+            stamp_ns: 7,
+            world_from_velodyne,
+            points_in_velodyne: vec![[1.0, 0.0, 2.0, 0.5], [0.0, 1.0, 0.0, 0.1]],
+            remission: travmap_core::frame::RemissionScale::Unit,
+            labels: None,
+            camera: None,
+            dropped_points: 0,
+            sensors: Vec::new(),
+        };
+        let scan = scan_to_world(frame);
+        let expected = [[10.0, 1.0, 2.0], [9.0, 0.0, 0.0]];
+        for (p, e) in scan.points_in_world.iter().zip(expected) {
+            assert!(p.iter().zip(e).all(|(a, b)| (a - b).abs() < 1e-6), "{p:?}");
+        }
+        assert_eq!(scan.origin_in_world, [10.0, 0.0, 0.0]);
+        assert_eq!(scan.moments.count, 2);
+    }
+
+    fn scan(index: usize) -> WorldScan {
+        WorldScan {
+            index,
+            stamp_ns: 0,
+            points_in_world: Arc::default(),
+            origin_in_world: [0.0; 3],
+            labels: None,
+            remission: None,
+            moments: Moments::default(),
+        }
+    }
+
+    #[test]
+    fn window_holds_the_last_n_frames_even_across_gaps() {
+        let mut window = IntegrationWindow::new(3);
+        assert_eq!(window.warm_up_start(5), 3);
+        assert_eq!(window.warm_up_start(1), 0);
+        assert_eq!(window.first_full(5), 7);
+        window.extend([2, 3, 5, 6].map(scan));
+        let indices = |scans: &[WorldScan]| scans.iter().map(|s| s.index).collect::<Vec<_>>();
+        assert_eq!(indices(window.window_of(1)), [2, 3]);
+        // Frame 4 is missing: the window of 5 is 3..=5, so only 3 and 5.
+        assert_eq!(indices(window.window_of(2)), [3, 5]);
+        assert_eq!(indices(window.window_of(3)), [5, 6]);
+        window.forget_old();
+        assert_eq!(indices(window.scans()), [5, 6]);
+        assert!(window.restarts_at(6) && window.restarts_at(0) && !window.restarts_at(7));
+    }
+}

@@ -1,0 +1,434 @@
+//! Where reading meets the method: a [`Selection`] is a [`Source`] and the frames
+//! of it to use. [`Selection::run`] feeds them through a [`Pipeline`] built for the
+//! source's posing, and [`Selection::run_mapped`] also fuses every result into the
+//! drive map, the one place that map is fed. Every command goes through here, the
+//! benchmark included ([`Selection::load`], [`Selection::run_loaded`]).
+
+use std::ops::Range;
+use std::sync::Arc;
+
+use nalgebra::Isometry3;
+
+use travmap_core::config::Config;
+use travmap_core::error::{Error, Result};
+use travmap_core::frame::Frame;
+use travmap_core::posing::Posing;
+use travmap_core::stopwatch::Stopwatch;
+use travmap_io::Source;
+use travmap_method::classifier::SvmModel;
+use travmap_method::footprint::Trajectory;
+use travmap_method::fusion::DriveMap;
+use travmap_method::pipeline::{FrameResult, Pipeline, Posed};
+use travmap_method::registration::RegistrationError;
+
+/// A frame read, and how long reading it took, ms.
+pub type ReadFrame = (Frame, f64);
+
+/// How the method stage takes frames: those before `first` only fill the window,
+/// the others go in batches of at most `size`.
+struct Batches {
+    first: usize,
+    size: usize,
+}
+
+/// A frame posed, waiting for the rest of the pipeline.
+struct Arrival {
+    posed: Posed,
+    read_ms: f64,
+    scan_sha256: Option<String>,
+}
+
+/// What a command makes of each frame as it is read ([`Selection::run_mapped_beside`]).
+pub type Beside<'a, B> = &'a (dyn Fn(&Frame) -> Result<B> + Sync);
+
+/// What [`Selection::run_mapped_beside`] hands on, in the order it comes.
+pub enum Handed<'a, B> {
+    /// What `beside` made of a frame as it was read.
+    Read(B),
+    /// A frame's result, with the drive map so far (it included).
+    Result(Box<FrameResult>, &'a DriveMap),
+}
+
+/// What the reading and method stages send on to the command's.
+enum Step<B> {
+    Read(B),
+    Result(Box<FrameResult>),
+}
+
+/// A scan's pose as registration estimated it.
+#[derive(Clone, Debug)]
+pub struct EstimatedPose {
+    pub index: usize,
+    pub stamp_ns: u64,
+    pub world_from_velodyne: Isometry3<f64>,
+    pub register_ms: f64,
+}
+
+/// A drive and the frames of it to use.
+pub struct Selection {
+    pub source: Source,
+    pub frames: Range<usize>,
+    /// Give each result its scan's SHA-256 (`FrameResult::scan_sha256`): costs a
+    /// few milliseconds a frame, so only where a frame's identity matters.
+    pub fingerprint_scans: bool,
+    /// The drive's trajectory, once followed ([`Selection::follow_trajectory`]).
+    trajectory: Option<Arc<Trajectory>>,
+}
+
+impl Selection {
+    pub fn new(source: Source, frames: Range<usize>) -> Self {
+        Self {
+            source,
+            frames,
+            fingerprint_scans: false,
+            trajectory: None,
+        }
+    }
+
+    /// The pipeline for this source's scans, as its posing asks (following the
+    /// trajectory once it is followed).
+    pub fn pipeline(&self, config: &Config) -> Result<Pipeline> {
+        let mut pipeline = Pipeline::new(config, self.source.posing())?;
+        if let Some(trajectory) = &self.trajectory {
+            pipeline.follow(trajectory.clone(), config);
+        }
+        Ok(pipeline)
+    }
+
+    /// From now on every result carries its footprint and self-labels (stages 6a,
+    /// 6b) along the drive's trajectory: every pose the input records, also past the
+    /// selected frames; the registration's estimates from the first frame read on
+    /// when poses are estimated; none when each scan is alone (each footprint then
+    /// runs straight along its scan's x axis).
+    pub fn follow_trajectory(&mut self, config: &Config) -> Result<Arc<Trajectory>> {
+        let poses = match self.source.posing() {
+            Posing::Recorded => self.source.recorded_poses()?,
+            Posing::Registration => {
+                let first = self
+                    .pipeline(config)?
+                    .window()
+                    .warm_up_start(self.frames.start);
+                let poses = self.registered_poses(config, &(first..usize::MAX), || {})?;
+                poses
+                    .iter()
+                    .map(|p| (p.index, p.world_from_velodyne))
+                    .collect()
+            }
+            Posing::Alone => Vec::new(),
+        };
+        let trajectory = Arc::new(Trajectory::new(&poses));
+        self.trajectory = Some(trajectory.clone());
+        Ok(trajectory)
+    }
+
+    /// Runs the pipeline over the selected frames, reading the n - 1 frames before
+    /// the first one to fill the window, and hands each result to `on_frame`, which
+    /// may return its own error type (the binary's, say).
+    pub fn run<E: From<Error>>(
+        &self,
+        config: &Config,
+        model: Option<&SvmModel>,
+        mut on_frame: impl FnMut(FrameResult) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.run_fusing(
+            config,
+            model,
+            false,
+            None::<Beside<()>>,
+            |handed| match handed {
+                Handed::Read(()) => Ok(()),
+                Handed::Result(result, _) => on_frame(*result),
+            },
+        )?;
+        Ok(())
+    }
+
+    /// [`Self::run`], with every result fused into the drive map before `on_frame`
+    /// sees it with the map so far; returns the map of the whole selection.
+    pub fn run_mapped<E: From<Error>>(
+        &self,
+        config: &Config,
+        model: Option<&SvmModel>,
+        mut on_frame: impl FnMut(FrameResult, &DriveMap) -> Result<(), E>,
+    ) -> Result<DriveMap, E> {
+        self.run_fusing(
+            config,
+            model,
+            true,
+            None::<Beside<()>>,
+            |handed| match handed {
+                Handed::Read(()) => Ok(()),
+                Handed::Result(result, map) => on_frame(*result, map),
+            },
+        )
+    }
+
+    /// [`Self::run_mapped`], with `beside` made of each selected frame as it is read,
+    /// on the reading thread (annotate passes a KITTI frame's messages through
+    /// without reading it again). `on_handed` takes those and the results as they
+    /// come: each in frame order, the two interleaved as the stages run.
+    pub fn run_mapped_beside<E: From<Error>, B: Send>(
+        &self,
+        config: &Config,
+        model: Option<&SvmModel>,
+        beside: Beside<B>,
+        on_handed: impl FnMut(Handed<B>) -> Result<(), E>,
+    ) -> Result<DriveMap, E> {
+        self.run_fusing(config, model, true, Some(beside), on_handed)
+    }
+
+    /// [`Self::run_mapped_beside`], fusing the results into the drive map when
+    /// `fuse` says so.
+    fn run_fusing<E: From<Error>, B: Send>(
+        &self,
+        config: &Config,
+        model: Option<&SvmModel>,
+        fuse: bool,
+        beside: Option<Beside<B>>,
+        mut on_handed: impl FnMut(Handed<B>) -> Result<(), E>,
+    ) -> Result<DriveMap, E> {
+        let mut drive_map = DriveMap::new(config.grid.cell_size_m);
+        let mut pipeline = self.pipeline(config)?;
+        let frames = pipeline.window().warm_up_start(self.frames.start)..self.frames.end;
+        // Three stages on their own threads, joined by bounded queues: frames read
+        // ahead; the method on batches of them (each batch in parallel on rayon);
+        // and here `on_frame` (encoding, writing) while the next batch runs.
+        let batch_size = (2 * rayon::current_num_threads()).clamp(1, 16);
+        std::thread::scope(|scope| {
+            let (read_frames, arrivals) = std::sync::mpsc::sync_channel(batch_size);
+            let (results, processed) = std::sync::mpsc::sync_channel(batch_size);
+            let made = results.clone();
+            scope.spawn(move || {
+                let mut reading = Stopwatch::start();
+                for frame in self.source.read(&frames) {
+                    let read_ms = reading.lap_ms();
+                    if let (Some(beside), Ok(frame)) = (beside, &frame)
+                        && frame.index >= self.frames.start
+                    {
+                        let beside = beside(frame).map(Step::Read);
+                        let failed = beside.is_err();
+                        if made.send(beside).is_err() || failed {
+                            return;
+                        }
+                    }
+                    if read_frames.send(frame.map(|f| (f, read_ms))).is_err() {
+                        return;
+                    }
+                }
+            });
+            scope.spawn(move || {
+                let mut next = |block: bool| match block {
+                    true => arrivals.recv().ok(),
+                    false => arrivals.try_recv().ok(),
+                };
+                let mut emit = |result| results.send(Ok(Step::Result(Box::new(result)))).is_ok();
+                let batches = Batches {
+                    first: self.frames.start,
+                    size: batch_size,
+                };
+                let method = self.run_method(&mut pipeline, batches, &mut next, model, &mut emit);
+                if let Err(error) = method {
+                    let _ = results.send(Err(error));
+                }
+            });
+            // A failing `on_handed` drops `processed`, which stops the stages above.
+            for step in processed {
+                match step? {
+                    Step::Read(made) => on_handed(Handed::Read(made))?,
+                    Step::Result(result) => {
+                        if fuse {
+                            drive_map.add_result(&result);
+                        }
+                        on_handed(Handed::Result(result, &drive_map))?;
+                    }
+                }
+            }
+            Ok(drive_map)
+        })
+    }
+
+    /// Every frame [`Self::run`] reads (those that fill the window first), into
+    /// memory, each with the time reading it took.
+    pub fn load(&self, config: &Config) -> Result<Vec<ReadFrame>> {
+        let warm_up_start = self
+            .pipeline(config)?
+            .window()
+            .warm_up_start(self.frames.start);
+        let mut reading = Stopwatch::start();
+        self.source
+            .read(&(warm_up_start..self.frames.end))
+            .map(|frame| frame.map(|f| (f, reading.lap_ms())))
+            .collect()
+    }
+
+    /// The method over frames from [`Self::load`], on this thread, as [`Self::run`]
+    /// runs it, in batches of at most `batch_size` consecutive frames: frames
+    /// before `first` only fill the window.
+    pub fn run_loaded(
+        &self,
+        loaded: &[ReadFrame],
+        first: usize,
+        config: &Config,
+        model: Option<&SvmModel>,
+        batch_size: usize,
+        mut on_frame: impl FnMut(FrameResult),
+    ) -> Result<()> {
+        let mut pipeline = self.pipeline(config)?;
+        let mut frames = loaded.iter().cloned().map(Ok);
+        let mut next = |_block: bool| frames.next();
+        let mut emit = |result| {
+            on_frame(result);
+            true
+        };
+        let batches = Batches {
+            first,
+            size: batch_size,
+        };
+        self.run_method(&mut pipeline, batches, &mut next, model, &mut emit)
+    }
+
+    /// The method stage of [`Self::run`]: poses the frames that `next` hands on
+    /// (blocking for one when asked, else only what has arrived), warms the window
+    /// up with those before `first`, and processes the others in batches of at most
+    /// `size` consecutive frames, handing each result to `emit` until it returns
+    /// false.
+    fn run_method(
+        &self,
+        pipeline: &mut Pipeline,
+        Batches { first, size }: Batches,
+        next: &mut dyn FnMut(bool) -> Option<Result<ReadFrame>>,
+        model: Option<&SvmModel>,
+        emit: &mut dyn FnMut(FrameResult) -> bool,
+    ) -> Result<()> {
+        // Block for one frame, then take what else has arrived, up to a batch.
+        while let Some(arrival) = next(true) {
+            let mut arrived = vec![arrival];
+            while arrived.len() < size {
+                match next(false) {
+                    Some(arrival) => arrived.push(arrival),
+                    None => break,
+                }
+            }
+            let mut batch: Vec<Arrival> = Vec::with_capacity(arrived.len());
+            for arrival in arrived {
+                let (frame, read_ms) = arrival?;
+                let index = frame.index;
+                let scan_sha256 = self.fingerprint_scans.then(|| frame.content_sha256());
+                let posed = match pipeline.pose(frame) {
+                    Ok(posed) => posed,
+                    // A frame read only to fill the window (not selected: a packet
+                    // log's partial first scan, say) is left out of it.
+                    Err(_) if index < first => continue,
+                    Err(problem) => {
+                        self.unregistered(index, problem)?;
+                        continue;
+                    }
+                };
+                if index < first {
+                    pipeline.warm_up(posed);
+                    continue;
+                }
+                // A batch is consecutive frames: a skipped one ends it.
+                if batch.last().is_some_and(|b| b.posed.index() + 1 != index)
+                    && !Self::process(pipeline, std::mem::take(&mut batch), model, emit)
+                {
+                    return Ok(());
+                }
+                batch.push(Arrival {
+                    posed,
+                    read_ms,
+                    scan_sha256,
+                });
+            }
+            if !Self::process(pipeline, batch, model, emit) {
+                return Ok(());
+            }
+        }
+        Ok(())
+    }
+
+    /// Runs the method on a batch of consecutive frames and hands on the results;
+    /// false once `emit` wants no more.
+    fn process(
+        pipeline: &mut Pipeline,
+        batch: Vec<Arrival>,
+        model: Option<&SvmModel>,
+        emit: &mut dyn FnMut(FrameResult) -> bool,
+    ) -> bool {
+        let (frames, extras): (Vec<Posed>, Vec<_>) = batch
+            .into_iter()
+            .map(|a| (a.posed, (a.read_ms, a.scan_sha256)))
+            .unzip();
+        for (mut result, (read_ms, scan_sha256)) in pipeline
+            .process_frames(frames, model)
+            .into_iter()
+            .zip(extras)
+        {
+            result.timings.read_ms = read_ms;
+            result.scan_sha256 = scan_sha256;
+            if !emit(result) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// The selected frames' poses by scan registration alone, whatever the input
+    /// records (`travmap odometry`): the first scan that registers is the world.
+    /// A scan that cannot be registered ends the run, or is skipped (`--keep-going`).
+    pub fn estimate_trajectory(
+        &self,
+        config: &Config,
+        on_frame: impl FnMut(),
+    ) -> Result<Vec<EstimatedPose>> {
+        self.registered_poses(config, &self.frames, on_frame)
+    }
+
+    /// The poses of the frames in `frames` by registration alone.
+    fn registered_poses(
+        &self,
+        config: &Config,
+        frames: &Range<usize>,
+        mut on_frame: impl FnMut(),
+    ) -> Result<Vec<EstimatedPose>> {
+        let mut pipeline = Pipeline::new(config, Posing::Registration)?;
+        let mut trajectory = Vec::new();
+        for frame in self.source.read(frames) {
+            let frame = frame?;
+            let (index, stamp_ns) = (frame.index, frame.stamp_ns);
+            match pipeline.pose(frame) {
+                Ok(posed) => trajectory.push(EstimatedPose {
+                    index,
+                    stamp_ns,
+                    world_from_velodyne: posed.world_from_velodyne(),
+                    register_ms: posed.register_ms(),
+                }),
+                Err(problem) => self.unregistered(index, problem)?,
+            }
+            on_frame();
+        }
+        Ok(trajectory)
+    }
+
+    /// A frame registration refused: the end of the run, or a skipped frame
+    /// (`--keep-going`).
+    fn unregistered(&self, frame: usize, problem: RegistrationError) -> Result<()> {
+        let error = Error::Registration {
+            path: self.source.path().to_path_buf(),
+            frame,
+            problem,
+        };
+        self.source.skip_log().handle(frame, error)
+    }
+
+    /// The input and the frames of it, as a person reads them.
+    pub fn describe(&self) -> String {
+        let frames = self.source.frames_in(&self.frames);
+        match (frames.first(), frames.last()) {
+            (Some(first), Some(last)) => {
+                format!("{} frames {first}..={last}", self.source.path().display(),)
+            }
+            _ => format!("{} (no frames in range)", self.source.path().display()),
+        }
+    }
+}

@@ -1,0 +1,479 @@
+//! `travmap annotate`: the method's results as an MCAP that Foxglove, rerun and
+//! rosbags open.
+//!
+//! Per frame, in the world frame (`map` for KITTI input): the filtered prediction and
+//! the ground truth as `nav_msgs/msg/OccupancyGrid` (0 traversable, 100 not, -1
+//! unknown), the frame's scan (by default its points inside the grid; see
+//! [`CloudPoints`]) as a PointCloud2 with each point's cell
+//! class, and `travmap_msgs/msg/FrameMetrics`; every few frames
+//! ([`AnnotationOptions::drive_map_every`]) and after the last, the fused map of the
+//! drive so far on `/travmap/drive_map` (an
+//! OccupancyGrid: 100 x P(not traversable), -1 unseen). With poses from registration,
+//! `/tf` carries them. By default the input's own messages are
+//! copied through (for KITTI input: what `convert` writes), so the file stands alone.
+//! A metadata record `travmap` holds the version, the effective config and the
+//! model's hash. The file is written atomically.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::drive::{Handed, Selection};
+use crate::outputs::conversion::{
+    EncodedFrame, KittiFrameWriter, encode_kitti_frame, transform_from_pose, write_log_messages,
+};
+use crate::outputs::drive_map::{GridValues, occupancy_grid};
+use crate::outputs::writing::McapSink;
+use crate::scoring::evaluation::{Evaluation, EvaluationReport};
+use crate::scoring::metrics::Confusion;
+use travmap_core::config::Config;
+use travmap_core::error::{Error, Result};
+use travmap_core::frame::Frame;
+use travmap_core::posing::Posing;
+use travmap_formats::mcap::writer::Compression;
+use travmap_formats::ros::{
+    FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion,
+    TfMessage, Time, TransformStamped, Vector3, datatype,
+};
+use travmap_io::Recording;
+use travmap_method::classifier::SvmModel;
+use travmap_method::grid::CellClass;
+use travmap_method::pipeline::FrameResult;
+
+pub const PREDICTION_TOPIC: &str = "/travmap/prediction";
+pub const GROUND_TRUTH_TOPIC: &str = "/travmap/ground_truth";
+pub const CLOUD_TOPIC: &str = "/travmap/cloud";
+pub const METRICS_TOPIC: &str = "/travmap/metrics";
+/// The fused map of the drive so far ([`travmap_method::fusion`]).
+pub const DRIVE_MAP_TOPIC: &str = "/travmap/drive_map";
+/// With [`AnnotationOptions::static_map`]: the final map once, as map_server serves it.
+pub const STATIC_MAP_TOPIC: &str = "/map";
+/// The default of [`AnnotationOptions::drive_map_every`].
+pub const DRIVE_MAP_EVERY: usize = 10;
+
+/// What the maps on [`DRIVE_MAP_TOPIC`] may add to each frame, on average: a map of
+/// B bytes is followed by at least B / this frames. A map covers the drive's bounding
+/// box, so at a fixed cadence their sum grew with the cube of a long drive's extent;
+/// this keeps it linear in the frames. About 2 % of a frame annotated with its
+/// passthrough scan. On the first 3,000 poses of KITTI sequence 00 the maps reach
+/// the 320 KB that slows the default cadence after frame 790: 165 maps, 85 MB,
+/// instead of 300 and 228 MB.
+pub const DRIVE_MAP_BYTES_PER_FRAME: usize = 32 * 1024;
+
+/// When the next map on [`DRIVE_MAP_TOPIC`] is due.
+#[derive(Clone, Debug)]
+struct DriveMapCadence {
+    every: usize,
+    since_last: usize,
+    wait: usize,
+}
+
+impl DriveMapCadence {
+    fn new(every: usize) -> Self {
+        Self {
+            every,
+            since_last: 0,
+            wait: every,
+        }
+    }
+
+    /// Counts a frame; whether a map is due after it.
+    fn frame(&mut self) -> bool {
+        self.since_last += 1;
+        self.every > 0 && self.since_last >= self.wait
+    }
+
+    /// A map of `bytes` was written after the last frame.
+    fn wrote(&mut self, bytes: usize) {
+        self.since_last = 0;
+        self.wait = self.every.max(bytes / DRIVE_MAP_BYTES_PER_FRAME);
+    }
+
+    /// Frames came since the last map: the final one is still to write.
+    fn final_due(&self) -> bool {
+        self.since_last > 0
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct AnnotationOptions {
+    pub compression: Compression,
+    /// Copy the input's messages into the output.
+    pub passthrough: bool,
+    /// Height of the drawn grids relative to the sensor, metres (KITTI's HDL-64E sits
+    /// 1.73 m above the road).
+    pub grid_height_m: f64,
+    /// Also write the final fused map once, at the end, on [`STATIC_MAP_TOPIC`].
+    pub static_map: bool,
+    /// What [`CLOUD_TOPIC`] holds.
+    pub cloud: CloudPoints,
+    /// Frames between two maps on [`DRIVE_MAP_TOPIC`] (default [`DRIVE_MAP_EVERY`]);
+    /// 0: only the final one. Each covers the drive's bounding box so far, so on a
+    /// long drive they grow with the square of its extent, and a large one waits
+    /// longer ([`DRIVE_MAP_BYTES_PER_FRAME`]).
+    pub drive_map_every: usize,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct AnnotationSummary {
+    pub frames: usize,
+    pub passthrough_messages: usize,
+    pub output_bytes: u64,
+    pub evaluation: EvaluationReport,
+}
+
+fn grid_message(
+    result: &FrameResult,
+    classes: &[CellClass],
+    world_frame: &str,
+    height_m: f64,
+) -> OccupancyGrid {
+    let [x, y] = result.layout.min_corner_in_world();
+    let stamp = Time::from_ns(result.stamp_ns);
+    OccupancyGrid {
+        header: Header {
+            stamp,
+            frame_id: world_frame.into(),
+        },
+        info: MapMetaData {
+            map_load_time: stamp,
+            resolution: result.layout.cell_size_m as f32,
+            width: result.layout.cells_per_side as u32,
+            height: result.layout.cells_per_side as u32,
+            origin: Pose {
+                position: Vector3 {
+                    x,
+                    y,
+                    z: result.sensor_in_world[2] + height_m,
+                },
+                orientation: Quaternion::default(),
+            },
+        },
+        data: classes.iter().map(|&c| c.occupancy()).collect(),
+    }
+}
+
+/// The points of a frame's `/travmap/cloud`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CloudPoints {
+    /// The frame's own scan's points inside the grid: each point once over the
+    /// drive (the window's older scans were written with their own frames).
+    Grid,
+    /// Every point of the frame's scan; outside the grid class -1 (unknown).
+    All,
+    /// No cloud.
+    None,
+}
+
+/// The frame's points in world coordinates with `class` (and `ground_truth`) int8:
+/// the occupancy values of their cells (0 traversable, 100 not, -1 unknown).
+fn cloud_message(
+    result: &FrameResult,
+    classes: &[CellClass],
+    world_frame: &str,
+    which: CloudPoints,
+) -> Option<PointCloud2> {
+    let [min_x, min_y] = result.layout.min_corner_in_world();
+    let occupancy = |cell: Option<usize>| {
+        let of = |grid: &[CellClass]| cell.and_then(|c| grid.get(c)).map_or(-1, |c| c.occupancy());
+        let truth = result.ground_truth.as_deref().map_or(-1, of);
+        [of(classes) as u8, truth as u8, 0, 0]
+    };
+    let points = match which {
+        CloudPoints::Grid => result.cells.newest_len(),
+        CloudPoints::All => result.scan_in_world.len(),
+        CloudPoints::None => 0,
+    };
+    let mut data = Vec::with_capacity(points * CLOUD_POINT_STEP);
+    let mut put = |xyz: [f32; 3], cell: Option<usize>| {
+        for v in xyz {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+        data.extend_from_slice(&occupancy(cell));
+    };
+    match which {
+        CloudPoints::None => return None,
+        CloudPoints::Grid => {
+            for cell in 0..result.layout.cell_count() {
+                for p in result.cells.newest(cell) {
+                    let x = (p[0] as f64 + min_x) as f32;
+                    let y = (p[1] as f64 + min_y) as f32;
+                    put([x, y, p[2]], Some(cell));
+                }
+            }
+        }
+        CloudPoints::All => {
+            for p in result.scan_in_world.iter() {
+                let cell = (result.layout).cell_of_local(p[0] as f64 - min_x, p[1] as f64 - min_y);
+                put(*p, cell);
+            }
+        }
+    }
+    let mut fields = PointField::xyz_float32();
+    fields.push(PointField::scalar("class", 12, datatype::INT8));
+    if result.ground_truth.is_some() {
+        fields.push(PointField::scalar("ground_truth", 13, datatype::INT8));
+    }
+    Some(PointCloud2 {
+        header: Header {
+            stamp: Time::from_ns(result.stamp_ns),
+            frame_id: world_frame.into(),
+        },
+        height: 1,
+        width: points as u32,
+        fields,
+        is_bigendian: false,
+        point_step: CLOUD_POINT_STEP as u32,
+        row_step: data.len() as u32,
+        data,
+        is_dense: true,
+    })
+}
+
+/// x, y, z float32, class and ground truth int8, two bytes that keep points
+/// 4-byte aligned (viewers read the floats in place).
+const CLOUD_POINT_STEP: usize = 16;
+
+fn metrics_message(result: &FrameResult, classes: &[CellClass], world_frame: &str) -> FrameMetrics {
+    let count = |class: CellClass| classes.iter().filter(|&&c| c == class).count() as u32;
+    let confusion = result
+        .ground_truth
+        .as_ref()
+        .map(|truth| Confusion::of_grids(classes, truth));
+    let c = confusion.unwrap_or_default();
+    let scores = confusion.map(|c| c.scores());
+    FrameMetrics {
+        header: Header {
+            stamp: Time::from_ns(result.stamp_ns),
+            frame_id: world_frame.into(),
+        },
+        frame_index: result.index as u32,
+        predictable_cells: count(CellClass::Traversable) + count(CellClass::NonTraversable),
+        traversable_cells: count(CellClass::Traversable),
+        non_traversable_cells: count(CellClass::NonTraversable),
+        has_ground_truth: confusion.is_some(),
+        true_positives: c.tp as u32,
+        true_negatives: c.tn as u32,
+        false_positives: c.fp as u32,
+        false_negatives: c.r#fn as u32,
+        unpredictable_with_ground_truth: c.unknown as u32,
+        accuracy: scores.map_or(f32::NAN, |s| s.accuracy as f32),
+        miou: scores.map_or(f32::NAN, |s| s.miou as f32),
+        f1: scores.map_or(f32::NAN, |s| s.f1 as f32),
+        latency_ms: result.timings.latency_ms as f32,
+        dropped_points: result.dropped_points as u32,
+    }
+}
+
+/// Annotates `selection` into `output`; `metadata` goes into the `travmap` record.
+pub fn annotate(
+    selection: &Selection,
+    config: &Config,
+    model: &SvmModel,
+    metadata: BTreeMap<String, String>,
+    output: &Path,
+    options: &AnnotationOptions,
+    on_frame: &(dyn Fn() + Sync),
+) -> Result<AnnotationSummary> {
+    let mut sink = McapSink::create(output, options.compression)?;
+    let mut passthrough_messages = 0;
+    // A KITTI frame's messages are made from the frame as the method's reader reads
+    // it (not read a second time), and written as they come, ahead of its results.
+    let mut kitti_passthrough = None;
+    match &selection.source.recording {
+        Recording::Kitti(sequence) if options.passthrough => {
+            kitti_passthrough = Some(KittiFrameWriter::new(sequence));
+        }
+        Recording::Log(drive) if options.passthrough => {
+            sink.copy_chunks_by_time();
+            passthrough_messages = write_log_messages(&mut sink, drive, true, &|_, _| {})?.messages;
+        }
+        // A folder of scans or a site cloud has no messages to pass through.
+        _ => {}
+    }
+    let kitti_passes = kitti_passthrough.is_some();
+    let encode_passthrough = |frame: &Frame| match &selection.source.recording {
+        Recording::Kitti(sequence) if kitti_passes => encode_kitti_frame(sequence, frame, 0),
+        _ => Ok(None),
+    };
+    let world_frame = selection.source.world_frame().to_string();
+    let posing = selection.source.posing();
+    // Estimated poses go on /tf, unless passthrough writes KITTI's recorded ones there.
+    let kitti_tf =
+        matches!(selection.source.recording, Recording::Kitti(..)) && options.passthrough;
+    let write_estimated_tf = posing == Posing::Registration && !kitti_tf;
+    let sensor_frame = selection.source.sensor_frame().to_string();
+    let mut evaluation = Evaluation::default();
+    let mut frames = 0;
+    let mut last_stamp_ns = 0;
+    let mut cadence = DriveMapCadence::new(options.drive_map_every);
+    let on_handed = |handed: Handed<'_, Option<EncodedFrame>>| {
+        let (result, drive_map) = match handed {
+            Handed::Read(encoded) => {
+                return match (&mut kitti_passthrough, encoded) {
+                    (Some(writer), Some(frame)) => writer.write(&mut sink, frame),
+                    _ => Ok(()),
+                };
+            }
+            Handed::Result(result, drive_map) => (result, drive_map),
+        };
+        let classes = result.filtered.as_deref().unwrap_or(&[]);
+        let stamp = result.stamp_ns;
+        if write_estimated_tf {
+            let tf = TfMessage {
+                transforms: vec![TransformStamped {
+                    header: Header {
+                        stamp: Time::from_ns(stamp),
+                        frame_id: world_frame.clone(),
+                    },
+                    child_frame_id: sensor_frame.clone(),
+                    transform: transform_from_pose(&result.world_from_velodyne),
+                }],
+            };
+            sink.write("/tf", stamp, &tf)?;
+        }
+        sink.write(
+            PREDICTION_TOPIC,
+            stamp,
+            &grid_message(&result, classes, &world_frame, options.grid_height_m),
+        )?;
+        if let Some(truth) = &result.ground_truth {
+            sink.write(
+                GROUND_TRUTH_TOPIC,
+                stamp,
+                &grid_message(&result, truth, &world_frame, options.grid_height_m),
+            )?;
+        }
+        if let Some(cloud) = cloud_message(&result, classes, &world_frame, options.cloud) {
+            sink.write(CLOUD_TOPIC, stamp, &cloud)?;
+        }
+        sink.write(
+            METRICS_TOPIC,
+            stamp,
+            &metrics_message(&result, classes, &world_frame),
+        )?;
+        evaluation.add(&result);
+        last_stamp_ns = stamp;
+        frames += 1;
+        if cadence.frame() {
+            let grid = occupancy_grid(
+                drive_map,
+                &world_frame,
+                stamp,
+                options.grid_height_m,
+                GridValues::Probability,
+            );
+            cadence.wrote(grid.data.len());
+            sink.write(DRIVE_MAP_TOPIC, stamp, &grid)?;
+        }
+        on_frame();
+        Ok(())
+    };
+    let drive_map = selection.run_mapped_beside::<Error, _>(
+        config,
+        Some(model),
+        &encode_passthrough,
+        on_handed,
+    )?;
+    if let Some(writer) = &kitti_passthrough {
+        let written = &writer.summary;
+        passthrough_messages = written.frames * 2 + written.images * 2 + 1;
+    }
+    if cadence.final_due() {
+        let grid = occupancy_grid(
+            &drive_map,
+            &world_frame,
+            last_stamp_ns,
+            options.grid_height_m,
+            GridValues::Probability,
+        );
+        sink.write(DRIVE_MAP_TOPIC, last_stamp_ns, &grid)?;
+    }
+    if options.static_map {
+        // At z 0 in the world frame, as a map layer expects; offered transient-local so
+        // that a replayed bag hands it to subscribers that join late, as map_server does.
+        let map = occupancy_grid(
+            &drive_map,
+            &world_frame,
+            last_stamp_ns,
+            0.0,
+            GridValues::Trinary,
+        );
+        sink.write_latched(STATIC_MAP_TOPIC, last_stamp_ns, &map)?;
+    }
+    let mut metadata = metadata;
+    metadata.insert("poses".into(), posing.describe().into());
+    let skipped = selection.source.skipped();
+    if !skipped.is_empty() {
+        // serde_json cannot fail on a list of plain structs.
+        metadata.insert(
+            "skipped_frames".into(),
+            serde_json::to_string(&skipped).unwrap_or_default(),
+        );
+    }
+    sink.write_metadata("travmap", metadata)?;
+    sink.finish()?;
+    Ok(AnnotationSummary {
+        frames,
+        passthrough_messages,
+        output_bytes: std::fs::metadata(output)
+            .map_err(|e| Error::io(output, e))?
+            .len(),
+        evaluation: evaluation.report(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The frames (1-based) after which a map is written, each map `bytes(frame)` long.
+    fn written(every: usize, frames: usize, bytes: impl Fn(usize) -> usize) -> Vec<usize> {
+        let mut cadence = DriveMapCadence::new(every);
+        let mut at = Vec::new();
+        for frame in 1..=frames {
+            if cadence.frame() {
+                cadence.wrote(bytes(frame));
+                at.push(frame);
+            }
+        }
+        at
+    }
+
+    #[test]
+    fn small_maps_keep_the_asked_cadence() {
+        assert_eq!(written(10, 35, |_| 2_000), [10, 20, 30]);
+        assert!(written(0, 35, |_| 2_000).is_empty());
+        let mut cadence = DriveMapCadence::new(10);
+        assert!(!cadence.final_due());
+        (0..10).for_each(|_| _ = cadence.frame());
+        cadence.wrote(2_000);
+        assert!(
+            !cadence.final_due(),
+            "the last frame's map is the final one"
+        );
+        cadence.frame();
+        assert!(cadence.final_due());
+    }
+
+    #[test]
+    fn a_large_map_waits_for_its_bytes_to_spread_over_frames() {
+        // 1 MiB maps: 32 frames apart, whatever was asked below that.
+        assert_eq!(written(10, 100, |_| 1 << 20), [10, 42, 74]);
+        // A map growing with the square of the frames (a straight drive's bounding
+        // box): every map but the last is paid for by the frames after it, at most
+        // the budget each (one more per map for the rounding).
+        let bytes = |frame: usize| frame * frame / 10;
+        let at = written(10, 20_000, bytes);
+        let before_last: usize = at[..at.len() - 1].iter().map(|&f| bytes(f)).sum();
+        assert!(
+            before_last <= (20_000 + at.len()) * DRIVE_MAP_BYTES_PER_FRAME,
+            "{before_last} bytes of maps in 20,000 frames"
+        );
+        // At a fixed cadence, 40 times as many bytes.
+        let fixed: usize = (1..=2_000).map(|k| bytes(10 * k)).sum();
+        assert!(fixed > 40 * before_last, "{fixed} against {before_last}");
+        assert!(at.windows(2).all(|w| w[1] - w[0] >= 10));
+    }
+}

@@ -1,0 +1,481 @@
+//! Datasets: one Parquet row per predictable cell per frame, with every feature,
+//! the ground truth and the prediction, for training across many logs and for
+//! analysis in pyarrow, DuckDB or Polars; [`reading`] reads the labelled cells
+//! back into a training set.
+//!
+//! Columns, in order (README "Datasets" lists them with units):
+//! `source`, `frame`, `stamp_ns`, `row`, `col`, `x_m`, `y_m`, `points`, the 20
+//! geometric features by name (float), the appearance values `hue_0..`,
+//! `saturation_0..`, `value_0..` (float, null where no camera ever saw the cell),
+//! `ground_truth_traversable` and `predicted_traversable` (boolean, null without
+//! labels / without a model), `footprint` (boolean: the vehicle drove over the cell)
+//! and `pseudo_label` (boolean, null where the drive says nothing: the self-label of
+//! adaptation, `method/self_labels.rs`). The key-value metadata `travmap.config`
+//! holds the configuration the rows were computed with, as JSON; reading checks it.
+//! Files of format 1 (before the last two columns) are read too.
+
+mod columns;
+pub mod reading;
+
+use std::io::BufWriter;
+use std::path::Path;
+use std::sync::Arc;
+
+use parquet::basic::{Compression, ZstdLevel};
+use parquet::data_type::ByteArray;
+use parquet::file::metadata::KeyValue;
+use parquet::file::properties::WriterProperties;
+use parquet::file::writer::SerializedFileWriter;
+use parquet::schema::types::ColumnPath;
+
+use columns::{Columns, write_column};
+
+use crate::outputs::atomic::{
+    AtomicFile, WritebackFile, parquet_failure, sync_output, write_failure,
+};
+use travmap_core::Config;
+use travmap_core::error::{Error, Result};
+use travmap_method::features::feature_names;
+use travmap_method::grid::CellClass;
+use travmap_method::pipeline::FrameResult;
+
+/// Rows per row group: about 18 MB of columns in memory at a time (four frames of
+/// the 36 m training grid). 2^17 rows peaked 55 MB higher on 60 frames; smaller
+/// groups cost memory too, as the writer keeps every group's metadata for the
+/// footer (README, "Speed": memory).
+const ROW_GROUP_ROWS: usize = 1 << 15;
+/// The columns written with a dictionary: those with few distinct values per row
+/// group. The features, almost all distinct, fit the writer's dictionary whole
+/// (1 MB a column chunk), which then doubled their size: without it, the shipped
+/// drive's 60-frame file is 26 % smaller (69.6 -> 51.1 MB) and written in 0.88x the
+/// time (README "Datasets").
+const DICTIONARY_COLUMNS: [&str; 6] = ["source", "frame", "stamp_ns", "row", "col", "points"];
+/// Rows read back per batch, from each column of a row group at once: memory stays
+/// this small whatever size of group a writer chose (pyarrow's are 2^20 rows).
+const READ_BATCH_ROWS: usize = 1 << 13;
+/// The most values (rows x columns) a dataset may declare per byte of file. Real
+/// cell tables hold about one (1.6 in travmap's zstd file of the shipped drive); run-length
+/// encoding lets a damaged or made-up file declare billions of rows in a few bytes,
+/// which must not fill memory or run for hours.
+const MAX_VALUES_PER_FILE_BYTE: usize = 1 << 10;
+
+const CONFIG_KEY: &str = "travmap.config";
+const FORMAT_KEY: &str = "travmap.format";
+const FORMAT: &str = "travmap-cells 2";
+/// The format before `footprint` and `pseudo_label`, still read.
+const FORMAT_1: &str = "travmap-cells 1";
+/// Columns format 2 added after `predicted_traversable`.
+const SELF_LABEL_COLUMNS: [&str; 2] = [
+    "REQUIRED BOOLEAN footprint",
+    "OPTIONAL BOOLEAN pseudo_label",
+];
+
+/// Names of the appearance columns for `config`'s buckets.
+pub fn appearance_columns(config: &Config) -> Vec<String> {
+    let a = &config.appearance;
+    let named = |name: &'static str, n: u32| (0..n).map(move |i| format!("{name}_{i}"));
+    named("hue", a.hue_bins)
+        .chain(named("saturation", a.saturation_bins))
+        .chain(named("value", a.value_bins))
+        .collect()
+}
+
+/// The message type of the cell table: `features` and `appearance` are the value
+/// columns' names; `self_labels` false for format 1.
+fn schema(features: &[String], appearance: &[String], self_labels: bool) -> String {
+    let mut fields = vec![
+        "REQUIRED BYTE_ARRAY source (STRING)".to_string(),
+        "REQUIRED INT64 frame".into(),
+        "REQUIRED INT64 stamp_ns".into(),
+        "REQUIRED INT32 row".into(),
+        "REQUIRED INT32 col".into(),
+        "REQUIRED DOUBLE x_m".into(),
+        "REQUIRED DOUBLE y_m".into(),
+        "REQUIRED INT32 points".into(),
+    ];
+    fields.extend(features.iter().map(|n| format!("REQUIRED FLOAT {n}")));
+    fields.extend(appearance.iter().map(|n| format!("OPTIONAL FLOAT {n}")));
+    fields.push("OPTIONAL BOOLEAN ground_truth_traversable".into());
+    fields.push("OPTIONAL BOOLEAN predicted_traversable".into());
+    if self_labels {
+        fields.extend(SELF_LABEL_COLUMNS.map(String::from));
+    }
+    format!("message travmap_cells {{ {}; }}", fields.join("; "))
+}
+
+/// A cell dataset being written; atomically, like every output.
+pub struct DatasetWriter {
+    writer: SerializedFileWriter<BufWriter<WritebackFile>>,
+    output: AtomicFile,
+    columns: Columns,
+    appearance_len: usize,
+    summary: DatasetSummary,
+}
+
+/// What a dataset holds, for the summary.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct DatasetSummary {
+    pub rows: u64,
+    pub frames: u64,
+    pub labelled_rows: u64,
+    pub rows_with_appearance: u64,
+    /// Rows the vehicle drove over, and rows with a self-label.
+    pub footprint_rows: u64,
+    pub pseudo_labelled_rows: u64,
+}
+
+impl DatasetWriter {
+    pub fn create(path: &Path, config: &Config) -> Result<Self> {
+        let appearance = appearance_columns(config);
+        let features = feature_names(&config.features.groups);
+        let schema =
+            parquet::schema::parser::parse_message_type(&schema(&features, &appearance, true))
+                .expect("the cell schema parses");
+        let config_json = serde_json::to_string(config).expect("config serialises");
+        let mut properties = WriterProperties::builder()
+            .set_compression(Compression::ZSTD(ZstdLevel::default()))
+            .set_created_by(concat!("travmap ", env!("CARGO_PKG_VERSION")).into())
+            .set_key_value_metadata(Some(vec![
+                KeyValue::new(FORMAT_KEY.into(), FORMAT.to_string()),
+                KeyValue::new(CONFIG_KEY.into(), config_json),
+            ]))
+            .set_dictionary_enabled(false);
+        for column in DICTIONARY_COLUMNS {
+            properties = properties.set_column_dictionary_enabled(ColumnPath::from(column), true);
+        }
+        let properties = properties.build();
+        let (output, file) = AtomicFile::create(path)?;
+        let writer = SerializedFileWriter::new(
+            BufWriter::with_capacity(1 << 20, WritebackFile::new(file)),
+            Arc::new(schema),
+            Arc::new(properties),
+        )
+        .map_err(|e| parquet_failure(path, &output, e))?;
+        Ok(Self {
+            writer,
+            output,
+            columns: Columns::new(features.len(), appearance.len()),
+            appearance_len: appearance.len(),
+            summary: DatasetSummary::default(),
+        })
+    }
+
+    /// Appends the predictable cells of one frame.
+    pub fn push_frame(&mut self, source: &str, result: &FrameResult) -> Result<()> {
+        if result.features.dimension != self.columns.features.len() {
+            return Err(Error::Dataset {
+                path: self.output_path(),
+                message: format!(
+                    "{source} frame {}: no usable remission (intensity) for the remission columns; extract without them (--set features.groups=[\"context\"])",
+                    result.index
+                ),
+            });
+        }
+        let source = ByteArray::from(source);
+        let classes = |grid: &Option<Vec<CellClass>>, cell: usize| {
+            grid.as_ref().and_then(|g| match g[cell] {
+                CellClass::Traversable => Some(true),
+                CellClass::NonTraversable => Some(false),
+                CellClass::Unknown => None,
+            })
+        };
+        // A frame adds at most a row per cell.
+        self.columns
+            .reserve(ROW_GROUP_ROWS - 1 + result.layout.cell_count());
+        let c = &mut self.columns;
+        let summary = &mut self.summary;
+        summary.frames += 1;
+        for cell in (0..result.layout.cell_count()).filter(|&i| result.features.predictable[i]) {
+            let (col, row) = result.layout.col_row(cell);
+            let [x_m, y_m] = result.layout.cell_centre_in_world(cell);
+            c.source.push(source.clone());
+            c.frame.push(result.index as i64);
+            c.stamp_ns.push(result.stamp_ns as i64);
+            c.row.push(row as i32);
+            c.col.push(col as i32);
+            c.x_m.push(x_m);
+            c.y_m.push(y_m);
+            c.points.push(result.cells.point_count(cell) as i32);
+            for (column, &value) in c.features.iter_mut().zip(result.features.cell(cell)) {
+                column.push(value);
+            }
+            match result.features.appearance(cell) {
+                Some(values) if values.len() == self.appearance_len => {
+                    c.appearance_defined.push(1);
+                    summary.rows_with_appearance += 1;
+                    for (column, &value) in c.appearance.iter_mut().zip(values) {
+                        column.push(value);
+                    }
+                }
+                _ => c.appearance_defined.push(0),
+            }
+            let truth = classes(&result.ground_truth, cell);
+            summary.labelled_rows += truth.is_some() as u64;
+            summary.rows += 1;
+            c.ground_truth.push(truth);
+            c.predicted.push(classes(&result.filtered, cell));
+            let footprint = result.footprint.as_ref().is_some_and(|(f, _)| f[cell]);
+            let pseudo = result.self_labels.as_ref().and_then(|l| l[cell]);
+            summary.footprint_rows += footprint as u64;
+            summary.pseudo_labelled_rows += pseudo.is_some() as u64;
+            c.footprint.push(footprint);
+            c.pseudo_label.push(pseudo);
+        }
+        if self.columns.len() >= ROW_GROUP_ROWS {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<()> {
+        let rows = self.columns.len();
+        if rows == 0 {
+            return Ok(());
+        }
+        let columns = &self.columns;
+        let path = self.output_path();
+        let output = &self.output;
+        let fail = |e| parquet_failure(&path, output, e);
+        let mut group = self.writer.next_row_group().map_err(fail)?;
+        let mut index = 0;
+        while let Some(mut column) = group.next_column().map_err(fail)? {
+            write_column(column.untyped(), columns, index).map_err(fail)?;
+            column.close().map_err(fail)?;
+            index += 1;
+        }
+        group.close().map_err(fail)?;
+        self.columns.clear();
+        Ok(())
+    }
+
+    fn output_path(&self) -> std::path::PathBuf {
+        self.output.path().to_path_buf()
+    }
+
+    /// Writes the last row group and the footer, then renames the file into place.
+    pub fn finish(mut self) -> Result<DatasetSummary> {
+        self.flush()?;
+        let path = self.output_path();
+        let output = &self.output;
+        let file = self
+            .writer
+            .into_inner()
+            .map_err(|e| parquet_failure(&path, output, e))?
+            .into_inner()
+            .map_err(|e| write_failure(&path, output, Some(e.into_error()), None))?
+            .into_inner();
+        sync_output(&file).map_err(|source| write_failure(&path, output, Some(source), None))?;
+        self.output.commit()?;
+        Ok(self.summary)
+    }
+}
+
+/// The settings that decide a cell's features and label: a dataset made with
+/// others cannot train a model used with these.
+fn feature_settings(config: &Config) -> serde_json::Value {
+    serde_json::json!({
+        "integration": config.integration,
+        "grid.cell_size_m": config.grid.cell_size_m,
+        "grid.min_points": config.grid.min_points,
+        "features": config.features,
+        "appearance": config.appearance,
+        // What the ground truth counts, however the configuration names it (a
+        // preset, explicit lists, a label map).
+        "ground_truth": {
+            "min_points": config.ground_truth.min_points,
+            "min_non_traversable_points": config.ground_truth.min_non_traversable_points,
+            "traversable_classes": config.ground_truth.classes().traversable,
+            "ignored_classes": config.ground_truth.classes().ignored,
+        },
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::fs::File;
+
+    use super::reading::read_training_rows;
+    use super::*;
+    use crate::training::TrainingSet;
+
+    /// A file with the cell schema as `edit` changes it and travmap's metadata.
+    fn write_with_schema(path: &Path, config: &Config, edit: impl Fn(String) -> String) {
+        let features = feature_names(&config.features.groups);
+        let schema = edit(schema(&features, &appearance_columns(config), true));
+        let schema = parquet::schema::parser::parse_message_type(&schema).unwrap();
+        let properties = WriterProperties::builder()
+            .set_key_value_metadata(Some(vec![
+                KeyValue::new(FORMAT_KEY.into(), FORMAT.to_string()),
+                KeyValue::new(CONFIG_KEY.into(), serde_json::to_string(config).unwrap()),
+            ]))
+            .build();
+        let file = File::create(path).unwrap();
+        SerializedFileWriter::new(file, Arc::new(schema), Arc::new(properties))
+            .unwrap()
+            .close()
+            .unwrap();
+    }
+
+    #[test]
+    fn a_column_of_another_type_is_refused_before_it_is_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cells.parquet");
+        let config = Config::default();
+        let read = |path: &Path| {
+            read_training_rows(
+                path,
+                &config,
+                &mut TrainingSet::default(),
+                reading::Labels::GroundTruth,
+            )
+            .map_err(|e| e.to_string())
+        };
+        write_with_schema(&path, &config, |s| s);
+        assert_eq!(read(&path), Ok(0));
+        write_with_schema(&path, &config, |s| {
+            s.replace("REQUIRED DOUBLE x_m", "REQUIRED INT64 x_m")
+        });
+        let err = read(&path).unwrap_err();
+        assert!(
+            err.contains("cells.parquet")
+                && err.contains("column 5 is `x_m INT64`; expected `x_m DOUBLE`"),
+            "{err}"
+        );
+        write_with_schema(&path, &config, |s| {
+            s.replace("; OPTIONAL BOOLEAN pseudo_label", "")
+        });
+        let err = read(&path).unwrap_err();
+        assert!(err.contains("column 122 is `(none)`; expected `pseudo_label BOOLEAN` (122 columns, expected 123)"), "{err}");
+    }
+
+    /// A file with the cell schema and `rows` rows in one group: column `c` of row
+    /// `r` holds `value(r, c)`; the labels are present where `labelled(r)`,
+    /// traversable in even rows; appearance in every row.
+    fn write_rows(
+        path: &Path,
+        config: &Config,
+        rows: usize,
+        value: impl Fn(usize, usize) -> f64,
+        labelled: impl Fn(usize) -> bool,
+    ) {
+        use parquet::column::writer::ColumnWriter;
+        let features = feature_names(&config.features.groups);
+        let schema = schema(&features, &appearance_columns(config), true);
+        let schema = parquet::schema::parser::parse_message_type(&schema).unwrap();
+        let properties = WriterProperties::builder()
+            .set_key_value_metadata(Some(vec![
+                KeyValue::new(FORMAT_KEY.into(), FORMAT.to_string()),
+                KeyValue::new(CONFIG_KEY.into(), serde_json::to_string(config).unwrap()),
+            ]))
+            // As a compact writer would: the constant pages of a made-up file shrink
+            // to nothing, as a fuzzer's do.
+            .set_compression(Compression::ZSTD(ZstdLevel::default()))
+            .set_data_page_row_count_limit(usize::MAX)
+            .build();
+        let file = File::create(path).unwrap();
+        let mut writer =
+            SerializedFileWriter::new(file, Arc::new(schema), Arc::new(properties)).unwrap();
+        let optional: Vec<bool> = (writer.schema_descr().columns().iter())
+            .map(|column| column.max_def_level() > 0)
+            .collect();
+        let mut group = writer.next_row_group().unwrap();
+        let mut c = 0;
+        let label_levels: Vec<i16> = (0..rows).map(|r| labelled(r) as i16).collect();
+        let labelled: Vec<usize> = (0..rows).filter(|&r| labelled(r)).collect();
+        while let Some(mut column) = group.next_column().unwrap() {
+            let all_levels = vec![1i16; rows];
+            let levels = |optional: bool| optional.then_some(&all_levels[..]);
+            let optional = optional[c];
+            match column.untyped() {
+                ColumnWriter::ByteArrayColumnWriter(w) => {
+                    w.write_batch(&vec![ByteArray::from("t"); rows], None, None)
+                }
+                ColumnWriter::Int64ColumnWriter(w) => {
+                    let values: Vec<i64> = (0..rows).map(|r| value(r, c) as i64).collect();
+                    w.write_batch(&values, None, None)
+                }
+                ColumnWriter::Int32ColumnWriter(w) => {
+                    let values: Vec<i32> = (0..rows).map(|r| value(r, c) as i32).collect();
+                    w.write_batch(&values, None, None)
+                }
+                ColumnWriter::DoubleColumnWriter(w) => {
+                    let values: Vec<f64> = (0..rows).map(|r| value(r, c)).collect();
+                    w.write_batch(&values, None, None)
+                }
+                ColumnWriter::FloatColumnWriter(w) => {
+                    let values: Vec<f32> = (0..rows).map(|r| value(r, c) as f32).collect();
+                    w.write_batch(&values, levels(optional), None)
+                }
+                ColumnWriter::BoolColumnWriter(w) if optional => {
+                    let values: Vec<bool> = labelled.iter().map(|r| r % 2 == 0).collect();
+                    w.write_batch(&values, Some(&label_levels), None)
+                }
+                ColumnWriter::BoolColumnWriter(w) => w.write_batch(&vec![false; rows], None, None),
+                _ => unreachable!("the cell schema has no other column type"),
+            }
+            .unwrap();
+            column.close().unwrap();
+            c += 1;
+        }
+        group.close().unwrap();
+        writer.close().unwrap();
+    }
+
+    #[test]
+    fn row_groups_are_read_in_batches_row_for_row() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cells.parquet");
+        let config = Config::default();
+        let rows = 2 * READ_BATCH_ROWS + 7;
+        let value = |r: usize, c: usize| r as f64 / 1000.0 + c as f64;
+        write_rows(&path, &config, rows, value, |r| r % 3 != 0);
+        let mut set = TrainingSet::for_features(&config);
+        let added =
+            read_training_rows(&path, &config, &mut set, reading::Labels::GroundTruth).unwrap();
+        let labelled: Vec<usize> = (0..rows).filter(|r| r % 3 != 0).collect();
+        assert_eq!(added, labelled.len());
+        let dimension = set.dimension;
+        assert_eq!(dimension, feature_names(&config.features.groups).len());
+        for (i, &r) in labelled.iter().enumerate() {
+            assert_eq!(set.traversable[i], r % 2 == 0, "row {r}");
+            assert_eq!(set.centre_in_world[i], [value(r, 5), value(r, 6)]);
+            let features = &set.features[i * dimension..(i + 1) * dimension];
+            let expected: Vec<f32> = (0..dimension).map(|f| value(r, 8 + f) as f32).collect();
+            assert_eq!(features, expected, "row {r}");
+            let appearance = set.appearance_row[i].expect("every row has appearance");
+            let at = appearance * set.appearance_len;
+            assert_eq!(
+                set.appearance[at],
+                value(r, 8 + dimension) as f32,
+                "row {r}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_file_declaring_far_more_rows_than_its_bytes_can_hold_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cells.parquet");
+        let mut config = Config::default();
+        // One value per row: run-length encoding holds a million rows in a few bytes.
+        config.features.groups.clear();
+        let rows = 1 << 20;
+        write_rows(&path, &config, rows, |_, _| 0.5, |_| true);
+        let bytes = std::fs::metadata(&path).unwrap().len();
+        let err = read_training_rows(
+            &path,
+            &config,
+            &mut TrainingSet::default(),
+            reading::Labels::GroundTruth,
+        )
+        .map(|_| bytes)
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("cells.parquet")
+                && err.contains(&format!("row group 0 declares {rows} rows"))
+                && err.contains(&format!("values per byte of a {bytes}-byte file")),
+            "{err}"
+        );
+    }
+}

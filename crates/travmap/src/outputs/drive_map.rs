@@ -1,0 +1,307 @@
+//! The fused map of a drive ([`travmap_method::fusion`]) as outputs: a picture (the
+//! map with the trajectory, a scale bar and the world axes; with ground truth, the
+//! fused ground truth and the errors beside it), a Parquet table of its cells, and
+//! a `nav_msgs/msg/OccupancyGrid` for annotated MCAP.
+
+use std::io::BufWriter;
+use std::path::Path;
+use std::sync::Arc;
+
+use parquet::basic::{Compression, ZstdLevel};
+use parquet::column::writer::ColumnWriter;
+use parquet::file::properties::WriterProperties;
+use parquet::file::writer::SerializedFileWriter;
+
+use crate::outputs::atomic::{AtomicFile, Staged, parquet_failure, sync_output, write_failure};
+use crate::outputs::rendering::{GAP_PX, class_colour, colour, error_colour};
+use travmap_core::error::Result;
+use travmap_core::frame::RgbImage;
+use travmap_formats::ros::{Header, MapMetaData, OccupancyGrid, Pose, Quaternion, Time, Vector3};
+use travmap_method::fusion::{DriveMap, FusedCell};
+use travmap_method::grid::CellClass;
+
+/// Cells of empty border around the map in the picture.
+const BORDER_CELLS: i64 = 2;
+/// Length of the scale bar, metres.
+pub const SCALE_BAR_M: f64 = 5.0;
+/// Length of each world axis drawn at the origin, metres.
+pub const AXIS_M: f64 = 2.0;
+/// Pixel rows under the panels for the scale bar.
+const FOOTER_PX: u32 = 16;
+
+/// The cells' key range, padded with [`BORDER_CELLS`]: (lowest key, cells per side).
+fn extent(cells: &[FusedCell]) -> ([i64; 2], [usize; 2]) {
+    let bounds = cells.iter().fold(None, |bounds, cell| {
+        let (low, high): ([i64; 2], [i64; 2]) = bounds.unwrap_or((cell.key, cell.key));
+        Some((
+            [low[0].min(cell.key[0]), low[1].min(cell.key[1])],
+            [high[0].max(cell.key[0]), high[1].max(cell.key[1])],
+        ))
+    });
+    padded_extent(bounds)
+}
+
+/// A key range (lowest, highest; None for no cells, read as the one cell 0, 0)
+/// padded with [`BORDER_CELLS`]: (lowest key, cells per side).
+fn padded_extent(bounds: Option<([i64; 2], [i64; 2])>) -> ([i64; 2], [usize; 2]) {
+    let (low, high) = bounds.unwrap_or(([0, 0], [0, 0]));
+    let low = [low[0] - BORDER_CELLS, low[1] - BORDER_CELLS];
+    let size = [
+        (high[0] + BORDER_CELLS - low[0] + 1) as usize,
+        (high[1] + BORDER_CELLS - low[1] + 1) as usize,
+    ];
+    (low, size)
+}
+
+/// The layout of a drive map picture: where each world cell lands.
+pub struct MapPicture {
+    pub low_key: [i64; 2],
+    pub cells: [usize; 2],
+    pub cell_px: u32,
+}
+
+impl MapPicture {
+    pub fn of(cells: &[FusedCell], cell_px: u32) -> Self {
+        let (low_key, cells) = extent(cells);
+        Self {
+            low_key,
+            cells,
+            cell_px,
+        }
+    }
+
+    fn panel_px(&self) -> (u32, u32) {
+        (
+            self.cells[0] as u32 * self.cell_px,
+            self.cells[1] as u32 * self.cell_px,
+        )
+    }
+
+    /// Top-left pixel of world cell `key` in the first panel (north up).
+    pub fn cell_origin_px(&self, key: [i64; 2]) -> (u32, u32) {
+        let col = (key[0] - self.low_key[0]) as u32;
+        let row = (key[1] - self.low_key[1]) as u32;
+        (
+            col * self.cell_px,
+            (self.cells[1] as u32 - 1 - row) * self.cell_px,
+        )
+    }
+
+    /// The pixel of a world point (x, y metres) in the first panel, if inside.
+    fn point_px(&self, x_m: f64, y_m: f64, cell_size_m: f64) -> Option<(u32, u32)> {
+        let (width, height) = self.panel_px();
+        let px = (x_m / cell_size_m - self.low_key[0] as f64) * self.cell_px as f64;
+        let from_bottom = (y_m / cell_size_m - self.low_key[1] as f64) * self.cell_px as f64;
+        let py = height as f64 - from_bottom;
+        (px >= 0.0 && py >= 0.0 && px < width as f64 && py < height as f64)
+            .then_some((px as u32, py as u32))
+    }
+}
+
+/// The map picture: the fused prediction, and with ground truth the fused ground
+/// truth and the errors; the trajectory (sensor positions, x-y metres) in white, the
+/// world axes at the origin (x red, y blue, [`AXIS_M`] long), a black scale bar of
+/// [`SCALE_BAR_M`] under the first panel.
+pub fn render_drive_map(
+    cells: &[FusedCell],
+    trajectory: &[[f64; 2]],
+    cell_size_m: f64,
+    cell_px: u32,
+) -> RgbImage {
+    let picture = MapPicture::of(cells, cell_px);
+    let with_truth = cells.iter().any(|c| c.ground_truth != CellClass::Unknown);
+    let panels = if with_truth { 3 } else { 1 };
+    let (panel_w, panel_h) = picture.panel_px();
+    let width = panels * panel_w + (panels - 1) * GAP_PX;
+    let height = panel_h + FOOTER_PX;
+    let mut image = RgbImage {
+        width,
+        height,
+        rgb: std::iter::repeat_n(colour::BACKGROUND, (width * height) as usize)
+            .flatten()
+            .collect(),
+    };
+    let mut set = |x: u32, y: u32, c: [u8; 3]| {
+        if x < width && y < height {
+            let at = 3 * (y * width + x) as usize;
+            image.rgb[at..at + 3].copy_from_slice(&c);
+        }
+    };
+    let panel_x = |panel: u32| panel * (panel_w + GAP_PX);
+    for panel in 0..panels {
+        for y in 0..panel_h {
+            for x in 0..panel_w {
+                set(panel_x(panel) + x, y, colour::UNKNOWN);
+            }
+        }
+    }
+    for cell in cells {
+        let (x0, y0) = picture.cell_origin_px(cell.key);
+        let colours = [
+            class_colour(cell.class),
+            class_colour(cell.ground_truth),
+            error_colour(cell.class, cell.ground_truth),
+        ];
+        for (panel, c) in colours.iter().enumerate().take(panels as usize) {
+            for y in y0..y0 + cell_px {
+                for x in x0..x0 + cell_px {
+                    set(panel_x(panel as u32) + x, y, *c);
+                }
+            }
+        }
+    }
+    // Overlays on every panel: the trajectory, then the axes.
+    let steps = |length_m: f64| (length_m / cell_size_m * cell_px as f64).ceil() as usize * 2;
+    let mut line = |from: [f64; 2], to: [f64; 2], c: [u8; 3]| {
+        let n = steps(((to[0] - from[0]).hypot(to[1] - from[1])).max(cell_size_m));
+        for i in 0..=n {
+            let t = i as f64 / n as f64;
+            let (x, y) = (
+                from[0] + t * (to[0] - from[0]),
+                from[1] + t * (to[1] - from[1]),
+            );
+            if let Some((px, py)) = picture.point_px(x, y, cell_size_m) {
+                for panel in 0..panels {
+                    set(panel_x(panel) + px, py, c);
+                }
+            }
+        }
+    };
+    for pair in trajectory.windows(2) {
+        line(pair[0], pair[1], colour::VEHICLE);
+    }
+    if let [only] = trajectory {
+        line(*only, *only, colour::VEHICLE);
+    }
+    line([0.0, 0.0], [AXIS_M, 0.0], [230, 30, 30]);
+    line([0.0, 0.0], [0.0, AXIS_M], [30, 60, 230]);
+    // The scale bar, under the first panel.
+    let bar_px = (SCALE_BAR_M / cell_size_m * cell_px as f64).round() as u32;
+    for y in panel_h + 6..panel_h + 10 {
+        for x in 4..4 + bar_px {
+            set(x, y, [0, 0, 0]);
+        }
+    }
+    image
+}
+
+/// The fused cells as a Parquet table: one row per cell some frame saw or labelled,
+/// staged to appear with the command's other outputs.
+pub fn write_map_cells(staged: &mut Staged, path: &Path, cells: &[FusedCell]) -> Result<()> {
+    let schema = parquet::schema::parser::parse_message_type(
+        "message travmap_drive_map { REQUIRED DOUBLE x_m; REQUIRED DOUBLE y_m; \
+         REQUIRED DOUBLE evidence; REQUIRED DOUBLE probability; REQUIRED INT32 observations; \
+         OPTIONAL BOOLEAN predicted_traversable; OPTIONAL BOOLEAN ground_truth_traversable; }",
+    )
+    .expect("the map schema parses");
+    let properties = WriterProperties::builder()
+        .set_compression(Compression::ZSTD(ZstdLevel::default()))
+        .set_created_by(concat!("travmap ", env!("CARGO_PKG_VERSION")).into())
+        .build();
+    let (output, file) = AtomicFile::create(path)?;
+    let fail = |e| parquet_failure(path, &output, e);
+    let mut writer =
+        SerializedFileWriter::new(BufWriter::new(file), Arc::new(schema), Arc::new(properties))
+            .map_err(fail)?;
+    let doubles: [Vec<f64>; 4] = [
+        cells.iter().map(|c| c.x_m).collect(),
+        cells.iter().map(|c| c.y_m).collect(),
+        cells.iter().map(|c| c.evidence).collect(),
+        cells.iter().map(|c| c.probability).collect(),
+    ];
+    let observations: Vec<i32> = cells.iter().map(|c| c.observations as i32).collect();
+    let nullable = |class: fn(&FusedCell) -> CellClass| {
+        let values: Vec<bool> = cells
+            .iter()
+            .map(class)
+            .filter(|c| *c != CellClass::Unknown)
+            .map(|c| c == CellClass::Traversable)
+            .collect();
+        let defined: Vec<i16> = cells
+            .iter()
+            .map(|c| (class(c) != CellClass::Unknown) as i16)
+            .collect();
+        (values, defined)
+    };
+    let booleans = [nullable(|c| c.class), nullable(|c| c.ground_truth)];
+    let mut group = writer.next_row_group().map_err(fail)?;
+    let mut index = 0;
+    while let Some(mut column) = group.next_column().map_err(fail)? {
+        let written = match column.untyped() {
+            ColumnWriter::DoubleColumnWriter(w) => w.write_batch(&doubles[index], None, None),
+            ColumnWriter::Int32ColumnWriter(w) => w.write_batch(&observations, None, None),
+            ColumnWriter::BoolColumnWriter(w) => {
+                let (values, defined) = &booleans[index - 5];
+                w.write_batch(values, Some(defined), None)
+            }
+            _ => unreachable!("column {index} is not in the map schema"),
+        };
+        written.map_err(fail)?;
+        column.close().map_err(fail)?;
+        index += 1;
+    }
+    group.close().map_err(fail)?;
+    let file = writer
+        .into_inner()
+        .map_err(fail)?
+        .into_inner()
+        .map_err(|e| write_failure(path, &output, Some(e.into_error()), None))?;
+    sync_output(&file).map_err(|source| write_failure(path, &output, Some(source), None))?;
+    staged.add(output);
+    Ok(())
+}
+
+/// How a fused cell becomes an OccupancyGrid value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GridValues {
+    /// 100 x P(not traversable), rounded: a costmap's view.
+    Probability,
+    /// 0 traversable, 100 not, -1 undecided: what nav2's map_server serves.
+    Trinary,
+}
+
+/// The fused map as an OccupancyGrid in `frame_id` at height `height_m`: -1 where no
+/// frame saw a cell, else the cell's value as `values` says.
+pub fn occupancy_grid(
+    map: &DriveMap,
+    frame_id: &str,
+    stamp_ns: u64,
+    height_m: f64,
+    values: GridValues,
+) -> OccupancyGrid {
+    let cell_size_m = map.cell_size_m();
+    let (low, size) = padded_extent(map.observed_bounds());
+    let mut data = vec![-1i8; size[0] * size[1]];
+    for cell in map.each_cell().filter(|c| c.observations > 0) {
+        let col = (cell.key[0] - low[0]) as usize;
+        let row = (cell.key[1] - low[1]) as usize;
+        data[row * size[0] + col] = match (values, cell.class) {
+            (GridValues::Probability, _) => (100.0 * (1.0 - cell.probability)).round() as i8,
+            (GridValues::Trinary, CellClass::Traversable) => 0,
+            (GridValues::Trinary, CellClass::NonTraversable) => 100,
+            (GridValues::Trinary, CellClass::Unknown) => -1,
+        };
+    }
+    let stamp = Time::from_ns(stamp_ns);
+    OccupancyGrid {
+        header: Header {
+            stamp,
+            frame_id: frame_id.to_string(),
+        },
+        info: MapMetaData {
+            map_load_time: stamp,
+            resolution: cell_size_m as f32,
+            width: size[0] as u32,
+            height: size[1] as u32,
+            origin: Pose {
+                position: Vector3 {
+                    x: low[0] as f64 * cell_size_m,
+                    y: low[1] as f64 * cell_size_m,
+                    z: height_m,
+                },
+                orientation: Quaternion::default(),
+            },
+        },
+        data,
+    }
+}

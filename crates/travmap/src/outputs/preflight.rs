@@ -1,0 +1,300 @@
+//! Checks before any work: an output must not be (or replace) an input, its
+//! directory must exist and take a new file, and it must not be a directory. Run
+//! before the first frame is read, so a doomed run costs nothing and no input is
+//! ever overwritten, however the paths are spelled (`./x/../d.mcap`, a symlinked
+//! directory, a hard link).
+//!
+//! Also removes temporary files that a killed run (SIGKILL cannot be caught) left
+//! beside the output.
+
+use std::collections::HashSet;
+use std::os::unix::fs::MetadataExt;
+use std::path::{Path, PathBuf};
+
+use crate::outputs::atomic::{TEMPORARY_INFIX, temporary_path};
+use travmap_core::error::{Error, Result};
+
+/// A file's identity on this machine: (device, inode).
+type FileId = (u64, u64);
+
+/// What travmap reads: every file of every input, by identity and by canonical path.
+#[derive(Debug, Default)]
+pub struct InputFiles {
+    ids: Vec<(FileId, PathBuf)>,
+    canonical: HashSet<PathBuf>,
+    directories: Vec<PathBuf>,
+}
+
+impl InputFiles {
+    /// Every file of `paths`, a directory's files recursively. A path that does not
+    /// exist is left out: opening it will say so.
+    pub fn of(paths: &[&Path]) -> Self {
+        let mut files = Self::default();
+        for path in paths {
+            files.add(path, 0);
+        }
+        files
+    }
+
+    fn add(&mut self, path: &Path, depth: usize) {
+        let Ok(metadata) = std::fs::metadata(path) else {
+            return;
+        };
+        let canonical = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+        if metadata.is_dir() {
+            self.directories.push(canonical);
+            // Sequence directories are two levels deep; a loop of links stops here.
+            if depth < 4
+                && let Ok(entries) = std::fs::read_dir(path)
+            {
+                for entry in entries.flatten() {
+                    self.add(&entry.path(), depth + 1);
+                }
+            }
+        } else {
+            self.ids
+                .push(((metadata.dev(), metadata.ino()), path.to_path_buf()));
+            self.canonical.insert(canonical);
+        }
+    }
+
+    /// The input `output` would overwrite, if any.
+    fn aliased_by(&self, output: &Path) -> Option<PathBuf> {
+        if let Ok(metadata) = std::fs::metadata(output) {
+            let id = (metadata.dev(), metadata.ino());
+            if let Some((_, input)) = self.ids.iter().find(|(i, _)| *i == id) {
+                return Some(input.clone());
+            }
+        }
+        let canonical = canonical_output(output)?;
+        self.canonical.contains(&canonical).then_some(canonical)
+    }
+
+    /// The input directory that is `dir` or holds it, if any.
+    fn directory_holding(&self, dir: &Path) -> Option<PathBuf> {
+        let canonical = std::fs::canonicalize(dir).ok()?;
+        self.directories
+            .iter()
+            .find(|d| canonical.starts_with(d))
+            .cloned()
+    }
+}
+
+/// The canonical path an output will have: its directory resolved, its name kept.
+fn canonical_output(output: &Path) -> Option<PathBuf> {
+    let dir = parent_dir(output);
+    Some(std::fs::canonicalize(dir).ok()?.join(output.file_name()?))
+}
+
+fn parent_dir(path: &Path) -> &Path {
+    path.parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."))
+}
+
+/// What the checks found that the user should hear about.
+#[derive(Debug, Default)]
+pub struct Preflight {
+    /// Temporary files of dead travmap processes, removed.
+    pub removed_stale: Vec<PathBuf>,
+}
+
+/// Checks that the file `output` can be written and replaces none of `inputs`: not
+/// an input, nor inside an input directory's folders, nor a directory, a block
+/// device or a write-protected file. A character device or FIFO is written straight
+/// through, with nothing beside it.
+pub fn check_output_file(output: &Path, inputs: &InputFiles) -> Result<Preflight> {
+    if let Some(input) = inputs.aliased_by(output) {
+        return Err(Error::OutputIsInput {
+            output: output.to_path_buf(),
+            input,
+        });
+    }
+    if output.is_dir() {
+        return Err(Error::OutputIsDirectory {
+            output: output.to_path_buf(),
+        });
+    }
+    if let Ok(metadata) = std::fs::metadata(output) {
+        use std::os::unix::fs::{FileTypeExt, PermissionsExt};
+        let kind = metadata.file_type();
+        if kind.is_char_device() || kind.is_fifo() {
+            return Ok(Preflight::default());
+        }
+        let special = match () {
+            _ if kind.is_block_device() => Some("a block device"),
+            _ if kind.is_socket() => Some("a socket"),
+            _ => None,
+        };
+        if let Some(what) = special {
+            return Err(Error::OutputIsSpecial {
+                output: output.to_path_buf(),
+                what,
+            });
+        }
+        let mode = metadata.permissions().mode() & 0o777;
+        if mode & 0o222 == 0 {
+            return Err(Error::OutputWriteProtected {
+                output: output.to_path_buf(),
+                mode,
+            });
+        }
+    }
+    // Beside an input's own files is fine (a map next to calib.txt); in its folders
+    // (velodyne/, labels/) the next run would read the output as data.
+    let dir = parent_dir(output);
+    if let (Some(input), Ok(canonical_dir)) =
+        (inputs.directory_holding(dir), std::fs::canonicalize(dir))
+        && canonical_dir != input
+    {
+        return Err(Error::OutputInsideInput {
+            output: output.to_path_buf(),
+            input,
+        });
+    }
+    let write_error = |source| Error::Write {
+        path: output.to_path_buf(),
+        source,
+    };
+    if !dir.is_dir() {
+        return Err(Error::NoOutputDirectory {
+            output: output.to_path_buf(),
+            directory: dir.to_path_buf(),
+        });
+    }
+    let removed_stale = remove_stale_temporaries(output);
+    // The temporary file is created beside the output: try it now, not after the work.
+    let probe = temporary_path(output).map_err(write_error)?;
+    std::fs::File::create(&probe).map_err(write_error)?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(Preflight { removed_stale })
+}
+
+/// Checks that no two of `outputs` name the same file, however spelled.
+pub fn check_distinct_outputs(outputs: &[&Path]) -> Result<()> {
+    let key = |path: &Path| canonical_output(path).unwrap_or_else(|| path.to_path_buf());
+    for (i, first) in outputs.iter().enumerate() {
+        if let Some(second) = outputs[i + 1..].iter().find(|o| key(o) == key(first)) {
+            return Err(Error::SameOutputTwice {
+                first: first.to_path_buf(),
+                second: second.to_path_buf(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Checks a directory that will receive one file per frame (`render --all`): it is
+/// no input directory nor inside one.
+pub fn check_output_directory(output: &Path, inputs: &InputFiles) -> Result<()> {
+    let existing = if output.exists() {
+        output
+    } else {
+        parent_dir(output)
+    };
+    match inputs.directory_holding(existing) {
+        Some(input) => Err(Error::OutputIsInput {
+            output: output.to_path_buf(),
+            input,
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Removes `.NAME.tmp-PID` files beside `output` whose process is gone.
+fn remove_stale_temporaries(output: &Path) -> Vec<PathBuf> {
+    let (Some(name), Ok(entries)) = (output.file_name(), std::fs::read_dir(parent_dir(output)))
+    else {
+        return Vec::new();
+    };
+    let prefix = format!(".{}{TEMPORARY_INFIX}", name.to_string_lossy());
+    let mut removed = Vec::new();
+    for entry in entries.flatten() {
+        let file_name = entry.file_name();
+        let Some(pid) = file_name
+            .to_str()
+            .and_then(|n| n.strip_prefix(&prefix))
+            .and_then(|pid| pid.parse::<i32>().ok())
+        else {
+            continue;
+        };
+        if !process_is_alive(pid) && std::fs::remove_file(entry.path()).is_ok() {
+            removed.push(entry.path());
+        }
+    }
+    removed
+}
+
+fn process_is_alive(pid: i32) -> bool {
+    // Signal 0 checks existence; EPERM means it exists under another user.
+    // SAFETY: kill with signal 0 sends nothing.
+    let result = unsafe { libc::kill(pid, 0) };
+    result == 0 || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_spelling_of_an_input_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let seq = dir.path().join("seq");
+        std::fs::create_dir_all(seq.join("velodyne")).unwrap();
+        let drive = dir.path().join("d.mcap");
+        std::fs::write(&drive, b"drive").unwrap();
+        std::fs::write(seq.join("velodyne/000000.bin"), b"scan").unwrap();
+        std::fs::hard_link(&drive, dir.path().join("link.mcap")).unwrap();
+        std::os::unix::fs::symlink(dir.path(), dir.path().join("via")).unwrap();
+        let inputs = InputFiles::of(&[&drive, &seq]);
+        for output in [
+            drive.clone(),
+            dir.path().join("seq/../d.mcap"),
+            dir.path().join("via/d.mcap"),
+            dir.path().join("link.mcap"),
+            seq.join("velodyne/000000.bin"),
+        ] {
+            let err = check_output_file(&output, &inputs).unwrap_err().to_string();
+            assert!(
+                err.contains("would overwrite the input"),
+                "{output:?}: {err}"
+            );
+        }
+        assert!(check_output_file(&dir.path().join("new.mcap"), &inputs).is_ok());
+        assert!(check_output_directory(&seq.join("pictures"), &inputs).is_err());
+        assert!(check_output_directory(&dir.path().join("pictures"), &inputs).is_ok());
+    }
+
+    #[test]
+    fn directories_and_missing_places_are_refused_before_work() {
+        let dir = tempfile::tempdir().unwrap();
+        let refusal = |output: &Path| {
+            check_output_file(output, &InputFiles::default())
+                .unwrap_err()
+                .to_string()
+        };
+        let err = refusal(dir.path());
+        assert!(err.contains("is a directory"), "{err}");
+        let err = refusal(&dir.path().join("missing/x.mcap"));
+        assert!(err.contains("does not exist"), "{err}");
+    }
+
+    #[test]
+    fn temporaries_of_dead_processes_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let output = dir.path().join("x.mcap");
+        // No process has pid 2^31 - 2; the test runner's parent is alive (not this
+        // process, whose own temporary name the check itself uses).
+        let dead = dir
+            .path()
+            .join(format!(".x.mcap{TEMPORARY_INFIX}2147483646"));
+        // SAFETY: getppid has no preconditions.
+        let parent = unsafe { libc::getppid() };
+        let alive = dir.path().join(format!(".x.mcap{TEMPORARY_INFIX}{parent}"));
+        std::fs::write(&dead, b"").unwrap();
+        std::fs::write(&alive, b"").unwrap();
+        let preflight = check_output_file(&output, &InputFiles::default()).unwrap();
+        assert_eq!(preflight.removed_stale, std::slice::from_ref(&dead));
+        assert!(!dead.exists() && alive.exists());
+    }
+}

@@ -1,0 +1,174 @@
+//! Evaluation: metrics and timings accumulated over frames.
+
+use serde::Serialize;
+
+use crate::scoring::metrics::{Confusion, Scores};
+use travmap_method::classifier::ForeignRemission;
+use travmap_method::ground_truth::UnknownLabels;
+use travmap_method::pipeline::{FrameResult, StageTimings};
+
+/// Median and 95th percentile of a sample.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Spread {
+    pub median: f64,
+    pub p95: f64,
+}
+
+impl Spread {
+    pub fn of(values: &[f64]) -> Self {
+        if values.is_empty() {
+            return Self::default();
+        }
+        let mut sorted = values.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let at = |q: f64| sorted[((sorted.len() - 1) as f64 * q).round() as usize];
+        Self {
+            median: at(0.5),
+            p95: at(0.95),
+        }
+    }
+}
+
+/// Per-stage spreads of the frame timings, milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct TimingReport {
+    pub read: Spread,
+    /// Scan registration (0 when the poses are recorded).
+    pub register: Spread,
+    pub integrate: Spread,
+    pub grid: Spread,
+    pub features: Spread,
+    pub appearance: Spread,
+    pub classify: Spread,
+    pub filter: Spread,
+    pub latency: Spread,
+}
+
+impl TimingReport {
+    pub fn of(timings: &[StageTimings]) -> Self {
+        let spread =
+            |f: fn(&StageTimings) -> f64| Spread::of(&timings.iter().map(f).collect::<Vec<_>>());
+        Self {
+            read: spread(|t| t.read_ms),
+            register: spread(|t| t.register_ms),
+            integrate: spread(|t| t.integrate_ms),
+            grid: spread(|t| t.grid_ms),
+            features: spread(|t| t.features_ms),
+            appearance: spread(|t| t.appearance_ms),
+            classify: spread(|t| t.classify_ms),
+            filter: spread(|t| t.filter_ms),
+            latency: spread(|t| t.latency_ms),
+        }
+    }
+}
+
+/// Metrics of predictions against ground truth over a set of frames.
+#[derive(Clone, Debug, Serialize)]
+pub struct EvaluationReport {
+    /// Frames with ground truth that were scored.
+    pub frames: usize,
+    /// After the outlier filter: the method's output.
+    pub confusion: Confusion,
+    /// None (`null` in JSON) without a scored frame: no score is 0.
+    pub scores: Option<Scores>,
+    /// The classifier alone, before the filter.
+    pub unfiltered_scores: Option<Scores>,
+    /// Frames with a camera image, and their predictable cells that some image covered.
+    pub frames_with_images: usize,
+    pub cells_with_appearance: u64,
+    /// Points the readers dropped as no return, over all frames.
+    pub dropped_points: u64,
+    /// Labelled points whose id the label set does not define, over all frames,
+    /// and how many frames held them.
+    pub unknown_labels: UnknownLabels,
+    pub frames_with_unknown_labels: usize,
+    /// Frames classified by the fallback model: remission features configured, but
+    /// the input had no usable remission (missing, or on an unknown scale).
+    pub frames_without_remission: usize,
+    /// Frames whose remission lay far outside the model's training range (another
+    /// sensor's scale), classified by the fallback model; the first one's figures.
+    pub frames_foreign_remission: usize,
+    pub foreign_remission: Option<ForeignRemission>,
+    pub timings_ms: TimingReport,
+}
+
+/// Accumulates frame results into an [`EvaluationReport`].
+#[derive(Clone, Debug, Default)]
+pub struct Evaluation {
+    frames: usize,
+    frames_with_images: usize,
+    cells_with_appearance: u64,
+    dropped_points: u64,
+    unknown_labels: UnknownLabels,
+    frames_with_unknown_labels: usize,
+    frames_without_remission: usize,
+    frames_foreign_remission: usize,
+    foreign_remission: Option<ForeignRemission>,
+    filtered: Confusion,
+    unfiltered: Confusion,
+    timings: Vec<StageTimings>,
+}
+
+impl Evaluation {
+    /// Adds a frame; frames without ground truth or predictions only add timings.
+    pub fn add(&mut self, result: &FrameResult) {
+        self.timings.push(result.timings);
+        self.dropped_points += result.dropped_points as u64;
+        if result.unknown_labels.points > 0 {
+            self.unknown_labels.merge(&result.unknown_labels);
+            self.frames_with_unknown_labels += 1;
+        }
+        self.frames_without_remission += result.without_remission as usize;
+        if let Some(foreign) = result.foreign_remission {
+            self.frames_foreign_remission += 1;
+            self.foreign_remission.get_or_insert(foreign);
+        }
+        let features = &result.features;
+        let seen = (0..features.predictable.len())
+            .filter(|&c| features.predictable[c] && features.appearance(c).is_some())
+            .count();
+        if seen > 0 {
+            self.frames_with_images += 1;
+            self.cells_with_appearance += seen as u64;
+        }
+        if let (Some(truth), Some(filtered), Some(predicted)) =
+            (&result.ground_truth, &result.filtered, &result.predicted)
+        {
+            self.frames += 1;
+            self.filtered.merge(&Confusion::of_grids(filtered, truth));
+            self.unfiltered
+                .merge(&Confusion::of_grids(predicted, truth));
+        }
+    }
+
+    pub fn report(&self) -> EvaluationReport {
+        EvaluationReport {
+            frames: self.frames,
+            confusion: self.filtered,
+            scores: (self.frames > 0).then(|| self.filtered.scores()),
+            unfiltered_scores: (self.frames > 0).then(|| self.unfiltered.scores()),
+            frames_with_images: self.frames_with_images,
+            cells_with_appearance: self.cells_with_appearance,
+            dropped_points: self.dropped_points,
+            unknown_labels: self.unknown_labels.clone(),
+            frames_with_unknown_labels: self.frames_with_unknown_labels,
+            frames_without_remission: self.frames_without_remission,
+            frames_foreign_remission: self.frames_foreign_remission,
+            foreign_remission: self.foreign_remission,
+            timings_ms: TimingReport::of(&self.timings),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spread_of_a_known_sample() {
+        let s = Spread::of(&[5.0, 1.0, 3.0, 2.0, 4.0]);
+        assert_eq!(s.median, 3.0);
+        assert_eq!(s.p95, 5.0);
+        assert_eq!(Spread::of(&[]), Spread::default());
+    }
+}
