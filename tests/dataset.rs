@@ -10,8 +10,7 @@ use serde_json::Value;
 use travmap::drive::Selection;
 use travmap::outputs::dataset::reading::{Labels, read_training_rows};
 use travmap::training::TrainingSet;
-use travmap_io::Source;
-use travmap_io::ros_drive::DriveOptions;
+use travmap_io::{Source, SourceOptions};
 use travmap_method::classifier::SvmModel;
 use travmap_method::grid::CellClass;
 
@@ -90,7 +89,7 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     // The same frame through the library, on the training grid the command uses.
     let mut config = travmap_core::Config::default();
     config.grid.size_m = config.training.grid_size_m;
-    let source = Source::open(&seq, &DriveOptions::default(), &|_| {}).unwrap();
+    let source = Source::open(&seq, &SourceOptions::default(), &|_| {}).unwrap();
     let mut selection = Selection::new(source, frame..frame + 1);
     selection.follow_trajectory(&config).unwrap();
     let mut results = Vec::new();

@@ -13,10 +13,9 @@ use travmap::outputs::writing::McapSink;
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{OccupancyGrid, PointCloud2, decode};
 use travmap_io::KittiSequence;
-use travmap_io::containers::log::Log;
-use travmap_io::format::InputFormat;
 use travmap_io::payloads::cloud::{check_some_finite, cloud_points};
-use travmap_io::ros_drive::{DriveOptions, RosDrive};
+use travmap_io::ros_drive::LogOptions;
+use travmap_io::{Source, SourceOptions};
 
 /// Every message of `topic` in an MCAP, decoded by travmap's own reader.
 fn messages<T: serde::de::DeserializeOwned>(path: &Path, topic: &str) -> Vec<(u64, T)> {
@@ -38,15 +37,11 @@ fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
 
     // The frames read back: same points, labels, stamps and poses, bit for bit.
     let kitti = KittiSequence::open(&seq).unwrap();
-    let ros_drive = RosDrive::open(
-        Log::open(&drive, InputFormat::Mcap).unwrap(),
-        &DriveOptions::default(),
-    )
-    .unwrap();
-    assert_eq!(ros_drive.frame_count(), 6);
-    assert_eq!(ros_drive.world_frame(), "map");
+    let source = Source::open(&drive, &SourceOptions::default(), &|_| {}).unwrap();
+    assert_eq!(source.frames().len(), 6);
+    assert_eq!(source.world_frame(), "map");
     let mut index = 0;
-    for frame in ros_drive.read(&(0..6)) {
+    for frame in source.read(&(0..6)) {
         let frame = frame.unwrap();
         let expected = kitti.read_frame(index).unwrap();
         assert_eq!(frame.index, expected.index);
@@ -532,10 +527,7 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
     let path = dir.path().join("odom.mcap");
     write_odometry_drive(&path);
     // Two cloud topics: ambiguous, and the error lists them.
-    let err = match RosDrive::open(
-        Log::open(&path, InputFormat::Mcap).unwrap(),
-        &DriveOptions::default(),
-    ) {
+    let err = match Source::open(&path, &SourceOptions::default(), &|_| {}) {
         Err(e) => e.to_string(),
         Ok(_) => panic!("two cloud topics must be ambiguous"),
     };
@@ -552,13 +544,16 @@ fn any_cloud_layout_posed_by_odometry_and_static_tf() {
         ],
     );
 
-    let options = DriveOptions {
-        cloud_topic: Some("/points".into()),
+    let options = SourceOptions {
+        log: LogOptions {
+            cloud_topic: Some("/points".into()),
+            ..Default::default()
+        },
         ..Default::default()
     };
-    let drive = RosDrive::open(Log::open(&path, InputFormat::Mcap).unwrap(), &options).unwrap();
-    assert_eq!(drive.world_frame(), "odom");
-    let frames: Vec<_> = drive.read(&(0..1)).map(Result::unwrap).collect();
+    let source = Source::open(&path, &options, &|_| {}).unwrap();
+    assert_eq!(source.world_frame(), "odom");
+    let frames: Vec<_> = source.read(&(0..1)).map(Result::unwrap).collect();
     let frame = &frames[0];
     // The NaN point is dropped; the others read through float64 big-endian fields.
     assert_eq!(

@@ -16,7 +16,8 @@ use travmap::outputs::writing::McapSink;
 use travmap_formats::mcap::writer::Compression;
 use travmap_io::containers::log::Log;
 use travmap_io::format::InputFormat;
-use travmap_io::ros_drive::{DriveOptions, MergedTopics, RosDrive};
+use travmap_io::ros_drive::{LogOptions, MergedTopics};
+use travmap_io::{Source, SourceOptions};
 
 fn rear_from_velodyne() -> Isometry3<f64> {
     let velodyne_from_rear = Isometry3::from_parts(
@@ -106,15 +107,11 @@ fn two_sensors_merge_into_the_scans_they_were_cut_from() {
 
     // The library: every scan holds both sensors but the last, all points in the
     // front sensor's frame, back where they were.
-    let options = DriveOptions {
-        merged_topics: MergedTopics::All,
-        ..Default::default()
-    };
-    let drive = RosDrive::open(Log::open(&log_path, InputFormat::Mcap).unwrap(), &options).unwrap();
-    assert_eq!(drive.cloud_topic(), "/front_points");
-    let source = travmap_io::Source::open(&seq, &Default::default(), &|_| {}).unwrap();
+    let merged = Source::open(&log_path, &merging_every_topic(), &|_| {}).unwrap();
+    assert_eq!(merged.log().unwrap().cloud_topic(), "/front_points");
+    let source = Source::open(&seq, &Default::default(), &|_| {}).unwrap();
     let originals: Vec<_> = source.read(&(0..usize::MAX)).map(Result::unwrap).collect();
-    let frames: Vec<_> = drive.read(&(0..usize::MAX)).map(Result::unwrap).collect();
+    let frames: Vec<_> = merged.read(&(0..usize::MAX)).map(Result::unwrap).collect();
     assert_eq!(frames.len(), sizes.len());
     for (i, (frame, original)) in frames.iter().zip(&originals).enumerate() {
         let last = i + 1 == frames.len();
@@ -300,13 +297,9 @@ fn packet_topics_merge_as_clouds_do() {
     }
     sink.finish().unwrap();
 
-    let options = DriveOptions {
-        merged_topics: MergedTopics::All,
-        ..Default::default()
-    };
-    let drive = RosDrive::open(Log::open(&log_path, InputFormat::Mcap).unwrap(), &options).unwrap();
-    assert_eq!(drive.cloud_topic(), "/front/pandar_packets");
-    let frames: Vec<_> = drive.read(&(0..usize::MAX)).map(Result::unwrap).collect();
+    let merged = Source::open(&log_path, &merging_every_topic(), &|_| {}).unwrap();
+    assert_eq!(merged.log().unwrap().cloud_topic(), "/front/pandar_packets");
+    let frames: Vec<_> = merged.read(&(0..usize::MAX)).map(Result::unwrap).collect();
     assert_eq!(frames.len(), 4);
     for frame in &frames {
         let sensors: Vec<&str> = frame.sensors.iter().map(String::as_str).collect();
@@ -397,4 +390,16 @@ fn packet_topics_merge_as_clouds_do() {
         !err.contains("TOPIC=FILE") && !err.contains("=FILE"),
         "{err}"
     );
+}
+
+/// Reading a log with every cloud or packet topic merged into the scans
+/// (`--cloud-topic all`).
+fn merging_every_topic() -> SourceOptions {
+    SourceOptions {
+        log: LogOptions {
+            merged_topics: MergedTopics::All,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
 }

@@ -13,7 +13,6 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 use travmap::drive::Selection;
 use travmap::scoring::evaluation::Spread;
-use travmap_io::Recording;
 
 use super::Inputs;
 use super::child_runs::{ChildRun, TemporaryDirectory, run_child};
@@ -241,13 +240,7 @@ pub fn bench_tools(
     let all_cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let directory = TemporaryDirectory::create()?;
     let given = selection.source.path();
-    let given_kind = match &selection.source.recording {
-        Recording::Kitti(..) => "kitti",
-        Recording::Log(drive) if drive.packet_model().is_some() => "packets",
-        Recording::Log(..) => "log",
-        Recording::Scans(..) => "scans",
-        Recording::Site(..) => "site",
-    };
+    let given_kind = selection.source.kind().name();
     let source = &selection.source;
     let selected = source.frames_in(&selection.frames);
     let mut converted: Option<PathBuf> = None;

@@ -9,9 +9,9 @@ use serde_json::json;
 use travmap::outputs::conversion::{convert_kitti, convert_log};
 use travmap::outputs::preflight::InputFiles;
 use travmap_formats::mcap::writer::Compression;
-use travmap_io::Recording;
-use travmap_io::ros_drive::DriveOptions;
+use travmap_io::ros_drive::LogOptions;
 use travmap_io::ros_drive::RosDrive;
+use travmap_io::{SkipLog, SourceOptions};
 
 use super::{
     Outcome, Output, Sensors, check_output, frame_count, open_selection, outcome,
@@ -79,31 +79,29 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
     check_output(output_path, &InputFiles::of(&[&args.sequence]))?;
     // Every scan: convert keeps a log's first, however partial.
     let frames = args.frames.clone().unwrap_or(0..usize::MAX);
-    let options = args.sensors.drive_options(DriveOptions::default())?;
-    let selection = open_selection(
-        &args.sequence,
-        Some(frames.clone()),
-        &options,
-        args.keep_going,
-        false,
-    )?;
+    let options = SourceOptions {
+        keep_going: args.keep_going,
+        log: args.sensors.log_options(LogOptions::default())?,
+        ..SourceOptions::default()
+    };
+    let selection = open_selection(&args.sequence, Some(frames.clone()), &options, false)?;
     let selections = [selection];
-    let sequence = match &selections[0].source.recording {
-        Recording::Kitti(sequence) => sequence,
-        Recording::Scans(..) | Recording::Site(..) => bail!(
-            "convert takes a KITTI sequence directory or a recorded log, not a folder of scans"
-        ),
-        Recording::Log(drive) => {
-            if args.frames.is_some() {
-                bail!("--frames applies to KITTI input; a log is converted whole");
-            }
-            return convert_whole_log(drive, output_path, compression, &output, &selections);
+    let source = &selections[0].source;
+    if let Some(drive) = source.log() {
+        if args.frames.is_some() {
+            bail!("--frames applies to KITTI input; a log is converted whole");
         }
+        let skips = source.skip_log();
+        return convert_whole_log(drive, skips, output_path, compression, &output, &selections);
+    }
+    let Some(sequence) = source.kitti() else {
+        bail!("convert takes a KITTI sequence directory or a recorded log, not a folder of scans");
     };
     let bar = output.progress(frame_count(&selections), "converting");
     let start_ns = (start_time_s * 1e9).round() as u64;
     let summary = convert_kitti(
         sequence,
+        source.skip_log(),
         &frames,
         output_path,
         compression,
@@ -208,13 +206,14 @@ impl Written {
 /// `convert` of a recorded log: every message, as ROS 2 where travmap knows the type.
 fn convert_whole_log(
     drive: &RosDrive,
+    skips: &SkipLog,
     output_path: &std::path::Path,
     compression: Compression,
     output: &Output,
     selections: &[travmap::drive::Selection],
 ) -> Result<Outcome> {
     let bar = output.progress(drive.frame_count() as u64, "converting");
-    let summary = convert_log(drive, output_path, compression, &|topic, count| {
+    let summary = convert_log(drive, skips, output_path, compression, &|topic, count| {
         if topic == drive.cloud_topic() {
             bar.inc(count);
         }

@@ -5,18 +5,14 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use travmap::drive::Selection;
 use travmap::outputs::atomic::Staged;
 use travmap::outputs::drive_map::{render_drive_map, write_map_cells};
-use travmap::outputs::nav2_map::{
-    Georeference, Nav2Mode, gis_world_file, image_path, write_nav2_map,
-};
+use travmap::outputs::nav2_map::{Nav2Mode, gis_world_file, image_path, write_nav2_map};
 use travmap::outputs::preflight::check_distinct_outputs;
 use travmap::outputs::rendering::encode_png;
 use travmap::scoring::evaluation::Evaluation;
 use travmap::scoring::metrics::Confusion;
-use travmap_io::format::site_cloud_format;
-use travmap_io::{Recording, Source};
+use travmap_io::SourceOptions;
 
 use super::{
     Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json,
@@ -70,7 +66,7 @@ impl Nav2ModeArg {
 
 pub fn map(args: MapArgs) -> Result<Outcome> {
     let cell_px = args.cell_pixels;
-    let mut config = args.inputs.settings.load()?;
+    let config = args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
     let inputs = args.inputs.files(args.model.path.as_deref());
     let nav2_mode = args.nav2_mode.mode();
@@ -85,37 +81,17 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
         check_output(path, &inputs)?;
     }
     let (model, model_name) = args.model.load(&config)?;
-    let selection = match args.inputs.sequences.as_slice() {
-        [path] if site_cloud_format(path).is_some() => {
-            // A tile is the whole window: its neighbours' points are its own.
-            config.integration.scans = 1;
-            let source = Source::site_cloud(path, config.grid.size_m)?;
-            if let (Recording::Site(site), false) = (&source.recording, output.quiet) {
-                eprintln!("notice: {}", site.notice());
-            }
-            Selection::new(source, args.inputs.frames.clone().unwrap_or(0..usize::MAX))
-        }
-        _ => args.inputs.open_one(images_for(&model, &config))?,
+    // One saved point cloud is a site: tiles of the grid's size.
+    let site_tile_m = Some(config.grid.size_m);
+    let options = SourceOptions {
+        site_tile_m,
+        ..args.inputs.source_options()?
     };
+    let selection = args
+        .inputs
+        .open_one_as(&options, images_for(&model, &config))?;
     let config = &config;
-    let georeference = match &selection.source.recording {
-        Recording::Site(site) => site.georeference().map(|(origin_m, crs)| Georeference {
-            frame: None,
-            origin_m,
-            rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
-            crs_wkt: crs.map(str::to_string),
-        }),
-        Recording::Log(drive) => drive.georeference().map(|(frame, geo_from_world)| {
-            let q = geo_from_world.rotation.coords;
-            Georeference {
-                frame: Some(frame.clone()),
-                origin_m: geo_from_world.translation.vector.into(),
-                rotation_xyzw: [q.x, q.y, q.z, q.w],
-                crs_wkt: None,
-            }
-        }),
-        _ => None,
-    };
+    let georeference = selection.source.georeference();
     if let (Some(image), Some(georeference)) = (&nav2_image, &georeference) {
         // The world file and .prj a georeferenced map gets beside its image.
         if georeference.is_planar() {

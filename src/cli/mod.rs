@@ -36,8 +36,8 @@ use travmap::drive::Selection;
 use travmap::outputs::preflight::{InputFiles, check_output_directory, check_output_file};
 use travmap_core::Config;
 use travmap_core::stopwatch::Stopwatch;
-use travmap_io::ros_drive::{DriveOptions, LidarCalibrations, LidarFrames, MergedTopics};
-use travmap_io::{Recording, Source};
+use travmap_io::ros_drive::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics};
+use travmap_io::{Source, SourceKind, SourceOptions};
 use travmap_method::classifier::SvmModel;
 
 /// How a command ended: exit code 0, or 3 when it completed but skipped frames
@@ -213,14 +213,14 @@ pub struct Sensors {
 
 impl Sensors {
     /// `options` reading these topics with these calibrations.
-    pub fn drive_options(&self, options: DriveOptions) -> Result<DriveOptions> {
+    pub fn log_options(&self, options: LogOptions) -> Result<LogOptions> {
         let (cloud_topic, merged_topics) = match self.cloud_topic.as_slice() {
             [] => (None, MergedTopics::None),
             [all] if all == "all" => (None, MergedTopics::All),
             [one] => (Some(one.clone()), MergedTopics::None),
             [first, more @ ..] => (Some(first.clone()), MergedTopics::Topics(more.to_vec())),
         };
-        Ok(DriveOptions {
+        Ok(LogOptions {
             cloud_topic,
             merged_topics,
             lidar_calibrations: LidarCalibrations::from_arguments(&self.lidar_calibration)
@@ -282,14 +282,19 @@ pub struct Inputs {
 }
 
 impl Inputs {
-    fn drive_options(&self) -> Result<DriveOptions> {
-        self.sensors.drive_options(DriveOptions {
-            world_frame: self.world_frame.clone(),
-            camera_topic: self.camera_topic.clone(),
-            pose_topic: self.pose_topic.clone(),
+    /// How the inputs are read: the flags given, and the configuration's poses.
+    pub fn source_options(&self) -> Result<SourceOptions> {
+        Ok(SourceOptions {
             poses: self.settings.load()?.integration.poses,
+            keep_going: self.keep_going,
+            log: self.sensors.log_options(LogOptions {
+                world_frame: self.world_frame.clone(),
+                camera_topic: self.camera_topic.clone(),
+                pose_topic: self.pose_topic.clone(),
+                ..Default::default()
+            })?,
             rate_hz: self.rate,
-            ..Default::default()
+            site_tile_m: None,
         })
     }
 
@@ -320,19 +325,21 @@ impl Inputs {
 
     /// Opens every input; `read_images` decodes camera images into the frames.
     pub fn open(&self, read_images: bool) -> Result<Vec<Selection>> {
-        self.open_paths(&self.sequences, read_images)
+        self.open_paths(&self.sequences, &self.source_options()?, read_images)
     }
 
-    /// Opens `paths` (some of the inputs) as [`Inputs::open`] does.
-    pub fn open_paths(&self, paths: &[PathBuf], read_images: bool) -> Result<Vec<Selection>> {
+    /// Opens `paths` (some of the inputs) as [`Inputs::open`] does, read as
+    /// `options` say.
+    pub fn open_paths(
+        &self,
+        paths: &[PathBuf],
+        options: &SourceOptions,
+        read_images: bool,
+    ) -> Result<Vec<Selection>> {
         refuse_repeats(paths)?;
-        let options = self.drive_options()?;
         paths
             .iter()
-            .map(|path| {
-                let frames = self.frames.clone();
-                open_selection(path, frames, &options, self.keep_going, read_images)
-            })
+            .map(|path| open_selection(path, self.frames.clone(), options, read_images))
             .collect()
     }
 
@@ -347,7 +354,14 @@ impl Inputs {
     /// Opens the one input of a command that takes one (clap has checked that it is
     /// one: [`one_input`]).
     pub fn open_one(&self, read_images: bool) -> Result<Selection> {
-        Ok(self.open(read_images)?.remove(0))
+        self.open_one_as(&self.source_options()?, read_images)
+    }
+
+    /// Opens the one input, read as `options` say.
+    pub fn open_one_as(&self, options: &SourceOptions, read_images: bool) -> Result<Selection> {
+        Ok(self
+            .open_paths(&self.sequences, options, read_images)?
+            .remove(0))
     }
 }
 
@@ -392,17 +406,17 @@ pub fn check_output_dir(output: &Path, inputs: &InputFiles) -> Result<()> {
 pub fn open_selection(
     path: &Path,
     frames: Option<Range<usize>>,
-    options: &DriveOptions,
-    keep_going: bool,
+    options: &SourceOptions,
     read_images: bool,
 ) -> Result<Selection> {
     let mut source = Source::open(path, options, &|notice| eprintln!("notice: {notice}"))?;
-    if let Recording::Kitti(..) = source.recording {
+    if source.kind() == SourceKind::Kitti {
+        let log = &options.log;
         let mcap_only = [
-            ("--cloud-topic", &options.cloud_topic),
-            ("--world-frame", &options.world_frame),
-            ("--camera-topic", &options.camera_topic),
-            ("--pose-topic", &options.pose_topic),
+            ("--cloud-topic", &log.cloud_topic),
+            ("--world-frame", &log.world_frame),
+            ("--camera-topic", &log.camera_topic),
+            ("--pose-topic", &log.pose_topic),
         ];
         for (flag, _) in mcap_only.iter().filter(|(_, value)| value.is_some()) {
             eprintln!(
@@ -412,12 +426,7 @@ pub fn open_selection(
         }
     }
     source.set_read_images(read_images);
-    source.set_keep_going(keep_going);
-    let partial_first_scan = match &source.recording {
-        Recording::Log(drive) => drive.partial_first_scan(),
-        _ => None,
-    };
-    let frames = match (frames, partial_first_scan) {
+    let frames = match (frames, source.partial_first_scan()) {
         (Some(frames), _) => frames,
         (None, None) => 0..usize::MAX,
         (None, Some((first, second))) => {

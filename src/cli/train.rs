@@ -63,7 +63,9 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
     let mut selections = if drives.is_empty() {
         Vec::new()
     } else {
-        args.inputs.open_paths(&drives, config.appearance.enabled)?
+        let options = args.inputs.source_options()?;
+        args.inputs
+            .open_paths(&drives, &options, config.appearance.enabled)?
     };
     // The model records which scans it learnt from, so `eval` can tell them apart.
     for selection in &mut selections {

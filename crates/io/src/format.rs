@@ -7,11 +7,14 @@ use std::path::{Path, PathBuf};
 
 use travmap_core::error::{Error, Result};
 
-/// An input format travmap reads.
+/// An input format travmap reads: [`detect`] is the one place that decides.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum InputFormat {
-    /// A KITTI odometry / SemanticKITTI sequence directory.
+    /// A KITTI odometry / SemanticKITTI sequence directory (or a directory that is
+    /// no other kind: reading it as one names what is missing).
     Kitti,
+    /// A folder of `.pcd` or KITTI-style `.bin` scans.
+    ScanFolder,
     /// An MCAP file, ROS 2 (CDR) or ROS 1 messages.
     Mcap,
     /// A ROS 1 bag, format 2.0.
@@ -20,8 +23,11 @@ pub enum InputFormat {
     Sqlite,
     /// A rosbag2 directory: `metadata.yaml` and its storage files.
     Rosbag2,
-    /// A packet capture (classic pcap) of LiDAR packets.
+    /// A packet capture (classic pcap or pcapng) of LiDAR packets.
     Pcap,
+    /// One saved point cloud (a SLAM or survey map): a site, read as tiles by
+    /// `travmap map`, and no drive for the other commands.
+    SiteCloud(SiteCloudFormat),
 }
 
 impl InputFormat {
@@ -29,11 +35,15 @@ impl InputFormat {
     pub fn describe(self) -> &'static str {
         match self {
             InputFormat::Kitti => "a KITTI sequence directory",
+            InputFormat::ScanFolder => "a folder of scans",
             InputFormat::Mcap => "an MCAP file",
             InputFormat::Bag => "a ROS 1 bag",
             InputFormat::Sqlite => "a rosbag2 sqlite3 file",
             InputFormat::Rosbag2 => "a rosbag2 directory",
             InputFormat::Pcap => "a pcap capture",
+            InputFormat::SiteCloud(SiteCloudFormat::Pcd) => SINGLE_PCD,
+            InputFormat::SiteCloud(SiteCloudFormat::Ply) => SINGLE_PLY,
+            InputFormat::SiteCloud(SiteCloudFormat::Las) => SINGLE_LAS,
         }
     }
 }
@@ -64,30 +74,6 @@ pub enum SiteCloudFormat {
     Las,
 }
 
-/// Whether `path` is one saved point cloud (a site cloud for `travmap map`), and
-/// of which format.
-pub fn site_cloud_format(path: &Path) -> Option<SiteCloudFormat> {
-    // A regular file first: opening a pipe with no writer would block.
-    if !path.is_file() {
-        return None;
-    }
-    let mut head = [0u8; 9];
-    let read = std::fs::File::open(path).and_then(|mut file| {
-        use std::io::Read;
-        file.read(&mut head)
-    });
-    let head = &head[..read.ok()?];
-    if PCD_MAGICS.iter().any(|m| head.starts_with(m)) {
-        Some(SiteCloudFormat::Pcd)
-    } else if PLY_MAGICS.iter().any(|m| head.starts_with(m)) {
-        Some(SiteCloudFormat::Ply)
-    } else if head.starts_with(LAS_MAGIC) {
-        Some(SiteCloudFormat::Las)
-    } else {
-        None
-    }
-}
-
 const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
     (b"\x89MCAP0\r\n", Ok(InputFormat::Mcap)),
     (BAG_MAGIC, Ok(InputFormat::Bag)),
@@ -104,11 +90,23 @@ const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
         ),
     ),
     (b"\x89MCAP", Err("an MCAP file of a version other than 0")),
-    (PCD_MAGICS[0], Err(SINGLE_PCD)),
-    (PCD_MAGICS[1], Err(SINGLE_PCD)),
-    (PLY_MAGICS[0], Err(SINGLE_PLY)),
-    (PLY_MAGICS[1], Err(SINGLE_PLY)),
-    (LAS_MAGIC, Err(SINGLE_LAS)),
+    (
+        PCD_MAGICS[0],
+        Ok(InputFormat::SiteCloud(SiteCloudFormat::Pcd)),
+    ),
+    (
+        PCD_MAGICS[1],
+        Ok(InputFormat::SiteCloud(SiteCloudFormat::Pcd)),
+    ),
+    (
+        PLY_MAGICS[0],
+        Ok(InputFormat::SiteCloud(SiteCloudFormat::Ply)),
+    ),
+    (
+        PLY_MAGICS[1],
+        Ok(InputFormat::SiteCloud(SiteCloudFormat::Ply)),
+    ),
+    (LAS_MAGIC, Ok(InputFormat::SiteCloud(SiteCloudFormat::Las))),
     (
         b"PAR1",
         Err("a Parquet file (a travmap dataset is an output, not a drive)"),
@@ -125,7 +123,6 @@ const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
     (b"\x7fELF", Err("an executable")),
 ];
 
-/// The format of `path`, or an error that says what it is instead.
 /// What a file that is neither a regular file nor a folder is, in words.
 fn special_file(file_type: &std::fs::FileType) -> Option<&'static str> {
     use std::os::unix::fs::FileTypeExt;
@@ -140,6 +137,8 @@ fn special_file(file_type: &std::fs::FileType) -> Option<&'static str> {
     }
 }
 
+/// The format of `path`, or an error that says what it is instead: a file by its
+/// first bytes, a directory by its layout.
 pub fn detect(path: &Path) -> Result<InputFormat> {
     let metadata = match std::fs::metadata(path) {
         Ok(metadata) => metadata,
@@ -161,11 +160,7 @@ pub fn detect(path: &Path) -> Result<InputFormat> {
         ));
     }
     if metadata.is_dir() {
-        let rosbag2 = path.join("metadata.yaml").is_file() || !storage_files(path).is_empty();
-        return Ok(match rosbag2 {
-            true => InputFormat::Rosbag2,
-            false => InputFormat::Kitti,
-        });
+        return directory_format(path);
     }
     let mut first = Vec::with_capacity(16);
     std::fs::File::open(path)
@@ -198,6 +193,83 @@ pub fn detect(path: &Path) -> Result<InputFormat> {
         )
     };
     Err(unsupported(path, what))
+}
+
+/// What a directory holds: a rosbag2 log, a KITTI sequence, a folder of scans; or,
+/// refused with where to point instead, a folder of sequences or a dataset root.
+fn directory_format(path: &Path) -> Result<InputFormat> {
+    if path.join("metadata.yaml").is_file() || !storage_files(path).is_empty() {
+        return Ok(InputFormat::Rosbag2);
+    }
+    if is_sequence(path) {
+        return Ok(InputFormat::Kitti);
+    }
+    let misplaced = |message: String| {
+        Err(Error::Sequence {
+            path: path.to_path_buf(),
+            message,
+        })
+    };
+    if let Some(first) = subdirectories(path).into_iter().find(|d| is_sequence(d)) {
+        return misplaced(format!(
+            "a folder of sequences, not one: point at one of them, e.g. {}",
+            first.display()
+        ));
+    }
+    let sequences = path.join("sequences");
+    if sequences.is_dir() {
+        let example = subdirectories(&sequences)
+            .into_iter()
+            .find(|d| is_sequence(d));
+        return misplaced(format!(
+            "a dataset root: point at one sequence, e.g. {}",
+            example.unwrap_or_else(|| sequences.join("00")).display()
+        ));
+    }
+    if holds_scans(path) {
+        return Ok(InputFormat::ScanFolder);
+    }
+    // Read as a sequence, it names the file it misses.
+    Ok(InputFormat::Kitti)
+}
+
+/// Whether `dir` is a KITTI sequence: its scans and its calibration.
+pub fn is_sequence(dir: &Path) -> bool {
+    dir.join("velodyne").is_dir() && dir.join("calib.txt").is_file()
+}
+
+fn subdirectories(path: &Path) -> Vec<PathBuf> {
+    let entries = std::fs::read_dir(path).into_iter().flatten().flatten();
+    let mut dirs: Vec<_> = entries.map(|e| e.path()).filter(|p| p.is_dir()).collect();
+    dirs.sort();
+    dirs
+}
+
+/// The kind of scan a folder of scans holds, by its name's extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScanFormat {
+    Pcd,
+    Bin,
+}
+
+/// What `path` is as one scan of a folder of scans.
+pub fn scan_format(path: &Path) -> Option<ScanFormat> {
+    match path.extension()?.to_str()? {
+        "pcd" => Some(ScanFormat::Pcd),
+        "bin" => Some(ScanFormat::Bin),
+        _ => None,
+    }
+}
+
+/// Whether `dir` holds scans.
+fn holds_scans(dir: &Path) -> bool {
+    std::fs::read_dir(dir)
+        .is_ok_and(|entries| entries.flatten().any(|e| scan_format(&e.path()).is_some()))
+}
+
+/// The error that refuses `path`, detected as `format`, where it cannot be read.
+pub fn refuse(path: &Path, format: InputFormat) -> Error {
+    unsupported(path, format.describe().to_string())
 }
 
 fn unsupported(path: &Path, what: String) -> Error {
@@ -287,16 +359,7 @@ mod tests {
             Ok(InputFormat::Sqlite)
         );
         for (bytes, what) in [
-            (&b"# .PCD v0.7"[..], "PCD point cloud"),
-            (
-                b"ply\nformat",
-                "a single PLY point cloud (`travmap map` reads one",
-            ),
-            (
-                b"LASF\0\0",
-                "a single LAS / LAZ point cloud (`travmap map` reads one",
-            ),
-            (b"PAR1\x15\x04", "a Parquet file"),
+            (&b"PAR1\x15\x04"[..], "a Parquet file"),
             (b"\x89PNG\r\n\x1a\n\0", "a PNG image"),
             (b"hello world\n", "a text file"),
             (b"", "an empty file"),
@@ -305,6 +368,39 @@ mod tests {
             let err = detect_bytes("x.mcap", bytes).unwrap_err();
             assert!(err.contains(what) && err.contains("travmap reads"), "{err}");
         }
+    }
+
+    #[test]
+    fn saved_clouds_are_sites_and_directories_are_told_by_their_layout() {
+        for (bytes, kind) in [
+            (&b"# .PCD v0.7"[..], SiteCloudFormat::Pcd),
+            (b"VERSION .7\n", SiteCloudFormat::Pcd),
+            (b"ply\nformat", SiteCloudFormat::Ply),
+            (b"LASF\0\0", SiteCloudFormat::Las),
+        ] {
+            assert_eq!(
+                detect_bytes("cloud", bytes),
+                Ok(InputFormat::SiteCloud(kind))
+            );
+        }
+        let root = tempfile::tempdir().unwrap();
+        let scans = root.path().join("scans");
+        std::fs::create_dir(&scans).unwrap();
+        std::fs::write(scans.join("000000.bin"), [0u8; 16]).unwrap();
+        assert_eq!(detect(&scans).unwrap(), InputFormat::ScanFolder);
+        let sequence = root.path().join("sequences/00");
+        std::fs::create_dir_all(sequence.join("velodyne")).unwrap();
+        std::fs::write(sequence.join("calib.txt"), "").unwrap();
+        assert_eq!(detect(&sequence).unwrap(), InputFormat::Kitti);
+        let err = detect(root.path()).unwrap_err().to_string();
+        assert!(
+            err.contains("a dataset root: point at one sequence"),
+            "{err}"
+        );
+        let err = detect(&root.path().join("sequences"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("a folder of sequences, not one"), "{err}");
     }
 
     #[test]

@@ -7,13 +7,13 @@
 use std::path::Path;
 
 use crate::Source;
+use crate::SourceOptions;
 use crate::kitti::{
     drop_non_returns, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
 };
 use crate::payloads::cloud::cloud_points;
 use crate::payloads::image::{image_pixels, jpeg_pixels};
 use crate::payloads::livox::{LIVOX_CUSTOM_MESSAGES, decode_cloud};
-use crate::ros_drive::DriveOptions;
 use crate::ros_drive::transforms::isometry;
 use travmap_formats::foxglove;
 use travmap_formats::log_message::Part;
@@ -294,7 +294,7 @@ pub fn rosbag2_metadata(data: &[u8]) {
 
 /// Opens `path` as a drive, of whatever format it is, and reads every frame.
 fn read_drive(path: &Path) {
-    if let Ok(source) = Source::open(path, &DriveOptions::default(), &|_| {}) {
+    if let Ok(source) = Source::open(path, &SourceOptions::default(), &|_| {}) {
         source.read(&(0..usize::MAX)).for_each(drop);
     }
 }

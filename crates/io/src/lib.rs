@@ -20,4 +20,4 @@ mod source;
 
 pub use kitti::KittiSequence;
 pub use skips::{Skip, SkipLog};
-pub use source::{Recording, Source, WORLD_FRAME};
+pub use source::{Georeference, Source, SourceKind, SourceOptions, WORLD_FRAME};

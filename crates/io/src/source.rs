@@ -1,23 +1,43 @@
-//! A drive to read, whatever holds it, told apart by content ([`super::format`]), and
-//! posed once by [`travmap_core::posing::decide`].
+//! A drive to read, whatever holds it, told apart by content ([`format::detect`],
+//! the one place that decides), and posed once by [`decide`]. What holds it
+//! ([`Recording`]) stays inside: callers ask the [`Source`].
 
 use std::ops::Range;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use super::format;
+use nalgebra::Isometry3;
+
+use super::format::{self, InputFormat};
 use super::kitti::KittiSequence;
-use super::ros_drive::{DriveOptions, RosDrive};
+use super::ros_drive::{LogOptions, RosDrive};
 use super::skips::{Skip, SkipLog};
 use crate::cloud_files::scan_folder::ScanFolder;
 use crate::cloud_files::site_cloud::SiteCloud;
 use crate::containers::log::Log;
+use travmap_core::config::PoseSource;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
 use travmap_core::posing::{PoseRecord, Posing, decide};
 
-/// What holds a drive: a KITTI sequence directory, a recorded ROS log or a folder of
-/// scans.
-pub enum Recording {
+/// How to read a drive: what every kind uses, then what one kind uses.
+#[derive(Clone, Debug, Default)]
+pub struct SourceOptions {
+    /// Where the scans' poses come from.
+    pub poses: PoseSource,
+    /// Skip (and record) frames whose input is unreadable instead of stopping.
+    pub keep_going: bool,
+    /// Recorded logs: topics, frames and sensors.
+    pub log: LogOptions,
+    /// Folders of scans: the rate stamps are made at when the file names are not
+    /// times (10 Hz when None).
+    pub rate_hz: Option<f64>,
+    /// One saved point cloud is read as a site of square tiles this wide (m), as
+    /// `travmap map` reads it; None: it is refused as no drive.
+    pub site_tile_m: Option<f64>,
+}
+
+/// What holds a drive.
+enum Recording {
     Kitti(Box<KittiSequence>),
     Log(Box<RosDrive>),
     Scans(Box<ScanFolder>),
@@ -25,15 +45,70 @@ pub enum Recording {
     Site(Box<SiteCloud>),
 }
 
+/// What kind of drive a source is, for reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SourceKind {
+    Kitti,
+    /// A recorded log of point clouds.
+    Log,
+    /// A recorded log of LiDAR packets.
+    PacketLog,
+    Scans,
+    Site,
+}
+
+impl SourceKind {
+    /// Its name in reports (`bench --tools`).
+    pub fn name(self) -> &'static str {
+        match self {
+            SourceKind::Kitti => "kitti",
+            SourceKind::Log => "log",
+            SourceKind::PacketLog => "packets",
+            SourceKind::Scans => "scans",
+            SourceKind::Site => "site",
+        }
+    }
+}
+
+/// Where a map's frame lies in a georeferenced source's coordinates: a LAS file's,
+/// or a log's `utm` / `earth` frame.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Georeference {
+    /// The log's frame the map is placed in; None: the source file's coordinates.
+    pub frame: Option<String>,
+    /// The map frame's (0, 0, 0) in those coordinates.
+    pub origin_m: [f64; 3],
+    /// The map frame's rotation in those coordinates (x, y, z, w; identity for a file).
+    pub rotation_xyzw: [f64; 4],
+    /// The source's coordinate reference system, as WKT.
+    pub crs_wkt: Option<String>,
+}
+
+impl Georeference {
+    /// Whether the coordinates are planar metres a world file can carry: a file's
+    /// (projected CRS) or `utm`; not `earth`, which is ECEF.
+    pub fn is_planar(&self) -> bool {
+        self.frame.as_deref().is_none_or(|frame| frame == "utm")
+    }
+
+    /// The rotation about z (radians), as a world file carries it.
+    pub fn yaw_rad(&self) -> f64 {
+        let [x, y, z, w] = self.rotation_xyzw;
+        (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z))
+    }
+}
+
 /// The world frame of inputs that do not name one (KITTI, folders of scans).
 pub const WORLD_FRAME: &str = "map";
 
 /// A drive to read, and how its scans are posed.
 pub struct Source {
-    pub recording: Recording,
+    recording: Recording,
     posing: Posing,
     /// Frames carry their points' labels (false: read as if unlabelled).
     read_labels: bool,
+    /// The frames skipped as unreadable (`--keep-going`), whichever pass met them.
+    skips: SkipLog,
 }
 
 impl Source {
@@ -41,35 +116,54 @@ impl Source {
     /// posed as [`decide`] says. `on_notice` hears what the reader noticed and worked
     /// around (an unindexed bag, poses estimated, ...) as soon as it is known, before
     /// anything can fail later.
-    pub fn open(path: &Path, options: &DriveOptions, on_notice: &dyn Fn(&str)) -> Result<Self> {
+    pub fn open(path: &Path, options: &SourceOptions, on_notice: &dyn Fn(&str)) -> Result<Self> {
+        let skips = SkipLog::new(options.keep_going);
         let (recording, record) = match format::detect(path)? {
-            format::InputFormat::Kitti if let Some(problem) = misplaced(path, options) => {
+            InputFormat::ScanFolder if let Some(sequence) = velodyne_of_sequence(path, options) => {
                 return Err(Error::Sequence {
                     path: path.to_path_buf(),
-                    message: problem,
+                    message: format!(
+                        "the velodyne/ folder of the sequence {}: point at the sequence, not its velodyne/ folder (or pass --poses registration to treat it as a folder of scans)",
+                        sequence.display()
+                    ),
                 });
             }
-            format::InputFormat::Kitti if ScanFolder::holds_scans(path) => {
+            InputFormat::ScanFolder => {
                 let folder = ScanFolder::open(path, options.rate_hz)?;
                 on_notice(folder.notice());
                 let record = PoseRecord::Missing("a folder of scans records no poses".into());
                 (Recording::Scans(Box::new(folder)), record)
             }
-            format::InputFormat::Kitti => {
+            InputFormat::Kitti => {
                 let sequence = KittiSequence::open(path)?;
                 (Recording::Kitti(Box::new(sequence)), PoseRecord::Reaches)
+            }
+            InputFormat::SiteCloud(kind) => {
+                let Some(tile_m) = options.site_tile_m else {
+                    return Err(format::refuse(path, InputFormat::SiteCloud(kind)));
+                };
+                let site = SiteCloud::open(path, kind, tile_m)?;
+                on_notice(&site.notice());
+                // Each tile is posed by its virtual sensor.
+                return Ok(Self {
+                    recording: Recording::Site(Box::new(site)),
+                    posing: Posing::Recorded,
+                    read_labels: true,
+                    skips,
+                });
             }
             format => {
                 let log = Log::open(path, format)?;
                 log.notices().iter().for_each(|notice| on_notice(notice));
                 // A log's poses depend on its transform tree: the drive decides as it opens.
-                let drive = RosDrive::open(log, options)?;
+                let drive = RosDrive::open(log, &options.log, options.poses)?;
                 drive.notice().into_iter().for_each(on_notice);
                 let posing = drive.posing();
                 return Ok(Self {
                     recording: Recording::Log(Box::new(drive)),
                     posing,
                     read_labels: true,
+                    skips,
                 });
             }
         };
@@ -79,17 +173,70 @@ impl Source {
             recording,
             posing: decision.posing,
             read_labels: true,
+            skips,
         })
     }
 
-    /// One saved point cloud (a PCD file) as a site: tiles of `grid_size_m` read
-    /// as frames posed by their virtual sensors (see [`SiteCloud`]).
-    pub fn site_cloud(path: &Path, grid_size_m: f64) -> Result<Self> {
-        Ok(Self {
-            recording: Recording::Site(Box::new(SiteCloud::open(path, grid_size_m)?)),
-            posing: Posing::Recorded,
-            read_labels: true,
-        })
+    /// What kind of drive this is.
+    pub fn kind(&self) -> SourceKind {
+        match &self.recording {
+            Recording::Kitti(..) => SourceKind::Kitti,
+            Recording::Log(drive) if drive.packet_model().is_some() => SourceKind::PacketLog,
+            Recording::Log(..) => SourceKind::Log,
+            Recording::Scans(..) => SourceKind::Scans,
+            Recording::Site(..) => SourceKind::Site,
+        }
+    }
+
+    /// The KITTI sequence, when the drive is one (convert, annotate's passthrough).
+    pub fn kitti(&self) -> Option<&KittiSequence> {
+        match &self.recording {
+            Recording::Kitti(sequence) => Some(sequence),
+            _ => None,
+        }
+    }
+
+    /// The recorded log, when the drive is one (convert, annotate's passthrough).
+    pub fn log(&self) -> Option<&RosDrive> {
+        match &self.recording {
+            Recording::Log(drive) => Some(drive),
+            _ => None,
+        }
+    }
+
+    /// The scans a frame's window holds at most, where the source decides it: a site
+    /// cloud's tile is already a whole window (its neighbours' points are its own).
+    pub fn window_scans(&self) -> Option<usize> {
+        matches!(self.recording, Recording::Site(..)).then_some(1)
+    }
+
+    /// When the drive is a packet log that began mid-turn: the packets of frame 0 (a
+    /// part of a rotation) and of frame 1.
+    pub fn partial_first_scan(&self) -> Option<(usize, usize)> {
+        self.log().and_then(RosDrive::partial_first_scan)
+    }
+
+    /// Where the world frame lies on the Earth or in a file's coordinates, when the
+    /// source says: a log's `utm` / `earth` frame, a site cloud's origin and CRS.
+    pub fn georeference(&self) -> Option<Georeference> {
+        match &self.recording {
+            Recording::Site(site) => site.georeference().map(|(origin_m, crs)| Georeference {
+                frame: None,
+                origin_m,
+                rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+                crs_wkt: crs.map(str::to_string),
+            }),
+            Recording::Log(drive) => drive.georeference().map(|(frame, geo_from_world)| {
+                let q = geo_from_world.rotation.coords;
+                Georeference {
+                    frame: Some(frame.clone()),
+                    origin_m: geo_from_world.translation.vector.into(),
+                    rotation_xyzw: [q.x, q.y, q.z, q.w],
+                    crs_wkt: None,
+                }
+            }),
+            Recording::Kitti(..) | Recording::Scans(..) => None,
+        }
     }
 
     /// The frame the scans are in, as written to MCAP (`header.frame_id`).
@@ -118,7 +265,7 @@ impl Source {
     /// Every pose the input records for its scans (frame number and
     /// `world_from_velodyne`), also past the selected frames; none when its scans
     /// are not posed by recorded poses.
-    pub fn recorded_poses(&self) -> Result<Vec<(usize, nalgebra::Isometry3<f64>)>> {
+    pub fn recorded_poses(&self) -> Result<Vec<(usize, Isometry3<f64>)>> {
         if self.posing != Posing::Recorded {
             return Ok(Vec::new());
         }
@@ -149,33 +296,14 @@ impl Source {
         }
     }
 
-    /// Skip (and record) frames whose input is unreadable instead of stopping.
-    pub fn set_keep_going(&mut self, keep_going: bool) {
-        *self.skip_log_mut() = SkipLog::new(keep_going);
-    }
-
-    fn skip_log_mut(&mut self) -> &mut SkipLog {
-        match &mut self.recording {
-            Recording::Kitti(sequence) => &mut sequence.skips,
-            Recording::Log(drive) => &mut drive.skips,
-            Recording::Scans(folder) => &mut folder.skips,
-            Recording::Site(site) => &mut site.skips,
-        }
-    }
-
     /// Where unreadable frames (and frames a later stage cannot use) are recorded.
     pub fn skip_log(&self) -> &SkipLog {
-        match &self.recording {
-            Recording::Kitti(sequence) => &sequence.skips,
-            Recording::Log(drive) => &drive.skips,
-            Recording::Scans(folder) => &folder.skips,
-            Recording::Site(site) => &site.skips,
-        }
+        &self.skips
     }
 
     /// The frames skipped so far.
     pub fn skipped(&self) -> Vec<Skip> {
-        self.skip_log().skipped()
+        self.skips.skipped()
     }
 
     pub fn path(&self) -> &Path {
@@ -221,8 +349,8 @@ impl Source {
         self.frames_in(&(0..usize::MAX))
     }
 
-    /// The frames in `range`, in order. With `--keep-going` (see
-    /// [`Source::set_keep_going`]) an unreadable frame is recorded and left out;
+    /// The frames in `range`, in order. With `--keep-going`
+    /// ([`SourceOptions::keep_going`]) an unreadable frame is recorded and left out;
     /// otherwise its error ends the run.
     pub fn read<'a>(
         &'a self,
@@ -242,18 +370,18 @@ impl Source {
         match &self.recording {
             Recording::Kitti(sequence) => Box::new(frame_by_frame(
                 sequence.frames_in(range),
-                &sequence.skips,
+                &self.skips,
                 |index| sequence.read_frame(index),
             )),
-            Recording::Log(drive) => Box::new(drive.read(range)),
+            Recording::Log(drive) => Box::new(drive.read(range, &self.skips)),
             Recording::Scans(folder) => Box::new(frame_by_frame(
                 folder.frames_in(range),
-                &folder.skips,
+                &self.skips,
                 |index| folder.read_frame(index),
             )),
             Recording::Site(site) => Box::new(frame_by_frame(
                 site.frames_in(range),
-                &site.skips,
+                &self.skips,
                 |index| site.read_frame(index),
             )),
         }
@@ -274,47 +402,10 @@ fn frame_by_frame<'a>(
         })
 }
 
-/// What a directory that is no drive is instead, and where to point: a dataset root,
-/// its `sequences/`, a sequence's `velodyne/` (a folder of scans only when asked), a
-/// rosbag2 directory without its metadata.
-fn misplaced(path: &Path, options: &DriveOptions) -> Option<String> {
-    let is_sequence = |dir: &Path| dir.join("velodyne").is_dir() && dir.join("calib.txt").is_file();
-    let subdirs = || -> Vec<std::path::PathBuf> {
-        let entries = std::fs::read_dir(path).into_iter().flatten().flatten();
-        let mut dirs: Vec<_> = entries.map(|e| e.path()).filter(|p| p.is_dir()).collect();
-        dirs.sort();
-        dirs
-    };
-    if is_sequence(path) {
-        return None;
-    }
-    if let Some(first) = subdirs().into_iter().find(|d| is_sequence(d)) {
-        return Some(format!(
-            "a folder of sequences, not one: point at one of them, e.g. {}",
-            first.display()
-        ));
-    }
-    let sequences = path.join("sequences");
-    if sequences.is_dir() {
-        let first = std::fs::read_dir(&sequences)
-            .into_iter()
-            .flatten()
-            .flatten();
-        let example = first.map(|e| e.path()).filter(|p| is_sequence(p)).min();
-        return Some(format!(
-            "a dataset root: point at one sequence, e.g. {}",
-            example.unwrap_or_else(|| sequences.join("00")).display()
-        ));
-    }
-    let parent = path.parent().filter(|p| is_sequence(p));
-    if let Some(sequence) = parent
-        && path.file_name().is_some_and(|n| n == "velodyne")
-        && options.poses != travmap_core::config::PoseSource::Registration
-    {
-        return Some(format!(
-            "the velodyne/ folder of the sequence {}: point at the sequence, not its velodyne/ folder (or pass --poses registration to treat it as a folder of scans)",
-            sequence.display()
-        ));
-    }
-    None
+/// The sequence whose `velodyne/` folder `path` is, unless `--poses registration`
+/// asks to read that folder as a folder of scans.
+fn velodyne_of_sequence(path: &Path, options: &SourceOptions) -> Option<PathBuf> {
+    let sequence = path.parent().filter(|p| format::is_sequence(p))?;
+    let is_velodyne = path.file_name().is_some_and(|n| n == "velodyne");
+    (is_velodyne && options.poses != PoseSource::Registration).then(|| sequence.to_path_buf())
 }

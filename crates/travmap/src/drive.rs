@@ -88,6 +88,17 @@ impl Selection {
     /// The pipeline for this source's scans, as its posing asks (following the
     /// trajectory once it is followed).
     pub fn pipeline(&self, config: &Config) -> Result<Pipeline> {
+        // Where each frame is already a whole window (a site cloud's tile), the
+        // window is one scan.
+        let mut windowed;
+        let config = match self.source.window_scans() {
+            Some(scans) if scans < config.integration.scans => {
+                windowed = config.clone();
+                windowed.integration.scans = scans;
+                &windowed
+            }
+            _ => config,
+        };
         let mut pipeline = Pipeline::new(config, self.source.posing())?;
         if let Some(trajectory) = &self.trajectory {
             pipeline.follow(trajectory.clone(), config);

@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 use nalgebra::Isometry3;
 
 use super::pcd::parse_pcd;
+use crate::format::{ScanFormat, scan_format};
 use crate::kitti::{drop_non_returns, parse_scan};
 use crate::payloads::cloud::{check_some_finite, cloud_points};
-use crate::skips::SkipLog;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::{Frame, RemissionScale};
 
@@ -24,12 +24,6 @@ pub const DEFAULT_RATE_HZ: f64 = 10.0;
 /// File names at or above this many nanoseconds (1973) are read as times.
 const SMALLEST_STAMP_NS: u64 = 100_000_000_000_000_000;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum ScanFormat {
-    Pcd,
-    Bin,
-}
-
 /// An opened folder of scans.
 pub struct ScanFolder {
     dir: PathBuf,
@@ -38,16 +32,9 @@ pub struct ScanFolder {
     stamps_ns: Vec<u64>,
     /// How the stamps were made, for the user to hear.
     notice: String,
-    pub(crate) skips: SkipLog,
 }
 
 impl ScanFolder {
-    /// Whether `dir` holds scans and nothing that says it is another kind of drive.
-    pub fn holds_scans(dir: &Path) -> bool {
-        std::fs::read_dir(dir)
-            .is_ok_and(|entries| entries.flatten().any(|e| scan_format(&e.path()).is_some()))
-    }
-
     /// Opens `dir`; stamps from numeric file names in ns, else at `rate_hz` (10 Hz when
     /// None).
     pub fn open(dir: &Path, rate_hz: Option<f64>) -> Result<Self> {
@@ -114,7 +101,6 @@ impl ScanFolder {
                     ScanFormat::Bin => ".bin",
                 }
             ),
-            skips: SkipLog::default(),
         })
     }
 
@@ -170,13 +156,5 @@ impl ScanFolder {
             dropped_points,
             sensors: Vec::new(),
         })
-    }
-}
-
-fn scan_format(path: &Path) -> Option<ScanFormat> {
-    match path.extension()?.to_str()? {
-        "pcd" => Some(ScanFormat::Pcd),
-        "bin" => Some(ScanFormat::Bin),
-        _ => None,
     }
 }

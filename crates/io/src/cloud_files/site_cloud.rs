@@ -25,9 +25,8 @@ use super::bucket_store::{BucketStore, SpillError, WORDS_PER_POINT};
 use super::las::stream_las;
 use super::pcd::stream_pcd;
 use super::ply::stream_ply;
-use crate::format::{SiteCloudFormat, site_cloud_format};
+use crate::format::SiteCloudFormat;
 use crate::payloads::cloud::{raw_cloud_points, remission_scale};
-use crate::skips::SkipLog;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::{Frame, RemissionScale};
 use travmap_formats::ros::PointCloud2;
@@ -66,13 +65,12 @@ pub struct SiteCloud {
     /// that keeps float32 precise; else zero), and the CRS the file names.
     origin_m: [f64; 3],
     crs_wkt: Option<String>,
-    pub(crate) skips: SkipLog,
 }
 
 impl SiteCloud {
-    /// Reads the PCD, PLY or LAS / LAZ file at `path` and cuts it into tiles of
-    /// `grid_size_m`.
-    pub fn open(path: &Path, grid_size_m: f64) -> Result<Self> {
+    /// Reads the PCD, PLY or LAS / LAZ file at `path` (of `format`, as
+    /// [`crate::format::detect`] found it) and cuts it into tiles of `grid_size_m`.
+    pub fn open(path: &Path, format: SiteCloudFormat, grid_size_m: f64) -> Result<Self> {
         let fail = |message: String| Error::Sequence {
             path: path.to_path_buf(),
             message,
@@ -113,11 +111,11 @@ impl SiteCloud {
                 .fold(largest_intensity, f32::max);
             keep(&read.points, read.labels.as_deref())
         };
-        let read = match site_cloud_format(path) {
-            Some(SiteCloudFormat::Las) => stream_las(path, &mut |batch| keep(batch, None))
+        let read = match format {
+            SiteCloudFormat::Las => stream_las(path, &mut |batch| keep(batch, None))
                 .map(|place| Some((place.origin_m, place.crs_wkt))),
-            Some(SiteCloudFormat::Ply) => stream_ply(path, &mut keep_cloud).map(|()| None),
-            _ => stream_pcd(path, &mut keep_cloud).map(|()| None),
+            SiteCloudFormat::Ply => stream_ply(path, &mut keep_cloud).map(|()| None),
+            SiteCloudFormat::Pcd => stream_pcd(path, &mut keep_cloud).map(|()| None),
         };
         if let Some(e) = spilled {
             return Err(spill_failed(e));
@@ -174,7 +172,6 @@ impl SiteCloud {
             tile_m: grid_size_m,
             origin_m,
             crs_wkt,
-            skips: SkipLog::default(),
         })
     }
 

@@ -14,7 +14,7 @@ use super::bag_messages::BagMessages;
 use super::pcap::PcapFile;
 use super::rosbag2::{Rosbag2Directory, says_zstd_messages};
 use super::sqlite::SqliteFile;
-use crate::format::InputFormat;
+use crate::format::{InputFormat, refuse};
 use travmap_core::error::{Error, LostMessage, Result};
 use travmap_formats::foxglove;
 use travmap_formats::log_message::HEADER_BYTES;
@@ -34,13 +34,18 @@ pub enum LogFile {
 }
 
 impl LogFile {
-    /// Opens `path` read as `format`, one of the single-file formats.
+    /// Opens `path` read as `format`, one of the single-file log formats (another
+    /// format is refused: a rosbag2 directory's storage file that is no log).
     pub fn open(path: &Path, format: InputFormat) -> Result<Self> {
         Ok(match format {
+            InputFormat::Mcap => LogFile::Mcap(McapFile::open(path)?),
             InputFormat::Bag => LogFile::Bag(BagFile::open(path)?),
             InputFormat::Sqlite => LogFile::Sqlite(SqliteFile::open(path)?),
             InputFormat::Pcap => LogFile::Pcap(PcapFile::open(path)?),
-            _ => LogFile::Mcap(McapFile::open(path)?),
+            InputFormat::Kitti
+            | InputFormat::ScanFolder
+            | InputFormat::Rosbag2
+            | InputFormat::SiteCloud(_) => return Err(refuse(path, format)),
         })
     }
 

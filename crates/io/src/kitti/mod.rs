@@ -13,7 +13,6 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Matrix4};
 
-use super::skips::SkipLog;
 pub use crate::kitti::text::{
     Calibration, parse_calibration, parse_poses, parse_times, read_calibration, read_poses,
     read_times,
@@ -38,7 +37,6 @@ pub struct KittiSequence {
     read_images: bool,
     /// Read `labels/` (false: the frames come without labels, as unlabelled drives).
     read_labels: bool,
-    pub(crate) skips: SkipLog,
 }
 
 impl KittiSequence {
@@ -64,13 +62,7 @@ impl KittiSequence {
             frames,
             read_images: true,
             read_labels: true,
-            skips: SkipLog::default(),
         })
-    }
-
-    /// What happens to frames whose files are unreadable.
-    pub fn skip_log(&self) -> &SkipLog {
-        &self.skips
     }
 
     /// Whether [`Self::read_frame`] decodes `image_2` (default true); decoding costs

@@ -12,6 +12,7 @@ use crate::packets::{PacketAssembler, PacketCalibration, PacketModel};
 use crate::payloads::cloud::{CloudPoints, check_some_finite, cloud_points};
 use crate::payloads::livox::decode_cloud;
 use crate::ros_drive::{IMAGE_PAIRING_NS, RosDrive};
+use crate::skips::SkipLog;
 use travmap_core::error::{Error, LostMessage, Result};
 use travmap_core::frame::{Frame, RemissionScale};
 use travmap_formats::log_message::{LogMessage, Part};
@@ -28,7 +29,10 @@ impl RosDrive {
     /// The scans of every packet topic read (the cloud topic's and the merged
     /// ones'), cut and decoded in one pass (no poses), in log order; the cloud
     /// topic's with the stamps the index gave them. None without a packet topic.
-    pub fn packet_scans(&self) -> Option<impl Iterator<Item = Result<DecodedScan<'_>>> + '_> {
+    pub fn packet_scans<'a>(
+        &'a self,
+        skips: &'a SkipLog,
+    ) -> Option<impl Iterator<Item = Result<DecodedScan<'a>>> + 'a> {
         let own = (self.assembler()).map(|a| (self.cloud_topic.as_str(), self.cloud_frame(), a));
         let merged = (self.merged.iter()).filter_map(|sensor| {
             let assembler = assembler(sensor.packets.as_ref())?;
@@ -39,7 +43,7 @@ impl RosDrive {
             return None;
         }
         let mut next = 0;
-        let scans = self.messages().flat_map(move |message| {
+        let scans = self.messages(skips).flat_map(move |message| {
             let message = match message {
                 Ok(message) => message,
                 Err(error) => return vec![Err(error)],
@@ -73,8 +77,8 @@ impl RosDrive {
 
     /// The frames in `frames`, streamed in one pass over the file, each with the
     /// camera image nearest in time (within 50 ms) when the drive has a camera. With
-    /// `--keep-going`, unreadable frames are recorded in the skip log and left out.
-    pub fn read(&self, frames: &Range<usize>) -> DriveFrames<'_> {
+    /// `--keep-going` (`skips`), unreadable frames are recorded and left out.
+    pub fn read<'a>(&'a self, frames: &Range<usize>, skips: &'a SkipLog) -> DriveFrames<'a> {
         // Only the topics frames are made of are read: a log's other cameras, say,
         // are not copied (nor, from SQLite, read).
         let camera = (self.camera.as_ref()).filter(|_| self.read_images);
@@ -94,6 +98,7 @@ impl RosDrive {
         };
         DriveFrames {
             drive: self,
+            skips,
             unreported,
             stream: Box::new(self.log.messages_in_parts(1, std::sync::Arc::new(parts))),
             // Clouds the index left out (past a cut end) are not frames.
@@ -228,6 +233,7 @@ enum Cloud {
 /// found too.
 pub struct DriveFrames<'a> {
     drive: &'a RosDrive,
+    skips: &'a SkipLog,
     /// Lost messages of topics this pass does not read, to report first.
     unreported: Vec<LostMessage>,
     stream: Box<dyn Iterator<Item = Result<LogMessage>> + 'a>,
@@ -261,7 +267,7 @@ impl DriveFrames<'_> {
         self.images.retain(|(stamp, _)| *stamp >= keep_after);
         match frame {
             Ok(frame) => Some(Ok(frame)),
-            Err(error) => self.drive.skips.handle(index, error).err().map(Err),
+            Err(error) => self.skips.handle(index, error).err().map(Err),
         }
     }
 
@@ -304,7 +310,7 @@ impl Iterator for DriveFrames<'_> {
             // At the cloud that follows it, as a damaged chunk is.
             let stamps_ns = &self.drive.stamps_ns;
             let cloud = stamps_ns.partition_point(|&stamp_ns| stamp_ns <= lost.log_time_ns);
-            if let Err(error) = (self.drive.skips).handle(cloud, Error::LogMessageLost(lost)) {
+            if let Err(error) = self.skips.handle(cloud, Error::LogMessageLost(lost)) {
                 self.stream_ended = true;
                 self.ready.clear();
                 return Some(Err(error));
@@ -323,7 +329,7 @@ impl Iterator for DriveFrames<'_> {
                 // A corrupt stretch of the file: with --keep-going, what came before counts.
                 // A damaged chunk: its clouds were never indexed, the rest follows.
                 Some(Err(error)) if error.is_lost_stretch() => {
-                    if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
+                    if let Err(error) = self.skips.handle(self.next_cloud, error) {
                         self.stream_ended = true;
                         return Some(Err(error));
                     }
@@ -343,7 +349,7 @@ impl Iterator for DriveFrames<'_> {
                         },
                         other => other,
                     };
-                    if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
+                    if let Err(error) = self.skips.handle(self.next_cloud, error) {
                         return Some(Err(error));
                     }
                     break;
@@ -371,7 +377,7 @@ impl Iterator for DriveFrames<'_> {
                 .position(|sensor| sensor.topic == message.connection.topic)
             {
                 if let Err(error) = self.hold_merged(topic, message)
-                    && let Err(error) = self.drive.skips.handle(self.next_cloud, error)
+                    && let Err(error) = self.skips.handle(self.next_cloud, error)
                 {
                     self.stream_ended = true;
                     return Some(Err(error));
@@ -389,7 +395,7 @@ impl Iterator for DriveFrames<'_> {
                         .collect(),
                     Err(problem) => {
                         let error = self.drive.cloud_error(self.next_cloud, problem);
-                        if let Err(error) = self.drive.skips.handle(self.next_cloud, error) {
+                        if let Err(error) = self.skips.handle(self.next_cloud, error) {
                             self.stream_ended = true;
                             return Some(Err(error));
                         }

@@ -8,8 +8,8 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use super::by_topic::{LidarCalibrations, LidarFrames};
 use super::camera_model::Projection;
+use super::options::{LogOptions, MergedTopics};
 use super::packet_topics::PacketTopics;
 use super::pose_topics::{
     POSE_MESSAGES, PoseTopic, VehiclePoses, add_vehicle_poses, named_pose_topic, unposed,
@@ -34,43 +34,6 @@ const ODOMETRY: &str = "nav_msgs/msg/Odometry";
 const CAMERA_INFO: &str = "sensor_msgs/msg/CameraInfo";
 const COMPRESSED_IMAGE: &str = "sensor_msgs/msg/CompressedImage";
 const RAW_IMAGE: &str = "sensor_msgs/msg/Image";
-
-/// What to read from the drive; everything found by itself when None.
-#[derive(Clone, Debug, Default)]
-pub struct DriveOptions {
-    pub cloud_topic: Option<String>,
-    /// Cloud topics merged into `cloud_topic`'s scans (several LiDARs).
-    pub merged_topics: MergedTopics,
-    pub world_frame: Option<String>,
-    /// The image topic (Image or CompressedImage) whose frame has a CameraInfo; found
-    /// by itself when there is exactly one.
-    pub camera_topic: Option<String>,
-    /// Where the clouds' poses come from.
-    pub poses: PoseSource,
-    /// The pose topic (PoseStamped / PoseWithCovarianceStamped) that poses the
-    /// vehicle, when there are several.
-    pub pose_topic: Option<String>,
-    /// Folders of scans: the rate stamps are made at when the file names are not
-    /// times (10 Hz when None).
-    pub rate_hz: Option<f64>,
-    /// Packet topics' calibration files (`--lidar-calibration`).
-    pub lidar_calibrations: LidarCalibrations,
-    /// The frames LiDAR topics' points are in, where the log's are missing or
-    /// wrong (`--lidar-frame`).
-    pub lidar_frames: LidarFrames,
-}
-
-/// Which other cloud topics are merged into the frames' scans.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub enum MergedTopics {
-    /// One sensor.
-    #[default]
-    None,
-    /// These cloud or packet topics.
-    Topics(Vec<String>),
-    /// Every cloud or packet topic but the frames' own.
-    All,
-}
 
 /// Another sensor's topic, merged into the frames' scans.
 pub(crate) struct MergedTopic {
@@ -117,10 +80,19 @@ pub(crate) struct Contents {
     camera_infos: HashMap<String, CameraInfo>,
     /// Which recorded poses count (`--poses`).
     poses: PoseSource,
-    /// Image topic -> (compressed, encoding, frame).
-    image_topics: BTreeMap<String, (bool, MessageEncoding, String)>,
+    /// The image topics, by name.
+    image_topics: BTreeMap<String, ImageTopic>,
     /// Packet topics: models, cuts, an Ouster's metadata.
     packets: PacketTopics,
+}
+
+/// An image topic as its first message shows it.
+struct ImageTopic {
+    /// CompressedImage (else a raw Image).
+    compressed: bool,
+    encoding: MessageEncoding,
+    /// The camera frame its images are in (`header.frame_id`).
+    frame: String,
 }
 
 impl Contents {
@@ -249,7 +221,11 @@ impl Contents {
                 let header: HeaderOnly = encoding.decode(data).map_err(problem)?;
                 self.image_topics.insert(
                     connection.topic.clone(),
-                    (schema == COMPRESSED_IMAGE, encoding, header.header.frame_id),
+                    ImageTopic {
+                        compressed: schema == COMPRESSED_IMAGE,
+                        encoding,
+                        frame: header.header.frame_id,
+                    },
                 );
             }
             _ => {}
@@ -259,7 +235,7 @@ impl Contents {
 
     /// The PointCloud2 topic asked for, or the only one; merging every topic
     /// (`--cloud-topic all`), the one with the most clouds (then by name).
-    fn cloud_topic(&self, path: &Path, options: &DriveOptions) -> Result<String> {
+    fn cloud_topic(&self, path: &Path, options: &LogOptions) -> Result<String> {
         let most_clouds = || {
             self.cloud_stamps
                 .iter()
@@ -286,7 +262,7 @@ impl Contents {
     fn merged_topics(
         &self,
         path: &Path,
-        options: &DriveOptions,
+        options: &LogOptions,
         cloud_topic: &str,
     ) -> Result<Vec<MergedTopic>> {
         let topics: Vec<String> = match &options.merged_topics {
@@ -341,8 +317,9 @@ impl Contents {
 
     /// The camera: the image topic asked for, or the only one whose frame has a
     /// CameraInfo; None without one.
-    fn camera(&self, options: &DriveOptions) -> Result<Option<CameraSource>, String> {
-        let source = |topic: &str, compressed: bool, encoding: MessageEncoding, frame: &str| {
+    fn camera(&self, options: &LogOptions) -> Result<Option<CameraSource>, String> {
+        let source = |topic: &str, image: &ImageTopic| {
+            let (compressed, encoding, frame) = (image.compressed, image.encoding, &image.frame);
             let info = self
                 .camera_infos
                 .get(frame)
@@ -359,7 +336,7 @@ impl Contents {
             }))
         };
         if let Some(topic) = &options.camera_topic {
-            let (compressed, encoding, frame) = self.image_topics.get(topic).ok_or_else(|| {
+            let image = self.image_topics.get(topic).ok_or_else(|| {
                 format!(
                     "no Image or CompressedImage messages on {topic}; image topics: [{}]",
                     self.image_topics
@@ -369,17 +346,13 @@ impl Contents {
                         .join(", ")
                 )
             })?;
-            return source(topic, *compressed, *encoding, frame);
+            return source(topic, image);
         }
-        let usable: Vec<(&String, &(bool, MessageEncoding, String))> = self
-            .image_topics
-            .iter()
-            .filter(|(_, (_, _, frame))| self.camera_infos.contains_key(frame))
+        let usable: Vec<(&String, &ImageTopic)> = (self.image_topics.iter())
+            .filter(|(_, image)| self.camera_infos.contains_key(&image.frame))
             .collect();
         match usable.as_slice() {
-            [(topic, (compressed, encoding, frame))] => {
-                source(topic, *compressed, *encoding, frame)
-            }
+            [(topic, image)] => source(topic, image),
             _ => Ok(None),
         }
     }
@@ -416,10 +389,10 @@ pub(crate) struct LogIndex {
 impl LogIndex {
     /// Reads `log`'s topics, cloud stamps and transforms in one pass, and chooses
     /// the cloud topic and the camera.
-    pub(crate) fn read(log: &Log, options: &DriveOptions) -> Result<Self> {
+    pub(crate) fn read(log: &Log, options: &LogOptions, poses: PoseSource) -> Result<Self> {
         let path = log.path();
         let mut contents = Contents {
-            poses: options.poses,
+            poses,
             pose_topic: options.pose_topic.clone(),
             packets: PacketTopics::new(options.lidar_calibrations.clone()),
             ..Default::default()
@@ -485,7 +458,7 @@ impl LogIndex {
                 *frame = given;
             }
         }
-        if matches!(options.poses, PoseSource::Auto | PoseSource::Odometry) {
+        if matches!(poses, PoseSource::Auto | PoseSource::Odometry) {
             let named = options.pose_topic.as_deref();
             (named_pose_topic(named, &contents.pose_topics, &contents.topics)).map_err(
                 |problem| Error::LogPoseTopic {
@@ -544,7 +517,7 @@ impl LogIndex {
     /// Whether the log's poses reach the clouds: a world frame named, or a moving
     /// transform above their frame (fixed mounts alone would give every scan the
     /// same pose).
-    pub(crate) fn pose_record(&self, options: &DriveOptions) -> PoseRecord {
+    pub(crate) fn pose_record(&self, options: &LogOptions) -> PoseRecord {
         // A cycle was refused when the root was found.
         let moves = self.transforms.moves(&self.cloud_frame).unwrap_or(false);
         if options.world_frame.is_some() || moves {

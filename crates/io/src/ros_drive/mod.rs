@@ -15,6 +15,7 @@ pub(crate) mod camera_model;
 pub mod frames;
 pub mod log_index;
 pub(crate) mod merged_clouds;
+mod options;
 pub(crate) mod packet_topics;
 pub mod pose_topics;
 pub mod transforms;
@@ -30,10 +31,11 @@ use crate::payloads::image::image_pixels;
 pub use crate::ros_drive::by_topic::{LidarCalibrations, LidarFrames};
 use crate::ros_drive::camera_model::Projection;
 use crate::ros_drive::log_index::{CameraSource, LogIndex};
-pub use crate::ros_drive::log_index::{DriveOptions, MergedTopics};
 use crate::ros_drive::merged_clouds::{MergedSensor, median_period_ns};
+pub use crate::ros_drive::options::{LogOptions, MergedTopics};
 use crate::ros_drive::pose_topics::VehiclePoses;
 use crate::ros_drive::transforms::TransformTree;
+use travmap_core::config::PoseSource;
 use travmap_core::error::{Error, LostMessage, Result};
 use travmap_core::frame::CameraImage;
 use travmap_core::posing::{Posing, decide};
@@ -105,14 +107,13 @@ pub struct RosDrive {
     pub(crate) merged: Vec<MergedSensor>,
     /// The clouds' median period: a merged cloud within half of it joins a scan.
     pub(crate) period_ns: u64,
-    pub(crate) skips: SkipLog,
 }
 
 impl RosDrive {
     /// Reads `log`'s topics, cloud stamps and transforms in one pass
-    /// ([`LogIndex`]), and poses the clouds as [`decide`] says.
-    pub fn open(log: Log, options: &DriveOptions) -> Result<Self> {
-        let mut index = LogIndex::read(&log, options)?;
+    /// ([`LogIndex`]), and poses the clouds as [`decide`] says, from `poses`.
+    pub fn open(log: Log, options: &LogOptions, poses: PoseSource) -> Result<Self> {
+        let mut index = LogIndex::read(&log, options, poses)?;
         let packet_topics = usize::from(index.packets.is_some())
             + (index.merged.iter())
                 .filter(|m| m.packets.is_some())
@@ -139,7 +140,7 @@ impl RosDrive {
                 })
             })
             .collect::<Result<Vec<_>>>()?;
-        let decision = decide(log.path(), options.poses, &index.pose_record(options))?;
+        let decision = decide(log.path(), poses, &index.pose_record(options))?;
         let mut notice = decision.notice;
         match (&index.vehicle_poses, decision.posing, &options.pose_topic) {
             (VehiclePoses::Used(said), Posing::Recorded, _) => {
@@ -212,7 +213,6 @@ impl RosDrive {
             packets,
             period_ns,
             merged,
-            skips: SkipLog::default(),
         };
         drive.trim_cut_end();
         Ok(drive)
@@ -433,9 +433,12 @@ impl RosDrive {
     }
 
     /// Every message of the log in order, undecoded (for passthrough); with
-    /// `--keep-going` the messages of damaged chunks are left out (reading the
-    /// frames records them), else the first is an error.
-    pub fn messages(&self) -> impl Iterator<Item = Result<LogMessage>> + '_ {
+    /// `--keep-going` (`skips`) the messages of damaged chunks are left out and
+    /// recorded at the cloud that follows, else the first is an error.
+    pub fn messages<'a>(
+        &'a self,
+        skips: &'a SkipLog,
+    ) -> impl Iterator<Item = Result<LogMessage>> + 'a {
         let mut clouds = 0;
         self.log
             .messages()
@@ -445,9 +448,7 @@ impl RosDrive {
                     Some(Ok(message))
                 }
                 // Recorded as reading the frames records it: at the cloud that follows.
-                Err(error) if error.is_lost_stretch() => {
-                    self.skips.handle(clouds, error).err().map(Err)
-                }
+                Err(error) if error.is_lost_stretch() => skips.handle(clouds, error).err().map(Err),
                 Err(error) => Some(Err(error)),
             })
     }

@@ -36,7 +36,6 @@ use travmap_formats::ros::{
     FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion,
     TfMessage, Time, TransformStamped, Vector3, datatype,
 };
-use travmap_io::Recording;
 use travmap_method::classifier::SvmModel;
 use travmap_method::grid::CellClass;
 use travmap_method::pipeline::FrameResult;
@@ -281,27 +280,26 @@ pub fn annotate(
     // A KITTI frame's messages are made from the frame as the method's reader reads
     // it (not read a second time), and written as they come, ahead of its results.
     let mut kitti_passthrough = None;
-    match &selection.source.recording {
-        Recording::Kitti(sequence) if options.passthrough => {
-            kitti_passthrough = Some(KittiFrameWriter::new(sequence));
-        }
-        Recording::Log(drive) if options.passthrough => {
-            sink.copy_chunks_by_time();
-            passthrough_messages = write_log_messages(&mut sink, drive, true, &|_, _| {})?.messages;
-        }
-        // A folder of scans or a site cloud has no messages to pass through.
-        _ => {}
+    let source = &selection.source;
+    let skips = source.skip_log();
+    // A folder of scans or a site cloud has no messages to pass through.
+    let passthrough_kitti = source.kitti().filter(|_| options.passthrough);
+    if let Some(sequence) = passthrough_kitti {
+        kitti_passthrough = Some(KittiFrameWriter::new(sequence));
     }
-    let kitti_passes = kitti_passthrough.is_some();
-    let encode_passthrough = |frame: &Frame| match &selection.source.recording {
-        Recording::Kitti(sequence) if kitti_passes => encode_kitti_frame(sequence, frame, 0),
-        _ => Ok(None),
+    if let Some(drive) = source.log().filter(|_| options.passthrough) {
+        sink.copy_chunks_by_time();
+        passthrough_messages =
+            write_log_messages(&mut sink, drive, skips, true, &|_, _| {})?.messages;
+    }
+    let encode_passthrough = |frame: &Frame| match passthrough_kitti {
+        Some(sequence) => encode_kitti_frame(sequence, skips, frame, 0),
+        None => Ok(None),
     };
     let world_frame = selection.source.world_frame().to_string();
     let posing = selection.source.posing();
     // Estimated poses go on /tf, unless passthrough writes KITTI's recorded ones there.
-    let kitti_tf =
-        matches!(selection.source.recording, Recording::Kitti(..)) && options.passthrough;
+    let kitti_tf = passthrough_kitti.is_some();
     let write_estimated_tf = posing == Posing::Registration && !kitti_tf;
     let sensor_frame = selection.source.sensor_frame().to_string();
     let mut evaluation = Evaluation::default();

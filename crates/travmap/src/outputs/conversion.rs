@@ -36,6 +36,7 @@ use travmap_formats::ros::{
     ros1_to_cdr,
 };
 use travmap_io::KittiSequence;
+use travmap_io::SkipLog;
 use travmap_io::packets::velodyne::PacketScan;
 use travmap_io::ros_drive::RosDrive;
 
@@ -88,6 +89,7 @@ pub struct LogCopySummary {
 pub fn write_log_messages(
     sink: &mut McapSink,
     drive: &RosDrive,
+    skips: &SkipLog,
     as_recorded: bool,
     on_messages: &dyn Fn(&str, u64),
 ) -> Result<LogCopySummary> {
@@ -128,7 +130,7 @@ pub fn write_log_messages(
             return Ok(summary);
         }
     }
-    for message in drive.messages() {
+    for message in drive.messages(skips) {
         let message = message?;
         on_messages(&message.connection.topic, 1);
         let connection = &message.connection;
@@ -186,14 +188,15 @@ pub fn write_log_messages(
 /// Converts every message of `drive` into `output` (see [`write_log_messages`]).
 pub fn convert_log(
     drive: &RosDrive,
+    skips: &SkipLog,
     output: &Path,
     compression: Compression,
     on_messages: &dyn Fn(&str, u64),
 ) -> Result<LogCopySummary> {
     let mut sink = McapSink::create(output, compression)?;
     // Converting is asked for a compression; passing through is not.
-    let mut summary = write_log_messages(&mut sink, drive, false, on_messages)?;
-    if let Some(scans) = drive.packet_scans() {
+    let mut summary = write_log_messages(&mut sink, drive, skips, false, on_messages)?;
+    if let Some(scans) = drive.packet_scans(skips) {
         for decoded in scans {
             let decoded = decoded?;
             let topic = decoded_topic(decoded.topic);
@@ -410,29 +413,26 @@ pub struct EncodedFrame {
 }
 
 /// The messages of `frame`, read from `sequence` (its image from its file, as
-/// recorded); None when they cannot be made and the sequence keeps going past
+/// recorded); None when they cannot be made and `skips` keeps going past
 /// unreadable frames, which records the skip.
 pub fn encode_kitti_frame(
     sequence: &KittiSequence,
+    skips: &SkipLog,
     frame: &Frame,
     start_ns: u64,
 ) -> Result<Option<EncodedFrame>> {
-    kept(
-        sequence,
-        frame.index,
-        encode_frame(sequence, frame, start_ns),
-    )
+    kept(skips, frame.index, encode_frame(sequence, frame, start_ns))
 }
 
-/// `encoded`, or None for a frame the sequence skips (`--keep-going`).
+/// `encoded`, or None for a frame `skips` skips (`--keep-going`).
 fn kept(
-    sequence: &KittiSequence,
+    skips: &SkipLog,
     index: usize,
     encoded: Result<EncodedFrame>,
 ) -> Result<Option<EncodedFrame>> {
     match encoded {
         Ok(encoded) => Ok(Some(encoded)),
-        Err(error) => sequence.skip_log().handle(index, error).map(|()| None),
+        Err(error) => skips.handle(index, error).map(|()| None),
     }
 }
 
@@ -528,6 +528,7 @@ impl<'a> KittiFrameWriter<'a> {
 /// after each written frame.
 pub fn convert_kitti(
     sequence: &KittiSequence,
+    skips: &SkipLog,
     frames: &Range<usize>,
     output: &Path,
     compression: Compression,
@@ -537,14 +538,14 @@ pub fn convert_kitti(
     let mut sink = McapSink::create(output, compression)?;
     let mut writer = KittiFrameWriter::new(sequence);
     for batch in sequence.frames_in(frames).chunks(BATCH) {
-        // A frame whose files are unreadable stops the conversion, unless the
-        // sequence keeps going, which skips and records it.
+        // A frame whose files are unreadable stops the conversion, unless `skips`
+        // keeps going, which skips and records it.
         let encoded: Vec<Option<EncodedFrame>> = batch
             .par_iter()
             .map(|&index| {
                 let frame = sequence.read_frame(index);
                 let encoded = frame.and_then(|frame| encode_frame(sequence, &frame, start_ns));
-                kept(sequence, index, encoded)
+                kept(skips, index, encoded)
             })
             .collect::<Result<_>>()?;
         for frame in encoded.into_iter().flatten() {

@@ -21,6 +21,7 @@ use std::path::{Path, PathBuf};
 
 use crate::outputs::atomic::Staged;
 use travmap_core::error::{Error, Result};
+use travmap_io::Georeference;
 use travmap_method::fusion::FusedCell;
 use travmap_method::grid::CellClass;
 
@@ -40,34 +41,6 @@ pub const UNKNOWN: u8 = 205;
 pub const OCCUPIED_THRESH: f64 = 0.65;
 /// `p` at or below this loads as free (see the module comment for why not 0.25).
 pub const FREE_THRESH: f64 = 0.196;
-
-/// Where a map's frame lies in a georeferenced source's coordinates: a LAS file's,
-/// or a log's `utm` / `earth` frame.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct Georeference {
-    /// The log's frame the map is placed in; None: the source file's coordinates.
-    pub frame: Option<String>,
-    /// The map frame's (0, 0, 0) in those coordinates.
-    pub origin_m: [f64; 3],
-    /// The map frame's rotation in those coordinates (x, y, z, w; identity for a file).
-    pub rotation_xyzw: [f64; 4],
-    /// The source's coordinate reference system, as WKT.
-    pub crs_wkt: Option<String>,
-}
-
-impl Georeference {
-    /// Whether the coordinates are planar metres a world file can carry: a file's
-    /// (projected CRS) or `utm`; not `earth`, which is ECEF.
-    pub fn is_planar(&self) -> bool {
-        self.frame.as_deref().is_none_or(|frame| frame == "utm")
-    }
-
-    /// The rotation about z (radians) that a world file carries.
-    fn yaw_rad(&self) -> f64 {
-        let [x, y, z, w] = self.rotation_xyzw;
-        (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z))
-    }
-}
 
 /// Where the map lies: the image's size and the world position of its lower-left
 /// corner.
