@@ -14,7 +14,7 @@ written to OUT_DIR/fleet-summary.json.
     python travmap_fleet.py annotate 'logs/**/*.mcap' --out-dir annotated/ --adapt
 
 `--adapt` adapts the model to each drive before annotating it (`travmap annotate
---adapt`: self-supervised, from the drive itself; README "Adaptation").
+--adapt`: self-supervised, from the drive itself; docs/method.md "Adaptation").
 
 On a cluster, start Ray there and pass `--address auto` (or set RAY_ADDRESS); the
 travmap binary must be at `--travmap` on every node.
@@ -39,7 +39,7 @@ import ray
 # What each command writes, by the suffix of its output.
 SUFFIXES = {"annotate": ".annotated.mcap", "dataset": ".cells.parquet"}
 
-# travmap's exit codes (README "Bad input").
+# travmap's exit codes (docs/guide.md "Exit codes and errors").
 COMPLETE, ERROR, COMPLETED_WITH_SKIPS = 0, 1, 3
 
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The adaptation study of the README ("Adaptation"): each row is a way to adapt,
+# The adaptation study of docs/method.md ("Adaptation"): each row is a way to adapt,
 # each column a scene the prior never saw, mIoU (Acc / TNR in the second table)
 # after the filter, 12 m and 40 m grids.
 #

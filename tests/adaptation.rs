@@ -1,7 +1,7 @@
 //! Self-supervised adaptation (`travmap adapt`, `eval --adapt`, `annotate --adapt`,
 //! the dataset's self-label columns, `train --labels pseudo`) on the shipped drives:
 //! determinism, the model's record of how it was adapted, labels never read, the
-//! refusals, and the study's default against its targets (README "Adaptation").
+//! refusals, and the study's default against its targets (docs/method.md "Adaptation").
 
 use std::path::{Path, PathBuf};
 
@@ -265,7 +265,7 @@ fn datasets_carry_self_labels_that_train_learns_from() {
     );
 }
 
-/// The README's study, its default row: on every column no more than 1 point of
+/// docs/method.md's study, its default row: on every column no more than 1 point of
 /// mIoU below the prior, +3 or more on the mean, and on RELLIS-3D (off-road rule) not
 /// below the embedded model.
 #[test]

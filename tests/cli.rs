@@ -127,7 +127,7 @@ fn embedded_model_is_what_the_documented_command_trains() {
     }
     let dir = tempfile::tempdir().unwrap();
     let model = dir.path().join("default.json");
-    // The README's retraining command, with the paths as the README gives them.
+    // docs/method.md's retraining command, with the paths as it gives them.
     let readme_path = "../shared/data/semantickitti-00/sequences/00";
     let other_scene = "../shared/data/semantickitti-07-000964/sequences/07";
     write_output("train", readme_path, &model, &[other_scene]);
@@ -144,7 +144,7 @@ fn embedded_model_is_what_the_documented_command_trains() {
     let shipped = std::fs::read("crates/method/src/classifier/default_model.json").unwrap();
     assert!(
         strip_time(&std::fs::read(&model).unwrap()) == strip_time(&shipped),
-        "crates/method/src/classifier/default_model.json is stale: retrain it with the README's command"
+        "crates/method/src/classifier/default_model.json is stale: retrain it with docs/method.md's command"
     );
 }
 

@@ -123,7 +123,7 @@ fn registration_grids_agree_with_the_recorded_poses_grids() {
         "frames 2-5: {:.2} % of cells the same class",
         agreement * 100.0
     );
-    // Measured 98.6 % (the target is 99 %): see the README's odometry section.
+    // Measured 98.6 % (the target is 99 %): see docs/formats.md "Drives without poses".
     assert!(agreement >= 0.98, "{agreement}");
 
     // Each scan alone: one scan integrated, and still a grid per frame.

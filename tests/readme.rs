@@ -1,23 +1,37 @@
-//! The README's figures come from the commands it quotes. Each test runs a quoted
-//! command and checks that the README shows what it drew (the pictures, byte for
-//! byte) or printed (the score rows of "Evaluation on the shipped data, honestly").
-//! `TRAVMAP_BLESS=1 cargo test --release --test readme` redraws the pictures; a score
-//! that moved fails with the row the README should now show.
+//! The docs' figures come from the commands they quote. Each test runs a quoted
+//! command and checks that the README or a page of `docs/` shows what it drew (the
+//! pictures, byte for byte) or printed (the score rows of docs/method.md's
+//! "Evaluation on the shipped data, honestly"). `TRAVMAP_BLESS=1 cargo test --release
+//! --test integration readme::` redraws the pictures; a score that moved fails with
+//! the row the docs should now show.
 
 use std::path::Path;
 
 use crate::common::{arg, success, travmap};
 use serde_json::Value;
 
+/// The README and every page of `docs/`, one after the other.
 fn readme() -> String {
-    std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap()
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut pages: Vec<_> = std::fs::read_dir(root.join("docs"))
+        .unwrap()
+        .map(|entry| entry.unwrap().path())
+        .filter(|path| path.extension().is_some_and(|e| e == "md"))
+        .collect();
+    pages.sort();
+    pages.insert(0, root.join("README.md"));
+    pages
+        .iter()
+        .map(|page| std::fs::read_to_string(page).unwrap())
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 /// Fails unless the README quotes `command` (with the sample's path as it gives it).
 fn assert_quoted(readme: &str, command: &str) {
     assert!(
         readme.contains(command),
-        "the README no longer quotes `{command}`: update this test with it"
+        "neither the README nor docs/ quotes `{command}` any more: update this test with it"
     );
 }
 
@@ -33,7 +47,7 @@ fn check_picture(drawn: &Path, fixture: &str) {
     }
     assert!(
         std::fs::read(&fixture).unwrap() == drawn,
-        "{} is stale: the README's command draws another picture; redraw it with TRAVMAP_BLESS=1 cargo test --release --test readme",
+        "{} is stale: the README's command draws another picture; redraw it with TRAVMAP_BLESS=1 cargo test --release --test integration readme::",
         fixture.display()
     );
 }
@@ -130,7 +144,7 @@ fn check_crossval_rows(settings: &[&str], filtered_label: &str, svm_label: &str)
     }
     assert!(
         stale.is_empty(),
-        "the README's table is stale; crossval now prints:\n{}",
+        "docs/method.md's table is stale; crossval now prints:\n{}",
         stale.join("\n")
     );
 }
@@ -194,7 +208,7 @@ fn the_held_out_scores_are_what_crossval_prints() {
     );
     assert!(
         readme.contains(&row),
-        "the README's default row should read:\n{row}"
+        "docs/method.md's default row should read:\n{row}"
     );
     let summary = format!(
         "held out (on a 40 m grid), each scores mIoU {} / {}",

@@ -22,8 +22,8 @@ pub fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {
     })
 }
 
-/// `--json` output, one convention for every command (README "Machine-readable
-/// output", schemas in `schemas/json/`): JSON Lines on stdout, a `frame` record per
+/// `--json` output, one convention for every command (docs/guide.md "Scripting with
+/// `--json`", schemas in `schemas/json/`): JSON Lines on stdout, a `frame` record per
 /// frame where a command streams frames, then one flat `summary` record naming the
 /// command, its `inputs` (always a list of {path, frames: {start, end, count}}),
 /// the frames it `skipped` and, for a command that writes, its `output` (what -o

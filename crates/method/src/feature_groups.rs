@@ -1,4 +1,4 @@
-//! Stage 3, feature groups beyond the paper's 20 (README "Features beyond the
+//! Stage 3, feature groups beyond the paper's 20 (docs/method.md "Features beyond the
 //! paper"): what geometry alone misses. Each group is a config switch
 //! (`features.groups`) and follows the 20 in a fixed order.
 //!

@@ -2,7 +2,7 @@
 //! vehicle drove over, swept by its width along the recorded trajectory within a
 //! horizon ahead of and behind the frame, and half its length past the ends. The
 //! ground a vehicle drove over was traversable for it: the self-supervised labels of
-//! `travmap adapt` start here (README "Adaptation").
+//! `travmap adapt` start here (docs/method.md "Adaptation").
 //!
 //! Input: the frame's [`GridLayout`] and the [`Trajectory`] of the drive (every pose
 //! the input has, also those past the last scan). Output: one bool per cell.

@@ -1,5 +1,5 @@
 //! The vehicle whose drives adaptation learns from, and the settings of adaptation
-//! (`travmap adapt`, README "Adaptation").
+//! (`travmap adapt`, docs/method.md "Adaptation").
 
 use serde::{Deserialize, Serialize};
 
@@ -78,7 +78,7 @@ impl Default for AdaptConfig {
     fn default() -> Self {
         Self {
             horizon_m: 20.0,
-            // The study's choice (README "Adaptation"): the sum, on a plateau of
+            // The study's choice (docs/method.md "Adaptation"): the sum, on a plateau of
             // C 0.3-1, gamma 0.02-0.03, prior weight 0.5-1.
             learner: Learner::Sum,
             negative_margin: 1.0,

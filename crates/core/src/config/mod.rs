@@ -60,7 +60,7 @@ pub struct ClassifierConfig {
     pub use_reduced_set: bool,
     /// A frame whose remission lies far outside a model's training range (another
     /// sensor's scale) is said in a notice and classified as read (`"notice"`,
-    /// default: it won the README's study), or classified without remission by the
+    /// default: it won docs/method.md's study), or classified without remission by the
     /// model's fallback (`"fallback"`).
     #[serde(default)]
     pub foreign_remission: ForeignRemissionPolicy,
@@ -107,7 +107,7 @@ pub struct FeatureConfig {
     pub curvity_bins: usize,
     /// Sub-cells with fewer points contribute no normal to unevenness (default 3).
     pub unevenness_min_points: usize,
-    /// Feature groups beyond the paper's 20 (README "Features beyond the paper"):
+    /// Feature groups beyond the paper's 20 (docs/method.md "Features beyond the paper"):
     /// `"remission"` and `"context"` (default `["remission"]`); `[]` is the paper's
     /// method.
     pub groups: Vec<FeatureGroup>,
@@ -147,8 +147,8 @@ pub struct FilterConfig {
     pub self_weight: u32,
 }
 
-/// METHOD.md section 8, with label presets for other datasets (README "Ground
-/// truth of other datasets").
+/// METHOD.md section 8, with label presets for other datasets (docs/guide.md "Label
+/// sets and label maps").
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GroundTruthConfig {
@@ -222,7 +222,7 @@ impl Default for FeatureConfig {
             subcell_size_m: 0.2,
             curvity_bins: 160,
             unevenness_min_points: 3,
-            // Remission wins the cross-scene numbers (README "Features beyond the paper").
+            // Remission wins the cross-scene numbers (docs/method.md "Features beyond the paper").
             groups: vec![FeatureGroup::Remission],
             remission_scale: RemissionScaling::AsRead,
         }

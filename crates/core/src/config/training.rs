@@ -46,7 +46,7 @@ pub struct TrainingConfig {
     pub criterion: Criterion,
     /// Choose the decision threshold (0 otherwise) that maximises the criterion over
     /// the held-out folds' decision values of the chosen (C, gamma) (default false:
-    /// on the shipped scenes it lowered every held-out score, README "Features beyond
+    /// on the shipped scenes it lowered every held-out score, docs/method.md "Features beyond
     /// the paper").
     pub tune_threshold: bool,
 }

@@ -34,7 +34,7 @@ impl Compression {
     }
 }
 
-/// zstd level of `Compression::Zstd`: -1 (`zstd --fast=1`). By the README's
+/// zstd level of `Compression::Zstd`: -1 (`zstd --fast=1`). By docs/speed.md's
 /// compression table, against level 1: about 1.3-1.5x the `convert` frames/s for
 /// files 2.5 % (converted) to 4 % (annotated) larger on the six real frames; level 3,
 /// the mcap crate's default, writes 10 % less for half the speed.

@@ -14,7 +14,7 @@ pub const MODEL_FORMAT: &str = "travmap-svm";
 pub const MODEL_VERSION: u32 = 1;
 
 /// The default geometry-only model, trained on the shipped labelled SemanticKITTI
-/// frames (see README, "The embedded model").
+/// frames (docs/method.md, "The embedded model").
 pub const DEFAULT_MODEL_JSON: &[u8] = include_bytes!("default_model.json");
 
 /// The model file: a JSON document, versioned.

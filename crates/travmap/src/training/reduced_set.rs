@@ -1,4 +1,4 @@
-//! The reduced set (a Decision of this project, README "Speed"): k-means centres of
+//! The reduced set (a Decision of this project, docs/speed.md): k-means centres of
 //! the support vectors with weights fitted by least squares to the exact decision
 //! function, so prediction costs the centres' count instead of the support vectors'.
 
@@ -90,7 +90,7 @@ pub(super) fn fit_reduced_set(
 }
 
 /// A reduced set of the adapted model `model` that stands for its sum with its
-/// prior (`margin + prior_weight x prior margin`, README "Adaptation"), so that
+/// prior (`margin + prior_weight x prior margin`, docs/method.md "Adaptation"), so that
 /// classifying costs one expansion, not two: centres from both models' support
 /// vectors (the prior's brought into `model`'s standardisation), fitted on `rows`
 /// (raw features: the drive's cells) and the prior's support vectors.

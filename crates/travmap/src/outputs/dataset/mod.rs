@@ -3,7 +3,7 @@
 //! analysis in pyarrow, DuckDB or Polars; [`reading`] reads the labelled cells
 //! back into a training set.
 //!
-//! Columns, in order (README "Datasets" lists them with units):
+//! Columns, in order (docs/guide.md "Parquet cell tables" lists them with units):
 //! `source`, `frame`, `stamp_ns`, `row`, `col`, `x_m`, `y_m`, `points`, the 20
 //! geometric features by name (float), the appearance values `hue_0..`,
 //! `saturation_0..`, `value_0..` (float, null where no camera ever saw the cell),
@@ -42,13 +42,13 @@ use travmap_method::pipeline::FrameResult;
 /// Rows per row group: about 18 MB of columns in memory at a time (four frames of
 /// the 36 m training grid). 2^17 rows peaked 55 MB higher on 60 frames; smaller
 /// groups cost memory too, as the writer keeps every group's metadata for the
-/// footer (README, "Speed": memory).
+/// footer (docs/speed.md: memory).
 const ROW_GROUP_ROWS: usize = 1 << 15;
 /// The columns written with a dictionary: those with few distinct values per row
 /// group. The features, almost all distinct, fit the writer's dictionary whole
 /// (1 MB a column chunk), which then doubled their size: without it, the shipped
 /// drive's 60-frame file is 26 % smaller (69.6 -> 51.1 MB) and written in 0.88x the
-/// time (README "Datasets").
+/// time (docs/guide.md "Parquet cell tables").
 const DICTIONARY_COLUMNS: [&str; 6] = ["source", "frame", "stamp_ns", "row", "col", "points"];
 /// Rows read back per batch, from each column of a row group at once: memory stays
 /// this small whatever size of group a writer chose (pyarrow's are 2^20 rows).
