@@ -10,8 +10,8 @@ use crate::common::{
     travmap_metadata, write_output,
 };
 use serde_json::Value;
-use travmap::outputs::dataset::reading::{Labels, read_training_rows};
-use travmap::training::TrainingSet;
+use travmap_outputs::dataset::reading::{Labels, read_training_rows};
+use travmap_training::TrainingSet;
 
 fn read_json(path: &Path) -> Value {
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()

@@ -27,24 +27,47 @@ const CRATES: &[(&str, &str, &[&str])] = &[
     ),
     ("crates/method", "travmap-method", &["travmap-core"]),
     (
-        "crates/travmap",
+        "crates/drive",
+        "travmap-drive",
+        &["travmap-core", "travmap-io", "travmap-method"],
+    ),
+    (
+        "crates/training",
+        "travmap-training",
+        &["travmap-core", "travmap-drive", "travmap-method"],
+    ),
+    (
+        "crates/outputs",
+        "travmap-outputs",
+        &[
+            "travmap-core",
+            "travmap-formats",
+            "travmap-io",
+            "travmap-method",
+            "travmap-drive",
+        ],
+    ),
+    (
+        "crates/fuzzing",
+        "travmap-fuzzing",
+        &[
+            "travmap-core",
+            "travmap-io",
+            "travmap-method",
+            "travmap-outputs",
+        ],
+    ),
+    (
+        ".",
         "travmap",
         &[
             "travmap-core",
             "travmap-formats",
             "travmap-io",
             "travmap-method",
-        ],
-    ),
-    (
-        ".",
-        "travmap-cli",
-        &[
-            "travmap-core",
-            "travmap-formats",
-            "travmap-io",
-            "travmap-method",
-            "travmap",
+            "travmap-drive",
+            "travmap-training",
+            "travmap-outputs",
         ],
     ),
 ];

@@ -285,8 +285,8 @@ fn bench_tools_times_every_subcommand_as_a_child_process() {
 
 #[test]
 fn render_draws_truth_prediction_and_errors_cell_by_cell() {
-    use travmap::outputs::rendering::{GAP_PX, cell_origin_px, colour};
     use travmap_method::grid::CellClass;
+    use travmap_outputs::rendering::{GAP_PX, cell_origin_px, colour};
     let Some(seq) = sample() else { return };
     let dir = tempfile::tempdir().unwrap();
     let picture = dir.path().join("frame.png");
@@ -299,7 +299,7 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
     let config = travmap_core::Config::default();
     let model = travmap_method::classifier::SvmModel::embedded_default().unwrap();
     let source = travmap_io::Source::open(Path::new(&seq), &Default::default(), &|_| {}).unwrap();
-    let selection = travmap::drive::Selection::new(source, 2..3);
+    let selection = travmap_drive::Selection::new(source, 2..3);
     let mut result = None;
     selection
         .run::<travmap_core::Error>(&config, Some(&model), |r| {

@@ -7,12 +7,12 @@
 use std::path::Path;
 
 use serde_json::Value;
-use travmap::drive::Selection;
-use travmap::outputs::dataset::reading::{Labels, read_training_rows};
-use travmap::training::TrainingSet;
+use travmap_drive::Selection;
 use travmap_io::{Source, SourceOptions};
 use travmap_method::classifier::SvmModel;
 use travmap_method::grid::CellClass;
+use travmap_outputs::dataset::reading::{Labels, read_training_rows};
+use travmap_training::TrainingSet;
 
 use crate::common::{arg, assert_contains, clean_failure, json_summary, travmap};
 

@@ -5,9 +5,9 @@
 use std::path::Path;
 
 use crate::common::{arg, success, travmap, write_output};
-use travmap::outputs::drive_map::MapPicture;
-use travmap::outputs::rendering::{GAP_PX, colour};
 use travmap_method::grid::CellClass;
+use travmap_outputs::drive_map::MapPicture;
+use travmap_outputs::rendering::{GAP_PX, colour};
 
 #[test]
 fn the_picture_shows_the_fused_map_truth_and_errors_cell_by_cell() {

@@ -4,11 +4,11 @@
 
 use std::path::Path;
 
-use travmap::outputs::writing::McapSink;
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{PointCloud2, TfMessage, datatype, decode};
 use travmap_io::containers::log::Log;
 use travmap_io::format::InputFormat;
+use travmap_outputs::writing::McapSink;
 
 /// Rewrites the converted drive `from` into `to` with each cloud's intensity
 /// changed by `edit` (clouds and transforms only).

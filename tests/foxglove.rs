@@ -110,6 +110,6 @@ fn the_layout_names_topics_fields_and_frames_of_an_annotated_file() {
     // The camera topic is the one `convert` writes for image_2 (no images here).
     assert_eq!(
         layout["configById"]["Image!camera"]["imageMode"]["imageTopic"],
-        travmap::outputs::conversion::IMAGE_TOPIC
+        travmap_outputs::conversion::IMAGE_TOPIC
     );
 }

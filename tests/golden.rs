@@ -15,10 +15,10 @@ use std::path::Path;
 
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
-use travmap::outputs::annotation::{
+use travmap_formats::ros::{FrameMetrics, OccupancyGrid, PointCloud2, Time, decode};
+use travmap_outputs::annotation::{
     CLOUD_TOPIC, GROUND_TRUTH_TOPIC, METRICS_TOPIC, PREDICTION_TOPIC,
 };
-use travmap_formats::ros::{FrameMetrics, OccupancyGrid, PointCloud2, Time, decode};
 
 const FIXTURE: &str = "fixtures/golden-annotate-00.json";
 const FRAMES: &str = "0..3";

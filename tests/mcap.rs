@@ -9,13 +9,13 @@ use crate::common::{
     arg, assert_contains, clean_failure, json_summary, success, travmap, write_output,
 };
 use serde_json::Value;
-use travmap::outputs::writing::McapSink;
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{OccupancyGrid, PointCloud2, decode};
 use travmap_io::KittiSequence;
 use travmap_io::payloads::cloud::{check_some_finite, cloud_points};
 use travmap_io::ros_drive::LogOptions;
 use travmap_io::{Source, SourceOptions};
+use travmap_outputs::writing::McapSink;
 
 /// Every message of `topic` in an MCAP, decoded by travmap's own reader.
 fn messages<T: serde::de::DeserializeOwned>(path: &Path, topic: &str) -> Vec<(u64, T)> {

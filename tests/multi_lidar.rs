@@ -11,13 +11,13 @@ use crate::common::{
     arg, assert_contains, clean_failure, json_records, stderr, success, tf, travmap, usage_error,
 };
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-use travmap::outputs::conversion::scan_to_cloud;
-use travmap::outputs::writing::McapSink;
 use travmap_formats::mcap::writer::Compression;
 use travmap_io::containers::log::Log;
 use travmap_io::format::InputFormat;
 use travmap_io::ros_drive::{LogOptions, MergedTopics};
 use travmap_io::{Source, SourceOptions};
+use travmap_outputs::conversion::scan_to_cloud;
+use travmap_outputs::writing::McapSink;
 
 fn rear_from_velodyne() -> Isometry3<f64> {
     let velodyne_from_rear = Isometry3::from_parts(

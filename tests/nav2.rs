@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 
 use crate::common::{arg, json_summary, tf};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-use travmap::outputs::conversion::scan_to_cloud;
-use travmap::outputs::writing::McapSink;
 use travmap_formats::mcap::writer::Compression;
 use travmap_method::fusion::FusedCell;
 use travmap_method::grid::CellClass;
+use travmap_outputs::conversion::scan_to_cloud;
+use travmap_outputs::writing::McapSink;
 
 /// map_server's OccupancyGrid values.
 const FREE: i8 = 0;

@@ -6,12 +6,12 @@
 use std::path::Path;
 
 use crate::common::{arg, json_records, nebula_fixture, success, travmap};
-use travmap::outputs::writing::McapSink;
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{Header, NebulaPacket, NebulaPackets, Time};
 use travmap_io::containers::log::Log;
 use travmap_io::format::InputFormat;
 use travmap_io::packets::{NEBULA_PACKETS, PacketModel, packet_message};
+use travmap_outputs::writing::McapSink;
 
 fn time(ns: u64) -> Time {
     Time {

@@ -1,14 +1,14 @@
 //! The fuzz targets on stable Rust, without libFuzzer: every file of the seed
 //! corpus (`fuzz/seeds/`) and every input a fuzzer once crashed on
-//! (`fuzz/regressions/`) is replayed through its target in `travmap::fuzzing`, and
+//! (`fuzz/regressions/`) is replayed through its target in `travmap_fuzzing`, and
 //! seeded random corruptions of the seeds (bit flips, byte overwrites, truncations,
 //! insertions, huge length fields) follow. Each must return, never panic or abort.
 //! `TRAVMAP_FUZZ_ITERATIONS` sets the mutations per seed (default 300).
 
 use std::path::{Path, PathBuf};
 
-use travmap::fuzzing::TARGETS;
 use travmap_core::random::SplitMix64;
+use travmap_fuzzing::TARGETS;
 
 fn iterations() -> usize {
     std::env::var("TRAVMAP_FUZZ_ITERATIONS")

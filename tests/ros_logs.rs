@@ -658,7 +658,7 @@ fn appearance_of(input: &Path) -> Vec<Option<Vec<f32>>> {
     config.grid.size_m = config.training.grid_size_m;
     let model = travmap_method::classifier::SvmModel::embedded_default().unwrap();
     let source = travmap_io::Source::open(input, &Default::default(), &|_| {}).unwrap();
-    let selection = travmap::drive::Selection::new(source, 0..usize::MAX);
+    let selection = travmap_drive::Selection::new(source, 0..usize::MAX);
     let mut cells = Vec::new();
     selection
         .run::<travmap_core::Error>(&config, Some(&model), |result| {

@@ -1,3 +1,3 @@
 #![no_main]
 
-libfuzzer_sys::fuzz_target!(|data: &[u8]| travmap::fuzzing::pcd_file(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| travmap_fuzzing::pcd_file(data));

@@ -1,3 +1,3 @@
 #![no_main]
 
-libfuzzer_sys::fuzz_target!(|data: &[u8]| travmap::fuzzing::rosbag2_metadata(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| travmap_fuzzing::rosbag2_metadata(data));

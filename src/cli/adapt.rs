@@ -7,10 +7,10 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap::outputs::atomic::write_atomically;
-use travmap::training::adaptation::{Adapted, adapt as adapt_model};
 use travmap_core::Config;
 use travmap_method::classifier::SvmModel;
+use travmap_outputs::atomic::write_atomically;
+use travmap_training::adaptation::{Adapted, adapt as adapt_model};
 
 use super::{
     Inputs, ModelArg, Outcome, Output, check_output, counted, frame_count, model_json, outcome,

@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use travmap::outputs::annotation;
-use travmap::outputs::annotation::{AnnotationOptions, CloudPoints, DRIVE_MAP_EVERY};
+use travmap_outputs::annotation;
+use travmap_outputs::annotation::{AnnotationOptions, CloudPoints, DRIVE_MAP_EVERY};
 
 use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;

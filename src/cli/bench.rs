@@ -6,7 +6,7 @@ use std::io::Write;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap::scoring::benchmark::benchmark;
+use travmap_drive::scoring::benchmark::benchmark;
 
 use super::bench_tools::{bench_tools, print_tools_table};
 use super::{Inputs, ModelArg, Outcome, images_for, model_json, outcome, print_json_summary};

@@ -11,8 +11,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use serde::Serialize;
-use travmap::drive::Selection;
-use travmap::scoring::evaluation::Spread;
+use travmap_drive::Selection;
+use travmap_drive::scoring::evaluation::Spread;
 
 use super::Inputs;
 use super::child_runs::{ChildRun, TemporaryDirectory, run_child};

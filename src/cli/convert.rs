@@ -6,12 +6,12 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use travmap::outputs::conversion::{convert_kitti, convert_log};
-use travmap::outputs::preflight::InputFiles;
 use travmap_formats::mcap::writer::Compression;
 use travmap_io::ros_drive::LogOptions;
 use travmap_io::ros_drive::RosDrive;
 use travmap_io::{SkipLog, SourceOptions};
+use travmap_outputs::conversion::{convert_kitti, convert_log};
+use travmap_outputs::preflight::InputFiles;
 
 use super::{
     Outcome, Output, Sensors, check_output, frame_count, open_selection, outcome,
@@ -181,7 +181,7 @@ impl Written {
         compression: Compression,
         output: &Output,
         seconds: f64,
-        selections: &[travmap::drive::Selection],
+        selections: &[travmap_drive::Selection],
     ) -> Result<Outcome> {
         if output.json {
             let fields = json!({"output": output_path, "compression": compression, "elapsed_ms": seconds * 1e3});
@@ -210,7 +210,7 @@ fn convert_whole_log(
     output_path: &std::path::Path,
     compression: Compression,
     output: &Output,
-    selections: &[travmap::drive::Selection],
+    selections: &[travmap_drive::Selection],
 ) -> Result<Outcome> {
     let bar = output.progress(drive.frame_count() as u64, "converting");
     let summary = convert_log(drive, skips, output_path, compression, &|topic, count| {

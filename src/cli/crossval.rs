@@ -7,8 +7,8 @@ use std::io::Write;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap::drive::Selection;
-use travmap::training::crossval::{
+use travmap_drive::Selection;
+use travmap_training::crossval::{
     CrossValidationReport, LeaveOneOutReport, cross_validate, leave_one_input_out,
 };
 

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap::outputs::dataset::DatasetWriter;
+use travmap_outputs::dataset::DatasetWriter;
 
 use super::{
     Inputs, Outcome, check_output, counted, frame_count, load_model, outcome, print_json_summary,

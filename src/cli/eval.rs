@@ -7,11 +7,11 @@ use std::io::Write;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap::drive::Selection;
-use travmap::scoring::evaluation::{Evaluation, EvaluationReport};
-use travmap::scoring::metrics::Confusion;
-use travmap::scoring::metrics::Scores;
 use travmap_core::config::ForeignRemissionPolicy;
+use travmap_drive::Selection;
+use travmap_drive::scoring::evaluation::{Evaluation, EvaluationReport};
+use travmap_drive::scoring::metrics::Confusion;
+use travmap_drive::scoring::metrics::Scores;
 use travmap_method::classifier::SvmModel;
 
 use super::adapt::AdaptFlag;

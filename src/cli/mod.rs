@@ -32,13 +32,13 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use travmap::drive::Selection;
-use travmap::outputs::preflight::{InputFiles, check_output_directory, check_output_file};
 use travmap_core::Config;
 use travmap_core::stopwatch::Stopwatch;
+use travmap_drive::Selection;
 use travmap_io::ros_drive::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics};
 use travmap_io::{Source, SourceKind, SourceOptions};
 use travmap_method::classifier::SvmModel;
+use travmap_outputs::preflight::{InputFiles, check_output_directory, check_output_file};
 
 /// How a command ended: exit code 0, or 3 when it completed but skipped frames
 /// (`--keep-going`), as the mcap CLI reports data loss.

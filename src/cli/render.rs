@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use serde_json::json;
-use travmap::outputs::atomic::Staged;
-use travmap::outputs::rendering;
+use travmap_outputs::atomic::Staged;
+use travmap_outputs::rendering;
 
 use super::{
     Inputs, ModelArg, Outcome, check_output, check_output_dir, counted, frame_count, images_for,

@@ -5,9 +5,9 @@ use std::path::Path;
 
 use anyhow::Result;
 use serde_json::json;
-use travmap::drive::Selection;
-use travmap::scoring::evaluation::EvaluationReport;
 use travmap_core::Config;
+use travmap_drive::Selection;
+use travmap_drive::scoring::evaluation::EvaluationReport;
 use travmap_method::classifier::SvmModel;
 
 /// The model's identity in JSON outputs.

@@ -6,7 +6,7 @@ use std::io::Write;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap::scoring::evaluation::Evaluation;
+use travmap_drive::scoring::evaluation::Evaluation;
 use travmap_method::grid::CellClass;
 
 use super::{

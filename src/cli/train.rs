@@ -6,10 +6,10 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::Args;
 use serde_json::json;
-use travmap::outputs::atomic::write_atomically;
-use travmap::outputs::dataset::reading::{Labels, read_training_rows};
-use travmap::training::crossval::collect_training_set;
-use travmap::training::{TrainingSet, train as train_model};
+use travmap_outputs::atomic::write_atomically;
+use travmap_outputs::dataset::reading::{Labels, read_training_rows};
+use travmap_training::crossval::collect_training_set;
+use travmap_training::{TrainingSet, train as train_model};
 
 use super::{
     Inputs, Outcome, check_output, frame_count, input_json, model_json, outcome,

@@ -271,7 +271,7 @@ pub fn fused_drive(seq: &Path) -> Vec<travmap_method::fusion::FusedCell> {
     let config = travmap_core::Config::default();
     let model = travmap_method::classifier::SvmModel::embedded_default().unwrap();
     let source = travmap_io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
-    let selection = travmap::drive::Selection::new(source, 0..usize::MAX);
+    let selection = travmap_drive::Selection::new(source, 0..usize::MAX);
     let mut map = travmap_method::fusion::DriveMap::new(config.grid.cell_size_m);
     selection
         .run::<travmap_core::Error>(&config, Some(&model), |result| {
@@ -297,7 +297,7 @@ pub fn tf(
                 frame_id: parent.into(),
             },
             child_frame_id: child.into(),
-            transform: travmap::outputs::conversion::transform_from_pose(pose),
+            transform: travmap_outputs::conversion::transform_from_pose(pose),
         }],
     }
 }

@@ -4,7 +4,7 @@
 //! [`features`] (3, and [`feature_groups`]), [`appearance`] (3b), [`classifier`] (4),
 //! [`filter`] (5), and for adaptation [`footprint`] (6a) and [`self_labels`] (6b);
 //! beside them [`ground_truth`], and [`fusion`] of the results into one map of the
-//! drive. Stages see flat arrays and [`Frame`](travmap_core::frame::Frame)s only: no
+//! drive; the [`training_set`] of labelled cells a classifier learns from. Stages see flat arrays and [`Frame`](travmap_core::frame::Frame)s only: no
 //! file, no MCAP, no CLI; this crate depends on `travmap-core` alone.
 
 pub mod appearance;
@@ -20,4 +20,5 @@ pub mod integration;
 pub mod pipeline;
 pub mod registration;
 pub mod self_labels;
+pub mod training_set;
 pub mod voxel_map;

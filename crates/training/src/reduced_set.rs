@@ -7,7 +7,7 @@ use std::ops::Range;
 use rayon::prelude::*;
 
 use super::columns::Columns;
-use super::set::TrainingSet;
+use travmap_method::training_set::TrainingSet;
 
 /// Rows of the reduced set's design matrix computed at a time.
 const DESIGN_BLOCK_ROWS: usize = 1024;
@@ -304,7 +304,7 @@ fn transposed_times(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::training::train;
+    use crate::train;
 
     #[test]
     fn reduced_set_follows_the_exact_decision_function() {
@@ -323,7 +323,7 @@ mod tests {
                 [(i % 40) as f64, (i / 40) as f64],
             );
         }
-        let mut config = crate::training::tests::paper_config();
+        let mut config = crate::tests::paper_config();
         config.training.c_values = vec![10.0];
         config.training.gamma_values = vec![1.0];
         config.training.reduced_set_size = 24;

@@ -5,9 +5,9 @@
 use std::fmt::Write;
 use std::path::Path;
 
-use crate::drive::EstimatedPose;
-use crate::outputs::atomic::write_atomically;
+use crate::atomic::write_atomically;
 use travmap_core::error::Result;
+use travmap_drive::EstimatedPose;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TrajectoryFormat {

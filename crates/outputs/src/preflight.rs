@@ -11,7 +11,7 @@ use std::collections::HashSet;
 use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
-use crate::outputs::atomic::{TEMPORARY_INFIX, temporary_path};
+use crate::atomic::{TEMPORARY_INFIX, temporary_path};
 use travmap_core::error::{Error, Result};
 
 /// A file's identity on this machine: (device, inode).

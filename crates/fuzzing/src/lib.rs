@@ -1,6 +1,7 @@
 //! Entry points of the cargo fuzz targets in `fuzz/`, and of the corpus replay and
-//! mutation tests in `tests/`: the readers' targets of `travmap-io` and this
-//! crate's own (a model file, a cell dataset). Each feeds arbitrary bytes to one
+//! mutation tests in `tests/`: the readers' targets of `travmap-io` (its `fuzzing`
+//! feature) and two more over the public faces of the other crates (a model file, a
+//! cell dataset). Each feeds arbitrary bytes to one
 //! parser of untrusted input. Any result is fine, an error or a value; a panic, an
 //! abort or an allocation out of proportion to the input is a bug.
 
@@ -9,8 +10,8 @@ pub use travmap_io::fuzzing::*;
 use travmap_core::Config;
 use travmap_method::classifier::SvmModel;
 
-use crate::outputs::dataset::reading::{Labels, read_training_rows};
-use crate::training::TrainingSet;
+use travmap_method::training_set::TrainingSet;
+use travmap_outputs::dataset::reading::{Labels, read_training_rows};
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.

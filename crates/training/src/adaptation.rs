@@ -10,14 +10,14 @@ use std::collections::HashSet;
 use serde::Serialize;
 
 use super::reduced_set::fit_folded_reduced_set;
-use super::set::TrainingSet;
 use super::{Reduce, Search, train_by};
-use crate::drive::Selection;
 use travmap_core::config::{Config, Learner};
 use travmap_core::error::{Error, Result};
 use travmap_core::random::SplitMix64;
+use travmap_drive::Selection;
 use travmap_method::classifier::{AdaptationSummary, AdaptedInput, SvmModel};
 use travmap_method::footprint::PathKind;
+use travmap_method::training_set::TrainingSet;
 
 /// One self-labelled (or unknown) cell of a drive.
 #[derive(Clone)]

@@ -5,8 +5,8 @@
 
 use serde::Serialize;
 
-use crate::drive::{ReadFrame, Selection};
 use crate::scoring::evaluation::{Spread, TimingReport};
+use crate::{ReadFrame, Selection};
 use travmap_core::config::Config;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;

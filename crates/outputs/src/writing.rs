@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
-use crate::outputs::atomic::{AtomicFile, WritebackFile, sync_output, write_failure};
+use crate::atomic::{AtomicFile, WritebackFile, sync_output, write_failure};
 use travmap_core::error::{Error, Result};
 use travmap_formats::mcap::stored::{StoredChunk, StoredLog};
 use travmap_formats::mcap::writer::{Compression, FinishedChunk, McapWriter};

@@ -12,8 +12,8 @@ use parquet::column::writer::ColumnWriter;
 use parquet::file::properties::WriterProperties;
 use parquet::file::writer::SerializedFileWriter;
 
-use crate::outputs::atomic::{AtomicFile, Staged, parquet_failure, sync_output, write_failure};
-use crate::outputs::rendering::{GAP_PX, class_colour, colour, error_colour};
+use crate::atomic::{AtomicFile, Staged, parquet_failure, sync_output, write_failure};
+use crate::rendering::{GAP_PX, class_colour, colour, error_colour};
 use travmap_core::error::Result;
 use travmap_core::frame::RgbImage;
 use travmap_formats::ros::{Header, MapMetaData, OccupancyGrid, Pose, Quaternion, Time, Vector3};

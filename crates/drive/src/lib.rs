@@ -1,8 +1,10 @@
 //! Where reading meets the method: a [`Selection`] is a [`Source`] and the frames
-//! of it to use. [`Selection::run`] feeds them through a [`Pipeline`] built for the
+//! of it to use; [`scoring`] says how good and how fast the result was. [`Selection::run`] feeds them through a [`Pipeline`] built for the
 //! source's posing, and [`Selection::run_mapped`] also fuses every result into the
 //! drive map, the one place that map is fed. Every command goes through here, the
 //! benchmark included ([`Selection::load`], [`Selection::run_loaded`]).
+
+pub mod scoring;
 
 use std::ops::Range;
 use std::sync::Arc;

@@ -10,23 +10,22 @@ pub mod adaptation;
 mod columns;
 pub mod crossval;
 mod reduced_set;
-mod set;
 pub mod smo;
 mod working_set;
 
 use rayon::prelude::*;
 
-use crate::scoring::metrics::Confusion;
 use reduced_set::fit_reduced_set;
-pub use set::{TrainingSet, spatial_folds};
 use smo::{Parameters, Problem};
 use travmap_core::config::{ClassWeights, Config, Criterion, FeatureGroup, TrainingConfig};
 use travmap_core::error::{Error, Result};
 use travmap_core::random::SplitMix64;
+use travmap_drive::scoring::metrics::Confusion;
 use travmap_method::classifier::{ReducedSet, SearchResult, SvmModel, TrainingSummary};
 use travmap_method::feature_groups::REMISSION_NAMES;
 use travmap_method::features::{FEATURE_COUNT, feature_count};
 use travmap_method::grid::CellClass;
+pub use travmap_method::training_set::{TrainingSet, spatial_folds};
 
 /// Mean and 1/deviation of each feature; constant features get 1.
 fn standardisation(set: &TrainingSet) -> (Vec<f32>, Vec<f32>) {

@@ -4,16 +4,16 @@
 
 use serde::Serialize;
 
-use super::set::{TrainingSet, spatial_folds};
 use super::train;
-use crate::drive::Selection;
-use crate::scoring::evaluation::{Evaluation, EvaluationReport};
 use travmap_core::config::{Config, FeatureGroup};
 use travmap_core::error::{Error, Result};
+use travmap_drive::Selection;
+use travmap_drive::scoring::evaluation::{Evaluation, EvaluationReport};
 use travmap_method::classifier::{PredictionScratch, SvmModel};
 use travmap_method::filter::OutlierFilter;
 use travmap_method::grid::CellClass;
 use travmap_method::pipeline::FrameResult;
+use travmap_method::training_set::{TrainingSet, spatial_folds};
 
 /// Collects the labelled cells of the selected frames on the training grid
 /// (`training.grid_size_m`).

@@ -2,9 +2,9 @@
 //! (where a camera saw them) appearance values; and the spatial folds that keep a
 //! world block's cells, and their copies in other frames, in one fold.
 
+use crate::features::feature_count;
 use travmap_core::config::Config;
 use travmap_core::random::SplitMix64;
-use travmap_method::features::feature_count;
 
 /// Labelled cells: raw features and where each cell lies in the world.
 #[derive(Clone, Debug, Default)]

@@ -17,11 +17,11 @@ use super::{
     CONFIG_KEY, FORMAT, FORMAT_1, FORMAT_KEY, MAX_VALUES_PER_FILE_BYTE, READ_BATCH_ROWS,
     appearance_columns, feature_settings, schema,
 };
-use crate::training::TrainingSet;
 use travmap_core::Config;
 use travmap_core::config::written_before_groups;
 use travmap_core::error::{Error, Result, contain_panics};
 use travmap_method::features::feature_names;
+use travmap_method::training_set::TrainingSet;
 
 fn read_error(path: &Path, message: impl std::fmt::Display) -> Error {
     Error::Dataset {

@@ -25,7 +25,7 @@ use nalgebra::{Isometry3, Matrix3};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::outputs::writing::McapSink;
+use crate::writing::McapSink;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
 use travmap_formats::foxglove;

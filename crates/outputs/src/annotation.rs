@@ -19,18 +19,18 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use crate::drive::{Handed, Selection};
-use crate::outputs::conversion::{
+use crate::conversion::{
     EncodedFrame, KittiFrameWriter, encode_kitti_frame, transform_from_pose, write_log_messages,
 };
-use crate::outputs::drive_map::{GridValues, occupancy_grid};
-use crate::outputs::writing::McapSink;
-use crate::scoring::evaluation::{Evaluation, EvaluationReport};
-use crate::scoring::metrics::Confusion;
+use crate::drive_map::{GridValues, occupancy_grid};
+use crate::writing::McapSink;
 use travmap_core::config::Config;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
 use travmap_core::posing::Posing;
+use travmap_drive::scoring::evaluation::{Evaluation, EvaluationReport};
+use travmap_drive::scoring::metrics::Confusion;
+use travmap_drive::{Handed, Selection};
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{
     FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion,

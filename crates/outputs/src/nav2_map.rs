@@ -19,7 +19,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use crate::outputs::atomic::Staged;
+use crate::atomic::Staged;
 use travmap_core::error::{Error, Result};
 use travmap_io::Georeference;
 use travmap_method::fusion::FusedCell;

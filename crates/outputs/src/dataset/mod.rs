@@ -30,9 +30,7 @@ use parquet::schema::types::ColumnPath;
 
 use columns::{Columns, write_column};
 
-use crate::outputs::atomic::{
-    AtomicFile, WritebackFile, parquet_failure, sync_output, write_failure,
-};
+use crate::atomic::{AtomicFile, WritebackFile, parquet_failure, sync_output, write_failure};
 use travmap_core::Config;
 use travmap_core::error::{Error, Result};
 use travmap_method::features::feature_names;
@@ -296,7 +294,7 @@ mod tests {
 
     use super::reading::read_training_rows;
     use super::*;
-    use crate::training::TrainingSet;
+    use travmap_method::training_set::TrainingSet;
 
     /// A file with the cell schema as `edit` changes it and travmap's metadata.
     fn write_with_schema(path: &Path, config: &Config, edit: impl Fn(String) -> String) {
