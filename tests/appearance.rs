@@ -269,7 +269,7 @@ fn a_cell_keeps_its_colour_five_frames_later_after_the_grid_moved() {
     }
     let mut config = travmap_core::Config::default();
     config.grid.size_m = 24.0;
-    let sequence = travmap_io::KittiSequence::open(&seq).unwrap();
+    let sequence = travmap_io::KittiSequence::open(&seq, None, &|_| {}).unwrap();
     let mut pipeline = Pipeline::new(&config, travmap_core::posing::Posing::Recorded).unwrap();
     let results: Vec<_> = (0..6)
         .map(|i| {

@@ -268,11 +268,36 @@ fn calibration_without_tr() {
 #[test]
 fn missing_files_and_directories() {
     let dir = sequence();
+    // Without times.txt (as nuScenes-lidarseg's conversions ship), the scans are
+    // stamped at a rate, said in a notice; without calib.txt the poses are the
+    // LiDAR's; without poses.txt there is nothing to place the scans by.
     std::fs::remove_file(dir.path().join("times.txt")).unwrap();
+    let said = stderr(&success_output(eval(dir.path())));
+    assert_contains(
+        &said,
+        &["no times.txt: the scans stamped at 10 Hz", "--rate"],
+    );
+    std::fs::remove_file(dir.path().join("calib.txt")).unwrap();
+    let said = stderr(&success_output(eval(dir.path())));
+    assert_contains(
+        &said,
+        &["no calib.txt: the poses in poses.txt are taken as the LiDAR's own"],
+    );
+    std::fs::remove_file(dir.path().join("poses.txt")).unwrap();
     let err = clean_failure(eval(dir.path()));
-    assert_contains(&err, &["times.txt"]);
+    assert_contains(&err, &["poses.txt"]);
     let err = clean_failure(eval(&dir.path().join("nowhere")));
     assert_contains(&err, &["nowhere does not exist"]);
+}
+
+/// `output`, asserted to have ended well.
+fn success_output(output: std::process::Output) -> std::process::Output {
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output
 }
 
 #[test]

@@ -36,7 +36,7 @@ fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
     };
 
     // The frames read back: same points, labels, stamps and poses, bit for bit.
-    let kitti = KittiSequence::open(&seq).unwrap();
+    let kitti = KittiSequence::open(&seq, None, &|_| {}).unwrap();
     let source = Source::open(&drive, &SourceOptions::default(), &|_| {}).unwrap();
     assert_eq!(source.frames().len(), 6);
     assert_eq!(source.world_frame(), "map");
@@ -143,7 +143,7 @@ fn the_cloud_is_the_scan_in_the_grid_the_whole_scan_or_none() {
     let in_grid = messages::<PointCloud2>(&grid_file, "/travmap/cloud");
     let whole = messages::<PointCloud2>(&all_file, "/travmap/cloud");
     assert_eq!((in_grid.len(), whole.len()), (4, 4));
-    let sequence = KittiSequence::open(&seq).unwrap();
+    let sequence = KittiSequence::open(&seq, None, &|_| {}).unwrap();
     for (frame, (((_, grid), (_, truth)), ((_, in_grid), (_, whole)))) in grids
         .iter()
         .zip(&truths)
@@ -196,7 +196,7 @@ fn check_client_summary(client: &str, entries: &[Value], seq: &Path, runs: &[Val
     assert_eq!(on("/tf").len(), 6, "{client}");
     assert_eq!(on("/travmap/metrics").len(), 6, "{client}");
     assert_eq!(on("/travmap/ground_truth").len(), 3, "{client}");
-    let sequence = KittiSequence::open(seq).unwrap();
+    let sequence = KittiSequence::open(seq, None, &|_| {}).unwrap();
     for (cloud, index) in on("/velodyne_points").iter().zip(0..) {
         let frame = sequence.read_frame(index).unwrap();
         assert_eq!(cloud["points"], frame.points_in_velodyne.len(), "{client}");

@@ -56,7 +56,7 @@ fn registration_tracks_the_shipped_drive_within_kiss_icp_figures() {
     let poses = dir.path().join("poses.txt");
     write_output("odometry", &sample, &poses, &[]);
     let estimated = read_trajectory(&poses);
-    let sequence = KittiSequence::open(&sample).unwrap();
+    let sequence = KittiSequence::open(&sample, None, &|_| {}).unwrap();
     let truth: Vec<Isometry3<f64>> = (0..6)
         .map(|i| sequence.read_frame(i).unwrap().world_from_velodyne)
         .collect();

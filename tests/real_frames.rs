@@ -62,7 +62,7 @@ fn consecutive_scans_coincide_in_the_world_frame() {
     let Some(dir) = crate::common::sample() else {
         return;
     };
-    let sequence = KittiSequence::open(&dir).unwrap();
+    let sequence = KittiSequence::open(&dir, None, &|_| {}).unwrap();
     let scans = world_scans(&sequence, 0..6);
     for pair in scans.windows(2) {
         let sensor = pair[1].origin_in_world.map(|v| v as f32);
@@ -124,7 +124,7 @@ fn the_road_lies_in_the_world_xy_plane() {
     let Some(dir) = crate::common::sample() else {
         return;
     };
-    let sequence = KittiSequence::open(&dir).unwrap();
+    let sequence = KittiSequence::open(&dir, None, &|_| {}).unwrap();
     for scan in world_scans(&sequence, 0..3) {
         let labels = scan.labels.as_ref().expect("frames 0-2 are labelled");
         let mut road = Moments::default();
@@ -154,7 +154,7 @@ fn shipped_scans_and_labels_match_their_provenance() {
     let Some(dir) = crate::common::sample() else {
         return;
     };
-    let sequence = KittiSequence::open(&dir).unwrap();
+    let sequence = KittiSequence::open(&dir, None, &|_| {}).unwrap();
     assert_eq!(sequence.frames(), &[0, 1, 2, 3, 4, 5]);
     let counts: Vec<usize> = (0..6)
         .map(|i| sequence.read_frame(i).unwrap().points_in_velodyne.len())
@@ -181,7 +181,10 @@ fn labels_join_the_right_points() {
         8766, 65, 3829, 6474, 6590, 4106, 5927, 2873, 1495, 2210, 946, 9473, 4990, 7150, 7285,
         1042, 7475, 6645, 6029, 5251,
     ];
-    let frame = KittiSequence::open(&full).unwrap().read_frame(0).unwrap();
+    let frame = KittiSequence::open(&full, None, &|_| {})
+        .unwrap()
+        .read_frame(0)
+        .unwrap();
     let labels = frame.labels.unwrap();
     let scan_path = subset.join("velodyne/000000.bin");
     let points = read_scan(&scan_path).unwrap();
@@ -206,7 +209,7 @@ fn frames_in_batches_equal_frames_one_by_one() {
     let Some(dir) = crate::common::sample() else {
         return;
     };
-    let sequence = KittiSequence::open(&dir).unwrap();
+    let sequence = KittiSequence::open(&dir, None, &|_| {}).unwrap();
     let model = SvmModel::embedded_default().unwrap();
     let config = travmap_core::Config::default();
     let frames: Vec<_> = (0..6).map(|i| sequence.read_frame(i).unwrap()).collect();

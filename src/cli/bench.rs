@@ -35,23 +35,25 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = args.inputs.output;
     let repeats = usize::from(args.repeats);
-    let (model, model_name) = args.model.load(config)?;
-    let selection = args.inputs.open_one(images_for(&model, config))?;
-    // The tools first, while this process is small (a child starts with its
-    // parent's peak memory as its own: `bench_tools::wait_with_peak_rss`); their
-    // table at once, so that minutes of runs survive the method's bench failing.
+    // The tools first, before the model is loaded, while this process is small (a
+    // child starts with its parent's peak memory as its own:
+    // `child_runs::wait_with_peak_rss`); their table at once, so that minutes of
+    // runs survive the method's bench failing.
     let tool_repeats = usize::from(args.tool_repeats);
     let tools = args
         .tools
         .then(|| {
+            let input = args.inputs.open_one(false)?;
             bench_tools(
                 &args.inputs,
-                &selection,
+                &input,
                 args.model.path.as_deref(),
                 tool_repeats,
             )
         })
         .transpose()?;
+    let (model, model_name) = args.model.load(config)?;
+    let selection = args.inputs.open_one(images_for(&model, config))?;
     if let (Some(tools), false) = (&tools, output.json || output.quiet) {
         let out = &mut std::io::stdout().lock();
         print_tools_table(out, &selection.describe(), tools, tool_repeats)?;

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
+use travmap_drive::Fingerprints;
 use travmap_outputs::dataset::DatasetWriter;
 
 use super::{
@@ -41,6 +42,8 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     // The footprint and pseudo_label columns follow each drive's trajectory.
     for selection in &mut selections {
         selection.follow_trajectory(&grid_config)?;
+        // A model trained on the file knows its training scans by content.
+        selection.fingerprint_scans = Fingerprints::Labelled;
     }
     let bar = output.progress(frame_count(&selections), "extracting cells");
     let mut writer = DatasetWriter::create(output_path, config)?;

@@ -8,10 +8,10 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use travmap_core::config::ForeignRemissionPolicy;
-use travmap_drive::Selection;
 use travmap_drive::scoring::evaluation::{Evaluation, EvaluationReport};
 use travmap_drive::scoring::metrics::Confusion;
 use travmap_drive::scoring::metrics::Scores;
+use travmap_drive::{Fingerprints, Selection};
 use travmap_method::classifier::SvmModel;
 
 use super::adapt::AdaptFlag;
@@ -45,7 +45,9 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         .map(String::as_str)
         .collect();
     for selection in &mut selections {
-        selection.fingerprint_scans = !trained_on.is_empty();
+        if !trained_on.is_empty() {
+            selection.fingerprint_scans = Fingerprints::Labelled;
+        }
     }
     let evaluate = |model: &SvmModel,
                     message: &str,

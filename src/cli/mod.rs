@@ -337,9 +337,16 @@ impl Inputs {
         read_images: bool,
     ) -> Result<Vec<Selection>> {
         refuse_repeats(paths)?;
+        let config = self.settings.load()?;
+        let notice = |notice: &str| eprintln!("notice: {notice}");
         paths
             .iter()
-            .map(|path| open_selection(path, self.frames.clone(), options, read_images))
+            .map(|path| {
+                let mut selection =
+                    open_selection(path, self.frames.clone(), options, read_images)?;
+                selection.survey(&config, &notice)?;
+                Ok(selection)
+            })
             .collect()
     }
 

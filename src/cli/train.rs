@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::Args;
 use serde_json::json;
+use travmap_drive::Fingerprints;
 use travmap_outputs::atomic::write_atomically;
 use travmap_outputs::dataset::reading::{Labels, read_training_rows};
 use travmap_training::crossval::collect_training_set;
@@ -69,7 +70,7 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
     };
     // The model records which scans it learnt from, so `eval` can tell them apart.
     for selection in &mut selections {
-        selection.fingerprint_scans = true;
+        selection.fingerprint_scans = Fingerprints::Labelled;
     }
     let mut set = if selections.is_empty() {
         TrainingSet::for_features(config)

@@ -6,22 +6,25 @@
 
 pub mod scoring;
 
+use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use std::sync::Arc;
 
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Vector3};
 
-use travmap_core::config::Config;
+use travmap_core::config::{Config, OwnPoints, RefinePoses};
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
 use travmap_core::posing::Posing;
 use travmap_core::stopwatch::Stopwatch;
-use travmap_io::Source;
+use travmap_io::{Source, SourceKind};
 use travmap_method::classifier::SvmModel;
 use travmap_method::footprint::Trajectory;
 use travmap_method::fusion::DriveMap;
 use travmap_method::pipeline::{FrameResult, Pipeline, Posed};
+use travmap_method::pose_check::ground_disagreement_m;
 use travmap_method::registration::RegistrationError;
+use travmap_method::vehicle_points::{SURVEY_SPACING_M, VehicleBox, find_vehicle_box};
 
 /// A frame read, and how long reading it took, ms.
 pub type ReadFrame = (Frame, f64);
@@ -57,6 +60,28 @@ enum Step<B> {
     Result(Box<FrameResult>),
 }
 
+/// Frames at least [`SURVEY_SPACING_M`] apart along the recorded poses, from the
+/// first on, at most [`SURVEY_BODY_SCANS`] of them.
+fn spaced_frames(frames: &[usize], poses: &BTreeMap<usize, Isometry3<f64>>) -> Vec<usize> {
+    let mut taken: Vec<(usize, Vector3<f64>)> = Vec::new();
+    for &frame in frames {
+        let Some(pose) = poses.get(&frame) else {
+            continue;
+        };
+        let at = pose.translation.vector;
+        if taken
+            .iter()
+            .all(|(_, t)| (t - at).norm() >= SURVEY_SPACING_M)
+        {
+            taken.push((frame, at));
+        }
+        if taken.len() == SURVEY_BODY_SCANS {
+            break;
+        }
+    }
+    taken.into_iter().map(|(frame, _)| frame).collect()
+}
+
 /// A scan's pose as registration estimated it.
 #[derive(Clone, Debug)]
 pub struct EstimatedPose {
@@ -70,21 +95,144 @@ pub struct EstimatedPose {
 pub struct Selection {
     pub source: Source,
     pub frames: Range<usize>,
-    /// Give each result its scan's SHA-256 (`FrameResult::scan_sha256`): costs a
-    /// few milliseconds a frame, so only where a frame's identity matters.
-    pub fingerprint_scans: bool,
+    /// Which results carry their scan's SHA-256 (`FrameResult::scan_sha256`): it
+    /// costs a few milliseconds a frame, so only where a frame's identity matters.
+    pub fingerprint_scans: Fingerprints,
     /// The drive's trajectory, once followed ([`Selection::follow_trajectory`]).
     trajectory: Option<Arc<Trajectory>>,
+    /// What [`Selection::survey`] found.
+    survey: Survey,
 }
+
+/// Which scans' results carry their SHA-256, the scan's identity by content.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fingerprints {
+    None,
+    /// Labelled scans only (what a model learns from and is scored on).
+    Labelled,
+    All,
+}
+
+/// What a look at a few of a drive's scans found before the method runs
+/// ([`Selection::survey`]).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Survey {
+    /// The median ground height difference of consecutive scans under the recorded
+    /// poses, metres, when measured.
+    pub pose_disagreement_m: Option<f64>,
+    /// The recorded poses are refined by registration.
+    pub refine_poses: bool,
+    /// The vehicle's body found in the sensor frame.
+    pub vehicle_box: Option<VehicleBox>,
+}
+
+/// A survey looks no further into the drive than this many frames.
+const SURVEY_REACH_FRAMES: usize = 600;
+/// Consecutive pairs of scans whose ground is compared.
+const SURVEY_PAIRS: usize = 4;
+/// Scans taken for the vehicle's body, at most.
+const SURVEY_BODY_SCANS: usize = 8;
 
 impl Selection {
     pub fn new(source: Source, frames: Range<usize>) -> Self {
         Self {
             source,
             frames,
-            fingerprint_scans: false,
+            fingerprint_scans: Fingerprints::None,
             trajectory: None,
+            survey: Survey::default(),
         }
+    }
+
+    /// Looks at a few of the drive's scans before the method runs, when their poses
+    /// are recorded: whether consecutive scans lay the same ground under them (else
+    /// the poses are refined by registration, `integration.refine_poses`), and where
+    /// the vehicle's own points are (`vehicle.own_points`). `on_notice` hears what
+    /// was found; unreadable scans are left to the run to report.
+    pub fn survey(&mut self, config: &Config, on_notice: &dyn Fn(&str)) -> Result<&Survey> {
+        self.survey = Survey::default();
+        let recorded = self.source.posing() == Posing::Recorded;
+        let refine = config.integration.refine_poses;
+        let find_body = config.vehicle.own_points == OwnPoints::Auto
+            && config.vehicle.own_points_box_m.is_none();
+        if !recorded || (refine == RefinePoses::Never && !find_body) {
+            return Ok(&self.survey);
+        }
+        let reach = self.frames.start..self.frames.end.min(self.frames.start + SURVEY_REACH_FRAMES);
+        let frames = self.source.frames_in(&reach);
+        let poses: BTreeMap<usize, Isometry3<f64>> =
+            self.source.recorded_poses()?.into_iter().collect();
+        let body_frames = spaced_frames(&frames, &poses);
+        let pairs: Vec<(usize, usize)> = (body_frames.iter())
+            .filter_map(|f| {
+                let at = frames.binary_search(f).ok()?;
+                Some((*f, *frames.get(at + 1)?))
+            })
+            .take(SURVEY_PAIRS)
+            .collect();
+        let wanted: BTreeSet<usize> = (pairs.iter())
+            .flat_map(|&(a, b)| [a, b])
+            .chain(body_frames.iter().copied().filter(|_| find_body))
+            .collect();
+        let scans = self.read_some(&wanted);
+        let scan = |f: &usize| {
+            scans
+                .get(f)
+                .map(|s| (&s.world_from_velodyne, s.points_in_velodyne.as_slice()))
+        };
+        let mut disagreements: Vec<f64> = (pairs.iter())
+            .filter_map(|(a, b)| ground_disagreement_m(scan(a)?, scan(b)?))
+            .collect();
+        disagreements.sort_by(f64::total_cmp);
+        let path = self.source.path().display().to_string();
+        self.survey.pose_disagreement_m = disagreements.get(disagreements.len() / 2).copied();
+        self.survey.refine_poses = match (refine, self.survey.pose_disagreement_m) {
+            (RefinePoses::Always, _) => true,
+            (RefinePoses::Auto, Some(apart)) => apart > config.integration.pose_disagreement_m,
+            _ => false,
+        };
+        if let (true, Some(apart)) = (self.survey.refine_poses, self.survey.pose_disagreement_m) {
+            on_notice(&format!(
+                "{path}: consecutive scans lay the ground a median {apart:.2} m apart under the recorded poses (a 2-D localisation's?): each scan is registered to the window from its recorded pose (integration.refine_poses)"
+            ));
+        }
+        if find_body {
+            let body: Vec<_> = (body_frames.iter())
+                .filter_map(|f| scan(f).map(|(pose, points)| (*pose, points)))
+                .collect();
+            self.survey.vehicle_box = find_vehicle_box(&body);
+        }
+        if let Some(found) = &self.survey.vehicle_box {
+            let (min, max) = (found.min_m, found.max_m);
+            on_notice(&format!(
+                "{path}: the vehicle's own points found in the sensor frame (x {:.1} to {:.1}, y {:.1} to {:.1}, z {:.1} to {:.1} m): left out of every scan (vehicle.own_points)",
+                min[0], max[0], min[1], max[1], min[2], max[2]
+            ));
+        }
+        Ok(&self.survey)
+    }
+
+    /// What the survey found (nothing before [`Self::survey`]).
+    pub fn surveyed(&self) -> &Survey {
+        &self.survey
+    }
+
+    /// The frames `wanted` that read, by number: one at a time where the source
+    /// reads any frame directly, in one pass over the stretch they span in a log.
+    fn read_some(&self, wanted: &BTreeSet<usize>) -> BTreeMap<usize, Frame> {
+        let (Some(&first), Some(&last)) = (wanted.first(), wanted.last()) else {
+            return BTreeMap::new();
+        };
+        let one_pass = matches!(self.source.kind(), SourceKind::Log | SourceKind::PacketLog);
+        let ranges: Vec<Range<usize>> = match one_pass {
+            true => std::iter::once(first..last + 1).collect(),
+            false => wanted.iter().map(|&f| f..f + 1).collect(),
+        };
+        (ranges.iter())
+            .flat_map(|range| self.source.read(range))
+            .filter_map(|frame| frame.ok().filter(|f| wanted.contains(&f.index)))
+            .map(|frame| (frame.index, frame))
+            .collect()
     }
 
     /// The pipeline for this source's scans, as its posing asks (following the
@@ -102,6 +250,17 @@ impl Selection {
             _ => config,
         };
         let mut pipeline = Pipeline::new(config, self.source.posing())?;
+        if self.survey.refine_poses {
+            pipeline.refine_recorded_poses(config);
+        }
+        let given = config
+            .vehicle
+            .own_points_box_m
+            .map(VehicleBox::from_corners);
+        let off = config.vehicle.own_points == OwnPoints::Off;
+        if let Some(vehicle_box) = given.or(self.survey.vehicle_box.filter(|_| !off)) {
+            pipeline.leave_out_vehicle(vehicle_box);
+        }
         if let Some(trajectory) = &self.trajectory {
             pipeline.follow(trajectory.clone(), config);
         }
@@ -326,7 +485,13 @@ impl Selection {
             for arrival in arrived {
                 let (frame, read_ms) = arrival?;
                 let index = frame.index;
-                let scan_sha256 = self.fingerprint_scans.then(|| frame.content_sha256());
+                let scan_sha256 = match self.fingerprint_scans {
+                    Fingerprints::All => Some(frame.content_sha256()),
+                    Fingerprints::Labelled if frame.labels.is_some() => {
+                        Some(frame.content_sha256())
+                    }
+                    _ => None,
+                };
                 let posed = match pipeline.pose(frame) {
                     Ok(posed) => posed,
                     // A frame read only to fill the window (not selected: a packet

@@ -233,9 +233,11 @@ fn directory_format(path: &Path) -> Result<InputFormat> {
     Ok(InputFormat::Kitti)
 }
 
-/// Whether `dir` is a KITTI sequence: its scans and its calibration.
+/// Whether `dir` is a KITTI sequence: its scans, and its calibration or poses (a
+/// LiDAR alone, as nuScenes-lidarseg's conversions lay it out, has no calib.txt).
 pub fn is_sequence(dir: &Path) -> bool {
-    dir.join("velodyne").is_dir() && dir.join("calib.txt").is_file()
+    dir.join("velodyne").is_dir()
+        && (dir.join("calib.txt").is_file() || dir.join("poses.txt").is_file())
 }
 
 fn subdirectories(path: &Path) -> Vec<PathBuf> {

@@ -28,8 +28,8 @@ pub struct SourceOptions {
     pub keep_going: bool,
     /// Recorded logs: topics, frames and sensors.
     pub log: LogOptions,
-    /// Folders of scans: the rate stamps are made at when the file names are not
-    /// times (10 Hz when None).
+    /// Folders of scans, and sequences without `times.txt`: the rate stamps are
+    /// made at (10 Hz when None; 2 Hz for nuScenes-lidarseg's keyframes).
     pub rate_hz: Option<f64>,
     /// One saved point cloud is read as a site of square tiles this wide (m), as
     /// `travmap map` reads it; None: it is refused as no drive.
@@ -135,7 +135,7 @@ impl Source {
                 (Recording::Scans(Box::new(folder)), record)
             }
             InputFormat::Kitti => {
-                let sequence = KittiSequence::open(path)?;
+                let sequence = KittiSequence::open(path, options.rate_hz, on_notice)?;
                 (Recording::Kitti(Box::new(sequence)), PoseRecord::Reaches)
             }
             InputFormat::SiteCloud(kind) => {

@@ -233,7 +233,7 @@ mod tests {
             vehicle: VehicleConfig {
                 width_m: 1.6,
                 length_m: 0.0,
-                clearance_m: 0.3,
+                ..VehicleConfig::default()
             },
             horizon_m,
         }

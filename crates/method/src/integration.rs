@@ -81,6 +81,43 @@ pub fn scale_remission_to_reference(scan: &mut WorldScan) {
     }
 }
 
+/// Bins of the remission histogram that [`rank_remission`] reads ranks from.
+const RANK_BINS: usize = 1024;
+
+/// Replaces each point's remission by its rank among the scan's, on 0..1: the share
+/// of the scan's returns below it (a bin of 1/1024 of the scan's range apart, its
+/// points sharing the bin's middle rank). A scale every sensor shares, whatever its
+/// calibration; a histogram, not a sort, so it costs two passes over the scan.
+pub fn rank_remission(scan: &mut WorldScan) {
+    let Some(remission) = scan.remission.as_mut() else {
+        return;
+    };
+    let largest = remission
+        .iter()
+        .copied()
+        .filter(|r| r.is_finite())
+        .fold(0f32, f32::max);
+    if remission.len() < 2 || largest <= 0.0 {
+        return;
+    }
+    let bin_of = |r: f32| ((r.max(0.0) / largest * RANK_BINS as f32) as usize).min(RANK_BINS - 1);
+    let mut counts = [0u32; RANK_BINS];
+    for &r in remission.iter() {
+        counts[bin_of(r)] += 1;
+    }
+    // Each bin's middle rank: the points below it and half of its own.
+    let n = remission.len() as f32;
+    let mut below = 0u32;
+    let mut ranks = [0f32; RANK_BINS];
+    for (rank, &count) in ranks.iter_mut().zip(&counts) {
+        *rank = (below as f32 + 0.5 * count as f32) / n;
+        below += count;
+    }
+    for r in remission.iter_mut() {
+        *r = ranks[bin_of(*r)];
+    }
+}
+
 /// The scans a frame integrates: its own and those of the n - 1 frames before it
 /// (METHOD.md section 2). The one place that says which scans those are, which frame
 /// to start reading at to fill the window, and when a window starts afresh.
@@ -162,6 +199,25 @@ pub fn ground_normal(scans: &[WorldScan]) -> [f64; 3] {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn ranks_are_the_same_on_any_scale_of_one_order() {
+        let scan = |scale: f32| WorldScan {
+            index: 0,
+            stamp_ns: 0,
+            points_in_world: Arc::new(vec![[0.0; 3]; 4]),
+            origin_in_world: [0.0; 3],
+            labels: None,
+            remission: Some(vec![0.1 * scale, 0.4 * scale, 0.2 * scale, 0.4 * scale]),
+            moments: Moments::default(),
+        };
+        let (mut unit, mut byte) = (scan(1.0), scan(255.0));
+        rank_remission(&mut unit);
+        rank_remission(&mut byte);
+        assert_eq!(unit.remission, byte.remission);
+        // The lowest of four below none (1/8), the two highest share 3/4.
+        assert_eq!(unit.remission.unwrap(), vec![0.125, 0.75, 0.375, 0.75]);
+    }
+
     use super::*;
 
     #[test]

@@ -24,10 +24,12 @@ use crate::footprint::{Footprint, PathKind, Trajectory};
 use crate::grid::{CellClass, GridBuffers, GridLayout, KeptCellPoints, grid_points};
 use crate::ground_truth::{GroundTruth, UnknownLabels};
 use crate::integration::{
-    IntegrationWindow, WorldScan, ground_normal, scale_remission_to_reference, scan_to_world,
+    IntegrationWindow, WorldScan, ground_normal, rank_remission, scale_remission_to_reference,
+    scan_to_world,
 };
 use crate::registration::{Odometry, RegistrationError};
 use crate::self_labels::SelfLabeller;
+use crate::vehicle_points::VehicleBox;
 use travmap_core::config::{ClassifierConfig, Config, RemissionScaling};
 use travmap_core::error::Result;
 use travmap_core::frame::{CameraImage, Frame, RemissionScale};
@@ -160,8 +162,10 @@ pub struct Pipeline {
     classifier: ClassifierConfig,
     /// Feature groups configured.
     feature_groups: usize,
-    /// Scan registration, when the poses are estimated.
+    /// Scan registration, when the poses are estimated or refined.
     registration: Option<Odometry>,
+    /// The vehicle's body in the sensor frame, whose points are left out.
+    vehicle_box: Option<VehicleBox>,
     /// Footprint and self-labels (stages 6a, 6b), when following a trajectory.
     adaptation: Option<Adaptation>,
     /// The grid stage's buffers not in use: each frame in flight takes a set and
@@ -207,6 +211,7 @@ impl Pipeline {
             feature_groups: config.features.groups.len(),
             registration: (posing == Posing::Registration)
                 .then(|| Odometry::new(config.registration.clone())),
+            vehicle_box: None,
             adaptation: None,
             grid_buffers: Mutex::default(),
         })
@@ -229,10 +234,28 @@ impl Pipeline {
         });
     }
 
-    /// Stage 0, posing: the frame's pose as the source's posing says: its own, the
-    /// registration's estimate (frames in order, warm-up frames included; a scan
+    /// Recorded poses are refined from now on: each scan registered to the window's
+    /// map starting from its recorded pose (`pose_check` said they disagree).
+    pub fn refine_recorded_poses(&mut self, config: &Config) {
+        if self.posing == Posing::Recorded {
+            self.registration = Some(Odometry::new(config.registration.clone()));
+        }
+    }
+
+    /// From now on the points inside `vehicle_box` (the vehicle's body, in the
+    /// sensor frame) are left out of every scan (stage 0a).
+    pub fn leave_out_vehicle(&mut self, vehicle_box: VehicleBox) {
+        self.vehicle_box = Some(vehicle_box);
+    }
+
+    /// Stage 0, posing: the vehicle's own points left out (0a); then the frame's pose
+    /// as the source's posing says: its own (refined by registration when asked),
+    /// the registration's estimate (frames in order, warm-up frames included; a scan
     /// that does not register is refused), or none (each scan in its own frame).
     pub fn pose(&mut self, mut frame: Frame) -> Result<Posed, RegistrationError> {
+        if let Some(vehicle_box) = &self.vehicle_box {
+            vehicle_box.remove_from(&mut frame.points_in_velodyne, frame.labels.as_mut());
+        }
         let mut register_ms = 0.0;
         match (self.posing, &mut self.registration) {
             (Posing::Alone, _) => frame.world_from_velodyne = Isometry3::identity(),
@@ -240,6 +263,12 @@ impl Pipeline {
                 let pose;
                 (pose, register_ms) = timed(|| odometry.register(&frame.points_in_velodyne));
                 frame.world_from_velodyne = pose?;
+            }
+            (Posing::Recorded, Some(odometry)) => {
+                let (recorded, pose) = (frame.world_from_velodyne, &frame.points_in_velodyne);
+                let refined;
+                (refined, register_ms) = timed(|| odometry.register_from(pose, recorded));
+                frame.world_from_velodyne = refined?;
             }
             _ => {}
         }
@@ -347,8 +376,10 @@ impl Pipeline {
     /// Stage 1 for one scan: into the world, its remission scaled as configured.
     fn integrate(&self, frame: Frame) -> WorldScan {
         let mut scan = scan_to_world(frame);
-        if self.features.config.remission_scale == RemissionScaling::ScanP95 {
-            scale_remission_to_reference(&mut scan);
+        match self.features.config.remission_scale {
+            RemissionScaling::AsRead => {}
+            RemissionScaling::ScanP95 => scale_remission_to_reference(&mut scan),
+            RemissionScaling::ScanRank => rank_remission(&mut scan),
         }
         scan
     }

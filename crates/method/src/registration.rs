@@ -92,11 +92,27 @@ impl Odometry {
     }
 
     /// Registers one scan, points `[x, y, z, remission]` in the sensor frame (metres;
-    /// remission unused; non-finite points skipped) and returns its world_from_sensor.
-    /// The first scan that registers defines the world: its pose is the identity.
+    /// remission unused; non-finite points skipped) and returns its world_from_sensor,
+    /// starting from the motion of the scans before it. The first scan that
+    /// registers defines the world: its pose is the identity.
     pub fn register(
         &mut self,
         points_in_sensor: &[[f32; 4]],
+    ) -> Result<Isometry3<f64>, RegistrationError> {
+        // Refused scans took their time too (scans are taken to be evenly spaced).
+        let steps = self.refused + 1;
+        let step = self.previous_from_sensor;
+        let predicted = (0..steps).fold(self.world_from_sensor, |pose, _| pose * step);
+        self.register_from(points_in_sensor, predicted)
+    }
+
+    /// Registers one scan as [`Self::register`] does, starting from `guess` instead:
+    /// a recorded pose to refine (the first scan's is taken as it is, and places the
+    /// map in the recorded world).
+    pub fn register_from(
+        &mut self,
+        points_in_sensor: &[[f32; 4]],
+        guess: Isometry3<f64>,
     ) -> Result<Isometry3<f64>, RegistrationError> {
         self.downsample(points_in_sensor);
         let Scratch {
@@ -110,16 +126,15 @@ impl Odometry {
             return Err(RegistrationError::TooFewPoints { points, needed });
         }
         if self.map.is_empty() {
-            self.map.add(map_points, &self.world_from_sensor);
+            self.world_from_sensor = guess;
+            self.map.add(map_points, &guess);
             (self.stats.points, self.refused) = (points, 0);
-            return Ok(self.world_from_sensor);
+            return Ok(guess);
         }
 
         let sigma_m = self.threshold_m();
-        // Refused scans took their time too (scans are taken to be evenly spaced).
         let steps = self.refused + 1;
-        let step = self.previous_from_sensor;
-        let predicted = (0..steps).fold(self.world_from_sensor, |pose, _| pose * step);
+        let predicted = guess;
         let (world_from_sensor, seen, failure) = align(
             &self.map,
             &mut self.scratch,

@@ -27,6 +27,9 @@ pub struct TrainingSet {
     pub appearance_len: usize,
     /// Per cell, its row in `appearance` (seen cells: the hybrid model's cells).
     pub appearance_row: Vec<Option<usize>>,
+    /// The rows each input (a drive, a dataset file) gave, in order; empty once the
+    /// cells are a subset.
+    pub input_rows: Vec<std::ops::Range<usize>>,
 }
 
 impl TrainingSet {

@@ -14,7 +14,7 @@ use super::{Reduce, Search, train_by};
 use travmap_core::config::{Config, Learner};
 use travmap_core::error::{Error, Result};
 use travmap_core::random::SplitMix64;
-use travmap_drive::Selection;
+use travmap_drive::{Fingerprints, Selection};
 use travmap_method::classifier::{AdaptationSummary, AdaptedInput, SvmModel};
 use travmap_method::footprint::PathKind;
 use travmap_method::training_set::TrainingSet;
@@ -105,7 +105,7 @@ pub fn adapt(
     let mut trajectory_m = 0.0;
     for selection in selections.iter_mut() {
         selection.source.set_read_labels(false);
-        selection.fingerprint_scans = true;
+        selection.fingerprint_scans = Fingerprints::All;
         let trajectory = selection.follow_trajectory(&grid_config)?;
         trajectory_m += trajectory.length_m();
         let mut scans = Vec::new();

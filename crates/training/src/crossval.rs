@@ -26,6 +26,7 @@ pub fn collect_training_set<'a>(
     let mut set = TrainingSet::for_features(config);
     for selection in selections {
         set.sources.push(selection.describe());
+        let first_row = set.len();
         selection.run::<Error>(&training_config, None, |result| {
             if result.features.dimension != set.dimension {
                 return Err(Error::Training(format!(
@@ -48,6 +49,7 @@ pub fn collect_training_set<'a>(
             on_frame();
             Ok(())
         })?;
+        set.input_rows.push(first_row..set.len());
     }
     if set.is_empty() {
         return Err(Error::Training(

@@ -17,7 +17,9 @@ use rayon::prelude::*;
 
 use reduced_set::fit_reduced_set;
 use smo::{Parameters, Problem};
-use travmap_core::config::{ClassWeights, Config, Criterion, FeatureGroup, TrainingConfig};
+use travmap_core::config::{
+    ClassWeights, Config, Criterion, FeatureGroup, TrainingConfig, WeighInputs,
+};
 use travmap_core::error::{Error, Result};
 use travmap_core::random::SplitMix64;
 use travmap_drive::scoring::metrics::Confusion;
@@ -119,6 +121,41 @@ fn fit(set: &TrainingSet, c: f64, gamma: f64, config: &Config) -> SvmModel {
         config.clone(),
         summary,
     )
+}
+
+/// The cells of several inputs, each input weighing as much in all: an input with
+/// more than its share of `max_cells` gives a seeded random share, and each cell's
+/// weight on C is scaled so that every input's weights sum alike.
+fn weigh_inputs_equally(set: &TrainingSet, max_cells: usize, seed: u64) -> TrainingSet {
+    let inputs: Vec<&std::ops::Range<usize>> =
+        set.input_rows.iter().filter(|r| !r.is_empty()).collect();
+    let share = (max_cells / inputs.len().max(1)).max(1);
+    let mut rng = SplitMix64(seed);
+    let mut indices = Vec::new();
+    let mut scale = Vec::new();
+    for rows in &inputs {
+        let mut taken: Vec<usize> = (*rows).clone().collect();
+        if taken.len() > share {
+            rng.shuffle(&mut taken);
+            taken.truncate(share);
+            taken.sort_unstable();
+        }
+        let weight_sum: f64 = taken.iter().map(|&i| set.weight[i] as f64).sum();
+        scale.extend(std::iter::repeat_n(1.0 / weight_sum, taken.len()));
+        indices.extend(taken);
+    }
+    let mut weighed = set.subset(&indices);
+    // Mean weight 1, as unweighted cells have.
+    let mean: f64 = scale
+        .iter()
+        .zip(&weighed.weight)
+        .map(|(s, w)| s * *w as f64)
+        .sum::<f64>()
+        / weighed.len() as f64;
+    for (w, s) in weighed.weight.iter_mut().zip(&scale) {
+        *w = (*w as f64 * s / mean) as f32;
+    }
+    weighed
 }
 
 /// The weights on C of the traversable and the non-traversable class.
@@ -327,6 +364,14 @@ fn train_one(
         )));
     }
 
+    let weighed;
+    let set = match t.weigh_inputs {
+        WeighInputs::Equally if set.input_rows.len() > 1 => {
+            weighed = weigh_inputs_equally(set, t.max_fit_samples, t.seed);
+            &weighed
+        }
+        _ => set,
+    };
     // The search and the final fit run on seeded random subsets when the set is
     // large; the fit's subset holds the search's.
     let mut order: Vec<usize> = (0..set.len()).collect();

@@ -15,6 +15,21 @@ pub struct VehicleConfig {
     /// Height range within a cell that the vehicle cannot drive over, metres: such
     /// cells are obstacles, never footprint (default 0.3).
     pub clearance_m: f64,
+    /// The vehicle's own points (its body as its LiDAR sees it) are left out of
+    /// every scan: `auto` (default) finds them where the recorded poses show the
+    /// world moving past points that stay put in the sensor frame; `off` keeps them.
+    pub own_points: OwnPoints,
+    /// The box around the vehicle's body in the sensor frame, `[xmin, ymin, zmin,
+    /// xmax, ymax, zmax]` metres; given, it is used instead of one found.
+    pub own_points_box_m: Option<[f64; 6]>,
+}
+
+/// Whether the vehicle's own points are found and left out.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OwnPoints {
+    Auto,
+    Off,
 }
 
 impl Default for VehicleConfig {
@@ -23,7 +38,24 @@ impl Default for VehicleConfig {
             width_m: 1.6,
             length_m: 4.0,
             clearance_m: 0.3,
+            own_points: OwnPoints::Auto,
+            own_points_box_m: None,
         }
+    }
+}
+
+impl VehicleConfig {
+    /// What is wrong with the vehicle's settings, if anything.
+    pub fn validate(&self) -> Result<(), String> {
+        if let Some(corners) = self.own_points_box_m {
+            let ordered = (0..3).all(|i| corners[i] < corners[i + 3]);
+            if !(ordered && corners.iter().all(|v| v.is_finite())) {
+                return Err(format!(
+                    "vehicle.own_points_box_m must be [xmin, ymin, zmin, xmax, ymax, zmax] with each min below its max, got {corners:?}"
+                ));
+            }
+        }
+        Ok(())
     }
 }
 

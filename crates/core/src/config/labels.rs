@@ -1,5 +1,5 @@
 //! Which label ids are traversable: presets for the datasets travmap reads
-//! (SemanticKITTI, RELLIS-3D), each with a road rule (the seed paper's: a road
+//! (SemanticKITTI, RELLIS-3D, nuScenes-lidarseg), each with a road rule (the seed paper's: a road
 //! car's ground) and an off-road rule (also terrain, grass, dirt, mud, puddles), and
 //! label maps for any other ontology.
 
@@ -14,6 +14,9 @@ pub enum LabelSet {
     Semantickitti,
     /// RELLIS-3D's ids.
     Rellis3d,
+    /// nuScenes-lidarseg's ids (0-31), and 32-39 for moving objects as some
+    /// conversions of it mark them.
+    Nuscenes,
 }
 
 /// Which ground counts as traversable.
@@ -48,6 +51,12 @@ const SEMANTICKITTI_IDS: &[u16] = &[
 const RELLIS3D_IDS: &[u16] = &[
     0, 1, 3, 4, 5, 6, 7, 8, 9, 10, 12, 15, 17, 18, 19, 23, 27, 31, 33, 34,
 ];
+/// nuScenes-lidarseg's ids 0-31 (shared/data PROVENANCE section 10), and 32-39:
+/// moving objects, as SegNet4D's conversion (scene 1072's labels) marks them.
+const NUSCENES_IDS: &[u16] = &[
+    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 24, 25,
+    26, 27, 28, 29, 30, 31, 32, 33, 34, 35, 36, 37, 38, 39,
+];
 
 impl LabelSet {
     /// The preset: `rule`'s traversable classes, the classes that do not vote.
@@ -68,6 +77,11 @@ impl LabelSet {
             (LabelSet::Rellis3d, LabelRule::Offroad) => {
                 (&[1, 3, 10, 23, 31, 33], &[0, 7], RELLIS3D_IDS)
             }
+            // flat.driveable_surface 24, flat.other 25, flat.sidewalk 26; noise 0 and
+            // vehicle.ego 31 (the recording car's own body) do not vote.
+            (LabelSet::Nuscenes, LabelRule::Road) => (&[24, 25, 26], &[0, 31], NUSCENES_IDS),
+            // ... and flat.terrain 27 (grass, soil, gravel).
+            (LabelSet::Nuscenes, LabelRule::Offroad) => (&[24, 25, 26, 27], &[0, 31], NUSCENES_IDS),
         };
         ClassRule {
             traversable: traversable.to_vec(),
@@ -80,6 +94,7 @@ impl LabelSet {
         match self {
             LabelSet::Semantickitti => "semantickitti",
             LabelSet::Rellis3d => "rellis3d",
+            LabelSet::Nuscenes => "nuscenes",
         }
     }
 }
@@ -141,7 +156,18 @@ mod tests {
         let rellis = LabelSet::Rellis3d.classes(LabelRule::Offroad);
         assert_eq!(rellis.traversable, vec![1, 3, 10, 23, 31, 33]);
         assert_eq!(rellis.ignored, vec![0, 7]);
-        for set in [LabelSet::Semantickitti, LabelSet::Rellis3d] {
+        let nuscenes = LabelSet::Nuscenes.classes(LabelRule::Road);
+        assert_eq!(nuscenes.traversable, vec![24, 25, 26]);
+        assert_eq!(nuscenes.ignored, vec![0, 31]);
+        assert!(
+            !nuscenes.traversable.contains(&32),
+            "a moving car is no road"
+        );
+        for set in [
+            LabelSet::Semantickitti,
+            LabelSet::Rellis3d,
+            LabelSet::Nuscenes,
+        ] {
             for rule in [LabelRule::Road, LabelRule::Offroad] {
                 let classes = set.classes(rule);
                 let known = classes.known.unwrap();

@@ -14,10 +14,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 
-pub use adaptation::{AdaptConfig, Learner, VehicleConfig};
+pub use adaptation::{AdaptConfig, Learner, OwnPoints, VehicleConfig};
 pub use labels::{ClassRule, LabelRule, LabelSet, parse_label_map};
 pub use registration::{PoseSource, RegistrationConfig};
-pub use training::{ClassWeights, Criterion, TrainingConfig};
+pub use training::{ClassWeights, Criterion, TrainingConfig, WeighInputs};
 
 /// Every tunable of the method, one section per stage.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -83,6 +83,24 @@ pub struct IntegrationConfig {
     pub scans: usize,
     /// Where each scan's pose comes from (default `auto`).
     pub poses: PoseSource,
+    /// Whether recorded poses are refined by registering each scan to the window
+    /// from its recorded pose (default `auto`: when consecutive scans lay the ground
+    /// more than `pose_disagreement_m` apart under them).
+    pub refine_poses: RefinePoses,
+    /// The median ground height difference of consecutive scans above which `auto`
+    /// refines the recorded poses, metres (default 0.05; SemanticKITTI's poses lay
+    /// its scans' ground within 0.01-0.02 m).
+    pub pose_disagreement_m: f64,
+}
+
+/// When recorded poses are refined by registration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RefinePoses {
+    /// When consecutive scans disagree under them.
+    Auto,
+    Always,
+    Never,
 }
 
 /// METHOD.md section 3.
@@ -111,9 +129,10 @@ pub struct FeatureConfig {
     /// `"remission"` and `"context"` (default `["remission"]`); `[]` is the paper's
     /// method.
     pub groups: Vec<FeatureGroup>,
-    /// What remission features see: `"as_read"` (the reader's 0..1 scale, default)
-    /// or `"scan_p95"` (each scan scaled so that its 95th percentile is KITTI's,
-    /// for sensors whose remission comes on another scale).
+    /// What remission features see: `"scan_rank"` (default: each point's rank
+    /// among its scan's returns, the same on every sensor's scale), `"as_read"`
+    /// (the reader's 0..1 scale) or `"scan_p95"` (each scan scaled so that its
+    /// 95th percentile is KITTI's). A file that does not say was written as read.
     #[serde(default)]
     pub remission_scale: RemissionScaling,
 }
@@ -122,9 +141,14 @@ pub struct FeatureConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RemissionScaling {
+    /// Files written before the choice existed read as this.
     #[default]
     AsRead,
+    /// Scaled so that the scan's 95th percentile is KITTI's.
     ScanP95,
+    /// Each point's rank among its scan's returns, 0..1: the same on any sensor's
+    /// scale, whatever its calibration.
+    ScanRank,
 }
 
 /// A group of features beyond the paper's 20, in the order they follow them.
@@ -202,6 +226,8 @@ impl Default for IntegrationConfig {
         Self {
             scans: 3,
             poses: PoseSource::Auto,
+            refine_poses: RefinePoses::Auto,
+            pose_disagreement_m: 0.05,
         }
     }
 }
@@ -224,7 +250,7 @@ impl Default for FeatureConfig {
             unevenness_min_points: 3,
             // Remission wins the cross-scene numbers (docs/method.md "Features beyond the paper").
             groups: vec![FeatureGroup::Remission],
-            remission_scale: RemissionScaling::AsRead,
+            remission_scale: RemissionScaling::ScanRank,
         }
     }
 }
@@ -393,6 +419,11 @@ impl Config {
                 self.integration.scans
             ));
         }
+        positive(
+            "integration.pose_disagreement_m",
+            self.integration.pose_disagreement_m,
+        )?;
+        self.vehicle.validate().map_err(Error::Config)?;
         self.registration.validate().map_err(Error::Config)?;
         self.adapt.validate(&self.vehicle).map_err(Error::Config)?;
         let ground_truth = &self.ground_truth;

@@ -49,6 +49,19 @@ pub struct TrainingConfig {
     /// on the shipped scenes it lowered every held-out score, docs/method.md "Features beyond
     /// the paper").
     pub tune_threshold: bool,
+    /// How the inputs of one training weigh against each other: `"equally"`
+    /// (default: each drive or dataset file counts as much in all, however many
+    /// cells it gave, so that a long drive of one sensor does not drown the others)
+    /// or `"by_cells"`.
+    pub weigh_inputs: WeighInputs,
+}
+
+/// How several training inputs weigh against each other.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WeighInputs {
+    Equally,
+    ByCells,
 }
 
 /// Per-class weights on the SVM's C.
@@ -85,6 +98,7 @@ impl Default for TrainingConfig {
             class_weights: ClassWeights::Balanced,
             criterion: Criterion::Miou,
             tune_threshold: false,
+            weigh_inputs: WeighInputs::Equally,
         }
     }
 }

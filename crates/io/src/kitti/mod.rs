@@ -4,6 +4,10 @@
 //! frame, its labels, its camera image, its stamp and `world_from_velodyne`, where
 //! `world` is the first scan's z-up velodyne frame. Every malformed input is an
 //! [`Error`] naming the file.
+//!
+//! Other datasets laid out as KITTI's (nuScenes-lidarseg as its conversions ship it)
+//! bend three of its rules, and each is told from the files and said in a notice:
+//! labels of one byte a point, intensity on 0-255, and no `calib.txt` or `times.txt`.
 
 pub(crate) mod text;
 
@@ -23,6 +27,21 @@ use travmap_core::error::{Error, Result};
 use travmap_core::frame::{Frame, RemissionScale};
 use travmap_core::geometry::rigid;
 
+/// How wide a sequence's label files are, told from their size against the scan's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LabelWidth {
+    /// SemanticKITTI's: a little-endian uint32 a point (class in the lower 16 bits).
+    U32,
+    /// One byte a point: nuScenes-lidarseg's ids, as its KITTI-layout conversions
+    /// store them.
+    U8,
+}
+
+/// The rate stamps are made at when `times.txt` is missing: KITTI's scans.
+const DEFAULT_RATE_HZ: f64 = 10.0;
+/// ... and nuScenes-lidarseg's, whose labelled scans are its 2 Hz keyframes.
+const KEYFRAME_RATE_HZ: f64 = 2.0;
+
 /// An opened sequence: calibration, poses and times are read at once, scans on demand.
 #[derive(Clone, Debug)]
 pub struct KittiSequence {
@@ -37,11 +56,18 @@ pub struct KittiSequence {
     read_images: bool,
     /// Read `labels/` (false: the frames come without labels, as unlabelled drives).
     read_labels: bool,
+    label_width: LabelWidth,
+    /// The scale of the scans' fourth value, told from the first scan.
+    remission: RemissionScale,
 }
 
 impl KittiSequence {
-    /// Opens `dir`, a directory holding `velodyne/`, `calib.txt`, `poses.txt`, `times.txt`.
-    pub fn open(dir: &Path) -> Result<Self> {
+    /// Opens `dir`, a directory holding `velodyne/`, `calib.txt`, `poses.txt`,
+    /// `times.txt`. Without `calib.txt` the poses are the LiDAR's own (`Tr` the
+    /// identity) and there is no camera; without `times.txt` the scans are stamped at
+    /// `rate_hz` (10 Hz, or 2 Hz for nuScenes-lidarseg's keyframes, told by their
+    /// one-byte labels). `on_notice` hears each thing assumed.
+    pub fn open(dir: &Path, rate_hz: Option<f64>, on_notice: &dyn Fn(&str)) -> Result<Self> {
         if !dir.is_dir() {
             return Err(Error::Sequence {
                 path: dir.to_path_buf(),
@@ -50,10 +76,47 @@ impl KittiSequence {
                     .into(),
             });
         }
-        let calibration = read_calibration(&dir.join("calib.txt"))?;
+        let said = |notice: String| on_notice(&format!("{}: {notice}", dir.display()));
+        let calib_path = dir.join("calib.txt");
+        let calibration = if calib_path.exists() {
+            read_calibration(&calib_path)?
+        } else {
+            said("no calib.txt: the poses in poses.txt are taken as the LiDAR's own, and there is no camera".into());
+            Calibration::lidar_alone()
+        };
         let first_cam0_from_cam0 = read_poses(&dir.join("poses.txt"))?;
-        let stamps_ns = read_times(&dir.join("times.txt"))?;
         let frames = list_scans(&dir.join("velodyne"))?;
+        let label_width = label_width(dir, &frames)?;
+        if label_width == LabelWidth::U8 {
+            said("labels of one byte a point (nuScenes-lidarseg's ids, as its KITTI-layout conversions store them), told from their size".into());
+        }
+        let times_path = dir.join("times.txt");
+        let stamps_ns = if times_path.exists() {
+            read_times(&times_path)?
+        } else {
+            let (rate_hz, why) = match (rate_hz, label_width) {
+                (Some(rate_hz), _) => (rate_hz, "as --rate says"),
+                (None, LabelWidth::U8) => (
+                    KEYFRAME_RATE_HZ,
+                    "nuScenes-lidarseg's keyframes; --rate to set",
+                ),
+                (None, LabelWidth::U32) => (DEFAULT_RATE_HZ, "KITTI's rate; --rate to set"),
+            };
+            said(format!(
+                "no times.txt: the scans stamped at {rate_hz} Hz ({why})"
+            ));
+            let last = frames.last().map_or(0, |last| last + 1);
+            (0..last.max(first_cam0_from_cam0.len()))
+                .map(|i| (i as f64 * 1e9 / rate_hz).round() as u64)
+                .collect()
+        };
+        let remission = match frames.first() {
+            Some(first) => remission_scale(&dir.join("velodyne").join(format!("{first:06}.bin")))?,
+            None => RemissionScale::Unit,
+        };
+        if remission == RemissionScale::Byte {
+            said("intensity on 0-255 (not KITTI's 0..1 remission): divided by 255".into());
+        }
         Ok(Self {
             dir: dir.to_path_buf(),
             calibration,
@@ -62,6 +125,8 @@ impl KittiSequence {
             frames,
             read_images: true,
             read_labels: true,
+            label_width,
+            remission,
         })
     }
 
@@ -147,13 +212,19 @@ impl KittiSequence {
     pub fn read_frame(&self, index: usize) -> Result<Frame> {
         let scan_path = self.scan_path(index);
         let mut points_in_velodyne = read_scan(&scan_path)?;
+        if self.remission == RemissionScale::Byte {
+            for point in &mut points_in_velodyne {
+                point[3] /= 255.0;
+            }
+        }
         let label_path = self.label_path(index);
         let mut labels = if self.read_labels && label_path.is_file() {
-            Some(read_labels(
-                &label_path,
-                &scan_path,
-                points_in_velodyne.len(),
-            )?)
+            let points = points_in_velodyne.len();
+            let bytes = std::fs::read(&label_path).map_err(|e| Error::io(&label_path, e))?;
+            Some(match self.label_width {
+                LabelWidth::U32 => parse_labels(&bytes, &label_path, &scan_path, points)?,
+                LabelWidth::U8 => parse_byte_labels(&bytes, &label_path, &scan_path, points)?,
+            })
         } else {
             None
         };
@@ -183,8 +254,7 @@ impl KittiSequence {
             stamp_ns: self.stamp_ns(index)?,
             world_from_velodyne: self.world_from_velodyne(index)?,
             points_in_velodyne,
-            // KITTI's remission is 0..1 already.
-            remission: RemissionScale::Unit,
+            remission: self.remission,
             labels,
             camera,
             dropped_points,
@@ -318,6 +388,60 @@ pub fn parse_labels(
         });
     }
     Ok(labels)
+}
+
+/// One-byte labels (nuScenes-lidarseg's ids), widened to the uint32 of a
+/// SemanticKITTI label; the count checked as [`parse_labels`] does.
+pub fn parse_byte_labels(
+    bytes: &[u8],
+    path: &Path,
+    scan_path: &Path,
+    points: usize,
+) -> Result<Vec<u32>> {
+    if bytes.len() != points {
+        return Err(Error::LabelCount {
+            path: path.to_path_buf(),
+            scan: scan_path.to_path_buf(),
+            labels: bytes.len(),
+            points,
+        });
+    }
+    Ok(bytes.iter().map(|&id| u32::from(id)).collect())
+}
+
+/// How wide the sequence's labels are: the first label file's size against its
+/// scan's point count (one byte a point, or SemanticKITTI's four).
+fn label_width(dir: &Path, frames: &[usize]) -> Result<LabelWidth> {
+    let labelled = frames.iter().find_map(|frame| {
+        let label = dir.join("labels").join(format!("{frame:06}.label"));
+        let scan = dir.join("velodyne").join(format!("{frame:06}.bin"));
+        Some((
+            std::fs::metadata(&label).ok()?.len(),
+            std::fs::metadata(&scan).ok()?.len(),
+        ))
+    });
+    Ok(match labelled {
+        // A one-point scan is the same either way; SemanticKITTI's is the default.
+        Some((label_bytes, scan_bytes)) if label_bytes * 16 == scan_bytes && scan_bytes > 16 => {
+            LabelWidth::U8
+        }
+        _ => LabelWidth::U32,
+    })
+}
+
+/// The scale of a scan file's fourth value: KITTI's 0..1 remission, or a 0-255
+/// intensity (nuScenes' conversions), told from its largest finite value.
+fn remission_scale(scan_path: &Path) -> Result<RemissionScale> {
+    let largest = read_scan(scan_path)?
+        .iter()
+        .map(|p| p[3])
+        .filter(|v| v.is_finite())
+        .fold(0f32, f32::max);
+    Ok(match largest {
+        ..=1.0 => RemissionScale::Unit,
+        ..=255.0 => RemissionScale::Byte,
+        _ => RemissionScale::Unknown,
+    })
 }
 
 /// Frame numbers of the `NNNNNN.bin` files in `velodyne_dir`, ascending.

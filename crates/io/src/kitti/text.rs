@@ -20,6 +20,14 @@ pub struct Calibration {
 }
 
 impl Calibration {
+    /// A LiDAR without a camera, whose poses are its own: `Tr` the identity.
+    pub fn lidar_alone() -> Self {
+        Self {
+            projections: [None; 4],
+            cam0_from_velodyne: Matrix4::identity(),
+        }
+    }
+
     /// The rigid velodyne -> camera_0 pose (`inv(Tr)`), as `/tf_static` carries it.
     pub fn velodyne_from_camera_0(&self) -> Isometry3<f64> {
         // Tr is checked invertible when the file is read.

@@ -251,8 +251,21 @@ impl SvmModel {
     /// cells; the error names the first setting that differs, both values, and the
     /// `--set` that runs the model as trained. `model_name` names the model file.
     pub fn check_compatible(&self, config: &Config, model_name: &str) -> Result<()> {
-        let trained = serde_json::to_value(&self.config).unwrap_or_default();
-        let wanted = serde_json::to_value(config).unwrap_or_default();
+        let mut trained = serde_json::to_value(&self.config).unwrap_or_default();
+        let mut wanted = serde_json::to_value(config).unwrap_or_default();
+        // The remission scale means nothing to a model without remission features.
+        if !self
+            .config
+            .features
+            .groups
+            .contains(&FeatureGroup::Remission)
+        {
+            for value in [&mut trained, &mut wanted] {
+                if let Some(scale) = value.pointer_mut("/features/remission_scale") {
+                    *scale = serde_json::Value::Null;
+                }
+            }
+        }
         let mut sections = vec!["grid.cell_size_m", "features"];
         // The appearance settings matter only where the hybrid model is used.
         if self.hybrid.is_some() && config.appearance.enabled {

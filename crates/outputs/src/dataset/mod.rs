@@ -32,6 +32,7 @@ use columns::{Columns, write_column};
 
 use crate::atomic::{AtomicFile, WritebackFile, parquet_failure, sync_output, write_failure};
 use travmap_core::Config;
+use travmap_core::config::FeatureGroup;
 use travmap_core::error::{Error, Result};
 use travmap_method::features::feature_names;
 use travmap_method::grid::CellClass;
@@ -58,6 +59,8 @@ const READ_BATCH_ROWS: usize = 1 << 13;
 const MAX_VALUES_PER_FILE_BYTE: usize = 1 << 10;
 
 const CONFIG_KEY: &str = "travmap.config";
+/// Metadata: the SHA-256 of the labelled scans, a JSON list (absent when unknown).
+const SCANS_KEY: &str = "travmap.labelled_scans";
 const FORMAT_KEY: &str = "travmap.format";
 const FORMAT: &str = "travmap-cells 2";
 /// The format before `footprint` and `pseudo_label`, still read.
@@ -108,6 +111,9 @@ pub struct DatasetWriter {
     columns: Columns,
     appearance_len: usize,
     summary: DatasetSummary,
+    /// The SHA-256 of every labelled scan whose cells the file holds, so that a
+    /// model trained on it knows its training scans by content.
+    labelled_scans: Vec<String>,
 }
 
 /// What a dataset holds, for the summary.
@@ -155,11 +161,15 @@ impl DatasetWriter {
             columns: Columns::new(features.len(), appearance.len()),
             appearance_len: appearance.len(),
             summary: DatasetSummary::default(),
+            labelled_scans: Vec::new(),
         })
     }
 
     /// Appends the predictable cells of one frame.
     pub fn push_frame(&mut self, source: &str, result: &FrameResult) -> Result<()> {
+        if let (Some(sha), Some(_)) = (&result.scan_sha256, &result.ground_truth) {
+            self.labelled_scans.push(sha.clone());
+        }
         if result.features.dimension != self.columns.features.len() {
             return Err(Error::Dataset {
                 path: self.output_path(),
@@ -253,6 +263,10 @@ impl DatasetWriter {
     /// Writes the last row group and the footer, then renames the file into place.
     pub fn finish(mut self) -> Result<DatasetSummary> {
         self.flush()?;
+        if !self.labelled_scans.is_empty() {
+            let scans = serde_json::to_string(&self.labelled_scans).expect("strings serialise");
+            (self.writer).append_key_value_metadata(KeyValue::new(SCANS_KEY.into(), scans));
+        }
         let path = self.output_path();
         let output = &self.output;
         let file = self
@@ -271,19 +285,38 @@ impl DatasetWriter {
 /// The settings that decide a cell's features and label: a dataset made with
 /// others cannot train a model used with these.
 fn feature_settings(config: &Config) -> serde_json::Value {
+    let truth = &config.ground_truth;
+    // Presets under one rule mean the same ground whatever dataset's ids they read
+    // (SemanticKITTI's and nuScenes' road rules train one model); explicit lists
+    // and label maps are compared by what they count.
+    // Lists equal to the preset's (as older configurations wrote them) are the preset.
+    let classes = truth.classes();
+    let preset_classes = truth.labels.classes(truth.rule);
+    let preset = truth.label_map.is_none()
+        && classes.traversable == preset_classes.traversable
+        && classes.ignored == preset_classes.ignored;
+    let counted = match preset {
+        true => serde_json::json!({ "rule": truth.rule }),
+        false => serde_json::json!({
+            "traversable_classes": classes.traversable,
+            "ignored_classes": classes.ignored,
+        }),
+    };
+    // The remission scale means nothing without remission features.
+    let mut features = config.features.clone();
+    if !features.groups.contains(&FeatureGroup::Remission) {
+        features.remission_scale = Default::default();
+    }
     serde_json::json!({
         "integration": config.integration,
         "grid.cell_size_m": config.grid.cell_size_m,
         "grid.min_points": config.grid.min_points,
-        "features": config.features,
+        "features": features,
         "appearance": config.appearance,
-        // What the ground truth counts, however the configuration names it (a
-        // preset, explicit lists, a label map).
         "ground_truth": {
-            "min_points": config.ground_truth.min_points,
-            "min_non_traversable_points": config.ground_truth.min_non_traversable_points,
-            "traversable_classes": config.ground_truth.classes().traversable,
-            "ignored_classes": config.ground_truth.classes().ignored,
+            "min_points": truth.min_points,
+            "min_non_traversable_points": truth.min_non_traversable_points,
+            "counted": counted,
         },
     })
 }

@@ -14,7 +14,7 @@ use parquet::file::serialized_reader::SerializedFileReader;
 use parquet::schema::types::SchemaDescriptor;
 
 use super::{
-    CONFIG_KEY, FORMAT, FORMAT_1, FORMAT_KEY, MAX_VALUES_PER_FILE_BYTE, READ_BATCH_ROWS,
+    CONFIG_KEY, FORMAT, FORMAT_1, FORMAT_KEY, MAX_VALUES_PER_FILE_BYTE, READ_BATCH_ROWS, SCANS_KEY,
     appearance_columns, feature_settings, schema,
 };
 use travmap_core::Config;
@@ -337,5 +337,11 @@ pub fn read_training_rows(
             }
         }
     }
+    if let Some(scans) =
+        value_of(SCANS_KEY).and_then(|json| serde_json::from_str::<Vec<String>>(&json).ok())
+    {
+        set.frame_sha256.extend(scans);
+    }
+    set.input_rows.push(set.len() - added..set.len());
     Ok(added)
 }
