@@ -220,3 +220,18 @@ fn the_held_out_scores_are_what_crossval_prints() {
         "the README's status should say: {summary}"
     );
 }
+
+#[test]
+fn the_configuration_in_the_guide_is_what_travmap_config_prints() {
+    let printed = success(travmap(&["config"]));
+    let guide = readme();
+    let start = guide
+        .find("```toml\n[integration]")
+        .expect("docs/guide.md no longer shows the configuration")
+        + "```toml\n".len();
+    let shown = &guide[start..start + guide[start..].find("```").unwrap()];
+    assert_eq!(
+        shown, printed,
+        "docs/guide.md's configuration is not what `travmap config` prints: paste it again"
+    );
+}

@@ -3,6 +3,7 @@
 
 use std::collections::HashMap;
 
+use travmap_core::config::RemissionScaling;
 use travmap_core::geometry::Moments;
 use travmap_io::KittiSequence;
 use travmap_io::kitti::{read_labels, read_poses, read_scan};
@@ -53,7 +54,7 @@ fn mean_nearest_distance(fixed: &[[f32; 3]], moving: &[[f32; 3]], sensor: [f32; 
 
 fn world_scans(sequence: &KittiSequence, frames: std::ops::Range<usize>) -> Vec<WorldScan> {
     frames
-        .map(|i| scan_to_world(sequence.read_frame(i).unwrap()))
+        .map(|i| scan_to_world(sequence.read_frame(i).unwrap(), RemissionScaling::AsRead))
         .collect()
 }
 

@@ -273,7 +273,7 @@ fn las_and_laz_written_by_laspy_map_in_their_own_coordinates() {
         common.len()
     );
     assert!(coverage >= 0.99, "{:.1} % covered", 100.0 * coverage);
-    // Not all: LAS intensity is not read (the fallback model without remission
-    // classifies), and the tiles lie on the local origin's lattice.
-    assert!(agree >= 0.85, "{:.1} % agree", 100.0 * agree);
+    // Not all: LAS intensity is 16-bit (its ranks tie where the PCD's floats do
+    // not), and the tiles lie on the local origin's lattice.
+    assert!(agree >= 0.93, "{:.1} % agree", 100.0 * agree);
 }

@@ -3,6 +3,7 @@
 
 use nalgebra::{Isometry3, Matrix3, Matrix3x4, Matrix4};
 
+use crate::config::RemissionScaling;
 use crate::lens::Distortion;
 
 /// One LiDAR scan with everything the method needs about it.
@@ -60,15 +61,22 @@ pub enum RemissionScale {
     Byte,
     /// No intensity field.
     Missing,
-    /// An intensity field on a scale travmap does not know (e.g. a uint16 photon
-    /// count): not used.
+    /// An intensity field on a scale travmap does not know (a uint16 photon count,
+    /// LAS intensity of 8, 12 or 16 bits): only its order within a scan means
+    /// anything.
     Unknown,
 }
 
 impl RemissionScale {
-    /// Whether remission features can be computed from it.
-    pub fn is_usable(self) -> bool {
-        matches!(self, RemissionScale::Unit | RemissionScale::Byte)
+    /// Whether remission features can be computed from it when each scan's
+    /// remission is scaled as `scaling` says: an unknown scale only where each scan
+    /// is ranked or scaled by itself.
+    pub fn is_usable(self, scaling: RemissionScaling) -> bool {
+        match self {
+            RemissionScale::Unit | RemissionScale::Byte => true,
+            RemissionScale::Missing => false,
+            RemissionScale::Unknown => scaling != RemissionScaling::AsRead,
+        }
     }
 }
 

@@ -7,6 +7,7 @@
 
 use std::sync::Arc;
 
+use travmap_core::config::RemissionScaling;
 use travmap_core::frame::Frame;
 use travmap_core::geometry::Moments;
 
@@ -26,8 +27,9 @@ pub struct WorldScan {
     pub moments: Moments,
 }
 
-/// Moves every point of `frame` into the world frame (the pose is applied in f64).
-pub fn scan_to_world(frame: Frame) -> WorldScan {
+/// Moves every point of `frame` into the world frame (the pose is applied in f64),
+/// its remission kept where `scaling` can use it.
+pub fn scan_to_world(frame: Frame, scaling: RemissionScaling) -> WorldScan {
     let m = frame.world_from_velodyne.to_homogeneous();
     // A loop with no call in it: around `push`'s (or a closure's) the sums went
     // through memory at every point, each waiting for the last one's store.
@@ -52,7 +54,7 @@ pub fn scan_to_world(frame: Frame) -> WorldScan {
         labels: frame.labels,
         remission: frame
             .remission
-            .is_usable()
+            .is_usable(scaling)
             .then(|| frame.points_in_velodyne.iter().map(|p| p[3]).collect()),
         moments,
     }
@@ -238,7 +240,7 @@ mod tests {
             dropped_points: 0,
             sensors: Vec::new(),
         };
-        let scan = scan_to_world(frame);
+        let scan = scan_to_world(frame, RemissionScaling::AsRead);
         let expected = [[10.0, 1.0, 2.0], [9.0, 0.0, 0.0]];
         for (p, e) in scan.points_in_world.iter().zip(expected) {
             assert!(p.iter().zip(e).all(|(a, b)| (a - b).abs() < 1e-6), "{p:?}");

@@ -375,8 +375,9 @@ impl Pipeline {
 
     /// Stage 1 for one scan: into the world, its remission scaled as configured.
     fn integrate(&self, frame: Frame) -> WorldScan {
-        let mut scan = scan_to_world(frame);
-        match self.features.config.remission_scale {
+        let scaling = self.features.config.remission_scale;
+        let mut scan = scan_to_world(frame, scaling);
+        match scaling {
             RemissionScaling::AsRead => {}
             RemissionScaling::ScanP95 => scale_remission_to_reference(&mut scan),
             RemissionScaling::ScanRank => rank_remission(&mut scan),

@@ -5,8 +5,8 @@
 //! Survey clouds sit in projected coordinates (UTM northings of millions of metres),
 //! where a float32 steps in tenths of a metre: the points are stored relative to
 //! [`LasPlace::origin_m`], the bounds' minimum floored to 100 m, and the notice says so.
-//! Intensity is left out (a remission of unknown scale): LAS asks writers to scale
-//! it to 16 bits, but files hold 8-bit, 12-bit and 16-bit values alike.
+//! Intensity is read as it is stored: LAS asks writers to scale it to 16 bits, but
+//! files hold 8-bit, 12-bit and 16-bit values alike, so its scale is unknown.
 
 use std::path::Path;
 
@@ -16,7 +16,7 @@ use travmap_core::error::contain_panics;
 /// whatever the file, and a header claiming 64 KiB records cannot make it large.
 const BATCH_BYTES: u64 = 8 << 20;
 
-/// What is given each batch of points (x, y, z, 0), to keep or refuse.
+/// What is given each batch of points (x, y, z, intensity), to keep or refuse.
 pub type OnPoints<'a> = dyn FnMut(&[[f32; 4]]) -> Result<(), String> + 'a;
 
 /// Where a LAS / LAZ file's points lie.
@@ -35,7 +35,8 @@ fn local_origin(min: [f64; 3]) -> [f64; 3] {
 }
 
 /// Reads the LAS or LAZ file at `path` a batch of points at a time: x, y, z
-/// relative to the returned origin and an intensity of 0. Errors say what is wrong.
+/// relative to the returned origin, and the intensity as stored. Errors say what is
+/// wrong.
 pub fn stream_las(path: &Path, on_points: &mut OnPoints) -> Result<LasPlace, String> {
     let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
     let file_bytes = file.metadata().map_or(0, |m| m.len());
@@ -86,10 +87,12 @@ where
             break;
         }
         points.clear();
-        for ((x, y), z) in batch.x().zip(batch.y()).zip(batch.z()) {
+        let xyz = batch.x().zip(batch.y()).zip(batch.z());
+        for (((x, y), z), intensity) in xyz.zip(batch.intensity()) {
             let local = [x - origin_m[0], y - origin_m[1], z - origin_m[2]];
             if local.iter().all(|v| v.is_finite()) {
-                points.push([local[0] as f32, local[1] as f32, local[2] as f32, 0.0]);
+                let intensity = f32::from(intensity);
+                points.push([local[0] as f32, local[1] as f32, local[2] as f32, intensity]);
             } else {
                 dropped += 1;
             }
@@ -206,7 +209,7 @@ mod tests {
             for k in 0..3 {
                 assert!((p[k] as f64 - e[k]).abs() < 1e-3, "{p:?} {e:?}");
             }
-            assert_eq!(p[3], 0.0);
+            assert_eq!(p[3], 900.0, "the intensity as stored");
         }
         assert!(stream_las(&dir.path().join("missing.las"), &mut |_| Ok(())).is_err());
     }

@@ -112,8 +112,11 @@ impl SiteCloud {
             keep(&read.points, read.labels.as_deref())
         };
         let read = match format {
-            SiteCloudFormat::Las => stream_las(path, &mut |batch| keep(batch, None))
-                .map(|place| Some((place.origin_m, place.crs_wkt))),
+            SiteCloudFormat::Las => stream_las(path, &mut |batch| {
+                largest_intensity = batch.iter().map(|p| p[3]).fold(largest_intensity, f32::max);
+                keep(batch, None)
+            })
+            .map(|place| Some((place.origin_m, place.crs_wkt))),
             SiteCloudFormat::Ply => stream_ply(path, &mut keep_cloud).map(|()| None),
             SiteCloudFormat::Pcd => stream_pcd(path, &mut keep_cloud).map(|()| None),
         };
@@ -121,9 +124,12 @@ impl SiteCloud {
             return Err(spill_failed(e));
         }
         let place = read.map_err(fail)?;
-        // LAS intensity is not used (see `las.rs`): an unknown scale.
+        // LAS intensity is of an unknown scale (see `las.rs`), whatever its values.
         let (remission, remission_factor) = match &place {
-            Some(_) => (RemissionScale::Unknown, 0.0),
+            Some(_) if largest_intensity > 0.0 => {
+                (RemissionScale::Unknown, 1.0 / largest_intensity)
+            }
+            Some(_) => (RemissionScale::Missing, 0.0),
             None => remission_scale(intensity_datatype, largest_intensity),
         };
         let (origin_m, crs_wkt) = place.unwrap_or(([0.0; 3], None));

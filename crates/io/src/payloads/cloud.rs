@@ -204,8 +204,8 @@ pub fn raw_cloud_points(cloud: &PointCloud2) -> Result<(CloudPoints, Option<u8>)
 
 /// Brings the intensity of `points` to 0..1 by its field's type and range: uint8,
 /// uint16 and floats up to 255 are Velodyne's (and Ouster's reflectivity's) 0..255;
-/// floats up to 1 are KITTI's own; any other scale is not guessed at (zeroed, and
-/// said so by the returned scale).
+/// floats up to 1 are KITTI's own; any other scale is not guessed at (divided by
+/// its largest value, and said so by the returned scale: only its order is used).
 fn normalise_remission(points: &mut [[f32; 4]], datatype_id: Option<u8>) -> RemissionScale {
     let largest = points.iter().map(|p| p[3]).fold(0.0f32, f32::max);
     let (scale, factor) = remission_scale(datatype_id, largest);
@@ -218,7 +218,8 @@ fn normalise_remission(points: &mut [[f32; 4]], datatype_id: Option<u8>) -> Remi
 }
 
 /// The scale of an intensity field of type `datatype_id` whose largest value is
-/// `largest`, and the factor that brings it to 0..1 (0 for a scale not guessed at).
+/// `largest`, and the factor that brings it to 0..1 (by its largest value for a
+/// scale not guessed at).
 pub fn remission_scale(datatype_id: Option<u8>, largest: f32) -> (RemissionScale, f32) {
     let Some(datatype_id) = datatype_id else {
         return (RemissionScale::Missing, 0.0);
@@ -233,6 +234,7 @@ pub fn remission_scale(datatype_id: Option<u8>, largest: f32) -> (RemissionScale
     let factor = match scale {
         RemissionScale::Unit => 1.0,
         RemissionScale::Byte => 1.0 / 255.0,
+        RemissionScale::Unknown if largest > 0.0 => 1.0 / largest,
         _ => 0.0,
     };
     (scale, factor)
