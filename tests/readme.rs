@@ -235,3 +235,59 @@ fn the_configuration_in_the_guide_is_what_travmap_config_prints() {
         "docs/guide.md's configuration is not what `travmap config` prints: paste it again"
     );
 }
+
+#[test]
+fn every_labelled_set_scores_what_the_docs_say() {
+    let readme = readme();
+    let (mut stale, mut checked) = (Vec::new(), 0);
+    for line in readme.lines() {
+        let cells: Vec<&str> = line
+            .split(" | ")
+            .map(|c| c.trim_matches('|').trim())
+            .collect();
+        let [set, labels, rule, _before, now] = cells[..] else {
+            continue;
+        };
+        if !["semantickitti", "rellis3d", "nuscenes"].contains(&labels) {
+            continue;
+        }
+        let relative = match labels {
+            "nuscenes" => set.to_string(),
+            _ if set.starts_with("semantickitti-07") => format!("{set}/sequences/07"),
+            _ => format!("{set}/sequences/00"),
+        };
+        let Some(path) = crate::common::shared_data(&relative) else {
+            return;
+        };
+        let labels_setting = format!("ground_truth.labels=\"{labels}\"");
+        let rule_setting = format!("ground_truth.rule=\"{rule}\"");
+        let out = travmap(&[
+            "eval",
+            arg(&path),
+            "--set",
+            &labels_setting,
+            "--set",
+            &rule_setting,
+            "--json",
+            "-q",
+        ]);
+        let doc: Value = serde_json::from_str(&success(out)).unwrap();
+        let miou = format!(
+            "{:.1}",
+            100.0 * doc["report"]["scores"]["miou"].as_f64().unwrap()
+        );
+        checked += 1;
+        if miou != now {
+            stale.push(format!("{set} {labels} {rule}: {miou}, the docs say {now}"));
+        }
+    }
+    assert_eq!(
+        checked, 12,
+        "docs/method.md's table of every labelled set has 12 rows"
+    );
+    assert!(
+        stale.is_empty(),
+        "docs/method.md's table of every labelled set is stale:\n{}",
+        stale.join("\n")
+    );
+}

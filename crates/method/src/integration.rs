@@ -102,7 +102,9 @@ pub fn rank_remission(scan: &mut WorldScan) {
     if remission.len() < 2 || largest <= 0.0 {
         return;
     }
-    let bin_of = |r: f32| ((r.max(0.0) / largest * RANK_BINS as f32) as usize).min(RANK_BINS - 1);
+    // A multiply, not a divide, per point.
+    let bins_per_remission = RANK_BINS as f32 / largest;
+    let bin_of = |r: f32| ((r.max(0.0) * bins_per_remission) as usize).min(RANK_BINS - 1);
     let mut counts = [0u32; RANK_BINS];
     for &r in remission.iter() {
         counts[bin_of(r)] += 1;

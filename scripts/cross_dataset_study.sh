@@ -1,0 +1,72 @@
+#!/usr/bin/env bash
+# The cross-dataset study of docs/method.md ("Streets and sensors it has never
+# seen"): models trained as the embedded one is (road rule, one cell table per
+# dataset, the datasets weighing alike), each without some of the labelled scans,
+# and scored on those it left out (filtered mIoU, 12 m grid).
+#
+#   scripts/cross_dataset_study.sh      # both tables (about 7 minutes on 2 cores)
+#
+# Leave one scene out: SemanticKITTI sequence 00 (two sets), 07 (two sets), the scan
+# of unknown sequence, RELLIS-3D (its two scans are of one place), nuScenes scene
+# 1072, scene 0002. Leave one dataset out: SemanticKITTI, RELLIS-3D, nuScenes.
+# Needs ../shared/data; TRAVMAP names the binary, DATA the data.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+T=${TRAVMAP:-target/release/travmap}
+D=${DATA:-../shared/data}
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+
+# name path dataset scene
+SETS="kitti-00 $D/semantickitti-00/sequences/00 semantickitti 00
+kitti-00-more $D/semantickitti-00-more/sequences/00 semantickitti 00
+kitti-07-0000 $D/semantickitti-07-000000/sequences/07 semantickitti 07
+kitti-07-0964 $D/semantickitti-07-000964/sequences/07 semantickitti 07
+kitti-unknown $D/semantickitti-unknown-000850/sequences/00 semantickitti unknown
+rellis-000001 $D/rellis3d-000001/sequences/00 rellis3d rellis
+rellis-000104 $D/rellis3d-000104/sequences/00 rellis3d rellis
+nuscenes-1072 $D/nuscenes-lidarseg-scene-1072 nuscenes 1072
+nuscenes-0002 $D/nuscenes-lidarseg-scene-0002 nuscenes 0002"
+
+labels() { echo "ground_truth.labels=\"$1\""; }
+
+# Trains on every set whose scene and dataset differ from $1 and $2 (a blank
+# matches nothing), one cell table per dataset, into $3.
+train_without() {
+    local scene=$1 dataset=$2 out=$3 tables=()
+    for d in semantickitti rellis3d nuscenes; do
+        [ "$d" = "$dataset" ] && continue
+        local paths
+        paths=$(echo "$SETS" | awk -v d="$d" -v s="$scene" '$3 == d && $4 != s { print $2 }')
+        [ -z "$paths" ] && continue
+        # shellcheck disable=SC2086
+        "$T" dataset -q -o "$work/$d.parquet" --set "$(labels "$d")" $paths
+        tables+=("$work/$d.parquet")
+    done
+    "$T" train -q -o "$out" "${tables[@]}"
+}
+
+# Prints the filtered mIoU of set $1 under the model $2.
+score() {
+    local path dataset
+    path=$(echo "$SETS" | awk -v n="$1" '$1 == n { print $2 }')
+    dataset=$(echo "$SETS" | awk -v n="$1" '$1 == n { print $3 }')
+    "$T" eval "$path" --model "$2" --set "$(labels "$dataset")" --json 2>/dev/null |
+        jq -r 'select(.type == "summary") | .report.scores.miou * 1000 | round
+            | "\(. / 10 | floor).\(. % 10)"'
+}
+
+echo "| held out | set | mIoU |"
+echo "|---|---|---|"
+for scene in 00 07 unknown rellis 1072 0002; do
+    train_without "$scene" "" "$work/model.json"
+    for name in $(echo "$SETS" | awk -v s="$scene" '$4 == s { print $1 }'); do
+        echo "| scene $scene | $name | $(score "$name" "$work/model.json") |"
+    done
+done
+for dataset in semantickitti rellis3d nuscenes; do
+    train_without "" "$dataset" "$work/model.json"
+    for name in $(echo "$SETS" | awk -v d="$dataset" '$3 == d { print $1 }'); do
+        echo "| dataset $dataset | $name | $(score "$name" "$work/model.json") |"
+    done
+done
