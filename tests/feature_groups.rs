@@ -138,19 +138,16 @@ fn remission_on_another_sensors_scale_is_named_and_the_fallback_is_a_setting() {
     let as_read_scale = "features.remission_scale=\"as_read\"";
     crate::common::write_output("train", &sample, &model, &["--set", as_read_scale]);
     let model = crate::common::arg(&model);
+    let as_read_args = [
+        "eval",
+        crate::common::arg(&rellis),
+        "--model",
+        model,
+        "--set",
+        as_read_scale,
+    ];
     let eval = |extra: &[&str]| {
-        let args = [
-            &[
-                "eval",
-                crate::common::arg(&rellis),
-                "--model",
-                model,
-                "--set",
-                as_read_scale,
-            ],
-            extra,
-        ]
-        .concat();
+        let args = [&as_read_args[..], extra].concat();
         crate::common::json_summary(&args)["report"].clone()
     };
     let ranked = crate::common::json_summary(&["eval", crate::common::arg(&rellis)]);
@@ -163,14 +160,7 @@ fn remission_on_another_sensors_scale_is_named_and_the_fallback_is_a_setting() {
     let fallback = eval(&["--set", "classifier.foreign_remission=\"fallback\""]);
     assert_eq!(fallback["frames_foreign_remission"], 1);
     assert_ne!(fallback["confusion"], as_read["confusion"]);
-    let text = crate::common::success(crate::common::travmap(&[
-        "eval",
-        crate::common::arg(&rellis),
-        "--model",
-        model,
-        "--set",
-        as_read_scale,
-    ]));
+    let text = crate::common::success(crate::common::travmap(&as_read_args));
     crate::common::assert_contains(&text, &["remission far outside the model's training range"]);
     // KITTI's own scans are not foreign to the model trained on them.
     let kitti = crate::common::json_summary(&[

@@ -80,6 +80,25 @@ impl RemissionScale {
     }
 }
 
+/// Keeps the points `keep` accepts, and their labels with them, so that labels stay
+/// one a point; returns how many points were left out.
+pub fn retain_points(
+    points: &mut Vec<[f32; 4]>,
+    labels: Option<&mut Vec<u32>>,
+    keep: impl Fn(&[f32; 4]) -> bool,
+) -> usize {
+    if let Some(labels) = labels {
+        let mut index = 0;
+        labels.retain(|_| {
+            index += 1;
+            keep(&points[index - 1])
+        });
+    }
+    let before = points.len();
+    points.retain(|p| keep(p));
+    before - points.len()
+}
+
 /// A decoded 8-bit RGB image, row-major.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RgbImage {

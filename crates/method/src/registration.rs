@@ -106,13 +106,13 @@ impl Odometry {
         self.register_from(points_in_sensor, predicted)
     }
 
-    /// Registers one scan as [`Self::register`] does, starting from `guess` instead:
-    /// a recorded pose to refine (the first scan's is taken as it is, and places the
-    /// map in the recorded world).
+    /// Registers one scan as [`Self::register`] does, starting from `predicted`
+    /// instead: a recorded pose to refine (the first scan's is taken as it is, and
+    /// places the map in the recorded world).
     pub fn register_from(
         &mut self,
         points_in_sensor: &[[f32; 4]],
-        guess: Isometry3<f64>,
+        predicted: Isometry3<f64>,
     ) -> Result<Isometry3<f64>, RegistrationError> {
         self.downsample(points_in_sensor);
         let Scratch {
@@ -126,15 +126,14 @@ impl Odometry {
             return Err(RegistrationError::TooFewPoints { points, needed });
         }
         if self.map.is_empty() {
-            self.world_from_sensor = guess;
-            self.map.add(map_points, &guess);
+            self.world_from_sensor = predicted;
+            self.map.add(map_points, &predicted);
             (self.stats.points, self.refused) = (points, 0);
-            return Ok(guess);
+            return Ok(predicted);
         }
 
         let sigma_m = self.threshold_m();
         let steps = self.refused + 1;
-        let predicted = guess;
         let (world_from_sensor, seen, failure) = align(
             &self.map,
             &mut self.scratch,

@@ -17,6 +17,7 @@
 use std::collections::{HashMap, HashSet};
 
 use nalgebra::{Isometry3, Point3};
+use travmap_core::frame::retain_points;
 
 /// Side of the sensor-frame voxels whose persistence is counted, metres.
 const VOXEL_M: f32 = 0.2;
@@ -69,16 +70,7 @@ impl VehicleBox {
     /// Leaves out the points inside the box (and their labels, which stay in
     /// step); returns how many.
     pub fn remove_from(&self, points: &mut Vec<[f32; 4]>, labels: Option<&mut Vec<u32>>) -> usize {
-        if let Some(labels) = labels {
-            let mut index = 0;
-            labels.retain(|_| {
-                index += 1;
-                !self.contains(&points[index - 1])
-            });
-        }
-        let before = points.len();
-        points.retain(|p| !self.contains(p));
-        before - points.len()
+        retain_points(points, labels, |p| !self.contains(p))
     }
 }
 

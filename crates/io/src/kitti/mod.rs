@@ -24,7 +24,7 @@ pub use crate::kitti::text::{
 use crate::payloads::cloud::{check_some_finite, is_return};
 use crate::payloads::image::decode_png;
 use travmap_core::error::{Error, Result};
-use travmap_core::frame::{Frame, RemissionScale};
+use travmap_core::frame::{Frame, RemissionScale, retain_points};
 use travmap_core::geometry::rigid;
 
 /// How wide a sequence's label files are, told from their size against the scan's.
@@ -348,17 +348,7 @@ fn check_record_size(
 /// coordinate, or the sensor's origin), and their labels, so that one bad return
 /// costs one point, not the frame. Returns how many were removed.
 pub fn drop_non_returns(points: &mut Vec<[f32; 4]>, labels: Option<&mut Vec<u32>>) -> usize {
-    let finite = |p: &[f32; 4]| is_return(p[0], p[1], p[2]);
-    if let Some(labels) = labels {
-        let mut index = 0;
-        labels.retain(|_| {
-            index += 1;
-            finite(&points[index - 1])
-        });
-    }
-    let before = points.len();
-    points.retain(finite);
-    before - points.len()
+    retain_points(points, labels, |p| is_return(p[0], p[1], p[2]))
 }
 
 /// Reads a SemanticKITTI `.label` file (uint32 per point) and checks its count.
@@ -375,19 +365,24 @@ pub fn parse_labels(
     points: usize,
 ) -> Result<Vec<u32>> {
     check_record_size(bytes.len() as u64, path, 4, "uint32 label per point")?;
-    let labels: Vec<u32> = bytes
+    check_label_count(bytes.len() / 4, path, scan_path, points)?;
+    Ok(bytes
         .chunks_exact(4)
         .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
-    if labels.len() != points {
+        .collect())
+}
+
+/// One label a point, or an error naming both files.
+fn check_label_count(labels: usize, path: &Path, scan_path: &Path, points: usize) -> Result<()> {
+    if labels != points {
         return Err(Error::LabelCount {
             path: path.to_path_buf(),
             scan: scan_path.to_path_buf(),
-            labels: labels.len(),
+            labels,
             points,
         });
     }
-    Ok(labels)
+    Ok(())
 }
 
 /// One-byte labels (nuScenes-lidarseg's ids), widened to the uint32 of a
@@ -398,14 +393,7 @@ pub fn parse_byte_labels(
     scan_path: &Path,
     points: usize,
 ) -> Result<Vec<u32>> {
-    if bytes.len() != points {
-        return Err(Error::LabelCount {
-            path: path.to_path_buf(),
-            scan: scan_path.to_path_buf(),
-            labels: bytes.len(),
-            points,
-        });
-    }
+    check_label_count(bytes.len(), path, scan_path, points)?;
     Ok(bytes.iter().map(|&id| u32::from(id)).collect())
 }
 
