@@ -185,7 +185,8 @@ fn config_prints_the_effective_settings_and_rejects_unknown_keys() {
     assert_eq!(doc["config"]["features"]["curvity_bins"], 80);
     let err = crate::common::usage_error(travmap(&["config", "--set", "grid.bogus=1"]));
     assert_contains(&err, &["no field `bogus`"]);
-    let err = clean_failure(travmap(&["config", "--set", "grid.size_m=-3"]));
+    // A value out of range is a mistake in the command line too (exit 2).
+    let err = crate::common::usage_error(travmap(&["config", "--set", "grid.size_m=-3"]));
     assert_contains(&err, &["grid.size_m must be > 0"]);
 }
 
@@ -475,4 +476,93 @@ fn crossval_over_several_inputs_holds_out_each_in_turn() {
     assert_eq!(doc["report"]["pooled"]["frames"], 4);
     let miou = doc["report"]["pooled"]["scores"]["miou"].as_f64().unwrap();
     assert!(miou > 0.75, "pooled held-out mIoU {miou}");
+}
+
+/// What a terminal shows of `raw` (a pseudo-terminal's bytes): each line as the
+/// text after its last carriage return, escape sequences left out.
+fn visible_lines(raw: &str) -> Vec<String> {
+    raw.split('\n')
+        .map(|line| {
+            let shown = line
+                .rsplit('\r')
+                .find(|part| !part.trim().is_empty())
+                .unwrap_or("");
+            let mut text = String::new();
+            let mut chars = shown.chars();
+            while let Some(c) = chars.next() {
+                if c == '\u{1b}' {
+                    // CSI: ESC [ parameters, then one final letter.
+                    chars.by_ref().find(|c| c.is_ascii_alphabetic());
+                } else {
+                    text.push(c);
+                }
+            }
+            text
+        })
+        .collect()
+}
+
+#[test]
+fn progress_bars_never_share_a_line_with_results_in_a_terminal() {
+    let Some(seq) = sample() else { return };
+    let binary = env!("CARGO_BIN_EXE_travmap");
+    for (command, bar) in [("eval", "evaluating"), ("run", "predicting")] {
+        // `script` runs the command in a pseudo-terminal of 40 rows x 100 columns.
+        let shell = format!("stty rows 40 cols 100; {binary} {command} {seq}");
+        let out = match std::process::Command::new("script")
+            .args(["-qec", &shell, "/dev/null"])
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+        {
+            Ok(out) => out,
+            Err(_) => {
+                crate::common::skip::<()>("`script` (util-linux) is not installed");
+                return;
+            }
+        };
+        let raw = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success(), "{command} in a terminal:\n{raw}");
+        assert!(raw.contains(bar), "{command} drew no progress bar:\n{raw}");
+        let lines = visible_lines(&raw);
+        assert!(
+            lines.iter().all(|line| !line.contains(bar)),
+            "{command}: a bar is left on screen, or shares a line with a result:\n{lines:#?}"
+        );
+        assert!(
+            lines
+                .iter()
+                .any(|line| line.contains("travmap (filtered)") || line.contains("median latency"))
+        );
+    }
+}
+
+#[test]
+fn set_takes_bare_text_and_every_configuration_mistake_is_a_usage_error() {
+    let out = success(travmap(&["config", "--set", "integration.poses=tf", "-q"]));
+    assert!(out.contains("poses = \"tf\""), "{out}");
+    for (assignment, named) in [
+        ("grid.size_m=-5", "grid.size_m must be > 0"),
+        ("integration.poses=bogus", "`auto`, `tf`"),
+        ("grid.size_m=abc", "`grid.size_m`: `abc` is not a float"),
+        (
+            "ground_truth.label_map=/no/such/map.toml",
+            "/no/such/map.toml",
+        ),
+    ] {
+        let err = crate::common::usage_error(travmap(&["config", "--set", assignment]));
+        assert!(err.contains(named), "--set {assignment}: {err}");
+    }
+}
+
+#[test]
+fn quiet_keeps_the_answer_and_drops_the_chatter() {
+    let Some(seq) = sample() else { return };
+    let scores = success(travmap(&["eval", &seq, "-q"]));
+    assert!(scores.contains("travmap (filtered)"), "{scores}");
+    assert!(
+        !scores.contains("inputs:") && !scores.contains("model:"),
+        "{scores}"
+    );
+    let rows = success(travmap(&["run", &seq, "-q", "--frames", "2..4"]));
+    assert_eq!(rows.lines().count(), 3, "a header and two rows:\n{rows}");
 }

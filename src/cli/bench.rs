@@ -54,7 +54,7 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
         .transpose()?;
     let (model, model_name) = args.model.load(config)?;
     let selection = args.inputs.open_one(images_for(&model, config))?;
-    if let (Some(tools), false) = (&tools, output.json || output.quiet) {
+    if let (Some(tools), false) = (&tools, output.json) {
         let out = &mut std::io::stdout().lock();
         print_tools_table(out, &selection.describe(), tools, tool_repeats)?;
     }
@@ -68,11 +68,10 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
         print_json_summary("bench", std::slice::from_ref(&selection), fields)?;
         return Ok(outcome(std::slice::from_ref(&selection)));
     }
-    if output.quiet {
-        return Ok(outcome(std::slice::from_ref(&selection)));
-    }
     let mut out = std::io::stdout().lock();
-    writeln!(out, "input: {}", selection.describe())?;
+    if !output.quiet {
+        writeln!(out, "input: {}", selection.describe())?;
+    }
     writeln!(
         out,
         "{} timed frames x {} repeats; n = {} scans of {:.0} points, {} x {} grid of {} m ({:.0} predictable cells, {:.0} points in grid); {model_name}, {} support vectors",

@@ -3,20 +3,21 @@
 use anyhow::Result;
 use clap::Args;
 
-use super::{Outcome, Settings, print_json_summary};
+use super::{Outcome, Output, Settings, print_json_summary};
 
 /// Print the effective configuration (TOML; JSON with --json).
 #[derive(Args)]
 pub struct ConfigArgs {
     #[command(flatten)]
     settings: Settings,
-    #[arg(long)]
-    json: bool,
+    #[command(flatten)]
+    output: Output,
 }
 
 pub fn config(args: ConfigArgs) -> Result<Outcome> {
     let config = args.settings.load()?;
-    if args.json {
+    // The configuration is the answer: `--quiet` (nothing else to hide) prints it too.
+    if args.output.json {
         print_json_summary("config", &[], serde_json::json!({ "config": config }))?;
     } else {
         print!("{}", toml::to_string(&config)?);

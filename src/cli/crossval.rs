@@ -38,9 +38,7 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
             bar.inc(1);
         })?;
         bar.finish();
-        if !output.quiet || output.json {
-            print_leave_one_out(&report, &selections, config, output.json)?;
-        }
+        print_leave_one_out(&report, &selections, config, output.json)?;
         return Ok(outcome(&selections));
     }
     let bar = output.progress(config.training.folds as u64, "cross-validating");
@@ -58,11 +56,10 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
         )?;
         return Ok(outcome(&selections));
     }
-    if output.quiet {
-        return Ok(outcome(&selections));
-    }
     let mut out = std::io::stdout().lock();
-    writeln!(out, "inputs: {}", sources.join("; "))?;
+    if !output.quiet {
+        writeln!(out, "inputs: {}", sources.join("; "))?;
+    }
     writeln!(
         out,
         "spatially-blocked {}-fold cross-validation, {} m world blocks; each fold's model has its own grid search",

@@ -106,27 +106,27 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         )?;
         return Ok(outcome(&selections));
     }
-    if output.quiet {
-        return Ok(outcome(&selections));
-    }
     let mut out = std::io::stdout().lock();
-    writeln!(out, "inputs: {}", sources.join("; "))?;
-    let hybrid = match &model.hybrid {
-        Some(h) => format!(
-            "a hybrid model with {} support vectors for cells a camera saw",
-            h.support_vector_count()
-        ),
-        None => "no hybrid model".into(),
-    };
-    writeln!(
-        out,
-        "model: {model_name} (sha256 {}, {} support vectors, C {}, gamma {}; {hybrid}), trained on {}",
-        &model.sha256_hex()[..12],
-        model.support_vector_count(),
-        model.c,
-        model.gamma,
-        model.training.sources.join("; ")
-    )?;
+    // `--quiet` leaves the scores: what was read and with which model is chatter.
+    if !output.quiet {
+        writeln!(out, "inputs: {}", sources.join("; "))?;
+        let hybrid = match &model.hybrid {
+            Some(h) => format!(
+                "a hybrid model with {} support vectors for cells a camera saw",
+                h.support_vector_count()
+            ),
+            None => "no hybrid model".into(),
+        };
+        writeln!(
+            out,
+            "model: {model_name} (sha256 {}, {} support vectors, C {}, gamma {}; {hybrid}), trained on {}",
+            &model.sha256_hex()[..12],
+            model.support_vector_count(),
+            model.c,
+            model.gamma,
+            model.training.sources.join("; ")
+        )?;
+    }
     if report.frames == 0 {
         writeln!(
             out,

@@ -78,10 +78,11 @@ impl Settings {
                 .map_err(|e| usage(format!("--set {assignment}: {e}")))?;
         }
         if let Some(poses) = &self.poses {
-            config.set(&format!("integration.poses=\"{poses}\""))?;
+            config.set(&format!("integration.poses={poses}"))?;
         }
-        config.load_label_map()?;
-        config.validate()?;
+        // A configuration that cannot be used is a mistake in the command line.
+        config.load_label_map().map_err(|e| usage(format!("{e}")))?;
+        config.validate().map_err(|e| usage(format!("{e}")))?;
         Ok(config)
     }
 
@@ -131,7 +132,8 @@ pub struct Output {
     /// Machine-readable output.
     #[arg(long)]
     pub json: bool,
-    /// Print nothing but errors and notices (no progress bars, tables or summaries).
+    /// No progress bars and no chatter: only the answer (scores, a table, the
+    /// configuration), notices and errors.
     #[arg(short, long)]
     pub quiet: bool,
 }
@@ -149,7 +151,7 @@ impl Output {
         }
         let bar = ProgressBar::new(length).with_message(message.to_string());
         bar.set_style(
-            ProgressStyle::with_template("{msg:<24} [{bar:30}] {pos}/{len} {elapsed}")
+            ProgressStyle::with_template("{msg:<24} [{wide_bar}] {pos}/{len} {elapsed}")
                 .expect("valid template")
                 .progress_chars("=> "),
         );
@@ -174,8 +176,21 @@ impl std::ops::Deref for Progress {
 impl Progress {
     /// Clears the bar; returns the seconds the work took.
     pub fn finish(self) -> f64 {
-        self.bar.finish();
         self.watch.elapsed_ms() * 1e-3
+    }
+
+    /// Runs `print` with the bar off the terminal, so that what it prints never
+    /// shares a line with the bar (which is drawn again after it).
+    pub fn print_beside<R>(&self, print: impl FnOnce() -> R) -> R {
+        self.bar.suspend(print)
+    }
+}
+
+/// A bar left drawn would start the next line printed (a result, or the error that
+/// ended the work): it is cleared however the work ends.
+impl Drop for Progress {
+    fn drop(&mut self) {
+        self.bar.finish_and_clear();
     }
 }
 

@@ -35,20 +35,22 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     for selection in &mut selections {
         selection.source.set_read_labels(false);
     }
-    let bar = output.progress(frame_count(&selections), "predicting");
     let mut stdout = std::io::stdout().lock();
-    if !output.json && !output.quiet {
-        writeln!(
-            stdout,
-            "model: {model_name} ({} support vectors)",
-            model.support_vector_count()
-        )?;
+    if !output.json {
+        if !output.quiet {
+            writeln!(
+                stdout,
+                "model: {model_name} ({} support vectors)",
+                model.support_vector_count()
+            )?;
+        }
         writeln!(
             stdout,
             "{:>6} {:>10} {:>6} {:>11} {:>11} {:>9} {:>10}",
             "frame", "stamp_s", "cells", "predictable", "traversable", "non-trav", "latency_ms"
         )?;
     }
+    let bar = output.progress(frame_count(&selections), "predicting");
     let mut evaluation = Evaluation::default();
     let mut frames = 0usize;
     for selection in &selections {
@@ -77,21 +79,24 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                     "remission": result.remission,
                     "without_remission": result.without_remission,
                 }))?;
-            } else if !output.quiet {
-                writeln!(
-                    stdout,
-                    "{:>6} {:>10.3} {:>6} {:>11} {:>11} {:>9} {:>10.2}",
-                    result.index,
-                    result.stamp_ns as f64 * 1e-9,
-                    grid.len(),
-                    traversable + non_traversable,
-                    traversable,
-                    non_traversable,
-                    result.timings.latency_ms
-                )?;
-                if args.ascii {
-                    write_ascii_grid(&mut stdout, grid, result.layout.cells_per_side)?;
-                }
+            } else {
+                bar.print_beside(|| -> Result<()> {
+                    writeln!(
+                        stdout,
+                        "{:>6} {:>10.3} {:>6} {:>11} {:>11} {:>9} {:>10.2}",
+                        result.index,
+                        result.stamp_ns as f64 * 1e-9,
+                        grid.len(),
+                        traversable + non_traversable,
+                        traversable,
+                        non_traversable,
+                        result.timings.latency_ms
+                    )?;
+                    if args.ascii {
+                        write_ascii_grid(&mut stdout, grid, result.layout.cells_per_side)?;
+                    }
+                    Ok(())
+                })?;
             }
             Ok(())
         })?;

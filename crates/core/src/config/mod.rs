@@ -338,10 +338,11 @@ pub fn written_before_groups(config: &mut serde_json::Value) {
 }
 
 /// Fields that are unset by default, so absent from a serialised configuration.
-const OPTIONAL_FIELDS: &[(&str, &str)] = &[
-    ("ground_truth", "label_map"),
-    ("ground_truth", "traversable_classes"),
-    ("ground_truth", "ignored_classes"),
+/// Fields that may be absent, and whether each holds text (the rest hold lists).
+const OPTIONAL_FIELDS: &[(&str, &str, bool)] = &[
+    ("ground_truth", "label_map", true),
+    ("ground_truth", "traversable_classes", false),
+    ("ground_truth", "ignored_classes", false),
 ];
 
 impl Config {
@@ -373,33 +374,58 @@ impl Config {
     }
 
     /// Sets one field from `section.key=value`, the value in TOML syntax
-    /// (`grid.size_m=24`, `training.c_values=[1, 10]`).
+    /// (`grid.size_m=24`, `training.c_values=[1, 10]`); a text field also takes its
+    /// value bare (`integration.poses=tf`, `ground_truth.label_map=/p/map.toml`).
     pub fn set(&mut self, assignment: &str) -> Result<()> {
         let (key, value) = assignment
             .split_once('=')
             .ok_or_else(|| Error::Config(format!("`{assignment}`: expected section.key=value")))?;
-        let (section, field) = key.trim().split_once('.').ok_or_else(|| {
+        let (key, value) = (key.trim(), value.trim());
+        let (section, field) = key.split_once('.').ok_or_else(|| {
             Error::Config(format!("`{key}`: expected section.key, e.g. grid.size_m"))
         })?;
-        let parsed: toml::Table = toml::from_str(&format!("v = {}", value.trim()))
-            .map_err(|e| Error::Config(format!("`{assignment}`: value is not TOML: {e}")))?;
         let mut table = toml::Table::try_from(&*self)
             .map_err(|e| Error::Config(format!("cannot serialise configuration: {e}")))?;
         let section_table = table
             .get_mut(section)
             .and_then(|s| s.as_table_mut())
             .ok_or_else(|| Error::Config(format!("`{key}`: no section `{section}`")))?;
-        if !section_table.contains_key(field) && !OPTIONAL_FIELDS.contains(&(section, field)) {
+        let current = section_table.get(field);
+        let optional = OPTIONAL_FIELDS
+            .iter()
+            .find(|(s, f, _)| (*s, *f) == (section, field));
+        if current.is_none() && optional.is_none() {
             let known: Vec<&str> = section_table.keys().map(String::as_str).collect();
             return Err(Error::Config(format!(
                 "`{key}`: section `{section}` has no field `{field}` (fields: {})",
                 known.join(", ")
             )));
         }
-        section_table.insert(field.to_string(), parsed["v"].clone());
-        *self = table
-            .try_into()
-            .map_err(|e| Error::Config(format!("`{assignment}`: {e}")))?;
+        let text_field = match current {
+            Some(current) => current.is_str(),
+            None => optional.is_some_and(|(_, _, text)| *text),
+        };
+        let list_field = current.is_none_or(toml::Value::is_array) && !text_field;
+        let parsed = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
+            Ok(mut parsed) => parsed.remove("v").filter(|v| v.is_str() || !text_field),
+            Err(e) if !text_field => {
+                return Err(Error::Config(format!(
+                    "`{key}`: `{value}` is not a {} (TOML: {})",
+                    current.map_or("value", toml::Value::type_str),
+                    e.message()
+                )));
+            }
+            Err(_) => None,
+        };
+        let parsed = match parsed.unwrap_or_else(|| toml::Value::String(value.to_string())) {
+            // One value where a list is wanted is a list of one (`training.c_values=10`).
+            one if list_field && !one.is_array() => toml::Value::Array(vec![one]),
+            parsed => parsed,
+        };
+        section_table.insert(field.to_string(), parsed);
+        *self = table.try_into().map_err(|e: toml::de::Error| {
+            Error::Config(format!("`{key}` = `{value}`: {}", e.message().trim()))
+        })?;
         Ok(())
     }
 
@@ -530,6 +556,40 @@ mod tests {
         );
         assert!(config.set("nonsense").is_err());
         assert!(config.set("grid.size_m=\"x\"").is_err());
+    }
+
+    #[test]
+    fn set_takes_text_bare_and_one_value_for_a_list() {
+        let mut config = Config::default();
+        config.set("integration.poses=tf").unwrap();
+        assert_eq!(config.integration.poses, PoseSource::Tf);
+        config.set("ground_truth.labels=rellis3d").unwrap();
+        config
+            .set("ground_truth.label_map=/maps/labels.toml")
+            .unwrap();
+        assert_eq!(
+            config.ground_truth.label_map.as_deref(),
+            Some(std::path::Path::new("/maps/labels.toml"))
+        );
+        config.set("training.c_values=10").unwrap();
+        assert_eq!(config.training.c_values, vec![10.0]);
+        config
+            .set("ground_truth.traversable_classes=[40, 44]")
+            .unwrap();
+        assert_eq!(config.ground_truth.traversable_classes, Some(vec![40, 44]));
+        let err = config
+            .set("integration.poses=bogus")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("integration.poses") && err.contains("`tf`"),
+            "{err}"
+        );
+        let err = config.set("grid.size_m=abc").unwrap_err().to_string();
+        assert!(
+            err.contains("grid.size_m") && err.contains("float"),
+            "{err}"
+        );
     }
 
     #[test]
