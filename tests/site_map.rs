@@ -113,6 +113,29 @@ fn a_site_cloud_maps_the_drive_it_was_merged_from() {
     );
     assert!(coverage >= 0.9, "{:.1} % covered", 100.0 * coverage);
     assert!(agree >= 0.8, "{:.1} % agree", 100.0 * agree);
+
+    // The same cloud as ouster-cli saves one: no VERSION, no VIEWPOINT, FIELDS first.
+    let bytes = std::fs::read(&site).unwrap();
+    let fields = bytes.windows(7).position(|w| w == b"FIELDS ").unwrap();
+    let ouster_cli: Vec<u8> = String::from_utf8_lossy(&bytes[fields..])
+        .split_inclusive('\n')
+        .take_while(|line| !line.starts_with("DATA"))
+        .filter(|line| !line.starts_with("VIEWPOINT"))
+        .flat_map(|line| line.bytes())
+        .chain(
+            bytes[bytes
+                .windows(12)
+                .position(|w| w == b"DATA binary\n")
+                .unwrap()..]
+                .iter()
+                .copied(),
+        )
+        .collect();
+    let headless = out("ouster-cli.pcd");
+    std::fs::write(&headless, ouster_cli).unwrap();
+    let headless_map = json_summary(&["map", arg(&headless), "-o", arg(&out("o.png"))]);
+    assert_eq!(headless_map["frames"], site_map["frames"]);
+    assert_eq!(headless_map["fused_scores"], site_map["fused_scores"]);
 }
 
 #[test]

@@ -55,8 +55,9 @@ pub const READABLE: &str = "travmap reads KITTI / SemanticKITTI sequence directo
 pub const BAG_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
 
 /// Formats known by their first bytes, readable (`Ok`) or named in a refusal (`Err`).
-/// How a PCD file begins: with its comment line, or straight with its version.
-const PCD_MAGICS: [&[u8]; 2] = [b"# .PCD", b"VERSION ."];
+/// How a PCD file begins: with its comment line, straight with its version, or (as
+/// ouster-cli writes them, with no version) with its fields.
+const PCD_MAGICS: [&[u8]; 3] = [b"# .PCD", b"VERSION ", b"FIELDS "];
 const SINGLE_PCD: &str = "a single PCD point cloud (`travmap map` reads one as a site map; a folder of .pcd scans is a drive: put them in one)";
 /// How a PLY file begins.
 const PLY_MAGICS: [&[u8]; 2] = [b"ply\n", b"ply\r\n"];
@@ -96,6 +97,10 @@ const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
     ),
     (
         PCD_MAGICS[1],
+        Ok(InputFormat::SiteCloud(SiteCloudFormat::Pcd)),
+    ),
+    (
+        PCD_MAGICS[2],
         Ok(InputFormat::SiteCloud(SiteCloudFormat::Pcd)),
     ),
     (
@@ -377,6 +382,8 @@ mod tests {
         for (bytes, kind) in [
             (&b"# .PCD v0.7"[..], SiteCloudFormat::Pcd),
             (b"VERSION .7\n", SiteCloudFormat::Pcd),
+            (b"VERSION 0.7\n", SiteCloudFormat::Pcd),
+            (b"FIELDS x y z reflectivity\n", SiteCloudFormat::Pcd),
             (b"ply\nformat", SiteCloudFormat::Ply),
             (b"LASF\0\0", SiteCloudFormat::Las),
         ] {

@@ -273,7 +273,12 @@ fn topics(
         .map_err(unreadable)?;
     let mut connections = HashMap::new();
     for row in rows {
-        let (id, topic, schema_name, message_encoding) = row.map_err(unreadable)?;
+        let (id, topic, schema_name, mut message_encoding) = row.map_err(unreadable)?;
+        // Some writers leave it empty (nebula's VLS-128 test bag); rosbag2 then plays
+        // the messages as CDR, its one serialisation.
+        if message_encoding.is_empty() {
+            message_encoding = "cdr".into();
+        }
         let (schema_encoding, schema_data) =
             definitions.get(&schema_name).cloned().unwrap_or_default();
         connections.insert(
@@ -300,6 +305,20 @@ mod tests {
             uri_path(Path::new("/d/a b?c#d%e.db3")),
             "/d/a%20b%3Fc%23d%25e.db3"
         );
+    }
+
+    #[test]
+    fn a_topic_without_serialization_format_is_read_as_cdr() {
+        let database = rusqlite::Connection::open_in_memory().unwrap();
+        database
+            .execute_batch(
+                "CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT, type TEXT,
+                     serialization_format TEXT, offered_qos_profiles TEXT);
+                 INSERT INTO topics VALUES (1, '/velodyne_packets', 'velodyne_msgs/msg/VelodyneScan', '', '');",
+            )
+            .unwrap();
+        let connections = topics(&database).unwrap();
+        assert_eq!(connections[&1].message_encoding, "cdr");
     }
 
     #[test]
