@@ -454,6 +454,45 @@ fn devices_and_fifos_are_written_through_not_replaced() {
     );
 }
 
+/// `-o /dev/stdout` (here a link of our own to `/proc/self/fd/1`) with stdout
+/// redirected to a file writes into that file and leaves the link a link (it was
+/// once replaced by a regular file); a FIFO no process reads is an error, not a hang.
+#[test]
+fn descriptors_are_written_through_and_a_fifo_without_reader_is_an_error() {
+    let Some(sample) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let stdout_link = dir.path().join("stdout");
+    std::os::unix::fs::symlink("/proc/self/fd/1", &stdout_link).unwrap();
+    let redirected = dir.path().join("redirected.mcap");
+    let status = Command::new(env!("CARGO_BIN_EXE_travmap"))
+        .args(["convert", arg(&sample), "-o", arg(&stdout_link), "-q"])
+        .stdout(std::fs::File::create(&redirected).unwrap())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert!(
+        std::fs::symlink_metadata(&stdout_link)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    let bytes = std::fs::read(&redirected).unwrap();
+    assert!(bytes.starts_with(b"\x89MCAP0\r\n") && bytes.ends_with(b"\x89MCAP0\r\n"));
+
+    let fifo = dir.path().join("fifo");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let err = clean_failure(travmap(&["convert", arg(&sample), "-o", arg(&fifo), "-q"]));
+    crate::common::assert_contains(&err, &["fifo", "no process opened to read"]);
+}
+
 /// Outputs that would lose something are refused before any work: two outputs of
 /// one command naming one file, an output inside an input's folders, a
 /// write-protected file.

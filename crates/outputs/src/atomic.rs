@@ -70,10 +70,73 @@ pub struct AtomicFile {
     committed: bool,
 }
 
-/// Whether `path` is a character device or a FIFO, written straight through.
+/// Whether `path` is a character device, a FIFO or one of the process's open
+/// descriptors (`/dev/stdout`), written straight through.
 pub fn is_stream(path: &Path) -> bool {
     use std::os::unix::fs::FileTypeExt;
-    std::fs::metadata(path).is_ok_and(|m| m.file_type().is_char_device() || m.file_type().is_fifo())
+    names_a_descriptor(path)
+        || std::fs::metadata(path)
+            .is_ok_and(|m| m.file_type().is_char_device() || m.file_type().is_fifo())
+}
+
+/// Whether `path` is, or links through, an open descriptor (`/dev/stdout`,
+/// `/dev/fd/N`, `/proc/self/fd/N`): renaming over it would replace the link with a
+/// file instead of writing where the descriptor goes (a shell's redirection).
+fn names_a_descriptor(path: &Path) -> bool {
+    let mut path = path.to_path_buf();
+    // As many links as the kernel follows.
+    for _ in 0..40 {
+        let in_descriptors = path.parent().is_some_and(|folder| {
+            folder == Path::new("/dev/fd")
+                || (folder.starts_with("/proc") && folder.file_name() == Some("fd".as_ref()))
+        });
+        if in_descriptors {
+            return true;
+        }
+        match std::fs::read_link(&path) {
+            Ok(target) => path = path.parent().unwrap_or(Path::new("/")).join(target),
+            Err(_) => return false,
+        }
+    }
+    false
+}
+
+/// How long a FIFO output waits for a process to open it for reading.
+const FIFO_READER_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// Opens a stream output. A descriptor is appended to (as the shell opened it:
+/// `>` has emptied it, `>>` means after what is there); a FIFO that no process opens
+/// to read within [`FIFO_READER_WAIT`] is an error, not a wait without end.
+fn open_stream(path: &Path) -> std::io::Result<File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let started = std::time::Instant::now();
+    let file = loop {
+        let opened = std::fs::OpenOptions::new()
+            .append(names_a_descriptor(path))
+            .write(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(path);
+        match opened {
+            Err(e) if e.raw_os_error() == Some(libc::ENXIO) => {
+                if started.elapsed() > FIFO_READER_WAIT {
+                    return Err(std::io::Error::other(format!(
+                        "a pipe (FIFO) that no process opened to read in {} s",
+                        FIFO_READER_WAIT.as_secs()
+                    )));
+                }
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            opened => break opened?,
+        }
+    };
+    // Blocking again, now that it is open: a slow reader is waited for.
+    let fd = std::os::fd::AsRawFd::as_raw_fd(&file);
+    // SAFETY: F_GETFL / F_SETFL on a descriptor this function owns.
+    unsafe {
+        let flags = libc::fcntl(fd, libc::F_GETFL);
+        libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK);
+    }
+    Ok(file)
 }
 
 /// Flushes a written output to the disk; a device or FIFO has nothing to sync.
@@ -155,10 +218,7 @@ impl AtomicFile {
             source,
         };
         if is_stream(path) {
-            let file = std::fs::OpenOptions::new()
-                .write(true)
-                .open(path)
-                .map_err(write_error)?;
+            let file = open_stream(path).map_err(write_error)?;
             let guard = Self {
                 path: path.to_path_buf(),
                 temporary_path: None,
