@@ -604,3 +604,34 @@ fn annotate_passes_kitti_frames_through_as_read_and_keep_going_skips_an_unreadab
     let metadata = crate::common::travmap_metadata(&bytes);
     assert_contains(&metadata["skipped_frames"], &["\"frame\":1", "000001.png"]);
 }
+
+/// With every frame skipped there is no result: each command that writes one exits
+/// 1 and leaves no output (an empty MCAP, PNG, Parquet file or trajectory was once
+/// written, and a fleet script counted the drive as done).
+#[test]
+fn every_frame_skipped_writes_no_output() {
+    let dir = sequence();
+    std::fs::write(dir.path().join("poses.txt"), "").unwrap();
+    let out_dir = tempfile::tempdir().unwrap();
+    for (command, name) in [
+        ("annotate", "a.mcap"),
+        ("convert", "c.mcap"),
+        ("map", "m.png"),
+        ("dataset", "d.parquet"),
+        ("odometry", "poses.txt"),
+    ] {
+        let output = out_dir.path().join(name);
+        let out = travmap(&[command, arg(dir.path()), "-o", arg(&output), "--keep-going"]);
+        let err = clean_failure(out);
+        assert_contains(
+            &err,
+            &[
+                "is not written: no frame of",
+                "skipped; frame 0:",
+                "poses.txt",
+            ],
+        );
+        assert!(!output.exists(), "{command} wrote {}", output.display());
+    }
+    assert_eq!(std::fs::read_dir(out_dir.path()).unwrap().count(), 0);
+}

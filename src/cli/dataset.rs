@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap_drive::Fingerprints;
+use travmap_drive::{Fingerprints, Selection};
 use travmap_outputs::dataset::DatasetWriter;
 
 use super::{
@@ -55,7 +55,9 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
             Ok(())
         })?;
     }
-    let summary = writer.finish()?;
+    let inputs: Vec<String> = selections.iter().map(Selection::describe).collect();
+    let skipped: Vec<_> = selections.iter().flat_map(|s| s.source.skipped()).collect();
+    let summary = writer.finish(&inputs.join("; "), &skipped)?;
     let seconds = bar.finish();
     if output.json {
         let cells_per_s = summary.rows as f64 / seconds;

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
+use travmap_core::error::Error;
 use travmap_drive::scoring::evaluation::Evaluation;
 use travmap_drive::scoring::metrics::Confusion;
 use travmap_io::SourceOptions;
@@ -114,6 +115,14 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let seconds = bar.finish();
     let cells = map.cells();
     let (cell_size_m, frames, memory_bytes) = (map.cell_size_m(), map.frames(), map.memory_bytes());
+    if frames == 0 {
+        return Err(Error::NothingWritten {
+            path: output_path.to_path_buf(),
+            inputs: selections[0].describe(),
+            why: travmap_io::why_none_read(&selections[0].source.skipped()),
+        }
+        .into());
+    }
     // The cells are the map from here on: its tiles (most of a site map's memory) go.
     drop(map);
     let picture = render_drive_map(&cells, &trajectory, cell_size_m, cell_px);

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
+use travmap_core::error::Error;
 use travmap_drive::scoring::evaluation::Spread;
 use travmap_outputs::trajectory::{TrajectoryFormat, write_trajectory};
 
@@ -47,6 +48,14 @@ pub fn odometry(args: OdometryArgs) -> Result<Outcome> {
         Format::Kitti => TrajectoryFormat::Kitti,
         Format::Tum => TrajectoryFormat::Tum,
     };
+    if poses.is_empty() {
+        return Err(Error::NothingWritten {
+            path: output_path.to_path_buf(),
+            inputs: selections[0].describe(),
+            why: travmap_io::why_none_read(&selections[0].source.skipped()),
+        }
+        .into());
+    }
     write_trajectory(output_path, &poses, format)?;
     let register_ms = Spread::of(&poses.iter().map(|p| p.register_ms).collect::<Vec<_>>());
     if output.json {

@@ -76,6 +76,15 @@ pub enum Error {
     #[error("{path}: {message}")]
     Dataset { path: PathBuf, message: String },
 
+    /// An output of no frame is no result: a fleet script would count it as done.
+    #[error("{path} is not written: no frame of {inputs} was read ({why})")]
+    NothingWritten {
+        path: PathBuf,
+        inputs: String,
+        /// The skipped frames in words (`travmap_io::why_none_read`).
+        why: String,
+    },
+
     #[error("{path}: {labels} labels for {points} points in {scan}; the counts must be equal")]
     LabelCount {
         path: PathBuf,
@@ -437,6 +446,7 @@ impl Error {
             | Error::RecordSize { path, .. }
             | Error::EmptyScan { path, .. }
             | Error::Dataset { path, .. }
+            | Error::NothingWritten { path, .. }
             | Error::LabelCount { path, .. }
             | Error::Parse { path, .. }
             | Error::MissingCalibration { path, .. }

@@ -19,5 +19,5 @@ mod skips;
 mod source;
 
 pub use kitti::KittiSequence;
-pub use skips::{Skip, SkipLog};
+pub use skips::{Skip, SkipLog, why_none_read};
 pub use source::{Georeference, Source, SourceKind, SourceOptions, WORLD_FRAME};

@@ -10,6 +10,22 @@ pub struct Skip {
     pub reason: String,
 }
 
+/// Why a run read no frame, in words for [`Error::NothingWritten`]: the skips (the
+/// first one's reason), or that none was selected.
+///
+/// [`Error::NothingWritten`]: travmap_core::error::Error::NothingWritten
+pub fn why_none_read(skipped: &[Skip]) -> String {
+    match skipped.first() {
+        Some(first) => format!(
+            "{} skipped; frame {}: {}",
+            skipped.len(),
+            first.frame,
+            first.reason
+        ),
+        None => "none selected".into(),
+    }
+}
+
 /// Whether a frame whose input is unreadable stops the run (the default) or is
 /// skipped and recorded, and the record.
 #[derive(Clone, Debug, Default)]

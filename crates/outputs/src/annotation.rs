@@ -374,6 +374,13 @@ pub fn annotate(
         &encode_passthrough,
         on_handed,
     )?;
+    if frames == 0 {
+        return Err(Error::NothingWritten {
+            path: output.to_path_buf(),
+            inputs: selection.source.path().display().to_string(),
+            why: travmap_io::why_none_read(&selection.source.skipped()),
+        });
+    }
     if let Some(writer) = &kitti_passthrough {
         let written = &writer.summary;
         passthrough_messages = written.frames * 2 + written.images * 2 + 1;

@@ -553,6 +553,13 @@ pub fn convert_kitti(
             on_frame();
         }
     }
+    if writer.summary.frames == 0 {
+        return Err(Error::NothingWritten {
+            path: output.to_path_buf(),
+            inputs: sequence.dir().display().to_string(),
+            why: travmap_io::why_none_read(&skips.skipped()),
+        });
+    }
     sink.finish()?;
     let mut summary = writer.summary;
     summary.output_bytes = std::fs::metadata(output)

@@ -34,6 +34,7 @@ use crate::atomic::{AtomicFile, WritebackFile, parquet_failure, sync_output, wri
 use travmap_core::Config;
 use travmap_core::config::FeatureGroup;
 use travmap_core::error::{Error, Result};
+use travmap_io::{Skip, why_none_read};
 use travmap_method::features::feature_names;
 use travmap_method::grid::CellClass;
 use travmap_method::pipeline::FrameResult;
@@ -260,8 +261,16 @@ impl DatasetWriter {
         self.output.path().to_path_buf()
     }
 
-    /// Writes the last row group and the footer, then renames the file into place.
-    pub fn finish(mut self) -> Result<DatasetSummary> {
+    /// Writes the last row group and the footer, then renames the file into place;
+    /// `inputs` and their `skipped` frames say why, when no frame was read.
+    pub fn finish(mut self, inputs: &str, skipped: &[Skip]) -> Result<DatasetSummary> {
+        if self.summary.frames == 0 {
+            return Err(Error::NothingWritten {
+                path: self.output_path(),
+                inputs: inputs.to_string(),
+                why: why_none_read(skipped),
+            });
+        }
         self.flush()?;
         if !self.labelled_scans.is_empty() {
             let scans = serde_json::to_string(&self.labelled_scans).expect("strings serialise");
