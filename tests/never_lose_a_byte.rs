@@ -532,4 +532,24 @@ fn outputs_that_would_lose_something_are_refused() {
     let err = clean_failure(travmap(&["map", arg(&sample), "-o", arg(&protected)]));
     crate::common::assert_contains(&err, &["write-protected (mode 444)"]);
     assert_eq!(std::fs::read(&protected).unwrap(), b"keep me");
+
+    // A LiDAR calibration is read too: no command writes over it.
+    let calibration = dir.path().join("vlp16.yaml");
+    std::fs::write(&calibration, b"lasers: []\n").unwrap();
+    for command in ["convert", "annotate", "map", "odometry"] {
+        let err = clean_failure(travmap(&[
+            command,
+            arg(&sample),
+            "--lidar-calibration",
+            arg(&calibration),
+            "-o",
+            arg(&calibration),
+        ]));
+        crate::common::assert_contains(&err, &["would overwrite the input", "vlp16.yaml"]);
+        assert_eq!(
+            std::fs::read(&calibration).unwrap(),
+            b"lasers: []\n",
+            "{command}"
+        );
+    }
 }

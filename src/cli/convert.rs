@@ -1,7 +1,7 @@
 //! `travmap convert`: a KITTI / SemanticKITTI sequence or a recorded log (ROS 1 bag,
 //! ROS 1 MCAP, rosbag2) to a ROS 2 MCAP.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
@@ -76,7 +76,10 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
     let (output, output_path) = (args.report, args.output.as_path());
     let compression = args.compression.compression();
     let start_time_s = args.start_time;
-    check_output(output_path, &InputFiles::of(&[&args.sequence]))?;
+    let calibrations = args.sensors.calibrations();
+    let mut read: Vec<&Path> = vec![&args.sequence];
+    read.extend(calibrations.files());
+    check_output(output_path, &InputFiles::of(&read))?;
     // Every scan: convert keeps a log's first, however partial.
     let frames = args.frames.clone().unwrap_or(0..usize::MAX);
     let options = SourceOptions {

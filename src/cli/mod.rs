@@ -246,6 +246,12 @@ impl Sensors {
         })
     }
 
+    /// The calibration files named (malformed flags are refused when the input is
+    /// opened: here they name none).
+    pub fn calibrations(&self) -> LidarCalibrations {
+        LidarCalibrations::from_arguments(&self.lidar_calibration).unwrap_or_default()
+    }
+
     /// The flags that give a child travmap these topics and calibrations.
     fn arguments(&self) -> impl Iterator<Item = (&'static str, Option<OsString>)> + '_ {
         let topics = (self.cloud_topic.iter()).map(|t| ("--cloud-topic", Some(t.into())));
@@ -365,11 +371,14 @@ impl Inputs {
             .collect()
     }
 
-    /// Every file the command reads: the inputs, `--config` and `model`.
+    /// Every file the command reads: the inputs, `--config`, `model` and the LiDAR
+    /// calibrations.
     pub fn files(&self, model: Option<&Path>) -> InputFiles {
         let mut paths: Vec<&Path> = self.sequences.iter().map(PathBuf::as_path).collect();
         paths.extend(model);
         paths.extend(self.settings.config.as_deref());
+        let calibrations = self.sensors.calibrations();
+        paths.extend(calibrations.files());
         InputFiles::of(&paths)
     }
 

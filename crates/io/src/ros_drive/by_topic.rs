@@ -75,6 +75,12 @@ impl LidarCalibrations {
         let what = ("calibration file", "FILE");
         ByTopic::parse(values, what, exists)
     }
+
+    /// Every calibration file named: inputs that no output may replace.
+    pub fn files(&self) -> impl Iterator<Item = &Path> {
+        let by_topic = self.by_topic.iter().map(|(_, file)| file.as_path());
+        self.any_topic.as_deref().into_iter().chain(by_topic)
+    }
 }
 
 impl LidarFrames {
