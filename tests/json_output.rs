@@ -175,3 +175,71 @@ fn skipped_frames_are_listed_in_the_summary() {
             .contains("not a multiple of 16")
     );
 }
+
+/// A path that is not UTF-8 (a Linux file name may hold any byte but / and NUL) is
+/// written with U+FFFD in JSON, never a panic: in a summary after the outputs are
+/// committed, in an error record.
+#[test]
+fn paths_that_are_not_utf8_are_written_lossily() {
+    use std::ffi::OsStr;
+    use std::os::unix::ffi::OsStrExt;
+    let Some(sample) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let odd = dir.path().join(OsStr::from_bytes(b"bad\xff"));
+    std::fs::create_dir(&odd).unwrap();
+    let run = |args: &[&OsStr]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_travmap"))
+            .args(args)
+            .arg("--json")
+            .output()
+            .unwrap()
+    };
+    let (map, nav2, cells) = (odd.join("m.png"), odd.join("m.yaml"), odd.join("c.parquet"));
+    let out = run(&[
+        "map".as_ref(),
+        sample.as_os_str(),
+        "-o".as_ref(),
+        map.as_os_str(),
+        "--nav2".as_ref(),
+        nav2.as_os_str(),
+        "--cells".as_ref(),
+        cells.as_os_str(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: serde_json::Value = serde_json::from_slice(
+        out.stdout
+            .split(|&b| b == b'\n')
+            .rfind(|l| !l.is_empty())
+            .unwrap(),
+    )
+    .unwrap();
+    assert!(
+        summary["output"]
+            .as_str()
+            .unwrap()
+            .ends_with("bad\u{fffd}/m.png")
+    );
+    assert!(
+        summary["nav2"]["yaml"]
+            .as_str()
+            .unwrap()
+            .ends_with("bad\u{fffd}/m.yaml")
+    );
+
+    let missing = odd.join("no-such-drive");
+    let out = run(&["eval".as_ref(), missing.as_os_str()]);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let error: serde_json::Value = serde_json::from_slice(&out.stderr).unwrap();
+    assert_eq!(error["type"], "error");
+}

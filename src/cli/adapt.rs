@@ -14,7 +14,7 @@ use travmap_training::adaptation::{Adapted, adapt as adapt_model};
 
 use super::{
     Inputs, ModelArg, Outcome, Output, check_output, counted, frame_count, model_json, outcome,
-    print_json_summary, setting_word,
+    path_text, print_json_summary, setting_word,
 };
 
 /// Adapt a model to the ground the given drives cover, from the drives alone: the
@@ -45,7 +45,7 @@ pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
     let summary = model.training.adaptation.as_ref();
     if output.json {
         let fields = json!({
-            "output": model_path,
+            "output": path_text(model_path),
             "model": model_json(model, &model_path.display().to_string()),
             "prior": {"name": prior_name, "sha256": prior.sha256_hex()},
             "counts": adapted.counts,

@@ -14,7 +14,7 @@ use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;
 use super::{
     Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json, outcome,
-    print_json_summary, print_wrote, with_summary,
+    path_text, print_json_summary, print_wrote, with_summary,
 };
 
 /// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
@@ -111,7 +111,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     let seconds = bar.finish();
     if output.json {
         let model = model_json(&model, &model_name);
-        let fields = json!({"output": output_path, "config": config, "model": model, "elapsed_ms": seconds * 1e3});
+        let fields = json!({"output": path_text(output_path), "config": config, "model": model, "elapsed_ms": seconds * 1e3});
         let fields = with_summary(fields, &summary)?;
         print_json_summary("annotate", &selections, fields)?;
     } else if !output.quiet {

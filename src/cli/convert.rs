@@ -15,7 +15,7 @@ use travmap_outputs::preflight::InputFiles;
 
 use super::{
     Outcome, Output, Sensors, check_output, frame_count, open_selection, outcome,
-    parse_frame_range, print_json_summary, print_wrote, with_summary,
+    parse_frame_range, path_text, print_json_summary, print_wrote, with_summary,
 };
 
 /// Convert a KITTI / SemanticKITTI sequence (clouds, poses on /tf, images) or a recorded
@@ -187,7 +187,7 @@ impl Written {
         selections: &[travmap_drive::Selection],
     ) -> Result<Outcome> {
         if output.json {
-            let fields = json!({"output": output_path, "compression": compression, "elapsed_ms": seconds * 1e3});
+            let fields = json!({"output": path_text(output_path), "compression": compression, "elapsed_ms": seconds * 1e3});
             let fields = with_summary(fields, &self.summary)?;
             print_json_summary("convert", selections, fields)?;
         } else if !output.quiet {

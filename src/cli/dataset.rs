@@ -10,8 +10,8 @@ use travmap_drive::{Fingerprints, Selection};
 use travmap_outputs::dataset::DatasetWriter;
 
 use super::{
-    Inputs, Outcome, check_output, counted, frame_count, load_model, outcome, print_json_summary,
-    with_summary,
+    Inputs, Outcome, check_output, counted, frame_count, load_model, outcome, path_text,
+    print_json_summary, with_summary,
 };
 
 /// One Parquet row per predictable cell per frame: features, appearance, ground
@@ -61,7 +61,7 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     let seconds = bar.finish();
     if output.json {
         let cells_per_s = summary.rows as f64 / seconds;
-        let fields = json!({"output": output_path, "config": config, "elapsed_ms": seconds * 1e3, "cells_per_s": cells_per_s});
+        let fields = json!({"output": path_text(output_path), "config": config, "elapsed_ms": seconds * 1e3, "cells_per_s": cells_per_s});
         let fields = with_summary(fields, &summary)?;
         print_json_summary("dataset", &selections, fields)?;
     } else if !output.quiet {

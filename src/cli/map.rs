@@ -17,7 +17,7 @@ use travmap_outputs::rendering::encode_png;
 
 use super::{
     Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json,
-    notice_unknown_labels, outcome, print_json_summary,
+    notice_unknown_labels, outcome, path_text, print_json_summary,
 };
 
 /// Fuse every frame's prediction (and ground truth) into one map of the drive.
@@ -156,9 +156,9 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let area_m2 = seen as f64 * cell_size_m.powi(2);
     if output.json {
         let fields = json!({
-            "output": output_path,
-            "outputs": outputs.iter().copied().chain(nav2.iter().flat_map(|n| n.gis_files.iter().map(PathBuf::as_path))).collect::<Vec<&Path>>(),
-            "cells_output": args.cells,
+            "output": path_text(output_path),
+            "outputs": outputs.iter().copied().chain(nav2.iter().flat_map(|n| n.gis_files.iter().map(PathBuf::as_path))).map(path_text).collect::<Vec<_>>(),
+            "cells_output": args.cells.as_deref().map(path_text),
             "nav2": nav2,
             "model": model_json(&model, &model_name),
             "frames": frames,

@@ -20,8 +20,8 @@ pub mod run;
 pub mod train;
 
 pub use report::{
-    counted, input_json, model_json, notice_unknown_labels, print_json_error, print_json_frame,
-    print_json_summary, print_wrote, setting_word, with_summary,
+    counted, input_json, model_json, notice_unknown_labels, path_text, print_json_error,
+    print_json_frame, print_json_summary, print_wrote, setting_word, with_summary,
 };
 
 use std::ffi::OsString;

@@ -10,7 +10,7 @@ use travmap_core::error::Error;
 use travmap_drive::scoring::evaluation::Spread;
 use travmap_outputs::trajectory::{TrajectoryFormat, write_trajectory};
 
-use super::{Inputs, Outcome, check_output, frame_count, outcome, print_json_summary};
+use super::{Inputs, Outcome, check_output, frame_count, outcome, path_text, print_json_summary};
 
 /// Estimate a drive's trajectory by scan registration (whatever poses it records).
 #[derive(Args)]
@@ -60,7 +60,7 @@ pub fn odometry(args: OdometryArgs) -> Result<Outcome> {
     let register_ms = Spread::of(&poses.iter().map(|p| p.register_ms).collect::<Vec<_>>());
     if output.json {
         let fields = json!({
-            "output": output_path,
+            "output": path_text(output_path),
             "format": match format { TrajectoryFormat::Kitti => "kitti", TrajectoryFormat::Tum => "tum" },
             "frames": poses.len(),
             "register_ms": register_ms,

@@ -11,7 +11,7 @@ use travmap_outputs::rendering;
 
 use super::{
     Inputs, ModelArg, Outcome, check_output, check_output_dir, counted, frame_count, images_for,
-    outcome, print_json_summary, usage,
+    outcome, path_text, print_json_summary, usage,
 };
 
 /// Draw ground truth, prediction and errors of a frame side by side as PNG.
@@ -99,7 +99,10 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
     }
     staged.commit()?;
     if output.json {
-        let fields = json!({"output": output_path, "outputs": written});
+        let fields = json!({
+            "output": path_text(output_path),
+            "outputs": written.iter().map(|p| path_text(p)).collect::<Vec<_>>(),
+        });
         print_json_summary("render", &selections, fields)?;
     } else if !output.quiet {
         println!(

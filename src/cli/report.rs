@@ -61,6 +61,12 @@ pub fn print_json_summary(
     print_json_line(&fields)
 }
 
+/// A path as JSON text. JSON holds no bytes that are not UTF-8: those of a path
+/// become U+FFFD (serde refuses such a path, and `json!` panics on the refusal).
+pub fn path_text(path: &Path) -> String {
+    path.to_string_lossy().into_owned()
+}
+
 /// One input of a `--json` summary: its path and the frames read from it.
 pub fn input_json(selection: &Selection) -> serde_json::Value {
     let frames = selection.source.frames_in(&selection.frames);
@@ -68,7 +74,7 @@ pub fn input_json(selection: &Selection) -> serde_json::Value {
         (Some(first), Some(last)) => json!({"start": first, "end": last, "count": frames.len()}),
         _ => json!({"start": null, "end": null, "count": 0}),
     };
-    json!({"path": selection.source.path(), "frames": range})
+    json!({"path": path_text(selection.source.path()), "frames": range})
 }
 
 /// `fields` with the command's own summary (a struct) merged in at the top level:
@@ -125,7 +131,7 @@ pub fn print_json_error(message: &str, file: Option<&Path>, exit_code: i32) {
     let record = json!({
         "type": "error",
         "error": message.trim_start_matches("error: ").trim_end(),
-        "file": file,
+        "file": file.map(path_text),
         "exit_code": exit_code,
     });
     eprintln!("{record}");

@@ -10,7 +10,7 @@ use travmap_drive::scoring::evaluation::Evaluation;
 use travmap_method::grid::CellClass;
 
 use super::{
-    Inputs, ModelArg, Outcome, counted, frame_count, images_for, model_json, outcome,
+    Inputs, ModelArg, Outcome, counted, frame_count, images_for, model_json, outcome, path_text,
     print_json_frame, print_json_summary,
 };
 
@@ -67,7 +67,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
             if output.json {
                 let cells: Vec<i8> = grid.iter().map(|c| c.occupancy()).collect();
                 print_json_frame(json!({
-                    "input": selection.source.path(),
+                    "input": path_text(selection.source.path()),
                     "frame": result.index,
                     "stamp_ns": result.stamp_ns,
                     "cell_size_m": result.layout.cell_size_m,

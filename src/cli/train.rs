@@ -13,7 +13,7 @@ use travmap_training::crossval::collect_training_set;
 use travmap_training::{TrainingSet, train as train_model};
 
 use super::{
-    Inputs, Outcome, check_output, frame_count, input_json, model_json, outcome,
+    Inputs, Outcome, check_output, frame_count, input_json, model_json, outcome, path_text,
     print_json_summary, setting_word,
 };
 
@@ -83,7 +83,7 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
     let mut inputs: Vec<serde_json::Value> = selections.iter().map(input_json).collect();
     for path in &datasets {
         let rows = read_training_rows(path, config, &mut set, labels)?;
-        inputs.push(json!({"path": path, "frames": null, "cells": rows}));
+        inputs.push(json!({"path": path_text(path), "frames": null, "cells": rows}));
         let kind = match labels {
             Labels::GroundTruth => "labelled",
             Labels::Pseudo => "self-labelled",
@@ -119,7 +119,7 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
         .copied();
     if output.json {
         let doc = json!({
-            "output": model_path,
+            "output": path_text(model_path),
             "model": model_json(&model, &model_path.display().to_string()),
             "inputs": inputs,
             "config": config,

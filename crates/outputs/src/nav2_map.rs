@@ -46,7 +46,9 @@ pub const FREE_THRESH: f64 = 0.196;
 /// corner.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Nav2Map {
+    #[serde(serialize_with = "lossy_path")]
     pub yaml: PathBuf,
+    #[serde(serialize_with = "lossy_path")]
     pub image: PathBuf,
     pub mode: Nav2Mode,
     pub width: usize,
@@ -59,7 +61,18 @@ pub struct Nav2Map {
     /// `.prj` with the CRS) so GIS tools place it; None: the drive's own frame.
     pub georeference: Option<Georeference>,
     /// The world file and `.prj` written, when georeferenced.
+    #[serde(serialize_with = "lossy_paths")]
     pub gis_files: Vec<PathBuf>,
+}
+
+/// A path as text, bytes that are not UTF-8 as U+FFFD: serde refuses such a path,
+/// and a summary must not fail on the name of what it wrote.
+fn lossy_path<S: serde::Serializer>(path: &Path, serializer: S) -> Result<S::Ok, S::Error> {
+    serializer.serialize_str(&path.to_string_lossy())
+}
+
+fn lossy_paths<S: serde::Serializer>(paths: &[PathBuf], serializer: S) -> Result<S::Ok, S::Error> {
+    serializer.collect_seq(paths.iter().map(|path| path.to_string_lossy()))
 }
 
 /// The image of a map: cells seen by some frame, from the lowest key to the highest.
