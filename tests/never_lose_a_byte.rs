@@ -553,3 +553,60 @@ fn outputs_that_would_lose_something_are_refused() {
         );
     }
 }
+
+/// One pose 10^6 m off the others would make the drive map a dense image of 10^13
+/// cells (it panicked on 32-bit pixel arithmetic, or aborted allocating 6.2 TB): the
+/// map, its nav2 copy and the annotated file's OccupancyGrid are refused by size,
+/// naming the extent, and nothing is left behind.
+#[test]
+fn a_pose_far_from_the_rest_is_refused_by_the_maps_size() {
+    let Some(sample) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let drive = crate::common::long_sequence(&sample, dir.path(), 6);
+    let poses = std::fs::read_to_string(drive.join("poses.txt")).unwrap();
+    let mut lines: Vec<String> = poses.lines().map(str::to_string).collect();
+    let mut values: Vec<f64> = lines[3]
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    values[3] += 1e6;
+    lines[3] = values
+        .iter()
+        .map(f64::to_string)
+        .collect::<Vec<_>>()
+        .join(" ");
+    std::fs::write(drive.join("poses.txt"), lines.join("\n") + "\n").unwrap();
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    for (command, output, extra) in [
+        ("map", "m.png", vec!["--nav2", "m.yaml"]),
+        ("annotate", "a.mcap", vec![]),
+    ] {
+        let extra: Vec<String> = extra
+            .iter()
+            .map(|e| match e.ends_with(".yaml") {
+                true => out.join(e).display().to_string(),
+                false => e.to_string(),
+            })
+            .collect();
+        let output = out.join(output);
+        let mut args = vec![command, arg(&drive), "-o", arg(&output)];
+        args.extend(extra.iter().map(String::as_str));
+        let err = clean_failure(travmap(&args));
+        crate::common::assert_contains(
+            &err,
+            &[
+                "999981 m",
+                "more than the 268435456 one image may hold",
+                "far from the rest",
+            ],
+        );
+        assert_eq!(
+            std::fs::read_dir(&out).unwrap().count(),
+            0,
+            "{command} left a file"
+        );
+    }
+}

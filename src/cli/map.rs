@@ -125,7 +125,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     }
     // The cells are the map from here on: its tiles (most of a site map's memory) go.
     drop(map);
-    let picture = render_drive_map(&cells, &trajectory, cell_size_m, cell_px);
+    let picture = render_drive_map(&cells, &trajectory, cell_size_m, cell_px)?;
     let mut staged = Staged::default();
     staged.write(output_path, &encode_png(&picture))?;
     if let Some(path) = &args.cells {

@@ -76,6 +76,22 @@ pub enum Error {
     #[error("{path}: {message}")]
     Dataset { path: PathBuf, message: String },
 
+    /// A map whose extent no dense image can hold: a pose or a point far from the
+    /// rest, most likely (a 1e6 m jump once asked for 6.2 TB).
+    #[error(
+        "{what} would be {columns} x {rows} {unit}s ({width_m:.0} x {height_m:.0} m), more than the {limit} one image may hold: is a pose or a point far from the rest? ({hint})"
+    )]
+    MapTooLarge {
+        what: &'static str,
+        columns: u64,
+        rows: u64,
+        unit: &'static str,
+        width_m: f64,
+        height_m: f64,
+        limit: u64,
+        hint: &'static str,
+    },
+
     /// An output of no frame is no result: a fleet script would count it as done.
     #[error("{path} is not written: no frame of {inputs} was read ({why})")]
     NothingWritten {

@@ -361,7 +361,7 @@ pub fn annotate(
                 stamp,
                 options.grid_height_m,
                 GridValues::Probability,
-            );
+            )?;
             cadence.wrote(grid.data.len());
             sink.write(DRIVE_MAP_TOPIC, stamp, &grid)?;
         }
@@ -392,7 +392,7 @@ pub fn annotate(
             last_stamp_ns,
             options.grid_height_m,
             GridValues::Probability,
-        );
+        )?;
         sink.write(DRIVE_MAP_TOPIC, last_stamp_ns, &grid)?;
     }
     if options.static_map {
@@ -404,7 +404,7 @@ pub fn annotate(
             last_stamp_ns,
             0.0,
             GridValues::Trinary,
-        );
+        )?;
         sink.write_latched(STATIC_MAP_TOPIC, last_stamp_ns, &map)?;
     }
     let mut metadata = metadata;

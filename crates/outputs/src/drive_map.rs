@@ -14,7 +14,7 @@ use parquet::file::writer::SerializedFileWriter;
 
 use crate::atomic::{AtomicFile, Staged, parquet_failure, sync_output, write_failure};
 use crate::rendering::{GAP_PX, class_colour, colour, error_colour};
-use travmap_core::error::Result;
+use travmap_core::error::{Error, Result};
 use travmap_core::frame::RgbImage;
 use travmap_formats::ros::{Header, MapMetaData, OccupancyGrid, Pose, Quaternion, Time, Vector3};
 use travmap_method::fusion::{DriveMap, FusedCell};
@@ -28,6 +28,34 @@ pub const SCALE_BAR_M: f64 = 5.0;
 pub const AXIS_M: f64 = 2.0;
 /// Pixel rows under the panels for the scale bar.
 const FOOTER_PX: u32 = 16;
+
+/// The most cells or pixels one dense image of a map may hold: 2^28 (256 MiB at a
+/// byte each; a 53 km square at 0.4 m cells and 8 pixels a cell, 6.5 km). More is a
+/// pose or a point far from the rest, not a drive.
+pub const MAX_IMAGE_CELLS: u64 = 1 << 28;
+
+/// Refuses a dense image of `size` units (cells or pixels) of `unit_m` metres, named
+/// `what`, beyond [`MAX_IMAGE_CELLS`]; `hint` says what else to do.
+pub fn check_image_size(
+    what: &'static str,
+    size: [u64; 2],
+    (unit, unit_m): (&'static str, f64),
+    hint: &'static str,
+) -> Result<()> {
+    if size[0].saturating_mul(size[1]) <= MAX_IMAGE_CELLS {
+        return Ok(());
+    }
+    Err(Error::MapTooLarge {
+        what,
+        columns: size[0],
+        rows: size[1],
+        unit,
+        width_m: size[0] as f64 * unit_m,
+        height_m: size[1] as f64 * unit_m,
+        limit: MAX_IMAGE_CELLS,
+        hint,
+    })
+}
 
 /// The cells' key range, padded with [`BORDER_CELLS`]: (lowest key, cells per side).
 fn extent(cells: &[FusedCell]) -> ([i64; 2], [usize; 2]) {
@@ -46,11 +74,13 @@ fn extent(cells: &[FusedCell]) -> ([i64; 2], [usize; 2]) {
 fn padded_extent(bounds: Option<([i64; 2], [i64; 2])>) -> ([i64; 2], [usize; 2]) {
     let (low, high) = bounds.unwrap_or(([0, 0], [0, 0]));
     let low = [low[0] - BORDER_CELLS, low[1] - BORDER_CELLS];
-    let size = [
-        (high[0] + BORDER_CELLS - low[0] + 1) as usize,
-        (high[1] + BORDER_CELLS - low[1] + 1) as usize,
-    ];
-    (low, size)
+    // Saturating: a key range no image holds is refused by its size, not wrapped.
+    let side = |axis: usize| {
+        (high[axis].saturating_add(BORDER_CELLS + 1))
+            .saturating_sub(low[axis])
+            .max(0) as usize
+    };
+    (low, [side(0), side(1)])
 }
 
 /// The layout of a drive map picture: where each world cell lands.
@@ -107,10 +137,17 @@ pub fn render_drive_map(
     trajectory: &[[f64; 2]],
     cell_size_m: f64,
     cell_px: u32,
-) -> RgbImage {
+) -> Result<RgbImage> {
     let picture = MapPicture::of(cells, cell_px);
     let with_truth = cells.iter().any(|c| c.ground_truth != CellClass::Unknown);
     let panels = if with_truth { 3 } else { 1 };
+    let pixels_per_side = picture.cells.map(|n| n as u64 * cell_px as u64);
+    check_image_size(
+        "the drive map picture",
+        [pixels_per_side[0] * panels as u64, pixels_per_side[1]],
+        ("pixel", cell_size_m / cell_px as f64),
+        "--frames chooses a stretch; --cell-pixels 1 draws a pixel a cell",
+    )?;
     let (panel_w, panel_h) = picture.panel_px();
     let width = panels * panel_w + (panels - 1) * GAP_PX;
     let height = panel_h + FOOTER_PX;
@@ -151,7 +188,12 @@ pub fn render_drive_map(
         }
     }
     // Overlays on every panel: the trajectory, then the axes.
-    let steps = |length_m: f64| (length_m / cell_size_m * cell_px as f64).ceil() as usize * 2;
+    // At most a step a pixel along the picture's diagonal and back, whatever the
+    // distance (a trajectory point outside the picture is not drawn).
+    let most_steps = 2 * (width + height) as usize;
+    let steps = |length_m: f64| {
+        ((length_m / cell_size_m * cell_px as f64).ceil() as usize * 2).min(most_steps)
+    };
     let mut line = |from: [f64; 2], to: [f64; 2], c: [u8; 3]| {
         let n = steps(((to[0] - from[0]).hypot(to[1] - from[1])).max(cell_size_m));
         for i in 0..=n {
@@ -182,7 +224,7 @@ pub fn render_drive_map(
             set(x, y, [0, 0, 0]);
         }
     }
-    image
+    Ok(image)
 }
 
 /// The fused cells as a Parquet table: one row per cell some frame saw or labelled,
@@ -268,9 +310,15 @@ pub fn occupancy_grid(
     stamp_ns: u64,
     height_m: f64,
     values: GridValues,
-) -> OccupancyGrid {
+) -> Result<OccupancyGrid> {
     let cell_size_m = map.cell_size_m();
     let (low, size) = padded_extent(map.observed_bounds());
+    check_image_size(
+        "the drive map's OccupancyGrid",
+        size.map(|n| n as u64),
+        ("cell", cell_size_m),
+        "--frames chooses a stretch",
+    )?;
     let mut data = vec![-1i8; size[0] * size[1]];
     for cell in map.each_cell().filter(|c| c.observations > 0) {
         let col = (cell.key[0] - low[0]) as usize;
@@ -283,7 +331,7 @@ pub fn occupancy_grid(
         };
     }
     let stamp = Time::from_ns(stamp_ns);
-    OccupancyGrid {
+    Ok(OccupancyGrid {
         header: Header {
             stamp,
             frame_id: frame_id.to_string(),
@@ -303,5 +351,5 @@ pub fn occupancy_grid(
             },
         },
         data,
-    }
+    })
 }

@@ -20,6 +20,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use crate::atomic::Staged;
+use crate::drive_map::check_image_size;
 use travmap_core::error::{Error, Result};
 use travmap_io::Georeference;
 use travmap_method::fusion::FusedCell;
@@ -94,10 +95,9 @@ impl Raster {
                 high[axis] = high[axis].max(cell.key[axis]);
             }
         }
-        let size = [
-            (high[0] - low[0] + 1) as usize,
-            (high[1] - low[1] + 1) as usize,
-        ];
+        // Saturating: a key range no image holds is refused by its size, not wrapped.
+        let side = |axis: usize| high[axis].saturating_sub(low[axis]).saturating_add(1) as usize;
+        let size = [side(0), side(1)];
         Self { low_key: low, size }
     }
 
@@ -156,6 +156,12 @@ pub fn write_nav2_map(
         });
     }
     let raster = Raster::of(cells);
+    check_image_size(
+        "the nav2 map",
+        raster.size.map(|n| n as u64),
+        ("cell", resolution_m),
+        "--frames chooses a stretch",
+    )?;
     let image = image_path(yaml, mode);
     let pixels = raster.size[0] * raster.size[1];
     let bytes = match mode {
