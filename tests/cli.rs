@@ -566,3 +566,23 @@ fn quiet_keeps_the_answer_and_drops_the_chatter() {
     let rows = success(travmap(&["run", &seq, "-q", "--frames", "2..4"]));
     assert_eq!(rows.lines().count(), 3, "a header and two rows:\n{rows}");
 }
+
+#[test]
+fn settings_that_would_never_end_or_exhaust_memory_are_refused() {
+    for (assignment, named) in [
+        (
+            "registration.max_points_per_voxel=4294967295",
+            "max_points_per_voxel in 1..=10000",
+        ),
+        (
+            "training.c_values=[1e300]",
+            "training.c_values must be in (0.0, 1000000.0], got 1e300",
+        ),
+        ("training.tolerance=1e-300", "training.tolerance must be in"),
+        ("adapt.rounds=1000000", "adapt.rounds must be at most 20"),
+        ("adapt.c=1e300", "adapt.c must be in"),
+    ] {
+        let err = crate::common::usage_error(travmap(&["config", "--set", assignment]));
+        assert!(err.contains(named), "--set {assignment}: {err}");
+    }
+}

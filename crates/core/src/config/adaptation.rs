@@ -59,6 +59,9 @@ impl VehicleConfig {
     }
 }
 
+/// The most self-training rounds `adapt.rounds` may ask for.
+const MAX_ROUNDS: usize = 20;
+
 /// How the adapted model learns from the prior and the drive.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -137,8 +140,15 @@ impl AdaptConfig {
         positive("vehicle.length_m", vehicle.length_m)?;
         positive("vehicle.clearance_m", vehicle.clearance_m)?;
         positive("adapt.horizon_m", self.horizon_m)?;
-        positive("adapt.c", self.c)?;
-        positive("adapt.gamma", self.gamma)?;
+        super::check_within("adapt.c", self.c, (0.0, super::MAX_SVM_C))?;
+        super::check_within("adapt.gamma", self.gamma, (0.0, super::MAX_SVM_GAMMA))?;
+        // Each round refits the model: past a few the cells left unknown are few.
+        if self.rounds > MAX_ROUNDS {
+            return Err(format!(
+                "adapt.rounds must be at most {MAX_ROUNDS}, got {}",
+                self.rounds
+            ));
+        }
         positive("adapt.self_training_margin", self.self_training_margin)?;
         if !(self.negative_margin.is_finite() && self.negative_margin >= 0.0) {
             return Err(format!(

@@ -338,6 +338,23 @@ pub fn written_before_groups(config: &mut serde_json::Value) {
 }
 
 /// Fields that are unset by default, so absent from a serialised configuration.
+/// The largest SVM C and gamma searched or fitted: beyond them the solver's steps
+/// lose all precision and it never converges (C 1e300 ran without end).
+pub const MAX_SVM_C: f64 = 1e6;
+pub const MAX_SVM_GAMMA: f64 = 1e4;
+
+/// Checks `low < v <= high` (a finite `v`), naming the setting.
+pub fn check_within(
+    name: &str,
+    v: f64,
+    (low, high): (f64, f64),
+) -> std::result::Result<(), String> {
+    match v.is_finite() && v > low && v <= high {
+        true => Ok(()),
+        false => Err(format!("{name} must be in ({low:?}, {high:?}], got {v:?}")),
+    }
+}
+
 /// Fields that may be absent, and whether each holds text (the rest hold lists).
 const OPTIONAL_FIELDS: &[(&str, &str, bool)] = &[
     ("ground_truth", "label_map", true),
@@ -472,7 +489,8 @@ impl Config {
         }
         positive("training.grid_size_m", self.training.grid_size_m)?;
         positive("training.block_size_m", self.training.block_size_m)?;
-        positive("training.tolerance", self.training.tolerance)?;
+        check_within("training.tolerance", self.training.tolerance, (1e-9, 1.0))
+            .map_err(Error::Config)?;
         let cells = self.grid.cells_per_side();
         if !(1..=4096).contains(&cells) {
             return fail(format!(
@@ -514,15 +532,19 @@ impl Config {
                 self.training.max_fit_samples, self.training.max_search_samples
             ));
         }
-        for (name, values) in [
-            ("training.c_values", &self.training.c_values),
-            ("training.gamma_values", &self.training.gamma_values),
+        for (name, values, largest) in [
+            ("training.c_values", &self.training.c_values, MAX_SVM_C),
+            (
+                "training.gamma_values",
+                &self.training.gamma_values,
+                MAX_SVM_GAMMA,
+            ),
         ] {
             if values.is_empty() {
                 return fail(format!("{name} must not be empty"));
             }
             for &v in values {
-                positive(name, v)?;
+                check_within(name, v, (0.0, largest)).map_err(Error::Config)?;
             }
         }
         Ok(())

@@ -95,11 +95,16 @@ impl RegistrationConfig {
         check(in_range, "0 <= min_range_m < max_range_m")?;
         let voxel = c.voxel_size_m == 0.0 || positive(c.voxel_size_m);
         check(voxel, "voxel_size_m >= 0")?;
-        check(c.max_points_per_voxel > 0, "max_points_per_voxel > 0")?;
+        // KISS-ICP keeps 20; 10^4 would already allocate gigabytes for the map.
+        let voxel_points = (1..=10_000).contains(&c.max_points_per_voxel);
+        check(voxel_points, "max_points_per_voxel in 1..=10000")?;
         check(positive(c.initial_threshold_m), "initial_threshold_m > 0")?;
         let motion = c.min_motion_m == 0.0 || positive(c.min_motion_m);
         check(motion, "min_motion_m >= 0")?;
         check(positive(c.convergence), "convergence > 0")?;
-        check(c.max_iterations > 0, "max_iterations > 0")
+        check(
+            (1..=10_000).contains(&c.max_iterations),
+            "max_iterations in 1..=10000",
+        )
     }
 }
