@@ -308,6 +308,10 @@ fn an_ouster_log_is_a_drive_however_it_was_recorded() {
     );
     let capture = route("RNG19_RFL8_SIG16_NIR16.pcap");
     let captured = annotated_on(dir, &capture, "captured", &given, &prediction);
+    // Without the flag, the metadata saved beside the capture (the same name, .json)
+    // is read, with a notice.
+    let beside = annotated_on(dir, &capture, "beside", &[], &prediction);
+    assert_eq!(beside, captured);
     // The SDK's capture keeps microseconds: the stamps are the log's to within one.
     let unstamped = |grids: &[(String, u64, Vec<u8>)]| -> Vec<OccupancyGrid> {
         let grid = |data: &[u8]| {

@@ -141,6 +141,11 @@ impl Log {
         &self.notices
     }
 
+    /// Whether the log is a packet capture (pcap): no topics, no recorded metadata.
+    pub fn is_capture(&self) -> bool {
+        (self.files.iter()).any(|file| matches!(file, LogFile::Pcap(_)))
+    }
+
     /// Whether a file of the log was cut short (read as far as it goes).
     pub fn is_cut(&self) -> bool {
         self.files

@@ -4,13 +4,13 @@
 //! intrinsics and image topics.
 
 use std::collections::{BTreeMap, HashMap};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
 use super::camera_model::Projection;
 use super::options::{LogOptions, MergedTopics};
-use super::packet_topics::PacketTopics;
+use super::packet_topics::{PacketTopics, ouster_metadata_beside};
 use super::pose_topics::{
     POSE_MESSAGES, PoseTopic, VehiclePoses, add_vehicle_poses, named_pose_topic, unposed,
 };
@@ -384,6 +384,8 @@ pub(crate) struct LogIndex {
     pub(crate) partial_first_scan: Option<(usize, usize)>,
     /// Packet topics' calibrations recorded in the log (an Ouster's metadata).
     pub(crate) recorded_calibrations: HashMap<String, PacketCalibration>,
+    /// The Ouster metadata file found beside a capture, when packets were read with it.
+    pub(crate) ouster_metadata_beside: Option<PathBuf>,
 }
 
 impl LogIndex {
@@ -394,7 +396,12 @@ impl LogIndex {
         let mut contents = Contents {
             poses,
             pose_topic: options.pose_topic.clone(),
-            packets: PacketTopics::new(options.lidar_calibrations.clone()),
+            packets: PacketTopics::new(
+                options.lidar_calibrations.clone(),
+                log.is_capture()
+                    .then(|| ouster_metadata_beside(path))
+                    .flatten(),
+            ),
             ..Default::default()
         };
         let (mut damaged_chunks, mut first_damage, mut lost_messages) = (0, None, Vec::new());
@@ -511,6 +518,10 @@ impl LogIndex {
             lost_messages,
             partial_first_scan,
             recorded_calibrations,
+            ouster_metadata_beside: contents
+                .packets
+                .metadata_beside_used()
+                .map(Path::to_path_buf),
         })
     }
 

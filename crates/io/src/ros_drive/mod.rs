@@ -190,6 +190,14 @@ impl RosDrive {
             index.stamps_ns.first().copied().unwrap_or(0),
         );
         let period_ns = median_period_ns(&index.stamps_ns);
+        if let Some(file) = &index.ouster_metadata_beside {
+            let said = notice.take().map(|n| format!("{n}; ")).unwrap_or_default();
+            notice = Some(format!(
+                "{said}{}: its Ouster packets are read with {}, the metadata saved beside it (--lidar-calibration gives another)",
+                log.path().display(),
+                file.display()
+            ));
+        }
         if let Some(lens) = index.camera.as_ref().and_then(|c| c.notice.as_ref()) {
             let said = notice.take().map(|n| format!("{n}; ")).unwrap_or_default();
             notice = Some(format!("{said}{}: {lens}", log.path().display()));

@@ -4,6 +4,7 @@
 //! from `--lidar-calibration`, before its packets can be cut.
 
 use std::collections::{BTreeMap, HashMap, HashSet};
+use std::path::{Path, PathBuf};
 
 use super::by_topic::LidarCalibrations;
 use crate::packets::hesai::{HesaiAssembler, HesaiCalibration};
@@ -33,6 +34,10 @@ enum PacketCut {
 pub(crate) struct PacketTopics {
     /// The packets' calibration files (`--lidar-calibration`).
     calibrations: LidarCalibrations,
+    /// An Ouster metadata file found beside a capture ([`ouster_metadata_beside`]),
+    /// and whether a topic was read with it.
+    beside: Option<(PathBuf, OusterMetadata)>,
+    beside_used: bool,
     /// Packet topic -> the model and where its scans are cut.
     topics: HashMap<String, (PacketModel, PacketCut)>,
     /// Velodyne packet topic -> the stamp of the scan being cut.
@@ -52,11 +57,23 @@ pub(crate) struct PacketTopics {
 }
 
 impl PacketTopics {
-    pub(crate) fn new(calibrations: LidarCalibrations) -> Self {
+    /// `beside`: the metadata found beside a capture, for Ouster topics that have
+    /// no calibration file and no metadata topic.
+    pub(crate) fn new(
+        calibrations: LidarCalibrations,
+        beside: Option<(PathBuf, OusterMetadata)>,
+    ) -> Self {
         Self {
             calibrations,
+            beside,
             ..Default::default()
         }
+    }
+
+    /// The metadata file found beside the capture, when a topic was read with it.
+    pub(crate) fn metadata_beside_used(&self) -> Option<&Path> {
+        let (file, _) = self.beside.as_ref().filter(|_| self.beside_used)?;
+        Some(file)
     }
 
     /// Whether the index reads messages of type `type_name` on `topic` whole.
@@ -223,8 +240,9 @@ impl PacketTopics {
     }
 
     /// The metadata an Ouster topic's packets are read with: the file given for
-    /// it, else its metadata topic's; None while the log has shown none.
-    fn ouster_metadata_for(&self, topic: &str) -> Result<Option<OusterMetadata>, String> {
+    /// it, else its metadata topic's, else the file beside the capture; None while
+    /// the log has shown none.
+    fn ouster_metadata_for(&mut self, topic: &str) -> Result<Option<OusterMetadata>, String> {
         if let Some(file) = self.calibrations.for_topic(topic) {
             return ouster_metadata_file(file).map(Some);
         }
@@ -241,7 +259,10 @@ impl PacketTopics {
             Some((metadata_topic, Err(problem))) => {
                 Err(format!("its metadata on {metadata_topic}: {problem}"))
             }
-            None => Ok(None),
+            None => {
+                self.beside_used |= self.beside.is_some();
+                Ok(self.beside.as_ref().map(|(_, metadata)| metadata.clone()))
+            }
         }
     }
 
@@ -270,7 +291,7 @@ impl PacketTopics {
             format!(
                 "Ouster packets without the sensor's metadata (metadata topics: {metadata_topics:?}): \
                  give its JSON with --lidar-calibration (ouster_ros records it on /ouster/metadata; \
-                 Ouster Studio and the SDK save it beside a pcap)"
+                 beside a pcap, NAME.json or NAME_0.json as the SDK saves it is read without asking)"
             ),
         ))
     }
@@ -329,6 +350,50 @@ impl PacketTopics {
     }
 }
 
+/// The Ouster metadata JSON saved beside a capture, found as ouster-sdk finds it: of
+/// the folder's `.json` files that read as Ouster metadata, the one whose name shares
+/// the longest start with the capture's name up to its extension's dot
+/// (`drive.pcap`: `drive.json` before `drive_0.json`, the SDK's own name). None when
+/// there is none, or two share the longest start (two sensors: give each with
+/// `--lidar-calibration TOPIC=FILE`).
+pub(crate) fn ouster_metadata_beside(capture: &Path) -> Option<(PathBuf, OusterMetadata)> {
+    let name = capture.file_name()?.to_str()?;
+    let stem = name.rfind('.').map_or(name, |dot| &name[..=dot]);
+    let folder = capture.parent().filter(|p| !p.as_os_str().is_empty());
+    let shared = |other: &str| {
+        stem.bytes()
+            .zip(other.bytes())
+            .take_while(|(a, b)| a == b)
+            .count()
+    };
+    let mut best: Vec<(usize, PathBuf, OusterMetadata)> = Vec::new();
+    for entry in std::fs::read_dir(folder.unwrap_or(Path::new(".")))
+        .ok()?
+        .flatten()
+    {
+        let path = entry.path();
+        let Some(other) = path.file_name().and_then(|n| n.to_str()) else {
+            continue;
+        };
+        let score = shared(other);
+        let worse = best.first().is_some_and(|(top, _, _)| score < *top);
+        if score == 0 || worse || !other.ends_with(".json") {
+            continue;
+        }
+        let Ok(metadata) = ouster_metadata_file(&path) else {
+            continue;
+        };
+        if best.first().is_some_and(|(top, _, _)| score > *top) {
+            best.clear();
+        }
+        best.push((score, path, metadata));
+    }
+    match <[_; 1]>::try_from(best) {
+        Ok([(_, path, metadata)]) => Some((path, metadata)),
+        Err(_) => None,
+    }
+}
+
 /// An Ouster's metadata JSON file (`--lidar-calibration`).
 fn ouster_metadata_file(file: &std::path::Path) -> Result<OusterMetadata, String> {
     let text = std::fs::read_to_string(file).map_err(|e| format!("{}: {e}", file.display()))?;
@@ -352,16 +417,38 @@ fn check_model(model: PacketModel, type_name: &str, packet: &[u8]) -> Result<(),
 mod tests {
     use super::*;
 
+    /// Metadata of a two-beam Ouster, as flat metadata names it.
+    const TWO_BEAMS: &str = r#"{"beam_altitude_angles": [1, -1], "beam_azimuth_angles": [0, 0],
+        "lidar_origin_to_beam_origin_mm": 0,
+        "lidar_to_sensor_transform": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1],
+        "data_format": {"columns_per_frame": 512, "columns_per_packet": 16,
+                        "pixels_per_column": 2}}"#;
+
+    #[test]
+    fn the_metadata_saved_beside_a_capture_is_the_one_its_name_starts() {
+        let dir = tempfile::tempdir().unwrap();
+        let capture = dir.path().join("drive.pcap");
+        assert!(ouster_metadata_beside(&capture).is_none());
+        for name in ["drive_0.json", "other.json"] {
+            std::fs::write(dir.path().join(name), TWO_BEAMS).unwrap();
+        }
+        std::fs::write(dir.path().join("drive.notes.json"), "{}").unwrap();
+        let (found, _) = ouster_metadata_beside(&capture).unwrap();
+        assert_eq!(found, dir.path().join("drive_0.json"));
+        // The SDK's order: the whole stem first.
+        std::fs::write(dir.path().join("drive.json"), TWO_BEAMS).unwrap();
+        let (found, _) = ouster_metadata_beside(&capture).unwrap();
+        assert_eq!(found, dir.path().join("drive.json"));
+        // Two of one score are two sensors' metadata: neither is chosen.
+        std::fs::write(dir.path().join("drive.2.json"), TWO_BEAMS).unwrap();
+        std::fs::remove_file(dir.path().join("drive.json")).unwrap();
+        std::fs::write(dir.path().join("drive.1.json"), TWO_BEAMS).unwrap();
+        assert!(ouster_metadata_beside(&capture).is_none());
+    }
+
     #[test]
     fn an_ouster_topics_frame_is_found_in_the_transform_tree() {
-        let metadata = OusterMetadata::from_json(
-            r#"{"beam_altitude_angles": [1, -1], "beam_azimuth_angles": [0, 0],
-                "lidar_origin_to_beam_origin_mm": 0,
-                "lidar_to_sensor_transform": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1],
-                "data_format": {"columns_per_frame": 512, "columns_per_packet": 16,
-                                "pixels_per_column": 2}}"#,
-        )
-        .unwrap();
+        let metadata = OusterMetadata::from_json(TWO_BEAMS).unwrap();
         let mut topics = PacketTopics::default();
         for topic in [
             "/front/lidar_packets",
