@@ -352,3 +352,38 @@ fn an_ouster_log_is_a_drive_however_it_was_recorded() {
         assert_ne!(grids, rng19, "{profile}");
     }
 }
+
+/// ouster-sdk's own captures of an azimuth window (its tests/pcaps, BSD-3-Clause,
+/// in fixtures/ouster-sdk with their metadata saved beside them, read without
+/// --lidar-calibration): one frame each, as many points as the SDK decodes
+/// (ouster-sdk 1.0.1, points of a range above 0). The second window wraps through
+/// column 0 ([370, 85] of 512): its columns 368-511 come after 0-95 in the same
+/// frame, and were once dropped (1,258 points of 8,447).
+#[test]
+fn azimuth_windows_keep_every_column_the_sdk_keeps() {
+    for (capture, sdk_points) in [
+        ("windowed_frame1.pcap", 9246),
+        ("windowed_frame2.pcap", 8447),
+    ] {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("fixtures/ouster-sdk")
+            .join(capture);
+        let notices = std::cell::RefCell::new(Vec::new());
+        let source = travmap_io::Source::open(&path, &Default::default(), &|notice| {
+            notices.borrow_mut().push(notice.to_string())
+        })
+        .unwrap();
+        let frames: Vec<_> = source.read(&(0..usize::MAX)).map(Result::unwrap).collect();
+        assert_eq!(frames.len(), 1, "{capture}");
+        let points = frames[0].points_in_velodyne.len() + frames[0].dropped_points;
+        assert_eq!(points, sdk_points, "{capture}");
+        assert!(
+            notices
+                .borrow()
+                .iter()
+                .any(|n| n.contains("_0.json, the metadata saved beside it")),
+            "{:?}",
+            notices.borrow()
+        );
+    }
+}

@@ -371,10 +371,11 @@ pub(crate) fn ouster_metadata_beside(capture: &Path) -> Option<(PathBuf, OusterM
         .ok()?
         .flatten()
     {
-        let path = entry.path();
-        let Some(other) = path.file_name().and_then(|n| n.to_str()) else {
+        let file_name = entry.file_name();
+        let Some(other) = file_name.to_str() else {
             continue;
         };
+        let path = folder.map_or_else(|| PathBuf::from(other), |f| f.join(other));
         let score = shared(other);
         let worse = best.first().is_some_and(|(top, _, _)| score < *top);
         if score == 0 || worse || !other.ends_with(".json") {

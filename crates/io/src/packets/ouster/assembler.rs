@@ -36,9 +36,16 @@ impl OusterAssembler {
         let rings = (altitudes.iter())
             .map(|a| altitudes.iter().filter(|b| b < &a).count() as u16)
             .collect();
+        // A window through 0 (ouster-sdk's windowed_frame2: [370, 85] of 512): the
+        // frame's columns 0..=85 are measured first, and its last is the frame's.
+        let (first_column, last_column) = metadata.column_window;
+        let last_column = match first_column > last_column {
+            true => metadata.model.columns_per_frame - 1,
+            false => last_column,
+        };
         Self {
             model: metadata.model,
-            last_column: metadata.column_window.1,
+            last_column,
             directions,
             origins,
             rings,
