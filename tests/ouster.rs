@@ -387,3 +387,54 @@ fn azimuth_windows_keep_every_column_the_sdk_keeps() {
         );
     }
 }
+
+/// ouster-sdk's metadata files of firmware 1.12 to 3.0.1 (fixtures/ouster-sdk/metadata,
+/// BSD-3-Clause), flat and nested, all read: before 1.14 there is no data format
+/// (nested files of 1.12 and 1.13 hold an error string in its place), and before
+/// 2.0 no beam origin; each version's flat and nested files read the same.
+#[test]
+fn ouster_metadata_of_every_firmware_reads() {
+    let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ouster-sdk/metadata");
+    let mut names: Vec<String> = std::fs::read_dir(&folder)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    names.sort();
+    assert_eq!(names.len(), 25);
+    let read = |name: &str| {
+        let text = std::fs::read_to_string(folder.join(name)).unwrap();
+        OusterMetadata::from_json(&text).unwrap_or_else(|e| panic!("{name}: {e}"))
+    };
+    for name in &names {
+        let metadata = read(name);
+        let model = metadata.model;
+        // Firmware 1.12 and 1.13 stream 64 pixels a column whatever the beams lit.
+        let pixels = match name.starts_with("1_12") || name.starts_with("1_13") {
+            true => 64,
+            false => metadata.beam_altitude_deg.len() as u16,
+        };
+        assert_eq!(model.pixels_per_column, pixels, "{name}");
+        assert!(
+            [512, 1024, 2048].contains(&model.columns_per_frame),
+            "{name}"
+        );
+        assert_eq!(model.columns_per_packet, 16, "{name}");
+        assert!(
+            metadata.beam_to_lidar_mm[(0, 3)] > 0.0,
+            "{name}: a beam origin"
+        );
+        if let Some(nested) = name
+            .strip_suffix("_legacy.json")
+            .map(|n| format!("{n}.json"))
+        {
+            if names.contains(&nested) {
+                assert_eq!(metadata, read(&nested), "{name}");
+            }
+        }
+    }
+    // Before 2.0 the beam origin is the product line's, as ouster-sdk assumes it.
+    let os1 = read("1_12_os1-991937000062-64_legacy.json");
+    assert_eq!(os1.beam_to_lidar_mm[(0, 3)], 15.806);
+    let os0 = read("1_14_6cccd_os-882002000138-128_legacy.json");
+    assert_eq!(os0.beam_to_lidar_mm[(0, 3)], 27.67);
+}

@@ -38,13 +38,36 @@ impl OusterMetadata {
                 .and_then(|s| s.get(key))
                 .or_else(|| root.get(key))
         };
-        let format = root
-            .get("lidar_data_format")
+        // Firmware before 1.14 gives no data format (or, asked through a newer
+        // client, an error string in its place): its packets are LEGACY, 16 columns
+        // each, a pixel per beam angle, and its lidar mode says the columns a turn.
+        let no_format = serde_json::Map::new();
+        let format = (root.get("lidar_data_format"))
             .or_else(|| root.get("data_format"))
-            .ok_or("no `lidar_data_format` (or `data_format`): not Ouster sensor metadata")?;
+            .and_then(Value::as_object)
+            .unwrap_or(&no_format);
+        let firmware_1 = format.is_empty();
+        let from_mode = |key: &str| -> Option<u64> {
+            let mode = find("config_params", "lidar_mode")?.as_str()?;
+            match key {
+                "columns_per_frame" => mode.split_once('x')?.0.parse().ok(),
+                "columns_per_packet" => Some(16),
+                _ => Some(
+                    find("beam_intrinsics", "beam_altitude_angles")?
+                        .as_array()?
+                        .len() as u64,
+                ),
+            }
+        };
         let count = |key: &str| -> Result<u16, String> {
-            let value = format.get(key).and_then(Value::as_u64);
-            let value = value.ok_or_else(|| format!("no whole `{key}` in the data format"))?;
+            let value = match firmware_1 {
+                false => format.get(key).and_then(Value::as_u64),
+                true => from_mode(key),
+            };
+            let value = value.ok_or_else(|| match firmware_1 {
+                false => format!("no whole `{key}` in the data format"),
+                true => "no data format, nor a `lidar_mode` and beam angles to tell it from: not Ouster sensor metadata".to_string(),
+            })?;
             u16::try_from(value).map_err(|_| format!("`{key}` {value} is out of range"))
         };
         let pixels_per_column = count("pixels_per_column")?;
@@ -109,18 +132,22 @@ impl OusterMetadata {
                 false => Err(format!("`{key}` is not finite")),
             }
         };
+        let product_line = find("sensor_info", "prod_line").and_then(Value::as_str);
         let h = usize::from(pixels_per_column);
         let beam_altitude_deg = numbers("beam_intrinsics", "beam_altitude_angles", h)?;
         let beam_azimuth_deg = numbers("beam_intrinsics", "beam_azimuth_angles", h)?;
         let matrix = |values: Vec<f64>| Matrix4::from_row_slice(&values);
         let beam_to_lidar_mm = match find("beam_intrinsics", "beam_to_lidar_transform") {
             Some(_) => matrix(numbers("beam_intrinsics", "beam_to_lidar_transform", 16)?),
-            // Before it was given whole, the beams sat on the x axis.
+            // Before it was given whole, the beams sat on the x axis; before firmware
+            // 2.0 not even that distance was given: the product line's (the SDK's).
             None => {
-                let origin = find("beam_intrinsics", "lidar_origin_to_beam_origin_mm")
-                    .and_then(Value::as_f64)
-                    .filter(|v| v.is_finite())
-                    .ok_or("no `beam_to_lidar_transform` nor `lidar_origin_to_beam_origin_mm`")?;
+                let origin = match find("beam_intrinsics", "lidar_origin_to_beam_origin_mm") {
+                    Some(origin) => (origin.as_f64())
+                        .filter(|v| v.is_finite())
+                        .ok_or("`lidar_origin_to_beam_origin_mm` is not a number")?,
+                    None => default_beam_origin_mm(product_line),
+                };
                 let mut m = Matrix4::identity();
                 m[(0, 3)] = origin;
                 m
@@ -131,10 +158,7 @@ impl OusterMetadata {
             "lidar_to_sensor_transform",
             16,
         )?);
-        let product = find("sensor_info", "prod_line")
-            .and_then(Value::as_str)
-            .unwrap_or("Ouster")
-            .to_string();
+        let product = product_line.unwrap_or("Ouster").to_string();
         Ok(Self {
             model: OusterModel {
                 profile,
@@ -188,6 +212,21 @@ impl OusterMetadata {
             }
         }
         (directions, origins)
+    }
+}
+
+/// The distance of the beams' origin from the lidar's axis by product line, for
+/// metadata that does not give it (firmware before 2.0), as ouster-sdk assumes it.
+fn default_beam_origin_mm(product_line: Option<&str>) -> f64 {
+    let line = product_line.unwrap_or_default();
+    if line.starts_with("OS-0") || line.starts_with("OS0") {
+        27.67
+    } else if line.starts_with("OS-1") || line.starts_with("OS1") {
+        15.806
+    } else if line.starts_with("OS-2") || line.starts_with("OS2") {
+        13.762
+    } else {
+        12.163
     }
 }
 
