@@ -423,13 +423,9 @@ fn ouster_metadata_of_every_firmware_reads() {
             metadata.beam_to_lidar_mm[(0, 3)] > 0.0,
             "{name}: a beam origin"
         );
-        if let Some(nested) = name
-            .strip_suffix("_legacy.json")
-            .map(|n| format!("{n}.json"))
-        {
-            if names.contains(&nested) {
-                assert_eq!(metadata, read(&nested), "{name}");
-            }
+        let nested = (name.strip_suffix("_legacy.json")).map(|n| format!("{n}.json"));
+        if let Some(nested) = nested.filter(|n| names.contains(n)) {
+            assert_eq!(metadata, read(&nested), "{name}");
         }
     }
     // Before 2.0 the beam origin is the product line's, as ouster-sdk assumes it.
