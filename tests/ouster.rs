@@ -17,11 +17,13 @@ use travmap_io::format::InputFormat;
 use travmap_io::packets::ouster::{OusterMetadata, string_message};
 use travmap_io::packets::{PacketAssembler, PacketCalibration, PacketModel};
 
-const PROFILES: [&str; 4] = [
+const PROFILES: [&str; 6] = [
     "LEGACY",
     "RNG19_RFL8_SIG16_NIR16",
     "RNG19_RFL8_SIG16_NIR16_DUAL",
     "RNG15_RFL8_NIR8",
+    "RNG15_RFL8_NIR8_DUAL",
+    "FUSA_RNG15_RFL8_NIR8_DUAL",
 ];
 const LOG_START_NS: u64 = 1_700_000_000_000_000_000;
 

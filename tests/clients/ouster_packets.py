@@ -72,7 +72,14 @@ FIRST_FRAME_ID = 100
 PERIOD_NS = 100_000_000
 SENSOR_START_NS = 5_000_000_000
 LOG_START_NS = 1_700_000_000_000_000_000
-PROFILES = ["LEGACY", "RNG19_RFL8_SIG16_NIR16", "RNG19_RFL8_SIG16_NIR16_DUAL", "RNG15_RFL8_NIR8"]
+PROFILES = [
+    "LEGACY",
+    "RNG19_RFL8_SIG16_NIR16",
+    "RNG19_RFL8_SIG16_NIR16_DUAL",
+    "RNG15_RFL8_NIR8",
+    "RNG15_RFL8_NIR8_DUAL",
+    "FUSA_RNG15_RFL8_NIR8_DUAL",
+]
 
 
 def scene(bin_path, info, lut):
@@ -318,6 +325,9 @@ def main():
     for profile in PROFILES:
         info = core.SensorInfo.from_default(core.LidarMode._2048x10)
         info.format.udp_profile_lidar = getattr(core.UDPProfileLidar, profile)
+        if profile.startswith("FUSA"):
+            # The functional-safety packets: a header with a 32-bit frame id.
+            info.format.header_type = core.HeaderType.FUSA
         range_mm, reflectivity = scene(bin_path, info, core.XYZLut(info))
         packets, points = frames(info, range_mm, reflectivity, profile)
         metadata = info.to_json_string().encode()

@@ -19,8 +19,8 @@ pub struct OusterAssembler {
     /// Per beam: its ring, 0 the lowest (Ouster numbers its beams from the top).
     rings: Vec<u16>,
     /// The frame id being gathered, and the last one handed on.
-    frame_id: Option<u16>,
-    handed_on: Option<u16>,
+    frame_id: Option<u32>,
+    handed_on: Option<u32>,
     points: Vec<VelodynePoint>,
     /// The scan's first column's time, and the shift from the sensor's clock to
     /// the log's at the packet that held it.

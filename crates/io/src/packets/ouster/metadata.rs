@@ -81,11 +81,16 @@ impl OusterMetadata {
             None | Some(Value::Null) => Profile::Legacy,
             Some(name) => Profile::from_name(name.as_str().unwrap_or_default())?,
         };
-        if let Some(header) = format.get("header_type").and_then(Value::as_str)
-            && header != "STANDARD"
-        {
+        let header = format.get("header_type").and_then(Value::as_str);
+        let expected = if profile.is_fusa() {
+            "FUSA"
+        } else {
+            "STANDARD"
+        };
+        if let Some(header) = header.filter(|h| *h != expected) {
             return Err(format!(
-                "packet header type {header}: only the STANDARD header is read"
+                "packet header type {header} with profile {}: travmap reads the {expected} header with it",
+                profile.name()
             ));
         }
         // Ouster's sensors have 16 to 128 beams and 512 to 4,096 columns a turn.
@@ -318,13 +323,20 @@ mod tests {
     #[test]
     fn bad_metadata_is_refused_with_what_is_wrong() {
         let problem = |text: &str| OusterMetadata::from_json(text).unwrap_err();
-        assert!(problem("{}").contains("lidar_data_format"));
+        assert!(problem("{}").contains("not Ouster sensor metadata"));
         assert!(problem("not json").contains("not Ouster metadata JSON"));
         let five_beams =
             nested("LEGACY").replace("\"pixels_per_column\": 4", "\"pixels_per_column\": 5");
         assert!(problem(&five_beams).contains("`beam_altitude_angles` has 4 values, 5"));
-        let unknown = nested("RNG99");
-        assert!(problem(&unknown).contains("RNG99"));
+        let unknown = problem(&nested("RNG99"));
+        for said in [
+            "RNG99",
+            "RNG15_RFL8_NIR8_DUAL",
+            "FUSA_RNG15_RFL8_NIR8_DUAL",
+            "RNG19_RFL8_SIG16_NIR16_DUAL",
+        ] {
+            assert!(unknown.contains(said), "{unknown}");
+        }
         let window = nested("LEGACY").replace("[0, 1023]", "[0, 1024]");
         assert!(problem(&window).contains("column window"));
         let fusa = nested("LEGACY").replace(
@@ -332,5 +344,16 @@ mod tests {
             "\"columns_per_packet\": 16, \"header_type\": \"FUSA\"",
         );
         assert!(problem(&fusa).contains("FUSA"));
+        let fusa = nested("FUSA_RNG15_RFL8_NIR8_DUAL").replace(
+            "\"columns_per_packet\": 16",
+            "\"columns_per_packet\": 16, \"header_type\": \"FUSA\"",
+        );
+        assert!(
+            OusterMetadata::from_json(&fusa)
+                .unwrap()
+                .model
+                .profile
+                .is_fusa()
+        );
     }
 }

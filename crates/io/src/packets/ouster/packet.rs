@@ -6,7 +6,8 @@
 //! count u32}, a pixel per beam, and a status u32 (all ones when valid). The other
 //! profiles: a 32-byte packet header (packet type u16, frame id u16, ...), columns of
 //! {timestamp u64, measurement id u16, status u16 (bit 0: valid)} and pixels, and a
-//! 32-byte footer. Everything little-endian.
+//! 32-byte footer; the FUSA profile's header holds a frame id of 32 bits at byte 4.
+//! Everything little-endian.
 
 /// The packet layout a sensor streams (`udp_profile_lidar`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -22,31 +23,51 @@ pub enum Profile {
     /// 4-byte pixels ("low data rate"): range u16 (15 bits, in 8 mm), reflectivity
     /// u8, near-IR u8.
     Rng15Rfl8Nir8,
+    /// 8-byte pixels: two returns of range u16 (15 bits, in 8 mm) and reflectivity
+    /// u8 each, near-IR and window bytes between.
+    Rng15Rfl8Nir8Dual,
+    /// The same pixels in the functional-safety packet, whose header differs.
+    FusaRng15Rfl8Nir8Dual,
 }
+
+/// Every profile travmap reads, by its name.
+const PROFILES: [(Profile, &str); 6] = [
+    (Profile::Legacy, "LEGACY"),
+    (Profile::Rng19Rfl8Sig16Nir16, "RNG19_RFL8_SIG16_NIR16"),
+    (
+        Profile::Rng19Rfl8Sig16Nir16Dual,
+        "RNG19_RFL8_SIG16_NIR16_DUAL",
+    ),
+    (Profile::Rng15Rfl8Nir8, "RNG15_RFL8_NIR8"),
+    (Profile::Rng15Rfl8Nir8Dual, "RNG15_RFL8_NIR8_DUAL"),
+    (Profile::FusaRng15Rfl8Nir8Dual, "FUSA_RNG15_RFL8_NIR8_DUAL"),
+];
 
 impl Profile {
     pub fn from_name(name: &str) -> Result<Self, String> {
-        Ok(match name {
-            "LEGACY" => Self::Legacy,
-            "RNG19_RFL8_SIG16_NIR16" => Self::Rng19Rfl8Sig16Nir16,
-            "RNG19_RFL8_SIG16_NIR16_DUAL" => Self::Rng19Rfl8Sig16Nir16Dual,
-            "RNG15_RFL8_NIR8" => Self::Rng15Rfl8Nir8,
-            other => {
-                return Err(format!(
-                    "UDP profile `{other}`: travmap reads LEGACY, RNG19_RFL8_SIG16_NIR16, \
-                     RNG19_RFL8_SIG16_NIR16_DUAL and RNG15_RFL8_NIR8"
-                ));
+        match PROFILES.iter().find(|(_, n)| *n == name) {
+            Some((profile, _)) => Ok(*profile),
+            None => {
+                let names: Vec<&str> = PROFILES.iter().map(|(_, n)| *n).collect();
+                Err(format!(
+                    "UDP profile `{name}`: travmap reads {}",
+                    names.join(", ")
+                ))
             }
-        })
+        }
     }
 
     pub fn name(self) -> &'static str {
-        match self {
-            Self::Legacy => "LEGACY",
-            Self::Rng19Rfl8Sig16Nir16 => "RNG19_RFL8_SIG16_NIR16",
-            Self::Rng19Rfl8Sig16Nir16Dual => "RNG19_RFL8_SIG16_NIR16_DUAL",
-            Self::Rng15Rfl8Nir8 => "RNG15_RFL8_NIR8",
-        }
+        let (_, name) = PROFILES
+            .iter()
+            .find(|(p, _)| *p == self)
+            .expect("every profile is listed");
+        name
+    }
+
+    /// Whether its packets have the functional-safety header.
+    pub fn is_fusa(self) -> bool {
+        self == Self::FusaRng15Rfl8Nir8Dual
     }
 
     fn pixel_bytes(self) -> usize {
@@ -54,6 +75,7 @@ impl Profile {
             Self::Legacy | Self::Rng19Rfl8Sig16Nir16 => 12,
             Self::Rng19Rfl8Sig16Nir16Dual => 16,
             Self::Rng15Rfl8Nir8 => 4,
+            Self::Rng15Rfl8Nir8Dual | Self::FusaRng15Rfl8Nir8Dual => 8,
         }
     }
 
@@ -80,6 +102,8 @@ impl Profile {
         let word = |at: usize| {
             u32::from_le_bytes([pixel[at], pixel[at + 1], pixel[at + 2], pixel[at + 3]])
         };
+        // 15 bits of range in units of 8 mm.
+        let coarse = |at: usize| (u32::from(pixel[at]) | u32::from(pixel[at + 1] & 0x7F) << 8) * 8;
         match self {
             Self::Legacy => [(word(0) & 0xF_FFFF, pixel[4]), (0, 0)],
             Self::Rng19Rfl8Sig16Nir16 => [(word(0) & 0x7_FFFF, pixel[4]), (0, 0)],
@@ -87,13 +111,10 @@ impl Profile {
                 (word(0) & 0x7_FFFF, pixel[3]),
                 (word(4) & 0x7_FFFF, pixel[7]),
             ],
-            Self::Rng15Rfl8Nir8 => [
-                (
-                    (u32::from(pixel[0]) | u32::from(pixel[1] & 0x7F) << 8) * 8,
-                    pixel[2],
-                ),
-                (0, 0),
-            ],
+            Self::Rng15Rfl8Nir8 => [(coarse(0), pixel[2]), (0, 0)],
+            Self::Rng15Rfl8Nir8Dual | Self::FusaRng15Rfl8Nir8Dual => {
+                [(coarse(0), pixel[2]), (coarse(4), pixel[6])]
+            }
         }
     }
 }
@@ -142,7 +163,7 @@ impl OusterModel {
     }
 
     /// The packet's length checked; its frame id.
-    pub(super) fn frame_id(self, packet: &[u8]) -> Result<u16, String> {
+    pub(super) fn frame_id(self, packet: &[u8]) -> Result<u32, String> {
         let expected = self.packet_bytes();
         if packet.len() != expected {
             return Err(format!(
@@ -152,12 +173,15 @@ impl OusterModel {
                 self.profile.name()
             ));
         }
-        // LEGACY repeats it in every column; the first one's counts.
-        let at = match self.profile {
-            Profile::Legacy => 10,
-            _ => 2,
-        };
-        Ok(u16::from_le_bytes([packet[at], packet[at + 1]]))
+        let u16_at = |at: usize| u32::from(u16::from_le_bytes([packet[at], packet[at + 1]]));
+        Ok(match self.profile {
+            // LEGACY repeats it in every column; the first one's counts.
+            Profile::Legacy => u16_at(10),
+            profile if profile.is_fusa() => {
+                u32::from_le_bytes([packet[4], packet[5], packet[6], packet[7]])
+            }
+            _ => u16_at(2),
+        })
     }
 
     /// The columns of a packet whose length [`Self::frame_id`] checked.
