@@ -98,3 +98,52 @@ fn a_pcapng_capture_reads_as_its_packet_log() {
 fn a_hesai_capture_with_vlan_tags_and_nanosecond_stamps_reads_as_its_packet_log() {
     a_capture_is_its_packet_log("xt32/1673400677802009732", &["--nanoseconds", "--vlan"]);
 }
+
+/// A classic Ethernet pcap of UDP datagrams: (destination port, payload bytes) each.
+fn udp_capture(datagrams: &[(u16, usize)]) -> Vec<u8> {
+    let mut out = Vec::new();
+    for word in [0xa1b2_c3d4u32.to_le_bytes(), [2, 0, 4, 0], [0; 4], [0; 4]] {
+        out.extend(word);
+    }
+    out.extend(65_535u32.to_le_bytes());
+    out.extend(1u32.to_le_bytes());
+    for (n, &(port, bytes)) in datagrams.iter().enumerate() {
+        let mut frame = vec![0u8; 12];
+        frame.extend([0x08, 0x00]);
+        let ip_length = (20 + 8 + bytes) as u16;
+        frame.extend([0x45, 0]);
+        frame.extend(ip_length.to_be_bytes());
+        frame.extend([0, n as u8, 0, 0, 64, 17, 0, 0, 10, 0, 0, 1, 10, 0, 0, 2]);
+        frame.extend(40_000u16.to_be_bytes());
+        frame.extend(port.to_be_bytes());
+        frame.extend(((8 + bytes) as u16).to_be_bytes());
+        frame.extend([0, 0]);
+        frame.extend(std::iter::repeat_n(7u8, bytes));
+        for value in [n as u32, 0, frame.len() as u32, frame.len() as u32] {
+            out.extend(value.to_le_bytes());
+        }
+        out.extend(frame);
+    }
+    out
+}
+
+/// A capture without LiDAR traffic says what it holds: each port's datagrams and
+/// their sizes (it once said "no PointCloud2 topic; all topics: []").
+#[test]
+fn a_capture_without_lidar_packets_names_its_ports_and_sizes() {
+    let dir = tempfile::tempdir().unwrap();
+    let capture = dir.path().join("dns.pcap");
+    let datagrams = [(5353, 100), (5353, 180), (123, 48), (5353, 100)];
+    std::fs::write(&capture, udp_capture(&datagrams)).unwrap();
+    let err = crate::common::clean_failure(crate::common::travmap(&[
+        "run",
+        crate::common::arg(&capture),
+    ]));
+    crate::common::assert_contains(
+        &err,
+        &[
+            "dns.pcap: no LiDAR packets among its UDP datagrams",
+            "port 5353: 3 of 100-180 bytes, port 123: 1 of 48 bytes",
+        ],
+    );
+}

@@ -141,6 +141,15 @@ impl Log {
         &self.notices
     }
 
+    /// A capture's UDP datagrams in words (each port's count and sizes), for an
+    /// error that finds no LiDAR among them; None for other logs.
+    pub fn capture_datagrams(&self) -> Option<String> {
+        self.files.iter().find_map(|file| match file {
+            LogFile::Pcap(pcap) => Some(pcap.datagrams_by_port()),
+            _ => None,
+        })
+    }
+
     /// Whether the log is a packet capture (pcap): no topics, no recorded metadata.
     pub fn is_capture(&self) -> bool {
         (self.files.iter()).any(|file| matches!(file, LogFile::Pcap(_)))

@@ -442,7 +442,16 @@ impl LogIndex {
                     path: path.to_path_buf(),
                     problem: format!("{topic}: {problem}"),
                 },
-                (None, None) => error,
+                // A capture has no topics to list: what it holds is its datagrams.
+                (None, None) => match log.capture_datagrams() {
+                    Some(datagrams) if contents.cloud_stamps.is_empty() => Error::LogContainer {
+                        path: path.to_path_buf(),
+                        problem: format!(
+                            "no LiDAR packets among its UDP datagrams ({datagrams}): travmap reads Velodyne's (1,206 bytes), Hesai's and Ouster's (the metadata's size); a capture of another port or sensor?"
+                        ),
+                    },
+                    _ => error,
+                },
             }
         })?;
         let mut merged = contents.merged_topics(path, options, &cloud_topic)?;

@@ -107,6 +107,35 @@ impl PcapFile {
     }
 
     /// Every UDP datagram over IPv4: (capture time, destination port, payload).
+    /// The capture's UDP datagrams in words: the ports with the most, each with
+    /// its count and the sizes seen ("none" when it holds no UDP over IPv4).
+    pub fn datagrams_by_port(&self) -> String {
+        // Port -> (datagrams, smallest and largest payload bytes).
+        let mut ports: HashMap<u16, (usize, usize, usize)> = HashMap::new();
+        for (_, port, payload) in self.datagrams() {
+            let (count, smallest, largest) = ports.entry(port).or_insert((0, usize::MAX, 0));
+            *count += 1;
+            *smallest = (*smallest).min(payload.len());
+            *largest = (*largest).max(payload.len());
+        }
+        let mut ports: Vec<_> = ports.into_iter().collect();
+        ports.sort_by_key(|&(port, (count, _, _))| (std::cmp::Reverse(count), port));
+        let said: Vec<String> = (ports.iter().take(5))
+            .map(|(port, (count, smallest, largest))| {
+                let sizes = match smallest == largest {
+                    true => format!("{smallest} bytes"),
+                    false => format!("{smallest}-{largest} bytes"),
+                };
+                format!("port {port}: {count} of {sizes}")
+            })
+            .collect();
+        match ports.len() {
+            0 => "none".into(),
+            n if n > 5 => format!("{} and {} more ports", said.join(", "), n - 5),
+            _ => said.join(", "),
+        }
+    }
+
     fn datagrams(&self) -> impl Iterator<Item = (u64, u16, Vec<u8>)> + '_ {
         let mut fragments = Fragments::default();
         records::records(self.map.as_ref(), self.capture, self.end).filter_map(
