@@ -229,12 +229,22 @@ fn convert_whole_log(
             summary.messages, summary.translated_messages
         ),
         output_bytes: summary.output_bytes,
-        note: (!summary.topics_as_recorded.is_empty()).then(|| {
-            format!(
-                "copied as recorded (types travmap does not translate): {}",
-                summary.topics_as_recorded.join(", ")
-            )
-        }),
+        note: {
+            let mut notes = Vec::new();
+            if !summary.topics_as_recorded.is_empty() {
+                notes.push(format!(
+                    "copied as recorded (types travmap does not translate): {}",
+                    summary.topics_as_recorded.join(", ")
+                ));
+            }
+            if summary.partial_first_scan_left_out {
+                notes.push(format!(
+                    "the part of a rotation the log began with is left out of {} (its packets are copied; its stamp would be the next scan's)",
+                    summary.decoded_topic.as_deref().unwrap_or("the decoded scans")
+                ));
+            }
+            (!notes.is_empty()).then(|| notes.join("\n"))
+        },
         summary: serde_json::to_value(&summary)?,
     };
     written.report(output_path, compression, output, seconds, selections)

@@ -29,14 +29,16 @@ use crate::writing::McapSink;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
 use travmap_formats::foxglove;
+use travmap_formats::log_message::ros2_type_name;
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{
     CameraInfo, CompressedImage, Header, MessageEncoding, PointCloud2, PointField, Quaternion,
     RegionOfInterest, TfMessage, Time, Transform, TransformStamped, Vector3, datatype, encode,
-    ros1_to_cdr,
+    known_schema, ros1_to_cdr,
 };
 use travmap_io::KittiSequence;
 use travmap_io::SkipLog;
+use travmap_io::packets::ouster::{OUSTER_PACKET_MESSAGES, PACKET_MSG_SCHEMA};
 use travmap_io::packets::velodyne::PacketScan;
 use travmap_io::ros_drive::RosDrive;
 
@@ -75,7 +77,17 @@ pub struct LogCopySummary {
     pub decoded_topic: Option<String>,
     pub decoded_topics: Vec<String>,
     pub decoded_scans: usize,
+    /// Whether the part of a rotation the log began with was left out of the
+    /// decoded scans (it would share the next scan's stamp).
+    pub partial_first_scan_left_out: bool,
     pub output_bytes: u64,
+}
+
+/// The definition of ouster_ros's packet message (ROS 2 names).
+fn ouster_schema(ros2_name: &str) -> Option<&'static str> {
+    OUSTER_PACKET_MESSAGES[..2]
+        .contains(&ros2_name)
+        .then_some(PACKET_MSG_SCHEMA)
 }
 
 /// Every message of `drive` into `sink`, in order, as ROS 2 where travmap knows the
@@ -169,11 +181,22 @@ pub fn write_log_messages(
                 {
                     summary.topics_as_recorded.push(connection.topic.clone());
                 }
+                // A recording without the definition (rosbag2 before Iron) gets
+                // travmap's, where it knows the type: decoders need one.
+                let type_name = ros2_type_name(&connection.schema_name);
+                let known = (connection.schema_data.is_empty()
+                    && connection.message_encoding == "cdr")
+                    .then(|| known_schema(&type_name).or(ouster_schema(&type_name)))
+                    .flatten();
+                let (schema_encoding, schema_data) = match known {
+                    Some(schema) => ("ros2msg", schema.as_bytes()),
+                    None => (&connection.schema_encoding[..], &connection.schema_data[..]),
+                };
                 let id = sink.channel(
                     &connection.topic,
                     &connection.schema_name,
-                    &connection.schema_encoding,
-                    &connection.schema_data,
+                    schema_encoding,
+                    schema_data,
                     &connection.message_encoding,
                 )?;
                 (id, message.data)
@@ -197,8 +220,13 @@ pub fn convert_log(
     // Converting is asked for a compression; passing through is not.
     let mut summary = write_log_messages(&mut sink, drive, skips, false, on_messages)?;
     if let Some(scans) = drive.packet_scans(skips) {
+        let mut partial_first = drive.partial_first_scan().is_some();
         for decoded in scans {
             let decoded = decoded?;
+            if partial_first && decoded.topic == drive.cloud_topic() {
+                (partial_first, summary.partial_first_scan_left_out) = (false, true);
+                continue;
+            }
             let topic = decoded_topic(decoded.topic);
             let cloud = packet_cloud(&decoded.scan, decoded.frame);
             sink.write(&topic, decoded.scan.stamp_ns, &cloud)?;

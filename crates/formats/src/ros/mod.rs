@@ -360,6 +360,32 @@ pub struct FrameMetrics {
     pub dropped_points: u32,
 }
 
+/// The definition (ros2msg, its dependencies with it) of a message type travmap
+/// knows, by its ROS 2 name: for a channel a log recorded without one (rosbag2
+/// before Iron keeps none), so that what travmap writes can be decoded.
+pub fn known_schema(ros2_name: &str) -> Option<&'static str> {
+    fn entry<M: RosMessage>() -> (&'static str, &'static str) {
+        (M::NAME, M::SCHEMA)
+    }
+    let known = [
+        entry::<PointCloud2>(),
+        entry::<Image>(),
+        entry::<CompressedImage>(),
+        entry::<CameraInfo>(),
+        entry::<Odometry>(),
+        entry::<PoseStamped>(),
+        entry::<TfMessage>(),
+        entry::<OccupancyGrid>(),
+        entry::<VelodyneScan>(),
+        entry::<PandarScan>(),
+        entry::<NebulaPackets>(),
+    ];
+    known
+        .into_iter()
+        .find(|(name, _)| *name == ros2_name)
+        .map(|(_, schema)| schema)
+}
+
 macro_rules! ros_message {
     ($type:ty, $name:literal, $file:literal) => {
         impl RosMessage for $type {
