@@ -1059,3 +1059,45 @@ fn a_recording_cut_short_is_read_as_far_as_it_goes() {
     let cut = frames_of("cut.mcap", &whole[..whole.len() * 2 / 3]);
     assert!((1..6).contains(&cut), "{cut} frames");
 }
+
+/// A record damaged in the middle of a complete MCAP (its summary and closing magic
+/// intact) is damage, not the end of a cut recording: a clear error, with or without
+/// --keep-going (it was read as a cut: 7 frames of 30, exit 0).
+#[test]
+fn a_damaged_record_in_a_complete_file_is_not_taken_for_its_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_, mcap)) = crate::common::sample_as_mcap(dir.path(), &["--compression", "none"])
+    else {
+        return;
+    };
+    let bytes = std::fs::read(&mcap).unwrap();
+    // The second chunk record (opcode 0x06), after the first.
+    let mut offset = 8;
+    let mut chunks = Vec::new();
+    while bytes[offset] != 0x0F {
+        let length = u64::from_le_bytes(bytes[offset + 1..offset + 9].try_into().unwrap());
+        if bytes[offset] == 0x06 {
+            chunks.push(offset);
+        }
+        offset += 9 + length as usize;
+    }
+    assert!(chunks.len() >= 2, "{chunks:?}");
+    for length in [40u64, 0x7fff_ffff] {
+        let mut damaged = bytes.clone();
+        damaged[chunks[1] + 1..chunks[1] + 9].copy_from_slice(&length.to_le_bytes());
+        let path = dir.path().join(format!("damaged-{length}.mcap"));
+        std::fs::write(&path, damaged).unwrap();
+        for extra in [&[][..], &["--keep-going"]] {
+            let args = [&["run", arg(&path)][..], extra].concat();
+            let err = clean_failure(travmap(&args));
+            crate::common::assert_contains(
+                &err,
+                &[
+                    &format!("byte {}", chunks[1]),
+                    "the file is damaged there",
+                    "not cut short",
+                ],
+            );
+        }
+    }
+}

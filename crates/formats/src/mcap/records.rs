@@ -198,11 +198,20 @@ pub fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
     let mut complete = walk.offset;
     let mut data_end = false;
     let mut rosbag2_metadata = None;
+    // Why the walk stopped before the data section's end, when a record did not read.
+    let mut damage = None;
     // After the 8-byte magic. A malformed chunk header ends the walk, as does a
     // record header cut short.
     while let Some(record) = walk.next() {
-        let Ok((offset, opcode, body)) = record else {
-            break;
+        let (offset, opcode, body) = match record {
+            Ok(record) => record,
+            Err(overrun) => {
+                damage = Some(format!(
+                    "the record at byte {} (opcode 0x{:02x}) claims {} bytes where {} remain",
+                    overrun.offset, overrun.opcode, overrun.length, overrun.available
+                ));
+                break;
+            }
         };
         complete = walk.offset;
         if opcode == op::DATA_END {
@@ -216,6 +225,7 @@ pub fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
             continue;
         }
         let Some((declared, compression, records)) = chunk_parts(body) else {
+            damage = Some(format!("the chunk at byte {offset} has a malformed header"));
             break;
         };
         let present = records.len() as u64;
@@ -248,6 +258,17 @@ pub fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
     let magic = b"\x89MCAP0\r\n";
     let footer = map.len().checked_sub(magic.len() + 29);
     let whole = map.ends_with(magic) && footer.is_some_and(|at| map[at] == op::FOOTER);
+    // With its footer and closing magic the file was not cut short: a record that
+    // does not read in the middle is damage, not its end (once read as a cut
+    // recording: 7 frames of 30 and exit 0).
+    if whole && !data_end {
+        let damage = damage.unwrap_or_else(|| {
+            format!("the records from byte {complete} on do not read as the data section's")
+        });
+        return Err(format!(
+            "{damage}: the file is damaged there (its summary and closing magic are intact, so it was not cut short); `mcap recover` rewrites what it can read"
+        ));
+    }
     Ok(Layout {
         cut_at: (!(data_end && whole)).then_some(complete),
         rosbag2_metadata,
