@@ -214,7 +214,12 @@ fn labels_of_ids_the_label_set_does_not_define_get_a_notice() {
     std::fs::write(dir.path().join("labels/000001.label"), labels).unwrap();
     let out_dir = tempfile::tempdir().unwrap();
     let map = out_dir.path().join("map.png");
-    for command in [vec!["eval"], vec!["map", "-o", arg(&map)]] {
+    let annotated = out_dir.path().join("a.mcap");
+    for command in [
+        vec!["eval"],
+        vec!["map", "-o", arg(&map)],
+        vec!["annotate", "-o", arg(&annotated)],
+    ] {
         let out = travmap(&[&command[..], &[arg(dir.path()), "-q"]].concat());
         let command = command[0];
         let err = stderr(&out);
@@ -634,4 +639,22 @@ fn every_frame_skipped_writes_no_output() {
         assert!(!output.exists(), "{command} wrote {}", output.display());
     }
     assert_eq!(std::fs::read_dir(out_dir.path()).unwrap().count(), 0);
+}
+
+/// Another dataset's labels scored as SemanticKITTI's: the notice names the presets
+/// that define every id seen (RELLIS-3D's scan read without its label set).
+#[test]
+fn the_notice_of_unknown_label_ids_names_the_presets_that_fit() {
+    let Some(rellis) = crate::common::shared_data("rellis3d-000104/sequences/00") else {
+        return;
+    };
+    let out = travmap(&["eval", arg(&rellis), "-q"]);
+    assert!(out.status.success());
+    assert_contains(
+        &stderr(&out),
+        &[
+            "the semantickitti label set does not define",
+            "they fit the rellis3d and nuscenes label sets",
+        ],
+    );
 }

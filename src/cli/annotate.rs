@@ -13,8 +13,8 @@ use travmap_outputs::annotation::{AnnotationOptions, CloudPoints, DRIVE_MAP_EVER
 use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;
 use super::{
-    Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json, outcome,
-    path_text, print_json_summary, print_wrote, with_summary,
+    Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json,
+    notice_unknown_labels, outcome, path_text, print_json_summary, print_wrote, with_summary,
 };
 
 /// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
@@ -133,5 +133,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
             );
         }
     }
+    // Scores against another dataset's labels look like a bad model: said as eval says it.
+    notice_unknown_labels(&summary.evaluation, config);
     Ok(outcome(&selections))
 }

@@ -6,6 +6,7 @@ use std::path::Path;
 use anyhow::Result;
 use serde_json::json;
 use travmap_core::Config;
+use travmap_core::config::LabelSet;
 use travmap_drive::Selection;
 use travmap_drive::scoring::evaluation::EvaluationReport;
 use travmap_method::classifier::SvmModel;
@@ -156,8 +157,22 @@ pub fn notice_unknown_labels(report: &EvaluationReport, config: &Config) {
         Some(path) => format!("label map {}", path.display()),
         None => format!("{} label set", truth.labels.name()),
     };
+    // The presets that define every id seen (the unknown ones among them).
+    let fitting: Vec<&str> = (LabelSet::ALL.iter())
+        .filter(|set| truth.label_map.is_some() || **set != truth.labels)
+        .filter(|set| unknown.examples.iter().all(|&id| set.defines(id)))
+        .map(|set| set.name())
+        .collect();
+    let which = match fitting.as_slice() {
+        [] => "--set ground_truth.labels=..., or a label_map".to_string(),
+        [one] => format!("they fit the {one} label set: --set ground_truth.labels={one}"),
+        several => format!(
+            "they fit the {} label sets: --set ground_truth.labels=...",
+            several.join(" and ")
+        ),
+    };
     eprintln!(
-        "notice: {} labelled points in {} carry ids the {label_set} does not define (e.g. {}): they count as not traversable; are these another dataset's labels (--set ground_truth.labels=..., or a label_map)?",
+        "notice: {} labelled points in {} carry ids the {label_set} does not define (e.g. {}): they count as not traversable; are these another dataset's labels ({which})?",
         unknown.points,
         counted(report.frames_with_unknown_labels, "frame"),
         ids.join(", ")

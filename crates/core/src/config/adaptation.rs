@@ -3,6 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::training::{MAX_SVM_C, MAX_SVM_GAMMA, check_within};
+
 /// The vehicle that recorded the drive.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -140,8 +142,8 @@ impl AdaptConfig {
         positive("vehicle.length_m", vehicle.length_m)?;
         positive("vehicle.clearance_m", vehicle.clearance_m)?;
         positive("adapt.horizon_m", self.horizon_m)?;
-        super::check_within("adapt.c", self.c, (0.0, super::MAX_SVM_C))?;
-        super::check_within("adapt.gamma", self.gamma, (0.0, super::MAX_SVM_GAMMA))?;
+        check_within("adapt.c", self.c, (0.0, MAX_SVM_C))?;
+        check_within("adapt.gamma", self.gamma, (0.0, MAX_SVM_GAMMA))?;
         // Each round refits the model: past a few the cells left unknown are few.
         if self.rounds > MAX_ROUNDS {
             return Err(format!(

@@ -59,6 +59,22 @@ const NUSCENES_IDS: &[u16] = &[
 ];
 
 impl LabelSet {
+    pub const ALL: [LabelSet; 3] = [
+        LabelSet::Semantickitti,
+        LabelSet::Rellis3d,
+        LabelSet::Nuscenes,
+    ];
+
+    /// Whether the set defines `id` (a SemanticKITTI label's lower 16 bits).
+    pub fn defines(self, id: u16) -> bool {
+        let ids = match self {
+            LabelSet::Semantickitti => SEMANTICKITTI_IDS,
+            LabelSet::Rellis3d => RELLIS3D_IDS,
+            LabelSet::Nuscenes => NUSCENES_IDS,
+        };
+        ids.contains(&id)
+    }
+
     /// The preset: `rule`'s traversable classes, the classes that do not vote.
     pub fn classes(self, rule: LabelRule) -> ClassRule {
         let (traversable, ignored, known): (&[u16], &[u16], &[u16]) = match (self, rule) {

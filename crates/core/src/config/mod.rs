@@ -17,7 +17,9 @@ use crate::error::{Error, Result};
 pub use adaptation::{AdaptConfig, Learner, OwnPoints, VehicleConfig};
 pub use labels::{ClassRule, LabelRule, LabelSet, parse_label_map};
 pub use registration::{PoseSource, RegistrationConfig};
-pub use training::{ClassWeights, Criterion, TrainingConfig, WeighInputs};
+pub use training::{
+    ClassWeights, Criterion, MAX_SVM_C, MAX_SVM_GAMMA, TrainingConfig, WeighInputs, check_within,
+};
 
 /// Every tunable of the method, one section per stage.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -338,23 +340,6 @@ pub fn written_before_groups(config: &mut serde_json::Value) {
 }
 
 /// Fields that are unset by default, so absent from a serialised configuration.
-/// The largest SVM C and gamma searched or fitted: beyond them the solver's steps
-/// lose all precision and it never converges (C 1e300 ran without end).
-pub const MAX_SVM_C: f64 = 1e6;
-pub const MAX_SVM_GAMMA: f64 = 1e4;
-
-/// Checks `low < v <= high` (a finite `v`), naming the setting.
-pub fn check_within(
-    name: &str,
-    v: f64,
-    (low, high): (f64, f64),
-) -> std::result::Result<(), String> {
-    match v.is_finite() && v > low && v <= high {
-        true => Ok(()),
-        false => Err(format!("{name} must be in ({low:?}, {high:?}], got {v:?}")),
-    }
-}
-
 /// Fields that may be absent, and whether each holds text (the rest hold lists).
 const OPTIONAL_FIELDS: &[(&str, &str, bool)] = &[
     ("ground_truth", "label_map", true),

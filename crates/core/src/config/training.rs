@@ -3,6 +3,23 @@
 
 use serde::{Deserialize, Serialize};
 
+/// The largest SVM C and gamma searched or fitted: beyond them the solver's steps
+/// lose all precision and it never converges (C 1e300 ran without end).
+pub const MAX_SVM_C: f64 = 1e6;
+pub const MAX_SVM_GAMMA: f64 = 1e4;
+
+/// Checks `low < v <= high` (a finite `v`), naming the setting.
+pub fn check_within(
+    name: &str,
+    v: f64,
+    (low, high): (f64, f64),
+) -> std::result::Result<(), String> {
+    match v.is_finite() && v > low && v <= high {
+        true => Ok(()),
+        false => Err(format!("{name} must be in ({low:?}, {high:?}], got {v:?}")),
+    }
+}
+
 /// METHOD.md section 6, and the spatially-blocked validation of this project.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
