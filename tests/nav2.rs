@@ -426,3 +426,24 @@ fn a_log_placed_in_utm_gets_its_map_placed_there() {
         assert_eq!(yaml["origin"], maps[0].1["origin"]);
     }
 }
+
+/// `--nav2 site.pgm` (the image's name, not the YAML's) is a usage error saying
+/// what to give (it said "site.pgm and site.pgm name the same file").
+#[test]
+fn nav2_given_the_images_name_says_to_give_the_yaml() {
+    let Some(sample) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (map, pgm) = (dir.path().join("m.png"), dir.path().join("site.pgm"));
+    let args = [
+        "map",
+        crate::common::arg(&sample),
+        "-o",
+        crate::common::arg(&map),
+        "--nav2",
+        crate::common::arg(&pgm),
+    ];
+    let err = crate::common::usage_error(crate::common::travmap(&args));
+    crate::common::assert_contains(&err, &["--nav2 takes the map's YAML", "site.yaml"]);
+}

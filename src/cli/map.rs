@@ -17,7 +17,7 @@ use travmap_outputs::rendering::encode_png;
 
 use super::{
     Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json,
-    notice_unknown_labels, outcome, path_text, print_json_summary,
+    notice_unknown_labels, outcome, path_text, print_json_summary, usage,
 };
 
 /// Fuse every frame's prediction (and ground truth) into one map of the drive.
@@ -72,6 +72,15 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let inputs = args.inputs.files(args.model.path.as_deref());
     let nav2_mode = args.nav2_mode.mode();
     let nav2_image = args.nav2.as_deref().map(|yaml| image_path(yaml, nav2_mode));
+    // The image's own name would be its YAML's and its image's at once.
+    if let (Some(yaml), Some(image)) = (&args.nav2, &nav2_image)
+        && yaml == image
+    {
+        return Err(usage(format!(
+            "--nav2 takes the map's YAML, which names the image written beside it: --nav2 {}",
+            yaml.with_extension("yaml").display()
+        )));
+    }
     let outputs: Vec<&Path> = [Some(output_path), args.cells.as_deref()]
         .into_iter()
         .chain([args.nav2.as_deref(), nav2_image.as_deref()])

@@ -124,11 +124,14 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
             );
         }
         let latency = report.timings_ms.latency;
-        writeln!(
-            stdout,
-            "median latency {:.2} ms per frame (p95 {:.2} ms)",
-            latency.median, latency.p95
-        )?;
+        match frames {
+            0 => writeln!(stdout, "no frame was read")?,
+            _ => writeln!(
+                stdout,
+                "median latency {:.2} ms per frame (p95 {:.2} ms)",
+                latency.median, latency.p95
+            )?,
+        }
     }
     Ok(outcome(&selections))
 }

@@ -190,7 +190,7 @@ pub enum Error {
         problem: String,
     },
 
-    #[error("{path}: {problem}; PointCloud2 topics: [{}]; all topics: [{}]", cloud_topics.join(", "), all_topics.join(", "))]
+    #[error("{path}: {problem}; {}", topics_said(cloud_topics, all_topics))]
     LogCloudTopic {
         path: PathBuf,
         problem: CloudTopicProblem,
@@ -415,7 +415,9 @@ impl std::fmt::Display for CloudTopicProblem {
             CloudTopicProblem::NotFound(topic) => {
                 write!(f, "no PointCloud2 messages on topic {topic}")
             }
-            CloudTopicProblem::None => write!(f, "no PointCloud2 topic"),
+            CloudTopicProblem::None => {
+                write!(f, "no PointCloud2 topic, nor LiDAR packets travmap reads")
+            }
             CloudTopicProblem::Several => {
                 write!(
                     f,
@@ -423,6 +425,19 @@ impl std::fmt::Display for CloudTopicProblem {
                 )
             }
         }
+    }
+}
+
+/// A log's topics for [`Error::LogCloudTopic`]: its cloud topics when it has any
+/// (an empty list says nothing), then every topic.
+fn topics_said(cloud_topics: &[String], all_topics: &[String]) -> String {
+    let all = format!("all topics: [{}]", all_topics.join(", "));
+    match cloud_topics.is_empty() {
+        true => all,
+        false => format!(
+            "PointCloud2 and LiDAR topics: [{}]; {all}",
+            cloud_topics.join(", ")
+        ),
     }
 }
 

@@ -10,6 +10,23 @@ pub struct Skip {
     pub reason: String,
 }
 
+/// `reason` without its clause telling to pass --keep-going: a bracket holding it,
+/// or from the comma or semicolon before it to the clause's end.
+fn without_keep_going_hint(reason: &str) -> String {
+    let mut said = reason.to_string();
+    while let Some(at) = said.find("--keep-going") {
+        let start = said[..at].rfind(['(', ';', ',']).unwrap_or(at);
+        let closing: &[char] = match said[start..].starts_with('(') {
+            true => &[')'],
+            false => &[';', ')'],
+        };
+        let end = said[at..].find(closing).map_or(said.len(), |e| at + e);
+        let end = end + usize::from(said[start..].starts_with('(') && end < said.len());
+        said.replace_range(start..end, "");
+    }
+    said.trim_end().to_string()
+}
+
 /// Why a run read no frame, in words for [`Error::NothingWritten`]: the skips (the
 /// first one's reason), or that none was selected.
 ///
@@ -55,6 +72,8 @@ impl SkipLog {
             reason.push_str(&format!(": {inner}"));
             cause = inner.source();
         }
+        // The error's advice to pass --keep-going is moot here: it was passed.
+        let reason = without_keep_going_hint(&reason);
         if let Ok(mut skipped) = self.skipped.lock()
             && !skipped
                 .iter()
@@ -72,5 +91,34 @@ impl SkipLog {
 
     pub fn skipped(&self) -> Vec<Skip> {
         self.skipped.lock().map(|s| s.clone()).unwrap_or_default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_skip_says_its_reason_without_the_advice_to_keep_going() {
+        for (reason, said) in [
+            (
+                "x.bin: 0 bytes, no points: a scan file that was never written (--keep-going skips it)",
+                "x.bin: 0 bytes, no points: a scan file that was never written",
+            ),
+            (
+                "frame 0: 7 points left; scans take --poses none (each scan alone), --keep-going skips the scans that do not register",
+                "frame 0: 7 points left; scans take --poses none (each scan alone)",
+            ),
+            (
+                "no return: nothing to map (a failed sensor?); --keep-going skips the frame",
+                "no return: nothing to map (a failed sensor?)",
+            ),
+            (
+                "chunk at 7 is damaged (bad CRC): it is lost (--keep-going reads on past it)",
+                "chunk at 7 is damaged (bad CRC): it is lost",
+            ),
+        ] {
+            assert_eq!(without_keep_going_hint(reason), said);
+        }
     }
 }
