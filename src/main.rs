@@ -109,7 +109,7 @@ fn remove_outputs_on_signals() {
     if let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) {
         std::thread::spawn(move || {
             if let Some(signal) = signals.forever().next() {
-                travmap_outputs::atomic::remove_temporary_files();
+                travmap_core::temporaries::remove_all();
                 let name = match signal {
                     SIGINT => "SIGINT",
                     SIGTERM => "SIGTERM",

@@ -1,8 +1,8 @@
 //! The words every travmap crate shares: the one [`Config`] (nested per stage), the
 //! one [`Error`], a [`frame::Frame`] (what readers produce and the method consumes)
 //! with its camera [`lens`], [`posing`] (how a source's scans are posed, decided
-//! once), small [`geometry`], a seeded [`random`] generator and stage timing
-//! ([`stopwatch`]). It knows no file format and no stage of the method.
+//! once), small [`geometry`], a seeded [`random`] generator, stage timing
+//! ([`stopwatch`]) and the run's [`temporaries`]. It knows no file format and no stage of the method.
 
 pub mod config;
 pub mod error;
@@ -12,6 +12,7 @@ pub mod lens;
 pub mod posing;
 pub mod random;
 pub mod stopwatch;
+pub mod temporaries;
 
 pub use config::Config;
 pub use error::{Error, Result};

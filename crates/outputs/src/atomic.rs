@@ -1,7 +1,7 @@
 //! Every output through a temporary file beside it, renamed into place when
 //! complete: [`AtomicFile`] for one file, [`Staged`] for a command's several
-//! outputs at once; temporaries are tracked so an interrupted run removes them, and
-//! a full disk is named as such.
+//! outputs at once; temporaries are registered (`travmap_core::temporaries`) so an
+//! interrupted run removes them, and a full disk is named as such.
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -9,32 +9,7 @@ use std::path::{Path, PathBuf};
 use parquet::errors::ParquetError;
 
 use travmap_core::error::{Error, Result};
-
-/// Temporary files being written, so that an interrupted run (SIGINT) can remove
-/// them: it leaves nothing at or beside the output.
-static TEMPORARY_FILES: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
-
-/// Records a temporary file until [`forget_temporary`].
-pub fn track_temporary(path: &Path) {
-    if let Ok(mut files) = TEMPORARY_FILES.lock() {
-        files.push(path.to_path_buf());
-    }
-}
-
-pub fn forget_temporary(path: &Path) {
-    if let Ok(mut files) = TEMPORARY_FILES.lock() {
-        files.retain(|p| p != path);
-    }
-}
-
-/// Deletes every tracked temporary file (from the signal handler).
-pub fn remove_temporary_files() {
-    if let Ok(files) = TEMPORARY_FILES.lock() {
-        for path in files.iter() {
-            let _ = std::fs::remove_file(path);
-        }
-    }
-}
+use travmap_core::temporaries;
 
 /// What tells a temporary output from others: `.NAME.tmp-PID` beside `NAME`.
 pub const TEMPORARY_INFIX: &str = ".tmp-";
@@ -228,7 +203,7 @@ impl AtomicFile {
         }
         let temporary_path = temporary_path(path).map_err(write_error)?;
         let file = File::create(&temporary_path).map_err(write_error)?;
-        track_temporary(&temporary_path);
+        temporaries::track(&temporary_path);
         let guard = Self {
             path: path.to_path_buf(),
             temporary_path: Some(temporary_path),
@@ -255,7 +230,7 @@ impl AtomicFile {
                 path: self.path.clone(),
                 source,
             })?;
-            forget_temporary(temporary_path);
+            temporaries::forget(temporary_path);
         }
         self.committed = true;
         Ok(())
@@ -266,7 +241,7 @@ impl Drop for AtomicFile {
     fn drop(&mut self) {
         if let (false, Some(temporary_path)) = (self.committed, &self.temporary_path) {
             let _ = std::fs::remove_file(temporary_path);
-            forget_temporary(temporary_path);
+            temporaries::forget(temporary_path);
         }
     }
 }

@@ -175,12 +175,7 @@ fn decompressed_notice(
 fn decompress_file(compressed: &Path, into: &mut Option<tempfile::TempDir>) -> Result<PathBuf> {
     let into = match into {
         Some(into) => into,
-        empty => empty.insert(
-            tempfile::Builder::new()
-                .prefix("travmap-rosbag2-")
-                .tempdir()
-                .map_err(|e| Error::io(std::env::temp_dir(), e))?,
-        ),
+        empty => empty.insert(super::temporary_dir("travmap-rosbag2-")?),
     };
     let name = compressed.file_stem().unwrap_or(compressed.as_os_str());
     let path = into.path().join(name);

@@ -33,10 +33,7 @@ impl Readable {
                 _copy: None,
             });
         }
-        let copy = tempfile::Builder::new()
-            .prefix("travmap-db3-")
-            .tempdir()
-            .map_err(|e| Error::io(std::env::temp_dir(), e))?;
+        let copy = super::temporary_dir("travmap-db3-")?;
         let name = path.file_name().unwrap_or(path.as_os_str());
         let copied = copy.path().join(name);
         let mut copied_log = copied.as_os_str().to_owned();
