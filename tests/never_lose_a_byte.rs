@@ -610,3 +610,29 @@ fn a_pose_far_from_the_rest_is_refused_by_the_maps_size() {
         );
     }
 }
+
+/// `-o -` is refused (it made a file named `-`), and an output whose name is 253
+/// bytes long is written (its temporary name was refused as too long).
+#[test]
+fn odd_output_names_are_refused_or_written() {
+    let Some(sample) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_travmap"))
+        .args(["map", arg(&sample), "-o", "-", "-q"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let err = clean_failure(out);
+    crate::common::assert_contains(&err, &["travmap's is -o /dev/stdout"]);
+    assert!(!dir.path().join("-").exists());
+    let long = dir.path().join(format!("{}.png", "m".repeat(249)));
+    crate::common::write_output("map", &sample, &long, &[]);
+    assert!(long.exists());
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        1,
+        "nothing beside it"
+    );
+}

@@ -41,8 +41,11 @@ mod tests {
     #[test]
     fn registered_files_and_folders_are_removed_and_forgotten_ones_kept() {
         let dir = tempfile::tempdir().unwrap();
-        let (file, folder, kept) =
-            (dir.path().join("a.tmp"), dir.path().join("decompressed"), dir.path().join("k"));
+        let (file, folder, kept) = (
+            dir.path().join("a.tmp"),
+            dir.path().join("decompressed"),
+            dir.path().join("k"),
+        );
         std::fs::write(&file, b"x").unwrap();
         std::fs::create_dir_all(folder.join("inner")).unwrap();
         std::fs::write(&kept, b"x").unwrap();

@@ -28,10 +28,26 @@ pub fn temporary_path(path: &Path) -> std::io::Result<PathBuf> {
         )
     })?;
     Ok(dir.join(format!(
-        ".{}{TEMPORARY_INFIX}{}",
-        name.to_string_lossy(),
+        "{}{}",
+        temporary_prefix(&name.to_string_lossy()),
         std::process::id()
     )))
+}
+
+/// The longest file name most filesystems hold, bytes.
+const NAME_MAX: usize = 255;
+
+/// How the temporary names of output `name` begin, up to the process id: `.NAME.tmp-`,
+/// NAME cut (at a character) so that the whole fits in [`NAME_MAX`] with the largest
+/// process id (a valid 253-byte name once could not be written).
+pub fn temporary_prefix(name: &str) -> String {
+    const LARGEST_PID_DIGITS: usize = 7;
+    let room = NAME_MAX - 1 - TEMPORARY_INFIX.len() - LARGEST_PID_DIGITS;
+    let mut end = name.len().min(room);
+    while !name.is_char_boundary(end) {
+        end -= 1;
+    }
+    format!(".{}{TEMPORARY_INFIX}", &name[..end])
 }
 
 /// An output being written under a temporary name beside it: [`AtomicFile::commit`]

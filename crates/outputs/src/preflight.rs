@@ -11,7 +11,7 @@ use std::collections::HashSet;
 use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
-use crate::atomic::{TEMPORARY_INFIX, temporary_path};
+use crate::atomic::{temporary_path, temporary_prefix};
 use travmap_core::error::{Error, Result};
 
 /// A file's identity on this machine: (device, inode).
@@ -104,6 +104,13 @@ pub struct Preflight {
 /// device or a write-protected file. A character device or FIFO is written straight
 /// through, with nothing beside it.
 pub fn check_output_file(output: &Path, inputs: &InputFiles) -> Result<Preflight> {
+    // Unix tools' name for stdout would otherwise become a file named `-`.
+    if output == Path::new("-") {
+        return Err(Error::OutputIsSpecial {
+            output: output.to_path_buf(),
+            what: "the name some tools give stdout (travmap's is -o /dev/stdout)",
+        });
+    }
     if let Some(input) = inputs.aliased_by(output) {
         return Err(Error::OutputIsInput {
             output: output.to_path_buf(),
@@ -207,7 +214,7 @@ fn remove_stale_temporaries(output: &Path) -> Vec<PathBuf> {
     else {
         return Vec::new();
     };
-    let prefix = format!(".{}{TEMPORARY_INFIX}", name.to_string_lossy());
+    let prefix = temporary_prefix(&name.to_string_lossy());
     let mut removed = Vec::new();
     for entry in entries.flatten() {
         let file_name = entry.file_name();
@@ -235,6 +242,7 @@ fn process_is_alive(pid: i32) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::atomic::TEMPORARY_INFIX;
 
     #[test]
     fn every_spelling_of_an_input_is_refused() {
