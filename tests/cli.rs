@@ -586,3 +586,34 @@ fn settings_that_would_never_end_or_exhaust_memory_are_refused() {
         assert!(err.contains(named), "--set {assignment}: {err}");
     }
 }
+
+/// Each command's --help: its own options first, the shared ones under headings,
+/// examples at the end; -h leaves the examples out.
+#[test]
+fn help_puts_the_commands_own_options_first_and_ends_with_examples() {
+    for command in [
+        "run", "eval", "annotate", "convert", "map", "render", "train", "dataset", "adapt",
+        "crossval", "odometry", "bench", "config",
+    ] {
+        let long = success(travmap(&[command, "--help"]));
+        let short = success(travmap(&[command, "-h"]));
+        assert!(
+            long.contains("\nExamples (SEQ: a KITTI sequence folder"),
+            "{command}:\n{long}"
+        );
+        assert!(!short.contains("\nExamples"), "{command} -h:\n{short}");
+        let at = |heading: &str| long.find(&format!("\n{heading}:\n"));
+        let options = at("Options").unwrap_or_else(|| panic!("{command}:\n{long}"));
+        for shared in [
+            "Reading the inputs",
+            "Recorded logs and packets",
+            "Configuration",
+            "Reporting",
+        ] {
+            assert!(
+                at(shared).is_none_or(|heading| heading > options),
+                "{command}: {shared}"
+            );
+        }
+    }
+}

@@ -21,6 +21,9 @@ use super::{
 /// cells the vehicle drove over are traversable, obstacles and what the prior (--model)
 /// confidently rejects are not; labels in the inputs are never read.
 #[derive(Args)]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap adapt drive.mcap -o adapted.json\n  travmap adapt drive.mcap -o adapted.json --model prior.json"
+)]
 pub struct AdaptArgs {
     #[command(flatten)]
     inputs: Inputs,

@@ -20,6 +20,9 @@ use super::{
 /// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
 #[derive(Args)]
 #[command(mut_arg("sequences", super::one_input))]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap annotate drive.mcap -o annotated.mcap\n  travmap annotate rosbag2_folder/ -o a.mcap --static-map\n  travmap annotate SEQ -o a.mcap --adapt"
+)]
 pub struct AnnotateArgs {
     #[command(flatten)]
     inputs: Inputs,

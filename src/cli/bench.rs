@@ -14,6 +14,9 @@ use super::{Inputs, ModelArg, Outcome, images_for, model_json, outcome, print_js
 /// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
 #[derive(Args)]
 #[command(mut_arg("sequences", super::one_input))]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap bench SEQ --repeats 30\n  travmap bench SEQ --tools --json"
+)]
 pub struct BenchArgs {
     #[command(flatten)]
     inputs: Inputs,

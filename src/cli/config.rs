@@ -7,6 +7,9 @@ use super::{Outcome, Output, Settings, print_json_summary};
 
 /// Print the effective configuration (TOML; JSON with --json).
 #[derive(Args)]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap config > travmap.toml\n  travmap config --set integration.poses=tf -q\n  travmap config --json"
+)]
 pub struct ConfigArgs {
     #[command(flatten)]
     settings: Settings,

@@ -21,6 +21,9 @@ use super::{
 /// Convert a KITTI / SemanticKITTI sequence (clouds, poses on /tf, images) or a recorded
 /// log (ROS 1 bag, ROS 1 MCAP, rosbag2 directory or .db3) to a ROS 2 MCAP.
 #[derive(Args)]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap convert SEQ -o drive.mcap\n  travmap convert drive.bag -o drive.mcap\n  travmap convert capture.pcap -o scans.mcap --lidar-calibration VLP16.yaml"
+)]
 pub struct ConvertArgs {
     /// The sequence directory, or the log.
     sequence: PathBuf,

@@ -18,6 +18,9 @@ use super::{Inputs, Outcome, outcome, print_json_summary};
 /// Held-out scores: spatially-blocked CV over one input's frames, or each of several
 /// inputs held out in turn.
 #[derive(Args)]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap crossval SEQ\n  travmap crossval seq00 seq07 --json"
+)]
 pub struct CrossvalArgs {
     #[command(flatten)]
     inputs: Inputs,

@@ -17,6 +17,9 @@ use super::{
 /// One Parquet row per predictable cell per frame: features, appearance, ground
 /// truth and (with --model) the prediction, on the training grid.
 #[derive(Args)]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap dataset SEQ -o cells.parquet\n  travmap dataset drive.mcap -o cells.parquet --model model.json"
+)]
 pub struct DatasetArgs {
     #[command(flatten)]
     inputs: Inputs,

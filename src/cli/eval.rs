@@ -22,6 +22,9 @@ use super::{
 
 /// Score predictions against SemanticKITTI ground truth (the paper's table).
 #[derive(Args)]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap eval SEQ\n  travmap eval rellis/sequences/00 --set ground_truth.labels=rellis3d\n  travmap eval SEQ --model my.json --json"
+)]
 pub struct EvalArgs {
     #[command(flatten)]
     inputs: Inputs,

@@ -25,6 +25,9 @@ use super::{
 #[command(mut_arg("sequences", |a| super::one_input(a).help(
     "A KITTI odometry / SemanticKITTI sequence directory, a recorded log (MCAP, ROS 1 bag, rosbag2 directory or .db3), a folder of .pcd / .bin scans, or one saved point cloud of a site (.pcd or .ply)"
 )))]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap map SEQ -o map.png\n  travmap map drive.mcap -o map.png --nav2 site.yaml\n  travmap map site.las -o site.png --cells cells.parquet"
+)]
 pub struct MapArgs {
     #[command(flatten)]
     inputs: Inputs,

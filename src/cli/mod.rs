@@ -52,16 +52,25 @@ pub enum Outcome {
 #[derive(Args)]
 pub struct Settings {
     /// TOML file overriding configuration defaults (see `travmap config`).
-    #[arg(long)]
+    #[arg(long, help_heading = "Configuration")]
     config: Option<PathBuf>,
-    /// Override one setting, e.g. --set grid.size_m=24 (repeatable).
-    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    /// Override one setting, e.g. --set grid.size_m=24 or --set integration.poses=tf
+    /// (repeatable; text bare or quoted, other values as TOML).
+    #[arg(
+        long = "set",
+        value_name = "SECTION.KEY=VALUE",
+        help_heading = "Configuration"
+    )]
     sets: Vec<String>,
     /// Where the scans' poses come from (integration.poses): the input's own (auto
     /// falls back to registration, with a notice), only /tf, only Odometry or a
     /// PoseStamped / PoseWithCovarianceStamped topic, estimated by registration, or
     /// none (each scan alone).
-    #[arg(long, value_parser = ["auto", "tf", "odometry", "registration", "none"])]
+    #[arg(
+        long,
+        value_parser = ["auto", "tf", "odometry", "registration", "none"],
+        help_heading = "Configuration"
+    )]
     poses: Option<String>,
 }
 
@@ -130,11 +139,11 @@ pub fn usage(message: String) -> anyhow::Error {
 #[derive(Args, Clone, Copy)]
 pub struct Output {
     /// Machine-readable output.
-    #[arg(long)]
+    #[arg(long, help_heading = "Reporting")]
     pub json: bool,
     /// No progress bars and no chatter: only the answer (scores, a table, the
     /// configuration), notices and errors.
-    #[arg(short, long)]
+    #[arg(short, long, help_heading = "Reporting")]
     pub quiet: bool,
 }
 
@@ -208,21 +217,29 @@ pub struct Sensors {
     /// Log input: the PointCloud2 or LiDAR packet topic (needed when there are
     /// several). Repeated, the first topic's scans with the other sensors' clouds
     /// merged in (through /tf_static); `all` merges every cloud and packet topic.
-    #[arg(long)]
+    #[arg(long, help_heading = "Recorded logs and packets")]
     cloud_topic: Vec<String>,
     /// LiDAR packet input: the sensor's calibration, Velodyne's YAML
     /// (velodyne_pointcloud / nebula format) or Hesai's angle-correction CSV; the
     /// VLP-16, VLP-32C and Pandar XT32, XT16, XT32M, 40P, 64, QT64 and QT128 have built-in tables. With several
     /// packet topics, TOPIC=FILE gives one topic's (repeatable); a FILE alone is
     /// for every packet topic without its own.
-    #[arg(long, value_name = "[TOPIC=]FILE")]
+    #[arg(
+        long,
+        value_name = "[TOPIC=]FILE",
+        help_heading = "Recorded logs and packets"
+    )]
     lidar_calibration: Vec<String>,
     /// Log input: the frame the LiDAR's points are in, when its clouds name none or
     /// the wrong one (a driver's empty or default frame_id), or its packets name none
     /// (an Ouster's custom sensor_frame, a capture). With several LiDAR topics,
     /// TOPIC=FRAME gives one topic's (repeatable); a FRAME alone is for every LiDAR
     /// topic without its own.
-    #[arg(long, value_name = "[TOPIC=]FRAME")]
+    #[arg(
+        long,
+        value_name = "[TOPIC=]FRAME",
+        help_heading = "Recorded logs and packets"
+    )]
     lidar_frame: Vec<String>,
 }
 
@@ -270,35 +287,35 @@ pub struct Inputs {
     /// .db3) or folders of .pcd / .bin scans.
     #[arg(required = true)]
     pub sequences: Vec<PathBuf>,
+    /// Frames to use: A..B (B excluded), A..=B, A.. or N. Default: all.
+    #[arg(long, value_parser = parse_frame_range, help_heading = "Reading the inputs")]
+    pub frames: Option<Range<usize>>,
+    /// Folder-of-scans input: the scan rate, Hz, when the file names are not times
+    /// (default 10).
+    #[arg(long, value_name = "HZ", value_parser = parse_rate_hz, help_heading = "Reading the inputs")]
+    rate: Option<f64>,
     #[command(flatten)]
     sensors: Sensors,
     /// MCAP input: the world frame poses are taken in (default: the root of the
     /// transform tree above the clouds' frame; the frame below it when the root is
     /// `utm` or `earth`).
-    #[arg(long)]
+    #[arg(long, help_heading = "Recorded logs and packets")]
     world_frame: Option<String>,
     /// MCAP input: the camera's Image or CompressedImage topic (needed when there are
     /// several with a CameraInfo).
-    #[arg(long)]
+    #[arg(long, help_heading = "Recorded logs and packets")]
     camera_topic: Option<String>,
     /// Recorded log input: the PoseStamped or PoseWithCovarianceStamped topic that
     /// poses the vehicle, when there are several and nothing else moves the clouds.
-    #[arg(long)]
+    #[arg(long, help_heading = "Recorded logs and packets")]
     pose_topic: Option<String>,
-    /// Frames to use: A..B (B excluded), A..=B, A.. or N. Default: all.
-    #[arg(long, value_parser = parse_frame_range)]
-    pub frames: Option<Range<usize>>,
-    /// Folder-of-scans input: the scan rate, Hz, when the file names are not times
-    /// (default 10).
-    #[arg(long, value_name = "HZ", value_parser = parse_rate_hz)]
-    rate: Option<f64>,
     #[command(flatten)]
     pub settings: Settings,
     #[command(flatten)]
     pub output: Output,
     /// Skip frames whose input is unreadable, report them, and exit with code 3
     /// (instead of stopping at the first one with code 1).
-    #[arg(long)]
+    #[arg(long, help_heading = "Reading the inputs")]
     keep_going: bool,
 }
 

@@ -15,6 +15,9 @@ use super::{Inputs, Outcome, check_output, frame_count, outcome, path_text, prin
 /// Estimate a drive's trajectory by scan registration (whatever poses it records).
 #[derive(Args)]
 #[command(mut_arg("sequences", super::one_input))]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap odometry drive.mcap -o poses.txt\n  travmap odometry SEQ -o traj.tum --format tum"
+)]
 pub struct OdometryArgs {
     #[command(flatten)]
     inputs: Inputs,

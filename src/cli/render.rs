@@ -17,6 +17,9 @@ use super::{
 /// Draw ground truth, prediction and errors of a frame side by side as PNG.
 #[derive(Args)]
 #[command(mut_arg("sequences", super::one_input))]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap render SEQ -o frame.png --frame 2\n  travmap render SEQ -o frames/ --all"
+)]
 pub struct RenderArgs {
     #[command(flatten)]
     inputs: Inputs,

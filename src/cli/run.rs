@@ -16,6 +16,9 @@ use super::{
 
 /// Predict the filtered traversability grid of every frame.
 #[derive(Args)]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap run SEQ\n  travmap run drive.mcap --cloud-topic /points --ascii\n  travmap run SEQ --json | jq .frame"
+)]
 pub struct RunArgs {
     #[command(flatten)]
     inputs: Inputs,

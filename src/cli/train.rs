@@ -19,6 +19,9 @@ use super::{
 
 /// Train the SVM (grid search over C and gamma, spatially-blocked CV).
 #[derive(Args)]
+#[command(
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap train SEQ -o model.json\n  travmap train cells.parquet more.parquet -o model.json\n  travmap train SEQ -o model.json --set 'training.c_values=[10]'"
+)]
 pub struct TrainArgs {
     #[command(flatten)]
     inputs: Inputs,
