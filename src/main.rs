@@ -9,7 +9,7 @@ mod cli;
 
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 
 use cli::Outcome;
 
@@ -39,6 +39,8 @@ enum Command {
     Odometry(cli::odometry::OdometryArgs),
     Map(cli::map::MapArgs),
     Config(cli::config::ConfigArgs),
+    Completions(cli::shell::CompletionsArgs),
+    Man(cli::shell::ManArgs),
 }
 
 fn main() -> ExitCode {
@@ -67,6 +69,8 @@ fn main() -> ExitCode {
         Command::Odometry(args) => cli::odometry::odometry(args),
         Command::Map(args) => cli::map::map(args),
         Command::Config(args) => cli::config::config(args),
+        Command::Completions(args) => cli::shell::completions(args, Cli::command()),
+        Command::Man(args) => cli::shell::man(args, Cli::command()),
     };
     match outcome {
         Ok(Outcome::Complete) => ExitCode::SUCCESS,

@@ -617,3 +617,27 @@ fn help_puts_the_commands_own_options_first_and_ends_with_examples() {
         }
     }
 }
+
+/// Shell completions and man pages come from the command line's own definition.
+#[test]
+fn completions_and_man_pages_are_generated() {
+    for shell in ["bash", "zsh", "fish", "elvish", "powershell"] {
+        let script = success(travmap(&["completions", shell]));
+        assert!(
+            script.contains("annotate") && script.contains("lidar-calibration"),
+            "{shell}"
+        );
+    }
+    let dir = tempfile::tempdir().unwrap();
+    success(travmap(&["man", "-o", arg(dir.path())]));
+    let page = std::fs::read_to_string(dir.path().join("travmap-annotate.1")).unwrap();
+    assert!(
+        page.contains(".TH TRAVMAP-ANNOTATE 1") && page.contains("travmap\\-annotate"),
+        "{page}"
+    );
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        16,
+        "travmap.1 and one per command"
+    );
+}

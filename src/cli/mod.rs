@@ -17,6 +17,7 @@ pub mod odometry;
 pub mod render;
 mod report;
 pub mod run;
+pub mod shell;
 pub mod train;
 
 pub use report::{

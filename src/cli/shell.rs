@@ -1,0 +1,83 @@
+//! `travmap completions SHELL` and `travmap man`: what a shell and `man` need,
+//! generated from the command line's own definition, so they never drift from it.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use clap::{Args, ValueEnum};
+use clap_complete::Shell;
+
+use super::Outcome;
+
+/// Print a shell's completion script for travmap.
+#[derive(Args)]
+#[command(
+    after_long_help = "Examples:\n  travmap completions bash > ~/.local/share/bash-completion/completions/travmap\n  travmap completions zsh > ~/.zfunc/_travmap\n  travmap completions fish > ~/.config/fish/completions/travmap.fish"
+)]
+pub struct CompletionsArgs {
+    /// The shell to complete in.
+    #[arg(value_enum)]
+    shell: ShellArg,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum ShellArg {
+    Bash,
+    Zsh,
+    Fish,
+    Elvish,
+    Powershell,
+}
+
+/// Write travmap's man pages: travmap.1 and one per command (travmap-eval.1, ...).
+#[derive(Args)]
+#[command(
+    after_long_help = "Examples:\n  travmap man -o ~/.local/share/man/man1 && man travmap-annotate"
+)]
+pub struct ManArgs {
+    /// The folder to write the pages into (made if missing).
+    #[arg(short, long, value_name = "DIR")]
+    output: PathBuf,
+}
+
+pub fn completions(args: CompletionsArgs, mut command: clap::Command) -> Result<Outcome> {
+    let shell = match args.shell {
+        ShellArg::Bash => Shell::Bash,
+        ShellArg::Zsh => Shell::Zsh,
+        ShellArg::Fish => Shell::Fish,
+        ShellArg::Elvish => Shell::Elvish,
+        ShellArg::Powershell => Shell::PowerShell,
+    };
+    let name = command.get_name().to_string();
+    let mut script = Vec::new();
+    clap_complete::generate(shell, &mut command, name, &mut script);
+    std::io::stdout().lock().write_all(&script)?;
+    Ok(Outcome::Complete)
+}
+
+pub fn man(args: ManArgs, command: clap::Command) -> Result<Outcome> {
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("cannot make {}", args.output.display()))?;
+    let mut written = vec![page(&args.output, "travmap", &command)?];
+    for sub in command.get_subcommands() {
+        let name = format!("travmap-{}", sub.get_name());
+        let sub = sub.clone().display_name(&name).bin_name(&name);
+        written.push(page(&args.output, &name, &sub)?);
+    }
+    for path in &written {
+        println!("wrote {}", path.display());
+    }
+    Ok(Outcome::Complete)
+}
+
+/// `command`'s page, `dir/name.1`, written whole (through a temporary file).
+fn page(dir: &Path, name: &str, command: &clap::Command) -> Result<PathBuf> {
+    let mut roff = Vec::new();
+    clap_mangen::Man::new(command.clone())
+        .title(name.to_uppercase())
+        .render(&mut roff)?;
+    let path = dir.join(format!("{name}.1"));
+    travmap_outputs::atomic::write_atomically(&path, &roff)?;
+    Ok(path)
+}
