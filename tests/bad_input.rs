@@ -658,3 +658,21 @@ fn the_notice_of_unknown_label_ids_names_the_presets_that_fit() {
         ],
     );
 }
+
+/// A FIFO as poses.txt is refused, not opened (opening a pipe no process writes
+/// blocked the run for ever).
+#[test]
+fn a_pipe_as_poses_txt_is_refused_not_waited_on() {
+    let dir = sequence();
+    let poses = dir.path().join("poses.txt");
+    std::fs::remove_file(&poses).unwrap();
+    assert!(
+        std::process::Command::new("mkfifo")
+            .arg(&poses)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let err = clean_failure(eval(dir.path()));
+    assert_contains(&err, &["poses.txt", "a pipe", "not a file"]);
+}

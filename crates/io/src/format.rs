@@ -129,7 +129,7 @@ const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
 ];
 
 /// What a file that is neither a regular file nor a folder is, in words.
-fn special_file(file_type: &std::fs::FileType) -> Option<&'static str> {
+pub(crate) fn special_file(file_type: &std::fs::FileType) -> Option<&'static str> {
     use std::os::unix::fs::FileTypeExt;
     if file_type.is_fifo() {
         Some("a pipe (a FIFO, or a shell's <(...) or /dev/stdin)")

@@ -65,6 +65,12 @@ impl Calibration {
 }
 
 fn read_text(path: &Path) -> Result<String> {
+    // A pipe no process writes would block the open for ever.
+    let kind = std::fs::metadata(path).map(|m| m.file_type());
+    if let Some(what) = kind.ok().as_ref().and_then(crate::format::special_file) {
+        let problem = format!("{what}, not a file: save it to a file first");
+        return Err(Error::io(path, std::io::Error::other(problem)));
+    }
     std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
 }
 
