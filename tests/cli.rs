@@ -641,3 +641,24 @@ fn completions_and_man_pages_are_generated() {
         "travmap.1 and one per command"
     );
 }
+
+/// What is read or written otherwise than asked is said: a frame range cut at the
+/// input's end, an output whose extension names another format.
+#[test]
+fn a_cut_frame_range_and_an_odd_extension_are_said() {
+    let Some(seq) = sample() else { return };
+    let out = travmap(&["run", &seq, "--frames", "4..10", "-q"]);
+    assert!(out.status.success());
+    assert_contains(
+        &crate::common::stderr(&out),
+        &["frames 4..=9 goes past its last frame, 5: reading 4..=5"],
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let text = dir.path().join("x.txt");
+    let out = travmap(&["convert", &seq, "-o", arg(&text), "-q", "--frames", "0..2"]);
+    assert!(out.status.success());
+    assert_contains(
+        &crate::common::stderr(&out),
+        &["is written as an MCAP file"],
+    );
+}

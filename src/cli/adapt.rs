@@ -13,8 +13,8 @@ use travmap_outputs::atomic::write_atomically;
 use travmap_training::adaptation::{Adapted, adapt as adapt_model};
 
 use super::{
-    Inputs, ModelArg, Outcome, Output, check_output, counted, frame_count, model_json, outcome,
-    path_text, print_json_summary, setting_word,
+    Inputs, ModelArg, Outcome, Output, check_output, counted, frame_count, model_json,
+    note_extension, outcome, path_text, print_json_summary, setting_word,
 };
 
 /// Adapt a model to the ground the given drives cover, from the drives alone: the
@@ -40,6 +40,7 @@ pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
     let output = &args.inputs.output;
     let model_path = args.output.as_path();
     check_output(model_path, &args.inputs.files(args.model.path.as_deref()))?;
+    note_extension(model_path, "json", "a travmap model (JSON)");
     let (prior, prior_name) = args.model.load(config)?;
     let adapted = adapted_model(&args.inputs, config, &prior, &prior_name, output)?;
     write_atomically(model_path, &adapted.model.to_json())?;

@@ -14,7 +14,8 @@ use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;
 use super::{
     Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json,
-    notice_unknown_labels, outcome, path_text, print_json_summary, print_wrote, with_summary,
+    note_extension, notice_unknown_labels, outcome, path_text, print_json_summary, print_wrote,
+    with_summary,
 };
 
 /// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
@@ -70,6 +71,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
     check_output(output_path, &args.inputs.files(args.model.path.as_deref()))?;
+    note_extension(output_path, "mcap", "an MCAP file");
     let options = AnnotationOptions {
         compression: args.compression.compression(),
         passthrough: !args.no_passthrough,

@@ -14,7 +14,7 @@ use travmap_outputs::conversion::{convert_kitti, convert_log};
 use travmap_outputs::preflight::InputFiles;
 
 use super::{
-    Outcome, Output, Sensors, check_output, frame_count, open_selection, outcome,
+    Outcome, Output, Sensors, check_output, frame_count, note_extension, open_selection, outcome,
     parse_frame_range, path_text, print_json_summary, print_wrote, with_summary,
 };
 
@@ -83,6 +83,7 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
     let mut read: Vec<&Path> = vec![&args.sequence];
     read.extend(calibrations.files());
     check_output(output_path, &InputFiles::of(&read))?;
+    note_extension(output_path, "mcap", "an MCAP file");
     // Every scan: convert keeps a log's first, however partial.
     let frames = args.frames.clone().unwrap_or(0..usize::MAX);
     let options = SourceOptions {

@@ -10,8 +10,8 @@ use travmap_drive::{Fingerprints, Selection};
 use travmap_outputs::dataset::DatasetWriter;
 
 use super::{
-    Inputs, Outcome, check_output, counted, frame_count, load_model, outcome, path_text,
-    print_json_summary, with_summary,
+    Inputs, Outcome, check_output, counted, frame_count, load_model, note_extension, outcome,
+    path_text, print_json_summary, with_summary,
 };
 
 /// One Parquet row per predictable cell per frame: features, appearance, ground
@@ -36,6 +36,7 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     let output = args.inputs.output;
     let output_path = args.output.as_path();
     check_output(output_path, &args.inputs.files(args.model.as_deref()))?;
+    note_extension(output_path, "parquet", "a Parquet file");
     let mut selections = args.inputs.open(config.appearance.enabled)?;
     let model = match args.model.as_deref() {
         Some(path) => Some(load_model(Some(path), config)?.0),

@@ -17,7 +17,7 @@ use travmap_outputs::rendering::encode_png;
 
 use super::{
     Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json,
-    notice_unknown_labels, outcome, path_text, print_json_summary, usage,
+    note_extension, notice_unknown_labels, outcome, path_text, print_json_summary, usage,
 };
 
 /// Fuse every frame's prediction (and ground truth) into one map of the drive.
@@ -90,6 +90,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
         .flatten()
         .collect();
     check_distinct_outputs(&outputs)?;
+    note_extension(output_path, "png", "a PNG image");
     for path in &outputs {
         check_output(path, &inputs)?;
     }

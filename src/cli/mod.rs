@@ -444,6 +444,20 @@ pub fn check_output(output: &Path, inputs: &InputFiles) -> Result<()> {
     Ok(())
 }
 
+/// A note when `output`'s extension names another format than the `extension` it
+/// is written in (`convert -o x.txt` writes an MCAP): written as asked, and said.
+pub fn note_extension(output: &Path, extension: &str, format: &str) {
+    let other = output
+        .extension()
+        .is_some_and(|e| !e.eq_ignore_ascii_case(extension));
+    if other && !travmap_outputs::atomic::is_stream(output) {
+        eprintln!(
+            "note: {} is written as {format}, whatever its extension says (.{extension} is the usual one)",
+            output.display()
+        );
+    }
+}
+
 /// Before any work: the directory `output` (one file per frame) is no input's.
 pub fn check_output_dir(output: &Path, inputs: &InputFiles) -> Result<()> {
     Ok(check_output_directory(output, inputs)?)
@@ -497,6 +511,16 @@ pub fn open_selection(
             "{}: no scans in {} (the input has {has})",
             path.display(),
             describe_frames(frames),
+        );
+    }
+    // A range past the end is read as far as the input goes, and said so.
+    let last = source.frames().last().copied();
+    if let Some(last) = last.filter(|&last| frames.end != usize::MAX && frames.end > last + 1) {
+        eprintln!(
+            "notice: {}: {} goes past its last frame, {last}: reading {}..={last}",
+            path.display(),
+            describe_frames(frames),
+            frames.start.max(source.frames()[0])
         );
     }
     Ok(Selection::new(source, frames.clone()))

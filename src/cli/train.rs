@@ -13,8 +13,8 @@ use travmap_training::crossval::collect_training_set;
 use travmap_training::{TrainingSet, train as train_model};
 
 use super::{
-    Inputs, Outcome, check_output, frame_count, input_json, model_json, outcome, path_text,
-    print_json_summary, setting_word,
+    Inputs, Outcome, check_output, frame_count, input_json, model_json, note_extension, outcome,
+    path_text, print_json_summary, setting_word,
 };
 
 /// Train the SVM (grid search over C and gamma, spatially-blocked CV).
@@ -47,6 +47,7 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
     let output = args.inputs.output;
     let model_path = args.output.as_path();
     check_output(model_path, &args.inputs.files(None))?;
+    note_extension(model_path, "json", "a travmap model (JSON)");
     // Cell datasets (`travmap dataset`) join the cells of the drives given.
     let (datasets, drives): (Vec<PathBuf>, Vec<PathBuf>) = args
         .inputs
