@@ -90,7 +90,6 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
         .flatten()
         .collect();
     check_distinct_outputs(&outputs)?;
-    note_extension(output_path, "png", "a PNG image");
     for path in &outputs {
         check_output(path, &inputs)?;
     }
@@ -115,6 +114,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
             check_output(&image.with_extension("prj"), &inputs)?;
         }
     }
+    note_extension(output_path, "png", "a PNG image");
     let selections = [selection];
     let bar = output.progress(frame_count(&selections), "mapping");
     let mut trajectory = Vec::new();
