@@ -636,3 +636,26 @@ fn odd_output_names_are_refused_or_written() {
         "nothing beside it"
     );
 }
+
+/// An output into an input's folder that is a link to another place (a velodyne/
+/// kept on another disk) is refused as the folder itself would be (the next run
+/// read the new file as a scan).
+#[test]
+fn an_output_into_a_linked_folder_of_an_input_is_refused() {
+    let Some(sample) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let drive = crate::common::long_sequence(&sample, dir.path(), 6);
+    let scans = dir.path().join("scans-elsewhere");
+    std::fs::rename(drive.join("velodyne"), &scans).unwrap();
+    std::os::unix::fs::symlink(&scans, drive.join("velodyne")).unwrap();
+    let inside = drive.join("velodyne").join("m.png");
+    let err = clean_failure(travmap(&["map", arg(&drive), "-o", arg(&inside)]));
+    crate::common::assert_contains(
+        &err,
+        &["is inside the input directory", "choose another -o"],
+    );
+    assert!(!scans.join("m.png").exists());
+    crate::common::write_output("map", &drive, &drive.join("m.png"), &[]);
+}

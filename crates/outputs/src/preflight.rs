@@ -22,7 +22,9 @@ type FileId = (u64, u64);
 pub struct InputFiles {
     ids: Vec<(FileId, PathBuf)>,
     canonical: HashSet<PathBuf>,
-    directories: Vec<PathBuf>,
+    /// Every input directory and folder inside one, canonical; whether it is an
+    /// input itself (a folder linked from inside one may lie anywhere).
+    directories: Vec<(PathBuf, bool)>,
 }
 
 impl InputFiles {
@@ -42,7 +44,7 @@ impl InputFiles {
         };
         let canonical = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
         if metadata.is_dir() {
-            self.directories.push(canonical);
+            self.directories.push((canonical, depth == 0));
             // Sequence directories are two levels deep; a loop of links stops here.
             if depth < 4
                 && let Ok(entries) = std::fs::read_dir(path)
@@ -70,12 +72,13 @@ impl InputFiles {
         self.canonical.contains(&canonical).then_some(canonical)
     }
 
-    /// The input directory that is `dir` or holds it, if any.
-    fn directory_holding(&self, dir: &Path) -> Option<PathBuf> {
+    /// The input directory (or folder of one) that is `dir` or holds it, if any, and
+    /// whether it is an input itself.
+    fn directory_holding(&self, dir: &Path) -> Option<(PathBuf, bool)> {
         let canonical = std::fs::canonicalize(dir).ok()?;
         self.directories
             .iter()
-            .find(|d| canonical.starts_with(d))
+            .find(|(d, _)| canonical.starts_with(d))
             .cloned()
     }
 }
@@ -150,9 +153,9 @@ pub fn check_output_file(output: &Path, inputs: &InputFiles) -> Result<Preflight
     // Beside an input's own files is fine (a map next to calib.txt); in its folders
     // (velodyne/, labels/) the next run would read the output as data.
     let dir = parent_dir(output);
-    if let (Some(input), Ok(canonical_dir)) =
+    if let (Some((input, is_input)), Ok(canonical_dir)) =
         (inputs.directory_holding(dir), std::fs::canonicalize(dir))
-        && canonical_dir != input
+        && (canonical_dir != input || !is_input)
     {
         return Err(Error::OutputInsideInput {
             output: output.to_path_buf(),
@@ -200,7 +203,7 @@ pub fn check_output_directory(output: &Path, inputs: &InputFiles) -> Result<()> 
         parent_dir(output)
     };
     match inputs.directory_holding(existing) {
-        Some(input) => Err(Error::OutputIsInput {
+        Some((input, _)) => Err(Error::OutputIsInput {
             output: output.to_path_buf(),
             input,
         }),
