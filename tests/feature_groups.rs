@@ -162,6 +162,24 @@ fn remission_on_another_sensors_scale_is_named_and_the_fallback_is_a_setting() {
     assert_ne!(fallback["confusion"], as_read["confusion"]);
     let text = crate::common::success(crate::common::travmap(&as_read_args));
     crate::common::assert_contains(&text, &["remission far outside the model's training range"]);
+    // annotate says so too, on stderr.
+    let annotated = dir.path().join("a.mcap");
+    let annotate = [
+        "annotate",
+        crate::common::arg(&rellis),
+        "-o",
+        crate::common::arg(&annotated),
+        "--model",
+        model,
+        "--set",
+        as_read_scale,
+    ];
+    let out = crate::common::travmap(&annotate);
+    assert!(out.status.success());
+    crate::common::assert_contains(
+        &crate::common::stderr(&out),
+        &["notice: 1 frame had remission far outside the model's training range"],
+    );
     // KITTI's own scans are not foreign to the model trained on them.
     let kitti = crate::common::json_summary(&[
         "eval",

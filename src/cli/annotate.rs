@@ -13,9 +13,9 @@ use travmap_outputs::annotation::{AnnotationOptions, CloudPoints, DRIVE_MAP_EVER
 use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;
 use super::{
-    Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json,
-    note_extension, notice_unknown_labels, outcome, path_text, print_json_summary, print_wrote,
-    with_summary,
+    Inputs, ModelArg, Outcome, check_output, counted, foreign_remission_said, frame_count,
+    images_for, model_json, note_extension, notice_unknown_labels, outcome, path_text,
+    print_json_summary, print_wrote, with_summary,
 };
 
 /// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
@@ -138,7 +138,11 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
             );
         }
     }
-    // Scores against another dataset's labels look like a bad model: said as eval says it.
+    // Scores against another dataset's labels, or of another sensor's remission, look
+    // like a bad model: said as eval says them.
     notice_unknown_labels(&summary.evaluation, config);
+    if let Some(said) = foreign_remission_said(&summary.evaluation, config) {
+        eprintln!("notice: {said}");
+    }
     Ok(outcome(&selections))
 }

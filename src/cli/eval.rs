@@ -7,7 +7,6 @@ use std::io::Write;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap_core::config::ForeignRemissionPolicy;
 use travmap_drive::scoring::evaluation::{Evaluation, EvaluationReport};
 use travmap_drive::scoring::metrics::Confusion;
 use travmap_drive::scoring::metrics::Scores;
@@ -16,8 +15,8 @@ use travmap_method::classifier::SvmModel;
 
 use super::adapt::AdaptFlag;
 use super::{
-    Inputs, ModelArg, Outcome, counted, frame_count, model_json, notice_unknown_labels, outcome,
-    print_json_summary,
+    Inputs, ModelArg, Outcome, counted, foreign_remission_said, frame_count, model_json,
+    notice_unknown_labels, outcome, print_json_summary,
 };
 
 /// Score predictions against SemanticKITTI ground truth (the paper's table).
@@ -155,21 +154,8 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
             counted(report.frames_without_remission, "frame")
         )?;
     }
-    if let Some(foreign) = report.foreign_remission {
-        writeln!(
-            out,
-            "{} had remission far outside the model's training range (median cell {:.4}, the model learnt {:.2} +- {:.2}: another sensor's scale?): {}",
-            counted(report.frames_foreign_remission, "frame"),
-            foreign.median,
-            foreign.trained_mean,
-            foreign.trained_std,
-            match config.classifier.foreign_remission {
-                ForeignRemissionPolicy::Notice =>
-                    "classified as read (--set classifier.foreign_remission=\"fallback\" classifies them without remission)",
-                ForeignRemissionPolicy::Fallback =>
-                    "the model's fallback without remission classified them",
-            }
-        )?;
+    if let Some(said) = foreign_remission_said(&report, config) {
+        writeln!(out, "{said}")?;
     }
     if report.dropped_points > 0 {
         writeln!(

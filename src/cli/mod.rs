@@ -21,8 +21,9 @@ pub mod shell;
 pub mod train;
 
 pub use report::{
-    counted, input_json, model_json, notice_unknown_labels, path_text, print_json_error,
-    print_json_frame, print_json_summary, print_wrote, setting_word, with_summary,
+    counted, foreign_remission_said, input_json, model_json, notice_unknown_labels, path_text,
+    print_json_error, print_json_frame, print_json_summary, print_wrote, setting_word,
+    with_summary,
 };
 
 use std::ffi::OsString;

@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::Result;
 use serde_json::json;
 use travmap_core::Config;
-use travmap_core::config::LabelSet;
+use travmap_core::config::{ForeignRemissionPolicy, LabelSet};
 use travmap_drive::Selection;
 use travmap_drive::scoring::evaluation::EvaluationReport;
 use travmap_method::classifier::SvmModel;
@@ -142,6 +142,27 @@ fn print_json_line(value: &serde_json::Value) -> Result<()> {
     use std::io::Write;
     writeln!(std::io::stdout().lock(), "{value}")?;
     Ok(())
+}
+
+/// What a report says of frames whose remission lay far outside the model's
+/// training range (another sensor's scale), when there were some.
+pub fn foreign_remission_said(report: &EvaluationReport, config: &Config) -> Option<String> {
+    let foreign = report.foreign_remission?;
+    Some(format!(
+        "{} had remission far outside the model's training range (median cell {:.4}, the model learnt {:.2} +- {:.2}: another sensor's scale?): {}",
+        counted(report.frames_foreign_remission, "frame"),
+        foreign.median,
+        foreign.trained_mean,
+        foreign.trained_std,
+        match config.classifier.foreign_remission {
+            ForeignRemissionPolicy::Notice => {
+                "classified as read (--set classifier.foreign_remission=\"fallback\" classifies them without remission)"
+            }
+            ForeignRemissionPolicy::Fallback => {
+                "the model's fallback without remission classified them"
+            }
+        }
+    ))
 }
 
 /// Says on stderr (even with -q) when labels carried ids the label set does not
