@@ -183,10 +183,12 @@ pub fn write_log_messages(
                 }
                 // A recording without the definition (rosbag2 before Iron) gets
                 // travmap's, where it knows the type: decoders need one.
-                let type_name = ros2_type_name(&connection.schema_name);
                 let known = (connection.schema_data.is_empty()
                     && connection.message_encoding == "cdr")
-                    .then(|| known_schema(&type_name).or(ouster_schema(&type_name)))
+                    .then(|| {
+                        let type_name = ros2_type_name(&connection.schema_name);
+                        known_schema(&type_name).or(ouster_schema(&type_name))
+                    })
                     .flatten();
                 let (schema_encoding, schema_data) = match known {
                     Some(schema) => ("ros2msg", schema.as_bytes()),
