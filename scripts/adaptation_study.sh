@@ -59,7 +59,7 @@ row() {
 
 rows() {
     row "prior (no adaptation)"
-    row "default: sum, C 1, gamma 0.02, prior weight 0.75" --adapt
+    row "default: sum, C 1, gamma 0.02, prior weight 0.75, margin 2, horizon 10 m" --adapt
     [ "${1:-}" = "--quick" ] && return
     row "drive only" --adapt --set 'adapt.learner="drive"'
     row "drive and prior cells, weight 0.75" --adapt --set 'adapt.learner="drive_and_prior"'
@@ -67,9 +67,9 @@ rows() {
     row "sum, prior weight 1" --adapt --set adapt.prior_weight=1
     row "sum, C 10, gamma 0.05" --adapt --set adapt.c=10 --set adapt.gamma=0.05
     row "+ 1 self-training round" --adapt --set adapt.rounds=1
-    row "horizon 10 m (default 20)" --adapt --set adapt.horizon_m=10
-    row "negatives at margin 0.5 (default 1)" --adapt --set adapt.negative_margin=0.5
-    row "negatives at margin 2" --adapt --set adapt.negative_margin=2
+    row "horizon 20 m" --adapt --set adapt.horizon_m=20
+    row "negatives at margin 1" --adapt --set adapt.negative_margin=1
+    row "negatives at margin 3" --adapt --set adapt.negative_margin=3
     row "no geometric negatives" --adapt --set adapt.geometric_negatives=false
     row "prior, foreign remission to the fallback" --set 'classifier.foreign_remission="fallback"'
     row "default, foreign remission to the fallback" --adapt --set 'classifier.foreign_remission="fallback"'

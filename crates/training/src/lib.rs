@@ -23,14 +23,18 @@ use travmap_core::config::{
 use travmap_core::error::{Error, Result};
 use travmap_core::random::SplitMix64;
 use travmap_drive::scoring::metrics::Confusion;
-use travmap_method::classifier::{ReducedSet, SearchResult, SvmModel, TrainingSummary};
+use travmap_method::classifier::{
+    ReducedSet, SearchResult, SvmModel, TrainingSummary, appearance_feature_names,
+    model_feature_names,
+};
 use travmap_method::feature_groups::REMISSION_NAMES;
 use travmap_method::features::{FEATURE_COUNT, feature_count};
 use travmap_method::grid::CellClass;
 pub use travmap_method::training_set::{TrainingSet, spatial_folds};
 
-/// Mean and 1/deviation of each feature; constant features get 1.
-fn standardisation(set: &TrainingSet) -> (Vec<f32>, Vec<f32>) {
+/// Mean and 1/deviation of each feature; constant features get 1, those `config`
+/// leaves out 0 (every standardised value 0: no part in the kernel's distances).
+fn standardisation(set: &TrainingSet, config: &Config) -> (Vec<f32>, Vec<f32>) {
     let d = set.dimension;
     let n = set.len().max(1) as f64;
     let mut mean = vec![0f64; d];
@@ -46,11 +50,17 @@ fn standardisation(set: &TrainingSet) -> (Vec<f32>, Vec<f32>) {
             *s += (v as f64 - m).powi(2);
         }
     }
+    let left_out = &config.training.left_out_features;
     let inverse_std = variance
         .iter()
-        .map(|s| {
+        .zip(model_feature_names(config, d))
+        .map(|(s, name)| {
             let std = (s / n).sqrt();
-            if std > 1e-12 { (1.0 / std) as f32 } else { 1.0 }
+            match left_out.contains(&name) {
+                true => 0.0,
+                false if std > 1e-12 => (1.0 / std) as f32,
+                false => 1.0,
+            }
         })
         .collect();
     (mean.iter().map(|&m| m as f32).collect(), inverse_std)
@@ -59,7 +69,7 @@ fn standardisation(set: &TrainingSet) -> (Vec<f32>, Vec<f32>) {
 /// Fits one SVM on `set` with the given C and gamma.
 fn fit(set: &TrainingSet, c: f64, gamma: f64, config: &Config) -> SvmModel {
     let d = set.dimension;
-    let (mean, inverse_std) = standardisation(set);
+    let (mean, inverse_std) = standardisation(set, config);
     let standardised: Vec<f32> = set
         .features
         .chunks_exact(d)
@@ -278,6 +288,7 @@ pub fn train_by(
     reduce: Option<&Reduce>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SvmModel> {
+    check_left_out_features(set, config)?;
     // The model, its hybrid and the fallback are independent fits: run side by side,
     // the solvers' serial steps overlap.
     // Progress is the sum over the three: each reports its own (done, total).
@@ -313,6 +324,25 @@ pub fn train_by(
     Ok(model)
 }
 
+/// Errors when `training.left_out_features` names a feature the cells do not have,
+/// listing those they have.
+fn check_left_out_features(set: &TrainingSet, config: &Config) -> Result<()> {
+    let mut names = model_feature_names(config, set.dimension);
+    names.extend(appearance_feature_names(&config.appearance));
+    match config
+        .training
+        .left_out_features
+        .iter()
+        .find(|name| !names.contains(name))
+    {
+        Some(name) => Err(Error::Config(format!(
+            "training.left_out_features: {name:?} is not a feature of these cells ({})",
+            names.join(", ")
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// Clouds without usable intensity get the same model without remission: the same
 /// cells with the remission columns left out, so no second pass is needed. None
 /// when the model has no remission features.
@@ -327,6 +357,10 @@ fn fallback_without_remission(
     }
     let mut without = config.clone();
     without.features = config.features.without_remission();
+    without
+        .training
+        .left_out_features
+        .retain(|name| !REMISSION_NAMES.contains(&name.as_str()));
     let columns = FEATURE_COUNT..FEATURE_COUNT + REMISSION_NAMES.len();
     if set.dimension < columns.end {
         return Err(Error::Training(format!(
@@ -482,6 +516,7 @@ mod tests {
     pub(super) fn paper_config() -> Config {
         let mut config = Config::default();
         config.features.groups.clear();
+        config.training.left_out_features.clear();
         config
     }
 
@@ -528,6 +563,46 @@ mod tests {
         let mut scratch = model.scratch();
         assert!(model.decision_value(&[0.1, 0.0], &mut scratch) > 0.0);
         assert!(model.decision_value(&[0.6, 0.0], &mut scratch) < 0.0);
+    }
+
+    #[test]
+    fn a_left_out_feature_has_no_part_in_the_decision() {
+        let set = separable_set();
+        let mut config = paper_config();
+        config.training.c_values = vec![10.0];
+        config.training.gamma_values = vec![1.0];
+        // The synthetic cells' two columns carry the paper's first two names.
+        config.training.left_out_features = vec!["planarity".into()];
+        let model = train(&set, &config, &|_, _| {}).unwrap();
+        assert_eq!(model.left_out_features(), ["planarity"]);
+        let mut scratch = model.scratch();
+        for x in [0.1, 0.35, 0.6] {
+            let low = model.decision_value(&[x, -1000.0], &mut scratch);
+            let high = model.decision_value(&[x, 1000.0], &mut scratch);
+            assert_eq!(low, high);
+        }
+        // Without the separating column nothing is learnt but the majority.
+        config.training.left_out_features = vec!["linearity".into()];
+        let blind = train(&set, &config, &|_, _| {}).unwrap();
+        let mut scratch = blind.scratch();
+        let near = blind.decision_value(&[0.1, 0.0], &mut scratch);
+        let far = blind.decision_value(&[0.6, 0.0], &mut scratch);
+        assert_eq!(near, far);
+    }
+
+    #[test]
+    fn leaving_out_a_feature_the_cells_lack_is_a_configuration_error() {
+        let mut config = paper_config();
+        config.training.left_out_features = vec!["wheel_count".into()];
+        match train(&separable_set(), &config, &|_, _| {}) {
+            Err(Error::Config(message)) => assert!(
+                message.contains("training.left_out_features")
+                    && message.contains("\"wheel_count\"")
+                    && message.contains("linearity"),
+                "{message}"
+            ),
+            other => panic!("expected a configuration error, got {other:?}"),
+        }
     }
 
     #[test]

@@ -136,7 +136,8 @@ pub struct PredictionScratch {
 #[derive(Clone, Debug, PartialEq)]
 pub struct SvmModel {
     pub feature_mean: Vec<f32>,
-    /// 1 / standard deviation per feature (1 for constant features).
+    /// 1 / standard deviation per feature (1 for constant features, 0 for those
+    /// left out: `training.left_out_features`).
     pub feature_inverse_std: Vec<f32>,
     pub c: f64,
     pub gamma: f64,
@@ -214,7 +215,8 @@ impl SvmModel {
                 z.iter()
                     .zip(&self.feature_mean)
                     .zip(&self.feature_inverse_std)
-                    .map(|((&z, &m), &s)| z / s + m)
+                    // A left-out feature's value is lost: its mean stands in.
+                    .map(|((&z, &m), &s)| if s == 0.0 { m } else { z / s + m })
             })
             .collect()
     }
@@ -229,11 +231,18 @@ impl SvmModel {
 
     /// Feature names: the geometric ones, plus the appearance ones for a hybrid model.
     pub fn feature_names(&self) -> Vec<String> {
-        let mut names = feature_names(&self.config.features.groups);
-        if self.dimension() > names.len() {
-            names.extend(appearance_feature_names(&self.config.appearance));
-        }
-        names
+        model_feature_names(&self.config, self.dimension())
+    }
+
+    /// The features this model does not look at (`training.left_out_features`):
+    /// those whose standardised values are all 0.
+    pub fn left_out_features(&self) -> Vec<String> {
+        self.feature_names()
+            .into_iter()
+            .zip(&self.feature_inverse_std)
+            .filter(|(_, s)| **s == 0.0)
+            .map(|(name, _)| name)
+            .collect()
     }
 
     /// Whether any cell's margin can depend on appearance features: a hybrid model
@@ -515,6 +524,16 @@ fn first_difference(
     }
     let text = |v: Option<&serde_json::Value>| v.map_or("nothing".into(), ToString::to_string);
     (prefix.to_string(), text(a), text(b))
+}
+
+/// The names of a model's `dimension` values under `config`: the geometric ones,
+/// then the appearance ones when there are more (a hybrid model's).
+pub fn model_feature_names(config: &Config, dimension: usize) -> Vec<String> {
+    let mut names = feature_names(&config.features.groups);
+    if dimension > names.len() {
+        names.extend(appearance_feature_names(&config.appearance));
+    }
+    names
 }
 
 /// Names of the appearance values: hue, saturation and value buckets.

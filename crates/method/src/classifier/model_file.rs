@@ -25,7 +25,11 @@ struct ModelFile {
     version: u32,
     feature_names: Vec<String>,
     feature_mean: Vec<f32>,
+    /// 1 for a left-out feature.
     feature_std: Vec<f32>,
+    /// Features the model does not look at: their standardised values are 0.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    left_out_features: Vec<String>,
     c: f64,
     gamma: f64,
     rho: f64,
@@ -177,6 +181,15 @@ impl SvmModel {
         {
             return Err(fail("non-finite or non-positive parameters".into()));
         }
+        if let Some(name) = file
+            .left_out_features
+            .iter()
+            .find(|name| !expected_names.contains(name))
+        {
+            return Err(fail(format!(
+                "left out feature {name:?} is not one of its features"
+            )));
+        }
         file.config.validate()?;
         let hybrid = match file.hybrid {
             Some(hybrid) => {
@@ -248,9 +261,17 @@ impl SvmModel {
                 ))
             }
         };
+        let inverse_std = expected_names
+            .iter()
+            .zip(&file.feature_std)
+            .map(|(name, s)| match file.left_out_features.contains(name) {
+                true => 0.0,
+                false => 1.0 / s,
+            })
+            .collect();
         let mut model = Self::new(
             file.feature_mean,
-            file.feature_std.iter().map(|s| 1.0 / s).collect(),
+            inverse_std,
             file.c,
             file.gamma,
             file.rho as f32,
@@ -281,7 +302,12 @@ impl SvmModel {
             version: MODEL_VERSION,
             feature_names: self.feature_names(),
             feature_mean: self.feature_mean.clone(),
-            feature_std: self.feature_inverse_std.iter().map(|s| 1.0 / s).collect(),
+            feature_std: self
+                .feature_inverse_std
+                .iter()
+                .map(|&s| if s == 0.0 { 1.0 } else { 1.0 / s })
+                .collect(),
+            left_out_features: self.left_out_features(),
             c: self.c,
             gamma: self.gamma,
             rho: self.rho as f64,
@@ -341,6 +367,24 @@ mod tests {
             .unwrap();
         let again = SvmModel::from_json(&model.to_json(), "round trip").unwrap();
         assert_eq!(again.to_json(), model.to_json());
+        // It looks at no feature the default training leaves out, and the file says so.
+        let left_out = Config::default().training.left_out_features;
+        assert_eq!(model.left_out_features(), left_out);
+        assert_eq!(again.feature_inverse_std, model.feature_inverse_std);
+    }
+
+    #[test]
+    fn a_left_out_feature_must_be_one_of_the_models() {
+        let model = SvmModel::embedded_default().unwrap();
+        let mut json: serde_json::Value = serde_json::from_slice(&model.to_json()).unwrap();
+        json["left_out_features"] = serde_json::json!(["wheel_count"]);
+        let err = SvmModel::from_json(json.to_string().as_bytes(), "m.json")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("m.json") && err.contains("\"wheel_count\""),
+            "{err}"
+        );
     }
 
     #[test]
