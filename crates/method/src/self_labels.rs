@@ -97,7 +97,7 @@ mod tests {
     #[test]
     fn negatives_need_a_confident_margin_or_a_height_over_the_clearance() {
         let footprint = [false; 5];
-        let margins = [-0.5f32, 2.0, -1.0, 2.0, f32::NAN];
+        let margins = [-0.5f32, 2.0, -2.0, 2.0, f32::NAN];
         let labels = labeller().label(&grid(), &footprint, Some(&margins));
         assert_eq!(
             labels,

@@ -78,10 +78,11 @@ pub struct TrainingConfig {
     pub left_out_features: Vec<String>,
 }
 
-/// What differs between drives over the same ground: the range histogram's
-/// curvity follows the sensor's beams, the normal's horizontal components the
-/// direction of travel. Left out, the held-out scores of docs/method.md rose.
-pub const SENSOR_DEPENDENT_FEATURES: [&str; 3] = ["curvity", "normal_x", "normal_y"];
+/// What differs between drives over the same ground: the normal's horizontal
+/// components follow the direction of travel, the range histogram's curvity the
+/// sensor's beams (in the order of the features). Left out, the held-out scores of
+/// docs/method.md rose.
+pub const SENSOR_DEPENDENT_FEATURES: [&str; 3] = ["normal_x", "normal_y", "curvity"];
 
 /// How several training inputs weigh against each other.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
