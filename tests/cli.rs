@@ -360,6 +360,22 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
     write_output("render", &seq, &all, &["--all", "--frames", "0..3"]);
     assert_eq!(std::fs::read_dir(&all).unwrap().count(), 3);
     crate::common::usage_error(travmap(&["render", &seq, "-o", arg(&all)]));
+    // Into the folder again, and not into a folder whose parent is missing: no
+    // command makes the folders above its output.
+    write_output("render", &seq, &all, &["--all", "--frames", "0..1"]);
+    let deep = dir.path().join("missing").join("all");
+    let out = travmap(&[
+        "render",
+        &seq,
+        "--all",
+        "--frames",
+        "0..1",
+        "-o",
+        arg(&deep),
+    ]);
+    let err = clean_failure(out);
+    assert_contains(&err, &["missing", "does not exist"]);
+    assert!(!dir.path().join("missing").exists());
 }
 
 #[test]
@@ -404,6 +420,20 @@ fn suspicious_arguments_are_refused_or_warned_about() {
     assert!(out.status.success());
     let err = crate::common::stderr(&out);
     assert_contains(&err, &["warning: --cloud-topic applies to recorded logs"]);
+    // So are a log's pose source and a rate where times.txt gives the stamps.
+    let out = travmap(&[
+        "run", &seq, "--frames", "0..1", "--poses", "tf", "--rate", "5",
+    ]);
+    assert!(out.status.success());
+    let err = crate::common::stderr(&out);
+    assert_contains(
+        &err,
+        &[
+            "warning: --poses tf names a recorded log's poses",
+            "whose poses.txt is used",
+            "times.txt gives the scans' stamps: --rate 5 is not used",
+        ],
+    );
 }
 
 #[test]
@@ -616,6 +646,24 @@ fn help_puts_the_commands_own_options_first_and_ends_with_examples() {
             );
         }
     }
+}
+
+/// `travmap --help` lists each command on one line of a wide terminal; the details
+/// follow in the command's own help.
+#[test]
+fn every_command_is_summed_up_in_one_short_line() {
+    let help = success(travmap(&["--help"]));
+    let commands = &help[help.find("Commands:\n").unwrap()..help.find("\nOptions:").unwrap()];
+    for line in commands.lines().skip(1) {
+        assert!(line.chars().count() <= 120, "{line}");
+    }
+    let adapt = success(travmap(&["adapt", "-h"]));
+    assert!(!adapt.contains("never read"), "{adapt}");
+    let bench = success(travmap(&["bench", "--help"]));
+    assert!(
+        bench.contains("(convert, annotate, dataset, adapt)"),
+        "{bench}"
+    );
 }
 
 /// Shell completions and man pages come from the command line's own definition.

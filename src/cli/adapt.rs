@@ -17,9 +17,10 @@ use super::{
     note_extension, outcome, path_text, print_json_summary, setting_word,
 };
 
-/// Adapt a model to the ground the given drives cover, from the drives alone: the
-/// cells the vehicle drove over are traversable, obstacles and what the prior (--model)
-/// confidently rejects are not; labels in the inputs are never read.
+/// Adapt a model to the ground the given drives cover, from the drives alone
+///
+/// The cells the vehicle drove over are traversable, obstacles and what the prior
+/// (--model) confidently rejects are not; labels in the inputs are never read.
 #[derive(Args)]
 #[command(
     after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap adapt drive.mcap -o adapted.json\n  travmap adapt drive.mcap -o adapted.json --model prior.json"

@@ -25,7 +25,7 @@ pub struct BenchArgs {
     /// Times each measurement is repeated.
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u16).range(1..=1000))]
     repeats: u16,
-    /// Also time the subcommands (convert, annotate, dataset) on this input, each
+    /// Also time the subcommands (convert, annotate, dataset, adapt) on this input, each
     /// as a child process on 1 thread and on all cores: frames/s, MB/s, peak RSS.
     #[arg(long)]
     tools: bool,

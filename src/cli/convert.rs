@@ -18,8 +18,10 @@ use super::{
     parse_frame_range, path_text, print_json_summary, print_wrote, with_summary,
 };
 
-/// Convert a KITTI / SemanticKITTI sequence (clouds, poses on /tf, images) or a recorded
-/// log (ROS 1 bag, ROS 1 MCAP, rosbag2 directory or .db3) to a ROS 2 MCAP.
+/// Convert a KITTI / SemanticKITTI sequence or a recorded log to a ROS 2 MCAP
+///
+/// A sequence gives its clouds, its poses on /tf and its images; a log may be a ROS 1
+/// bag, a ROS 1 MCAP, a rosbag2 directory or .db3, or captured packets.
 #[derive(Args)]
 #[command(
     after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap convert SEQ -o drive.mcap\n  travmap convert drive.bag -o drive.mcap\n  travmap convert capture.pcap -o scans.mcap --lidar-calibration VLP16.yaml"

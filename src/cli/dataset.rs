@@ -14,8 +14,10 @@ use super::{
     path_text, print_json_summary, with_summary,
 };
 
-/// One Parquet row per predictable cell per frame: features, appearance, ground
-/// truth and (with --model) the prediction, on the training grid.
+/// Write a Parquet table of cells to train on, one row per predictable cell per frame
+///
+/// Each row holds the cell's features, appearance, ground truth and (with --model) the
+/// prediction, on the training grid.
 #[derive(Args)]
 #[command(
     after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap dataset SEQ -o cells.parquet\n  travmap dataset drive.mcap -o cells.parquet --model model.json"

@@ -35,6 +35,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use travmap_core::Config;
+use travmap_core::config::PoseSource;
 use travmap_core::stopwatch::Stopwatch;
 use travmap_drive::Selection;
 use travmap_io::ros_drive::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics};
@@ -485,6 +486,13 @@ pub fn open_selection(
         for (flag, _) in mcap_only.iter().filter(|(_, value)| value.is_some()) {
             eprintln!(
                 "warning: {flag} applies to recorded logs (MCAP, ROS 1 bag, rosbag2); {} is a KITTI directory, so it is ignored there",
+                path.display()
+            );
+        }
+        if matches!(options.poses, PoseSource::Tf | PoseSource::Odometry) {
+            eprintln!(
+                "warning: --poses {} names a recorded log's poses; {} is a KITTI directory, whose poses.txt is used",
+                options.poses.name(),
                 path.display()
             );
         }

@@ -67,8 +67,8 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         )));
     }
     let created_dir = args.all && !output_path.exists();
-    if args.all {
-        std::fs::create_dir_all(output_path)
+    if created_dir {
+        std::fs::create_dir(output_path)
             .with_context(|| format!("cannot create {}", output_path.display()))?;
     }
     let selections = [selection];

@@ -195,13 +195,21 @@ pub fn check_distinct_outputs(outputs: &[&Path]) -> Result<()> {
 }
 
 /// Checks a directory that will receive one file per frame (`render --all`): it is
-/// no input directory nor inside one.
+/// no input directory nor inside one, and it exists or its parent does (the
+/// directory is made, as a file would be; missing parents are refused, as for any
+/// output).
 pub fn check_output_directory(output: &Path, inputs: &InputFiles) -> Result<()> {
     let existing = if output.exists() {
         output
     } else {
         parent_dir(output)
     };
+    if !existing.is_dir() {
+        return Err(Error::NoOutputDirectory {
+            output: output.to_path_buf(),
+            directory: existing.to_path_buf(),
+        });
+    }
     match inputs.directory_holding(existing) {
         Some((input, _)) => Err(Error::OutputIsInput {
             output: output.to_path_buf(),

@@ -92,6 +92,11 @@ impl KittiSequence {
         }
         let times_path = dir.join("times.txt");
         let stamps_ns = if times_path.exists() {
+            if let Some(rate_hz) = rate_hz {
+                said(format!(
+                    "times.txt gives the scans' stamps: --rate {rate_hz} is not used"
+                ));
+            }
             read_times(&times_path)?
         } else {
             let (rate_hz, why) = match (rate_hz, label_width) {
