@@ -107,6 +107,21 @@ fn adapt_is_deterministic_records_its_provenance_and_never_reads_labels() {
     // The prior rides along, and one reduced set stands for both.
     assert!(model["prior"].is_object());
     assert_eq!(model["reduced_set_includes_prior"], true);
+    // It learnt labels only through the prior: eval knows the prior's training scans
+    // and says the model was adapted, not trained, on the drive.
+    assert_eq!(
+        model["training"]["frame_sha256"],
+        model["prior"]["training"]["frame_sha256"]
+    );
+    let said = success(travmap(&["eval", arg(&sample), "--model", arg(&first)]));
+    assert_contains(
+        &said,
+        &[
+            "(no labels read) from embedded default model",
+            "every scored frame is a scan this model was trained on",
+        ],
+    );
+    assert!(!said.contains("does not record"), "{said}");
 
     // The same scans with garbage for labels, or none: the same model.
     let garbage = |_: &Path, to: &Path| std::fs::write(to, b"not a label file").unwrap();

@@ -119,14 +119,21 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
             ),
             None => "no hybrid model".into(),
         };
+        let learnt = match &model.training.adaptation {
+            Some(adaptation) => format!(
+                "adapted to {} (no labels read) from {}",
+                model.training.sources.join("; "),
+                adaptation.prior
+            ),
+            None => format!("trained on {}", model.training.sources.join("; ")),
+        };
         writeln!(
             out,
-            "model: {model_name} (sha256 {}, {} support vectors, C {}, gamma {}; {hybrid}), trained on {}",
+            "model: {model_name} (sha256 {}, {} support vectors, C {}, gamma {}; {hybrid}), {learnt}",
             &model.sha256_hex()[..12],
             model.support_vector_count(),
             model.c,
             model.gamma,
-            model.training.sources.join("; ")
         )?;
     }
     if report.frames == 0 {

@@ -238,6 +238,9 @@ pub fn adapt(
         straight_path_frames: counts.straight_path_frames,
     });
     model.training.sources = selections.iter().map(Selection::describe).collect();
+    // It read no labels: what it knows of labelled scans is the prior's, so eval
+    // still tells the prior's training scans from held-out ones.
+    model.training.frame_sha256 = prior.training.frame_sha256.clone();
     Ok(Adapted {
         model,
         counts,
