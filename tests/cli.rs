@@ -62,6 +62,32 @@ fn eval_json_reports_config_model_and_scores() {
     assert!(cells > 3000 && cells <= 3 * 1600, "{cells}");
 }
 
+/// Every command that reads a configuration prints all of it in its `--json`
+/// summary, and times in milliseconds.
+#[test]
+fn json_summaries_carry_the_whole_configuration() {
+    let Some(seq) = sample() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let at = |name: &str| arg(&dir.path().join(name)).to_string();
+    let (picture, map, poses, adapted) = (at("f.png"), at("m.png"), at("p.txt"), at("a.json"));
+    for args in [
+        vec!["render", &seq, "--frame", "2", "-o", &picture],
+        vec!["map", &seq, "-o", &map],
+        vec!["odometry", &seq, "-o", &poses],
+        vec!["adapt", &seq, "-o", &adapted],
+    ] {
+        let summary = crate::common::json_summary(&args);
+        let config = &summary["config"];
+        assert!(
+            config["grid"]["size_m"].is_number() && config["adapt"].is_object(),
+            "{args:?}: {config}"
+        );
+        assert!(summary.get("seconds").is_none(), "{args:?}");
+    }
+    let summary = crate::common::json_summary(&["adapt", &seq, "-o", &adapted]);
+    assert!(summary["elapsed_ms"].as_f64().unwrap() > 0.0);
+}
+
 #[test]
 fn run_emits_one_grid_per_frame() {
     let Some(seq) = sample() else { return };

@@ -56,8 +56,8 @@ pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
             "counts": adapted.counts,
             "adaptation": summary,
             "support_vectors": model.support_vector_count(),
-            "seconds": model.training.seconds,
-            "config": {"vehicle": config.vehicle, "adapt": config.adapt},
+            "elapsed_ms": model.training.seconds * 1e3,
+            "config": config,
         });
         print_json_summary("adapt", &selections, fields)?;
     } else if !output.quiet {

@@ -174,6 +174,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
             "cells_output": args.cells.as_deref().map(path_text),
             "nav2": nav2,
             "model": model_json(&model, &model_name),
+            "config": config,
             "frames": frames,
             "cells": cells.len(),
             "seen_cells": seen,

@@ -67,7 +67,7 @@ pub fn odometry(args: OdometryArgs) -> Result<Outcome> {
             "format": match format { TrajectoryFormat::Kitti => "kitti", TrajectoryFormat::Tum => "tum" },
             "frames": poses.len(),
             "register_ms": register_ms,
-            "config": config.registration,
+            "config": config,
             "elapsed_ms": seconds * 1e3,
         });
         print_json_summary("odometry", &selections, fields)?;

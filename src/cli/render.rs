@@ -104,6 +104,7 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
     if output.json {
         let fields = json!({
             "output": path_text(output_path),
+            "config": config,
             "outputs": written.iter().map(|p| path_text(p)).collect::<Vec<_>>(),
         });
         print_json_summary("render", &selections, fields)?;
