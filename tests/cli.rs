@@ -314,6 +314,20 @@ fn bench_tools_times_every_subcommand_as_a_child_process() {
             if cfg!(target_os = "linux") {
                 assert!(rate("peak_rss_mib") > 0.0, "{row}");
             }
+            // The roofline: the method alone (no method in convert) and the disk.
+            let synced = row["synced_write_s"].as_f64().unwrap();
+            let roofline = match row["tool"].as_str() {
+                Some("convert") => {
+                    assert!(timing["method_s"].is_null(), "{row}");
+                    synced
+                }
+                _ => rate("method_s").max(synced),
+            };
+            let ratio = rate("wall_s") / roofline;
+            assert!(
+                (rate("roofline_ratio") - ratio).abs() < 1e-9 * ratio,
+                "{row}"
+            );
         }
     }
 }

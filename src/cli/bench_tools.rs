@@ -15,7 +15,7 @@ use travmap_drive::Selection;
 use travmap_drive::scoring::evaluation::Spread;
 
 use super::Inputs;
-use super::child_runs::{ChildRun, TemporaryDirectory, run_child};
+use super::child_runs::{ChildRun, TemporaryDirectory, run_child, synced_write_seconds};
 
 /// Which file a row's tool reads.
 #[derive(Clone, Copy)]
@@ -131,14 +131,45 @@ impl ToolSpec {
         given_kind: &str,
         model: Option<&Path>,
     ) -> Vec<OsString> {
+        let mut arguments: Vec<OsString> =
+            vec![self.tool.into(), input.into(), "-o".into(), output.into()];
+        arguments.extend(self.reading_arguments(inputs, given_kind, model));
+        // The row times the work: a bench's few frames hold fewer footprint cells
+        // than adapt asks of a drive before it trusts one.
+        if self.tool == "adapt" {
+            arguments.extend(["--set".into(), "adapt.min_footprint_cells=0".into()]);
+        }
+        if self.passthrough == Some(false) {
+            arguments.push("--no-passthrough".into());
+        }
+        arguments
+    }
+
+    /// `travmap run` on this row's input, frames, configuration and model: the method
+    /// alone, writing nothing (the row's roofline); None for convert, which runs no
+    /// method.
+    fn method_arguments(
+        &self,
+        input: &Path,
+        inputs: &Inputs,
+        given_kind: &str,
+        model: Option<&Path>,
+    ) -> Option<Vec<OsString>> {
+        let mut arguments: Vec<OsString> = vec!["run".into(), input.into()];
+        arguments.extend(self.reading_arguments(inputs, given_kind, model));
+        (self.tool != "convert").then_some(arguments)
+    }
+
+    /// What the row's tool and its method run share: quiet, the frames, how to read
+    /// the input, and the model.
+    fn reading_arguments(
+        &self,
+        inputs: &Inputs,
+        given_kind: &str,
+        model: Option<&Path>,
+    ) -> Vec<OsString> {
         let whole_log = self.converts_whole_log(given_kind);
-        let mut arguments: Vec<OsString> = vec![
-            self.tool.into(),
-            input.into(),
-            "-o".into(),
-            output.into(),
-            "-q".into(),
-        ];
+        let mut arguments: Vec<OsString> = vec!["-q".into()];
         if let (ToolInput::Given, Some(frames), false) = (self.input, &inputs.frames, whole_log) {
             let end = match frames.end {
                 usize::MAX => String::new(),
@@ -155,14 +186,6 @@ impl ToolSpec {
         }
         if let ("annotate" | "adapt", Some(model)) = (self.tool, model) {
             arguments.extend(["--model".into(), model.into()]);
-        }
-        // The row times the work: a bench's few frames hold fewer footprint cells
-        // than adapt asks of a drive before it trusts one.
-        if self.tool == "adapt" {
-            arguments.extend(["--set".into(), "adapt.min_footprint_cells=0".into()]);
-        }
-        if self.passthrough == Some(false) {
-            arguments.push("--no-passthrough".into());
         }
         arguments
     }
@@ -183,6 +206,12 @@ pub struct ToolTiming {
     /// The child's peak resident set (`ru_maxrss`), MiB; None where the platform
     /// does not report it.
     peak_rss_mib: Option<f64>,
+    /// The roofline: `travmap run` on the same frames and threads, the method alone
+    /// (None for convert), ...
+    method_s: Option<f64>,
+    /// ... and the wall time over the larger of that and the row's
+    /// `synced_write_s`.
+    roofline_ratio: Option<f64>,
 }
 
 /// A row's measurement, or why it was not taken.
@@ -213,6 +242,9 @@ pub struct ToolRow {
     /// convert), and the time they span as recorded.
     frames: usize,
     recorded_s: Option<f64>,
+    /// Seconds `dd conv=fsync` took to write the tool's output size to the same
+    /// folder: the disk's part of the roofline.
+    synced_write_s: Option<f64>,
     #[serde(flatten)]
     outcome: ToolOutcome,
 }
@@ -252,15 +284,33 @@ pub fn bench_tools(
             false => selected.clone(),
         };
         let recorded_s = source.recorded_seconds(&frames);
+        let mut synced_write_s = None;
         let outcome = match spec.input(given, given_kind, converted.as_deref()) {
             Err(skipped) => ToolOutcome::Skipped { skipped },
             Ok(input) => {
                 let arguments = spec.arguments(input, &output, inputs, given_kind, model);
-                let time = |threads| -> Result<ToolTiming> {
-                    let runs = (0..repeats.max(1))
-                        .map(|_| run_child(&executable, &arguments, threads, &output))
-                        .collect::<Result<Vec<_>>>()?;
-                    Ok(ToolTiming::of(&runs, threads, frames.len(), recorded_s))
+                let method = spec.method_arguments(input, inputs, given_kind, model);
+                let runs = |arguments: &[OsString], threads, output| {
+                    (0..repeats.max(1))
+                        .map(|_| run_child(&executable, arguments, threads, output))
+                        .collect::<Result<Vec<_>>>()
+                };
+                let median = |values: Vec<f64>| Spread::of(&values).median;
+                let mut time = |threads| -> Result<ToolTiming> {
+                    let tool_runs = runs(&arguments, threads, Some(&output))?;
+                    let bytes = median(tool_runs.iter().map(|r| r.output_bytes as f64).collect());
+                    if synced_write_s.is_none() {
+                        synced_write_s = synced_write_seconds(&directory.0, bytes as u64);
+                    }
+                    let method_s = match &method {
+                        Some(method) => {
+                            let method_runs = runs(method, threads, None)?;
+                            Some(median(method_runs.iter().map(|r| r.wall_s).collect()))
+                        }
+                        None => None,
+                    };
+                    let timing = ToolTiming::of(&tool_runs, threads, frames.len(), recorded_s);
+                    Ok(timing.against(method_s, synced_write_s))
                 };
                 let (one_thread, all_cores) = (time(1)?, time(all_cores)?);
                 ToolOutcome::Timed {
@@ -284,6 +334,7 @@ pub fn bench_tools(
             passthrough: spec.passthrough,
             frames: frames.len(),
             recorded_s,
+            synced_write_s,
             outcome,
         });
     }
@@ -308,17 +359,35 @@ pub fn print_tools_table(
     let frames = (rows.iter().map(|row| row.frames)).min().unwrap_or(0);
     writeln!(
         out,
-        "tools on {input} ({frames} frames; a log's convert: all of them; each a child process; median of {repeats} runs; wall time from start to exit; x real time: recorded time / wall time; the child's peak RSS):"
+        "tools on {input} ({frames} frames; a log's convert: all of them; each a child process; median of {repeats} runs; wall time from start to exit; x real time: recorded time / wall time; the child's peak RSS; roofline on {all_cores}: `travmap run` of the same frames, the method alone, and `dd conv=fsync` of as many bytes into the same folder, x roofline the wall time over the larger):"
     )?;
     writeln!(
         out,
-        "{:<34} {:>17} {:>17} {:>17} {:>17} {:>7}",
-        "tool input", "frames/s", "x real time", "MB/s written", "peak RSS MiB", "speedup"
+        "{:<34} {:>17} {:>17} {:>17} {:>17} {:>7} {:>26}",
+        "tool input",
+        "frames/s",
+        "x real time",
+        "MB/s written",
+        "peak RSS MiB",
+        "speedup",
+        "roofline"
     )?;
     writeln!(
         out,
-        "{:<34} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7}",
-        "", "1 thr", all_cores, "1 thr", all_cores, "1 thr", all_cores, "1 thr", all_cores, ""
+        "{:<34} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7} {:>8} {:>8} {:>8}",
+        "",
+        "1 thr",
+        all_cores,
+        "1 thr",
+        all_cores,
+        "1 thr",
+        all_cores,
+        "1 thr",
+        all_cores,
+        "",
+        "run s",
+        "fsync s",
+        "x"
     )?;
     let rss = |timing: &ToolTiming| {
         timing
@@ -330,6 +399,9 @@ pub fn print_tools_table(
             .real_time
             .map_or("-".to_string(), |times| format!("{times:.1}"))
     };
+    let figure = |value: Option<f64>, decimals: usize| {
+        value.map_or("-".to_string(), |v| format!("{v:.decimals$}"))
+    };
     for row in rows {
         let label = row.label();
         match &row.outcome {
@@ -339,7 +411,7 @@ pub fn print_tools_table(
                 speedup,
             } => writeln!(
                 out,
-                "{label:<34} {:>8.1} {:>8.1} {:>8} {:>8} {:>8.1} {:>8.1} {:>8} {:>8} {:>6.2}x",
+                "{label:<34} {:>8.1} {:>8.1} {:>8} {:>8} {:>8.1} {:>8.1} {:>8} {:>8} {:>6.2}x {:>8} {:>8} {:>8}",
                 one_thread.frames_per_second,
                 all_cores.frames_per_second,
                 real_time(one_thread),
@@ -348,7 +420,10 @@ pub fn print_tools_table(
                 all_cores.megabytes_per_second,
                 rss(one_thread),
                 rss(all_cores),
-                speedup
+                speedup,
+                figure(all_cores.method_s, 2),
+                figure(row.synced_write_s, 2),
+                figure(all_cores.roofline_ratio, 2),
             )?,
             ToolOutcome::Skipped { skipped } => writeln!(out, "{label:<34} skipped: {skipped}")?,
         }
@@ -371,6 +446,19 @@ impl ToolTiming {
             megabytes_per_second: output_bytes * 1e-6 / wall_s,
             real_time: recorded_s.map(|recorded_s| recorded_s / wall_s),
             peak_rss_mib: (!rss.is_empty()).then(|| median(rss)),
+            method_s: None,
+            roofline_ratio: None,
+        }
+    }
+
+    /// This timing held against its roofline: the method alone (`method_s`) and the
+    /// synced write of its output (`synced_write_s`), whichever takes longer.
+    fn against(self, method_s: Option<f64>, synced_write_s: Option<f64>) -> Self {
+        let roofline_s = method_s.into_iter().chain(synced_write_s).reduce(f64::max);
+        Self {
+            method_s,
+            roofline_ratio: roofline_s.map(|roofline_s| self.wall_s / roofline_s),
+            ..self
         }
     }
 }

@@ -20,20 +20,22 @@ pub(super) struct ChildRun {
 
 /// Runs `executable arguments` on `threads` rayon threads and times it; a child
 /// that fails is an error naming the command, its exit status and the end of its
-/// stderr. `output` (the file the child writes) is removed first: a child that
-/// replaced the last run's output would be timed freeing its blocks too (0.1 s of
-/// a 0.65 s `annotate` here, for 160 MB on ext4).
+/// stderr. `output` (the file the child writes, if any) is removed first: a child
+/// that replaced the last run's output would be timed freeing its blocks too (0.1 s
+/// of a 0.65 s `annotate` here, for 160 MB on ext4).
 pub(super) fn run_child(
     executable: &Path,
     arguments: &[OsString],
     threads: usize,
-    output: &Path,
+    output: Option<&Path>,
 ) -> Result<ChildRun> {
-    match std::fs::remove_file(output) {
-        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-            return Err(e).with_context(|| format!("cannot remove {}", output.display()));
+    if let Some(output) = output {
+        match std::fs::remove_file(output) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(e).with_context(|| format!("cannot remove {}", output.display()));
+            }
+            _ => {}
         }
-        _ => {}
     }
     let mut command = Command::new(executable);
     command
@@ -62,14 +64,39 @@ pub(super) fn run_child(
         let last = lines[lines.len().saturating_sub(5)..].join("\n");
         bail!("{command:?} failed ({status}); the end of its stderr:\n{last}");
     }
-    let output_bytes = std::fs::metadata(output)
-        .with_context(|| format!("{command:?} wrote no {}", output.display()))?
-        .len();
+    let output_bytes = match output {
+        Some(output) => std::fs::metadata(output)
+            .with_context(|| format!("{command:?} wrote no {}", output.display()))?
+            .len(),
+        None => 0,
+    };
     Ok(ChildRun {
         wall_s,
         output_bytes,
         peak_rss_mib,
     })
+}
+
+/// Seconds `dd conv=fsync` takes to write `bytes` (in whole MiB, at least one) into
+/// `directory` and sync them: what the disk alone needs for an output of that size,
+/// durable as travmap's outputs are. None where dd cannot run.
+pub(super) fn synced_write_seconds(directory: &Path, bytes: u64) -> Option<f64> {
+    let file = directory.join("synced-write.bin");
+    let mut of = OsString::from("of=");
+    of.push(&file);
+    let count = format!("count={}", bytes.div_ceil(1 << 20).max(1));
+    let watch = Stopwatch::start();
+    let status = Command::new("dd")
+        .arg("if=/dev/zero")
+        .arg(of)
+        .args(["bs=1M", &count, "conv=fsync", "status=none"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status();
+    let seconds = watch.elapsed_ms() * 1e-3;
+    let _ = std::fs::remove_file(&file);
+    status.ok()?.success().then_some(seconds)
 }
 
 /// Pins `command` to the first `threads` CPUs this process may use, so that a
@@ -185,8 +212,13 @@ mod tests {
     fn a_failing_tool_is_named_with_its_exit_status_and_last_words() {
         let script = ["-c", "echo first >&2; echo last words >&2; exit 3"].map(OsString::from);
         let dir = tempfile::tempdir().unwrap();
-        let error =
-            run_child(Path::new("/bin/sh"), &script, 1, &dir.path().join("out")).unwrap_err();
+        let error = run_child(
+            Path::new("/bin/sh"),
+            &script,
+            1,
+            Some(&dir.path().join("out")),
+        )
+        .unwrap_err();
         let message = format!("{error:#}");
         for part in [
             "/bin/sh",
@@ -211,7 +243,7 @@ mod tests {
             "test ! -e \"$0\" && echo new > \"$0\"".into(),
             output.clone().into(),
         ];
-        let run = run_child(Path::new("/bin/sh"), &arguments, 1, &output).unwrap();
+        let run = run_child(Path::new("/bin/sh"), &arguments, 1, Some(&output)).unwrap();
         assert_eq!(run.output_bytes, 4);
     }
 }
