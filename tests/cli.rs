@@ -429,6 +429,11 @@ fn suspicious_arguments_are_refused_or_warned_about() {
     // convert copies a log whole: --frames is for KITTI input.
     let drive = dir.path().join("d.mcap");
     write_output("convert", &seq, &drive, &["--frames", "0..2"]);
+    // A hard link is the same file under another name.
+    let linked = dir.path().join("linked.mcap");
+    std::fs::hard_link(&drive, &linked).unwrap();
+    let err = clean_failure(travmap(&["eval", arg(&drive), arg(&linked)]));
+    assert_contains(&err, &["are the same input"]);
     let other = dir.path().join("e.mcap");
     let err = clean_failure(travmap(&[
         "convert",

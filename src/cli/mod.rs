@@ -416,19 +416,26 @@ impl Inputs {
     }
 }
 
-/// The same input twice (however spelled) would count its frames twice.
+/// The same input twice (however spelled, or hard-linked under another name) would
+/// count its frames twice.
 fn refuse_repeats(paths: &[PathBuf]) -> Result<()> {
-    let mut seen: Vec<(PathBuf, &Path)> = Vec::new();
+    use std::os::unix::fs::MetadataExt;
+    let file_id = |path: &Path| std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()));
+    let mut seen: Vec<(PathBuf, Option<(u64, u64)>, &Path)> = Vec::new();
     for path in paths {
         let canonical = std::fs::canonicalize(path).unwrap_or_else(|_| path.clone());
-        if let Some((_, first)) = seen.iter().find(|(c, _)| *c == canonical) {
+        let id = file_id(path);
+        let same = |(c, i, _): &&(PathBuf, Option<(u64, u64)>, &Path)| {
+            *c == canonical || (id.is_some() && *i == id)
+        };
+        if let Some((_, _, first)) = seen.iter().find(same) {
             bail!(
                 "{} and {} are the same input; give each input once",
                 first.display(),
                 path.display()
             );
         }
-        seen.push((canonical, path));
+        seen.push((canonical, id, path));
     }
     Ok(())
 }

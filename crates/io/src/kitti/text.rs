@@ -71,7 +71,22 @@ fn read_text(path: &Path) -> Result<String> {
         let problem = format!("{what}, not a file: save it to a file first");
         return Err(Error::io(path, std::io::Error::other(problem)));
     }
-    std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    // Editors on Windows start UTF-8 files with a byte-order mark; it is no number.
+    Ok(match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    })
+}
+
+/// A token as an error quotes it: whole when short, else its start and its length
+/// (a corrupt file can hold one token of megabytes).
+fn quoted(token: &str) -> String {
+    const SHOWN: usize = 40;
+    match token.char_indices().nth(SHOWN) {
+        Some((end, _)) => format!("`{}...` ({} bytes)", &token[..end], token.len()),
+        None => format!("`{token}`"),
+    }
 }
 
 /// The numbered lines of a text input, blank ones at the end left out; a blank line
@@ -99,16 +114,16 @@ fn lines_of<'a>(text: &'a str, path: &Path, what: &str) -> Result<Vec<(usize, &'
 fn parse_numbers(path: &Path, line_no: usize, text: &str) -> Result<Vec<f64>> {
     text.split_whitespace()
         .map(|token| {
-            let value: f64 = token
-                .parse()
-                .map_err(|_| Error::parse(path, line_no, format!("`{token}` is not a number")))?;
+            let value: f64 = token.parse().map_err(|_| {
+                Error::parse(path, line_no, format!("{} is not a number", quoted(token)))
+            })?;
             if value.is_finite() {
                 Ok(value)
             } else {
                 Err(Error::parse(
                     path,
                     line_no,
-                    format!("`{token}` is not finite"),
+                    format!("{} is not finite", quoted(token)),
                 ))
             }
         })
@@ -170,6 +185,7 @@ pub fn read_calibration(path: &Path) -> Result<Calibration> {
 /// [`read_calibration`] on the file's text; `path` names it in errors.
 pub fn parse_calibration(text: &str, path: &Path) -> Result<Calibration> {
     let mut projections = [None; 4];
+    // Each matrix with the line it was read from.
     let (mut tr, mut rectification, mut velo_to_cam) = (None, None, None);
     for (line_no, line) in lines_of(text, path, "`KEY: numbers`")? {
         let (key, rest) = line
@@ -185,18 +201,18 @@ pub fn parse_calibration(text: &str, path: &Path) -> Result<Calibration> {
             "R0_rect" => {
                 let values = parse_numbers(path, line_no, rest)?;
                 let r = top_rows(path, line_no, &values, 3)?;
-                rectification = Some(r);
+                rectification = Some((line_no, r));
                 continue;
             }
             // Other keys (e.g. Tr_imu_to_velo) are not used by the method.
             _ => continue,
         };
         let values = parse_numbers(path, line_no, rest)?;
-        *slot = Some(matrix_3x4(path, line_no, &values)?);
+        *slot = Some((line_no, matrix_3x4(path, line_no, &values)?));
     }
-    let cam0_from_velodyne = match (tr, rectification, velo_to_cam) {
-        (Some(tr), _, _) => tr,
-        (None, Some(r), Some(v)) => r * v,
+    let (line_no, what, cam0_from_velodyne) = match (tr, rectification, velo_to_cam) {
+        (Some((line_no, tr)), _, _) => (line_no, "Tr", tr),
+        (None, Some((_, r)), Some((line_no, v))) => (line_no, "R0_rect * Tr_velo_to_cam", r * v),
         _ => {
             return Err(Error::MissingCalibration {
                 path: path.to_path_buf(),
@@ -205,9 +221,9 @@ pub fn parse_calibration(text: &str, path: &Path) -> Result<Calibration> {
             });
         }
     };
-    check_rigid(path, 0, "Tr", &cam0_from_velodyne)?;
+    check_rigid(path, line_no, what, &cam0_from_velodyne)?;
     Ok(Calibration {
-        projections,
+        projections: projections.map(|p| p.map(|(_, m)| m)),
         cam0_from_velodyne,
     })
 }
@@ -243,12 +259,12 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Vec<u64>> {
         let line = line.trim();
         let seconds: f64 = line
             .parse()
-            .map_err(|_| Error::parse(path, i + 1, format!("`{line}` is not a number")))?;
+            .map_err(|_| Error::parse(path, i + 1, format!("{} is not a number", quoted(line))))?;
         if !(seconds.is_finite() && seconds >= 0.0) {
             return Err(Error::parse(
                 path,
                 i + 1,
-                format!("`{line}`: expected finite seconds >= 0"),
+                format!("{}: expected finite seconds >= 0", quoted(line)),
             ));
         }
         let stamp_ns = (seconds * 1e9).round() as u64;
@@ -267,6 +283,45 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Vec<u64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_calibration_that_is_not_rigid_is_reported_at_its_line() {
+        let path = Path::new("calib.txt");
+        let projection = "P0: 1 0 0 0 0 1 0 0 0 0 1 0";
+        let scaled = "Tr: 2 0 0 0 0 2 0 0 0 0 2 0";
+        let err = parse_calibration(&format!("{projection}\n{scaled}\n"), path).unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("calib.txt:2: Tr is not a rigid"),
+            "{err}"
+        );
+        let object = "R0_rect: 1 0 0 0 1 0 0 0 1\nTr_velo_to_cam: 2 0 0 0 0 2 0 0 0 0 2 0\n";
+        let err = parse_calibration(object, path).unwrap_err().to_string();
+        assert!(
+            err.starts_with("calib.txt:2: R0_rect * Tr_velo_to_cam"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn a_huge_token_is_quoted_by_its_start_and_length() {
+        let token = "x".repeat(1_000_000);
+        for err in [
+            parse_poses(&token, Path::new("poses.txt")).unwrap_err(),
+            parse_times(&token, Path::new("times.txt")).unwrap_err(),
+        ] {
+            let err = err.to_string();
+            assert!(err.len() < 200 && err.contains("(1000000 bytes)"), "{err}");
+        }
+    }
+
+    #[test]
+    fn a_byte_order_mark_is_no_part_of_the_text() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("times.txt");
+        std::fs::write(&path, "\u{feff}0.0\n0.1\n").unwrap();
+        assert_eq!(read_times(&path).unwrap(), [0, 100_000_000]);
+    }
 
     #[test]
     fn a_blank_line_inside_a_text_input_is_an_error_naming_it() {
