@@ -416,18 +416,20 @@ impl Inputs {
     }
 }
 
+/// A file's device and inode: the same under every name it has.
+type FileId = Option<(u64, u64)>;
+
 /// The same input twice (however spelled, or hard-linked under another name) would
 /// count its frames twice.
 fn refuse_repeats(paths: &[PathBuf]) -> Result<()> {
     use std::os::unix::fs::MetadataExt;
     let file_id = |path: &Path| std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()));
-    let mut seen: Vec<(PathBuf, Option<(u64, u64)>, &Path)> = Vec::new();
+    let mut seen: Vec<(PathBuf, FileId, &Path)> = Vec::new();
     for path in paths {
         let canonical = std::fs::canonicalize(path).unwrap_or_else(|_| path.clone());
         let id = file_id(path);
-        let same = |(c, i, _): &&(PathBuf, Option<(u64, u64)>, &Path)| {
-            *c == canonical || (id.is_some() && *i == id)
-        };
+        let same =
+            |(c, i, _): &&(PathBuf, FileId, &Path)| *c == canonical || (id.is_some() && *i == id);
         if let Some((_, _, first)) = seen.iter().find(same) {
             bail!(
                 "{} and {} are the same input; give each input once",
