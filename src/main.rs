@@ -80,6 +80,13 @@ fn main() -> ExitCode {
             }
             ExitCode::from(3)
         }
+        Err(_) if travmap_core::temporaries::cleaning_up() => {
+            // A tool the signal's handler stopped: the handler says so and exits with
+            // the signal's status.
+            loop {
+                std::thread::park();
+            }
+        }
         Err(error) => {
             let code = if error.downcast_ref::<cli::UsageError>().is_some() {
                 2
@@ -100,8 +107,8 @@ fn main() -> ExitCode {
 }
 
 /// SIGINT, SIGTERM and SIGHUP (Ctrl-C; Docker, systemd, Ray and SLURM stopping a
-/// job; a closed terminal) remove the temporary outputs and exit with 128 + the
-/// signal, as shells expect. A closed stdout (`travmap eval | head`) ends the
+/// job; a closed terminal) stop the child processes, remove the temporary outputs
+/// and exit with 128 + the signal, as shells expect. A closed stdout (`travmap eval | head`) ends the
 /// process quietly with SIGPIPE's status, as Unix tools do, instead of an error;
 /// outputs are committed before anything is printed, so none is left half-written.
 fn remove_outputs_on_signals() {
@@ -113,7 +120,7 @@ fn remove_outputs_on_signals() {
     if let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) {
         std::thread::spawn(move || {
             if let Some(signal) = signals.forever().next() {
-                travmap_core::temporaries::remove_all();
+                travmap_core::temporaries::clean_up();
                 let name = match signal {
                     SIGINT => "SIGINT",
                     SIGTERM => "SIGTERM",

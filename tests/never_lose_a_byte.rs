@@ -235,6 +235,61 @@ fn sigint_sigterm_and_sighup_remove_the_temporary_output() {
     }
 }
 
+/// `kill -INT` of `bench --tools` (the parent alone, as a job scheduler may send it)
+/// stops the tool it is timing and removes their temporary folder.
+#[test]
+fn a_signal_to_bench_stops_its_tools_and_removes_their_folder() {
+    let Some(sample) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let long = crate::common::long_sequence(&sample, dir.path(), 200);
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let mut bench = Command::new(env!("CARGO_BIN_EXE_travmap"))
+        .args(["bench", arg(&long), "--tools", "--repeats", "1", "-q"])
+        .env("TMPDIR", &tmp)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let children = || {
+        let tasks = std::fs::read_dir(format!("/proc/{}/task", bench.id())).unwrap();
+        tasks
+            .flat_map(|task| std::fs::read_to_string(task.unwrap().path().join("children")))
+            .flat_map(|list| {
+                let pids: Vec<u32> = list.split_whitespace().flat_map(str::parse).collect();
+                pids
+            })
+            .collect::<Vec<u32>>()
+    };
+    let started = Instant::now();
+    let mut tools = children();
+    while tools.is_empty() && started.elapsed() < Duration::from_secs(30) {
+        std::thread::sleep(Duration::from_millis(5));
+        tools = children();
+    }
+    assert!(!tools.is_empty(), "bench started no tool");
+    std::thread::sleep(Duration::from_millis(100));
+    let sent = Command::new("kill")
+        .args(["-INT", &bench.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let status = bench.wait().unwrap();
+    assert_eq!(status.code(), Some(130));
+    for tool in tools {
+        // Gone, or a zombie its new parent has not yet reaped.
+        let state = std::fs::read_to_string(format!("/proc/{tool}/stat")).unwrap_or_default();
+        let alive = state
+            .rsplit_once(')')
+            .is_some_and(|(_, rest)| !rest.trim_start().starts_with(['Z', 'X']));
+        assert!(!alive, "tool {tool} still runs: {state}");
+    }
+    let left: Vec<_> = std::fs::read_dir(&tmp).unwrap().collect();
+    assert!(left.is_empty(), "left {left:?}");
+}
+
 #[test]
 fn the_next_run_removes_what_a_killed_run_left() {
     let Some(sample) = crate::common::sample() else {

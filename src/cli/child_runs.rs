@@ -9,6 +9,7 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 
 use anyhow::{Context, Result, bail};
 use travmap_core::stopwatch::Stopwatch;
+use travmap_core::temporaries;
 
 /// One run of a child: its wall time, output size and peak memory.
 #[derive(Debug)]
@@ -49,14 +50,18 @@ pub(super) fn run_child(
     let mut child = command
         .spawn()
         .with_context(|| format!("cannot start {command:?}"))?;
+    // A signal to bench stops its tool too, or it would run on, writing.
+    temporaries::track_child(child.id());
+    let pid = child.id();
     // Read stderr until the child closes it, so a full pipe cannot stall it.
     let mut stderr = Vec::new();
     if let Some(mut pipe) = child.stderr.take() {
         pipe.read_to_end(&mut stderr)
             .with_context(|| format!("cannot read the stderr of {command:?}"))?;
     }
-    let (status, peak_rss_mib) =
-        wait_with_peak_rss(child).with_context(|| format!("cannot wait for {command:?}"))?;
+    let waited = wait_with_peak_rss(child);
+    temporaries::forget_child(pid);
+    let (status, peak_rss_mib) = waited.with_context(|| format!("cannot wait for {command:?}"))?;
     let wall_s = watch.elapsed_ms() * 1e-3;
     if !status.success() {
         let text = String::from_utf8_lossy(&stderr);
@@ -193,6 +198,7 @@ impl TemporaryDirectory {
         let _ = std::fs::remove_dir_all(&path);
         std::fs::create_dir(&path)
             .with_context(|| format!("cannot create the directory {}", path.display()))?;
+        temporaries::track(&path);
         Ok(Self(path))
     }
 }
@@ -200,6 +206,7 @@ impl TemporaryDirectory {
 impl Drop for TemporaryDirectory {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.0);
+        temporaries::forget(&self.0);
     }
 }
 

@@ -1,12 +1,39 @@
 //! Temporary files and folders a run makes (outputs being written beside their
-//! final names, decompressed logs, copies of a database and its WAL), registered
-//! so that an interrupted run removes them: a signal's handler calls
-//! [`remove_all`], which no `Drop` would run.
+//! final names, decompressed logs, copies of a database and its WAL) and the child
+//! processes it starts (`bench --tools`' timed tools), registered so that an
+//! interrupted run stops and removes them: a signal's handler calls [`clean_up`],
+//! which no `Drop` would run.
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// The running children, and whether the run is being cleaned up (a child started
+/// after that is stopped at once).
+static CHILDREN: Mutex<(Vec<u32>, bool)> = Mutex::new((Vec::new(), false));
+
+/// How long [`clean_up`] waits for stopped children to exit (each removes its own
+/// temporaries first) before removing the folders they wrote into.
+const CHILD_GRACE: Duration = Duration::from_secs(3);
+
+/// Registers a child process until [`forget_child`].
+pub fn track_child(pid: u32) {
+    if let Ok(mut children) = CHILDREN.lock() {
+        children.0.push(pid);
+        if children.1 {
+            terminate(pid);
+        }
+    }
+}
+
+/// Unregisters a child that has exited.
+pub fn forget_child(pid: u32) {
+    if let Ok(mut children) = CHILDREN.lock() {
+        children.0.retain(|&p| p != pid);
+    }
+}
 
 /// Registers a temporary file or folder until [`forget`].
 pub fn track(path: &Path) {
@@ -22,8 +49,52 @@ pub fn forget(path: &Path) {
     }
 }
 
-/// Removes every registered file and folder (from a signal's handler).
-pub fn remove_all() {
+/// Whether [`clean_up`] has begun: an error from a child it stopped is no error of
+/// the run's.
+pub fn cleaning_up() -> bool {
+    CHILDREN.lock().is_ok_and(|children| children.1)
+}
+
+/// Stops every registered child (SIGTERM: it removes its own temporaries and exits),
+/// waits for them a while, then removes every registered file and folder (from a
+/// signal's handler).
+pub fn clean_up() {
+    let children = match CHILDREN.lock() {
+        Ok(mut children) => {
+            children.1 = true;
+            children.0.clone()
+        }
+        Err(_) => Vec::new(),
+    };
+    children.iter().for_each(|&pid| terminate(pid));
+    let deadline = Instant::now() + CHILD_GRACE;
+    while children.iter().any(|&pid| running(pid)) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    remove_all();
+}
+
+fn terminate(pid: u32) {
+    if let Ok(pid) = libc::pid_t::try_from(pid) {
+        // SAFETY: kill has no memory effects; `pid` is a child this process started
+        // and has not reaped (it is forgotten once waited for).
+        unsafe {
+            libc::kill(pid, libc::SIGTERM);
+        }
+    }
+}
+
+/// Whether process `pid` still runs (exists and is not a zombie awaiting its wait).
+fn running(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|stat| {
+        // `pid (command) state ...`: the command may hold spaces and parentheses.
+        stat.rsplit_once(')')
+            .is_some_and(|(_, rest)| !rest.trim_start().starts_with(['Z', 'X']))
+    })
+}
+
+/// Removes every registered file and folder.
+fn remove_all() {
     if let Ok(paths) = TEMPORARIES.lock() {
         for path in paths.iter() {
             match path.is_dir() {
@@ -53,9 +124,22 @@ mod tests {
             track(path);
         }
         forget(&kept);
-        remove_all();
+        clean_up();
         assert!(!file.exists() && !folder.exists() && kept.exists());
         forget(&file);
         forget(&folder);
+    }
+
+    #[test]
+    fn a_registered_child_is_stopped() {
+        let mut child = std::process::Command::new("sleep")
+            .arg("30")
+            .spawn()
+            .unwrap();
+        track_child(child.id());
+        clean_up();
+        let status = child.wait().unwrap();
+        assert!(!status.success(), "{status:?}");
+        forget_child(child.id());
     }
 }
