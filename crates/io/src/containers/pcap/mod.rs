@@ -285,6 +285,28 @@ mod tests {
     }
 
     #[test]
+    fn a_damaged_record_length_is_an_error_not_the_end() {
+        let small = udp(2368, &[1, 2, 3]);
+        let frames: Vec<Vec<u8>> = (0..4)
+            .map(|k| frame(true, 17, k, 0, false, &small))
+            .collect();
+        let file = capture(&frames, None);
+        let whole = std::fs::read(file.path()).unwrap();
+        // The second record's captured length: past the snap length, or past its
+        // packet's own length (read as the start of a cut record before).
+        let second = 24 + 16 + frames[0].len();
+        let packet = frames[1].len() as u32;
+        for damaged in [0x7fff_ffff, packet + 1] {
+            let mut bytes = whole.clone();
+            bytes[second + 8..second + 12].copy_from_slice(&damaged.to_le_bytes());
+            std::fs::write(file.path(), &bytes).unwrap();
+            let problem = PcapFile::open(file.path()).err().unwrap().to_string();
+            assert!(problem.contains("damaged"), "{problem}");
+            assert!(problem.contains(&format!("byte {second}")), "{problem}");
+        }
+    }
+
+    #[test]
     fn what_is_not_a_capture_travmap_reads_is_named() {
         let file = tempfile::NamedTempFile::new().unwrap();
         let mut header = vec![0xd4, 0xc3, 0xb2, 0xa1, 2, 0, 4, 0];

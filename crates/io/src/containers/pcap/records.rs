@@ -39,6 +39,8 @@ pub(super) enum Capture {
 }
 
 const CLASSIC_HEADER: usize = 24;
+/// The largest snap length a capture tool writes (tcpdump's default, 256 KiB).
+const MAX_SNAP_LENGTH: usize = 262_144;
 const RECORD_HEADER: usize = 16;
 const BYTE_ORDER_MAGIC: u32 = 0x1A2B_3C4D;
 
@@ -64,13 +66,26 @@ pub(super) fn read(bytes: &[u8]) -> Result<(Capture, usize, Option<usize>), Stri
     let link = Link::of(link_type).ok_or_else(|| {
         format!("link type {link_type}: travmap reads Ethernet, Linux cooked and raw IPv4 captures")
     })?;
+    // No record holds more than the capture's snap length (writers set 65535 or
+    // 262144; 0 in some, meaning no limit but the largest link frame).
+    let snap_length = match read_u32(bytes, 16, big_endian) as usize {
+        0 => MAX_SNAP_LENGTH,
+        length => length.max(u16::MAX as usize),
+    };
     let mut at = CLASSIC_HEADER;
-    while at < bytes.len() {
-        let next = (at + RECORD_HEADER <= bytes.len())
-            .then(|| read_u32(bytes, at + 8, big_endian) as usize)
-            .and_then(|captured| (at + RECORD_HEADER).checked_add(captured))
-            .filter(|&next| next <= bytes.len());
-        match next {
+    while at + RECORD_HEADER <= bytes.len() {
+        let captured = read_u32(bytes, at + 8, big_endian) as usize;
+        let original = read_u32(bytes, at + 12, big_endian) as usize;
+        // A length no writer gives is damage, not the end of a cut capture: the
+        // records after it would be lost without a word.
+        if captured > snap_length || captured > original {
+            return Err(format!(
+                "the record at byte {at} claims {captured} bytes of a {original}-byte packet (the capture's snap length is {snap_length}): the file is damaged there"
+            ));
+        }
+        match (at + RECORD_HEADER + captured <= bytes.len())
+            .then_some(at + RECORD_HEADER + captured)
+        {
             Some(next) => at = next,
             None => break,
         }
