@@ -151,11 +151,13 @@ pub fn check_output_file(output: &Path, inputs: &InputFiles) -> Result<Preflight
         }
     }
     // Beside an input's own files is fine (a map next to calib.txt); in its folders
-    // (velodyne/, labels/) the next run would read the output as data.
+    // (velodyne/, labels/) the next run would read the output as data, and so it
+    // would a log beside the storage files of a rosbag2 folder without metadata.yaml
+    // (which reads every storage file it holds).
     let dir = parent_dir(output);
     if let (Some((input, is_input)), Ok(canonical_dir)) =
         (inputs.directory_holding(dir), std::fs::canonicalize(dir))
-        && (canonical_dir != input || !is_input)
+        && (canonical_dir != input || !is_input || read_as_storage(output, &input))
     {
         return Err(Error::OutputInsideInput {
             output: output.to_path_buf(),
@@ -178,6 +180,26 @@ pub fn check_output_file(output: &Path, inputs: &InputFiles) -> Result<Preflight
     std::fs::File::create(&probe).map_err(write_error)?;
     let _ = std::fs::remove_file(&probe);
     Ok(Preflight { removed_stale })
+}
+
+/// Storage files a rosbag2 folder without `metadata.yaml` reads, all of them.
+const STORAGE_EXTENSIONS: [&str; 3] = ["db3", "mcap", "zstd"];
+
+/// Whether `output`, written into the input folder `input`, would be read with it as
+/// one of its storage files: `input` holds some and no `metadata.yaml` naming them.
+fn read_as_storage(output: &Path, input: &Path) -> bool {
+    let storage = |path: &Path| {
+        path.extension()
+            .is_some_and(|e| STORAGE_EXTENSIONS.iter().any(|s| e.eq_ignore_ascii_case(s)))
+    };
+    let holds_storage = || {
+        std::fs::read_dir(input)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .any(|entry| storage(&entry.path()))
+    };
+    storage(output) && !input.join("metadata.yaml").exists() && holds_storage()
 }
 
 /// Checks that no two of `outputs` name the same file, however spelled.
@@ -254,6 +276,29 @@ fn process_is_alive(pid: i32) -> bool {
 mod tests {
     use super::*;
     use crate::atomic::TEMPORARY_INFIX;
+
+    #[test]
+    fn a_log_beside_the_storage_of_a_rosbag2_folder_without_metadata_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let bag = dir.path().join("bag");
+        std::fs::create_dir(&bag).unwrap();
+        std::fs::write(bag.join("bag_0.db3"), b"storage").unwrap();
+        let inputs = InputFiles::of(&[&bag]);
+        // Read as a second storage file by the next run.
+        let err = check_output_file(&bag.join("annotated.mcap"), &inputs).unwrap_err();
+        assert!(
+            err.to_string().contains("inside the input directory"),
+            "{err}"
+        );
+        // A picture is no storage file; with metadata.yaml only what it names is read.
+        check_output_file(&bag.join("map.png"), &inputs).unwrap();
+        std::fs::write(
+            bag.join("metadata.yaml"),
+            b"rosbag2_bagfile_information: {}",
+        )
+        .unwrap();
+        check_output_file(&bag.join("annotated.mcap"), &inputs).unwrap();
+    }
 
     #[test]
     fn every_spelling_of_an_input_is_refused() {
