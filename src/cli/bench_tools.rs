@@ -155,9 +155,12 @@ impl ToolSpec {
         given_kind: &str,
         model: Option<&Path>,
     ) -> Option<Vec<OsString>> {
+        if self.tool == "convert" {
+            return None;
+        }
         let mut arguments: Vec<OsString> = vec!["run".into(), input.into()];
         arguments.extend(self.reading_arguments(inputs, given_kind, model));
-        (self.tool != "convert").then_some(arguments)
+        Some(arguments)
     }
 
     /// What the row's tool and its method run share: quiet, the frames, how to read
@@ -389,16 +392,6 @@ pub fn print_tools_table(
         "fsync s",
         "x"
     )?;
-    let rss = |timing: &ToolTiming| {
-        timing
-            .peak_rss_mib
-            .map_or("-".to_string(), |mib| format!("{mib:.0}"))
-    };
-    let real_time = |timing: &ToolTiming| {
-        timing
-            .real_time
-            .map_or("-".to_string(), |times| format!("{times:.1}"))
-    };
     let figure = |value: Option<f64>, decimals: usize| {
         value.map_or("-".to_string(), |v| format!("{v:.decimals$}"))
     };
@@ -414,12 +407,12 @@ pub fn print_tools_table(
                 "{label:<34} {:>8.1} {:>8.1} {:>8} {:>8} {:>8.1} {:>8.1} {:>8} {:>8} {:>6.2}x {:>8} {:>8} {:>8}",
                 one_thread.frames_per_second,
                 all_cores.frames_per_second,
-                real_time(one_thread),
-                real_time(all_cores),
+                figure(one_thread.real_time, 1),
+                figure(all_cores.real_time, 1),
                 one_thread.megabytes_per_second,
                 all_cores.megabytes_per_second,
-                rss(one_thread),
-                rss(all_cores),
+                figure(one_thread.peak_rss_mib, 0),
+                figure(all_cores.peak_rss_mib, 0),
                 speedup,
                 figure(all_cores.method_s, 2),
                 figure(row.synced_write_s, 2),

@@ -83,12 +83,11 @@ pub(super) fn read(bytes: &[u8]) -> Result<(Capture, usize, Option<usize>), Stri
                 "the record at byte {at} claims {captured} bytes of a {original}-byte packet (the capture's snap length is {snap_length}): the file is damaged there"
             ));
         }
-        match (at + RECORD_HEADER + captured <= bytes.len())
-            .then_some(at + RECORD_HEADER + captured)
-        {
-            Some(next) => at = next,
-            None => break,
+        let next = at + RECORD_HEADER + captured;
+        if next > bytes.len() {
+            break;
         }
+        at = next;
     }
     let cut = (at < bytes.len()).then_some(at);
     let capture = Capture::Classic {
