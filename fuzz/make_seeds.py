@@ -121,24 +121,29 @@ def first_message_per_topic(path: pathlib.Path) -> dict:
         return found
 
 
-def packet_scans(db: pathlib.Path, data_bytes: int = 1206, sized: bool = False, packets: int = 3) -> dict:
-    """The first packet message (VelodyneScan: `uint8[1206] data`; PandarScan:
-    `uint8[1500] data` and `uint32 size`) of a rosbag2 .db3 cut to its first packets,
-    as CDR and as ROS 1, and the same packets as nebula's NebulaPackets (CDR,
-    `uint8[] data`)."""
+def packet_scans(
+    db: pathlib.Path, data_bytes: int = 1206, sized: bool = False, packets: int = 3, flagged: bool = False, message: int = 0, first: int = 0
+) -> dict:
+    """A packet message (VelodyneScan: `uint8[1206] data`; PandarScan:
+    `uint8[1500] data` and `uint32 size`; RobosenseScan: `uint8 is_difop` first) of a
+    rosbag2 .db3, the `message`-th, cut to `packets` from its `first`, as CDR and as ROS 1, and
+    the same packets as nebula's NebulaPackets (CDR, `uint8[] data`)."""
     import sqlite3
     import struct
 
-    buf = sqlite3.connect(db).execute("select data from messages order by timestamp limit 1").fetchone()[0]
+    rows = sqlite3.connect(db).execute("select data from messages order by timestamp").fetchall()
+    buf = rows[message][0]
     at = 4 + 8
     name_len = struct.unpack_from("<I", buf, at)[0]
     at = (at + 4 + name_len + 3) & ~3
     header, frame = buf[:at], buf[16 : 16 + name_len - 1]
     at += 4
     cut = []
-    for _ in range(packets):
+    for index in range(first + packets):
         at = (at + 3) & ~3
         sec, nsec = struct.unpack_from("<iI", buf, at)
+        flag = buf[at + 8 : at + 8 + flagged]
+        at += flagged
         data = buf[at + 8 : at + 8 + data_bytes]
         at += 8 + data_bytes
         size = b""
@@ -146,7 +151,8 @@ def packet_scans(db: pathlib.Path, data_bytes: int = 1206, sized: bool = False, 
             at = (at + 3) & ~3
             size = buf[at : at + 4]
             at += 4
-        cut.append((sec, nsec, data, size))
+        if index >= first:
+            cut.append((sec, nsec, flag + data, size))
     cdr = bytearray(header) + struct.pack("<I", len(cut))
     for sec, nsec, data, size in cut:
         cdr += b"\0" * ((4 - (len(cdr) - 4) % 4) % 4) + struct.pack("<iI", sec, nsec) + data
@@ -158,7 +164,7 @@ def packet_scans(db: pathlib.Path, data_bytes: int = 1206, sized: bool = False, 
         ros1 += struct.pack("<II", sec, nsec) + data + size
     nebula = bytearray(header) + struct.pack("<I", len(cut))
     for sec, nsec, data, size in cut:
-        packet = data[: struct.unpack("<I", size)[0]] if sized else data
+        packet = data[len(data) - data_bytes :][: struct.unpack("<I", size)[0]] if sized else data
         nebula += b"\0" * ((4 - (len(nebula) - 4) % 4) % 4) + struct.pack("<iII", sec, nsec, len(packet)) + packet
     return {"cdr": bytes(cdr), "ros1": ros1, "nebula": bytes(nebula)}
 
@@ -213,6 +219,12 @@ def main() -> None:
         seed("nebula_packets", f"{name}.cdr", scans.pop("nebula"))
         for encoding, body in scans.items():
             seed("pandar_scan", f"{name}.{encoding}", body)
+    # The Helios 16P's fourth message holds its DIFOP: the seed is cut around it.
+    helios = nebula / "helios16p/rosbag2_2023_08_03-11_02_46/rosbag2_2023_08_03-11_02_46_0.db3"
+    scans = packet_scans(helios, 1500, sized=True, packets=3, flagged=True, message=3, first=92)
+    seed("nebula_packets", "helios16p.cdr", scans.pop("nebula"))
+    for encoding, body in scans.items():
+        seed("robosense_scan", f"helios16p.{encoding}", body)
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = pathlib.Path(tmp)

@@ -2,7 +2,7 @@
 //! (`fixtures/nebula/xt32`, `xt16`, see fixtures/README.md): the scan nebula's test
 //! compares, cut from the same packets, point for point in nebula's order.
 
-use crate::common::{nebula_fixture, nebula_ground_truth};
+use crate::common::{nebula_fixture, nebula_ground_truth, point_for_point};
 
 use travmap_io::containers::log::Log;
 use travmap_io::format::InputFormat;
@@ -36,21 +36,6 @@ fn decode_like_nebula(
         }
     }
     panic!("no scan completed in the message logged at {truth_stamp}");
-}
-
-/// The same points in the same order, each within `tolerance_m`.
-fn point_for_point(name: &str, truth: &[[f32; 3]], decoded: &[[f32; 3]], tolerance_m: f32) {
-    assert_eq!(decoded.len(), truth.len(), "{name}: point count");
-    let worst = truth
-        .iter()
-        .zip(decoded)
-        .map(|(t, d)| (0..3).map(|i| (t[i] - d[i]).abs()).fold(0.0, f32::max))
-        .fold(0.0, f32::max);
-    println!(
-        "{name}: {} points, in nebula's order, the farthest {worst:e} m from nebula's",
-        truth.len()
-    );
-    assert!(worst <= tolerance_m, "{name}: a point {worst} m off");
 }
 
 #[test]

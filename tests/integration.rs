@@ -29,6 +29,7 @@ mod ouster;
 mod pcap;
 mod readme;
 mod real_frames;
+mod robosense;
 mod robustness;
 mod ros_logs;
 mod site_map;

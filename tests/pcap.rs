@@ -99,32 +99,110 @@ fn a_hesai_capture_with_vlan_tags_and_nanosecond_stamps_reads_as_its_packet_log(
     a_capture_is_its_packet_log("xt32/1673400677802009732", &["--nanoseconds", "--vlan"]);
 }
 
-/// A classic Ethernet pcap of UDP datagrams: (destination port, payload bytes) each.
+/// A classic Ethernet pcap of UDP datagrams: (destination port, payload bytes) each,
+/// a second apart.
 fn udp_capture(datagrams: &[(u16, usize)]) -> Vec<u8> {
+    let payloads: Vec<(u64, u16, Vec<u8>)> = (datagrams.iter().enumerate())
+        .map(|(n, &(port, bytes))| (n as u64 * 1_000_000_000, port, vec![7u8; bytes]))
+        .collect();
+    udp_capture_of(&payloads)
+}
+
+/// A classic Ethernet pcap (microseconds) of UDP datagrams: (capture time in ns,
+/// destination port, payload) each.
+fn udp_capture_of(datagrams: &[(u64, u16, Vec<u8>)]) -> Vec<u8> {
     let mut out = Vec::new();
     for word in [0xa1b2_c3d4u32.to_le_bytes(), [2, 0, 4, 0], [0; 4], [0; 4]] {
         out.extend(word);
     }
     out.extend(65_535u32.to_le_bytes());
     out.extend(1u32.to_le_bytes());
-    for (n, &(port, bytes)) in datagrams.iter().enumerate() {
+    for (n, (stamp_ns, port, payload)) in datagrams.iter().enumerate() {
         let mut frame = vec![0u8; 12];
         frame.extend([0x08, 0x00]);
-        let ip_length = (20 + 8 + bytes) as u16;
+        let ip_length = (20 + 8 + payload.len()) as u16;
         frame.extend([0x45, 0]);
         frame.extend(ip_length.to_be_bytes());
         frame.extend([0, n as u8, 0, 0, 64, 17, 0, 0, 10, 0, 0, 1, 10, 0, 0, 2]);
         frame.extend(40_000u16.to_be_bytes());
         frame.extend(port.to_be_bytes());
-        frame.extend(((8 + bytes) as u16).to_be_bytes());
+        frame.extend(((8 + payload.len()) as u16).to_be_bytes());
         frame.extend([0, 0]);
-        frame.extend(std::iter::repeat_n(7u8, bytes));
-        for value in [n as u32, 0, frame.len() as u32, frame.len() as u32] {
+        frame.extend(payload);
+        let (seconds, micros) = (stamp_ns / 1_000_000_000, stamp_ns % 1_000_000_000 / 1_000);
+        for value in [
+            seconds as u32,
+            micros as u32,
+            frame.len() as u32,
+            frame.len() as u32,
+        ] {
             out.extend(value.to_le_bytes());
         }
         out.extend(frame);
     }
     out
+}
+
+/// A RoboSense's capture, its data sent to port 6699 and its DIFOP to 7788 as the
+/// sensor sends them, reads as its packet log: the same frames, the same cells (the
+/// DIFOP, on a port of its own, still reaches the data's decoder).
+#[test]
+fn a_robosense_capture_with_its_difop_port_reads_as_its_packet_log() {
+    let log = nebula_fixture("helios16p/rosbag2_2023_08_03-11_02_46");
+    let mut datagrams = Vec::new();
+    for message in Log::open(&log, InputFormat::Rosbag2).unwrap().messages() {
+        let message = message.unwrap();
+        let type_name = message.connection.type_name().into_owned();
+        let encoding = message.connection.encoding().unwrap();
+        let scan = packet_message(&type_name, &message.data, encoding, message.log_time_ns);
+        for (stamp_ns, packet) in scan.unwrap().packets {
+            let port = if packet.starts_with(&[0xA5, 0xFF]) {
+                7788
+            } else {
+                6699
+            };
+            datagrams.push((stamp_ns, port, packet.to_vec()));
+        }
+    }
+    assert!(
+        datagrams.iter().any(|d| d.1 == 7788),
+        "the log holds a DIFOP"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let capture = dir.path().join("helios.pcap");
+    std::fs::write(&capture, udp_capture_of(&datagrams)).unwrap();
+    let mut topics = std::collections::BTreeMap::new();
+    for message in Log::open(&capture, InputFormat::Pcap).unwrap().messages() {
+        let message = message.unwrap();
+        let encoding = message.connection.encoding().unwrap();
+        let type_name = message.connection.type_name().into_owned();
+        let scan = packet_message(&type_name, &message.data, encoding, message.log_time_ns);
+        let difop = scan.unwrap().packets[0].1.starts_with(&[0xA5, 0xFF]);
+        *topics
+            .entry((message.connection.topic.clone(), difop))
+            .or_insert(0) += 1;
+    }
+    assert_eq!(
+        topics.into_iter().collect::<Vec<_>>(),
+        [
+            (("/udp_6699".to_string(), false), 750),
+            (("/udp_6699".to_string(), true), 1)
+        ],
+        "one topic, the DIFOP on it"
+    );
+    let (expected, read) = (frames(&log), frames(&capture));
+    assert_eq!(read.len(), expected.len(), "frames");
+    assert!(expected.len() >= 4, "{} frames", expected.len());
+    for (k, ((stamp, cells), (expected_stamp, expected_cells))) in
+        read.iter().zip(&expected).enumerate()
+    {
+        let (stamp, expected_stamp) = (stamp.as_u64().unwrap(), expected_stamp.as_u64().unwrap());
+        assert!(
+            stamp.abs_diff(expected_stamp) <= 999,
+            "frame {k}: stamp {stamp} for {expected_stamp}"
+        );
+        assert!(cells == expected_cells, "frame {k}: other cells");
+    }
 }
 
 /// A capture without LiDAR traffic says what it holds: each port's datagrams and

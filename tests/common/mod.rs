@@ -321,3 +321,18 @@ pub fn nebula_ground_truth(relative: &str) -> (u64, Vec<[f32; 3]>) {
         .points;
     (stamp, points.iter().map(|p| [p[0], p[1], p[2]]).collect())
 }
+
+/// The same points in the same order as nebula's, each within `tolerance_m`.
+pub fn point_for_point(name: &str, truth: &[[f32; 3]], decoded: &[[f32; 3]], tolerance_m: f32) {
+    assert_eq!(decoded.len(), truth.len(), "{name}: point count");
+    let worst = truth
+        .iter()
+        .zip(decoded)
+        .map(|(t, d)| (0..3).map(|i| (t[i] - d[i]).abs()).fold(0.0, f32::max))
+        .fold(0.0, f32::max);
+    println!(
+        "{name}: {} points, in nebula's order, the farthest {worst:e} m from nebula's",
+        truth.len()
+    );
+    assert!(worst <= tolerance_m, "{name}: a point {worst} m off");
+}

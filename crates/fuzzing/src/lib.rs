@@ -15,14 +15,14 @@ use travmap_outputs::dataset::reading::{Labels, read_training_rows};
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 23] = {
-    let mut all = [("model", model as Target); 23];
+pub const TARGETS: [(&str, Target); 24] = {
+    let mut all = [("model", model as Target); 24];
     let mut i = 0;
     while i < travmap_io::fuzzing::TARGETS.len() {
         all[i] = travmap_io::fuzzing::TARGETS[i];
         i += 1;
     }
-    all[22] = ("dataset_file", dataset_file);
+    all[23] = ("dataset_file", dataset_file);
     all
 };
 

@@ -1,6 +1,7 @@
 //! `cargo bench --bench velodyne`: LiDAR packets decoded and cut into scans on one
 //! thread, on nebula's test logs (`fixtures/nebula/`: Velodyne VLP-32C and VLP-16,
-//! Hesai Pandar XT32, XT16, XT32M, 40P, 64, QT64 and QT128): the median time per packet and per second of
+//! Hesai Pandar XT32, XT16, XT32M, 40P, 64, QT64 and QT128, RoboSense Helios 16P): the median
+//! time per packet and per second of
 //! recording, and the real-time factor (seconds of recording decoded per second).
 //! Asserts nothing about time.
 
@@ -45,6 +46,7 @@ fn main() {
         "qt64/1673401195788312575",
         "xt32m/1660893203042895158",
         "qt128/1730273789074637152",
+        "helios16p/rosbag2_2023_08_03-11_02_46",
     ]
     .map(|bag| format!("nebula/{bag}"))
     .into_iter()

@@ -28,7 +28,7 @@ pub type Target = fn(&[u8]);
 
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
 /// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 21] = [
+pub const TARGETS: [(&str, Target); 22] = [
     ("kitti_calib", kitti_calib),
     ("kitti_poses", kitti_poses),
     ("kitti_scan", kitti_scan),
@@ -47,6 +47,7 @@ pub const TARGETS: [(&str, Target); 21] = [
     ("las_file", las_file),
     ("velodyne_scan", velodyne_scan),
     ("pandar_scan", pandar_scan),
+    ("robosense_scan", robosense_scan),
     ("nebula_packets", nebula_packets),
     ("ouster_packets", ouster_packets),
     ("foxglove_message", foxglove_message),
@@ -344,6 +345,33 @@ pub fn pandar_scan(data: &[u8]) {
                         .iter()
                         .all(|p| p.xyz_m.iter().all(|v| v.is_finite()))
                 );
+            }
+        }
+    }
+}
+
+/// A `robosense_msgs/msg/RobosenseScan` message, CDR and then ROS 1: its packets
+/// decoded (the DIFOPs among them read) and cut into scans as a Helios 16P; and the
+/// bytes as a RoboSense angle CSV.
+pub fn robosense_scan(data: &[u8]) {
+    use crate::packets::robosense::{
+        RobosenseAssembler, RobosenseCalibration, RobosenseModel, robosense_scan_message,
+    };
+    use travmap_formats::ros::MessageEncoding;
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = RobosenseCalibration::from_csv(text);
+    }
+    for encoding in [MessageEncoding::Cdr, MessageEncoding::Ros1] {
+        let Ok(message) = robosense_scan_message(data, encoding) else {
+            continue;
+        };
+        let model = RobosenseModel::Helios16p;
+        let mut assembler = RobosenseAssembler::new(model, &RobosenseCalibration::builtin(model))
+            .expect("the generic table fits its model");
+        for (stamp_ns, packet) in message.packets {
+            if let Ok(Some(scan)) = assembler.push(packet, stamp_ns) {
+                let points = scan.points.iter().flat_map(|p| p.xyz_m);
+                assert!(points.clone().all(f32::is_finite));
             }
         }
     }

@@ -322,6 +322,24 @@ pub struct PandarPacket {
     pub size: u32,
 }
 
+/// `robosense_msgs/msg/RobosenseScan`: RoboSense packets, data and DIFOP, each the
+/// first `size` bytes of `data` (read in place by
+/// [`travmap_io::packets::robosense::robosense_scan_message`]); this type gives the
+/// schema logs recorded without one lack.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RobosenseScan {
+    pub header: Header,
+    pub packets: Vec<RobosensePacket>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RobosensePacket {
+    pub stamp: Time,
+    pub is_difop: u8,
+    pub data: FixedArray<u8, 1500>,
+    pub size: u32,
+}
+
 /// `nebula_msgs/msg/NebulaPackets`: nebula's packets of any sensor (read in place by
 /// [`travmap_io::packets::packet_message`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -378,6 +396,7 @@ pub fn known_schema(ros2_name: &str) -> Option<&'static str> {
         entry::<OccupancyGrid>(),
         entry::<VelodyneScan>(),
         entry::<PandarScan>(),
+        entry::<RobosenseScan>(),
         entry::<NebulaPackets>(),
     ];
     known
@@ -436,6 +455,11 @@ ros_message!(
     PandarScan,
     "pandar_msgs/msg/PandarScan",
     "pandar_msgs__PandarScan.msg"
+);
+ros_message!(
+    RobosenseScan,
+    "robosense_msgs/msg/RobosenseScan",
+    "robosense_msgs__RobosenseScan.msg"
 );
 ros_message!(
     NebulaPackets,

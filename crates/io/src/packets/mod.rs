@@ -1,11 +1,12 @@
 //! LiDAR packet topics whatever the vendor: Velodyne's `VelodyneScan`, Hesai's
-//! `PandarScan`, nebula's vendor-neutral `NebulaPackets` and ouster_ros's
-//! `PacketMsg`, each with its model (read from the packets; an Ouster's from its
+//! `PandarScan`, RoboSense's `RobosenseScan`, nebula's vendor-neutral `NebulaPackets`
+//! and ouster_ros's `PacketMsg`, each with its model (read from the packets; an Ouster's from its
 //! metadata), its calibration and its scan assembler, behind one face for the log
 //! index and the drive's frames.
 
 pub mod hesai;
 pub mod ouster;
+pub mod robosense;
 pub mod velodyne;
 
 use std::path::Path;
@@ -15,6 +16,10 @@ use crate::packets::hesai::{
 };
 use crate::packets::ouster::{
     OUSTER_PACKET_MESSAGES, OusterAssembler, OusterMetadata, OusterModel, packet_msg_message,
+};
+use crate::packets::robosense::{
+    ROBOSENSE_SCAN, RobosenseAssembler, RobosenseCalibration, RobosenseModel,
+    robosense_scan_message,
 };
 use crate::packets::velodyne::{
     Calibration, Decoder, DecoderSettings, PacketField, PacketScan, ScanAssembler, ScanMessage,
@@ -27,9 +32,10 @@ use travmap_formats::ros::MessageEncoding;
 pub const NEBULA_PACKETS: &str = "nebula_msgs/msg/NebulaPackets";
 
 /// The message types that carry packets.
-pub const PACKET_MESSAGES: [&str; 6] = [
+pub const PACKET_MESSAGES: [&str; 7] = [
     VELODYNE_SCAN,
     PANDAR_SCAN,
+    ROBOSENSE_SCAN,
     NEBULA_PACKETS,
     OUSTER_PACKET_MESSAGES[0],
     OUSTER_PACKET_MESSAGES[1],
@@ -41,6 +47,7 @@ pub const PACKET_MESSAGES: [&str; 6] = [
 pub enum PacketModel {
     Velodyne(VelodyneModel),
     Hesai(HesaiModel),
+    Robosense(RobosenseModel),
     Ouster(OusterModel),
 }
 
@@ -48,21 +55,26 @@ impl PacketModel {
     /// The model of a packet of a message of type `message_type`. A NebulaPackets
     /// packet is Hesai's if Hesai's header and length fit it (a Pandar 40P begins
     /// `FF EE` as Velodyne's blocks do, but is 1,262 bytes to their 1,206), else
-    /// Velodyne's. An Ouster's packets do not tell it: its metadata does.
+    /// RoboSense's if its identifier is, else Velodyne's. An Ouster's packets do not
+    /// tell it: its metadata does.
     pub fn of_packet(message_type: &str, packet: &[u8]) -> Result<Self, String> {
         match message_type {
             name if OUSTER_PACKET_MESSAGES.contains(&name) => {
                 Err("an Ouster packet's layout is in the sensor's metadata".into())
             }
             PANDAR_SCAN => HesaiModel::of_packet(packet).map(Self::Hesai),
+            ROBOSENSE_SCAN => RobosenseModel::of_packet(packet).map(Self::Robosense),
             NEBULA_PACKETS => HesaiModel::of_packet(packet)
                 .map(Self::Hesai)
-                .or_else(|hesai| {
-                    VelodyneModel::of_packet(packet)
+                .or_else(|hesai| match packet {
+                    [0x55, 0xAA, ..] | [0xA5, 0xFF, ..] => {
+                        RobosenseModel::of_packet(packet).map(Self::Robosense)
+                    }
+                    _ => VelodyneModel::of_packet(packet)
                         .map(Self::Velodyne)
                         .map_err(|velodyne| {
                             format!("neither Hesai's ({hesai}) nor Velodyne's ({velodyne})")
-                        })
+                        }),
                 }),
             _ => VelodyneModel::of_packet(packet).map(Self::Velodyne),
         }
@@ -72,6 +84,7 @@ impl PacketModel {
         match self {
             Self::Velodyne(model) => model.name(),
             Self::Hesai(model) => model.name(),
+            Self::Robosense(model) => model.name(),
             Self::Ouster(model) => model.name(),
         }
     }
@@ -91,19 +104,22 @@ pub fn packet_message<'a>(
             packet_msg_message(data, encoding, log_time_ns)
         }
         PANDAR_SCAN => pandar_scan_message(data, encoding),
+        ROBOSENSE_SCAN => robosense_scan_message(data, encoding),
         NEBULA_PACKETS => packets_message(data, encoding, PacketField::Sequence),
         _ => scan_message(data, encoding),
     }
 }
 
 /// A packet model's calibration: the file given (`--lidar-calibration`: the
-/// velodyne_pointcloud / nebula YAML, or Hesai's angle-correction CSV), else the
+/// velodyne_pointcloud / nebula YAML, Hesai's angle-correction CSV, RoboSense's angle
+/// CSV), else the
 /// model's built-in table. An Ouster's is its metadata, which the log index reads
 /// with its packets (`packet_topics.rs`).
 #[derive(Clone, Debug)]
 pub enum PacketCalibration {
     Velodyne(Calibration),
     Hesai(HesaiCalibration),
+    Robosense(RobosenseCalibration),
     Ouster(Box<OusterMetadata>),
 }
 
@@ -114,21 +130,38 @@ impl PacketCalibration {
                 Err("an Ouster's metadata is read with its packets, by the log index".into())
             }
             PacketModel::Velodyne(model) => Calibration::for_model(model, file).map(Self::Velodyne),
+            // A table of another model is refused here, naming both.
             PacketModel::Hesai(model) => {
                 let calibration = match file {
                     None => HesaiCalibration::builtin(model),
-                    Some(file) => {
-                        let text = std::fs::read_to_string(file)
-                            .map_err(|e| format!("{}: {e}", file.display()))?;
-                        HesaiCalibration::from_csv(&text)
-                            .map_err(|e| format!("{}: {e}", file.display()))?
-                    }
+                    Some(file) => table_file(file, HesaiCalibration::from_csv)?,
                 };
-                // A table of another model is refused here, naming both.
-                HesaiAssembler::new(model, &calibration)?;
+                HesaiAssembler::new(model, &calibration).map_err(|e| named(file, e))?;
                 Ok(Self::Hesai(calibration))
             }
+            PacketModel::Robosense(model) => {
+                let calibration = match file {
+                    None => RobosenseCalibration::builtin(model),
+                    Some(file) => table_file(file, RobosenseCalibration::from_csv)?,
+                };
+                RobosenseAssembler::new(model, &calibration).map_err(|e| named(file, e))?;
+                Ok(Self::Robosense(calibration))
+            }
         }
+    }
+}
+
+/// An angle table file read by `parse`; its errors name the file.
+fn table_file<T>(file: &Path, parse: fn(&str) -> Result<T, String>) -> Result<T, String> {
+    let text = std::fs::read_to_string(file).map_err(|e| named(Some(file), e.to_string()))?;
+    parse(&text).map_err(|e| named(Some(file), e))
+}
+
+/// `problem`, naming the file it is about, when there is one.
+fn named(file: Option<&Path>, problem: String) -> String {
+    match file {
+        Some(file) => format!("{}: {problem}", file.display()),
+        None => problem,
     }
 }
 
@@ -136,6 +169,7 @@ impl PacketCalibration {
 pub enum PacketAssembler {
     Velodyne(ScanAssembler),
     Hesai(Box<HesaiAssembler>),
+    Robosense(Box<RobosenseAssembler>),
     Ouster(Box<OusterAssembler>),
 }
 
@@ -148,6 +182,9 @@ impl PacketAssembler {
             }
             (PacketModel::Hesai(model), PacketCalibration::Hesai(calibration)) => {
                 Self::Hesai(Box::new(HesaiAssembler::new(model, calibration)?))
+            }
+            (PacketModel::Robosense(model), PacketCalibration::Robosense(calibration)) => {
+                Self::Robosense(Box::new(RobosenseAssembler::new(model, calibration)?))
             }
             (PacketModel::Ouster(model), PacketCalibration::Ouster(metadata))
                 if metadata.model == model =>
@@ -178,6 +215,7 @@ impl PacketAssembler {
             match self {
                 Self::Velodyne(assembler) => scans.extend(assembler.push(packet, stamp_ns)?),
                 Self::Hesai(assembler) => scans.extend(assembler.push(packet, stamp_ns)?),
+                Self::Robosense(assembler) => scans.extend(assembler.push(packet, stamp_ns)?),
                 Self::Ouster(assembler) => scans.extend(assembler.push(packet, stamp_ns)?),
             }
         }

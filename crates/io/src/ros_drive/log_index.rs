@@ -447,7 +447,7 @@ impl LogIndex {
                     Some(datagrams) if contents.cloud_stamps.is_empty() => Error::LogContainer {
                         path: path.to_path_buf(),
                         problem: format!(
-                            "no LiDAR packets among its UDP datagrams ({datagrams}): travmap reads Velodyne's (1,206 bytes), Hesai's and Ouster's (the metadata's size); a capture of another port or sensor?"
+                            "no LiDAR packets among its UDP datagrams ({datagrams}): travmap reads Velodyne's (1,206 bytes), Hesai's, RoboSense's (1,248) and Ouster's (the metadata's size); a capture of another port or sensor?"
                         ),
                     },
                     _ => error,

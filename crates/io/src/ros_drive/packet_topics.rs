@@ -12,6 +12,7 @@ use crate::packets::ouster::{
     METADATA_MESSAGE, METADATA_TOPIC_NAME, OUSTER_FRAME, OUSTER_PACKET_MESSAGES, OusterAssembler,
     OusterMetadata, metadata_topic_of, string_message,
 };
+use crate::packets::robosense::{RobosenseAssembler, RobosenseCalibration};
 use crate::packets::velodyne::{DecoderSettings, ScanCutter};
 use crate::packets::{PacketCalibration, PacketModel, packet_message};
 use travmap_formats::ros::MessageEncoding;
@@ -22,10 +23,12 @@ const WAITING_BYTES: usize = 64 << 20;
 
 /// Where a packet topic's scans are cut, for their stamps: Velodyne's cut is on the
 /// packets' azimuths alone; Hesai's is per laser, on the points' corrected azimuths;
-/// an Ouster's on the frame ids of the packets.
+/// RoboSense's on its blocks' azimuths, after the packet's DIFOP; an Ouster's on the
+/// frame ids of the packets.
 enum PacketCut {
     Velodyne(ScanCutter),
     Hesai(Box<HesaiAssembler>),
+    Robosense(Box<RobosenseAssembler>),
     Ouster(Box<OusterAssembler>),
 }
 
@@ -198,6 +201,12 @@ impl PacketTopics {
                         stamps.push(scan.stamp_ns);
                     }
                 }
+                PacketCut::Robosense(assembler) => {
+                    check_model(*model, type_name, packet)?;
+                    if let Some(scan) = assembler.push(packet, *stamp_ns)? {
+                        stamps.push(scan.stamp_ns);
+                    }
+                }
                 PacketCut::Ouster(assembler) => {
                     stamps.extend(
                         assembler
@@ -214,7 +223,8 @@ impl PacketTopics {
         Ok(())
     }
 
-    /// A Velodyne or Hesai topic's model, from its first packet, and its cut.
+    /// A Velodyne, Hesai or RoboSense topic's model, from its first packet, and its
+    /// cut.
     fn cut_of(
         &self,
         topic: &str,
@@ -233,6 +243,15 @@ impl PacketTopics {
                 };
                 let assembler = HesaiAssembler::new(hesai, &calibration)?;
                 PacketCut::Hesai(Box::new(assembler.stamps_only()))
+            }
+            PacketModel::Robosense(robosense) => {
+                let file = self.calibrations.for_topic(topic).map(|f| f.as_path());
+                let calibration = match PacketCalibration::for_model(model, file) {
+                    Ok(PacketCalibration::Robosense(calibration)) => calibration,
+                    _ => RobosenseCalibration::builtin(robosense),
+                };
+                let assembler = RobosenseAssembler::new(robosense, &calibration)?;
+                PacketCut::Robosense(Box::new(assembler.stamps_only()))
             }
             _ => PacketCut::Velodyne(ScanCutter::new(DecoderSettings::default().cut_angle_deg)),
         };

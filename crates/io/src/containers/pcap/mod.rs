@@ -1,10 +1,11 @@
 //! Packet captures (classic `.pcap` and pcapng, as tcpdump, Wireshark, VeloView and
 //! Ouster's SDK write them) of LiDAR packets, read as a log: each UDP port whose datagrams are
 //! a LiDAR's is a topic (`/udp_2368`), each datagram a message of the packet type
-//! travmap reads it as: Velodyne's and Hesai's (told apart by their bytes) as
-//! nebula's `NebulaPackets`, an Ouster's (larger than an Ethernet frame, so IP
-//! fragments, put back together here) as ouster_ros's `PacketMsg`. Other ports
-//! (Velodyne's position packets, an Ouster's IMU) and other traffic are left out.
+//! travmap reads it as: Velodyne's, Hesai's and RoboSense's (told apart by their
+//! bytes) as nebula's `NebulaPackets` (a RoboSense's DIFOP port joining its data
+//! port's topic), an Ouster's (larger than an Ethernet frame, so IP fragments, put
+//! back together here) as ouster_ros's `PacketMsg`. Other ports (Velodyne's position
+//! packets, an Ouster's IMU) and other traffic are left out.
 //! The capture's time stamps each packet.
 
 mod records;
@@ -18,6 +19,7 @@ use records::Capture;
 use udp::{Fragments, ipv4};
 
 use crate::packets::ouster::{OUSTER_PACKET_MESSAGES, PACKET_MSG_SCHEMA};
+use crate::packets::robosense::RobosenseModel;
 use crate::packets::{NEBULA_PACKETS, PacketModel};
 use travmap_core::error::{Error, Result};
 use travmap_formats::log_message::{Connection, Damage, FileMap, LogMessage};
@@ -71,13 +73,21 @@ impl PcapFile {
     pub fn messages(&self) -> impl Iterator<Item = std::result::Result<LogMessage, Damage>> + '_ {
         let mut datagrams = self.datagrams();
         let mut topics: HashMap<u16, Option<Arc<Connection>>> = HashMap::new();
+        // A RoboSense sends its DIFOP to a port of its own: they join its data's topic.
+        let mut robosense: Option<Arc<Connection>> = None;
         std::iter::from_fn(move || {
             for (stamp_ns, port, payload) in datagrams.by_ref() {
-                let connection = topics
-                    .entry(port)
-                    .or_insert_with(|| connection(port, &payload));
-                let Some(connection) = connection else {
-                    continue;
+                let connection = topics.entry(port).or_insert_with(|| {
+                    let connection = connection(port, &payload);
+                    if let Some(c) = connection.as_ref().filter(|_| is_robosense(&payload)) {
+                        robosense.get_or_insert_with(|| c.clone());
+                    }
+                    connection
+                });
+                let connection = match (connection, &robosense) {
+                    (Some(connection), _) => connection,
+                    (None, Some(data)) if RobosenseModel::is_difop(&payload) => data,
+                    (None, _) => continue,
                 };
                 let data = match connection.schema_name.as_str() {
                     NEBULA_PACKETS => encode(
@@ -147,10 +157,20 @@ impl PcapFile {
     }
 }
 
-/// A port's topic, by its first datagram: a Velodyne or Hesai packet's, an
-/// Ouster's (a datagram past an Ethernet frame), or none.
+fn is_robosense(packet: &[u8]) -> bool {
+    matches!(
+        PacketModel::of_packet(NEBULA_PACKETS, packet),
+        Ok(PacketModel::Robosense(_))
+    )
+}
+
+/// A port's topic, by its first datagram: a Velodyne, Hesai or RoboSense data
+/// packet's, an Ouster's (a datagram past an Ethernet frame), or none (a RoboSense's
+/// DIFOP port among them).
 fn connection(port: u16, first: &[u8]) -> Option<Arc<Connection>> {
-    let (schema_name, schema) = if PacketModel::of_packet(NEBULA_PACKETS, first).is_ok() {
+    let (schema_name, schema) = if RobosenseModel::is_difop(first) {
+        return None;
+    } else if PacketModel::of_packet(NEBULA_PACKETS, first).is_ok() {
         (NEBULA_PACKETS, NebulaPackets::SCHEMA)
     } else if first.len() > ETHERNET_MTU {
         (OUSTER_PACKET_MESSAGES[0], PACKET_MSG_SCHEMA)

@@ -27,12 +27,14 @@ pub(crate) enum PacketField {
     Fixed(usize),
     /// `uint8[N] data`, `uint32 size`: the packet is the first `size` bytes (Hesai's).
     FixedSized(usize),
+    /// `uint8 flag`, then as `FixedSized` (RoboSense's).
+    FlagThenFixedSized(usize),
     /// `uint8[] data` (nebula's).
     Sequence,
 }
 
 /// Reads a message of a header and packets (`time stamp`, then the packet as
-/// `field` says), as Velodyne's, Hesai's and nebula's packet messages are, without
+/// `field` says), as Velodyne's, Hesai's, RoboSense's and nebula's packet messages are, without
 /// copying the packets.
 pub(crate) fn packets_message(
     data: &[u8],
@@ -64,7 +66,9 @@ pub(crate) fn packets_message(
     let count = reader.u32()? as usize;
     // A packet takes at least its stamp and its length.
     let least_bytes = match field {
-        PacketField::Fixed(bytes) | PacketField::FixedSized(bytes) => bytes,
+        PacketField::Fixed(bytes)
+        | PacketField::FixedSized(bytes)
+        | PacketField::FlagThenFixedSized(bytes) => bytes,
         PacketField::Sequence => 12,
     };
     if count > data.len() / least_bytes {
@@ -75,7 +79,10 @@ pub(crate) fn packets_message(
         let stamp = reader.stamp(encoding)?;
         let packet = match field {
             PacketField::Fixed(bytes) => reader.bytes(bytes)?,
-            PacketField::FixedSized(bytes) => {
+            PacketField::FixedSized(bytes) | PacketField::FlagThenFixedSized(bytes) => {
+                if matches!(field, PacketField::FlagThenFixedSized(_)) {
+                    reader.bytes(1)?;
+                }
                 let packet = reader.bytes(bytes)?;
                 let size = reader.u32()? as usize;
                 packet
