@@ -101,6 +101,21 @@ fn adapt_is_deterministic_records_its_provenance_and_never_reads_labels() {
         );
         assert_eq!(summary["counts"][count], adaptation[count]);
     }
+    // It fitted what the drive uses: no hybrid (the sample has no images) and no
+    // fallback (every scan has remission): the prior's is carried.
+    let said = |part: &str| adaptation[part].as_str().unwrap().to_string();
+    assert!(
+        said("hybrid").starts_with("none: no camera"),
+        "{}",
+        said("hybrid")
+    );
+    assert!(model["hybrid"].is_null());
+    assert!(
+        said("fallback").starts_with("the prior's"),
+        "{}",
+        said("fallback")
+    );
+    assert!(model["fallback"] == model["prior"]["fallback"]);
     // The settings it was adapted with are the model's configuration.
     assert_eq!(model["config"]["vehicle"]["width_m"], 1.6);
     assert_eq!(model["config"]["adapt"]["learner"], "sum");
@@ -135,6 +150,84 @@ fn adapt_is_deterministic_records_its_provenance_and_never_reads_labels() {
             "labels changed the adapted model"
         );
     }
+}
+
+/// `--keep-going` skips a damaged scan of the drive adapted to, says so and exits 3
+/// (the drives were once opened again for the summary, which forgot the skip).
+#[test]
+fn a_skipped_scan_is_reported_by_adapt() {
+    let Some(sample) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let copy = sample_copy(&sample, dir.path(), None, None);
+    let damaged = copy.join("velodyne/000003.bin");
+    std::fs::remove_file(&damaged).unwrap();
+    std::fs::write(&damaged, [0u8; 10]).unwrap();
+    let model = dir.path().join("m.json");
+    let out = travmap(&["adapt", arg(&copy), "-o", arg(&model), "--keep-going"]);
+    assert_eq!(
+        out.status.code(),
+        Some(3),
+        "{}",
+        crate::common::stderr(&out)
+    );
+    assert!(crate::common::stderr(&out).contains("skipped frame 3 of"));
+    assert!(model.exists());
+}
+
+/// Clouds without intensity (PCDs of x, y, z) are classified by the model's fallback
+/// without remission: that is what adapt fits (it once panicked on their shorter
+/// cells), the prior's model with remission kept, and the adapted model classifies
+/// the drive.
+#[test]
+fn clouds_without_remission_adapt_the_fallback() {
+    let Some(sample) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let clouds = dir.path().join("clouds");
+    std::fs::create_dir(&clouds).unwrap();
+    for entry in std::fs::read_dir(sample.join("velodyne")).unwrap() {
+        let scan = entry.unwrap().path();
+        let bytes = std::fs::read(&scan).unwrap();
+        let points = bytes.len() / 16;
+        let mut pcd = format!(
+            "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {points}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {points}\nDATA binary\n"
+        )
+        .into_bytes();
+        for point in bytes.chunks_exact(16) {
+            pcd.extend_from_slice(&point[..12]);
+        }
+        let name = scan.with_extension("pcd");
+        std::fs::write(clouds.join(name.file_name().unwrap()), pcd).unwrap();
+    }
+    let model = dir.path().join("m.json");
+    let settings = ["--set", "adapt.min_footprint_cells=20"];
+    let out = travmap(&[&["adapt", arg(&clouds), "-o", arg(&model)][..], &settings].concat());
+    let err = crate::common::stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("6 of 6 frames have no usable remission"),
+        "{err}"
+    );
+    let written = read_json(&model);
+    let reason = written["training"]["adaptation"]["fallback"]
+        .as_str()
+        .unwrap();
+    assert!(reason.starts_with("fitted to the drives"), "{reason}");
+    assert!(
+        written["fallback"]["prior"].is_object(),
+        "the fallback carries its prior"
+    );
+    assert_eq!(written["config"]["features"]["groups"][0], "remission");
+    let out = travmap(&["run", arg(&clouds), "--model", arg(&model), "--json"]);
+    let (frames, _) = crate::common::json_records(&success(out));
+    assert_eq!(frames.len(), 6);
+    assert!(
+        frames.iter().all(|f| f["without_remission"] == true),
+        "{frames:?}"
+    );
 }
 
 #[test]

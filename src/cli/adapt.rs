@@ -8,6 +8,7 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use travmap_core::Config;
+use travmap_drive::Selection;
 use travmap_method::classifier::SvmModel;
 use travmap_outputs::atomic::write_atomically;
 use travmap_training::adaptation::{Adapted, adapt as adapt_model};
@@ -43,9 +44,8 @@ pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
     check_output(model_path, &args.inputs.files(args.model.path.as_deref()))?;
     note_extension(model_path, "json", "a travmap model (JSON)");
     let (prior, prior_name) = args.model.load(config)?;
-    let adapted = adapted_model(&args.inputs, config, &prior, &prior_name, output)?;
+    let (adapted, selections) = adapted_model(&args.inputs, config, &prior, &prior_name, output)?;
     write_atomically(model_path, &adapted.model.to_json())?;
-    let selections = args.inputs.open(false)?;
     let model = &adapted.model;
     let summary = model.training.adaptation.as_ref();
     if output.json {
@@ -55,7 +55,7 @@ pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
             "prior": {"name": prior_name, "sha256": prior.sha256_hex()},
             "counts": adapted.counts,
             "adaptation": summary,
-            "support_vectors": model.support_vector_count(),
+            "support_vectors": adapted.fitted().support_vector_count(),
             "elapsed_ms": model.training.seconds * 1e3,
             "config": config,
         });
@@ -69,12 +69,17 @@ pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
             counts.negative_cells,
             counts.unknown_cells
         );
+        let fitted = adapted.fitted();
         println!(
-            "adapted {prior_name} (adapt.learner {}, C {} gamma {}): {} support vectors on {} cells",
+            "adapted {}{prior_name} (adapt.learner {}, C {} gamma {}): {} support vectors on {} cells",
+            match adapted.fallback_fitted {
+                true => "the fallback without remission of ",
+                false => "",
+            },
             setting_word(&config.adapt.learner),
-            model.c,
-            model.gamma,
-            model.support_vector_count(),
+            fitted.c,
+            fitted.gamma,
+            fitted.support_vector_count(),
             summary.map_or(0, |s| s.fitted_cells)
         );
         println!("wrote {}", model_path.display());
@@ -83,14 +88,15 @@ pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
 }
 
 /// The prior adapted to the drives of `inputs` (opened afresh, without labels),
-/// with a progress bar and the notices on stderr.
+/// with a progress bar and the notices on stderr; and the drives as read (with the
+/// frames `--keep-going` skipped).
 pub fn adapted_model(
     inputs: &Inputs,
     config: &Config,
     prior: &SvmModel,
     prior_name: &str,
     output: &Output,
-) -> Result<Adapted> {
+) -> Result<(Adapted, Vec<Selection>)> {
     let mut selections = inputs.open(config.appearance.enabled)?;
     let bar = output.progress(frame_count(&selections), "adapting");
     let adapted = adapt_model(&mut selections, config, prior, prior_name, &mut || {
@@ -100,7 +106,7 @@ pub fn adapted_model(
     for notice in &adapted.notices {
         eprintln!("notice: {notice}");
     }
-    Ok(adapted)
+    Ok((adapted, selections))
 }
 
 /// `--adapt` of the commands that classify drives.
@@ -124,7 +130,7 @@ impl AdaptFlag {
         if !self.adapt {
             return Ok((model, name));
         }
-        let adapted = adapted_model(inputs, config, &model, &name, output)?;
+        let (adapted, _) = adapted_model(inputs, config, &model, &name, output)?;
         Ok((adapted.model, format!("{name}, adapted to these drives")))
     }
 }

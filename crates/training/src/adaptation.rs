@@ -10,12 +10,13 @@ use std::collections::HashSet;
 use serde::Serialize;
 
 use super::reduced_set::fit_folded_reduced_set;
-use super::{Reduce, Search, train_by};
-use travmap_core::config::{Config, Learner};
+use super::{REMISSION_COLUMNS, Reduce, Search, config_without_remission, train_by};
+use travmap_core::config::{Config, FeatureGroup, Learner};
 use travmap_core::error::{Error, Result};
 use travmap_core::random::SplitMix64;
 use travmap_drive::{Fingerprints, Selection};
 use travmap_method::classifier::{AdaptationSummary, AdaptedInput, SvmModel};
+use travmap_method::features::feature_count;
 use travmap_method::footprint::PathKind;
 use travmap_method::training_set::TrainingSet;
 
@@ -78,6 +79,18 @@ pub struct Adapted {
     pub counts: SelfLabelCounts,
     /// What the user should hear (straight footprints, ...).
     pub notices: Vec<String>,
+    /// The drives had no usable remission: what was fitted is the model's fallback.
+    pub fallback_fitted: bool,
+}
+
+impl Adapted {
+    /// The part of the model fitted to the drives.
+    pub fn fitted(&self) -> &SvmModel {
+        match (&self.model.fallback, self.fallback_fitted) {
+            (Some(fallback), true) => fallback,
+            _ => &self.model,
+        }
+    }
 }
 
 /// Adapts `prior` (named `prior_name`) to the drives of `selections`: see the
@@ -103,6 +116,7 @@ pub fn adapt(
     let mut inputs = Vec::new();
     let mut notices = Vec::new();
     let mut trajectory_m = 0.0;
+    let mut frames_without_remission = 0;
     for selection in selections.iter_mut() {
         selection.source.set_read_labels(false);
         selection.fingerprint_scans = Fingerprints::All;
@@ -112,6 +126,7 @@ pub fn adapt(
         let mut straight = 0;
         selection.run::<Error>(&grid_config, Some(prior), |result| {
             counts.frames += 1;
+            frames_without_remission += usize::from(result.without_remission);
             scans.extend(result.scan_sha256.clone());
             if matches!(result.footprint, Some((_, PathKind::Straight))) {
                 straight += 1;
@@ -183,10 +198,40 @@ pub fn adapt(
         )));
     }
 
-    let labelled = [positives.cells, negatives.cells].concat();
+    // Frames without usable remission give cells without its columns, and are
+    // classified by the model's fallback: then the prior's fallback is what is
+    // adapted (the cells' remission columns dropped). Otherwise no fallback is
+    // fitted: the prior's is kept.
+    let uses_remission = config.features.groups.contains(&FeatureGroup::Remission);
+    let without_remission = uses_remission && frames_without_remission > 0;
+    let (fit_config, fit_prior) = match (without_remission, prior.fallback.as_deref()) {
+        (true, Some(fallback)) => (config_without_remission(config), fallback),
+        (true, None) => {
+            return Err(refuse(format!(
+                "{frames_without_remission} frames have no usable remission and the prior has no model without it"
+            )));
+        }
+        (false, _) => (config.clone(), prior),
+    };
+    let (original_config, original_prior) = (config, prior);
+    let (config, prior) = (&fit_config, fit_prior);
+    let mut labelled = [positives.cells, negatives.cells].concat();
+    let mut unknown = unknown.cells;
+    if without_remission {
+        notices.push(format!(
+            "{}: {frames_without_remission} of {} frames have no usable remission: the prior's model without remission is adapted to the drives (frames with remission keep the prior's)",
+            path.display(),
+            counts.frames
+        ));
+        let full = feature_count(&original_config.features.groups);
+        for cell in labelled.iter_mut().chain(unknown.iter_mut()) {
+            if cell.features.len() == full {
+                cell.features.drain(REMISSION_COLUMNS);
+            }
+        }
+    }
     let mut drive = cells_to_set(&labelled, config);
     let unknown_features: Vec<f32> = unknown
-        .cells
         .iter()
         .flat_map(|c| c.features.iter().copied())
         .collect();
@@ -207,7 +252,8 @@ pub fn adapt(
             fit_folded_reduced_set(model, prior, weight, &rows, config)
         };
         let reduce = (a.learner == Learner::Sum).then_some(&folded as &Reduce);
-        let mut model = train_by(cells, config, search, reduce, &|_, _| {})?;
+        let mut model = train_by(cells, config, search, reduce, false, &|_, _| {})?;
+        model.fallback = prior.fallback.clone();
         if a.learner == Learner::Sum {
             model.prior = Some(Box::new(prior.clone()));
             model.prior_weight = weight;
@@ -218,33 +264,54 @@ pub fn adapt(
     let mut model = fit(&drive)?;
     // Self-training: the unknown cells the adapted model is sure of join its cells.
     for _ in 0..a.rounds {
-        let confident = confident_cells(&model, &unknown.cells, a.self_training_margin as f32);
+        let confident = confident_cells(&model, &unknown, a.self_training_margin as f32);
         if confident.is_empty() {
             break;
         }
         drive = cells_to_set(&[labelled.clone(), confident].concat(), config);
         model = fit(&drive)?;
     }
+    if without_remission {
+        // The drives' model classifies what they show, clouds without remission: it
+        // is the prior's fallback; clouds with remission keep the prior's model.
+        let mut outer = original_prior.clone();
+        outer.fallback = Some(Box::new(model));
+        model = outer;
+    }
     model.training.adaptation = Some(AdaptationSummary {
         self_supervised: true,
         learner: a.learner,
         prior: prior_name.to_string(),
-        prior_sha256: prior.sha256_hex(),
+        prior_sha256: original_prior.sha256_hex(),
         inputs,
         footprint_cells: counts.footprint_cells,
         negative_cells: counts.negative_cells,
         unknown_cells: counts.unknown_cells,
         fitted_cells: drive.len(),
         straight_path_frames: counts.straight_path_frames,
+        hybrid: match (&model.hybrid, drive.hybrid()) {
+            (Some(_), Some(seen)) => format!("fitted on the {} cells cameras saw", seen.len()),
+            _ => "none: no camera saw the drives' cells".into(),
+        },
+        fallback: match (uses_remission, without_remission) {
+            (false, _) => "none: the model has no remission features".into(),
+            (true, true) => format!(
+                "fitted to the drives, whose {frames_without_remission} frames had no usable remission (the model with remission is the prior's)"
+            ),
+            (true, false) => {
+                "the prior's: every frame had usable remission, so the drives use none".into()
+            }
+        },
     });
     model.training.sources = selections.iter().map(Selection::describe).collect();
     // It read no labels: what it knows of labelled scans is the prior's, so eval
     // still tells the prior's training scans from held-out ones.
-    model.training.frame_sha256 = prior.training.frame_sha256.clone();
+    model.training.frame_sha256 = original_prior.training.frame_sha256.clone();
     Ok(Adapted {
         model,
         counts,
         notices,
+        fallback_fitted: without_remission,
     })
 }
 

@@ -272,7 +272,7 @@ pub fn train(
     config: &Config,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SvmModel> {
-    train_by(set, config, Search::Grid, None, progress)
+    train_by(set, config, Search::Grid, None, true, progress)
 }
 
 /// A reduced set fitted in place of a model's own, given the model and the cells it
@@ -280,12 +280,15 @@ pub fn train(
 pub type Reduce<'a> = dyn Fn(&SvmModel, &TrainingSet) -> Option<ReducedSet> + Sync + 'a;
 
 /// [`train`] with C and gamma chosen as `search` says, and the model's reduced set
-/// by `reduce` when given (its hybrid and fallback always get their own).
+/// by `reduce` when given (its hybrid and fallback always get their own); the
+/// fallback without remission only when `fallback` asks (the caller supplies one
+/// otherwise: a model with remission features carries one).
 pub fn train_by(
     set: &TrainingSet,
     config: &Config,
     search: Search,
     reduce: Option<&Reduce>,
+    fallback: bool,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SvmModel> {
     check_left_out_features(set, config)?;
@@ -310,7 +313,10 @@ pub fn train_by(
                     let hybrid = set.hybrid()?;
                     Some(train_one(&hybrid, config, search, None, &part(1)))
                 },
-                || fallback_without_remission(set, config, search, &part(2)),
+                || match fallback {
+                    true => fallback_without_remission(set, config, search, &part(2)),
+                    false => Ok(None),
+                },
             )
         },
     );
@@ -343,6 +349,21 @@ fn check_left_out_features(set: &TrainingSet, config: &Config) -> Result<()> {
     }
 }
 
+/// Where a cell's remission features are, when it has them.
+pub const REMISSION_COLUMNS: std::ops::Range<usize> =
+    FEATURE_COUNT..FEATURE_COUNT + REMISSION_NAMES.len();
+
+/// `config` with its remission features taken out (and out of those left out).
+pub fn config_without_remission(config: &Config) -> Config {
+    let mut without = config.clone();
+    without.features = config.features.without_remission();
+    without
+        .training
+        .left_out_features
+        .retain(|name| !REMISSION_NAMES.contains(&name.as_str()));
+    without
+}
+
 /// Clouds without usable intensity get the same model without remission: the same
 /// cells with the remission columns left out, so no second pass is needed. None
 /// when the model has no remission features.
@@ -355,13 +376,8 @@ fn fallback_without_remission(
     if !config.features.groups.contains(&FeatureGroup::Remission) {
         return Ok(None);
     }
-    let mut without = config.clone();
-    without.features = config.features.without_remission();
-    without
-        .training
-        .left_out_features
-        .retain(|name| !REMISSION_NAMES.contains(&name.as_str()));
-    let columns = FEATURE_COUNT..FEATURE_COUNT + REMISSION_NAMES.len();
+    let without = config_without_remission(config);
+    let columns = REMISSION_COLUMNS;
     if set.dimension < columns.end {
         return Err(Error::Training(format!(
             "{} values per cell: too few for remission features ({} expected)",
@@ -374,6 +390,7 @@ fn fallback_without_remission(
         &without,
         search,
         None,
+        false,
         progress,
     )
     .map(Some)

@@ -60,6 +60,12 @@ pub struct AdaptationSummary {
     /// Frames whose footprint ran straight along the sensor's x axis (no
     /// trajectory beyond one pose).
     pub straight_path_frames: usize,
+    /// Which parts besides the geometric model were fitted to the drives, and why:
+    /// adaptation fits only what the drives use.
+    #[serde(default)]
+    pub hybrid: String,
+    #[serde(default)]
+    pub fallback: String,
 }
 
 /// A drive a model was adapted to.
@@ -436,6 +442,11 @@ impl SvmModel {
             && let Some(without) = grid.without_remission()
         {
             return self.margins(&without, settings);
+        }
+        // A fallback adapted to drives carries its own prior: it is the sum.
+        let model = self.model_for(&grid.groups);
+        if !std::ptr::eq(model, self) && model.prior.is_some() {
+            return model.margins(grid, settings);
         }
         let use_reduced_set = settings.use_reduced_set;
         let mut margins = self.own_margins(grid, use_reduced_set);
