@@ -305,6 +305,71 @@ fn success_output(output: std::process::Output) -> std::process::Output {
     output
 }
 
+/// A model file's error names the parameter that is wrong, as the file names it.
+#[test]
+fn a_model_error_names_its_parameter() {
+    let dir = sequence();
+    let seq = arg(dir.path());
+    let embedded = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("crates/method/src/classifier/default_model.json");
+    let model: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(embedded).unwrap()).unwrap();
+    let cases: [(&str, serde_json::Value, &str); 4] = [
+        (
+            "/gamma",
+            "x".into(),
+            "`gamma`: invalid type: string \"x\", expected f64",
+        ),
+        (
+            "/gamma",
+            (-1.0).into(),
+            "`gamma` is -1, a positive number expected",
+        ),
+        (
+            "/feature_std/3",
+            0.0.into(),
+            "`feature_std[3]` is 0, a positive deviation expected",
+        ),
+        (
+            "/config/grid/size_m",
+            "x".into(),
+            "`config.grid.size_m`: invalid type",
+        ),
+    ];
+    for (pointer, value, said) in cases {
+        let mut broken = model.clone();
+        *broken.pointer_mut(pointer).unwrap() = value;
+        let file = dir.path().join("broken.json");
+        std::fs::write(&file, serde_json::to_vec(&broken).unwrap()).unwrap();
+        let err = clean_failure(travmap(&["eval", seq, "--model", arg(&file)]));
+        assert_contains(&err, &["broken.json", said]);
+    }
+}
+
+/// A database that is not rosbag2's says what it lacks in words, not in SQL.
+#[test]
+fn a_sqlite_file_of_other_tables_is_named_without_sql() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("other.db3");
+    let database = rusqlite::Connection::open(&file).unwrap();
+    database
+        .execute_batch(
+            "CREATE TABLE topics(id INTEGER, name TEXT); \
+             CREATE TABLE messages(id INTEGER, topic_id INTEGER, timestamp INTEGER, data BLOB);",
+        )
+        .unwrap();
+    drop(database);
+    let err = clean_failure(eval(&file));
+    assert_contains(
+        &err,
+        &[
+            "other.db3: not a rosbag2 database: no such column: type",
+            "(expected: rosbag2's `topics` table: id, name, type, serialization_format)",
+        ],
+    );
+    assert!(!err.contains("SELECT"), "{err}");
+}
+
 #[test]
 fn bad_frame_range_and_model_file() {
     let dir = sequence();

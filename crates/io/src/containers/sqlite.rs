@@ -124,10 +124,10 @@ impl SqliteFile {
         );
         let mut statement = database
             .prepare_cached(&sql)
-            .map_err(|e| format!("cannot read the messages table: {e}"))?;
+            .map_err(unreadable(MESSAGES_COLUMNS))?;
         let mut rows = statement
             .query(params![after_id, PAGE_ROWS as i64])
-            .map_err(|e| format!("cannot read the messages table: {e}"))?;
+            .map_err(unreadable(MESSAGES_COLUMNS))?;
         let mut messages = Vec::with_capacity(PAGE_ROWS);
         let (mut last_id, mut bytes) = (None, 0);
         while let Some(row) = rows
@@ -221,19 +221,36 @@ fn uri_path(path: &Path) -> String {
     out
 }
 
+/// What rosbag2 writes in the tables travmap reads.
+const TOPICS_COLUMNS: &str = "rosbag2's `topics` table: id, name, type, serialization_format";
+const DEFINITIONS_COLUMNS: &str =
+    "rosbag2's `message_definitions` table: topic_type, encoding, encoded_message_definition";
+const MESSAGES_COLUMNS: &str = "rosbag2's `messages` table: id, topic_id, timestamp, data";
+
+/// A database error in words, without the SQL it came from, and what rosbag2 writes
+/// there (`expected`).
+fn unreadable(expected: &str) -> impl Fn(rusqlite::Error) -> String + '_ {
+    move |e| {
+        let problem = match &e {
+            rusqlite::Error::SqlInputError { msg, .. } => msg.clone(),
+            other => other.to_string(),
+        };
+        format!("not a rosbag2 database: {problem} (expected: {expected})")
+    }
+}
+
 /// The topics table, with each type's definition where the file has one (rosbag2
 /// from Iron on keeps them in `message_definitions`).
 fn topics(
     database: &rusqlite::Connection,
 ) -> std::result::Result<HashMap<i64, Arc<Connection>>, String> {
-    let unreadable = |e: rusqlite::Error| format!("not a rosbag2 database: {e}");
     let has_definitions: bool = database
         .query_row(
             "SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = 'message_definitions'",
             [],
             |row| row.get::<_, i64>(0),
         )
-        .map_err(unreadable)?
+        .map_err(unreadable("an SQLite file"))?
         > 0;
     let mut definitions: HashMap<String, (String, Vec<u8>)> = HashMap::new();
     if has_definitions {
@@ -241,7 +258,7 @@ fn topics(
             .prepare(
                 "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions",
             )
-            .map_err(unreadable)?;
+            .map_err(unreadable(DEFINITIONS_COLUMNS))?;
         let rows = statement
             .query_map([], |row| {
                 Ok((
@@ -250,9 +267,9 @@ fn topics(
                     row.get::<_, String>(2)?,
                 ))
             })
-            .map_err(unreadable)?;
+            .map_err(unreadable(DEFINITIONS_COLUMNS))?;
         for row in rows {
-            let (topic_type, encoding, text) = row.map_err(unreadable)?;
+            let (topic_type, encoding, text) = row.map_err(unreadable(DEFINITIONS_COLUMNS))?;
             if encoding != "unknown" {
                 definitions.insert(topic_type, (encoding, text.into_bytes()));
             }
@@ -260,7 +277,7 @@ fn topics(
     }
     let mut statement = database
         .prepare("SELECT id, name, type, serialization_format FROM topics")
-        .map_err(unreadable)?;
+        .map_err(unreadable(TOPICS_COLUMNS))?;
     let rows = statement
         .query_map([], |row| {
             Ok((
@@ -270,10 +287,11 @@ fn topics(
                 row.get::<_, String>(3)?,
             ))
         })
-        .map_err(unreadable)?;
+        .map_err(unreadable(TOPICS_COLUMNS))?;
     let mut connections = HashMap::new();
     for row in rows {
-        let (id, topic, schema_name, mut message_encoding) = row.map_err(unreadable)?;
+        let (id, topic, schema_name, mut message_encoding) =
+            row.map_err(unreadable(TOPICS_COLUMNS))?;
         // Some writers leave it empty (nebula's VLS-128 test bag); rosbag2 then plays
         // the messages as CDR, its one serialisation.
         if message_encoding.is_empty() {

@@ -117,8 +117,10 @@ impl SvmModel {
         }
         let mut header = header;
         older_configs(&mut header);
-        let file: ModelFile =
-            serde_json::from_value(header).map_err(|e| fail(format!("malformed model: {e}")))?;
+        // The error names the field (`gamma`, `config.grid.size_m`) where serde's alone
+        // would not.
+        let file: ModelFile = serde_path_to_error::deserialize(header)
+            .map_err(|e| fail(format!("malformed model: `{}`: {}", e.path(), e.inner())))?;
         let names = feature_names(&file.config.features.groups);
         let model = Self::from_file(file, source_name, &names)?;
         let uses_remission = model
@@ -168,18 +170,58 @@ impl SvmModel {
                 sv.len()
             )));
         }
-        let numbers = file
-            .feature_mean
-            .iter()
-            .chain(&file.feature_std)
-            .chain(&file.dual_coefficients)
-            .chain(file.support_vectors.iter().flatten());
-        if numbers.clone().any(|v| !v.is_finite())
-            || !(file.gamma.is_finite() && file.gamma > 0.0 && file.rho.is_finite())
-            || !file.threshold.is_finite()
-            || file.feature_std.iter().any(|s| *s <= 0.0)
+        // The first parameter out of range, named as the file names it.
+        let lists: [(&str, &[f32]); 3] = [
+            ("feature_mean", &file.feature_mean),
+            ("feature_std", &file.feature_std),
+            ("dual_coefficients", &file.dual_coefficients),
+        ];
+        let in_lists = lists.iter().find_map(|(name, values)| {
+            let at = values.iter().position(|v| !v.is_finite())?;
+            Some(format!(
+                "`{name}[{at}]` is {}, a finite number expected",
+                values[at]
+            ))
+        });
+        let in_vectors = || {
+            let (i, sv) = (file.support_vectors.iter().enumerate())
+                .find(|(_, sv)| sv.iter().any(|v| !v.is_finite()))?;
+            let at = sv.iter().position(|v| !v.is_finite())?;
+            Some(format!(
+                "`support_vectors[{i}][{at}]` is {}, a finite number expected",
+                sv[at]
+            ))
+        };
+        let scalars = [
+            ("gamma", file.gamma, true),
+            ("rho", file.rho, false),
+            ("threshold", file.threshold, false),
+        ];
+        let in_scalars = || {
+            scalars.iter().find_map(|&(name, value, positive)| {
+                (!value.is_finite() || (positive && value <= 0.0)).then(|| {
+                    let expected = if positive {
+                        "a positive number"
+                    } else {
+                        "a finite number"
+                    };
+                    format!("`{name}` is {value}, {expected} expected")
+                })
+            })
+        };
+        let in_std = || {
+            let at = file.feature_std.iter().position(|s| *s <= 0.0)?;
+            Some(format!(
+                "`feature_std[{at}]` is {}, a positive deviation expected (a left-out feature is written 1)",
+                file.feature_std[at]
+            ))
+        };
+        if let Some(problem) = in_lists
+            .or_else(in_vectors)
+            .or_else(in_scalars)
+            .or_else(in_std)
         {
-            return Err(fail("non-finite or non-positive parameters".into()));
+            return Err(fail(problem));
         }
         if let Some(name) = file
             .left_out_features
