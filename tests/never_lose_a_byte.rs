@@ -329,6 +329,33 @@ fn the_next_run_removes_what_a_killed_run_left() {
     assert_eq!(left, ["drive.mcap"]);
 }
 
+/// The pictures a killed `render --all` left in its folder are removed by the next
+/// run into it (they once stayed for good); a live run's are left alone.
+#[test]
+fn a_killed_render_alls_temporary_pictures_are_removed_by_the_next() {
+    let Some(sample) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let pictures = dir.path().join("pictures");
+    std::fs::create_dir(&pictures).unwrap();
+    // A process id above the kernel's largest is never alive; this test's is.
+    let dead = pictures.join(".000003.png.tmp-2147483646");
+    let alive = pictures.join(format!(".000004.png.tmp-{}", std::process::id()));
+    for file in [&dead, &alive] {
+        std::fs::write(file, b"half a picture").unwrap();
+    }
+    let out = travmap(&["render", arg(&sample), "--all", "-o", arg(&pictures), "-q"]);
+    let err = crate::common::stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("removed") && err.contains(".000003.png.tmp-2147483646"),
+        "{err}"
+    );
+    assert!(!dead.exists() && alive.exists());
+    assert!(pictures.join("000003.png").exists());
+}
+
 /// A tmpfs of `size` mounted on a new temporary directory, or None (with the
 /// reason printed) where mounting is not allowed.
 fn small_tmpfs(size: &str) -> Option<tempfile::TempDir> {

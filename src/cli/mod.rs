@@ -41,7 +41,9 @@ use travmap_drive::Selection;
 use travmap_io::ros_drive::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics};
 use travmap_io::{Source, SourceKind, SourceOptions};
 use travmap_method::classifier::SvmModel;
-use travmap_outputs::preflight::{InputFiles, check_output_directory, check_output_file};
+use travmap_outputs::preflight::{
+    InputFiles, Preflight, check_output_directory, check_output_file,
+};
 
 /// How a command ended: exit code 0, or 3 when it completed but skipped frames
 /// (`--keep-going`), as the mcap CLI reports data loss.
@@ -445,14 +447,17 @@ fn refuse_repeats(paths: &[PathBuf]) -> Result<()> {
 /// Before any work: the file `output` replaces none of `inputs` and can be written.
 /// Temporary files that killed runs left beside it are removed, and said so.
 pub fn check_output(output: &Path, inputs: &InputFiles) -> Result<()> {
-    let preflight = check_output_file(output, inputs)?;
+    say_removed(check_output_file(output, inputs)?);
+    Ok(())
+}
+
+fn say_removed(preflight: Preflight) {
     for stale in preflight.removed_stale {
         eprintln!(
             "removed {}, left by a travmap run that was killed",
             stale.display()
         );
     }
-    Ok(())
 }
 
 /// A note when `output`'s extension names another format than the `extension` it
@@ -471,7 +476,8 @@ pub fn note_extension(output: &Path, extension: &str, format: &str) {
 
 /// Before any work: the directory `output` (one file per frame) is no input's.
 pub fn check_output_dir(output: &Path, inputs: &InputFiles) -> Result<()> {
-    Ok(check_output_directory(output, inputs)?)
+    say_removed(check_output_directory(output, inputs)?);
+    Ok(())
 }
 
 /// Opens one input and checks that it has frames in `frames`; without `frames`,

@@ -11,7 +11,7 @@ use std::collections::HashSet;
 use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
-use crate::atomic::{temporary_path, temporary_prefix};
+use crate::atomic::{TEMPORARY_INFIX, temporary_path, temporary_prefix};
 use travmap_core::error::{Error, Result};
 
 /// A file's identity on this machine: (device, inode).
@@ -219,8 +219,8 @@ pub fn check_distinct_outputs(outputs: &[&Path]) -> Result<()> {
 /// Checks a directory that will receive one file per frame (`render --all`): it is
 /// no input directory nor inside one, and it exists or its parent does (the
 /// directory is made, as a file would be; missing parents are refused, as for any
-/// output).
-pub fn check_output_directory(output: &Path, inputs: &InputFiles) -> Result<()> {
+/// output). Temporary pictures a killed run left in it are removed.
+pub fn check_output_directory(output: &Path, inputs: &InputFiles) -> Result<Preflight> {
     let existing = if output.exists() {
         output
     } else {
@@ -232,28 +232,47 @@ pub fn check_output_directory(output: &Path, inputs: &InputFiles) -> Result<()> 
             directory: existing.to_path_buf(),
         });
     }
-    match inputs.directory_holding(existing) {
-        Some((input, _)) => Err(Error::OutputIsInput {
+    if let Some((input, _)) = inputs.directory_holding(existing) {
+        return Err(Error::OutputIsInput {
             output: output.to_path_buf(),
             input,
-        }),
-        None => Ok(()),
+        });
     }
+    Ok(Preflight {
+        removed_stale: remove_stale_temporaries_in(output),
+    })
 }
 
 /// Removes `.NAME.tmp-PID` files beside `output` whose process is gone.
 fn remove_stale_temporaries(output: &Path) -> Vec<PathBuf> {
-    let (Some(name), Ok(entries)) = (output.file_name(), std::fs::read_dir(parent_dir(output)))
-    else {
+    let Some(name) = output.file_name() else {
         return Vec::new();
     };
     let prefix = temporary_prefix(&name.to_string_lossy());
+    remove_dead_runs_files(parent_dir(output), |file| file.strip_prefix(&prefix))
+}
+
+/// Removes the temporary files (`.NAME.tmp-PID`, any NAME) in `dir` whose process
+/// is gone: a killed `render --all`'s pictures.
+fn remove_stale_temporaries_in(dir: &Path) -> Vec<PathBuf> {
+    remove_dead_runs_files(dir, |file| {
+        let hidden = file.strip_prefix('.')?;
+        Some(&hidden[hidden.rfind(TEMPORARY_INFIX)? + TEMPORARY_INFIX.len()..])
+    })
+}
+
+/// Removes the files of `dir` whose name `pid_of` reads a process id from, when that
+/// process is gone.
+fn remove_dead_runs_files(dir: &Path, pid_of: impl Fn(&str) -> Option<&str>) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
     let mut removed = Vec::new();
     for entry in entries.flatten() {
         let file_name = entry.file_name();
         let Some(pid) = file_name
             .to_str()
-            .and_then(|n| n.strip_prefix(&prefix))
+            .and_then(&pid_of)
             .and_then(|pid| pid.parse::<i32>().ok())
         else {
             continue;
