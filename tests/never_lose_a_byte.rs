@@ -329,6 +329,33 @@ fn the_next_run_removes_what_a_killed_run_left() {
     assert_eq!(left, ["drive.mcap"]);
 }
 
+/// A storage file a rosbag2 folder's metadata names outside the folder
+/// (`../outside.db3`) is an input like the folder's own: an output over it is refused
+/// (it was replaced).
+#[test]
+fn a_storage_file_the_metadata_names_outside_the_bag_is_an_input() {
+    let fixture = crate::common::nebula_fixture("helios16p/rosbag2_2023_08_03-11_02_46");
+    let dir = tempfile::tempdir().unwrap();
+    let (bag, outside) = (dir.path().join("bag"), dir.path().join("outside.db3"));
+    std::fs::create_dir(&bag).unwrap();
+    std::fs::copy(fixture.join("rosbag2_2023_08_03-11_02_46_0.db3"), &outside).unwrap();
+    let metadata = std::fs::read_to_string(fixture.join("metadata.yaml")).unwrap();
+    let metadata = metadata.replace("rosbag2_2023_08_03-11_02_46_0.db3", "../outside.db3");
+    std::fs::write(bag.join("metadata.yaml"), metadata).unwrap();
+    let before = std::fs::read(&outside).unwrap();
+    let out = travmap(&["convert", arg(&bag), "-o", arg(&outside)]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = crate::common::stderr(&out);
+    assert!(
+        err.contains("would overwrite the input") && err.contains("../outside.db3"),
+        "{err}"
+    );
+    assert!(
+        std::fs::read(&outside).unwrap() == before,
+        "the input was replaced"
+    );
+}
+
 /// The pictures a killed `render --all` left in its folder are removed by the next
 /// run into it (they once stayed for good); a live run's are left alone.
 #[test]

@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 
 use crate::atomic::{TEMPORARY_INFIX, temporary_path, temporary_prefix};
 use travmap_core::error::{Error, Result};
+use travmap_io::containers::rosbag2::listed_storage_files;
 
 /// A file's identity on this machine: (device, inode).
 type FileId = (u64, u64);
@@ -44,6 +45,14 @@ impl InputFiles {
         };
         let canonical = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
         if metadata.is_dir() {
+            // A rosbag2 folder's metadata may name storage files outside it.
+            for listed in listed_storage_files(path) {
+                let inside =
+                    std::fs::canonicalize(&listed).is_ok_and(|l| l.starts_with(&canonical));
+                if !inside {
+                    self.add(&listed, depth + 1);
+                }
+            }
             self.directories.push((canonical, depth == 0));
             // Sequence directories are two levels deep; a loop of links stops here.
             if depth < 4

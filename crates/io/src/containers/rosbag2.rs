@@ -51,6 +51,23 @@ impl Information {
     }
 }
 
+/// The storage files a rosbag2 directory's `metadata.yaml` lists, wherever they lie
+/// (a path may leave the directory: `../outside.db3`); none when it has no metadata
+/// or the metadata does not read.
+pub fn listed_storage_files(directory: &Path) -> Vec<PathBuf> {
+    let Ok(text) = std::fs::read_to_string(directory.join("metadata.yaml")) else {
+        return Vec::new();
+    };
+    let Ok(metadata) = serde_yaml_ng::from_str::<Metadata>(&text) else {
+        return Vec::new();
+    };
+    let listed = metadata.rosbag2_bagfile_information.relative_file_paths;
+    listed
+        .iter()
+        .map(|relative| directory.join(relative))
+        .collect()
+}
+
 /// A rosbag2 directory: its storage files in order, each with its format (sqlite3
 /// or MCAP), for [`super::log`] to open.
 pub struct Rosbag2Directory {
