@@ -1061,17 +1061,18 @@ fn a_recording_cut_short_is_read_as_far_as_it_goes() {
 }
 
 /// A record damaged in the middle of a complete MCAP (its summary and closing magic
-/// intact) is damage, not the end of a cut recording: a clear error, with or without
-/// --keep-going (it was read as a cut: 7 frames of 30, exit 0).
+/// intact) is damage, not the end of a cut recording (it was read as a cut: 7 frames
+/// of 30, exit 0): a clear error naming the chunk; with --keep-going its messages are
+/// left out, named, and reading resumes at the next chunk the summary indexes (or its
+/// end), the channels read from the summary (the first chunk holds them).
 #[test]
-fn a_damaged_record_in_a_complete_file_is_not_taken_for_its_end() {
+fn a_damaged_record_in_a_complete_file_is_stepped_over_by_keep_going() {
     let dir = tempfile::tempdir().unwrap();
     let Some((_, mcap)) = crate::common::sample_as_mcap(dir.path(), &["--compression", "none"])
     else {
         return;
     };
     let bytes = std::fs::read(&mcap).unwrap();
-    // The second chunk record (opcode 0x06), after the first.
     let mut offset = 8;
     let mut chunks = Vec::new();
     while bytes[offset] != 0x0F {
@@ -1082,22 +1083,34 @@ fn a_damaged_record_in_a_complete_file_is_not_taken_for_its_end() {
         offset += 9 + length as usize;
     }
     assert!(chunks.len() >= 2, "{chunks:?}");
-    for length in [40u64, 0x7fff_ffff] {
+    let frames = |output: &std::process::Output| {
+        let (frames, _) = crate::common::json_records(&String::from_utf8_lossy(&output.stdout));
+        frames.len()
+    };
+    for (chunk, length) in [(0, 0x7fff_ffffu64), (1, 40), (1, 0x7fff_ffff)] {
         let mut damaged = bytes.clone();
-        damaged[chunks[1] + 1..chunks[1] + 9].copy_from_slice(&length.to_le_bytes());
-        let path = dir.path().join(format!("damaged-{length}.mcap"));
+        let at = chunks[chunk];
+        damaged[at + 1..at + 9].copy_from_slice(&length.to_le_bytes());
+        let path = dir.path().join(format!("damaged-{chunk}-{length}.mcap"));
         std::fs::write(&path, damaged).unwrap();
-        for extra in [&[][..], &["--keep-going"]] {
-            let args = [&["run", arg(&path)][..], extra].concat();
-            let err = clean_failure(travmap(&args));
-            crate::common::assert_contains(
-                &err,
-                &[
-                    &format!("byte {}", chunks[1]),
-                    "the file is damaged there",
-                    "not cut short",
-                ],
-            );
-        }
+        let named = format!("the chunk at byte {at} ");
+        let err = clean_failure(travmap(&["run", arg(&path)]));
+        crate::common::assert_contains(
+            &err,
+            &[&named, "is damaged", "--keep-going reads on past it"],
+        );
+        let output = travmap(&["run", arg(&path), "--keep-going", "--json"]);
+        let err = crate::common::stderr(&output);
+        assert_eq!(
+            output.status.code(),
+            Some(3),
+            "chunk {chunk}, length {length}: {err}"
+        );
+        assert!(err.contains(&named), "{err}");
+        let read = frames(&output);
+        assert!(
+            (1..6).contains(&read),
+            "chunk {chunk}, length {length}: {read} frames"
+        );
     }
 }

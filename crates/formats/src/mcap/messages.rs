@@ -11,7 +11,7 @@ use mcap::records::{Record, op};
 use mcap::{McapError, Message};
 
 use crate::log_message::{ChunkSpan, Damage, FileMap, Part, Parts, in_parallel, part_of};
-use crate::mcap::records::{RecordWalk, check_lengths, chunk_parts};
+use crate::mcap::records::{RecordWalk, check_lengths, chunk_parts, summary_start};
 
 /// Bytes a pass reads before it gives the pages behind it back.
 const RELEASE_BYTES: usize = 32 << 20;
@@ -41,6 +41,9 @@ pub struct Messages<'a> {
     /// The data section's end, or the file's, was reached.
     walked: bool,
     done: bool,
+    /// Damaged stretches stepped over, in file order, each with why
+    /// ([`crate::mcap::records::Layout::damaged`]).
+    damaged: VecDeque<(ChunkSpan, String)>,
 }
 
 enum Pending<'a> {
@@ -88,7 +91,32 @@ impl<'a> Messages<'a> {
             channels: Default::default(),
             parts,
             done: false,
+            damaged: VecDeque::new(),
         }
+    }
+
+    /// These messages, the `damaged` stretches stepped over: each is a damaged chunk
+    /// whose messages are lost, read on after it.
+    /// The summary's schemas and channels are read first, so that messages after a
+    /// damaged chunk that held their channel still read.
+    pub fn stepping_over(mut self, damaged: Vec<(ChunkSpan, String)>) -> Self {
+        let whole = self.walk.bytes.ends_with(MAGIC);
+        if let Some(summary) =
+            summary_start(self.walk.bytes).filter(|_| whole && !damaged.is_empty())
+        {
+            let walk = RecordWalk {
+                bytes: self.walk.bytes,
+                offset: summary,
+            };
+            let definitions = walk
+                .map_while(Result::ok)
+                .filter(|(_, opcode, _)| matches!(*opcode, op::SCHEMA | op::CHANNEL));
+            for (_, opcode, body) in definitions {
+                self.batch.push_back(Pending::Record { opcode, body });
+            }
+        }
+        self.damaged = damaged.into();
+        self
     }
 
     /// Walks the next records up to `threads` chunks, and decompresses those.
@@ -109,6 +137,18 @@ impl<'a> Messages<'a> {
             && stored_chunks < STORED_PER_BATCH
             && self.batch.len() < RECORDS_PER_BATCH
         {
+            if let Some((span, _)) = self.damaged.front()
+                && span.bytes.start <= self.walk.offset
+            {
+                let (span, problem) = self.damaged.pop_front().expect("the front");
+                self.walk.offset = self.walk.offset.max(span.bytes.end);
+                self.batch.push_back(Pending::Chunk {
+                    span,
+                    records: Err((problem, Vec::new())),
+                    at: 0,
+                });
+                continue;
+            }
             match self.walk.next() {
                 // A cut file's readable part ends with its last complete record.
                 None => self.walked = true,

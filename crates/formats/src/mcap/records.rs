@@ -11,6 +11,8 @@
 
 use mcap::records::op;
 
+use crate::log_message::ChunkSpan;
+
 /// One field of a record, in the MCAP specification's order.
 #[derive(Clone, Copy)]
 enum Field {
@@ -181,6 +183,68 @@ pub struct Layout {
     /// The bag's metadata a rosbag2 MCAP keeps (its `rosbag2` metadata record's
     /// `serialized_metadata`): whether its messages are compressed one by one.
     pub rosbag2_metadata: Option<String>,
+    /// Damaged stretches of the data section that reading steps over, each with why:
+    /// a chunk whose declared size is wrong, or (in a whole file) a record that does
+    /// not read, up to the next chunk the summary's chunk index names.
+    pub damaged: Vec<(ChunkSpan, String)>,
+}
+
+/// Where a whole file's reading resumes after damage at `offset`: the next chunk its
+/// summary indexes, else its DataEnd record (just before the summary).
+fn resume_after(map: &[u8], indexed: &[(usize, u64, u64)], offset: usize) -> Option<usize> {
+    let next_chunk = indexed.iter().map(|c| c.0).find(|&start| start > offset);
+    next_chunk.or_else(|| {
+        let data_end = summary_start(map)?.checked_sub(13)?;
+        (data_end > offset && map[data_end] == op::DATA_END).then_some(data_end)
+    })
+}
+
+/// Where the summary of a file with a footer begins.
+pub(crate) fn summary_start(map: &[u8]) -> Option<usize> {
+    let footer = map.len().checked_sub(8 + 29)?;
+    let at = u64::from_le_bytes(map.get(footer + 9..footer + 17)?.try_into().ok()?);
+    usize::try_from(at)
+        .ok()
+        .filter(|&at| at >= 8 && at < footer)
+}
+
+/// Each chunk the summary's chunk indexes name: where it starts and the times of
+/// its messages (none for a file without a footer, or whose summary does not read).
+fn indexed_chunks(map: &[u8]) -> Vec<(usize, u64, u64)> {
+    let word = |bytes: &[u8], at: usize| -> Option<u64> {
+        Some(u64::from_le_bytes(bytes.get(at..at + 8)?.try_into().ok()?))
+    };
+    let Some(summary) = summary_start(map) else {
+        return Vec::new();
+    };
+    let footer = map.len() - 8 - 29;
+    let walk = RecordWalk {
+        bytes: &map[..footer],
+        offset: summary,
+    };
+    let mut chunks: Vec<(usize, u64, u64)> = walk
+        .map_while(Result::ok)
+        .filter(|(_, opcode, _)| *opcode == op::CHUNK_INDEX)
+        .filter_map(|(_, _, body)| {
+            let start = usize::try_from(word(body, 16)?).ok()?;
+            (map.get(start) == Some(&op::CHUNK)).then_some((start, word(body, 0)?, word(body, 8)?))
+        })
+        .collect();
+    chunks.sort_unstable();
+    chunks
+}
+
+/// The stretch from a damaged record at `offset` to `resume`, with the times of the
+/// indexed chunks in it.
+fn damaged_span(offset: usize, resume: usize, indexed: &[(usize, u64, u64)]) -> ChunkSpan {
+    let inside = indexed
+        .iter()
+        .filter(|(start, _, _)| (offset..resume).contains(start));
+    ChunkSpan {
+        bytes: offset..resume,
+        start_ns: inside.clone().map(|c| c.1).min().unwrap_or(0),
+        end_ns: inside.map(|c| c.2).max().unwrap_or(0),
+    }
 }
 
 /// Checks every chunk's declared uncompressed size before the mcap crate, which
@@ -198,19 +262,45 @@ pub fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
     let mut complete = walk.offset;
     let mut data_end = false;
     let mut rosbag2_metadata = None;
+    let mut damaged = Vec::new();
+    // A whole file ends with the footer and the closing magic; a recorder killed
+    // after the data section leaves neither.
+    let magic = b"\x89MCAP0\r\n";
+    let footer = map.len().checked_sub(magic.len() + 29);
+    let whole = map.ends_with(magic) && footer.is_some_and(|at| map[at] == op::FOOTER);
+    // In a whole file a record that does not read is stepped over to the next chunk
+    // its summary indexes.
+    let indexed = if whole {
+        indexed_chunks(map)
+    } else {
+        Vec::new()
+    };
     // Why the walk stopped before the data section's end, when a record did not read.
     let mut damage = None;
     // After the 8-byte magic. A malformed chunk header ends the walk, as does a
-    // record header cut short.
+    // record header cut short, unless the summary says where the next chunk is.
     while let Some(record) = walk.next() {
         let (offset, opcode, body) = match record {
             Ok(record) => record,
             Err(overrun) => {
-                damage = Some(format!(
+                let problem = format!(
                     "the record at byte {} (opcode 0x{:02x}) claims {} bytes where {} remain",
                     overrun.offset, overrun.opcode, overrun.length, overrun.available
-                ));
-                break;
+                );
+                match whole
+                    .then(|| resume_after(map, &indexed, overrun.offset))
+                    .flatten()
+                {
+                    Some(resume) => {
+                        damaged.push((damaged_span(overrun.offset, resume, &indexed), problem));
+                        walk.offset = resume;
+                        continue;
+                    }
+                    None => {
+                        damage = Some(problem);
+                        break;
+                    }
+                }
             }
         };
         complete = walk.offset;
@@ -224,9 +314,35 @@ pub fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
         if opcode != op::CHUNK {
             continue;
         }
+        // A damaged chunk's own header holds its messages' times.
+        let time = |at: usize| {
+            body.get(at..at + 8)
+                .map_or(0, |b| u64::from_le_bytes(b.try_into().unwrap_or_default()))
+        };
+        // In a whole file a damaged chunk's length is not trusted either: reading
+        // resumes where the summary says the next chunk is.
+        let resume = whole.then(|| resume_after(map, &indexed, offset)).flatten();
+        let mut span = ChunkSpan {
+            bytes: offset..walk.offset,
+            start_ns: time(0),
+            end_ns: time(8),
+        };
+        let mut step_over = |span: ChunkSpan, walk: &mut RecordWalk, problem: String| {
+            if let Some(resume) = resume {
+                walk.offset = resume;
+            }
+            damaged.push((span, problem));
+        };
+        if let Some(resume) = resume {
+            span.bytes.end = resume;
+        }
         let Some((declared, compression, records)) = chunk_parts(body) else {
-            damage = Some(format!("the chunk at byte {offset} has a malformed header"));
-            break;
+            step_over(
+                span,
+                &mut walk,
+                format!("the chunk at byte {offset} has a malformed header"),
+            );
+            continue;
         };
         let present = records.len() as u64;
         let plausible = declared <= TRUSTED_CHUNK_BYTES.max(present * TRUSTED_CHUNK_RATIO);
@@ -245,19 +361,21 @@ pub fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
             } else {
                 compression
             };
-            return Err(format!(
-                "chunk at byte {offset} declares {declared} bytes uncompressed, but its {present} bytes of {kind} data hold {actual}"
-            ));
+            step_over(
+                span,
+                &mut walk,
+                format!(
+                    "chunk at byte {offset} declares {declared} bytes uncompressed, but its {present} bytes of {kind} data hold {actual}"
+                ),
+            );
+            continue;
         }
-        if compression.is_empty() {
-            check_chunk_records(records).map_err(|e| format!("chunk at byte {offset}: {e}"))?;
+        if compression.is_empty()
+            && let Err(e) = check_chunk_records(records)
+        {
+            step_over(span, &mut walk, format!("chunk at byte {offset}: {e}"));
         }
     }
-    // A whole file ends with the footer and the closing magic; a recorder killed
-    // after the data section leaves neither.
-    let magic = b"\x89MCAP0\r\n";
-    let footer = map.len().checked_sub(magic.len() + 29);
-    let whole = map.ends_with(magic) && footer.is_some_and(|at| map[at] == op::FOOTER);
     // With its footer and closing magic the file was not cut short: a record that
     // does not read in the middle is damage, not its end (once read as a cut
     // recording: 7 frames of 30 and exit 0).
@@ -272,6 +390,7 @@ pub fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
     Ok(Layout {
         cut_at: (!(data_end && whole)).then_some(complete),
         rosbag2_metadata,
+        damaged,
     })
 }
 
@@ -478,7 +597,7 @@ mod tests {
     }
 
     #[test]
-    fn chunks_that_claim_more_than_they_hold_are_refused() {
+    fn chunks_that_claim_more_than_they_hold_are_stepped_over() {
         let payload: Vec<u8> = (0..4096u32).map(|i| (i * 7 % 251) as u8).collect();
         for compression in [
             Some(mcap::Compression::Zstd),
@@ -489,11 +608,18 @@ mod tests {
             assert!(check_chunk_sizes(&file).is_ok());
             let at = declared_size_offset(&file);
             file[at..at + 8].copy_from_slice(&(1u64 << 40).to_le_bytes());
-            let err = check_chunk_sizes(&file).unwrap_err();
+            // Never decompressed into the size it claims: a damaged chunk, its
+            // messages lost, named.
+            let layout = check_chunk_sizes(&file).unwrap();
+            let [(span, problem)] = &layout.damaged[..] else {
+                panic!("one damaged chunk: {layout:?}");
+            };
             assert!(
-                err.contains("declares 1099511627776 bytes uncompressed") && err.contains("hold"),
-                "{err}"
+                problem.contains("declares 1099511627776 bytes uncompressed")
+                    && problem.contains("hold"),
+                "{problem}"
             );
+            assert!(span.bytes.start < at && at < span.bytes.end);
         }
     }
 }

@@ -17,7 +17,7 @@ use super::sqlite::SqliteFile;
 use crate::format::{InputFormat, refuse};
 use travmap_core::error::{Error, LostMessage, Result};
 use travmap_formats::foxglove;
-use travmap_formats::log_message::HEADER_BYTES;
+use travmap_formats::log_message::{ChunkSpan, HEADER_BYTES};
 pub use travmap_formats::log_message::{
     Connection, Damage, FileMap, FileMessages, LogMessage, Part, Parts,
 };
@@ -354,6 +354,8 @@ pub struct McapFile {
     map: bytes::Bytes,
     /// For a file cut short: where its last complete record ends.
     cut_at: Option<usize>,
+    /// Damaged stretches its messages step over.
+    damaged: Vec<(ChunkSpan, String)>,
     /// Its own copy of a rosbag2 bag's metadata says each message is a zstd frame.
     zstd_messages: bool,
 }
@@ -379,6 +381,7 @@ impl McapFile {
             file,
             map,
             cut_at: layout.cut_at,
+            damaged: layout.damaged,
             zstd_messages: zstd_messages.unwrap_or(false),
         })
     }
@@ -414,33 +417,36 @@ impl McapFile {
     ) -> impl Iterator<Item = std::result::Result<LogMessage, Damage>> + 'a {
         let mut connections: HashMap<u16, Arc<Connection>> = HashMap::new();
         let readable = &self.map[..self.cut_at.unwrap_or(self.map.len())];
-        Messages::new(readable, Some(&self.file), threads, parts).map(move |message| {
-            let message = message?;
-            let channel = &message.channel;
-            let connection = connections.entry(channel.id).or_insert_with(|| {
-                let (schema_name, schema_encoding, schema_data) = match &channel.schema {
-                    Some(schema) => (
-                        schema.name.clone(),
-                        schema.encoding.clone(),
-                        schema.data.to_vec(),
-                    ),
-                    None => Default::default(),
-                };
-                Arc::new(Connection {
-                    topic: channel.topic.clone(),
-                    schema_name,
-                    schema_encoding,
-                    schema_data,
-                    message_encoding: channel.message_encoding.clone(),
+        let messages = Messages::new(readable, Some(&self.file), threads, parts);
+        messages
+            .stepping_over(self.damaged.clone())
+            .map(move |message| {
+                let message = message?;
+                let channel = &message.channel;
+                let connection = connections.entry(channel.id).or_insert_with(|| {
+                    let (schema_name, schema_encoding, schema_data) = match &channel.schema {
+                        Some(schema) => (
+                            schema.name.clone(),
+                            schema.encoding.clone(),
+                            schema.data.to_vec(),
+                        ),
+                        None => Default::default(),
+                    };
+                    Arc::new(Connection {
+                        topic: channel.topic.clone(),
+                        schema_name,
+                        schema_encoding,
+                        schema_data,
+                        message_encoding: channel.message_encoding.clone(),
+                    })
+                });
+                Ok(LogMessage {
+                    connection: connection.clone(),
+                    log_time_ns: message.log_time,
+                    publish_time_ns: message.publish_time,
+                    data: message.data.into_owned(),
                 })
-            });
-            Ok(LogMessage {
-                connection: connection.clone(),
-                log_time_ns: message.log_time,
-                publish_time_ns: message.publish_time,
-                data: message.data.into_owned(),
             })
-        })
     }
 }
 
