@@ -62,7 +62,7 @@ fn helios_16p_packets_decode_to_nebulas_points() {
 /// `convert` of the Helios 16P bag (recorded without message definitions, as
 /// rosbag2 before Iron records): the packet channel gets RobosenseScan's definition,
 /// whose messages decode as that type to the packets read in place, and each
-/// completed scan is a PointCloud2 beside them.
+/// completed scan is a PointCloud2 beside them; the model it was read as is said.
 #[test]
 fn a_converted_robosense_log_carries_its_packets_definition_and_its_clouds() {
     use travmap_formats::ros::{MessageEncoding, RobosenseScan, decode};
@@ -70,12 +70,11 @@ fn a_converted_robosense_log_carries_its_packets_definition_and_its_clouds() {
     let output = dir.path().join("helios.mcap");
     let bag = nebula_fixture(BAG);
     let bag = bag.to_str().unwrap();
-    crate::common::success(crate::common::travmap(&[
-        "convert",
-        bag,
-        "-o",
-        output.to_str().unwrap(),
-    ]));
+    let out = crate::common::travmap(&["convert", bag, "-o", output.to_str().unwrap()]);
+    // Which model the packets were read as is said (a Helios 32's look the same).
+    let said = crate::common::stderr(&out);
+    assert!(said.contains("read as a RoboSense Helios 16P's"), "{said}");
+    crate::common::success(out);
     let bytes = std::fs::read(&output).unwrap();
     let (mut packet_messages, mut clouds) = (0, 0);
     for message in mcap::MessageStream::new(&bytes).unwrap() {

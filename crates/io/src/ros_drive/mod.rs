@@ -202,6 +202,15 @@ impl RosDrive {
             let said = notice.take().map(|n| format!("{n}; ")).unwrap_or_default();
             notice = Some(format!("{said}{}: {lens}", log.path().display()));
         }
+        // A Helios 32 sends packets of the same form: the reading is said.
+        if let Some((PacketModel::Robosense(model), _)) = &packets {
+            let said = notice.take().map(|n| format!("{n}; ")).unwrap_or_default();
+            notice = Some(format!(
+                "{said}{}: its RoboSense Helios packets are read as a {}'s (a Helios 32 sends packets of the same form, which travmap does not decode yet)",
+                log.path().display(),
+                model.name()
+            ));
+        }
         let mut drive = Self {
             path: log.path().to_path_buf(),
             log,
