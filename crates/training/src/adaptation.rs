@@ -289,9 +289,12 @@ pub fn adapt(
         unknown_cells: counts.unknown_cells,
         fitted_cells: drive.len(),
         straight_path_frames: counts.straight_path_frames,
-        hybrid: match (&model.hybrid, drive.hybrid()) {
-            (Some(_), Some(seen)) => format!("fitted on the {} cells cameras saw", seen.len()),
-            _ => "none: no camera saw the drives' cells".into(),
+        hybrid: match &model.hybrid {
+            Some(hybrid) => format!(
+                "fitted on the {} cells cameras saw",
+                hybrid.training.samples
+            ),
+            None => "none: no camera saw the drives' cells".into(),
         },
         fallback: match (uses_remission, without_remission) {
             (false, _) => "none: the model has no remission features".into(),

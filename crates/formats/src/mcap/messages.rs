@@ -11,7 +11,7 @@ use mcap::records::{Record, op};
 use mcap::{McapError, Message};
 
 use crate::log_message::{ChunkSpan, Damage, FileMap, Part, Parts, in_parallel, part_of};
-use crate::mcap::records::{RecordWalk, check_lengths, chunk_parts, summary_start};
+use crate::mcap::records::{RecordWalk, check_lengths, chunk_parts, chunk_span, summary_start};
 
 /// Bytes a pass reads before it gives the pages behind it back.
 const RELEASE_BYTES: usize = 32 << 20;
@@ -162,10 +162,6 @@ impl<'a> Messages<'a> {
                 // After the data section the summary repeats schemas and channels.
                 Some(Ok((_, op::DATA_END, _))) => self.walked = true,
                 Some(Ok((offset, op::CHUNK, body))) => {
-                    let time = |at: usize| {
-                        body.get(at..at + 8)
-                            .map_or(0, |b| u64::from_le_bytes(b.try_into().unwrap_or_default()))
-                    };
                     let stored = chunk_parts(body).is_some_and(|(_, c, _)| c.is_empty());
                     let records = if stored {
                         stored_chunks += 1;
@@ -176,11 +172,7 @@ impl<'a> Messages<'a> {
                         Ok(Cow::Borrowed(body))
                     };
                     self.batch.push_back(Pending::Chunk {
-                        span: ChunkSpan {
-                            bytes: offset..self.walk.offset,
-                            start_ns: time(0),
-                            end_ns: time(8),
-                        },
+                        span: chunk_span(offset..self.walk.offset, body),
                         records,
                         at: 0,
                     });

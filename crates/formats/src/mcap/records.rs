@@ -189,6 +189,20 @@ pub struct Layout {
     pub damaged: Vec<(ChunkSpan, String)>,
 }
 
+/// A chunk record's place in the file (`bytes`) and its messages' times, from its
+/// `body`'s header (0 where it is too short to hold them).
+pub(crate) fn chunk_span(bytes: std::ops::Range<usize>, body: &[u8]) -> ChunkSpan {
+    let time = |at: usize| {
+        body.get(at..at + 8)
+            .map_or(0, |b| u64::from_le_bytes(b.try_into().unwrap_or_default()))
+    };
+    ChunkSpan {
+        bytes,
+        start_ns: time(0),
+        end_ns: time(8),
+    }
+}
+
 /// Where a whole file's reading resumes after damage at `offset`: the next chunk its
 /// summary indexes, else its DataEnd record (just before the summary).
 fn resume_after(map: &[u8], indexed: &[(usize, u64, u64)], offset: usize) -> Option<usize> {
@@ -269,12 +283,9 @@ pub fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
     let footer = map.len().checked_sub(magic.len() + 29);
     let whole = map.ends_with(magic) && footer.is_some_and(|at| map[at] == op::FOOTER);
     // In a whole file a record that does not read is stepped over to the next chunk
-    // its summary indexes.
-    let indexed = if whole {
-        indexed_chunks(map)
-    } else {
-        Vec::new()
-    };
+    // its summary indexes: the summary is read at the first damage, if any.
+    let indexed = std::cell::OnceCell::new();
+    let indexed = || indexed.get_or_init(|| indexed_chunks(map)).as_slice();
     // Why the walk stopped before the data section's end, when a record did not read.
     let mut damage = None;
     // After the 8-byte magic. A malformed chunk header ends the walk, as does a
@@ -288,11 +299,11 @@ pub fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
                     overrun.offset, overrun.opcode, overrun.length, overrun.available
                 );
                 match whole
-                    .then(|| resume_after(map, &indexed, overrun.offset))
+                    .then(|| resume_after(map, indexed(), overrun.offset))
                     .flatten()
                 {
                     Some(resume) => {
-                        damaged.push((damaged_span(overrun.offset, resume, &indexed), problem));
+                        damaged.push((damaged_span(overrun.offset, resume, indexed()), problem));
                         walk.offset = resume;
                         continue;
                     }
@@ -314,28 +325,20 @@ pub fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
         if opcode != op::CHUNK {
             continue;
         }
-        // A damaged chunk's own header holds its messages' times.
-        let time = |at: usize| {
-            body.get(at..at + 8)
-                .map_or(0, |b| u64::from_le_bytes(b.try_into().unwrap_or_default()))
-        };
-        // In a whole file a damaged chunk's length is not trusted either: reading
-        // resumes where the summary says the next chunk is.
-        let resume = whole.then(|| resume_after(map, &indexed, offset)).flatten();
-        let mut span = ChunkSpan {
-            bytes: offset..walk.offset,
-            start_ns: time(0),
-            end_ns: time(8),
-        };
-        let mut step_over = |span: ChunkSpan, walk: &mut RecordWalk, problem: String| {
-            if let Some(resume) = resume {
+        // A damaged chunk is stepped over, its times from its own header; in a whole
+        // file its length is not trusted either: reading resumes where the summary
+        // says the next chunk is.
+        let span = chunk_span(offset..walk.offset, body);
+        let mut step_over = |mut span: ChunkSpan, walk: &mut RecordWalk, problem: String| {
+            if let Some(resume) = whole
+                .then(|| resume_after(map, indexed(), offset))
+                .flatten()
+            {
+                span.bytes.end = resume;
                 walk.offset = resume;
             }
             damaged.push((span, problem));
         };
-        if let Some(resume) = resume {
-            span.bytes.end = resume;
-        }
         let Some((declared, compression, records)) = chunk_parts(body) else {
             step_over(
                 span,

@@ -2,7 +2,7 @@
 
 use super::calibration::HesaiCalibration;
 use super::model::{DistanceUnit, HesaiModel, Layout, packet_time_ns, returns_of};
-use crate::packets::velodyne::{PacketScan, VelodynePoint};
+use crate::packets::velodyne::{PacketScan, VelodynePoint, to_log_clock_ns};
 
 /// Two returns of one firing closer than this are one surface: the first is dropped.
 const DUAL_RETURN_THRESHOLD_M: f32 = 0.1;
@@ -142,10 +142,7 @@ impl HesaiAssembler {
         }
         let packet_ns = packet_time_ns(tail, layout)?;
         let loop_flag = layout.loop_flag_at.map_or(0, |at| tail[at]);
-        let to_log_clock_ns = match stamp_ns {
-            0 => 0,
-            stamp_ns => (i128::from(stamp_ns) - i128::from(packet_ns)) as i64,
-        };
+        let to_log_clock_ns = to_log_clock_ns(stamp_ns, packet_ns);
         // In f64 then rounded, as nebula computes them.
         let unit_m = match layout.unit_mm {
             DistanceUnit::HeaderByte(at) => f64::from(packet[at]),
@@ -284,19 +281,14 @@ impl HesaiAssembler {
         }
         if before != Some(next) && after == Some(next) {
             self.current = next;
-            let mut scan = std::mem::replace(
+            let scan = std::mem::replace(
                 &mut self.scans[current],
                 PacketScan {
                     stamp_ns: 0,
                     points: Vec::new(),
                 },
             );
-            let shift = self.to_log_clock_ns[current];
-            scan.stamp_ns = scan.stamp_ns.saturating_add_signed(shift);
-            for point in &mut scan.points {
-                point.time_ns = point.time_ns.saturating_add_signed(shift);
-            }
-            return Some(scan);
+            return Some(scan.shifted(self.to_log_clock_ns[current]));
         }
         None
     }

@@ -7,7 +7,7 @@ use super::model::{
     BLOCK_BYTES, BLOCK_ID, BLOCKS, CHANNEL_FIRING_US, DISTANCE_UNIT_M, FIRING_US, HEADER_BYTES,
     LENS_OFFSET_M, RANGE_M, RobosenseModel, TIME_AT,
 };
-use crate::packets::velodyne::{PacketScan, VelodynePoint};
+use crate::packets::velodyne::{PacketScan, VelodynePoint, to_log_clock_ns};
 
 const ROUND_CENTIDEG: i32 = 36_000;
 /// Blocks further apart than this span the field of view's blind part.
@@ -53,7 +53,6 @@ pub struct RobosenseAssembler {
     /// return, 600 rpm, the whole round seen.
     dual_return: bool,
     rounds_per_s: u16,
-    block_step_centideg: i32,
     blind_s: f64,
     /// The last block's azimuth (unwrapped below the cut), for the cut.
     previous_azimuth: i32,
@@ -85,7 +84,6 @@ impl RobosenseAssembler {
             rings: Vec::new(),
             dual_return: false,
             rounds_per_s: 10,
-            block_step_centideg: 0,
             blind_s: 0.0,
             previous_azimuth: 0,
             scan: None,
@@ -93,7 +91,6 @@ impl RobosenseAssembler {
             decode_points: true,
         };
         assembler.calibrate(calibration.clone());
-        assembler.block_step_centideg = assembler.block_step();
         Ok(assembler)
     }
 
@@ -135,7 +132,6 @@ impl RobosenseAssembler {
             0 => 10,
             rounds => rounds,
         };
-        self.block_step_centideg = self.block_step();
         let (start, end) = (
             i32::from(u16_at(DIFOP_FOV_AT)),
             i32::from(u16_at(DIFOP_FOV_AT + 2)),
@@ -166,18 +162,19 @@ impl RobosenseAssembler {
     fn block_steps(&self, azimuths: &[i32; BLOCKS]) -> [(i32, f64); BLOCKS] {
         let stride = if self.dual_return { 2 } else { 1 };
         let block_s = f64::from(FIRING_US / 1_000_000.0);
-        let mut steps = [(self.block_step_centideg, 0.0); BLOCKS];
+        let nominal = self.block_step();
+        let mut steps = [(nominal, 0.0); BLOCKS];
         let mut offset_s = 0.0;
         for first in (0..BLOCKS).step_by(stride) {
             let next = first + stride;
-            let mut step = (self.block_step_centideg, block_s);
+            let mut step = (nominal, block_s);
             if next < BLOCKS {
                 let mut azimuth_step = azimuths[next] - azimuths[first];
                 if azimuth_step < 0 {
                     azimuth_step += ROUND_CENTIDEG;
                 }
                 step = match azimuth_step > BLIND_GAP_CENTIDEG {
-                    true => (self.block_step_centideg, self.blind_s),
+                    true => (nominal, self.blind_s),
                     false => (azimuth_step, block_s),
                 };
             }
@@ -219,10 +216,7 @@ impl RobosenseAssembler {
         let packet_ns = seconds
             .saturating_mul(1_000_000_000)
             .saturating_add(micros * 1_000);
-        let to_log_clock_ns = match stamp_ns {
-            0 => 0,
-            stamp_ns => (i128::from(stamp_ns) - i128::from(packet_ns)) as i64,
-        };
+        let to_log_clock_ns = to_log_clock_ns(stamp_ns, packet_ns);
         let block = |b: usize| &packet[HEADER_BYTES + b * BLOCK_BYTES..][..BLOCK_BYTES];
         if let Some(b) = (0..BLOCKS).find(|&b| block(b)[..2] != BLOCK_ID) {
             return Err(format!(
@@ -244,12 +238,8 @@ impl RobosenseAssembler {
                     points: Vec::new(),
                 };
                 let shift = std::mem::replace(&mut self.to_log_clock_ns, to_log_clock_ns);
-                if let Some(mut scan) = self.scan.replace(next) {
-                    scan.stamp_ns = scan.stamp_ns.saturating_add_signed(shift);
-                    for point in &mut scan.points {
-                        point.time_ns = point.time_ns.saturating_add_signed(shift);
-                    }
-                    completed = Some(scan);
+                if let Some(scan) = self.scan.replace(next) {
+                    completed = Some(scan.shifted(shift));
                 }
             }
             if !self.decode_points {

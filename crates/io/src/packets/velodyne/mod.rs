@@ -33,7 +33,7 @@ pub use decoder::{Decoder, DecoderSettings, VelodynePoint};
 pub(crate) use message::{PacketField, packets_message};
 pub use message::{ScanMessage, VELODYNE_SCAN, scan_message};
 pub use packet::{PACKET_BYTES, VelodyneModel};
-pub use scans::{PacketScan, ScanAssembler, ScanCutter};
+pub use scans::{PacketScan, ScanAssembler, ScanCutter, to_log_clock_ns};
 
 #[cfg(test)]
 mod tests {
