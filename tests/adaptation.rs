@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use crate::common::{
     arg, assert_contains, clean_failure, json_summary, shared_data, stderr, success, travmap,
-    travmap_metadata, write_output,
+    travmap_metadata, usage_error, write_output,
 };
 use serde_json::Value;
 use travmap_outputs::dataset::reading::{Labels, read_training_rows};
@@ -268,9 +268,71 @@ fn drives_that_show_too_little_are_refused_with_the_reason() {
     ]));
     assert_contains(
         &err,
-        &["every self-label says traversable", "adapt.negative_margin"],
+        &[
+            "every self-label says traversable",
+            "adapt.negative_margin",
+            "adapt.unlabelled_weight",
+        ],
     );
     assert!(!model.exists());
+}
+
+#[test]
+fn the_footprint_is_learnt_against_the_unknown_cells_when_they_weigh() {
+    let Some(sample) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("pu.json");
+    // No negative self-label at all: the unknown cells are the negatives.
+    let out = success(travmap(&[
+        "adapt",
+        arg(&sample),
+        "-o",
+        arg(&model),
+        "--json",
+        "--set",
+        "adapt.negative_margin=1000",
+        "--set",
+        "adapt.geometric_negatives=false",
+        "--set",
+        "adapt.unlabelled_weight=1",
+    ]));
+    let summary: Value = serde_json::from_str(out.lines().last().unwrap()).unwrap();
+    let adaptation = &summary["adaptation"];
+    assert_eq!(adaptation["negative_cells"], 0);
+    let unknown = adaptation["unknown_cells"].as_u64().unwrap();
+    let fitted = adaptation["fitted_cells"].as_u64().unwrap();
+    let footprint = adaptation["footprint_cells"].as_u64().unwrap();
+    assert!(unknown > 0 && fitted > footprint, "{adaptation}");
+    // The adapted model calls some cells of the drive obstacles: it learnt a boundary.
+    let report: Value = serde_json::from_str(
+        success(travmap(&[
+            "eval",
+            arg(&sample),
+            "--model",
+            arg(&model),
+            "--json",
+            "-q",
+        ]))
+        .lines()
+        .last()
+        .unwrap(),
+    )
+    .unwrap();
+    let confusion = &report["report"]["confusion"];
+    let called_obstacles = confusion["tn"].as_u64().unwrap() + confusion["fn"].as_u64().unwrap();
+    assert!(called_obstacles > 0, "{confusion}");
+    // A weight below 0 is refused, naming the setting.
+    let err = usage_error(travmap(&[
+        "adapt",
+        arg(&sample),
+        "-o",
+        arg(&model),
+        "--set",
+        "adapt.unlabelled_weight=-1",
+    ]));
+    assert_contains(&err, &["adapt.unlabelled_weight must be >= 0"]);
 }
 
 #[test]

@@ -191,9 +191,10 @@ pub fn adapt(
             counts.footprint_cells, a.min_footprint_cells
         )));
     }
-    if counts.negative_cells == 0 {
+    let unlabelled_learnt = a.unlabelled_weight > 0.0 && counts.unknown_cells > 0;
+    if counts.negative_cells == 0 && !unlabelled_learnt {
         return Err(refuse(format!(
-            "no cell is an obstacle (over vehicle.clearance_m = {} m) or rejected by the prior with a margin of -{} or less, so every self-label says traversable; lower adapt.negative_margin or adapt on a drive with obstacles",
+            "no cell is an obstacle (over vehicle.clearance_m = {} m) or rejected by the prior with a margin of -{} or less, so every self-label says traversable; lower adapt.negative_margin, learn the unknown cells as negatives (adapt.unlabelled_weight) or adapt on a drive with obstacles",
             config.vehicle.clearance_m, a.negative_margin
         )));
     }
@@ -230,7 +231,19 @@ pub fn adapt(
             }
         }
     }
-    let mut drive = cells_to_set(&labelled, config);
+    // Positive-unlabelled learning: the unknown cells are negatives of their own
+    // weight.
+    let unlabelled_weight = a.unlabelled_weight as f32;
+    let to_set = |labelled: &[DriveCell], unlabelled: &[DriveCell]| {
+        let mut set = cells_to_set(labelled, config);
+        for cell in unlabelled.iter().filter(|_| unlabelled_weight > 0.0) {
+            let appearance = cell.appearance.as_deref();
+            let centre = cell.centre_in_world;
+            set.push_weighted(&cell.features, appearance, false, centre, unlabelled_weight);
+        }
+        set
+    };
+    let mut drive = to_set(&labelled, &unknown);
     let unknown_features: Vec<f32> = unknown
         .iter()
         .flat_map(|c| c.features.iter().copied())
@@ -264,11 +277,11 @@ pub fn adapt(
     let mut model = fit(&drive)?;
     // Self-training: the unknown cells the adapted model is sure of join its cells.
     for _ in 0..a.rounds {
-        let confident = confident_cells(&model, &unknown, a.self_training_margin as f32);
+        let (confident, unsure) = confident_cells(&model, &unknown, a.self_training_margin as f32);
         if confident.is_empty() {
             break;
         }
-        drive = cells_to_set(&[labelled.clone(), confident].concat(), config);
+        drive = to_set(&[labelled.clone(), confident].concat(), &unsure);
         model = fit(&drive)?;
     }
     if without_remission {
@@ -360,25 +373,32 @@ fn with_prior_cells(set: &TrainingSet, prior: &SvmModel, prior_weight: f64) -> T
 }
 
 /// The unknown cells `model` classifies with a margin of at least `margin`, now
-/// labelled by it.
-fn confident_cells(model: &SvmModel, unknown: &[DriveCell], margin: f32) -> Vec<DriveCell> {
+/// labelled by it, and the others.
+fn confident_cells(
+    model: &SvmModel,
+    unknown: &[DriveCell],
+    margin: f32,
+) -> (Vec<DriveCell>, Vec<DriveCell>) {
     let geometric = model;
     let mut scratch = geometric.scratch();
-    unknown
-        .iter()
-        .filter_map(|cell| {
-            let mut value = geometric.cell_margin(&cell.features, None, &mut scratch, true);
-            if let Some(prior) = &model.prior {
-                let mut prior_scratch = prior.scratch();
-                value += model.prior_weight
-                    * prior.cell_margin(&cell.features, None, &mut prior_scratch, true);
-            }
-            (value.abs() >= margin).then(|| DriveCell {
+    let (mut confident, mut unsure) = (Vec::new(), Vec::new());
+    for cell in unknown {
+        let mut value = geometric.cell_margin(&cell.features, None, &mut scratch, true);
+        if let Some(prior) = &model.prior {
+            let mut prior_scratch = prior.scratch();
+            value += model.prior_weight
+                * prior.cell_margin(&cell.features, None, &mut prior_scratch, true);
+        }
+        if value.abs() >= margin {
+            confident.push(DriveCell {
                 label: Some(value > 0.0),
                 ..cell.clone()
-            })
-        })
-        .collect()
+            });
+        } else {
+            unsure.push(cell.clone());
+        }
+    }
+    (confident, unsure)
 }
 
 fn sha256_hex(bytes: &[u8]) -> String {

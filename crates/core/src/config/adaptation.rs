@@ -105,6 +105,11 @@ pub struct AdaptConfig {
     /// fitted again (default 0).
     pub rounds: usize,
     pub self_training_margin: f64,
+    /// Positive-unlabelled learning: cells left unknown are negatives too, each with
+    /// this weight on C (default 0: unknown cells are not learnt from). At 1 with no
+    /// other negatives (`negative_margin` high, `geometric_negatives` false) the
+    /// footprint is learnt against everything else, a biased SVM.
+    pub unlabelled_weight: f64,
     /// A drive with fewer distinct footprint cells is refused (default 50).
     pub min_footprint_cells: usize,
     /// Self-labelled cells the SVM is fitted on at most, a seeded random subset,
@@ -126,6 +131,7 @@ impl Default for AdaptConfig {
             gamma: 0.02,
             rounds: 0,
             self_training_margin: 1.0,
+            unlabelled_weight: 0.0,
             min_footprint_cells: 50,
             max_cells: 10_000,
         }
@@ -159,11 +165,13 @@ impl AdaptConfig {
                 self.negative_margin
             ));
         }
-        if !(self.prior_weight.is_finite() && self.prior_weight >= 0.0) {
-            return Err(format!(
-                "adapt.prior_weight must be >= 0, got {}",
-                self.prior_weight
-            ));
+        for (name, weight) in [
+            ("adapt.prior_weight", self.prior_weight),
+            ("adapt.unlabelled_weight", self.unlabelled_weight),
+        ] {
+            if !(weight.is_finite() && weight >= 0.0) {
+                return Err(format!("{name} must be >= 0, got {weight}"));
+            }
         }
         if self.max_cells < 2 {
             return Err(format!(
