@@ -14,8 +14,11 @@ pub const LANES: usize = 8;
 /// Support vectors laid out for [`SupportVectorBlocks::rbf_sum`], padded with zero-weight vectors.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SupportVectorBlocks {
-    dimension: usize,
-    /// Per block, `dimension` rows of LANES values.
+    /// The dimensions where some vector is not 0, ascending. The others add nothing
+    /// to a dot product (a feature the model leaves out is 0 in every vector), so
+    /// they are not stored and not multiplied.
+    used: Vec<usize>,
+    /// Per block, `used.len()` rows of LANES values.
     values: Vec<[f32; LANES]>,
     squared_norms: Vec<[f32; LANES]>,
     coefficients: Vec<[f32; LANES]>,
@@ -25,20 +28,24 @@ impl SupportVectorBlocks {
     /// From row-major support vectors and their coefficients.
     pub fn new(support_vectors: &[f32], coefficients: &[f32], dimension: usize) -> Self {
         let blocks = coefficients.len().div_ceil(LANES);
+        let vectors = || {
+            support_vectors
+                .chunks_exact(dimension)
+                .take(coefficients.len())
+        };
+        let used: Vec<usize> = (0..dimension)
+            .filter(|&k| vectors().any(|sv| sv[k] != 0.0))
+            .collect();
         let mut out = Self {
-            dimension,
-            values: vec![[0.0; LANES]; blocks * dimension],
+            values: vec![[0.0; LANES]; blocks * used.len()],
             squared_norms: vec![[0.0; LANES]; blocks],
             coefficients: vec![[0.0; LANES]; blocks],
+            used,
         };
-        for (i, (sv, &c)) in support_vectors
-            .chunks_exact(dimension)
-            .zip(coefficients)
-            .enumerate()
-        {
+        for (i, (sv, &c)) in vectors().zip(coefficients).enumerate() {
             let (block, lane) = (i / LANES, i % LANES);
-            for (k, &v) in sv.iter().enumerate() {
-                out.values[block * dimension + k][lane] = v;
+            for (row, &k) in out.used.iter().enumerate() {
+                out.values[block * out.used.len() + row][lane] = sv[k];
             }
             out.squared_norms[block][lane] = sv.iter().map(|v| v * v).sum();
             out.coefficients[block][lane] = c;
@@ -48,26 +55,51 @@ impl SupportVectorBlocks {
 
     /// `sum_i c_i exp(-gamma |z - sv_i|^2)` for a standardised row `z`.
     pub fn rbf_sum(&self, z: &[f32], gamma: f32) -> f32 {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
-            // SAFETY: the CPU has just been checked to support AVX2 and FMA.
-            return unsafe { rbf_sum_avx2_fma(self, z, gamma) };
-        }
-        rbf_sum::<false>(self, z, gamma)
+        self.with_used(z, |blocks, used, z_norm| {
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                // SAFETY: the CPU has just been checked to support AVX2 and FMA.
+                return unsafe { rbf_sum_avx2_fma(blocks, used, z_norm, gamma) };
+            }
+            rbf_sum::<false>(blocks, used, z_norm, gamma)
+        })
     }
 
     /// The portable path, whatever the CPU (for tests against the fast one).
     #[cfg(test)]
     fn rbf_sum_portable(&self, z: &[f32], gamma: f32) -> f32 {
-        rbf_sum::<false>(self, z, gamma)
+        self.with_used(z, |blocks, used, z_norm| {
+            rbf_sum::<false>(blocks, used, z_norm, gamma)
+        })
+    }
+
+    /// Calls `f` with `z`'s values in the used dimensions (gathered on the stack) and
+    /// the squared norm of all of `z`.
+    fn with_used(&self, z: &[f32], f: impl FnOnce(&Self, &[f32], f32) -> f32) -> f32 {
+        let z_norm: f32 = z.iter().map(|v| v * v).sum();
+        let gather = |out: &mut [f32]| {
+            for (o, &k) in out.iter_mut().zip(&self.used) {
+                *o = z.get(k).copied().unwrap_or(0.0);
+            }
+        };
+        let mut on_stack = [0f32; 128];
+        if let Some(used) = on_stack.get_mut(..self.used.len()) {
+            gather(used);
+            f(self, used, z_norm)
+        } else {
+            let mut used = vec![0f32; self.used.len()];
+            gather(&mut used);
+            f(self, &used, z_norm)
+        }
     }
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn rbf_sum_avx2_fma(blocks: &SupportVectorBlocks, z: &[f32], gamma: f32) -> f32 {
-    rbf_sum::<true>(blocks, z, gamma)
+fn rbf_sum_avx2_fma(blocks: &SupportVectorBlocks, z: &[f32], z_norm: f32, gamma: f32) -> f32 {
+    rbf_sum::<true>(blocks, z, z_norm, gamma)
 }
 
 /// `a * b + c`, fused where the target has FMA (without it `mul_add` is a libm call).
@@ -83,9 +115,15 @@ fn multiply_add<const FUSED: bool>(a: f32, b: f32, c: f32) -> f32 {
 /// same order, so the sums are the same to the bit.
 const BLOCKS_AT_ONCE: usize = 4;
 
+/// [`SupportVectorBlocks::rbf_sum`] of `z` in the used dimensions, `z_norm` its
+/// squared norm in all.
 #[inline(always)]
-fn rbf_sum<const FUSED: bool>(blocks: &SupportVectorBlocks, z: &[f32], gamma: f32) -> f32 {
-    let z_norm: f32 = z.iter().map(|v| v * v).sum();
+fn rbf_sum<const FUSED: bool>(
+    blocks: &SupportVectorBlocks,
+    z: &[f32],
+    z_norm: f32,
+    gamma: f32,
+) -> f32 {
     let mut total = [0f32; LANES];
     let mut add = |dot: &[f32; LANES], block: usize| {
         let (norms, coefficients) = (&blocks.squared_norms[block], &blocks.coefficients[block]);
@@ -119,7 +157,7 @@ fn dot_products<const G: usize, const FUSED: bool>(
     first: usize,
     z: &[f32],
 ) -> [[f32; LANES]; G] {
-    let d = blocks.dimension;
+    let d = blocks.used.len();
     // Each block's rows sliced to the length of `z` once, so that indexing them by
     // position in `z` needs no bounds check per block and term in the hot loop.
     let z = &z[..d.min(z.len())];
@@ -188,12 +226,18 @@ mod tests {
     }
 
     #[test]
-    fn blocked_sum_matches_a_plain_f64_sum() {
+    fn blocked_sum_matches_a_plain_f64_sum_and_skips_unused_dimensions() {
         let mut rng = SplitMix64(4);
         let (d, n) = (20, 37); // 37 is not a multiple of LANES: padding is exercised
-        let svs: Vec<f32> = (0..n * d).map(|_| rng.uniform(-2.0, 2.0) as f32).collect();
+        let mut svs: Vec<f32> = (0..n * d).map(|_| rng.uniform(-2.0, 2.0) as f32).collect();
+        // Two dimensions no vector uses (features left out): not stored, yet the
+        // row's values there still count in its distance to every vector.
+        for sv in svs.chunks_exact_mut(d) {
+            (sv[3], sv[11]) = (0.0, 0.0);
+        }
         let coefficients: Vec<f32> = (0..n).map(|_| rng.uniform(-10.0, 10.0) as f32).collect();
         let blocks = SupportVectorBlocks::new(&svs, &coefficients, d);
+        assert_eq!(blocks.used.len(), d - 2);
         for _ in 0..50 {
             let z: Vec<f32> = (0..d).map(|_| rng.uniform(-2.0, 2.0) as f32).collect();
             let gamma = 0.05;
