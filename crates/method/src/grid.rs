@@ -197,9 +197,11 @@ pub struct GridBuffers {
     remission: Vec<f32>,
 }
 
-/// `buffer` emptied and filled with `len` copies of `value`.
-fn refilled<T: Clone>(mut buffer: Vec<T>, len: usize, value: T) -> Vec<T> {
-    buffer.clear();
+/// `buffer` at `len` elements, each slot to be written by the caller: only slots it
+/// never held are filled (with `value`), so that the frame's points are not written
+/// twice (clearing 2.5 MB a frame here).
+fn sized<T: Clone>(mut buffer: Vec<T>, len: usize, value: T) -> Vec<T> {
+    buffer.truncate(len);
     buffer.resize(len, value);
     buffer
 }
@@ -290,14 +292,14 @@ pub fn grid_points(
     let with_remission = scans.iter().all(|s| s.remission.is_some());
     let n = found;
     let mut remission = if with_remission {
-        refilled(std::mem::take(&mut buffers.remission), n, 0.0)
+        sized(std::mem::take(&mut buffers.remission), n, 0.0)
     } else {
         Vec::new()
     };
-    let mut points_in_grid = refilled(std::mem::take(&mut buffers.points_in_grid), n, [0.0; 3]);
-    let mut range_m = refilled(std::mem::take(&mut buffers.range_m), n, 0.0);
+    let mut points_in_grid = sized(std::mem::take(&mut buffers.points_in_grid), n, [0.0; 3]);
+    let mut range_m = sized(std::mem::take(&mut buffers.range_m), n, 0.0);
     let mut labels = if with_labels {
-        refilled(std::mem::take(&mut buffers.labels), n, 0)
+        sized(std::mem::take(&mut buffers.labels), n, 0)
     } else {
         Vec::new()
     };
