@@ -7,7 +7,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use crate::common::{nebula_fixture, run_client};
+use crate::common::{arg, assert_contains, nebula_fixture, run_client};
 use travmap_io::containers::log::Log;
 use travmap_io::format::InputFormat;
 use travmap_io::packets::packet_message;
@@ -202,6 +202,56 @@ fn a_robosense_capture_with_its_difop_port_reads_as_its_packet_log() {
             "frame {k}: stamp {stamp} for {expected_stamp}"
         );
         assert!(cells == expected_cells, "frame {k}: other cells");
+    }
+
+    // A record length that still reads, but is wrong (1,400 bytes of a 1,290-byte
+    // frame, the packet's own length made to agree): the walk lands inside the next
+    // packet, on a header no writer gives. Without --keep-going, an error naming
+    // the byte; with it, the records from there to where they read right again are
+    // stepped over, the frames around them skipped and reported (exit 3), every
+    // other frame as before.
+    let mut bytes = std::fs::read(&capture).unwrap();
+    let record = |k: usize| 24 + k * (16 + 42 + 1248);
+    let damaged = record(300);
+    for field in [8, 12] {
+        bytes[damaged + field..damaged + field + 4].copy_from_slice(&1400u32.to_le_bytes());
+    }
+    let broken = dir.path().join("broken.pcap");
+    std::fs::write(&broken, &bytes).unwrap();
+    let lands = damaged + 16 + 1400;
+    let said = format!("record header no capture tool writes at byte {lands}");
+    let err = crate::common::clean_failure(crate::common::travmap(&["run", arg(&broken)]));
+    assert_contains(&err, &[&said, "read again from there"]);
+    let output = crate::common::travmap(&["run", arg(&broken), "--json", "--keep-going"]);
+    assert_eq!(
+        output.status.code(),
+        Some(3),
+        "{}",
+        crate::common::stderr(&output)
+    );
+    let (kept, summary) = crate::common::json_records(&crate::common::stdout(&output));
+    let skipped = summary["skipped"].as_array().unwrap();
+    assert!(
+        !skipped.is_empty() && kept.len() <= expected.len(),
+        "{summary}"
+    );
+    assert!(
+        kept.len() + 2 >= expected.len(),
+        "{} of {} frames",
+        kept.len(),
+        expected.len()
+    );
+    for frame in &kept {
+        let same = expected
+            .iter()
+            .find(|(stamp, _)| *stamp == frame["stamp_ns"]);
+        if let Some((_, cells)) = same {
+            assert!(
+                *cells == frame["cells"],
+                "frame at {}: other cells",
+                frame["stamp_ns"]
+            );
+        }
     }
 }
 

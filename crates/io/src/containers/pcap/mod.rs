@@ -15,14 +15,14 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use records::Capture;
+use records::{Damaged, Layout};
 use udp::{Fragments, ipv4};
 
 use crate::packets::ouster::{OUSTER_PACKET_MESSAGES, PACKET_MSG_SCHEMA};
 use crate::packets::robosense::RobosenseModel;
 use crate::packets::{NEBULA_PACKETS, PacketModel};
 use travmap_core::error::{Error, Result};
-use travmap_formats::log_message::{Connection, Damage, FileMap, LogMessage};
+use travmap_formats::log_message::{ChunkSpan, Connection, Damage, FileMap, LogMessage};
 use travmap_formats::ros::{Header, NebulaPacket, NebulaPackets, RosMessage, Time, encode};
 
 /// An Ethernet frame's payload: a datagram past it came in IP fragments.
@@ -32,21 +32,19 @@ const ETHERNET_MTU: usize = 1500;
 pub struct PcapFile {
     path: PathBuf,
     map: FileMap,
-    capture: Capture,
-    /// Where its last whole record ends, and what was said of a cut tail.
-    end: usize,
+    layout: Layout,
+    /// What was said of a cut tail.
     notice: Option<String>,
 }
 
 impl PcapFile {
     pub fn open(path: &Path) -> Result<Self> {
         let map = FileMap::open(path)?;
-        let (capture, end, cut) =
-            records::read(map.as_ref()).map_err(|problem| Error::LogContainer {
-                path: path.to_path_buf(),
-                problem,
-            })?;
-        let notice = cut.map(|at| {
+        let layout = records::read(map.as_ref()).map_err(|problem| Error::LogContainer {
+            path: path.to_path_buf(),
+            problem,
+        })?;
+        let notice = layout.cut.map(|at| {
             format!(
                 "{}: the capture ends inside the record at byte {at} (cut short?): reading the records before it",
                 path.display()
@@ -55,8 +53,7 @@ impl PcapFile {
         Ok(Self {
             path: path.to_path_buf(),
             map,
-            capture,
-            end,
+            layout,
             notice,
         })
     }
@@ -76,7 +73,11 @@ impl PcapFile {
         // A RoboSense sends its DIFOP to a port of its own: they join its data's topic.
         let mut robosense: Option<Arc<Connection>> = None;
         std::iter::from_fn(move || {
-            for (stamp_ns, port, payload) in datagrams.by_ref() {
+            for datagram in datagrams.by_ref() {
+                let (stamp_ns, port, payload) = match datagram {
+                    Ok(datagram) => datagram,
+                    Err(stretch) => return Some(Err(damage(stretch))),
+                };
                 let connection = topics.entry(port).or_insert_with(|| {
                     let connection = connection(port, &payload);
                     if let Some(c) = connection.as_ref().filter(|_| is_robosense(&payload)) {
@@ -122,7 +123,7 @@ impl PcapFile {
     pub fn datagrams_by_port(&self) -> String {
         // Port -> (datagrams, smallest and largest payload bytes).
         let mut ports: HashMap<u16, (usize, usize, usize)> = HashMap::new();
-        for (_, port, payload) in self.datagrams() {
+        for (_, port, payload) in self.datagrams().flatten() {
             let (count, smallest, largest) = ports.entry(port).or_insert((0, usize::MAX, 0));
             *count += 1;
             *smallest = (*smallest).min(payload.len());
@@ -146,14 +147,41 @@ impl PcapFile {
         }
     }
 
-    fn datagrams(&self) -> impl Iterator<Item = (u64, u16, Vec<u8>)> + '_ {
+    /// Every UDP datagram over IPv4, (capture time, destination port, payload), and
+    /// the damaged stretches between them.
+    fn datagrams(&self) -> impl Iterator<Item = Result<(u64, u16, Vec<u8>), Damaged>> + '_ {
         let mut fragments = Fragments::default();
-        records::records(self.map.as_ref(), self.capture, self.end).filter_map(
-            move |(stamp_ns, link, frame)| {
-                let (port, payload) = fragments.add(ipv4(frame, link)?)?;
-                Some((stamp_ns, port, payload))
-            },
-        )
+        records::records(self.map.as_ref(), &self.layout).filter_map(move |record| {
+            let Ok((stamp_ns, link, frame)) = record else {
+                return Some(Err(record.err()?));
+            };
+            let (port, payload) = fragments.add(ipv4(frame, link)?)?;
+            Some(Ok((stamp_ns, port, payload)))
+        })
+    }
+}
+
+/// A damaged stretch as a reader's damage: the records in it are lost, reading goes
+/// on after it (`--keep-going`).
+fn damage(stretch: Damaged) -> Damage {
+    let end_ns = stretch.before_ns.unwrap_or(stretch.after_ns);
+    let problem = match stretch.before_ns {
+        Some(_) => format!(
+            "a record header no capture tool writes at byte {}: the records to byte {} are lost, read again from there",
+            stretch.start, stretch.resume
+        ),
+        None => format!(
+            "a record header no capture tool writes at byte {}, and none reads right after it: the rest of the capture is lost",
+            stretch.start
+        ),
+    };
+    Damage {
+        problem,
+        chunk: Some(ChunkSpan {
+            bytes: stretch.start..stretch.resume,
+            start_ns: stretch.after_ns.min(end_ns),
+            end_ns,
+        }),
     }
 }
 
@@ -285,7 +313,7 @@ mod tests {
                 .unwrap()
                 .contains("ends inside the record at byte")
         );
-        let datagrams: Vec<_> = pcap.datagrams().collect();
+        let datagrams: Vec<_> = pcap.datagrams().flatten().collect();
         assert_eq!(datagrams.len(), 2);
         assert_eq!(datagrams[0], (1_000_000_000, 2368, vec![1, 2, 3]));
         let (stamp_ns, port, payload) = &datagrams[1];
@@ -305,25 +333,53 @@ mod tests {
     }
 
     #[test]
-    fn a_damaged_record_length_is_an_error_not_the_end() {
+    fn reading_steps_over_a_damaged_record_header_to_where_records_read_right() {
         let small = udp(2368, &[1, 2, 3]);
         let frames: Vec<Vec<u8>> = (0..4)
             .map(|k| frame(true, 17, k, 0, false, &small))
             .collect();
         let file = capture(&frames, None);
         let whole = std::fs::read(file.path()).unwrap();
-        // The second record's captured length: past the snap length, or past its
-        // packet's own length (read as the start of a cut record before).
-        let second = 24 + 16 + frames[0].len();
+        let record = |k: usize| 24 + (0..k).map(|j| 16 + frames[j].len()).sum::<usize>();
+        let (second, third) = (record(1), record(2));
         let packet = frames[1].len() as u32;
-        for damaged in [0x7fff_ffff, packet + 1] {
+        // The second record's captured length: past the snap length, past its
+        // packet's own length, or shorter than its frame (a length that reads, the
+        // walk then lands inside the frame and finds a header no writer gives).
+        for (damaged, found_at, after_ns) in [
+            (0x7fff_ffff, second, 1_000_000_000),
+            (packet + 1, second, 1_000_000_000),
+            (10, second + 16 + 10, 1_001_000_000),
+        ] {
             let mut bytes = whole.clone();
             bytes[second + 8..second + 12].copy_from_slice(&damaged.to_le_bytes());
             std::fs::write(file.path(), &bytes).unwrap();
-            let problem = PcapFile::open(file.path()).err().unwrap().to_string();
-            assert!(problem.contains("damaged"), "{problem}");
-            assert!(problem.contains(&format!("byte {second}")), "{problem}");
+            let pcap = PcapFile::open(file.path()).unwrap();
+            let read: Vec<_> = pcap.datagrams().collect();
+            let stamps: Vec<u64> = read.iter().flatten().map(|d| d.0).collect();
+            assert_eq!(stamps, [1_000_000_000, 1_002_000_000, 1_003_000_000]);
+            let stretch = read.iter().find_map(|d| d.as_ref().err()).unwrap();
+            assert_eq!((stretch.start, stretch.resume), (found_at, third));
+            let damage = pcap.messages().find_map(Result::err).unwrap();
+            assert!(
+                damage.problem.contains(&format!("byte {found_at}")),
+                "{damage:?}"
+            );
+            let span = damage.chunk.unwrap();
+            assert_eq!((span.start_ns, span.end_ns), (after_ns, 1_002_000_000));
         }
+        // In the last record, nothing after it reads: the rest is lost, named.
+        let mut bytes = whole.clone();
+        let last = record(3);
+        bytes[last + 8..last + 12].copy_from_slice(&0x7fff_ffffu32.to_le_bytes());
+        std::fs::write(file.path(), &bytes).unwrap();
+        let pcap = PcapFile::open(file.path()).unwrap();
+        assert_eq!(pcap.datagrams().flatten().count(), 3);
+        let damage = pcap.messages().find_map(Result::err).unwrap();
+        assert!(
+            damage.problem.contains("the rest of the capture is lost"),
+            "{damage:?}"
+        );
     }
 
     #[test]

@@ -44,9 +44,86 @@ const MAX_SNAP_LENGTH: usize = 262_144;
 const RECORD_HEADER: usize = 16;
 const BYTE_ORDER_MAGIC: u32 = 0x1A2B_3C4D;
 
-/// The capture `bytes` holds, and where its last whole record ends (before a cut
-/// one, whose start is the second value).
-pub(super) fn read(bytes: &[u8]) -> Result<(Capture, usize, Option<usize>), String> {
+/// A stretch of a classic capture whose record headers are damaged: reading goes on
+/// at `resume`, the next place where records read right again (the end when none).
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct Damaged {
+    pub start: usize,
+    pub resume: usize,
+    /// The capture times of the records either side, ns (0 before the first).
+    pub after_ns: u64,
+    pub before_ns: Option<u64>,
+}
+
+/// What `read` found in a capture.
+#[derive(Debug)]
+pub(super) struct Layout {
+    pub capture: Capture,
+    /// Where its last whole record ends.
+    pub end: usize,
+    /// Where a cut last record begins.
+    pub cut: Option<usize>,
+    /// Damaged stretches of a classic capture, in order.
+    pub damaged: Vec<Damaged>,
+}
+
+/// Two records in a row further apart in time than this are not where reading
+/// resumes past damage (a clock may jump between them, but not at that place too).
+const MAX_RECORD_GAP_NS: u64 = 86_400_000_000_000;
+/// The least frame a record where reading resumes may hold: an IPv4 header (a run of
+/// zeros in packet data reads as empty records).
+const MIN_RESUMING_FRAME: usize = 20;
+
+/// How a classic capture's record headers read.
+#[derive(Clone, Copy)]
+struct ClassicHeaders {
+    big_endian: bool,
+    nanoseconds: bool,
+    snap_length: usize,
+}
+
+impl ClassicHeaders {
+    /// The time (ns) and captured length of the record at `at`, when its header is
+    /// one a writer gives: lengths within the snap length and the packet's own, a
+    /// fraction of a second below one.
+    fn record(&self, bytes: &[u8], at: usize) -> Option<(u64, usize)> {
+        let header = bytes.get(at..at + RECORD_HEADER)?;
+        let field = |k: usize| read_u32(header, 4 * k, self.big_endian) as usize;
+        let (seconds, fraction, captured, original) = (field(0), field(1), field(2), field(3));
+        let (unit, per_second) = match self.nanoseconds {
+            true => (1, 1_000_000_000),
+            false => (1_000, 1_000_000),
+        };
+        let stamp_ns = seconds as u64 * 1_000_000_000 + fraction as u64 * unit;
+        let lengths = captured <= self.snap_length
+            && captured <= original
+            && original <= MAX_SNAP_LENGTH.max(self.snap_length);
+        (lengths && fraction < per_second).then_some((stamp_ns, captured))
+    }
+
+    /// The first place after `from` where two records in a row, each holding a
+    /// frame, less than a day apart (or one that ends the capture) read right:
+    /// where reading resumes past damage.
+    fn resume_after(&self, bytes: &[u8], from: usize) -> Option<usize> {
+        let framed = |at: usize| {
+            self.record(bytes, at)
+                .filter(|&(_, captured)| captured >= MIN_RESUMING_FRAME)
+        };
+        (from + 1..bytes.len().saturating_sub(RECORD_HEADER - 1)).find(|&at| {
+            let Some((stamp_ns, captured)) = framed(at) else {
+                return false;
+            };
+            let next = at + RECORD_HEADER + captured;
+            next == bytes.len()
+                || framed(next)
+                    .is_some_and(|(next_ns, _)| next_ns.abs_diff(stamp_ns) <= MAX_RECORD_GAP_NS)
+        })
+    }
+}
+
+/// The capture `bytes` holds: its format, where its last whole record ends, a cut
+/// last record, and (classic captures) the damaged stretches reading steps over.
+pub(super) fn read(bytes: &[u8]) -> Result<Layout, String> {
     let magic = bytes.get(..4).ok_or("shorter than a pcap header")?;
     let (big_endian, nanoseconds) = match magic {
         [0xd4, 0xc3, 0xb2, 0xa1] => (false, false),
@@ -55,7 +132,13 @@ pub(super) fn read(bytes: &[u8]) -> Result<(Capture, usize, Option<usize>), Stri
         [0xa1, 0xb2, 0x3c, 0x4d] => (true, true),
         [0x0a, 0x0d, 0x0d, 0x0a] => {
             let (end, cut) = whole_blocks(bytes)?;
-            return Ok((Capture::Ng, end, cut));
+            let (capture, damaged) = (Capture::Ng, Vec::new());
+            return Ok(Layout {
+                capture,
+                end,
+                cut,
+                damaged,
+            });
         }
         _ => return Err("not a pcap capture".into()),
     };
@@ -72,22 +155,33 @@ pub(super) fn read(bytes: &[u8]) -> Result<(Capture, usize, Option<usize>), Stri
         0 => MAX_SNAP_LENGTH,
         length => length.max(u16::MAX as usize),
     };
-    let mut at = CLASSIC_HEADER;
+    let headers = ClassicHeaders {
+        big_endian,
+        nanoseconds,
+        snap_length,
+    };
+    let (mut at, mut last_ns, mut damaged) = (CLASSIC_HEADER, None, Vec::new());
     while at + RECORD_HEADER <= bytes.len() {
-        let captured = read_u32(bytes, at + 8, big_endian) as usize;
-        let original = read_u32(bytes, at + 12, big_endian) as usize;
-        // A length no writer gives is damage, not the end of a cut capture: the
-        // records after it would be lost without a word.
-        if captured > snap_length || captured > original {
-            return Err(format!(
-                "the record at byte {at} claims {captured} bytes of a {original}-byte packet (the capture's snap length is {snap_length}): the file is damaged there"
-            ));
-        }
+        // A header no writer gives is damage, not the end of a cut capture: the
+        // records after it are read from where they read right again.
+        let Some((stamp_ns, captured)) = headers.record(bytes, at) else {
+            let resume = headers.resume_after(bytes, at);
+            damaged.push(Damaged {
+                start: at,
+                resume: resume.unwrap_or(bytes.len()),
+                after_ns: last_ns.unwrap_or(0),
+                before_ns: resume
+                    .and_then(|r| headers.record(bytes, r))
+                    .map(|(ns, _)| ns),
+            });
+            at = resume.unwrap_or(bytes.len());
+            continue;
+        };
         let next = at + RECORD_HEADER + captured;
         if next > bytes.len() {
             break;
         }
-        at = next;
+        (at, last_ns) = (next, Some(stamp_ns));
     }
     let cut = (at < bytes.len()).then_some(at);
     let capture = Capture::Classic {
@@ -95,7 +189,12 @@ pub(super) fn read(bytes: &[u8]) -> Result<(Capture, usize, Option<usize>), Stri
         nanoseconds,
         link,
     };
-    Ok((capture, at, cut))
+    Ok(Layout {
+        capture,
+        end: at,
+        cut,
+        damaged,
+    })
 }
 
 /// A pcapng capture's whole blocks: where they end, and where a cut one begins.
@@ -122,22 +221,30 @@ fn whole_blocks(bytes: &[u8]) -> Result<(usize, Option<usize>), String> {
     Ok((at, (at < bytes.len()).then_some(at)))
 }
 
-/// The records of a capture `read` checked, up to `end`: (time in ns, link, frame).
-/// Frames of a link type travmap does not read are left out.
-pub(super) fn records(
-    bytes: &[u8],
-    capture: Capture,
-    end: usize,
-) -> Box<dyn Iterator<Item = (u64, Link, &[u8])> + '_> {
-    let bytes = &bytes[..end];
-    match capture {
+/// One record of a capture, or a damaged stretch stepped over.
+pub(super) type Record<'a> = Result<(u64, Link, &'a [u8]), Damaged>;
+
+/// The records of a capture `read` laid out, up to its end: (time in ns, link,
+/// frame), each damaged stretch where it lies. Frames of a link type travmap does
+/// not read are left out.
+pub(super) fn records<'a>(
+    bytes: &'a [u8],
+    layout: &Layout,
+) -> Box<dyn Iterator<Item = Record<'a>> + 'a> {
+    let bytes = &bytes[..layout.end];
+    match layout.capture {
         Capture::Classic {
             big_endian,
             nanoseconds,
             link,
         } => {
             let mut at = CLASSIC_HEADER;
+            let mut damaged = layout.damaged.clone().into_iter().peekable();
             Box::new(std::iter::from_fn(move || {
+                if let Some(stretch) = damaged.next_if(|d| d.start == at) {
+                    at = stretch.resume;
+                    return Some(Err(stretch));
+                }
                 (at < bytes.len()).then(|| {
                     let seconds = u64::from(read_u32(bytes, at, big_endian));
                     let fraction = u64::from(read_u32(bytes, at + 4, big_endian));
@@ -145,11 +252,11 @@ pub(super) fn records(
                     let frame = &bytes[at + RECORD_HEADER..at + RECORD_HEADER + captured];
                     at += RECORD_HEADER + captured;
                     let unit = if nanoseconds { 1 } else { 1_000 };
-                    (seconds * 1_000_000_000 + fraction * unit, link, frame)
+                    Ok((seconds * 1_000_000_000 + fraction * unit, link, frame))
                 })
             }))
         }
-        Capture::Ng => Box::new(ng_records(bytes)),
+        Capture::Ng => Box::new(ng_records(bytes).map(Ok)),
     }
 }
 
@@ -305,15 +412,15 @@ mod tests {
         // A record cut short is not read.
         let whole = capture.len();
         capture.extend(&enhanced_packet(0, 9, b"cut")[..20]);
-        let (kind, end, cut) = read(&capture).unwrap();
-        assert!(matches!(kind, Capture::Ng));
-        assert_eq!((end, cut), (whole, Some(whole)));
-        let read: Vec<_> = records(&capture, kind, end).collect();
+        let layout = read(&capture).unwrap();
+        assert!(matches!(layout.capture, Capture::Ng));
+        assert_eq!((layout.end, layout.cut), (whole, Some(whole)));
+        let read: Vec<_> = records(&capture, &layout).collect();
         assert_eq!(
             read,
             [
-                (1_500_000_000, Link::Ethernet, &b"first"[..]),
-                (2_000_000_007, Link::Ipv4, &b"second"[..]),
+                Ok((1_500_000_000, Link::Ethernet, &b"first"[..])),
+                Ok((2_000_000_007, Link::Ipv4, &b"second"[..])),
             ]
         );
     }
