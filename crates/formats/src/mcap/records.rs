@@ -17,9 +17,13 @@ use crate::log_message::ChunkSpan;
 #[derive(Clone, Copy)]
 enum Field {
     Fixed(usize),
-    /// u32 length, then that many bytes (strings, schema data, message index arrays,
-    /// maps of fixed-size entries).
+    /// u32 length, then that many bytes (strings, schema data).
     Bytes32(&'static str),
+    /// u32 byte length, then entries of the given size (message index arrays, maps
+    /// of fixed-size entries): the crate reads whole entries until the length is
+    /// used up, so a length that is not a whole number of them moves every field
+    /// after it off the place checked here.
+    Entries32(&'static str, usize),
     /// u64 length, then that many bytes (attachment data).
     Bytes64(&'static str),
     /// u32 byte length, then string-to-string entries, each a u32-prefixed key and value.
@@ -50,10 +54,10 @@ fn layout(opcode: u8) -> &'static [Field] {
         op::MESSAGE => &[Fixed(22), Rest],
         // Only a chunk inside a chunk reaches here: the reader opens top-level ones.
         op::CHUNK => &[Fixed(28), Bytes32("compression"), Bytes64("records")],
-        op::MESSAGE_INDEX => &[Fixed(2), Bytes32("records")],
+        op::MESSAGE_INDEX => &[Fixed(2), Entries32("records", 16)],
         op::CHUNK_INDEX => &[
             Fixed(32),
-            Bytes32("message_index_offsets"),
+            Entries32("message_index_offsets", 10),
             Fixed(8),
             Bytes32("compression"),
             Fixed(16),
@@ -66,7 +70,7 @@ fn layout(opcode: u8) -> &'static [Field] {
             Fixed(4),
         ],
         op::ATTACHMENT_INDEX => &[Fixed(40), Bytes32("name"), Bytes32("media_type")],
-        op::STATISTICS => &[Fixed(42), Bytes32("channel_message_counts")],
+        op::STATISTICS => &[Fixed(42), Entries32("channel_message_counts", 10)],
         op::METADATA => &[Bytes32("name"), StringMap("metadata")],
         op::METADATA_INDEX => &[Fixed(16), Bytes32("name")],
         _ => &[Rest],
@@ -103,6 +107,16 @@ pub fn check_lengths(opcode: u8, body: &[u8]) -> Result<(), String> {
         at = match *field {
             Fixed(n) => at + n,
             Bytes32(name) => skip(at, 4, body.len(), name)?,
+            Entries32(name, size) => {
+                let end = skip(at, 4, body.len(), name)?;
+                let bytes = end - at - 4;
+                if !bytes.is_multiple_of(size) {
+                    return Err(format!(
+                        "record (opcode {opcode:#04x}): its {name} are {bytes} bytes, not a whole number of {size}-byte entries"
+                    ));
+                }
+                end
+            }
             Bytes64(name) => skip(at, 8, body.len(), name)?,
             StringMap(name) => {
                 let end = skip(at, 4, body.len(), name)?;
@@ -569,6 +583,37 @@ mod tests {
         assert!(err.contains("ends inside the length of its topic"), "{err}");
         let err = check_lengths(op::CHANNEL, &good[..3]).unwrap_err();
         assert!(err.contains("shorter than its fields"), "{err}");
+    }
+
+    #[test]
+    fn entry_arrays_of_part_entries_are_refused_before_parsing() {
+        // A chunk index whose message index offsets (u16 -> u64 entries) are one byte:
+        // the crate reads a whole entry past it, then takes the compression string's
+        // length from inside another field (3.4 GB, what the fuzzer found).
+        let chunk_index = |offsets: &[u8]| {
+            let mut body = vec![0u8; 32];
+            body.extend((offsets.len() as u32).to_le_bytes());
+            body.extend(offsets);
+            body.extend([0u8; 8]);
+            body.extend(string("zstd"));
+            body.extend([0u8; 16]);
+            body
+        };
+        let whole = chunk_index(&[0u8; 10]);
+        assert_eq!(check_lengths(op::CHUNK_INDEX, &whole), Ok(()));
+        assert!(mcap::parse_record(op::CHUNK_INDEX, &whole).is_ok());
+        let err = check_lengths(op::CHUNK_INDEX, &chunk_index(&[0u8; 11])).unwrap_err();
+        assert!(
+            err.contains(
+                "its message_index_offsets are 11 bytes, not a whole number of 10-byte entries"
+            ),
+            "{err}"
+        );
+        let mut index = vec![0u8; 2];
+        index.extend(17u32.to_le_bytes());
+        index.extend([0u8; 17]);
+        let err = check_lengths(op::MESSAGE_INDEX, &index).unwrap_err();
+        assert!(err.contains("its records are 17 bytes"), "{err}");
     }
 
     /// The byte offset of the first chunk's declared uncompressed size.
