@@ -231,6 +231,7 @@ fn a_robosense_capture_with_its_difop_port_reads_as_its_packet_log() {
     );
     let (kept, summary) = crate::common::json_records(&crate::common::stdout(&output));
     let skipped = summary["skipped"].as_array().unwrap();
+    assert_eq!(skipped.len(), 1, "{summary}");
     assert!(
         !skipped.is_empty() && kept.len() <= expected.len(),
         "{summary}"
@@ -253,6 +254,31 @@ fn a_robosense_capture_with_its_difop_port_reads_as_its_packet_log() {
             );
         }
     }
+
+    // A record the capture holds only part of (its snap length cut the packet to
+    // 100 of 1,290 bytes), the records after it whole: that packet is lost, named;
+    // --keep-going reads on.
+    let mut bytes = std::fs::read(&capture).unwrap();
+    let cut = record(300);
+    bytes[cut + 8..cut + 12].copy_from_slice(&100u32.to_le_bytes());
+    bytes.drain(cut + 16 + 100..cut + 16 + 42 + 1248);
+    std::fs::write(&broken, &bytes).unwrap();
+    let err = crate::common::clean_failure(crate::common::travmap(&["run", arg(&broken)]));
+    assert_contains(
+        &err,
+        &[&format!(
+            "the record at byte {cut} holds 58 of its 1248-byte packet"
+        )],
+    );
+    let output = crate::common::travmap(&["run", arg(&broken), "--json", "--keep-going"]);
+    assert_eq!(
+        output.status.code(),
+        Some(3),
+        "{}",
+        crate::common::stderr(&output)
+    );
+    let (_, summary) = crate::common::json_records(&crate::common::stdout(&output));
+    assert_eq!(summary["skipped"].as_array().unwrap().len(), 1, "{summary}");
 }
 
 /// A capture without LiDAR traffic says what it holds: each port's datagrams and

@@ -74,7 +74,13 @@ impl PcapFile {
         let mut robosense: Option<Arc<Connection>> = None;
         std::iter::from_fn(move || {
             for datagram in datagrams.by_ref() {
-                let (stamp_ns, port, payload) = match datagram {
+                let Datagram {
+                    at,
+                    stamp_ns,
+                    port,
+                    payload,
+                    cut_from,
+                } = match datagram {
                     Ok(datagram) => datagram,
                     Err(stretch) => return Some(Err(damage(stretch))),
                 };
@@ -90,6 +96,21 @@ impl PcapFile {
                     (None, Some(data)) if RobosenseModel::is_difop(&payload) => data,
                     (None, _) => continue,
                 };
+                // A LiDAR packet the capture holds only part of (its snap length cut
+                // it) is lost, as a damaged record is: no decoder can read it.
+                if let Some(whole) = cut_from {
+                    return Some(Err(Damage {
+                        problem: format!(
+                            "the record at byte {at} holds {} of its {whole}-byte packet (the capture's snap length cut it?)",
+                            payload.len()
+                        ),
+                        chunk: Some(ChunkSpan {
+                            bytes: at..at,
+                            start_ns: stamp_ns,
+                            end_ns: stamp_ns,
+                        }),
+                    }));
+                }
                 let data = match connection.schema_name.as_str() {
                     NEBULA_PACKETS => encode(
                         &NebulaPackets {
@@ -123,7 +144,7 @@ impl PcapFile {
     pub fn datagrams_by_port(&self) -> String {
         // Port -> (datagrams, smallest and largest payload bytes).
         let mut ports: HashMap<u16, (usize, usize, usize)> = HashMap::new();
-        for (_, port, payload) in self.datagrams().flatten() {
+        for Datagram { port, payload, .. } in self.datagrams().flatten() {
             let (count, smallest, largest) = ports.entry(port).or_insert((0, usize::MAX, 0));
             *count += 1;
             *smallest = (*smallest).min(payload.len());
@@ -147,18 +168,37 @@ impl PcapFile {
         }
     }
 
-    /// Every UDP datagram over IPv4, (capture time, destination port, payload), and
-    /// the damaged stretches between them.
-    fn datagrams(&self) -> impl Iterator<Item = Result<(u64, u16, Vec<u8>), Damaged>> + '_ {
+    /// Every UDP datagram over IPv4, and the damaged stretches between them.
+    fn datagrams(&self) -> impl Iterator<Item = Result<Datagram, Damaged>> + '_ {
         let mut fragments = Fragments::default();
         records::records(self.map.as_ref(), &self.layout).filter_map(move |record| {
-            let Ok((stamp_ns, link, frame)) = record else {
+            let Ok((at, stamp_ns, link, frame)) = record else {
                 return Some(Err(record.err()?));
             };
-            let (port, payload) = fragments.add(ipv4(frame, link)?)?;
-            Some(Ok((stamp_ns, port, payload)))
+            let (port, payload, cut_from) = fragments.add(ipv4(frame, link)?)?;
+            Some(Ok(Datagram {
+                at,
+                stamp_ns,
+                port,
+                payload,
+                cut_from,
+            }))
         })
     }
+}
+
+/// A UDP datagram of a capture.
+#[derive(Debug)]
+struct Datagram {
+    /// Where its (last) record begins in the file.
+    at: usize,
+    /// The capture's time of it, ns.
+    stamp_ns: u64,
+    /// Its destination port.
+    port: u16,
+    payload: Vec<u8>,
+    /// The payload's length by its header, when the capture holds less of it.
+    cut_from: Option<usize>,
 }
 
 /// A damaged stretch as a reader's damage: the records in it are lost, reading goes
@@ -313,7 +353,9 @@ mod tests {
                 .unwrap()
                 .contains("ends inside the record at byte")
         );
-        let datagrams: Vec<_> = pcap.datagrams().flatten().collect();
+        let datagrams: Vec<_> = (pcap.datagrams().flatten())
+            .map(|d| (d.stamp_ns, d.port, d.payload))
+            .collect();
         assert_eq!(datagrams.len(), 2);
         assert_eq!(datagrams[0], (1_000_000_000, 2368, vec![1, 2, 3]));
         let (stamp_ns, port, payload) = &datagrams[1];
@@ -356,7 +398,7 @@ mod tests {
             std::fs::write(file.path(), &bytes).unwrap();
             let pcap = PcapFile::open(file.path()).unwrap();
             let read: Vec<_> = pcap.datagrams().collect();
-            let stamps: Vec<u64> = read.iter().flatten().map(|d| d.0).collect();
+            let stamps: Vec<u64> = read.iter().flatten().map(|d| d.stamp_ns).collect();
             assert_eq!(stamps, [1_000_000_000, 1_002_000_000, 1_003_000_000]);
             let stretch = read.iter().find_map(|d| d.as_ref().err()).unwrap();
             assert_eq!((stretch.start, stretch.resume), (found_at, third));

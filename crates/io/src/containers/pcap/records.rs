@@ -222,11 +222,11 @@ fn whole_blocks(bytes: &[u8]) -> Result<(usize, Option<usize>), String> {
 }
 
 /// One record of a capture, or a damaged stretch stepped over.
-pub(super) type Record<'a> = Result<(u64, Link, &'a [u8]), Damaged>;
+pub(super) type Record<'a> = Result<(usize, u64, Link, &'a [u8]), Damaged>;
 
-/// The records of a capture `read` laid out, up to its end: (time in ns, link,
-/// frame), each damaged stretch where it lies. Frames of a link type travmap does
-/// not read are left out.
+/// The records of a capture `read` laid out, up to its end: (byte offset, time in
+/// ns, link, frame), each damaged stretch where it lies. Frames of a link type
+/// travmap does not read are left out.
 pub(super) fn records<'a>(
     bytes: &'a [u8],
     layout: &Layout,
@@ -250,9 +250,15 @@ pub(super) fn records<'a>(
                     let fraction = u64::from(read_u32(bytes, at + 4, big_endian));
                     let captured = read_u32(bytes, at + 8, big_endian) as usize;
                     let frame = &bytes[at + RECORD_HEADER..at + RECORD_HEADER + captured];
+                    let offset = at;
                     at += RECORD_HEADER + captured;
                     let unit = if nanoseconds { 1 } else { 1_000 };
-                    Ok((seconds * 1_000_000_000 + fraction * unit, link, frame))
+                    Ok((
+                        offset,
+                        seconds * 1_000_000_000 + fraction * unit,
+                        link,
+                        frame,
+                    ))
                 })
             }))
         }
@@ -287,7 +293,7 @@ impl Resolution {
     }
 }
 
-fn ng_records(bytes: &[u8]) -> impl Iterator<Item = (u64, Link, &[u8])> {
+fn ng_records(bytes: &[u8]) -> impl Iterator<Item = (usize, u64, Link, &[u8])> {
     let mut at = 0;
     let mut big_endian = false;
     let mut interfaces: Vec<Interface> = Vec::new();
@@ -300,6 +306,7 @@ fn ng_records(bytes: &[u8]) -> impl Iterator<Item = (u64, Link, &[u8])> {
             }
             let length = read_u32(bytes, at + 4, big_endian) as usize;
             let body = &bytes[at + 8..at + length - 4];
+            let offset = at;
             at += length;
             match block_type {
                 1 if body.len() >= 8 => interfaces.push(Interface {
@@ -316,7 +323,8 @@ fn ng_records(bytes: &[u8]) -> impl Iterator<Item = (u64, Link, &[u8])> {
                         continue;
                     };
                     if let Some(link) = interface.link {
-                        return Some((interface.resolution.nanoseconds(ticks), link, frame));
+                        let stamp_ns = interface.resolution.nanoseconds(ticks);
+                        return Some((offset, stamp_ns, link, frame));
                     }
                 }
                 _ => {}
@@ -405,8 +413,10 @@ mod tests {
         let nanoseconds = [228, 0, 0, 0, 0, 0, 4, 0, 9, 0, 1, 0, 9, 0, 0, 0, 0, 0, 0, 0];
         capture.extend(block(1, &nanoseconds));
         capture.extend(block(1, &[105, 0, 0, 0, 0, 0, 4, 0]));
+        let first_at = capture.len();
         capture.extend(enhanced_packet(0, 1_500_000, b"first"));
         capture.extend(block(5, b"statistics"));
+        let second_at = capture.len();
         capture.extend(enhanced_packet(1, 2_000_000_007, b"second"));
         capture.extend(enhanced_packet(2, 3, b"wifi"));
         // A record cut short is not read.
@@ -419,8 +429,8 @@ mod tests {
         assert_eq!(
             read,
             [
-                Ok((1_500_000_000, Link::Ethernet, &b"first"[..])),
-                Ok((2_000_000_007, Link::Ipv4, &b"second"[..])),
+                Ok((first_at, 1_500_000_000, Link::Ethernet, &b"first"[..])),
+                Ok((second_at, 2_000_000_007, Link::Ipv4, &b"second"[..])),
             ]
         );
     }

@@ -69,8 +69,9 @@ pub(super) struct Fragments {
 const PARTIAL_DATAGRAMS: usize = 64;
 
 impl Fragments {
-    /// Adds a packet; a whole UDP datagram, once it is: (destination port, payload).
-    pub(super) fn add(&mut self, ip: Ipv4<'_>) -> Option<(u16, Vec<u8>)> {
+    /// Adds a packet; a whole UDP datagram, once it is: (destination port, payload,
+    /// and the payload's length its header gives when the capture holds less).
+    pub(super) fn add(&mut self, ip: Ipv4<'_>) -> Option<(u16, Vec<u8>, Option<usize>)> {
         if ip.protocol != 17 {
             return None;
         }
@@ -103,6 +104,7 @@ impl Fragments {
         let port = u16::from_be_bytes([*datagram.get(2)?, *datagram.get(3)?]);
         let length = usize::from(u16::from_be_bytes([*datagram.get(4)?, *datagram.get(5)?]));
         let payload = datagram.get(8..length.clamp(8, datagram.len()))?;
-        Some((port, payload.to_vec()))
+        let cut = (length > datagram.len()).then(|| length - 8);
+        Some((port, payload.to_vec(), cut))
     }
 }
