@@ -9,11 +9,14 @@
 # Leave one scene out: SemanticKITTI sequence 00 (two sets), 07 (two sets), the scan
 # of unknown sequence, RELLIS-3D (its two scans are of one place), nuScenes scene
 # 1072, scene 0002. Leave one dataset out: SemanticKITTI, RELLIS-3D, nuScenes.
-# Needs ../shared/data; TRAVMAP names the binary, DATA the data.
+# Needs ../shared/data; TRAVMAP names the binary, DATA the data; SETTINGS adds
+# settings to every command, e.g.
+#   SETTINGS='--set features.groups=["remission","frame_relative"]' scripts/cross_dataset_study.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 T=${TRAVMAP:-target/release/travmap}
 D=${DATA:-../shared/data}
+read -ra settings <<<"${SETTINGS:-}"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
@@ -40,10 +43,10 @@ train_without() {
         paths=$(echo "$SETS" | awk -v d="$d" -v s="$scene" '$3 == d && $4 != s { print $2 }')
         [ -z "$paths" ] && continue
         # shellcheck disable=SC2086
-        "$T" dataset -q -o "$work/$d.parquet" --set "$(labels "$d")" $paths
+        "$T" dataset -q -o "$work/$d.parquet" --set "$(labels "$d")" "${settings[@]}" $paths
         tables+=("$work/$d.parquet")
     done
-    "$T" train -q -o "$out" "${tables[@]}"
+    "$T" train -q -o "$out" "${settings[@]}" "${tables[@]}"
 }
 
 # Prints the filtered mIoU of set $1 under the model $2.
@@ -51,7 +54,7 @@ score() {
     local path dataset
     path=$(echo "$SETS" | awk -v n="$1" '$1 == n { print $2 }')
     dataset=$(echo "$SETS" | awk -v n="$1" '$1 == n { print $3 }')
-    "$T" eval "$path" --model "$2" --set "$(labels "$dataset")" --json 2>/dev/null |
+    "$T" eval "$path" --model "$2" --set "$(labels "$dataset")" "${settings[@]}" --json 2>/dev/null |
         jq -r 'select(.type == "summary") | .report.scores.miou * 1000 | round
             | "\(. / 10 | floor).\(. % 10)"'
 }
