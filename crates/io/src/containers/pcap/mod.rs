@@ -205,12 +205,12 @@ struct Datagram {
 /// on after it (`--keep-going`).
 fn damage(stretch: Damaged) -> Damage {
     let end_ns = stretch.before_ns.unwrap_or(stretch.after_ns);
-    let problem = match stretch.before_ns {
-        Some(_) => format!(
+    let problem = match stretch.to_end {
+        false => format!(
             "a record header no capture tool writes at byte {}: the records to byte {} are lost, read again from there",
             stretch.start, stretch.resume
         ),
-        None => format!(
+        true => format!(
             "a record header no capture tool writes at byte {}, and none reads right after it: the rest of the capture is lost",
             stretch.start
         ),

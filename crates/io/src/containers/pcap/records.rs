@@ -44,13 +44,16 @@ const MAX_SNAP_LENGTH: usize = 262_144;
 const RECORD_HEADER: usize = 16;
 const BYTE_ORDER_MAGIC: u32 = 0x1A2B_3C4D;
 
-/// A stretch of a classic capture whose record headers are damaged: reading goes on
-/// at `resume`, the next place where records read right again (the end when none).
+/// A stretch of a capture whose records (pcapng: blocks) are damaged: reading goes
+/// on at `resume`, the next place where they read right again (the end when none:
+/// `to_end`).
 #[derive(Clone, Debug, PartialEq)]
 pub(super) struct Damaged {
     pub start: usize,
     pub resume: usize,
-    /// The capture times of the records either side, ns (0 before the first).
+    pub to_end: bool,
+    /// The capture times of the packets either side, ns (0 before the first; the
+    /// one after, when known).
     pub after_ns: u64,
     pub before_ns: Option<u64>,
 }
@@ -131,10 +134,9 @@ pub(super) fn read(bytes: &[u8]) -> Result<Layout, String> {
         [0x4d, 0x3c, 0xb2, 0xa1] => (false, true),
         [0xa1, 0xb2, 0x3c, 0x4d] => (true, true),
         [0x0a, 0x0d, 0x0d, 0x0a] => {
-            let (end, cut) = whole_blocks(bytes)?;
-            let (capture, damaged) = (Capture::Ng, Vec::new());
+            let (end, cut, damaged) = whole_blocks(bytes)?;
             return Ok(Layout {
-                capture,
+                capture: Capture::Ng,
                 end,
                 cut,
                 damaged,
@@ -169,6 +171,7 @@ pub(super) fn read(bytes: &[u8]) -> Result<Layout, String> {
             damaged.push(Damaged {
                 start: at,
                 resume: resume.unwrap_or(bytes.len()),
+                to_end: resume.is_none(),
                 after_ns: last_ns.unwrap_or(0),
                 before_ns: resume
                     .and_then(|r| headers.record(bytes, r))
@@ -197,10 +200,34 @@ pub(super) fn read(bytes: &[u8]) -> Result<Layout, String> {
     })
 }
 
-/// A pcapng capture's whole blocks: where they end, and where a cut one begins.
-fn whole_blocks(bytes: &[u8]) -> Result<(usize, Option<usize>), String> {
+/// The pcapng block types reading resumes at past damage: a section header, an
+/// interface description, a simple and an enhanced packet, interface statistics.
+const NG_BLOCK_TYPES: [u32; 5] = [0x0A0D_0D0A, 1, 3, 6, 5];
+
+/// Whether a whole pcapng block begins at `at` (of a type of [`NG_BLOCK_TYPES`] when
+/// `known` says so; other writers' blocks are read past): a length of at least 12,
+/// a multiple of 4, inside the file, repeated at its end.
+fn ng_block_at(bytes: &[u8], at: usize, big_endian: bool, known: bool) -> bool {
+    let Some(header) = bytes.get(at..at + 8) else {
+        return false;
+    };
+    let length = read_u32(header, 4, big_endian) as usize;
+    (!known || NG_BLOCK_TYPES.contains(&read_u32(header, 0, big_endian)))
+        && length >= 12
+        && length.is_multiple_of(4)
+        && at
+            .checked_add(length)
+            .filter(|&end| end <= bytes.len())
+            .is_some_and(|end| read_u32(bytes, end - 4, big_endian) as usize == length)
+}
+
+/// A pcapng capture's whole blocks: where they end, where a cut one begins, and the
+/// damaged stretches (a block whose length is not repeated at its end, or is no
+/// block's) with where whole blocks begin again (blocks lie on 4-byte bounds).
+fn whole_blocks(bytes: &[u8]) -> Result<(usize, Option<usize>, Vec<Damaged>), String> {
     let mut at = 0;
     let mut big_endian = false;
+    let mut damaged = Vec::new();
     while at + 12 <= bytes.len() {
         if bytes[at..at + 4] == [0x0a, 0x0d, 0x0d, 0x0a] {
             big_endian = match read_u32(bytes, at + 8, false) {
@@ -209,16 +236,30 @@ fn whole_blocks(bytes: &[u8]) -> Result<(usize, Option<usize>), String> {
                 _ => return Err(format!("a pcapng section at byte {at} of no byte order")),
             };
         }
+        if ng_block_at(bytes, at, big_endian, false) {
+            at += read_u32(bytes, at + 4, big_endian) as usize;
+            continue;
+        }
+        let resume = (at + 4..bytes.len())
+            .step_by(4)
+            .find(|&next| ng_block_at(bytes, next, big_endian, true));
         let length = read_u32(bytes, at + 4, big_endian) as usize;
-        if length < 12 || !length.is_multiple_of(4) {
-            return Err(format!("a pcapng block at byte {at} of length {length}"));
+        // A well-formed length past the end with no whole block after it: the
+        // capture was cut inside its last block.
+        if resume.is_none() && length >= 12 && length.is_multiple_of(4) && at + length > bytes.len()
+        {
+            break;
         }
-        match at.checked_add(length).filter(|&end| end <= bytes.len()) {
-            Some(end) => at = end,
-            None => break,
-        }
+        damaged.push(Damaged {
+            start: at,
+            resume: resume.unwrap_or(bytes.len()),
+            to_end: resume.is_none(),
+            after_ns: 0,
+            before_ns: None,
+        });
+        at = resume.unwrap_or(bytes.len());
     }
-    Ok((at, (at < bytes.len()).then_some(at)))
+    Ok((at, (at < bytes.len()).then_some(at), damaged))
 }
 
 /// One record of a capture, or a damaged stretch stepped over.
@@ -262,7 +303,7 @@ pub(super) fn records<'a>(
                 })
             }))
         }
-        Capture::Ng => Box::new(ng_records(bytes).map(Ok)),
+        Capture::Ng => Box::new(ng_records(bytes, layout.damaged.clone())),
     }
 }
 
@@ -293,12 +334,21 @@ impl Resolution {
     }
 }
 
-fn ng_records(bytes: &[u8]) -> impl Iterator<Item = (usize, u64, Link, &[u8])> {
+/// A pcapng capture's packets, each damaged stretch where it lies (stamped with the
+/// last packet's time before it).
+fn ng_records(bytes: &[u8], damaged: Vec<Damaged>) -> impl Iterator<Item = Record<'_>> {
     let mut at = 0;
     let mut big_endian = false;
     let mut interfaces: Vec<Interface> = Vec::new();
+    let mut damaged = damaged.into_iter().peekable();
+    let mut last_ns = 0;
     std::iter::from_fn(move || {
         while at + 12 <= bytes.len() {
+            if let Some(mut stretch) = damaged.next_if(|d| d.start == at) {
+                at = stretch.resume;
+                stretch.after_ns = last_ns;
+                return Some(Err(stretch));
+            }
             let block_type = read_u32(bytes, at, big_endian);
             if block_type == 0x0A0D_0D0A {
                 big_endian = read_u32(bytes, at + 8, false) != BYTE_ORDER_MAGIC;
@@ -324,7 +374,8 @@ fn ng_records(bytes: &[u8]) -> impl Iterator<Item = (usize, u64, Link, &[u8])> {
                     };
                     if let Some(link) = interface.link {
                         let stamp_ns = interface.resolution.nanoseconds(ticks);
-                        return Some((offset, stamp_ns, link, frame));
+                        last_ns = stamp_ns;
+                        return Some(Ok((offset, stamp_ns, link, frame)));
                     }
                 }
                 _ => {}
@@ -399,6 +450,47 @@ mod tests {
         body.extend((frame.len() as u32).to_le_bytes());
         body.extend(frame);
         block(6, &body)
+    }
+
+    #[test]
+    fn a_damaged_pcapng_block_is_stepped_over_to_the_next_whole_block() {
+        let mut section = BYTE_ORDER_MAGIC.to_le_bytes().to_vec();
+        section.extend([1, 0, 0, 0]);
+        section.extend(u64::MAX.to_le_bytes());
+        let mut whole = block(0x0A0D_0D0A, &section);
+        whole.extend(block(1, &[1, 0, 0, 0, 0, 0, 4, 0]));
+        let at = |k: usize| whole.len() + k * enhanced_packet(0, 0, b"packet").len();
+        let (second, third) = (at(1), at(2));
+        for k in 0..3 {
+            whole.extend(enhanced_packet(0, 1_000_000 * (k + 1), b"packet"));
+        }
+        // A whole block of a type travmap does not know (name resolution) is no damage.
+        let mut with_names = whole.clone();
+        with_names.extend(block(4, b"names"));
+        let layout = read(&with_names).unwrap();
+        assert!(layout.damaged.is_empty() && layout.end == with_names.len());
+        // The second block's length: not repeated at its end, not a multiple of 4,
+        // or past the end of the file (a third block follows: damage, not a cut).
+        for length in [44u32, 45, 1 << 30] {
+            let mut bytes = whole.clone();
+            bytes[second + 4..second + 8].copy_from_slice(&length.to_le_bytes());
+            let layout = read(&bytes).unwrap();
+            assert_eq!((layout.end, layout.cut), (bytes.len(), None), "{length}");
+            let read: Vec<_> = records(&bytes, &layout).collect();
+            let stamps: Vec<u64> = read.iter().flatten().map(|r| r.1).collect();
+            assert_eq!(stamps, [1_000_000_000, 3_000_000_000], "{length}");
+            let stretch = read.iter().find_map(|r| r.as_ref().err()).unwrap();
+            let expected = (second, third, false, 1_000_000_000);
+            assert_eq!(
+                (
+                    stretch.start,
+                    stretch.resume,
+                    stretch.to_end,
+                    stretch.after_ns
+                ),
+                expected
+            );
+        }
     }
 
     #[test]
