@@ -452,12 +452,17 @@ mod tests {
         block(6, &body)
     }
 
-    #[test]
-    fn a_damaged_pcapng_block_is_stepped_over_to_the_next_whole_block() {
+    /// A little-endian pcapng section header block, version 1.0, of unknown length.
+    fn section_header() -> Vec<u8> {
         let mut section = BYTE_ORDER_MAGIC.to_le_bytes().to_vec();
         section.extend([1, 0, 0, 0]);
         section.extend(u64::MAX.to_le_bytes());
-        let mut whole = block(0x0A0D_0D0A, &section);
+        block(0x0A0D_0D0A, &section)
+    }
+
+    #[test]
+    fn a_damaged_pcapng_block_is_stepped_over_to_the_next_whole_block() {
+        let mut whole = section_header();
         whole.extend(block(1, &[1, 0, 0, 0, 0, 0, 4, 0]));
         let at = |k: usize| whole.len() + k * enhanced_packet(0, 0, b"packet").len();
         let (second, third) = (at(1), at(2));
@@ -495,10 +500,7 @@ mod tests {
 
     #[test]
     fn pcapng_packets_keep_their_interfaces_link_and_time_unit() {
-        let mut section = BYTE_ORDER_MAGIC.to_le_bytes().to_vec();
-        section.extend([1, 0, 0, 0]);
-        section.extend(u64::MAX.to_le_bytes());
-        let mut capture = block(0x0A0D_0D0A, &section);
+        let mut capture = section_header();
         // Interface 0: Ethernet in microseconds; 1: raw IPv4 in nanoseconds (an
         // if_tsresol option); 2: a link type travmap does not read.
         capture.extend(block(1, &[1, 0, 0, 0, 0, 0, 4, 0]));
