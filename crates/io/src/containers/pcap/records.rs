@@ -30,11 +30,7 @@ impl Link {
 /// Which of the two formats, and what its header says.
 #[derive(Clone, Copy, Debug)]
 pub(super) enum Capture {
-    Classic {
-        big_endian: bool,
-        nanoseconds: bool,
-        link: Link,
-    },
+    Classic { headers: ClassicHeaders, link: Link },
     Ng,
 }
 
@@ -66,7 +62,7 @@ pub(super) struct Layout {
     pub end: usize,
     /// Where a cut last record begins.
     pub cut: Option<usize>,
-    /// Damaged stretches of a classic capture, in order.
+    /// Damaged stretches, in order.
     pub damaged: Vec<Damaged>,
 }
 
@@ -78,8 +74,8 @@ const MAX_RECORD_GAP_NS: u64 = 86_400_000_000_000;
 const MIN_RESUMING_FRAME: usize = 20;
 
 /// How a classic capture's record headers read.
-#[derive(Clone, Copy)]
-struct ClassicHeaders {
+#[derive(Clone, Copy, Debug)]
+pub(super) struct ClassicHeaders {
     big_endian: bool,
     nanoseconds: bool,
     snap_length: usize,
@@ -187,13 +183,8 @@ pub(super) fn read(bytes: &[u8]) -> Result<Layout, String> {
         (at, last_ns) = (next, Some(stamp_ns));
     }
     let cut = (at < bytes.len()).then_some(at);
-    let capture = Capture::Classic {
-        big_endian,
-        nanoseconds,
-        link,
-    };
     Ok(Layout {
-        capture,
+        capture: Capture::Classic { headers, link },
         end: at,
         cut,
         damaged,
@@ -274,11 +265,7 @@ pub(super) fn records<'a>(
 ) -> Box<dyn Iterator<Item = Record<'a>> + 'a> {
     let bytes = &bytes[..layout.end];
     match layout.capture {
-        Capture::Classic {
-            big_endian,
-            nanoseconds,
-            link,
-        } => {
+        Capture::Classic { headers, link } => {
             let mut at = CLASSIC_HEADER;
             let mut damaged = layout.damaged.clone().into_iter().peekable();
             Box::new(std::iter::from_fn(move || {
@@ -286,21 +273,12 @@ pub(super) fn records<'a>(
                     at = stretch.resume;
                     return Some(Err(stretch));
                 }
-                (at < bytes.len()).then(|| {
-                    let seconds = u64::from(read_u32(bytes, at, big_endian));
-                    let fraction = u64::from(read_u32(bytes, at + 4, big_endian));
-                    let captured = read_u32(bytes, at + 8, big_endian) as usize;
-                    let frame = &bytes[at + RECORD_HEADER..at + RECORD_HEADER + captured];
-                    let offset = at;
-                    at += RECORD_HEADER + captured;
-                    let unit = if nanoseconds { 1 } else { 1_000 };
-                    Ok((
-                        offset,
-                        seconds * 1_000_000_000 + fraction * unit,
-                        link,
-                        frame,
-                    ))
-                })
+                // `read` walked these records: each header reads right.
+                let (stamp_ns, captured) = headers.record(bytes, at)?;
+                let frame = &bytes[at + RECORD_HEADER..at + RECORD_HEADER + captured];
+                let offset = at;
+                at += RECORD_HEADER + captured;
+                Some(Ok((offset, stamp_ns, link, frame)))
             }))
         }
         Capture::Ng => Box::new(ng_records(bytes, layout.damaged.clone())),
