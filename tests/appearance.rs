@@ -270,7 +270,12 @@ fn a_cell_keeps_its_colour_five_frames_later_after_the_grid_moved() {
     let mut config = travmap_core::Config::default();
     config.grid.size_m = 24.0;
     let sequence = travmap_io::KittiSequence::open(&seq, None, &|_| {}).unwrap();
-    let mut pipeline = Pipeline::new(&config, travmap_core::posing::Posing::Recorded).unwrap();
+    let mut pipeline = Pipeline::new(
+        &config,
+        travmap_core::posing::Posing::Recorded,
+        travmap_core::posing::DriveFrame::default(),
+    )
+    .unwrap();
     let results: Vec<_> = (0..6)
         .map(|i| {
             let frame = sequence.read_frame(i).unwrap();
@@ -285,9 +290,8 @@ fn a_cell_keeps_its_colour_five_frames_later_after_the_grid_moved() {
     assert!(seen.len() > 100, "{} cells seen in frame 0", seen.len());
     let mut kept = 0;
     for &cell in &seen {
-        let key = first.layout.world_key(cell);
-        if let Some(later) =
-            (0..last.layout.cell_count()).find(|&c| last.layout.world_key(c) == key)
+        let key = first.layout.cell_key(cell);
+        if let Some(later) = (0..last.layout.cell_count()).find(|&c| last.layout.cell_key(c) == key)
         {
             assert_eq!(
                 last.features.appearance(later),

@@ -741,3 +741,53 @@ fn a_pipe_as_poses_txt_is_refused_not_waited_on() {
     let err = clean_failure(eval(dir.path()));
     assert_contains(&err, &["poses.txt", "a pipe", "not a file"]);
 }
+
+#[test]
+fn a_scan_whose_remission_is_nan_is_classified_without_remission_and_said() {
+    let Some(sample) = crate::common::sample() else {
+        return;
+    };
+    // The sample with frame 1's remission NaN at every point (its points intact).
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
+    std::fs::create_dir_all(seq.join("velodyne")).unwrap();
+    for name in ["labels", "calib.txt", "times.txt", "poses.txt"] {
+        std::os::unix::fs::symlink(sample.join(name), seq.join(name)).unwrap();
+    }
+    for frame in 0..6 {
+        let name = format!("velodyne/{frame:06}.bin");
+        let mut bytes = std::fs::read(sample.join(&name)).unwrap();
+        if frame == 1 {
+            for point in bytes.chunks_exact_mut(16) {
+                point[12..].copy_from_slice(&f32::NAN.to_le_bytes());
+            }
+        }
+        std::fs::write(seq.join(&name), bytes).unwrap();
+    }
+    let (frames, summary) =
+        crate::common::json_records(&success(travmap(&["run", arg(&seq), "--json"])));
+    // Frames 1-3 integrate scan 1: the fallback classifies them, and they still see
+    // obstacles (with the NaN in the remission features every cell was traversable).
+    for frame in &frames {
+        let index = frame["frame"].as_u64().unwrap();
+        let integrates_scan_1 = (1..=3).contains(&index);
+        assert_eq!(
+            frame["without_remission"], integrates_scan_1,
+            "frame {index}"
+        );
+        let obstacles = frame["cells"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|c| *c == 100)
+            .count();
+        assert!(obstacles > 20, "frame {index}: {obstacles} obstacle cells");
+    }
+    assert_eq!(summary["frames_without_remission"], 3);
+    assert_contains(
+        &success(eval(&seq)),
+        &[
+            "3 frames had no usable remission (intensity; 124605 points' remission was NaN or infinite)",
+        ],
+    );
+}

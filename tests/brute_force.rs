@@ -17,10 +17,11 @@ use std::collections::HashMap;
 use nalgebra::{DMatrix, Matrix3, SymmetricEigen, Vector3};
 use travmap_core::config::FeatureConfig;
 use travmap_core::geometry::Moments;
+use travmap_core::posing::DriveFrame;
 use travmap_core::random::SplitMix64;
 use travmap_method::features::{FEATURE_COUNT, FEATURE_NAMES, FeatureExtractor};
 use travmap_method::grid::{CellPoints, GridBuffers, GridLayout, grid_points};
-use travmap_method::integration::{WorldScan, ground_normal};
+use travmap_method::integration::{DriveScan, ground_normal};
 
 // ---------------------------------------------------------------------------------
 // Shared helpers.
@@ -30,18 +31,19 @@ fn scan(
     points: Vec<[f32; 3]>,
     origin: [f64; 3],
     labels: Option<Vec<u32>>,
-) -> WorldScan {
+) -> DriveScan {
     let mut moments = Moments::default();
     for p in &points {
         moments.add(p.map(f64::from));
     }
-    WorldScan {
+    DriveScan {
         index,
         stamp_ns: index as u64 * 100_000_000,
-        points_in_world: points.into(),
-        origin_in_world: origin,
+        points_in_drive: points.into(),
+        sensor_in_drive: origin,
         labels,
         remission: None,
+        non_finite_remission: 0,
         moments,
     }
 }
@@ -133,8 +135,8 @@ fn random_scan(
     layout: &GridLayout,
     index: usize,
     labelled: bool,
-) -> WorldScan {
-    let [min_x, min_y] = layout.min_corner_in_world();
+) -> DriveScan {
+    let [min_x, min_y] = layout.min_corner_in_drive();
     let side = layout.cell_size_m * layout.cells_per_side as f64;
     let n = 50 + (rng.next_u64() % 400) as usize;
     let border = |rng: &mut SplitMix64, min: f64| {
@@ -196,14 +198,14 @@ impl Binned {
 }
 
 /// The obvious binning: each point on its own, its cell by floor division.
-fn binned_by_hash_map(scans: &[WorldScan], layout: &GridLayout) -> HashMap<usize, Vec<Binned>> {
-    let [min_x, min_y] = layout.min_corner_in_world();
+fn binned_by_hash_map(scans: &[DriveScan], layout: &GridLayout) -> HashMap<usize, Vec<Binned>> {
+    let [min_x, min_y] = layout.min_corner_in_drive();
     let r = layout.cell_size_m;
     let l = layout.cells_per_side as f64;
     let with_labels = scans.iter().all(|s| s.labels.is_some());
     let mut cells: HashMap<usize, Vec<Binned>> = HashMap::new();
     for scan in scans {
-        for (i, p) in scan.points_in_world.iter().enumerate() {
+        for (i, p) in scan.points_in_drive.iter().enumerate() {
             // The same f64 arithmetic as `GridLayout::cell_of_local` documents: the
             // point relative to the min corner (f32 widened, minus the f64 corner), then
             // divided by the cell size. A point on a border, or within rounding of one,
@@ -219,7 +221,7 @@ fn binned_by_hash_map(scans: &[WorldScan], layout: &GridLayout) -> HashMap<usize
                 continue;
             }
             let cell = row as usize * layout.cells_per_side + col as usize;
-            let o = scan.origin_in_world;
+            let o = scan.sensor_in_drive;
             let range_m =
                 Vector3::new(p[0] as f64 - o[0], p[1] as f64 - o[1], p[2] as f64 - o[2]).norm();
             cells.entry(cell).or_default().push(Binned {
@@ -236,7 +238,7 @@ fn binned_by_hash_map(scans: &[WorldScan], layout: &GridLayout) -> HashMap<usize
     cells
 }
 
-fn check_grid_points(seed: u64, scans: &[WorldScan], layout: GridLayout, failures: &mut Failures) {
+fn check_grid_points(seed: u64, scans: &[DriveScan], layout: GridLayout, failures: &mut Failures) {
     let fast = grid_points(scans, layout, &mut GridBuffers::default());
     let expected = binned_by_hash_map(scans, &layout);
     let cell_count = layout.cell_count();
@@ -348,17 +350,18 @@ fn grid_points_matches_binning_each_point_into_a_hash_map() {
         // coordinate is coarse (0.25 mm at 4 km).
         let scale = pick(&mut rng, &[1.0, 50.0, 4000.0]);
         let centre = [rng.uniform(-scale, scale), rng.uniform(-scale, scale)];
-        let layout = GridLayout::centred_on(centre, cell_size_m, cells_per_side);
+        let layout =
+            GridLayout::centred_on(centre, DriveFrame::default(), cell_size_m, cells_per_side);
         let scan_count = 2 + (rng.next_u64() % 2) as usize;
         // Every scan labelled, then one scan (chosen at random) without labels.
-        let labelled: Vec<WorldScan> = (0..scan_count)
+        let labelled: Vec<DriveScan> = (0..scan_count)
             .map(|i| random_scan(&mut rng, &layout, i, true))
             .collect();
         check_grid_points(seed, &labelled, layout, &mut failures);
         let mut partly = labelled.clone();
         partly[(rng.next_u64() % scan_count as u64) as usize].labels = None;
         check_grid_points(seed, &partly, layout, &mut failures);
-        let unlabelled: Vec<WorldScan> = (0..scan_count)
+        let unlabelled: Vec<DriveScan> = (0..scan_count)
             .map(|i| random_scan(&mut rng, &layout, i, false))
             .collect();
         check_grid_points(seed, &unlabelled, layout, &mut failures);
@@ -368,7 +371,7 @@ fn grid_points_matches_binning_each_point_into_a_hash_map() {
 
 #[test]
 fn grid_points_of_an_empty_window_and_of_scans_wholly_outside() {
-    let layout = GridLayout::centred_on([3.0, -7.0], 0.4, 30);
+    let layout = GridLayout::centred_on([3.0, -7.0], DriveFrame::default(), 0.4, 30);
     let empty = grid_points(&[], layout, &mut GridBuffers::default());
     assert_eq!(empty.cell_start, vec![0; 901]);
     assert!(empty.points_in_grid.is_empty() && empty.range_m.is_empty());
@@ -953,6 +956,7 @@ fn random_grid(
         cell_size_m,
         cells_per_side,
         first_cell_key: [rng.next_u64() as i64 % 1000, rng.next_u64() as i64 % 1000],
+        drive: DriveFrame::default(),
     };
     let side = cell_size_m * cells_per_side as f64;
     let z0 = pick(rng, &[-1.7, 0.0, 12.0, -25.0]) + rng.uniform(-0.5, 0.5);
@@ -1107,7 +1111,7 @@ fn ground_normal_matches_a_two_pass_plane_fit() {
             rng.uniform(-3000.0, 3000.0),
             rng.uniform(-30.0, 30.0),
         ];
-        let scans: Vec<WorldScan> = (0..3)
+        let scans: Vec<DriveScan> = (0..3)
             .map(|i| {
                 let points = (0..2000)
                     .map(|_| {
@@ -1126,7 +1130,7 @@ fn ground_normal_matches_a_two_pass_plane_fit() {
             .collect();
         let all: Vec<[f64; 3]> = scans
             .iter()
-            .flat_map(|s| s.points_in_world.iter().map(|p| p.map(f64::from)))
+            .flat_map(|s| s.points_in_drive.iter().map(|p| p.map(f64::from)))
             .collect();
         let (_, covariance) = centroid_and_covariance(&all);
         let ([l1, l2, l3], expected) = eigen_decreasing(covariance);
@@ -1229,6 +1233,7 @@ fn degenerate_cells_take_the_guards_defined_values() {
         cell_size_m: 0.4,
         cells_per_side: 1,
         first_cell_key: [0, 0],
+        drive: DriveFrame::default(),
     };
     let extractor = FeatureExtractor {
         config: FeatureConfig::default(),

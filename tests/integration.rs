@@ -13,6 +13,7 @@ mod brute_force;
 mod cli;
 mod dataset;
 mod drive_map;
+mod far_from_origin;
 mod feature_groups;
 mod fleet;
 mod foxglove;

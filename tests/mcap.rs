@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use crate::common::{
-    arg, assert_contains, clean_failure, json_summary, success, travmap, write_output,
+    arg, assert_contains, clean_failure, json_summary, messages, success, travmap, write_output,
 };
 use serde_json::Value;
 use travmap_formats::mcap::writer::Compression;
@@ -16,17 +16,6 @@ use travmap_io::payloads::cloud::{check_some_finite, cloud_points};
 use travmap_io::ros_drive::LogOptions;
 use travmap_io::{Source, SourceOptions};
 use travmap_outputs::writing::McapSink;
-
-/// Every message of `topic` in an MCAP, decoded by travmap's own reader.
-fn messages<T: serde::de::DeserializeOwned>(path: &Path, topic: &str) -> Vec<(u64, T)> {
-    let bytes = std::fs::read(path).unwrap();
-    mcap::MessageStream::new(&bytes)
-        .unwrap()
-        .map(|m| m.unwrap())
-        .filter(|m| m.channel.topic == topic)
-        .map(|m| (m.log_time, decode(&m.data).unwrap()))
-        .collect()
-}
 
 #[test]
 fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
@@ -155,8 +144,8 @@ fn the_cloud_is_the_scan_in_the_grid_the_whole_scan_or_none() {
         // Each point with the values of its cell, -1 outside the grid.
         let (origin, r, side) = (&grid.info.origin.position, grid.info.resolution as f64, 30);
         let cell_of = |point: &[u8]| {
-            let v = |at: usize| f32::from_le_bytes(point[at..at + 4].try_into().unwrap()) as f64;
-            let (col, row) = ((v(0) - origin.x) / r, (v(4) - origin.y) / r);
+            let v = |at: usize| f64::from_le_bytes(point[at..at + 8].try_into().unwrap());
+            let (col, row) = ((v(0) - origin.x) / r, (v(8) - origin.y) / r);
             (col >= 0.0 && row >= 0.0 && col < side as f64 && row < side as f64)
                 .then(|| row as usize * side + col as usize)
         };
@@ -166,7 +155,7 @@ fn the_cloud_is_the_scan_in_the_grid_the_whole_scan_or_none() {
                 let cell = cell_of(point);
                 let expected = cell.map_or([-1, -1], |c| [grid.data[c], truth.data[c]]);
                 assert_eq!(
-                    [point[12] as i8, point[13] as i8],
+                    [point[24] as i8, point[25] as i8],
                     expected,
                     "frame {frame}"
                 );

@@ -176,7 +176,7 @@ fn map_server_loads_every_fused_cell_on_its_pixel_with_its_value() {
     let dir = tempfile::tempdir().unwrap();
     let cells = crate::common::fused_drive(&seq);
     let seen: Vec<&FusedCell> = cells.iter().filter(|c| c.observations > 0).collect();
-    assert!(seen.len() > 1000, "{} cells seen", seen.len());
+    assert!(seen.len() > 900, "{} cells seen", seen.len());
 
     let (yaml, summary) = write_nav2(&seq, dir.path(), "trinary");
     assert_eq!(

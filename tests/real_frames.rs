@@ -7,7 +7,7 @@ use travmap_core::config::RemissionScaling;
 use travmap_core::geometry::Moments;
 use travmap_io::KittiSequence;
 use travmap_io::kitti::{read_labels, read_poses, read_scan};
-use travmap_method::integration::{WorldScan, scan_to_world};
+use travmap_method::integration::{DriveScan, scan_to_drive};
 
 const VOXEL_M: f32 = 0.5;
 
@@ -52,9 +52,14 @@ fn mean_nearest_distance(fixed: &[[f32; 3]], moving: &[[f32; 3]], sensor: [f32; 
     sum / n as f64
 }
 
-fn world_scans(sequence: &KittiSequence, frames: std::ops::Range<usize>) -> Vec<WorldScan> {
+/// The scans in the sequence's world, which is its first scan's frame (its drive frame).
+fn world_scans(sequence: &KittiSequence, frames: std::ops::Range<usize>) -> Vec<DriveScan> {
     frames
-        .map(|i| scan_to_world(sequence.read_frame(i).unwrap(), RemissionScaling::AsRead))
+        .map(|i| {
+            let frame = sequence.read_frame(i).unwrap();
+            let pose = frame.world_from_velodyne;
+            scan_to_drive(frame, &pose, RemissionScaling::AsRead)
+        })
         .collect()
 }
 
@@ -66,9 +71,9 @@ fn consecutive_scans_coincide_in_the_world_frame() {
     let sequence = KittiSequence::open(&dir, None, &|_| {}).unwrap();
     let scans = world_scans(&sequence, 0..6);
     for pair in scans.windows(2) {
-        let sensor = pair[1].origin_in_world.map(|v| v as f32);
+        let sensor = pair[1].sensor_in_drive.map(|v| v as f32);
         let aligned =
-            mean_nearest_distance(&pair[0].points_in_world, &pair[1].points_in_world, sensor);
+            mean_nearest_distance(&pair[0].points_in_drive, &pair[1].points_in_drive, sensor);
         // The same scan left in its own velodyne frame: the car's motion shows.
         let raw = sequence.read_frame(pair[1].index).unwrap();
         let unmoved: Vec<[f32; 3]> = raw
@@ -113,7 +118,7 @@ fn consecutive_scans_coincide_in_the_world_frame() {
         );
     }
     // The car drives forward (velodyne +x) about 0.7 m per frame, on the ground plane.
-    let last = scans[5].origin_in_world;
+    let last = scans[5].sensor_in_drive;
     assert!(
         last[0] > 3.0 && last[0] < 4.5 && last[1].abs() < 0.3 && last[2].abs() < 0.1,
         "{last:?}"
@@ -129,9 +134,9 @@ fn the_road_lies_in_the_world_xy_plane() {
     for scan in world_scans(&sequence, 0..3) {
         let labels = scan.labels.as_ref().expect("frames 0-2 are labelled");
         let mut road = Moments::default();
-        for (p, &label) in scan.points_in_world.iter().zip(labels) {
-            let horizontal = ((p[0] as f64 - scan.origin_in_world[0]).powi(2)
-                + (p[1] as f64 - scan.origin_in_world[1]).powi(2))
+        for (p, &label) in scan.points_in_drive.iter().zip(labels) {
+            let horizontal = ((p[0] as f64 - scan.sensor_in_drive[0]).powi(2)
+                + (p[1] as f64 - scan.sensor_in_drive[1]).powi(2))
             .sqrt();
             if label & 0xFFFF == 40 && horizontal < 15.0 {
                 road.add(p.map(|v| v as f64));
@@ -204,7 +209,7 @@ fn labels_join_the_right_points() {
 #[test]
 fn frames_in_batches_equal_frames_one_by_one() {
     use travmap_core::frame::Frame;
-    use travmap_core::posing::Posing;
+    use travmap_core::posing::{DriveFrame, Posing};
     use travmap_method::classifier::SvmModel;
     use travmap_method::pipeline::Pipeline;
     let Some(dir) = crate::common::sample() else {
@@ -214,7 +219,7 @@ fn frames_in_batches_equal_frames_one_by_one() {
     let model = SvmModel::embedded_default().unwrap();
     let config = travmap_core::Config::default();
     let frames: Vec<_> = (0..6).map(|i| sequence.read_frame(i).unwrap()).collect();
-    let pipeline = || Pipeline::new(&config, Posing::Recorded).unwrap();
+    let pipeline = || Pipeline::new(&config, Posing::Recorded, DriveFrame::default()).unwrap();
     let posed = |pipeline: &mut Pipeline, frames: &[Frame]| -> Vec<_> {
         let pose = |f: &Frame| pipeline.pose(f.clone()).unwrap();
         frames.iter().map(pose).collect()

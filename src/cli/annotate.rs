@@ -15,7 +15,7 @@ use super::convert::CompressionArg;
 use super::{
     Inputs, ModelArg, Outcome, check_output, counted, foreign_remission_said, frame_count,
     images_for, model_json, note_extension, notice_unknown_labels, outcome, path_text,
-    print_json_summary, print_wrote, with_summary,
+    print_json_summary, print_wrote, with_summary, without_remission_said,
 };
 
 /// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
@@ -141,7 +141,11 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     // Scores against another dataset's labels, or of another sensor's remission, look
     // like a bad model: said as eval says them.
     notice_unknown_labels(&summary.evaluation, config);
-    if let Some(said) = foreign_remission_said(&summary.evaluation, config) {
+    let said = without_remission_said(&summary.evaluation);
+    for said in said
+        .into_iter()
+        .chain(foreign_remission_said(&summary.evaluation, config))
+    {
         eprintln!("notice: {said}");
     }
     Ok(outcome(&selections))

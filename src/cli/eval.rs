@@ -16,7 +16,7 @@ use travmap_method::classifier::SvmModel;
 use super::adapt::AdaptFlag;
 use super::{
     Inputs, ModelArg, Outcome, counted, foreign_remission_said, frame_count, model_json,
-    notice_unknown_labels, outcome, print_json_summary,
+    notice_unknown_labels, outcome, print_json_summary, without_remission_said,
 };
 
 /// Score predictions against SemanticKITTI ground truth (the paper's table).
@@ -154,12 +154,8 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
             scores.tpr * 100.0
         )?;
     }
-    if report.frames_without_remission > 0 {
-        writeln!(
-            out,
-            "{} had no usable remission (intensity): the model's fallback without remission features classified them",
-            counted(report.frames_without_remission, "frame")
-        )?;
+    if let Some(said) = without_remission_said(&report) {
+        writeln!(out, "{said}")?;
     }
     if let Some(said) = foreign_remission_said(&report, config) {
         writeln!(out, "{said}")?;

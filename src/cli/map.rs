@@ -18,6 +18,7 @@ use travmap_outputs::rendering::encode_png;
 use super::{
     Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json,
     note_extension, notice_unknown_labels, outcome, path_text, print_json_summary, usage,
+    without_remission_said,
 };
 
 /// Fuse every frame's prediction (and ground truth) into one map of the drive.
@@ -127,7 +128,8 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     })?;
     let seconds = bar.finish();
     let cells = map.cells();
-    let (cell_size_m, frames, memory_bytes) = (map.cell_size_m(), map.frames(), map.memory_bytes());
+    let (lattice, frames, memory_bytes) = (map.lattice(), map.frames(), map.memory_bytes());
+    let cell_size_m = lattice.cell_size_m;
     if frames == 0 {
         return Err(Error::NothingWritten {
             path: output_path.to_path_buf(),
@@ -138,7 +140,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     }
     // The cells are the map from here on: its tiles (most of a site map's memory) go.
     drop(map);
-    let picture = render_drive_map(&cells, &trajectory, cell_size_m, cell_px)?;
+    let picture = render_drive_map(&cells, &trajectory, &lattice, cell_px)?;
     let mut staged = Staged::default();
     staged.write(output_path, &encode_png(&picture))?;
     if let Some(path) = &args.cells {
@@ -153,7 +155,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
                 &mut staged,
                 yaml,
                 &cells,
-                cell_size_m,
+                &lattice,
                 world_frame,
                 nav2_mode,
                 georeference.as_ref(),
@@ -165,6 +167,9 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let fused_scores = (fused.tp + fused.tn + fused.fp + fused.r#fn > 0).then(|| fused.scores());
     let per_frame = per_frame.report();
     notice_unknown_labels(&per_frame, config);
+    if let Some(said) = without_remission_said(&per_frame) {
+        eprintln!("notice: {said}");
+    }
     let seen = cells.iter().filter(|c| c.observations > 0).count();
     let area_m2 = seen as f64 * cell_size_m.powi(2);
     if output.json {

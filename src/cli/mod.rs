@@ -23,7 +23,7 @@ pub mod train;
 pub use report::{
     counted, foreign_remission_said, input_json, model_json, notice_unknown_labels, path_text,
     print_json_error, print_json_frame, print_json_summary, print_wrote, setting_word,
-    with_summary,
+    with_summary, without_remission_said,
 };
 
 use std::ffi::OsString;

@@ -146,6 +146,22 @@ fn print_json_line(value: &serde_json::Value) -> Result<()> {
 
 /// What a report says of frames whose remission lay far outside the model's
 /// training range (another sensor's scale), when there were some.
+/// What is said when frames had no usable remission, and why when some of it was
+/// NaN or infinite (a frame that looks fine but lost its remission features).
+pub fn without_remission_said(report: &EvaluationReport) -> Option<String> {
+    if report.frames_without_remission == 0 {
+        return None;
+    }
+    let why = match report.non_finite_remission_points {
+        0 => String::new(),
+        points => format!("; {points} points' remission was NaN or infinite"),
+    };
+    Some(format!(
+        "{} had no usable remission (intensity{why}): the model's fallback without remission features classified them",
+        counted(report.frames_without_remission, "frame")
+    ))
+}
+
 pub fn foreign_remission_said(report: &EvaluationReport, config: &Config) -> Option<String> {
     let foreign = report.foreign_remission?;
     Some(format!(

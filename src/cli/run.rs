@@ -10,8 +10,8 @@ use travmap_drive::scoring::evaluation::Evaluation;
 use travmap_method::grid::CellClass;
 
 use super::{
-    Inputs, ModelArg, Outcome, counted, frame_count, images_for, model_json, outcome, path_text,
-    print_json_frame, print_json_summary,
+    Inputs, ModelArg, Outcome, frame_count, images_for, model_json, outcome, path_text,
+    print_json_frame, print_json_summary, without_remission_said,
 };
 
 /// Predict the filtered traversability grid of every frame.
@@ -120,11 +120,8 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
             }),
         )?;
     } else if !output.quiet {
-        if report.frames_without_remission > 0 {
-            eprintln!(
-                "note: {} had no usable remission (intensity): the model's fallback without remission features classified them",
-                counted(report.frames_without_remission, "frame")
-            );
+        if let Some(said) = without_remission_said(&report) {
+            eprintln!("note: {said}");
         }
         let latency = report.timings_ms.latency;
         match frames {

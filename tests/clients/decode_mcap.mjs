@@ -34,7 +34,11 @@ function summarise(topic, schema, msg, logTime) {
   const entry = { topic, schema, log_time: Number(logTime), stamp: stampOf(msg) };
   if (schema === "sensor_msgs/msg/PointCloud2") {
     const view = new DataView(msg.data.buffer, msg.data.byteOffset, msg.data.byteLength);
-    const at = (offset) => [0, 4, 8].map((k) => view.getFloat32(offset + k, true));
+    // x, y, z by their fields: FLOAT32 (7), or FLOAT64 (8) as travmap's annotated cloud.
+    const xyz = ["x", "y", "z"].map((axis) => msg.fields.find((f) => f.name === axis));
+    const read = (f, offset) =>
+      f.datatype === 8 ? view.getFloat64(offset + f.offset, true) : view.getFloat32(offset + f.offset, true);
+    const at = (offset) => xyz.map((f) => read(f, offset));
     entry.points = msg.width * msg.height;
     entry.fields = msg.fields.map((f) => f.name);
     entry.first = msg.data.length ? at(0) : null;

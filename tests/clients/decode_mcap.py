@@ -17,12 +17,21 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 
+# PointField datatypes of coordinates: FLOAT32 and FLOAT64 (travmap's annotated cloud).
+COORDINATE_FORMATS = {7: "<f", 8: "<d"}
+
+
 def cloud_summary(msg):
     step = msg.point_step
     data = bytes(msg.data)
     names = [f.name for f in msg.fields]
-    first = struct.unpack_from("<fff", data, 0) if data else None
-    last = struct.unpack_from("<fff", data, len(data) - step) if data else None
+    xyz = [next(f for f in msg.fields if f.name == axis) for axis in "xyz"]
+
+    def at(offset):
+        return [struct.unpack_from(COORDINATE_FORMATS[f.datatype], data, offset + f.offset)[0] for f in xyz]
+
+    first = at(0) if data else None
+    last = at(len(data) - step) if data else None
     return {"points": int(msg.width * msg.height), "fields": names, "first": first, "last": last}
 
 

@@ -112,6 +112,18 @@ pub fn json_summary(args: &[&str]) -> serde_json::Value {
     summary
 }
 
+/// Every message of `topic` in an MCAP, decoded by travmap's own reader: (log time,
+/// message).
+pub fn messages<T: serde::de::DeserializeOwned>(path: &Path, topic: &str) -> Vec<(u64, T)> {
+    let bytes = std::fs::read(path).unwrap();
+    mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| m.unwrap())
+        .filter(|m| m.channel.topic == topic)
+        .map(|m| (m.log_time, travmap_formats::ros::decode(&m.data).unwrap()))
+        .collect()
+}
+
 /// Runs another program (a client, a converter) and asserts it succeeded, with
 /// its stderr as the message.
 pub fn run_client(command: &mut Command) -> Output {
@@ -271,8 +283,9 @@ pub fn fused_drive(seq: &Path) -> Vec<travmap_method::fusion::FusedCell> {
     let config = travmap_core::Config::default();
     let model = travmap_method::classifier::SvmModel::embedded_default().unwrap();
     let source = travmap_io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
+    let drive = source.drive_frame();
     let selection = travmap_drive::Selection::new(source, 0..usize::MAX);
-    let mut map = travmap_method::fusion::DriveMap::new(config.grid.cell_size_m);
+    let mut map = travmap_method::fusion::DriveMap::new(config.grid.cell_size_m, drive);
     selection
         .run::<travmap_core::Error>(&config, Some(&model), |result| {
             map.add_result(&result);

@@ -6,6 +6,8 @@
 
 use std::path::Path;
 
+use nalgebra::{Isometry3, Translation3};
+
 use crate::config::PoseSource;
 use crate::error::{Error, Result};
 
@@ -29,6 +31,48 @@ impl Posing {
             Posing::Registration => "estimated by scan registration",
             Posing::Alone => "none: each scan alone",
         }
+    }
+}
+
+/// The frame the method keeps a drive in: the world moved so that the drive's first
+/// recorded pose is at its origin (no rotation). Coordinates in it stay as small as
+/// the drive is long, so the method's f32 points and its sums of squares keep their
+/// precision however far the world's origin lies (UTM, a national grid, an MGRS
+/// square), and the cell lattice, anchored at this origin, moves with the drive: the
+/// same drive moved by any distance maps to the same cells. Every output gives the
+/// world's coordinates.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DriveFrame {
+    /// The drive frame's origin in the world, metres.
+    pub origin_in_world: [f64; 3],
+}
+
+impl DriveFrame {
+    /// The drive frame whose origin is at `origin_in_world`.
+    pub fn at(origin_in_world: [f64; 3]) -> Self {
+        Self { origin_in_world }
+    }
+
+    /// `drive_from_x` of a `world_from_x`.
+    pub fn from_world(&self, world_from_x: &Isometry3<f64>) -> Isometry3<f64> {
+        let [x, y, z] = self.origin_in_world;
+        Translation3::new(-x, -y, -z) * world_from_x
+    }
+
+    /// `world_from_x` of a `drive_from_x`.
+    pub fn to_world(&self, drive_from_x: &Isometry3<f64>) -> Isometry3<f64> {
+        let [x, y, z] = self.origin_in_world;
+        Translation3::new(x, y, z) * drive_from_x
+    }
+
+    /// A point of the drive frame in the world.
+    pub fn point_in_world(&self, point_in_drive: [f64; 3]) -> [f64; 3] {
+        let o = self.origin_in_world;
+        [
+            o[0] + point_in_drive[0],
+            o[1] + point_in_drive[1],
+            o[2] + point_in_drive[2],
+        ]
     }
 }
 

@@ -15,7 +15,7 @@ use nalgebra::{Isometry3, Vector3};
 use travmap_core::config::{Config, OwnPoints, RefinePoses};
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
-use travmap_core::posing::Posing;
+use travmap_core::posing::{DriveFrame, Posing};
 use travmap_core::stopwatch::Stopwatch;
 use travmap_io::{Source, SourceKind};
 use travmap_method::classifier::SvmModel;
@@ -160,8 +160,12 @@ impl Selection {
         }
         let reach = self.frames.start..self.frames.end.min(self.frames.start + SURVEY_REACH_FRAMES);
         let frames = self.source.frames_in(&reach);
-        let poses: BTreeMap<usize, Isometry3<f64>> =
-            self.source.recorded_poses()?.into_iter().collect();
+        // In the drive frame, as the method sees them: near the origin, whatever the
+        // world's coordinates.
+        let drive = self.source.drive_frame();
+        let poses: BTreeMap<usize, Isometry3<f64>> = (self.source.recorded_poses()?.iter())
+            .map(|(index, pose)| (*index, drive.from_world(pose)))
+            .collect();
         let body_frames = spaced_frames(&frames, &poses);
         let pairs: Vec<(usize, usize)> = (body_frames.iter())
             .filter_map(|f| {
@@ -178,7 +182,7 @@ impl Selection {
         let scan = |f: &usize| {
             scans
                 .get(f)
-                .map(|s| (&s.world_from_velodyne, s.points_in_velodyne.as_slice()))
+                .map(|s| (&poses[f], s.points_in_velodyne.as_slice()))
         };
         let mut disagreements: Vec<f64> = (pairs.iter())
             .filter_map(|(a, b)| ground_disagreement_m(scan(a)?, scan(b)?))
@@ -249,7 +253,7 @@ impl Selection {
             }
             _ => config,
         };
-        let mut pipeline = Pipeline::new(config, self.source.posing())?;
+        let mut pipeline = Pipeline::new(config, self.source.posing(), self.source.drive_frame())?;
         if self.survey.refine_poses {
             pipeline.refine_recorded_poses(config);
         }
@@ -268,13 +272,16 @@ impl Selection {
     }
 
     /// From now on every result carries its footprint and self-labels (stages 6a,
-    /// 6b) along the drive's trajectory: every pose the input records, also past the
-    /// selected frames; the registration's estimates from the first frame read on
-    /// when poses are estimated; none when each scan is alone (each footprint then
-    /// runs straight along its scan's x axis).
+    /// 6b) along the drive's trajectory (in the drive frame): every pose the input
+    /// records, also past the selected frames; the registration's estimates from the
+    /// first frame read on when poses are estimated; none when each scan is alone
+    /// (each footprint then runs straight along its scan's x axis).
     pub fn follow_trajectory(&mut self, config: &Config) -> Result<Arc<Trajectory>> {
+        let drive = self.source.drive_frame();
         let poses = match self.source.posing() {
-            Posing::Recorded => self.source.recorded_poses()?,
+            Posing::Recorded => (self.source.recorded_poses()?.into_iter())
+                .map(|(index, pose)| (index, drive.from_world(&pose)))
+                .collect(),
             Posing::Registration => {
                 let first = self
                     .pipeline(config)?
@@ -359,7 +366,7 @@ impl Selection {
         beside: Option<Beside<B>>,
         mut on_handed: impl FnMut(Handed<B>) -> Result<(), E>,
     ) -> Result<DriveMap, E> {
-        let mut drive_map = DriveMap::new(config.grid.cell_size_m);
+        let mut drive_map = DriveMap::new(config.grid.cell_size_m, self.source.drive_frame());
         let mut pipeline = self.pipeline(config)?;
         let frames = pipeline.window().warm_up_start(self.frames.start)..self.frames.end;
         // Three stages on their own threads, joined by bounded queues: frames read
@@ -569,7 +576,8 @@ impl Selection {
         frames: &Range<usize>,
         mut on_frame: impl FnMut(),
     ) -> Result<Vec<EstimatedPose>> {
-        let mut pipeline = Pipeline::new(config, Posing::Registration)?;
+        // The first scan that registers is the drive frame's origin, and the world's.
+        let mut pipeline = Pipeline::new(config, Posing::Registration, DriveFrame::default())?;
         let mut trajectory = Vec::new();
         for frame in self.source.read(frames) {
             let frame = frame?;

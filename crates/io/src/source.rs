@@ -17,7 +17,7 @@ use crate::containers::log::Log;
 use travmap_core::config::PoseSource;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
-use travmap_core::posing::{PoseRecord, Posing, decide};
+use travmap_core::posing::{DriveFrame, PoseRecord, Posing, decide};
 
 /// How to read a drive: what every kind uses, then what one kind uses.
 #[derive(Clone, Debug, Default)]
@@ -105,6 +105,8 @@ pub const WORLD_FRAME: &str = "map";
 pub struct Source {
     recording: Recording,
     posing: Posing,
+    /// The frame the method keeps the drive in.
+    drive: DriveFrame,
     /// Frames carry their points' labels (false: read as if unlabelled).
     read_labels: bool,
     /// The frames skipped as unreadable (`--keep-going`), whichever pass met them.
@@ -144,10 +146,12 @@ impl Source {
                 };
                 let site = SiteCloud::open(path, kind, tile_m)?;
                 on_notice(&site.notice());
-                // Each tile is posed by its virtual sensor.
+                // Each tile is posed by its virtual sensor; the reader already moved
+                // the file's coordinates near zero.
                 return Ok(Self {
                     recording: Recording::Site(Box::new(site)),
                     posing: Posing::Recorded,
+                    drive: DriveFrame::default(),
                     read_labels: true,
                     skips,
                 });
@@ -159,22 +163,28 @@ impl Source {
                 let drive = RosDrive::open(log, &options.log, options.poses)?;
                 drive.notice().into_iter().for_each(on_notice);
                 let posing = drive.posing();
-                return Ok(Self {
-                    recording: Recording::Log(Box::new(drive)),
-                    posing,
-                    read_labels: true,
-                    skips,
-                });
+                return Self::posed(Recording::Log(Box::new(drive)), posing, skips);
             }
         };
         let decision = decide(path, options.poses, &record)?;
         decision.notice.as_deref().into_iter().for_each(on_notice);
-        Ok(Self {
+        Self::posed(recording, decision.posing, skips)
+    }
+
+    /// The source of `recording` posed as `posing`: the drive frame at its first
+    /// recorded pose (estimated poses start at the world's origin).
+    fn posed(recording: Recording, posing: Posing, skips: SkipLog) -> Result<Self> {
+        let mut source = Self {
             recording,
-            posing: decision.posing,
+            posing,
+            drive: DriveFrame::default(),
             read_labels: true,
             skips,
-        })
+        };
+        if let Some((_, first)) = source.recorded_poses()?.first() {
+            source.drive = DriveFrame::at(first.translation.vector.into());
+        }
+        Ok(source)
     }
 
     /// What kind of drive this is.
@@ -260,6 +270,13 @@ impl Source {
     /// How the scans are posed.
     pub fn posing(&self) -> Posing {
         self.posing
+    }
+
+    /// The frame the method keeps the drive in ([`DriveFrame`]): the world moved to
+    /// the drive's first recorded pose, so that a drive far from the world's origin
+    /// maps as one at it.
+    pub fn drive_frame(&self) -> DriveFrame {
+        self.drive
     }
 
     /// Every pose the input records for its scans (frame number and

@@ -171,8 +171,9 @@ pub fn context(
 mod tests {
     use super::*;
     use crate::grid::{GridBuffers, GridLayout, grid_points};
-    use crate::integration::WorldScan;
+    use crate::integration::DriveScan;
     use travmap_core::geometry::Moments;
+    use travmap_core::posing::DriveFrame;
 
     #[test]
     fn total_order_keys_order_as_total_cmp_and_give_the_value_back() {
@@ -249,8 +250,8 @@ mod tests {
     fn context_of_a_hand_made_neighbourhood() {
         // 5 x 5 cells of 1 m around (0.5, 0.5): the centre cell is (2, 2), its
         // corner at world (0, 0). Two points per occupied cell, so min_points 2.
-        let layout = GridLayout::centred_on([0.5, 0.5], 1.0, 5);
-        assert_eq!(layout.min_corner_in_world(), [-2.0, -2.0]);
+        let layout = GridLayout::centred_on([0.5, 0.5], DriveFrame::default(), 1.0, 5);
+        assert_eq!(layout.min_corner_in_drive(), [-2.0, -2.0]);
         let mut points = Vec::new();
         let mut put = |x: f32, y: f32, z: [f32; 2]| {
             points.push([x, y, z[0]]);
@@ -260,13 +261,14 @@ mod tests {
         put(1.5, 0.5, [0.5, 0.7]); // east: mean 0.6, step 0.5
         put(0.5, 1.5, [-0.1, -0.1]); // north: mean -0.1, step 0.2
         put(-1.5, -1.5, [-1.0, -1.0]); // two cells away: only the 5 x 5 minimum
-        let scan = WorldScan {
+        let scan = DriveScan {
             index: 0,
             stamp_ns: 0,
-            points_in_world: points.into(),
-            origin_in_world: [0.5, -2.5, 0.0],
+            points_in_drive: points.into(),
+            sensor_in_drive: [0.5, -2.5, 0.0],
             labels: None,
             remission: None,
+            non_finite_remission: 0,
             moments: Moments::default(),
         };
         let cells = grid_points(&[scan], layout, &mut GridBuffers::default());

@@ -146,12 +146,12 @@ impl Scratch {
 }
 
 impl FeatureExtractor {
-    /// The features of every cell; `sensor_in_world` is where the sensor was.
+    /// The features of every cell; `sensor_in_drive` is where the sensor was.
     pub fn compute(
         &self,
         cells: &CellPoints,
         ground_normal: [f64; 3],
-        sensor_in_world: [f64; 3],
+        sensor_in_drive: [f64; 3],
     ) -> FeatureGrid {
         let layout = &cells.layout;
         let cell_count = layout.cell_count();
@@ -207,8 +207,8 @@ impl FeatureExtractor {
             }
         }
         if groups.contains(&FeatureGroup::Context) {
-            let [min_x, min_y] = layout.min_corner_in_world();
-            let sensor_in_grid = [sensor_in_world[0] - min_x, sensor_in_world[1] - min_y];
+            let [min_x, min_y] = layout.min_corner_in_drive();
+            let sensor_in_grid = [sensor_in_drive[0] - min_x, sensor_in_drive[1] - min_y];
             let offset = dimension - feature_groups::CONTEXT_NAMES.len();
             feature_groups::context(
                 cells,

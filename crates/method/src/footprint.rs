@@ -36,7 +36,7 @@ pub enum PathKind {
 }
 
 impl Trajectory {
-    /// The trajectory of `poses` (frame number, `world_from_velodyne`), in order.
+    /// The trajectory of `poses` (frame number, `drive_from_velodyne`), in order.
     pub fn new(poses: &[(usize, Isometry3<f64>)]) -> Self {
         let mut trajectory = Self::default();
         for (index, pose) in poses {
@@ -67,7 +67,7 @@ impl Trajectory {
         self.along_m.last().copied().unwrap_or(0.0)
     }
 
-    /// The path through frame `index` (posed at `world_from_velodyne`) from
+    /// The path through frame `index` from
     /// `horizon_m` behind it to `horizon_m` ahead, as points on the ground plane.
     fn path_around(&self, index: usize, horizon_m: f64) -> Option<Vec<[f64; 2]>> {
         if self.positions.len() < 2 {
@@ -130,19 +130,19 @@ pub struct Footprint {
 
 impl Footprint {
     /// The cells of `layout` the vehicle covers on its path through frame `index`
-    /// (posed at `world_from_velodyne`), and where the path came from.
+    /// (posed at `drive_from_velodyne`), and where the path came from.
     pub fn cells(
         &self,
         layout: &GridLayout,
         trajectory: &Trajectory,
         index: usize,
-        world_from_velodyne: &Isometry3<f64>,
+        drive_from_velodyne: &Isometry3<f64>,
     ) -> (Vec<bool>, PathKind) {
         let (mut path, kind) = match trajectory.path_around(index, self.horizon_m) {
             Some(path) if !path.is_empty() => (path, PathKind::Trajectory),
             _ => {
-                let forward = world_from_velodyne.rotation * Vector3::x();
-                let origin = world_from_velodyne.translation.vector;
+                let forward = drive_from_velodyne.rotation * Vector3::x();
+                let origin = drive_from_velodyne.translation.vector;
                 let at = |t: f64| [origin.x + t * forward.x, origin.y + t * forward.y];
                 (
                     vec![at(-self.horizon_m), at(self.horizon_m)],
@@ -159,7 +159,7 @@ impl Footprint {
         let mut covered = vec![false; layout.cell_count()];
         let half_width = 0.5 * self.vehicle.width_m;
         let r = layout.cell_size_m;
-        let [min_x, min_y] = layout.min_corner_in_world();
+        let [min_x, min_y] = layout.min_corner_in_drive();
         let n = layout.cells_per_side as i64;
         let segments: Vec<([f64; 2], [f64; 2])> = match path {
             [only] => vec![(*only, *only)],
@@ -178,7 +178,7 @@ impl Footprint {
                     if covered[cell] {
                         continue;
                     }
-                    let centre = layout.cell_centre_in_world(cell);
+                    let centre = layout.cell_centre_in_drive(cell);
                     covered[cell] = segment_distance(centre, a, b) <= half_width;
                 }
             }
@@ -220,6 +220,7 @@ fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
 mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion};
+    use travmap_core::posing::DriveFrame;
 
     fn pose(x: f64, y: f64, yaw_rad: f64) -> Isometry3<f64> {
         Isometry3::from_parts(
@@ -241,14 +242,14 @@ mod tests {
 
     /// A 40 x 40 m grid of 0.4 m cells centred on the origin.
     fn layout() -> GridLayout {
-        GridLayout::centred_on([0.0, 0.0], 0.4, 100)
+        GridLayout::centred_on([0.0, 0.0], DriveFrame::default(), 0.4, 100)
     }
 
-    /// The covered cells as world keys.
+    /// The covered cells as lattice keys.
     fn keys(covered: &[bool], layout: &GridLayout) -> Vec<[i64; 2]> {
         (0..covered.len())
             .filter(|&c| covered[c])
-            .map(|c| layout.world_key(c))
+            .map(|c| layout.cell_key(c))
             .collect()
     }
 
@@ -292,7 +293,7 @@ mod tests {
         let layout = layout();
         let (covered, _) = footprint(30.0).cells(&layout, &trajectory, 0, &poses[0].1);
         for c in (0..covered.len()).filter(|&c| covered[c]) {
-            let [x, y] = layout.cell_centre_in_world(c);
+            let [x, y] = layout.cell_centre_in_drive(c);
             let radius = (x * x + (y - 10.0).powi(2)).sqrt();
             // Within the half width (and the chord error of 31 poses) of the arc.
             assert!((radius - 10.0).abs() <= 0.85, "{x} {y}: radius {radius}");

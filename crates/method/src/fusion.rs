@@ -1,8 +1,8 @@
 //! Fusion: every frame's filtered prediction (and ground truth) into one map of the
-//! whole drive, each world cell fused over every frame that saw it.
+//! whole drive, each cell fused over every frame that saw it.
 //!
-//! A frame's grid is aligned with the world (its corner a whole number of cells from
-//! the origin, [`GridLayout`]), so its cells are world cells. Each observation of a
+//! A frame's grid lies on the drive's lattice (its corner a whole number of cells
+//! from the drive frame's origin, [`GridLayout`]), so its cells are the map's cells. Each observation of a
 //! cell adds evidence `s * w_distance * w_margin`:
 //! - `s` is +1 for traversable, -1 for not (the filtered class);
 //! - `w_distance = 1 / (1 + (r / R)^2)`, r the cell centre's distance from the
@@ -26,6 +26,7 @@ use std::collections::HashMap;
 
 use crate::grid::{CellClass, GridLayout};
 use crate::pipeline::FrameResult;
+use travmap_core::posing::DriveFrame;
 
 /// R in the distance weight, metres.
 pub const DISTANCE_SCALE_M: f64 = 6.0;
@@ -67,10 +68,10 @@ impl Tile {
     }
 }
 
-/// A fused world cell.
+/// A fused cell.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FusedCell {
-    /// World cell key: `floor(x / r)`, `floor(y / r)`.
+    /// Lattice key: `floor(x / r)`, `floor(y / r)` in the drive frame.
     pub key: [i64; 2],
     /// The cell centre in the world, metres.
     pub x_m: f64,
@@ -86,9 +87,34 @@ pub struct FusedCell {
     pub ground_truth: CellClass,
 }
 
+/// Where a drive map's cells lie: squares of `cell_size_m` whose key (0, 0) has its
+/// min corner at the drive frame's origin.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lattice {
+    pub cell_size_m: f64,
+    pub drive: DriveFrame,
+}
+
+impl Lattice {
+    /// World x, y of the min corner of the cell with key `key`.
+    pub fn corner_in_world(&self, key: [i64; 2]) -> [f64; 2] {
+        let [x, y, _] = self.drive.origin_in_world;
+        [
+            x + key[0] as f64 * self.cell_size_m,
+            y + key[1] as f64 * self.cell_size_m,
+        ]
+    }
+
+    /// A world x, y in cells from key (0, 0)'s corner (fractional).
+    pub fn in_cells(&self, x_m: f64, y_m: f64) -> [f64; 2] {
+        let [x, y, _] = self.drive.origin_in_world;
+        [(x_m - x) / self.cell_size_m, (y_m - y) / self.cell_size_m]
+    }
+}
+
 /// The fused map of a drive.
 pub struct DriveMap {
-    cell_size_m: f64,
+    lattice: Lattice,
     tiles: HashMap<[i64; 2], Tile>,
     frames: usize,
     /// The lowest and highest keys of the cells a prediction covered, kept as frames
@@ -98,9 +124,9 @@ pub struct DriveMap {
 }
 
 impl DriveMap {
-    pub fn new(cell_size_m: f64) -> Self {
+    pub fn new(cell_size_m: f64, drive: DriveFrame) -> Self {
         Self {
-            cell_size_m,
+            lattice: Lattice { cell_size_m, drive },
             tiles: HashMap::new(),
             frames: 0,
             observed_bounds: None,
@@ -108,7 +134,12 @@ impl DriveMap {
     }
 
     pub fn cell_size_m(&self) -> f64 {
-        self.cell_size_m
+        self.lattice.cell_size_m
+    }
+
+    /// Where the map's cells lie.
+    pub fn lattice(&self) -> Lattice {
+        self.lattice
     }
 
     /// Frames fused so far.
@@ -134,7 +165,7 @@ impl DriveMap {
         distance * confidence
     }
 
-    /// The tile holding world cell `key`, and the cell's index in it.
+    /// The tile holding cell `key`, and the cell's index in it.
     fn locate(key: [i64; 2]) -> ([i64; 2], usize) {
         let tile = [key[0].div_euclid(TILE_CELLS), key[1].div_euclid(TILE_CELLS)];
         let local = key[1].rem_euclid(TILE_CELLS) * TILE_CELLS + key[0].rem_euclid(TILE_CELLS);
@@ -204,11 +235,11 @@ impl DriveMap {
         self.frames += 1;
     }
 
+    /// World x, y of the centre of the cell with lattice key `key`.
     fn centre(&self, key: [i64; 2]) -> (f64, f64) {
-        (
-            (key[0] as f64 + 0.5) * self.cell_size_m,
-            (key[1] as f64 + 0.5) * self.cell_size_m,
-        )
+        let [x, y] = self.lattice.corner_in_world(key);
+        let half = 0.5 * self.lattice.cell_size_m;
+        (x + half, y + half)
     }
 
     /// Every cell some frame saw or labelled, ordered by key (y, then x).
@@ -275,6 +306,7 @@ impl DriveMap {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use travmap_core::posing::DriveFrame;
 
     const T: CellClass = CellClass::Traversable;
     const N: CellClass = CellClass::NonTraversable;
@@ -285,12 +317,13 @@ mod tests {
             cell_size_m: 1.0,
             cells_per_side: 2,
             first_cell_key,
+            drive: DriveFrame::default(),
         }
     }
 
     #[test]
     fn evidence_is_the_weighted_sum_of_the_observations() {
-        let mut map = DriveMap::new(1.0);
+        let mut map = DriveMap::new(1.0, DriveFrame::default());
         // The sensor at the centre of cell (0, 0): distance 0, weight = |margin|.
         let grid = layout([0, 0]);
         map.add(&FrameObservation {
@@ -346,7 +379,7 @@ mod tests {
             })
             .collect();
         let fuse = |order: &[usize]| {
-            let mut map = DriveMap::new(1.0);
+            let mut map = DriveMap::new(1.0, DriveFrame::default());
             for &i in order {
                 let (layout, sensor, classes, margins) = &frames[i];
                 map.add(&FrameObservation {
@@ -366,7 +399,7 @@ mod tests {
 
     #[test]
     fn tiles_are_made_only_where_frames_see() {
-        let mut map = DriveMap::new(1.0);
+        let mut map = DriveMap::new(1.0, DriveFrame::default());
         for first in [[0, 0], [10_000, -10_000]] {
             map.add(&FrameObservation {
                 layout: &layout(first),

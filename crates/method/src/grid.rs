@@ -1,12 +1,14 @@
 //! Stage 2, grid (METHOD.md section 3): the integrated points that fall in the square
 //! grid around the sensor, sorted by cell.
 //!
-//! Input: the window of [`WorldScan`]s and the sensor position. Output: [`CellPoints`],
+//! Input: the window of [`DriveScan`]s and the sensor position. Output: [`CellPoints`],
 //! flat arrays in cell order (a counting sort, two passes, no per-cell allocation).
-//! The grid is axis-aligned with `world` and its corner is snapped to a multiple of
-//! the cell size, so a world cell keeps its identity from frame to frame.
+//! The grid is axis-aligned with the world and its corner is snapped to a multiple of
+//! the cell size from the drive frame's origin, so a cell keeps its identity from
+//! frame to frame.
 
-use crate::integration::WorldScan;
+use crate::integration::DriveScan;
+use travmap_core::posing::DriveFrame;
 
 /// The label of a cell, predicted or ground truth.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -51,25 +53,36 @@ impl CellClass {
     }
 }
 
-/// Where the grid lies in the world.
+/// Where the grid lies: on the drive's lattice of cells, which is anchored at the
+/// drive frame's origin ([`DriveFrame`]), so a cell keeps its key from frame to frame
+/// and the same drive moved anywhere in the world has the same cells.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GridLayout {
     pub cell_size_m: f64,
     pub cells_per_side: usize,
-    /// World cell key (`floor(x / r)`, `floor(y / r)`) of cell (col 0, row 0).
+    /// Lattice key (`floor(x / r)`, `floor(y / r)` in the drive frame) of cell
+    /// (col 0, row 0).
     pub first_cell_key: [i64; 2],
+    /// The frame the method's points are in, and where it lies in the world.
+    pub drive: DriveFrame,
 }
 
 impl GridLayout {
-    /// The grid of `cells_per_side` cells centred on `centre_in_world` (x, y); its
-    /// corner is a whole number of cells from the world origin.
-    pub fn centred_on(centre_in_world: [f64; 2], cell_size_m: f64, cells_per_side: usize) -> Self {
+    /// The grid of `cells_per_side` cells centred on `centre_in_drive` (x, y); its
+    /// corner is a whole number of cells from the drive frame's origin.
+    pub fn centred_on(
+        centre_in_drive: [f64; 2],
+        drive: DriveFrame,
+        cell_size_m: f64,
+        cells_per_side: usize,
+    ) -> Self {
         let half = (cells_per_side / 2) as i64;
         let key = |v: f64| (v / cell_size_m).floor() as i64 - half;
         Self {
             cell_size_m,
             cells_per_side,
-            first_cell_key: [key(centre_in_world[0]), key(centre_in_world[1])],
+            first_cell_key: [key(centre_in_drive[0]), key(centre_in_drive[1])],
+            drive,
         }
     }
 
@@ -77,9 +90,17 @@ impl GridLayout {
         self.cells_per_side * self.cells_per_side
     }
 
+    /// Drive-frame x, y of the grid's min corner: where the method's points are
+    /// measured from.
+    pub fn min_corner_in_drive(&self) -> [f64; 2] {
+        self.first_cell_key.map(|k| k as f64 * self.cell_size_m)
+    }
+
     /// World x, y of the grid's min corner.
     pub fn min_corner_in_world(&self) -> [f64; 2] {
-        self.first_cell_key.map(|k| k as f64 * self.cell_size_m)
+        let [x, y] = self.min_corner_in_drive();
+        let [ox, oy, _] = self.drive.origin_in_world;
+        [ox + x, oy + y]
     }
 
     /// Cell index (`row * cells_per_side + col`, col along world x) of a point
@@ -105,8 +126,8 @@ impl GridLayout {
         (cell % self.cells_per_side, cell / self.cells_per_side)
     }
 
-    /// World cell key of a cell index: the cell's identity across frames.
-    pub fn world_key(&self, cell: usize) -> [i64; 2] {
+    /// Lattice key of a cell index: the cell's identity across the drive's frames.
+    pub fn cell_key(&self, cell: usize) -> [i64; 2] {
         let (col, row) = self.col_row(cell);
         [
             self.first_cell_key[0] + col as i64,
@@ -114,10 +135,25 @@ impl GridLayout {
         ]
     }
 
+    /// Drive-frame x, y of a cell's centre.
+    pub fn cell_centre_in_drive(&self, cell: usize) -> [f64; 2] {
+        self.cell_key(cell)
+            .map(|k| (k as f64 + 0.5) * self.cell_size_m)
+    }
+
     /// World x, y of a cell's centre.
     pub fn cell_centre_in_world(&self, cell: usize) -> [f64; 2] {
-        self.world_key(cell)
-            .map(|k| (k as f64 + 0.5) * self.cell_size_m)
+        let [x, y] = self.cell_centre_in_drive(cell);
+        let [ox, oy, _] = self.drive.origin_in_world;
+        [ox + x, oy + y]
+    }
+
+    /// A point of [`CellPoints::points_in_grid`] (x, y from the min corner, z in the
+    /// drive frame) in the world.
+    pub fn grid_point_in_world(&self, p: [f32; 3]) -> [f64; 3] {
+        let [x, y] = self.min_corner_in_drive();
+        self.drive
+            .point_in_world([x + p[0] as f64, y + p[1] as f64, p[2] as f64])
     }
 }
 
@@ -127,7 +163,7 @@ pub struct CellPoints {
     pub layout: GridLayout,
     /// Cell `c` holds points `cell_start[c]..cell_start[c + 1]`.
     pub cell_start: Vec<u32>,
-    /// x, y relative to the grid's min corner, z as in the world, metres.
+    /// x, y relative to the grid's min corner, z as in the drive frame, metres.
     pub points_in_grid: Vec<[f32; 3]>,
     /// Distance of each point from the sensor origin of its own scan, metres.
     pub range_m: Vec<f32>,
@@ -216,7 +252,7 @@ pub struct KeptCellPoints {
     cell_start: Vec<u32>,
     /// Cell `c`'s newest points are `newest_start[c]..newest_start[c + 1]`.
     newest_start: Vec<u32>,
-    /// x, y relative to the grid's min corner, z as in the world, metres.
+    /// x, y relative to the grid's min corner, z as in the drive frame, metres.
     newest_points_in_grid: Vec<[f32; 3]>,
 }
 
@@ -246,11 +282,11 @@ impl KeptCellPoints {
 /// Sorts the points of `scans` that fall inside `layout` into cells, in `buffers`
 /// (given back by [`CellPoints::kept_for_outputs`]).
 pub fn grid_points(
-    scans: &[WorldScan],
+    scans: &[DriveScan],
     layout: GridLayout,
     buffers: &mut GridBuffers,
 ) -> CellPoints {
-    let [min_x, min_y] = layout.min_corner_in_world();
+    let [min_x, min_y] = layout.min_corner_in_drive();
     let cell_count = layout.cell_count();
 
     // Pass 1: the cell of every in-grid point, and the count per cell.
@@ -264,11 +300,11 @@ pub fn grid_points(
     let mut newest_per_cell = vec![0u32; cell_count];
     for (s, scan) in scans.iter().enumerate() {
         scan_start.push(found);
-        let room = found + scan.points_in_world.len();
+        let room = found + scan.points_in_drive.len();
         if in_grid.len() < room {
             in_grid.resize(room, (0, 0));
         }
-        for (i, p) in scan.points_in_world.iter().enumerate() {
+        for (i, p) in scan.points_in_drive.iter().enumerate() {
             if let Some(cell) = layout.cell_of_local(p[0] as f64 - min_x, p[1] as f64 - min_y) {
                 counts[cell] += 1;
                 in_grid[found] = (cell as u32, i as u32);
@@ -307,8 +343,8 @@ pub fn grid_points(
     // through the scan's index at every point.
     let mut next = cell_start.clone();
     for (s, scan) in scans.iter().enumerate() {
-        let points = &scan.points_in_world[..];
-        let o = scan.origin_in_world;
+        let points = &scan.points_in_drive[..];
+        let o = scan.sensor_in_drive;
         let scan_labels = scan.labels.as_deref().filter(|_| with_labels);
         let scan_remission = scan.remission.as_deref().filter(|_| with_remission);
         for &(cell, i) in &buffers.in_grid[scan_start[s]..scan_start[s + 1]] {
@@ -344,37 +380,43 @@ mod tests {
     use super::*;
     use travmap_core::geometry::Moments;
 
-    fn scan(points: Vec<[f32; 3]>, origin: [f64; 3]) -> WorldScan {
-        WorldScan {
+    fn scan(points: Vec<[f32; 3]>, origin: [f64; 3]) -> DriveScan {
+        DriveScan {
             index: 0,
             stamp_ns: 0,
             labels: Some((0..points.len() as u32).collect()),
             remission: None,
-            points_in_world: points.into(),
-            origin_in_world: origin,
+            points_in_drive: points.into(),
+            sensor_in_drive: origin,
+            non_finite_remission: 0,
             moments: Moments::default(),
         }
     }
 
     #[test]
     fn layout_is_snapped_and_centred() {
-        let layout = GridLayout::centred_on([10.13, -3.9], 0.4, 30);
+        let drive = DriveFrame::at([5e6, -3e5, 40.0]);
+        let layout = GridLayout::centred_on([10.13, -3.9], drive, 0.4, 30);
         // floor(10.13 / 0.4) = 25, floor(-3.9 / 0.4) = -10, minus 15 cells.
         assert_eq!(layout.first_cell_key, [10, -25]);
-        let [x, y] = layout.min_corner_in_world();
+        let [x, y] = layout.min_corner_in_drive();
         assert!((x - 4.0).abs() < 1e-12 && (y + 10.0).abs() < 1e-12);
+        // The world's corner is the drive frame's origin away.
+        assert_eq!(layout.min_corner_in_world(), [5e6 + x, -3e5 + y]);
         // The sensor lies inside the grid, in cell (15, 15).
         let cell = layout.cell_of_local(10.13 - x, -3.9 - y).unwrap();
         assert_eq!(layout.col_row(cell), (15, 15));
-        assert_eq!(layout.world_key(cell), [25, -10]);
-        // Moving the sensor by less than a cell keeps every world key.
-        let moved = GridLayout::centred_on([10.2, -3.7], 0.4, 30);
+        assert_eq!(layout.cell_key(cell), [25, -10]);
+        let [cx, cy] = layout.cell_centre_in_world(cell);
+        assert!((cx - (5e6 + 10.2)).abs() < 1e-6 && (cy - (-3e5 - 3.8)).abs() < 1e-6);
+        // Moving the sensor by less than a cell keeps every key.
+        let moved = GridLayout::centred_on([10.2, -3.7], drive, 0.4, 30);
         assert_eq!(moved, layout);
     }
 
     #[test]
     fn points_are_sorted_into_cells_and_outside_points_dropped() {
-        let layout = GridLayout::centred_on([0.0, 0.0], 1.0, 4); // x, y in [-2, 2)
+        let layout = GridLayout::centred_on([0.0, 0.0], DriveFrame::default(), 1.0, 4); // x, y in [-2, 2)
         let a = scan(
             vec![[0.5, 0.5, 1.0], [5.0, 0.0, 0.0], [-1.5, -1.5, 2.0]],
             [0.0; 3],
@@ -412,7 +454,7 @@ mod tests {
 
     #[test]
     fn a_window_with_one_unlabelled_scan_has_no_labels() {
-        let layout = GridLayout::centred_on([0.0, 0.0], 1.0, 4);
+        let layout = GridLayout::centred_on([0.0, 0.0], DriveFrame::default(), 1.0, 4);
         let labelled = scan(vec![[0.5, 0.5, 1.0]], [0.0; 3]);
         let mut unlabelled = scan(vec![[0.6, 0.4, 3.0]], [0.0; 3]);
         unlabelled.labels = None;

@@ -1,41 +1,54 @@
-//! Stage 1, integration (METHOD.md section 2): a scan moved into the world frame
-//! with its own pose, keeping its sensor origin, plus the ground plane of the
-//! integrated cloud.
+//! Stage 1, integration (METHOD.md section 2): a scan moved into the drive frame (the
+//! world moved to the drive's first pose, [`DriveFrame`]) with its own pose, keeping
+//! its sensor origin, plus the ground plane of the integrated cloud.
 //!
-//! Input: a [`Frame`]. Output: a [`WorldScan`]; the [`IntegrationWindow`] keeps the
-//! last n of them and [`ground_normal`] fits the plane of their union.
+//! Input: a [`Frame`] and its pose in the drive frame. Output: a [`DriveScan`]; the
+//! [`IntegrationWindow`] keeps the last n of them and [`ground_normal`] fits the
+//! plane of their union.
+//!
+//! [`DriveFrame`]: travmap_core::posing::DriveFrame
 
 use std::sync::Arc;
+
+use nalgebra::Isometry3;
 
 use travmap_core::config::RemissionScaling;
 use travmap_core::frame::Frame;
 use travmap_core::geometry::Moments;
 
-/// One scan in the world frame.
+/// One scan in the drive frame.
 #[derive(Clone, Debug)]
-pub struct WorldScan {
+pub struct DriveScan {
     pub index: usize,
     pub stamp_ns: u64,
     /// Shared with the results of the frames that integrate it.
-    pub points_in_world: Arc<Vec<[f32; 3]>>,
+    pub points_in_drive: Arc<Vec<[f32; 3]>>,
     /// Where the sensor was when it took this scan; curvity measures ranges from it.
-    pub origin_in_world: [f64; 3],
+    pub sensor_in_drive: [f64; 3],
     pub labels: Option<Vec<u32>>,
     /// Remission per point on a 0..1 scale, when the input's is usable.
     pub remission: Option<Vec<f32>>,
-    /// Moments of `points_in_world`, so that the plane of several scans costs O(1).
+    /// Points whose remission was NaN or infinite: then the scan has none usable
+    /// (one such value would make every remission feature of its cells NaN).
+    pub non_finite_remission: usize,
+    /// Moments of `points_in_drive`, so that the plane of several scans costs O(1).
     pub moments: Moments,
 }
 
-/// Moves every point of `frame` into the world frame (the pose is applied in f64),
-/// its remission kept where `scaling` can use it.
-pub fn scan_to_world(frame: Frame, scaling: RemissionScaling) -> WorldScan {
-    let m = frame.world_from_velodyne.to_homogeneous();
+/// Moves every point of `frame` into the drive frame by `drive_from_velodyne` (the
+/// pose is applied in f64), its remission kept where `scaling` can use it and it is
+/// finite at every point.
+pub fn scan_to_drive(
+    frame: Frame,
+    drive_from_velodyne: &Isometry3<f64>,
+    scaling: RemissionScaling,
+) -> DriveScan {
+    let m = drive_from_velodyne.to_homogeneous();
     // A loop with no call in it: around `push`'s (or a closure's) the sums went
     // through memory at every point, each waiting for the last one's store.
     let mut moments = Moments::default();
-    let mut points_in_world = vec![[0f32; 3]; frame.points_in_velodyne.len()];
-    for (p, out) in frame.points_in_velodyne.iter().zip(&mut points_in_world) {
+    let mut points_in_drive = vec![[0f32; 3]; frame.points_in_velodyne.len()];
+    for (p, out) in frame.points_in_velodyne.iter().zip(&mut points_in_drive) {
         let (x, y, z) = (p[0] as f64, p[1] as f64, p[2] as f64);
         let w = [
             m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + m[(0, 3)],
@@ -45,17 +58,20 @@ pub fn scan_to_world(frame: Frame, scaling: RemissionScaling) -> WorldScan {
         moments.add(w);
         *out = [w[0] as f32, w[1] as f32, w[2] as f32];
     }
-    let points_in_world = Arc::new(points_in_world);
-    WorldScan {
+    let points_in_drive = Arc::new(points_in_drive);
+    let remission: Option<Vec<f32>> = (frame.remission.is_usable(scaling))
+        .then(|| frame.points_in_velodyne.iter().map(|p| p[3]).collect());
+    let non_finite_remission = (remission.iter().flatten())
+        .filter(|r| !r.is_finite())
+        .count();
+    DriveScan {
         index: frame.index,
         stamp_ns: frame.stamp_ns,
-        points_in_world,
-        origin_in_world: [m[(0, 3)], m[(1, 3)], m[(2, 3)]],
+        points_in_drive,
+        sensor_in_drive: [m[(0, 3)], m[(1, 3)], m[(2, 3)]],
         labels: frame.labels,
-        remission: frame
-            .remission
-            .is_usable(scaling)
-            .then(|| frame.points_in_velodyne.iter().map(|p| p[3]).collect()),
+        remission: remission.filter(|_| non_finite_remission == 0),
+        non_finite_remission,
         moments,
     }
 }
@@ -67,7 +83,7 @@ pub const REFERENCE_REMISSION_P95: f32 = 0.54;
 /// Scales a scan's remission so that its 95th percentile is
 /// [`REFERENCE_REMISSION_P95`] (a scan without remission, or with none above 0, is
 /// left as it is).
-pub fn scale_remission_to_reference(scan: &mut WorldScan) {
+pub fn scale_remission_to_reference(scan: &mut DriveScan) {
     let Some(remission) = scan.remission.as_mut() else {
         return;
     };
@@ -90,7 +106,7 @@ const RANK_BINS: usize = 1024;
 /// of the scan's returns below it (a bin of 1/1024 of the scan's range apart, its
 /// points sharing the bin's middle rank). A scale every sensor shares, whatever its
 /// calibration; a histogram, not a sort, so it costs three passes over the scan.
-pub fn rank_remission(scan: &mut WorldScan) {
+pub fn rank_remission(scan: &mut DriveScan) {
     let Some(remission) = scan.remission.as_mut() else {
         return;
     };
@@ -154,7 +170,7 @@ pub struct IntegrationWindow {
     /// n, the scans integrated per frame.
     scans_per_frame: usize,
     /// Ascending frame indices; the last n - 1 once a batch is processed.
-    scans: Vec<WorldScan>,
+    scans: Vec<DriveScan>,
 }
 
 impl IntegrationWindow {
@@ -186,18 +202,18 @@ impl IntegrationWindow {
     }
 
     /// Adds scans of ascending frames after the newest one.
-    pub fn extend(&mut self, scans: impl IntoIterator<Item = WorldScan>) {
+    pub fn extend(&mut self, scans: impl IntoIterator<Item = DriveScan>) {
         self.scans.extend(scans);
     }
 
     /// Every scan held, ascending.
-    pub fn scans(&self) -> &[WorldScan] {
+    pub fn scans(&self) -> &[DriveScan] {
         &self.scans
     }
 
     /// The window of the scan at position `at` of [`Self::scans`]: it and the scans
     /// of the n - 1 frames before it that are held.
-    pub fn window_of(&self, at: usize) -> &[WorldScan] {
+    pub fn window_of(&self, at: usize) -> &[DriveScan] {
         let current = self.scans[at].index;
         let start = self.scans[..=at]
             .iter()
@@ -217,7 +233,7 @@ impl IntegrationWindow {
 
 /// Unit normal (z >= 0) of the plane fitted by least squares to all points of
 /// `scans`: the ground-plane normal that zeta difference projects on (section 4).
-pub fn ground_normal(scans: &[WorldScan]) -> [f64; 3] {
+pub fn ground_normal(scans: &[DriveScan]) -> [f64; 3] {
     let mut all = Moments::default();
     for scan in scans {
         all.merge(&scan.moments);
@@ -229,13 +245,14 @@ pub fn ground_normal(scans: &[WorldScan]) -> [f64; 3] {
 mod tests {
     #[test]
     fn ranks_are_the_same_on_any_scale_of_one_order() {
-        let scan = |scale: f32| WorldScan {
+        let scan = |scale: f32| DriveScan {
             index: 0,
             stamp_ns: 0,
-            points_in_world: Arc::new(vec![[0.0; 3]; 4]),
-            origin_in_world: [0.0; 3],
+            points_in_drive: Arc::new(vec![[0.0; 3]; 4]),
+            sensor_in_drive: [0.0; 3],
             labels: None,
             remission: Some(vec![0.1 * scale, 0.4 * scale, 0.2 * scale, 0.4 * scale]),
+            non_finite_remission: 0,
             moments: Moments::default(),
         };
         let (mut unit, mut byte) = (scan(1.0), scan(255.0));
@@ -250,15 +267,15 @@ mod tests {
 
     #[test]
     fn pose_moves_points_and_origin() {
-        // 90 degrees about z (velodyne x becomes world y), 10 m along x.
-        let world_from_velodyne = nalgebra::Isometry3::new(
+        // 90 degrees about z (velodyne x becomes drive y), 10 m along x.
+        let drive_from_velodyne = nalgebra::Isometry3::new(
             nalgebra::Vector3::new(10.0, 0.0, 0.0),
             nalgebra::Vector3::new(0.0, 0.0, std::f64::consts::FRAC_PI_2),
         );
         let frame = Frame {
             index: 4,
             stamp_ns: 7,
-            world_from_velodyne,
+            world_from_velodyne: drive_from_velodyne,
             points_in_velodyne: vec![[1.0, 0.0, 2.0, 0.5], [0.0, 1.0, 0.0, 0.1]],
             remission: travmap_core::frame::RemissionScale::Unit,
             labels: None,
@@ -266,23 +283,46 @@ mod tests {
             dropped_points: 0,
             sensors: Vec::new(),
         };
-        let scan = scan_to_world(frame, RemissionScaling::AsRead);
+        let scan = scan_to_drive(frame, &drive_from_velodyne, RemissionScaling::AsRead);
         let expected = [[10.0, 1.0, 2.0], [9.0, 0.0, 0.0]];
-        for (p, e) in scan.points_in_world.iter().zip(expected) {
+        for (p, e) in scan.points_in_drive.iter().zip(expected) {
             assert!(p.iter().zip(e).all(|(a, b)| (a - b).abs() < 1e-6), "{p:?}");
         }
-        assert_eq!(scan.origin_in_world, [10.0, 0.0, 0.0]);
+        assert_eq!(scan.sensor_in_drive, [10.0, 0.0, 0.0]);
         assert_eq!(scan.moments.count, 2);
+        assert_eq!(scan.remission, Some(vec![0.5, 0.1]));
     }
 
-    fn scan(index: usize) -> WorldScan {
-        WorldScan {
+    #[test]
+    fn a_scan_with_a_nan_or_infinite_remission_has_none_usable() {
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let frame = Frame {
+                index: 0,
+                stamp_ns: 0,
+                world_from_velodyne: nalgebra::Isometry3::identity(),
+                points_in_velodyne: vec![[1.0, 0.0, 2.0, 0.5], [0.0, 1.0, 0.0, bad]],
+                remission: travmap_core::frame::RemissionScale::Unit,
+                labels: None,
+                camera: None,
+                dropped_points: 0,
+                sensors: Vec::new(),
+            };
+            let pose = frame.world_from_velodyne;
+            let scan = scan_to_drive(frame, &pose, RemissionScaling::ScanRank);
+            assert_eq!((scan.remission, scan.non_finite_remission), (None, 1));
+            assert_eq!(scan.points_in_drive.len(), 2, "the points stay");
+        }
+    }
+
+    fn scan(index: usize) -> DriveScan {
+        DriveScan {
             index,
             stamp_ns: 0,
-            points_in_world: Arc::default(),
-            origin_in_world: [0.0; 3],
+            points_in_drive: Arc::default(),
+            sensor_in_drive: [0.0; 3],
             labels: None,
             remission: None,
+            non_finite_remission: 0,
             moments: Moments::default(),
         }
     }
@@ -294,7 +334,7 @@ mod tests {
         assert_eq!(window.warm_up_start(1), 0);
         assert_eq!(window.first_full(5), 7);
         window.extend([2, 3, 5, 6].map(scan));
-        let indices = |scans: &[WorldScan]| scans.iter().map(|s| s.index).collect::<Vec<_>>();
+        let indices = |scans: &[DriveScan]| scans.iter().map(|s| s.index).collect::<Vec<_>>();
         assert_eq!(indices(window.window_of(1)), [2, 3]);
         // Frame 4 is missing: the window of 5 is 3..=5, so only 3 and 5.
         assert_eq!(indices(window.window_of(2)), [3, 5]);

@@ -24,8 +24,8 @@ use crate::footprint::{Footprint, PathKind, Trajectory};
 use crate::grid::{CellClass, GridBuffers, GridLayout, KeptCellPoints, grid_points};
 use crate::ground_truth::{GroundTruth, UnknownLabels};
 use crate::integration::{
-    IntegrationWindow, WorldScan, ground_normal, rank_remission, scale_remission_to_reference,
-    scan_to_world,
+    DriveScan, IntegrationWindow, ground_normal, rank_remission, scale_remission_to_reference,
+    scan_to_drive,
 };
 use crate::registration::{Odometry, RegistrationError};
 use crate::self_labels::SelfLabeller;
@@ -33,7 +33,7 @@ use crate::vehicle_points::VehicleBox;
 use travmap_core::config::{ClassifierConfig, Config, RemissionScaling};
 use travmap_core::error::Result;
 use travmap_core::frame::{CameraImage, Frame, RemissionScale};
-use travmap_core::posing::Posing;
+use travmap_core::posing::{DriveFrame, Posing};
 use travmap_core::stopwatch::timed;
 
 /// Wall time of each stage for one frame, milliseconds.
@@ -66,9 +66,9 @@ pub struct FrameResult {
     pub sensor_in_world: [f64; 3],
     /// What the outputs read of the integrated points inside the grid.
     pub cells: KeptCellPoints,
-    /// Every point of the frame's own scan, in the world frame (shared with the
-    /// integration window, not copied).
-    pub scan_in_world: std::sync::Arc<Vec<[f32; 3]>>,
+    /// Every point of the frame's own scan, in the drive frame (`layout.drive`;
+    /// shared with the integration window, not copied).
+    pub scan_in_drive: std::sync::Arc<Vec<[f32; 3]>>,
     /// Points of this frame's scan that the reader dropped (non-finite coordinates).
     pub dropped_points: usize,
     /// Points of this frame's scan whose label id the label set does not define.
@@ -78,6 +78,9 @@ pub struct FrameResult {
     /// Remission features were configured but the window had no usable remission,
     /// so they were left out and the model's fallback classified the frame.
     pub without_remission: bool,
+    /// Points of this frame's scan whose remission was NaN or infinite (the scan then
+    /// has no usable remission).
+    pub non_finite_remission: usize,
     /// The frame's remission lay far outside the model's training range: the
     /// model's fallback classified it without remission.
     pub foreign_remission: Option<ForeignRemission>,
@@ -117,6 +120,8 @@ impl FrameResult {
 /// others.
 pub struct Posed {
     frame: Frame,
+    drive_from_velodyne: Isometry3<f64>,
+    drive: DriveFrame,
     register_ms: f64,
 }
 
@@ -126,7 +131,7 @@ impl Posed {
     }
 
     pub fn world_from_velodyne(&self) -> Isometry3<f64> {
-        self.frame.world_from_velodyne
+        self.drive.to_world(&self.drive_from_velodyne)
     }
 
     /// The registration's time, ms (0 when the pose was not estimated).
@@ -137,7 +142,7 @@ impl Posed {
 
 /// What a frame brings besides its scan, set aside while the scan is integrated.
 struct FrameExtras {
-    world_from_velodyne: Isometry3<f64>,
+    drive_from_velodyne: Isometry3<f64>,
     register_ms: f64,
     remission: RemissionScale,
     camera: Option<CameraImage>,
@@ -151,6 +156,8 @@ struct FrameExtras {
 /// the registration's map.
 pub struct Pipeline {
     posing: Posing,
+    /// The frame the stages keep the drive in.
+    drive: DriveFrame,
     window: IntegrationWindow,
     colours: ColourMemory,
     features: FeatureExtractor,
@@ -183,7 +190,8 @@ struct Adaptation {
 impl Pipeline {
     /// The pipeline for scans posed as `posing` says: each scan alone has nothing to
     /// be integrated with (a window of one), estimated poses need the registration.
-    pub fn new(config: &Config, posing: Posing) -> Result<Self> {
+    /// Recorded poses are moved into `drive` (estimated ones start at its origin).
+    pub fn new(config: &Config, posing: Posing, drive: DriveFrame) -> Result<Self> {
         config.validate()?;
         let scans = match posing {
             Posing::Alone => 1,
@@ -191,6 +199,7 @@ impl Pipeline {
         };
         Ok(Self {
             posing,
+            drive,
             window: IntegrationWindow::new(scans),
             colours: ColourMemory::default(),
             features: FeatureExtractor {
@@ -218,8 +227,8 @@ impl Pipeline {
     }
 
     /// Adds stages 6a and 6b: each frame's footprint along `trajectory` (the whole
-    /// drive's poses) and its self-labels, by the prior's margins when a model is
-    /// given.
+    /// drive's poses, in the drive frame) and its self-labels, by the prior's margins
+    /// when a model is given.
     pub fn follow(&mut self, trajectory: std::sync::Arc<Trajectory>, config: &Config) {
         self.adaptation = Some(Adaptation {
             trajectory,
@@ -249,30 +258,37 @@ impl Pipeline {
     }
 
     /// Stage 0, posing: the vehicle's own points left out (0a); then the frame's pose
-    /// as the source's posing says: its own (refined by registration when asked),
-    /// the registration's estimate (frames in order, warm-up frames included; a scan
-    /// that does not register is refused), or none (each scan in its own frame).
+    /// in the drive frame as the source's posing says: its own (refined by
+    /// registration when asked), the registration's estimate (frames in order,
+    /// warm-up frames included; a scan that does not register is refused), or none
+    /// (each scan in its own frame).
     pub fn pose(&mut self, mut frame: Frame) -> Result<Posed, RegistrationError> {
         if let Some(vehicle_box) = &self.vehicle_box {
             vehicle_box.remove_from(&mut frame.points_in_velodyne, frame.labels.as_mut());
         }
         let mut register_ms = 0.0;
-        match (self.posing, &mut self.registration) {
-            (Posing::Alone, _) => frame.world_from_velodyne = Isometry3::identity(),
+        let recorded = self.drive.from_world(&frame.world_from_velodyne);
+        let drive_from_velodyne = match (self.posing, &mut self.registration) {
+            (Posing::Alone, _) => Isometry3::identity(),
             (Posing::Registration, Some(odometry)) => {
                 let pose;
                 (pose, register_ms) = timed(|| odometry.register(&frame.points_in_velodyne));
-                frame.world_from_velodyne = pose?;
+                pose?
             }
             (Posing::Recorded, Some(odometry)) => {
-                let (recorded, pose) = (frame.world_from_velodyne, &frame.points_in_velodyne);
                 let refined;
-                (refined, register_ms) = timed(|| odometry.register_from(pose, recorded));
-                frame.world_from_velodyne = refined?;
+                (refined, register_ms) =
+                    timed(|| odometry.register_from(&frame.points_in_velodyne, recorded));
+                refined?
             }
-            _ => {}
-        }
-        Ok(Posed { frame, register_ms })
+            _ => recorded,
+        };
+        Ok(Posed {
+            frame,
+            drive_from_velodyne,
+            drive: self.drive,
+            register_ms,
+        })
     }
 
     /// The scan window, to ask which frames fill it.
@@ -284,7 +300,8 @@ impl Pipeline {
     /// window so that the next frames integrate it. Returns the time it took, ms.
     pub fn warm_up(&mut self, posed: Posed) -> f64 {
         self.start_afresh_before(posed.frame.index);
-        let (scan, integrate_ms) = timed(|| self.integrate(posed.frame));
+        let (scan, integrate_ms) =
+            timed(|| self.integrate(posed.frame, &posed.drive_from_velodyne));
         self.window.extend([scan]);
         self.window.forget_old();
         integrate_ms
@@ -313,13 +330,15 @@ impl Pipeline {
             return Vec::new();
         };
         self.start_afresh_before(first.index());
-        let (mut frames, register_ms): (Vec<Frame>, Vec<f64>) =
-            posed.into_iter().map(|p| (p.frame, p.register_ms)).unzip();
+        let (mut frames, poses): (Vec<Frame>, Vec<(Isometry3<f64>, f64)>) = posed
+            .into_iter()
+            .map(|p| (p.frame, (p.drive_from_velodyne, p.register_ms)))
+            .unzip();
         let extras: Vec<FrameExtras> = frames
             .iter_mut()
-            .zip(register_ms)
-            .map(|(f, register_ms)| FrameExtras {
-                world_from_velodyne: f.world_from_velodyne,
+            .zip(poses)
+            .map(|(f, (drive_from_velodyne, register_ms))| FrameExtras {
+                drive_from_velodyne,
                 register_ms,
                 remission: f.remission,
                 camera: f.camera.take(),
@@ -333,12 +352,18 @@ impl Pipeline {
             })
             .collect();
 
-        // 1. Integration: each scan into the world, joined with the previous n - 1.
+        // 1. Integration: each scan into the drive frame, joined with the previous n - 1.
         let held = self.window.scans().len();
-        let (scans, integrate_ms): (Vec<WorldScan>, Vec<f64>) =
-            map_frames(frames, |frame| timed(|| self.integrate(frame)))
-                .into_iter()
-                .unzip();
+        let posed: Vec<(Frame, Isometry3<f64>)> = frames
+            .into_iter()
+            .zip(extras.iter().map(|e| e.drive_from_velodyne))
+            .collect();
+        let (scans, integrate_ms): (Vec<DriveScan>, Vec<f64>) =
+            map_frames(posed, |(frame, pose)| {
+                timed(|| self.integrate(frame, &pose))
+            })
+            .into_iter()
+            .unzip();
         self.window.extend(scans);
         let extras: Vec<FrameExtras> = extras
             .into_iter()
@@ -373,10 +398,10 @@ impl Pipeline {
         results
     }
 
-    /// Stage 1 for one scan: into the world, its remission scaled as configured.
-    fn integrate(&self, frame: Frame) -> WorldScan {
+    /// Stage 1 for one scan: into the drive frame, its remission scaled as configured.
+    fn integrate(&self, frame: Frame, drive_from_velodyne: &Isometry3<f64>) -> DriveScan {
         let scaling = self.features.config.remission_scale;
-        let mut scan = scan_to_world(frame, scaling);
+        let mut scan = scan_to_drive(frame, drive_from_velodyne, scaling);
         match scaling {
             RemissionScaling::AsRead => {}
             RemissionScaling::ScanP95 => scale_remission_to_reference(&mut scan),
@@ -394,15 +419,17 @@ impl Pipeline {
     }
 
     /// Stages 2, 3 and the voting of 3b on the window of a frame (its scan last).
-    fn observe(&self, window: &[WorldScan], extras: FrameExtras) -> Observation {
+    fn observe(&self, window: &[DriveScan], extras: FrameExtras) -> Observation {
         let current = &window[window.len() - 1];
         let mut timings = StageTimings {
             register_ms: extras.register_ms,
             integrate_ms: extras.integrate_ms,
             ..StageTimings::default()
         };
+        let sensor = current.sensor_in_drive;
         let layout = GridLayout::centred_on(
-            [current.origin_in_world[0], current.origin_in_world[1]],
+            [sensor[0], sensor[1]],
+            self.drive,
             self.cell_size_m,
             self.cells_per_side,
         );
@@ -415,13 +442,11 @@ impl Pipeline {
         let cells;
         (cells, timings.grid_ms) = timed(|| grid_points(window, layout, &mut buffers));
         let features;
-        (features, timings.features_ms) = timed(|| {
-            self.features
-                .compute(&cells, ground_normal(window), current.origin_in_world)
-        });
+        (features, timings.features_ms) =
+            timed(|| self.features.compute(&cells, ground_normal(window), sensor));
         let votes;
         (votes, timings.appearance_ms) = timed(|| match (&self.appearance, &extras.camera) {
-            (Some(voter), Some(camera)) => voter.vote(&cells, &extras.world_from_velodyne, camera),
+            (Some(voter), Some(camera)) => voter.vote(&cells, &extras.drive_from_velodyne, camera),
             _ => FrameVotes::default(),
         });
         // Ground truth from the same cloud, outside the latency.
@@ -432,7 +457,7 @@ impl Pipeline {
                 &layout,
                 &a.trajectory,
                 current.index,
-                &extras.world_from_velodyne,
+                &extras.drive_from_velodyne,
             )
         });
         let kept = cells.kept_for_outputs(&mut buffers);
@@ -444,14 +469,15 @@ impl Pipeline {
                 index: current.index,
                 stamp_ns: current.stamp_ns,
                 layout,
-                world_from_velodyne: extras.world_from_velodyne,
-                sensor_in_world: current.origin_in_world,
+                world_from_velodyne: self.drive.to_world(&extras.drive_from_velodyne),
+                sensor_in_world: self.drive.point_in_world(sensor),
                 cells: kept,
-                scan_in_world: current.points_in_world.clone(),
+                scan_in_drive: current.points_in_drive.clone(),
                 dropped_points: extras.dropped_points,
                 unknown_labels: extras.unknown_labels,
                 remission: extras.remission,
                 without_remission: features.groups.len() < self.feature_groups,
+                non_finite_remission: current.non_finite_remission,
                 foreign_remission: None,
                 features,
                 predicted: None,

@@ -165,15 +165,17 @@ pub enum CloudPoints {
     None,
 }
 
-/// The frame's points in world coordinates with `class` (and `ground_truth`) int8:
-/// the occupancy values of their cells (0 traversable, 100 not, -1 unknown).
+/// The frame's points in world coordinates (float64: a world in UTM coordinates keeps
+/// them to the millimetre) with `class` (and `ground_truth`) int8: the occupancy
+/// values of their cells (0 traversable, 100 not, -1 unknown).
 fn cloud_message(
     result: &FrameResult,
     classes: &[CellClass],
     world_frame: &str,
     which: CloudPoints,
 ) -> Option<PointCloud2> {
-    let [min_x, min_y] = result.layout.min_corner_in_world();
+    let layout = &result.layout;
+    let [min_x, min_y] = layout.min_corner_in_drive();
     let occupancy = |cell: Option<usize>| {
         let of = |grid: &[CellClass]| cell.and_then(|c| grid.get(c)).map_or(-1, |c| c.occupancy());
         let truth = result.ground_truth.as_deref().map_or(-1, of);
@@ -181,38 +183,42 @@ fn cloud_message(
     };
     let points = match which {
         CloudPoints::Grid => result.cells.newest_len(),
-        CloudPoints::All => result.scan_in_world.len(),
+        CloudPoints::All => result.scan_in_drive.len(),
         CloudPoints::None => 0,
     };
     let mut data = Vec::with_capacity(points * CLOUD_POINT_STEP);
-    let mut put = |xyz: [f32; 3], cell: Option<usize>| {
+    let mut put = |xyz: [f64; 3], cell: Option<usize>| {
         for v in xyz {
             data.extend_from_slice(&v.to_le_bytes());
         }
         data.extend_from_slice(&occupancy(cell));
+        data.extend_from_slice(&[0; CLOUD_POINT_STEP - 28]);
     };
     match which {
         CloudPoints::None => return None,
         CloudPoints::Grid => {
-            for cell in 0..result.layout.cell_count() {
-                for p in result.cells.newest(cell) {
-                    let x = (p[0] as f64 + min_x) as f32;
-                    let y = (p[1] as f64 + min_y) as f32;
-                    put([x, y, p[2]], Some(cell));
+            for cell in 0..layout.cell_count() {
+                for &p in result.cells.newest(cell) {
+                    put(layout.grid_point_in_world(p), Some(cell));
                 }
             }
         }
         CloudPoints::All => {
-            for p in result.scan_in_world.iter() {
-                let cell = (result.layout).cell_of_local(p[0] as f64 - min_x, p[1] as f64 - min_y);
-                put(*p, cell);
+            for p in result.scan_in_drive.iter() {
+                let cell = layout.cell_of_local(p[0] as f64 - min_x, p[1] as f64 - min_y);
+                let in_drive = p.map(f64::from);
+                put(layout.drive.point_in_world(in_drive), cell);
             }
         }
     }
-    let mut fields = PointField::xyz_float32();
-    fields.push(PointField::scalar("class", 12, datatype::INT8));
+    let mut fields = vec![
+        PointField::scalar("x", 0, datatype::FLOAT64),
+        PointField::scalar("y", 8, datatype::FLOAT64),
+        PointField::scalar("z", 16, datatype::FLOAT64),
+        PointField::scalar("class", 24, datatype::INT8),
+    ];
     if result.ground_truth.is_some() {
-        fields.push(PointField::scalar("ground_truth", 13, datatype::INT8));
+        fields.push(PointField::scalar("ground_truth", 25, datatype::INT8));
     }
     Some(PointCloud2 {
         header: Header {
@@ -230,9 +236,9 @@ fn cloud_message(
     })
 }
 
-/// x, y, z float32, class and ground truth int8, two bytes that keep points
-/// 4-byte aligned (viewers read the floats in place).
-const CLOUD_POINT_STEP: usize = 16;
+/// x, y, z float64, class and ground truth int8, six bytes that keep points 8-byte
+/// aligned (viewers read the floats in place).
+const CLOUD_POINT_STEP: usize = 32;
 
 fn metrics_message(result: &FrameResult, classes: &[CellClass], world_frame: &str) -> FrameMetrics {
     let count = |class: CellClass| classes.iter().filter(|&&c| c == class).count() as u32;

@@ -17,7 +17,7 @@ use crate::rendering::{GAP_PX, class_colour, colour, error_colour};
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::RgbImage;
 use travmap_formats::ros::{Header, MapMetaData, OccupancyGrid, Pose, Quaternion, Time, Vector3};
-use travmap_method::fusion::{DriveMap, FusedCell};
+use travmap_method::fusion::{DriveMap, FusedCell, Lattice};
 use travmap_method::grid::CellClass;
 
 /// Cells of empty border around the map in the picture.
@@ -118,26 +118,29 @@ impl MapPicture {
     }
 
     /// The pixel of a world point (x, y metres) in the first panel, if inside.
-    fn point_px(&self, x_m: f64, y_m: f64, cell_size_m: f64) -> Option<(u32, u32)> {
+    fn point_px(&self, x_m: f64, y_m: f64, lattice: &Lattice) -> Option<(u32, u32)> {
         let (width, height) = self.panel_px();
-        let px = (x_m / cell_size_m - self.low_key[0] as f64) * self.cell_px as f64;
-        let from_bottom = (y_m / cell_size_m - self.low_key[1] as f64) * self.cell_px as f64;
+        let [col, row] = lattice.in_cells(x_m, y_m);
+        let px = (col - self.low_key[0] as f64) * self.cell_px as f64;
+        let from_bottom = (row - self.low_key[1] as f64) * self.cell_px as f64;
         let py = height as f64 - from_bottom;
         (px >= 0.0 && py >= 0.0 && px < width as f64 && py < height as f64)
             .then_some((px as u32, py as u32))
     }
 }
 
-/// The map picture: the fused prediction, and with ground truth the fused ground
-/// truth and the errors; the trajectory (sensor positions, x-y metres) in white, the
-/// world axes at the origin (x red, y blue, [`AXIS_M`] long), a black scale bar of
-/// [`SCALE_BAR_M`] under the first panel.
+/// The map picture of `cells` (on `lattice`): the fused prediction, and with ground
+/// truth the fused ground truth and the errors; the trajectory (sensor positions, x-y
+/// metres in the world) in white, the world axes at its origin when the picture
+/// shows it (x red, y blue, [`AXIS_M`] long), a black scale bar of [`SCALE_BAR_M`]
+/// under the first panel.
 pub fn render_drive_map(
     cells: &[FusedCell],
     trajectory: &[[f64; 2]],
-    cell_size_m: f64,
+    lattice: &Lattice,
     cell_px: u32,
 ) -> Result<RgbImage> {
+    let cell_size_m = lattice.cell_size_m;
     let picture = MapPicture::of(cells, cell_px);
     let with_truth = cells.iter().any(|c| c.ground_truth != CellClass::Unknown);
     let panels = if with_truth { 3 } else { 1 };
@@ -202,7 +205,7 @@ pub fn render_drive_map(
                 from[0] + t * (to[0] - from[0]),
                 from[1] + t * (to[1] - from[1]),
             );
-            if let Some((px, py)) = picture.point_px(x, y, cell_size_m) {
+            if let Some((px, py)) = picture.point_px(x, y, lattice) {
                 for panel in 0..panels {
                     set(panel_x(panel) + px, py, c);
                 }
@@ -311,7 +314,8 @@ pub fn occupancy_grid(
     height_m: f64,
     values: GridValues,
 ) -> Result<OccupancyGrid> {
-    let cell_size_m = map.cell_size_m();
+    let lattice = map.lattice();
+    let cell_size_m = lattice.cell_size_m;
     let (low, size) = padded_extent(map.observed_bounds());
     check_image_size(
         "the drive map's OccupancyGrid",
@@ -331,6 +335,7 @@ pub fn occupancy_grid(
         };
     }
     let stamp = Time::from_ns(stamp_ns);
+    let [x, y] = lattice.corner_in_world(low);
     Ok(OccupancyGrid {
         header: Header {
             stamp,
@@ -342,11 +347,7 @@ pub fn occupancy_grid(
             width: size[0] as u32,
             height: size[1] as u32,
             origin: Pose {
-                position: Vector3 {
-                    x: low[0] as f64 * cell_size_m,
-                    y: low[1] as f64 * cell_size_m,
-                    z: height_m,
-                },
+                position: Vector3 { x, y, z: height_m },
                 orientation: Quaternion::default(),
             },
         },

@@ -23,7 +23,7 @@ use crate::atomic::Staged;
 use crate::drive_map::check_image_size;
 use travmap_core::error::{Error, Result};
 use travmap_io::Georeference;
-use travmap_method::fusion::FusedCell;
+use travmap_method::fusion::{FusedCell, Lattice};
 use travmap_method::grid::CellClass;
 
 /// How cells become grey levels (`mode` in the YAML).
@@ -136,14 +136,14 @@ pub fn gis_world_file(image: &Path) -> PathBuf {
     PathBuf::from(name)
 }
 
-/// Writes the map of the seen `cells` (world cells of `resolution_m`, in `frame`) as
-/// `yaml` and its image (and, for a georeferenced source, a world file and `.prj`
-/// beside the image), staged to appear with the command's other outputs.
+/// Writes the map of the seen `cells` (on `lattice`, in `frame`) as `yaml` and its
+/// image (and, for a georeferenced source, a world file and `.prj` beside the
+/// image), staged to appear with the command's other outputs.
 pub fn write_nav2_map(
     staged: &mut Staged,
     yaml: &Path,
     cells: &[FusedCell],
-    resolution_m: f64,
+    lattice: &Lattice,
     frame: &str,
     mode: Nav2Mode,
     georeference: Option<&Georeference>,
@@ -155,6 +155,7 @@ pub fn write_nav2_map(
             source: std::io::Error::other("no frame saw any cell: the map would be empty"),
         });
     }
+    let resolution_m = lattice.cell_size_m;
     let raster = Raster::of(cells);
     check_image_size(
         "the nav2 map",
@@ -184,11 +185,8 @@ pub fn write_nav2_map(
             grey_alpha_png(raster.size[0] as u32, raster.size[1] as u32, &grey_alpha)
         }
     };
-    let origin = [
-        raster.low_key[0] as f64 * resolution_m,
-        raster.low_key[1] as f64 * resolution_m,
-        0.0,
-    ];
+    let [x, y] = lattice.corner_in_world(raster.low_key);
+    let origin = [x, y, 0.0];
     let mut map = Nav2Map {
         yaml: yaml.to_path_buf(),
         image,

@@ -136,7 +136,7 @@ pub fn adapt(
                 if !result.features.predictable[cell] {
                     continue;
                 }
-                let key = result.layout.world_key(cell);
+                let key = result.layout.cell_key(cell);
                 match label {
                     Some(true) => footprint.insert(key),
                     Some(false) => negative.insert(key),

@@ -10,6 +10,7 @@ use crate::{ReadFrame, Selection};
 use travmap_core::config::Config;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
+use travmap_core::posing::DriveFrame;
 use travmap_core::stopwatch::{Stopwatch, timed};
 use travmap_method::classifier::SvmModel;
 use travmap_method::grid::GridLayout;
@@ -195,8 +196,10 @@ fn floor_ms(loaded: &[ReadFrame], first_timed: usize, config: &Config, repeats: 
                 .map(|(f, _)| f)
                 .filter(|f| f.index <= frame.index && f.index + scans > frame.index);
             let sensor = frame.world_from_velodyne.translation.vector;
+            // On the world's lattice: the floor counts, it does not keep, the points.
             let layout = GridLayout::centred_on(
                 [sensor.x, sensor.y],
+                DriveFrame::default(),
                 config.grid.cell_size_m,
                 cells_per_side,
             );

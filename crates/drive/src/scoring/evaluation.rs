@@ -83,8 +83,11 @@ pub struct EvaluationReport {
     pub unknown_labels: UnknownLabels,
     pub frames_with_unknown_labels: usize,
     /// Frames classified by the fallback model: remission features configured, but
-    /// the input had no usable remission (missing, or on an unknown scale).
+    /// the input had no usable remission (missing, on an unknown scale, or NaN).
     pub frames_without_remission: usize,
+    /// Points whose remission was NaN or infinite, over all frames (their scans had
+    /// no usable remission).
+    pub non_finite_remission_points: u64,
     /// Frames whose remission lay far outside the model's training range (another
     /// sensor's scale), classified by the fallback model; the first one's figures.
     pub frames_foreign_remission: usize,
@@ -102,6 +105,7 @@ pub struct Evaluation {
     unknown_labels: UnknownLabels,
     frames_with_unknown_labels: usize,
     frames_without_remission: usize,
+    non_finite_remission_points: u64,
     frames_foreign_remission: usize,
     foreign_remission: Option<ForeignRemission>,
     filtered: Confusion,
@@ -119,6 +123,7 @@ impl Evaluation {
             self.frames_with_unknown_labels += 1;
         }
         self.frames_without_remission += result.without_remission as usize;
+        self.non_finite_remission_points += result.non_finite_remission as u64;
         if let Some(foreign) = result.foreign_remission {
             self.frames_foreign_remission += 1;
             self.foreign_remission.get_or_insert(foreign);
@@ -153,6 +158,7 @@ impl Evaluation {
             unknown_labels: self.unknown_labels.clone(),
             frames_with_unknown_labels: self.frames_with_unknown_labels,
             frames_without_remission: self.frames_without_remission,
+            non_finite_remission_points: self.non_finite_remission_points,
             frames_foreign_remission: self.frames_foreign_remission,
             foreign_remission: self.foreign_remission,
             timings_ms: TimingReport::of(&self.timings),

@@ -115,12 +115,12 @@ impl AppearanceVoter {
     pub fn vote(
         &self,
         cells: &CellPoints,
-        world_from_velodyne: &Isometry3<f64>,
+        drive_from_velodyne: &Isometry3<f64>,
         camera: &CameraImage,
     ) -> FrameVotes {
         let layout: &GridLayout = &cells.layout;
-        let [min_x, min_y] = layout.min_corner_in_world();
-        let velodyne_from_world = world_from_velodyne.inverse();
+        let [min_x, min_y] = layout.min_corner_in_drive();
+        let velodyne_from_drive = drive_from_velodyne.inverse();
         let image = &camera.image;
         let bins = [
             self.config.hue_bins,
@@ -156,7 +156,7 @@ impl AppearanceVoter {
             for corner in 0..8 {
                 let pick = |axis: usize| bounds[2 * axis + ((corner >> axis) & 1)] as f64;
                 let world = Point3::new(pick(0) + min_x, pick(1) + min_y, pick(2));
-                let v = velodyne_from_world * world;
+                let v = velodyne_from_drive * world;
                 if let Some(px) = camera.project([v.x, v.y, v.z]) {
                     inside_image |= px[0] >= 0.0
                         && px[1] >= 0.0
@@ -175,7 +175,7 @@ impl AppearanceVoter {
                 counts.add(bucket_rows.span(y, x0, x1));
             });
             if counts.pixels > 0 {
-                votes.keys.push(layout.world_key(cell));
+                votes.keys.push(layout.cell_key(cell));
                 counts.append_to(bins, &mut votes.counts);
             }
         }
@@ -231,7 +231,7 @@ impl ColourMemory {
         let mut row_of_cell = vec![CellAppearance::UNSEEN; layout.cell_count()];
         let mut seen = Vec::new();
         for (cell, row) in row_of_cell.iter_mut().enumerate() {
-            if let Some(counts) = self.counts.get(&layout.world_key(cell))
+            if let Some(counts) = self.counts.get(&layout.cell_key(cell))
                 && let Some(&pixels) = counts.get(n)
                 && pixels > 0
             {
@@ -281,6 +281,7 @@ impl CellAppearance {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use travmap_core::posing::DriveFrame;
     use travmap_core::random::SplitMix64;
 
     #[test]
@@ -320,9 +321,10 @@ mod tests {
 
     #[test]
     fn colour_memory_keeps_a_cell_while_the_grid_moves() {
-        let layout_then = GridLayout::centred_on([0.0, 0.0], 0.4, 30);
-        let layout_now = GridLayout::centred_on([2.0, 0.0], 0.4, 30); // 5 cells later
-        let key = layout_then.world_key(100);
+        let drive = DriveFrame::default();
+        let layout_then = GridLayout::centred_on([0.0, 0.0], drive, 0.4, 30);
+        let layout_now = GridLayout::centred_on([2.0, 0.0], drive, 0.4, 30); // 5 cells later
+        let key = layout_then.cell_key(100);
         let mut memory = ColourMemory::default();
         let mut counts = vec![0u32; 5];
         counts[1] = 3;
@@ -334,7 +336,7 @@ mod tests {
         memory.forget_outside(&layout_now, 2);
         let appearance = memory.features(&layout_now, 4);
         let cell = (0..layout_now.cell_count())
-            .find(|&c| layout_now.world_key(c) == key)
+            .find(|&c| layout_now.cell_key(c) == key)
             .unwrap();
         assert_eq!(appearance.of(cell), Some(&[0.0, 1.0, 0.0, 0.0][..]));
         let seen = (0..layout_now.cell_count()).filter(|&c| appearance.of(c).is_some());
