@@ -58,6 +58,15 @@ fn run_frames(input: &Path) -> Vec<(u64, Vec<i64>, [f64; 2])> {
         .collect()
 }
 
+/// Fails unless `to` is `from` moved by `shift` (x, y), within `tolerance_m`.
+fn assert_moved(from: [f64; 2], to: [f64; 2], shift: [f64; 2], tolerance_m: f64) {
+    let error = (to[0] - from[0] - shift[0]).hypot(to[1] - from[1] - shift[1]);
+    assert!(
+        error < tolerance_m,
+        "{from:?} -> {to:?} is not a move by {shift:?}"
+    );
+}
+
 /// The world translation between two runs of the same drive, from their first
 /// frames' grid corners (checked to be the same for every frame).
 fn shift_between(
@@ -69,15 +78,7 @@ fn shift_between(
     for (a, b) in at_origin.iter().zip(moved) {
         assert_eq!(a.0, b.0);
         assert!(a.1 == b.1, "frame {}: the moved drive's cells differ", a.0);
-        for i in 0..2 {
-            let moved_by = b.2[i] - a.2[i];
-            assert!(
-                (moved_by - shift[i]).abs() < 1e-6,
-                "frame {}: corner moved by {moved_by} not {}",
-                a.0,
-                shift[i]
-            );
-        }
+        assert_moved(a.2, b.2, shift, 1e-6);
     }
     shift
 }
@@ -105,12 +106,7 @@ fn assert_grids_moved(at_origin: &[OccupancyGrid], moved: &[OccupancyGrid], shif
             b.info.origin.position.x - a.info.origin.position.x,
             b.info.origin.position.y - a.info.origin.position.y,
         ];
-        for i in 0..2 {
-            assert!(
-                (moved_by[i] - shift[i]).abs() < 1e-6,
-                "grid origin moved by {moved_by:?}, not {shift:?}"
-            );
-        }
+        assert_moved([0.0; 2], moved_by, shift, 1e-6);
     }
 }
 
@@ -183,22 +179,15 @@ fn a_drive_moved_by_5000_km_or_300_km_maps_to_the_same_cells_at_its_true_coordin
                 |c: &PointCloud2| c.data.chunks_exact(32).map(|p| p[24]).collect::<Vec<_>>();
             assert!(classes(a) == classes(&b), "the points' classes differ");
             for (p, q) in cloud_points(a).iter().zip(cloud_points(&b)) {
-                for i in 0..2 {
-                    // The points' own f32 precision near the drive frame's origin.
-                    assert!((q[i] - p[i] - shift[i]).abs() < 1e-4, "{p:?} -> {q:?}");
-                }
+                // The points' own f32 precision near the drive frame's origin.
+                assert_moved([p[0], p[1]], [q[0], q[1]], shift, 1e-4);
             }
         }
 
         // map: the nav2 map's pixels, its origin moved.
         let (image, origin) = nav2_map(&moved, &dir.path().join(format!("map-{offset_m}")));
         assert!(image == nav2_image, "the nav2 map's pixels differ");
-        for i in 0..2 {
-            assert!(
-                (origin[i] - nav2_origin[i] - shift[i]).abs() < 1e-6,
-                "{origin:?}"
-            );
-        }
+        assert_moved(nav2_origin, origin, shift, 1e-6);
 
         // dataset: the same cells and features, at their true coordinates.
         let moved_cells = dataset(&moved, &dir.path().join(format!("dataset-{offset_m}")));
@@ -217,9 +206,7 @@ fn a_drive_moved_by_5000_km_or_300_km_maps_to_the_same_cells_at_its_true_coordin
             .iter()
             .zip(&moved_cells.centre_in_world)
         {
-            for i in 0..2 {
-                assert!((b[i] - a[i] - shift[i]).abs() < 1e-6, "{a:?} -> {b:?}");
-            }
+            assert_moved(*a, *b, shift, 1e-6);
         }
 
         // The same drive as an MCAP posed by /tf: the same cells again.
