@@ -252,7 +252,9 @@ fn a_tr_or_pose_that_is_not_rigid() {
 #[test]
 fn a_model_file_of_another_version() {
     let dir = sequence();
-    let model = travmap_method::classifier::SvmModel::embedded_default().unwrap();
+    let model =
+        travmap_method::classifier::SvmModel::embedded(travmap_core::config::LabelRule::Road)
+            .unwrap();
     let mut json: serde_json::Value = serde_json::from_slice(&model.to_json()).unwrap();
     json["version"] = 99.into();
     let path = dir.path().join("old-model.json");
@@ -310,8 +312,8 @@ fn success_output(output: std::process::Output) -> std::process::Output {
 fn a_model_error_names_its_parameter() {
     let dir = sequence();
     let seq = arg(dir.path());
-    let embedded = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("crates/method/src/classifier/default_model.json");
+    let embedded =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/method/src/classifier/road_model.json");
     let model: serde_json::Value =
         serde_json::from_slice(&std::fs::read(embedded).unwrap()).unwrap();
     let cases: [(&str, serde_json::Value, &str); 4] = [

@@ -143,7 +143,7 @@ fn train_writes_a_model_that_eval_uses() {
 }
 
 #[test]
-fn embedded_model_is_what_the_documented_command_trains() {
+fn embedded_models_are_what_the_documented_command_trains() {
     let Some(seq) = sample() else { return };
     if seq != "../shared/data/semantickitti-00/sequences/00"
         && !seq.ends_with("/../shared/data/semantickitti-00/sequences/00")
@@ -152,10 +152,9 @@ fn embedded_model_is_what_the_documented_command_trains() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let model = dir.path().join("default.json");
     // The retraining script docs/method.md gives, on this binary.
     let trained = std::process::Command::new("scripts/train_embedded_model.sh")
-        .arg(&model)
+        .arg(dir.path())
         .env("TRAVMAP", env!("CARGO_BIN_EXE_travmap"))
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
@@ -175,11 +174,13 @@ fn embedded_model_is_what_the_documented_command_trains() {
         }
         v
     };
-    let shipped = std::fs::read("crates/method/src/classifier/default_model.json").unwrap();
-    assert!(
-        strip_time(&std::fs::read(&model).unwrap()) == strip_time(&shipped),
-        "crates/method/src/classifier/default_model.json is stale: retrain it with scripts/train_embedded_model.sh"
-    );
+    for file in ["road_model.json", "offroad_model.json"] {
+        let shipped = std::fs::read(format!("crates/method/src/classifier/{file}")).unwrap();
+        assert!(
+            strip_time(&std::fs::read(dir.path().join(file)).unwrap()) == strip_time(&shipped),
+            "crates/method/src/classifier/{file} is stale: retrain it with scripts/train_embedded_model.sh"
+        );
+    }
 }
 
 #[test]
@@ -346,7 +347,9 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
 
     // The same frame through the library: every cell's colour in every panel.
     let config = travmap_core::Config::default();
-    let model = travmap_method::classifier::SvmModel::embedded_default().unwrap();
+    let model =
+        travmap_method::classifier::SvmModel::embedded(travmap_core::config::LabelRule::Road)
+            .unwrap();
     let source = travmap_io::Source::open(Path::new(&seq), &Default::default(), &|_| {}).unwrap();
     let selection = travmap_drive::Selection::new(source, 2..3);
     let mut result = None;

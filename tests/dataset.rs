@@ -49,7 +49,7 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     };
     let dir = tempfile::tempdir().unwrap();
     let model_path = dir.path().join("model.json");
-    let model = SvmModel::embedded_default().unwrap();
+    let model = SvmModel::embedded(travmap_core::config::LabelRule::Road).unwrap();
     std::fs::write(&model_path, model.to_json()).unwrap();
     let cells = dir.path().join("cells.parquet");
     let summary = dataset(&seq, &cells, &["--model", arg(&model_path)]);

@@ -61,7 +61,7 @@ fn inputs(sample: &Path, dir: &Path) -> (PathBuf, PathBuf, PathBuf, PathBuf) {
 }
 
 fn travmap_model() -> Vec<u8> {
-    travmap_method::classifier::SvmModel::embedded_default()
+    travmap_method::classifier::SvmModel::embedded(travmap_core::config::LabelRule::Road)
         .unwrap()
         .to_json()
 }

@@ -216,7 +216,7 @@ fn frames_in_batches_equal_frames_one_by_one() {
         return;
     };
     let sequence = KittiSequence::open(&dir, None, &|_| {}).unwrap();
-    let model = SvmModel::embedded_default().unwrap();
+    let model = SvmModel::embedded(travmap_core::config::LabelRule::Road).unwrap();
     let config = travmap_core::Config::default();
     let frames: Vec<_> = (0..6).map(|i| sequence.read_frame(i).unwrap()).collect();
     let pipeline = || Pipeline::new(&config, Posing::Recorded, DriveFrame::default()).unwrap();

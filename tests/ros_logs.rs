@@ -656,7 +656,9 @@ fn files_travmap_does_not_read_are_named_not_misdiagnosed() {
 fn appearance_of(input: &Path) -> Vec<Option<Vec<f32>>> {
     let mut config = travmap_core::Config::default();
     config.grid.size_m = config.training.grid_size_m;
-    let model = travmap_method::classifier::SvmModel::embedded_default().unwrap();
+    let model =
+        travmap_method::classifier::SvmModel::embedded(travmap_core::config::LabelRule::Road)
+            .unwrap();
     let source = travmap_io::Source::open(input, &Default::default(), &|_| {}).unwrap();
     let selection = travmap_drive::Selection::new(source, 0..usize::MAX);
     let mut cells = Vec::new();

@@ -41,7 +41,10 @@ pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = &args.inputs.output;
     let model_path = args.output.as_path();
-    check_output(model_path, &args.inputs.files(args.model.path.as_deref()))?;
+    check_output(
+        model_path,
+        &args.inputs.files(args.model.file(config).as_deref()),
+    )?;
     note_extension(model_path, "json", "a travmap model (JSON)");
     let (prior, prior_name) = args.model.load(config)?;
     let (adapted, selections) = adapted_model(&args.inputs, config, &prior, &prior_name, output)?;

@@ -13,9 +13,9 @@ use travmap_outputs::annotation::{AnnotationOptions, CloudPoints, DRIVE_MAP_EVER
 use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;
 use super::{
-    Inputs, ModelArg, Outcome, check_output, counted, foreign_remission_said, frame_count,
-    images_for, model_json, note_extension, notice_unknown_labels, outcome, path_text,
-    print_json_summary, print_wrote, with_summary, without_remission_said,
+    Inputs, ModelArg, Outcome, check_output, counted, fit_said, frame_count, images_for,
+    model_json, note_extension, notice_drives, outcome, path_text, print_json_summary, print_wrote,
+    with_summary,
 };
 
 /// Write the annotated MCAP: predicted and ground-truth grids, classified cloud, metrics.
@@ -70,7 +70,10 @@ enum CloudArg {
 pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
-    check_output(output_path, &args.inputs.files(args.model.path.as_deref()))?;
+    check_output(
+        output_path,
+        &args.inputs.files(args.model.file(config).as_deref()),
+    )?;
     note_extension(output_path, "mcap", "an MCAP file");
     let options = AnnotationOptions {
         compression: args.compression.compression(),
@@ -137,16 +140,8 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
                 100.0 * s.f1
             );
         }
+        println!("{}", fit_said(&summary.evaluation.fit, &model).0);
     }
-    // Scores against another dataset's labels, or of another sensor's remission, look
-    // like a bad model: said as eval says them.
-    notice_unknown_labels(&summary.evaluation, config);
-    let said = without_remission_said(&summary.evaluation);
-    for said in said
-        .into_iter()
-        .chain(foreign_remission_said(&summary.evaluation, config))
-    {
-        eprintln!("notice: {said}");
-    }
+    notice_drives(&summary.evaluation, &model, config);
     Ok(outcome(&selections))
 }

@@ -50,7 +50,7 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
             bench_tools(
                 &args.inputs,
                 &input,
-                args.model.path.as_deref(),
+                args.model.model.as_deref().map(std::path::Path::new),
                 tool_repeats,
             )
         })

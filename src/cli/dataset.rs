@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
+use travmap_core::config::ModelChoice;
 use travmap_drive::{Fingerprints, Selection};
 use travmap_outputs::dataset::DatasetWriter;
 
@@ -28,20 +29,26 @@ pub struct DatasetArgs {
     /// Where to write the Parquet file.
     #[arg(short, long)]
     output: PathBuf,
-    /// Add the prediction of this model file (by default no prediction column values).
-    #[arg(long)]
-    model: Option<PathBuf>,
+    /// Add the prediction of this model: `road`, `offroad` or a model file (by
+    /// default no prediction column values).
+    #[arg(long, value_name = "MODEL")]
+    model: Option<String>,
 }
 
 pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = args.inputs.output;
     let output_path = args.output.as_path();
-    check_output(output_path, &args.inputs.files(args.model.as_deref()))?;
+    let choice = args.model.as_deref().map(ModelChoice::parse);
+    let model_file = match &choice {
+        Some(ModelChoice::File(path)) => Some(path.as_path()),
+        _ => None,
+    };
+    check_output(output_path, &args.inputs.files(model_file))?;
     note_extension(output_path, "parquet", "a Parquet file");
     let mut selections = args.inputs.open(config.appearance.enabled)?;
-    let model = match args.model.as_deref() {
-        Some(path) => Some(load_model(Some(path), config)?.0),
+    let model = match &choice {
+        Some(choice) => Some(load_model(choice, config)?.0),
         None => None,
     };
     let grid_config = config.for_training_cells();

@@ -15,8 +15,8 @@ use travmap_method::classifier::SvmModel;
 
 use super::adapt::AdaptFlag;
 use super::{
-    Inputs, ModelArg, Outcome, counted, foreign_remission_said, frame_count, model_json,
-    notice_unknown_labels, outcome, print_json_summary, without_remission_said,
+    Inputs, ModelArg, Outcome, counted, fit_said, foreign_remission_said, frame_count, model_json,
+    notice_unknown_labels, other_rule_said, outcome, print_json_summary, without_remission_said,
 };
 
 /// Score predictions against SemanticKITTI ground truth (the paper's table).
@@ -136,6 +136,9 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
             model.gamma,
         )?;
     }
+    if let Some(said) = other_rule_said(&model, config) {
+        writeln!(out, "note: {said}")?;
+    }
     if report.frames == 0 {
         writeln!(
             out,
@@ -159,6 +162,11 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     }
     if let Some(said) = foreign_remission_said(&report, config) {
         writeln!(out, "{said}")?;
+    }
+    let (fit, poor_fit) = fit_said(&report.fit, &model);
+    writeln!(out, "{fit}")?;
+    if let Some(said) = poor_fit {
+        writeln!(out, "notice: {said}")?;
     }
     if report.dropped_points > 0 {
         writeln!(

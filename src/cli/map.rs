@@ -16,9 +16,8 @@ use travmap_outputs::preflight::check_distinct_outputs;
 use travmap_outputs::rendering::encode_png;
 
 use super::{
-    Inputs, ModelArg, Outcome, check_output, counted, frame_count, images_for, model_json,
-    note_extension, notice_unknown_labels, outcome, path_text, print_json_summary, usage,
-    without_remission_said,
+    Inputs, ModelArg, Outcome, check_output, counted, fit_said, frame_count, images_for,
+    model_json, note_extension, notice_drives, outcome, path_text, print_json_summary, usage,
 };
 
 /// Fuse every frame's prediction (and ground truth) into one map of the drive.
@@ -73,7 +72,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let cell_px = args.cell_pixels;
     let config = args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
-    let inputs = args.inputs.files(args.model.path.as_deref());
+    let inputs = args.inputs.files(args.model.file(&config).as_deref());
     let nav2_mode = args.nav2_mode.mode();
     let nav2_image = args.nav2.as_deref().map(|yaml| image_path(yaml, nav2_mode));
     // The image's own name would be its YAML's and its image's at once.
@@ -166,10 +165,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let fused = Confusion::of_drive_map(&cells);
     let fused_scores = (fused.tp + fused.tn + fused.fp + fused.r#fn > 0).then(|| fused.scores());
     let per_frame = per_frame.report();
-    notice_unknown_labels(&per_frame, config);
-    if let Some(said) = without_remission_said(&per_frame) {
-        eprintln!("notice: {said}");
-    }
+    notice_drives(&per_frame, &model, config);
     let seen = cells.iter().filter(|c| c.observations > 0).count();
     let area_m2 = seen as f64 * cell_size_m.powi(2);
     if output.json {
@@ -188,6 +184,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
             "fused_confusion": fused,
             "fused_scores": fused_scores,
             "per_frame_scores": per_frame.scores,
+            "fit": per_frame.fit,
             "elapsed_ms": seconds * 1e3,
         });
         print_json_summary("map", &selections, fields)?;
@@ -226,6 +223,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
                 frames.f1 * 100.0
             );
         }
+        println!("{}", fit_said(&per_frame.fit, &model).0);
     }
     Ok(outcome(&selections))
 }

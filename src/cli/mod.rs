@@ -21,9 +21,9 @@ pub mod shell;
 pub mod train;
 
 pub use report::{
-    counted, foreign_remission_said, input_json, model_json, notice_unknown_labels, path_text,
-    print_json_error, print_json_frame, print_json_summary, print_wrote, setting_word,
-    with_summary, without_remission_said,
+    counted, fit_said, foreign_remission_said, input_json, model_json, notice_drives,
+    notice_unknown_labels, other_rule_said, path_text, print_json_error, print_json_frame,
+    print_json_summary, print_wrote, setting_word, with_summary, without_remission_said,
 };
 
 use std::ffi::OsString;
@@ -35,12 +35,13 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use travmap_core::Config;
-use travmap_core::config::PoseSource;
+use travmap_core::config::{ModelChoice, PoseSource};
 use travmap_core::stopwatch::Stopwatch;
 use travmap_drive::Selection;
 use travmap_io::ros_drive::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics};
 use travmap_io::{Source, SourceKind, SourceOptions};
 use travmap_method::classifier::SvmModel;
+use travmap_method::classifier::model_file::embedded_name;
 use travmap_outputs::preflight::{
     InputFiles, Preflight, check_output_directory, check_output_file,
 };
@@ -607,32 +608,47 @@ pub fn describe_frames(frames: &Range<usize>) -> String {
 /// The model a command predicts with.
 #[derive(Args)]
 pub struct ModelArg {
-    /// Model file (default: the model compiled into travmap).
-    #[arg(long = "model")]
-    pub path: Option<PathBuf>,
+    /// The model: `road` (a car's road; the default), `offroad` (a robot that may
+    /// also drive on grass, dirt and low vegetation), both compiled into travmap, or
+    /// a model file (`./road` for a file of that name). Default: `classifier.model`.
+    #[arg(long = "model", value_name = "MODEL")]
+    pub model: Option<String>,
 }
 
 impl ModelArg {
+    /// Which model: `--model`, else the configuration's.
+    pub fn choice(&self, config: &Config) -> ModelChoice {
+        match &self.model {
+            Some(text) => ModelChoice::parse(text),
+            None => config.classifier.model.clone(),
+        }
+    }
+
+    /// The model file chosen, if a file was: an input, which no output may replace.
+    pub fn file(&self, config: &Config) -> Option<PathBuf> {
+        match self.choice(config) {
+            ModelChoice::File(path) => Some(path),
+            ModelChoice::Embedded(_) => None,
+        }
+    }
+
     /// The model, checked against `config`, and the name to report it by.
     pub fn load(&self, config: &Config) -> Result<(SvmModel, String)> {
-        load_model(self.path.as_deref(), config)
+        load_model(&self.choice(config), config)
     }
 }
 
-/// A model file, or the embedded default model, checked against `config`; with the
-/// name to report it by.
-pub fn load_model(path: Option<&Path>, config: &Config) -> Result<(SvmModel, String)> {
-    let (model, name) = match path {
-        Some(path) => {
+/// The chosen model, compiled in or a file, checked against `config`; with the name
+/// to report it by.
+pub fn load_model(choice: &ModelChoice, config: &Config) -> Result<(SvmModel, String)> {
+    let (model, name) = match choice {
+        ModelChoice::File(path) => {
             let bytes = std::fs::read(path)
                 .with_context(|| format!("cannot read model {}", path.display()))?;
             let name = path.display().to_string();
             (SvmModel::from_json(&bytes, &name)?, name)
         }
-        None => (
-            SvmModel::embedded_default()?,
-            "embedded default model".into(),
-        ),
+        ModelChoice::Embedded(rule) => (SvmModel::embedded(*rule)?, embedded_name(*rule)),
     };
     model.check_compatible(config, &name)?;
     Ok((model, name))

@@ -48,7 +48,7 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
     let cell_px = args.cell_pixels;
     let config = &args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
-    let inputs = args.inputs.files(args.model.path.as_deref());
+    let inputs = args.inputs.files(args.model.file(config).as_deref());
     if args.all {
         check_output_dir(output_path, &inputs)?;
     } else {

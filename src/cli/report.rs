@@ -6,9 +6,11 @@ use std::path::Path;
 use anyhow::Result;
 use serde_json::json;
 use travmap_core::Config;
-use travmap_core::config::{ForeignRemissionPolicy, LabelSet};
+use travmap_core::config::{ForeignRemissionPolicy, LabelRule, LabelSet};
 use travmap_drive::Selection;
-use travmap_drive::scoring::evaluation::EvaluationReport;
+use travmap_drive::scoring::evaluation::{
+    EvaluationReport, Fit, POOR_FIT_UNSURE_SHARE, UNSURE_MARGIN,
+};
 use travmap_method::classifier::SvmModel;
 
 /// The model's identity in JSON outputs.
@@ -146,6 +148,66 @@ fn print_json_line(value: &serde_json::Value) -> Result<()> {
 
 /// What a report says of frames whose remission lay far outside the model's
 /// training range (another sensor's scale), when there were some.
+/// What a command that classifies says of the drives on stderr, even with -q: labels
+/// of ids the label set does not define, remission it could not use or of another
+/// sensor's scale, and a poor fit (each looks like a bad model otherwise).
+pub fn notice_drives(report: &EvaluationReport, model: &SvmModel, config: &Config) {
+    notice_unknown_labels(report, config);
+    let remission = without_remission_said(report)
+        .into_iter()
+        .chain(foreign_remission_said(report, config));
+    for said in remission.chain(fit_said(&report.fit, model).1) {
+        eprintln!("notice: {said}");
+    }
+}
+
+/// How well the drives fit the model, in a line; and when poorly, what to do about it.
+pub fn fit_said(fit: &Fit, model: &SvmModel) -> (String, Option<String>) {
+    let share = format!(
+        "{:.1} % of {} predicted cells within the model's margin (|margin| < {UNSURE_MARGIN})",
+        100.0 * fit.unsure_share,
+        fit.cells
+    );
+    let line = format!(
+        "fit: {share}; drives like its training ones: at most {:.0} %",
+        100.0 * POOR_FIT_UNSURE_SHARE
+    );
+    let other = match model.config.ground_truth.rule {
+        LabelRule::Road => LabelRule::Offroad,
+        LabelRule::Offroad => LabelRule::Road,
+    };
+    let notice = fit.poor.then(|| {
+        format!(
+            "these drives fit the model poorly ({share}; its training drives: at most {:.0} %): expect scores below its own; adapt it to them (--adapt), try the {} model if the robot's ground is {} (--model {}), or train on labelled scans of this sensor",
+            100.0 * POOR_FIT_UNSURE_SHARE,
+            other.name(),
+            match other {
+                LabelRule::Offroad => "grass, dirt or low vegetation",
+                LabelRule::Road => "a car's road",
+            },
+            other.name(),
+        )
+    });
+    (line, notice)
+}
+
+/// What is said when the scores count another rule of what is traversable than the
+/// model learnt (the off-road model scored by the road rule looks like a bad model).
+pub fn other_rule_said(model: &SvmModel, config: &Config) -> Option<String> {
+    let (learnt, scored) = (model.config.ground_truth.rule, config.ground_truth.rule);
+    let by_preset = |c: &Config| {
+        c.ground_truth.label_map.is_none() && c.ground_truth.traversable_classes.is_none()
+    };
+    (learnt != scored && by_preset(&model.config) && by_preset(config)).then(|| {
+        format!(
+            "the model learnt the {} rule of what is traversable, these scores count the {} rule (--set ground_truth.rule=\"{}\" scores it by its own)",
+            learnt.name(),
+            scored.name(),
+            learnt.name()
+        )
+    })
+}
+
 /// What is said when frames had no usable remission, and why when some of it was
 /// NaN or infinite (a frame that looks fine but lost its remission features).
 pub fn without_remission_said(report: &EvaluationReport) -> Option<String> {

@@ -10,8 +10,8 @@ use travmap_drive::scoring::evaluation::Evaluation;
 use travmap_method::grid::CellClass;
 
 use super::{
-    Inputs, ModelArg, Outcome, frame_count, images_for, model_json, outcome, path_text,
-    print_json_frame, print_json_summary, without_remission_said,
+    Inputs, ModelArg, Outcome, fit_said, frame_count, images_for, model_json, notice_drives,
+    outcome, path_text, print_json_frame, print_json_summary,
 };
 
 /// Predict the filtered traversability grid of every frame.
@@ -117,12 +117,12 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                 "latency_ms": report.timings_ms.latency,
                 "dropped_points": report.dropped_points,
                 "frames_without_remission": report.frames_without_remission,
+                "fit": report.fit,
             }),
         )?;
-    } else if !output.quiet {
-        if let Some(said) = without_remission_said(&report) {
-            eprintln!("note: {said}");
-        }
+        return Ok(outcome(&selections));
+    }
+    if !output.quiet {
         let latency = report.timings_ms.latency;
         match frames {
             0 => writeln!(stdout, "no frame was read")?,
@@ -132,7 +132,9 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                 latency.median, latency.p95
             )?,
         }
+        writeln!(stdout, "{}", fit_said(&report.fit, &model).0)?;
     }
+    notice_drives(&report, &model, &config);
     Ok(outcome(&selections))
 }
 

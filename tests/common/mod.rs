@@ -281,7 +281,9 @@ pub fn one_frame_with_image() -> Option<(tempfile::TempDir, PathBuf)> {
 /// The drive at `seq` fused by the library with the embedded model, as `map` fuses it.
 pub fn fused_drive(seq: &Path) -> Vec<travmap_method::fusion::FusedCell> {
     let config = travmap_core::Config::default();
-    let model = travmap_method::classifier::SvmModel::embedded_default().unwrap();
+    let model =
+        travmap_method::classifier::SvmModel::embedded(travmap_core::config::LabelRule::Road)
+            .unwrap();
     let source = travmap_io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
     let drive = source.drive_frame();
     let selection = travmap_drive::Selection::new(source, 0..usize::MAX);

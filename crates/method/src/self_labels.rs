@@ -18,6 +18,12 @@ const _: () = assert!(matches!(
     b"zeta_difference"
 ));
 
+/// Whether a cell's height range (its features, `cell`) is over the vehicle's
+/// clearance: an obstacle by geometry alone.
+pub fn over_clearance(cell: &[f32], vehicle: &VehicleConfig) -> bool {
+    cell[HEIGHT_RANGE] > vehicle.clearance_m as f32
+}
+
 /// The rules of the self-labels.
 #[derive(Clone, Debug)]
 pub struct SelfLabeller {
@@ -35,14 +41,13 @@ impl SelfLabeller {
         footprint: &[bool],
         margins: Option<&[f32]>,
     ) -> Vec<Option<bool>> {
-        let clearance = self.vehicle.clearance_m as f32;
         let confident = -(self.adapt.negative_margin as f32);
         (0..features.predictable.len())
             .map(|cell| {
                 if !features.predictable[cell] {
                     return None;
                 }
-                let blocked = features.cell(cell)[HEIGHT_RANGE] > clearance;
+                let blocked = over_clearance(features.cell(cell), &self.vehicle);
                 if footprint[cell] {
                     return (!blocked).then_some(true);
                 }

@@ -4,6 +4,12 @@
 //! label its cells; an SVM is fitted to them as `adapt.learner` says, with
 //! `adapt.rounds` of self-training. The drives' labels, if they have any, are never
 //! read (`Source::set_read_labels`).
+//!
+//! The adapted model replaces the prior only where the drives show it is better
+//! ([`check_against_prior`]): on the cells the vehicle drove over and the cells over
+//! its clearance, evidence that owes nothing to the prior, held out of the fit a
+//! block of the world at a time. Otherwise the prior is kept, and the model file says
+//! why.
 
 use std::collections::HashSet;
 
@@ -14,10 +20,13 @@ use super::{REMISSION_COLUMNS, Reduce, Search, config_without_remission, train_b
 use travmap_core::config::{Config, FeatureGroup, Learner};
 use travmap_core::error::{Error, Result};
 use travmap_core::random::SplitMix64;
+use travmap_drive::scoring::metrics::Confusion;
 use travmap_drive::{Fingerprints, Selection};
-use travmap_method::classifier::{AdaptationSummary, AdaptedInput, SvmModel};
+use travmap_method::classifier::{AdaptationCheck, AdaptationSummary, AdaptedInput, SvmModel};
 use travmap_method::features::feature_count;
 use travmap_method::footprint::PathKind;
+use travmap_method::grid::CellClass;
+use travmap_method::self_labels::over_clearance;
 use travmap_method::training_set::TrainingSet;
 
 /// One self-labelled (or unknown) cell of a drive.
@@ -27,6 +36,9 @@ struct DriveCell {
     appearance: Option<Vec<f32>>,
     /// None: unknown.
     label: Option<bool>,
+    /// Its label is the drive's own evidence, owing nothing to the prior: the
+    /// vehicle drove over it, or it is over the vehicle's clearance.
+    evidence: bool,
     centre_in_world: [f64; 2],
 }
 
@@ -103,7 +115,7 @@ pub fn adapt(
     on_frame: &mut dyn FnMut(),
 ) -> Result<Adapted> {
     let grid_config = config.for_training_cells();
-    let a = &config.adapt;
+    let (a, vehicle) = (&config.adapt, &config.vehicle);
     // Each label keeps half the cells: footprint cells are few on a long drive, and
     // a sample of all labelled cells would keep fewer still.
     let seed = config.training.seed;
@@ -142,11 +154,20 @@ pub fn adapt(
                     Some(false) => negative.insert(key),
                     None => neither.insert(key),
                 };
-                let cell_of = || DriveCell {
-                    features: result.features.cell(cell).to_vec(),
-                    appearance: result.features.appearance(cell).map(<[f32]>::to_vec),
-                    label: *label,
-                    centre_in_world: result.layout.cell_centre_in_world(cell),
+                let cell_of = || {
+                    let features = result.features.cell(cell).to_vec();
+                    let evidence = match label {
+                        Some(true) => true,
+                        Some(false) => a.geometric_negatives && over_clearance(&features, vehicle),
+                        None => false,
+                    };
+                    DriveCell {
+                        appearance: result.features.appearance(cell).map(<[f32]>::to_vec),
+                        label: *label,
+                        evidence,
+                        centre_in_world: result.layout.cell_centre_in_world(cell),
+                        features,
+                    }
                 };
                 match label {
                     Some(true) => positives.offer(cell_of),
@@ -248,7 +269,8 @@ pub fn adapt(
         .iter()
         .flat_map(|c| c.features.iter().copied())
         .collect();
-    let fit = |set: &TrainingSet| -> Result<SvmModel> {
+    // `reduced`: with the reduced set that classifies (the checks' fits need none).
+    let fit = |set: &TrainingSet, reduced: bool| -> Result<SvmModel> {
         let cells = match a.learner {
             Learner::DriveAndPrior => &with_prior_cells(set, prior, a.prior_weight),
             Learner::Drive | Learner::Sum => set,
@@ -264,7 +286,12 @@ pub fn adapt(
             let rows = [&set.features[..], &unknown_features].concat();
             fit_folded_reduced_set(model, prior, weight, &rows, config)
         };
-        let reduce = (a.learner == Learner::Sum).then_some(&folded as &Reduce);
+        let none = |_: &SvmModel, _: &TrainingSet| None;
+        let reduce = match (reduced, a.learner) {
+            (false, _) => Some(&none as &Reduce),
+            (true, Learner::Sum) => Some(&folded as &Reduce),
+            (true, _) => None,
+        };
         let mut model = train_by(cells, config, search, reduce, false, &|_, _| {})?;
         model.fallback = prior.fallback.clone();
         if a.learner == Learner::Sum {
@@ -274,7 +301,61 @@ pub fn adapt(
         }
         Ok(model)
     };
-    let mut model = fit(&drive)?;
+    // What the model file says of the adaptation: which parts were fitted and why.
+    let summary = |model: &SvmModel, fitted_cells: usize, check: AdaptationCheck| {
+        let hybrid = match (&model.hybrid, check.adapted) {
+            (_, false) => "the prior's: the prior is kept".into(),
+            (Some(hybrid), true) => format!(
+                "fitted on the {} cells cameras saw",
+                hybrid.training.samples
+            ),
+            (None, true) => "none: no camera saw the drives' cells".into(),
+        };
+        let fallback = match (uses_remission, without_remission, check.adapted) {
+            (false, _, _) => "none: the model has no remission features".into(),
+            (true, _, false) => "the prior's: the prior is kept".into(),
+            (true, true, true) => format!(
+                "fitted to the drives, whose {frames_without_remission} frames had no usable remission (the model with remission is the prior's)"
+            ),
+            (true, false, true) => {
+                "the prior's: every frame had usable remission, so the drives use none".into()
+            }
+        };
+        AdaptationSummary {
+            self_supervised: true,
+            learner: a.learner,
+            prior: prior_name.to_string(),
+            prior_sha256: original_prior.sha256_hex(),
+            inputs: inputs.clone(),
+            footprint_cells: counts.footprint_cells,
+            negative_cells: counts.negative_cells,
+            unknown_cells: counts.unknown_cells,
+            fitted_cells,
+            straight_path_frames: counts.straight_path_frames,
+            hybrid,
+            fallback,
+            check: Some(check),
+        }
+    };
+    let check = check_against_prior(
+        &labelled,
+        counts.straight_path_frames == counts.frames,
+        &|cells| fit(&to_set(cells, &unknown), false),
+        prior,
+        config.training.seed,
+    )?;
+    notices.push(format!("{}: {}", path.display(), check.why));
+    if !check.adapted {
+        let mut kept = original_prior.clone();
+        kept.training.adaptation = Some(summary(&kept, 0, check));
+        return Ok(Adapted {
+            model: kept,
+            counts,
+            notices,
+            fallback_fitted: false,
+        });
+    }
+    let mut model = fit(&drive, true)?;
     // Self-training: the unknown cells the adapted model is sure of join its cells.
     for _ in 0..a.rounds {
         let (confident, unsure) = confident_cells(&model, &unknown, a.self_training_margin as f32);
@@ -282,7 +363,7 @@ pub fn adapt(
             break;
         }
         drive = to_set(&[labelled.clone(), confident].concat(), &unsure);
-        model = fit(&drive)?;
+        model = fit(&drive, true)?;
     }
     if without_remission {
         // The drives' model classifies what they show, clouds without remission: it
@@ -291,34 +372,7 @@ pub fn adapt(
         outer.fallback = Some(Box::new(model));
         model = outer;
     }
-    model.training.adaptation = Some(AdaptationSummary {
-        self_supervised: true,
-        learner: a.learner,
-        prior: prior_name.to_string(),
-        prior_sha256: original_prior.sha256_hex(),
-        inputs,
-        footprint_cells: counts.footprint_cells,
-        negative_cells: counts.negative_cells,
-        unknown_cells: counts.unknown_cells,
-        fitted_cells: drive.len(),
-        straight_path_frames: counts.straight_path_frames,
-        hybrid: match &model.hybrid {
-            Some(hybrid) => format!(
-                "fitted on the {} cells cameras saw",
-                hybrid.training.samples
-            ),
-            None => "none: no camera saw the drives' cells".into(),
-        },
-        fallback: match (uses_remission, without_remission) {
-            (false, _) => "none: the model has no remission features".into(),
-            (true, true) => format!(
-                "fitted to the drives, whose {frames_without_remission} frames had no usable remission (the model with remission is the prior's)"
-            ),
-            (true, false) => {
-                "the prior's: every frame had usable remission, so the drives use none".into()
-            }
-        },
-    });
+    model.training.adaptation = Some(summary(&model, drive.len(), check));
     model.training.sources = selections.iter().map(Selection::describe).collect();
     // It read no labels: what it knows of labelled scans is the prior's, so eval
     // still tells the prior's training scans from held-out ones.
@@ -329,6 +383,124 @@ pub fn adapt(
         notices,
         fallback_fitted: without_remission,
     })
+}
+
+/// Blocks of the world the check holds out of the fit one fold at a time, metres:
+/// wider than the features' neighbourhoods, so that a held-out cell's neighbours are
+/// not among the cells fitted.
+const CHECK_BLOCK_M: f64 = 8.0;
+const CHECK_FOLDS: usize = 3;
+/// Held-out cells of each class (footprint, clearance) the check needs at least.
+const MIN_CHECK_CELLS: usize = 30;
+/// How much better (mIoU on the held-out evidence) the adapted model must be than
+/// its prior to replace it: less is within what a few hundred cells can tell apart.
+const MIN_CHECK_GAIN: f64 = 0.01;
+
+/// Whether the model `fit` makes of `labelled` may replace `prior`. The evidence is
+/// what the drive shows without the prior: the cells the vehicle drove over
+/// (traversable) and those over its clearance (not). The world is cut into blocks
+/// of [`CHECK_BLOCK_M`] dealt into [`CHECK_FOLDS`] folds; each fold's evidence is
+/// classified by a model fitted to the cells of the other folds (exact, without its
+/// reduced set) and by the prior, and the two are scored by mIoU. A drive whose
+/// footprint was guessed (no trajectory), or with too little evidence to tell the
+/// two apart, keeps the prior.
+fn check_against_prior(
+    labelled: &[DriveCell],
+    path_guessed: bool,
+    fit: &dyn Fn(&[DriveCell]) -> Result<SvmModel>,
+    prior: &SvmModel,
+    seed: u64,
+) -> Result<AdaptationCheck> {
+    let block = |cell: &DriveCell| {
+        cell.centre_in_world
+            .map(|v| (v / CHECK_BLOCK_M).floor() as i64)
+    };
+    let evidence: Vec<&DriveCell> = labelled.iter().filter(|c| c.evidence).collect();
+    let footprint_cells = evidence.iter().filter(|c| c.label == Some(true)).count();
+    let clearance_cells = evidence.len() - footprint_cells;
+    let mut blocks: Vec<[i64; 2]> = evidence.iter().map(|c| block(c)).collect();
+    blocks.sort_unstable();
+    blocks.dedup();
+    let mut check = AdaptationCheck {
+        adapted: false,
+        why: String::new(),
+        footprint_cells,
+        clearance_cells,
+        blocks: blocks.len(),
+        prior_miou: None,
+        adapted_miou: None,
+    };
+    let held = format!(
+        "{footprint_cells} cells driven over and {clearance_cells} over the clearance, in {} blocks of {CHECK_BLOCK_M} m",
+        blocks.len()
+    );
+    if path_guessed {
+        check.why = "the prior is kept: the footprint was guessed (no trajectory beyond one pose), so the drive cannot show that an adapted model is better".into();
+        return Ok(check);
+    }
+    if footprint_cells.min(clearance_cells) < MIN_CHECK_CELLS || blocks.len() < CHECK_FOLDS {
+        check.why = format!(
+            "the prior is kept: too little of the drive's own evidence to tell an adapted model from it ({held}; at least {MIN_CHECK_CELLS} of each in {CHECK_FOLDS} blocks)"
+        );
+        return Ok(check);
+    }
+    // The evidence's blocks dealt into folds in a seeded order; cells of other
+    // blocks are fitted in every fold.
+    SplitMix64(seed).shuffle(&mut blocks);
+    let fold_of: std::collections::HashMap<[i64; 2], usize> = (blocks.iter().enumerate())
+        .map(|(i, b)| (*b, i % CHECK_FOLDS))
+        .collect();
+    let fold = |cell: &DriveCell| fold_of.get(&block(cell)).copied();
+    let (mut by_prior, mut by_adapted) = (Confusion::default(), Confusion::default());
+    for k in 0..CHECK_FOLDS {
+        let fitted: Vec<DriveCell> = (labelled.iter())
+            .filter(|c| fold(c) != Some(k))
+            .cloned()
+            .collect();
+        let held_out = evidence.iter().filter(|c| fold(c) == Some(k));
+        let adapted = match fit(&fitted) {
+            Ok(model) => model,
+            // A fold whose fitted cells hold one class only cannot be compared.
+            Err(Error::Training(_)) => continue,
+            Err(e) => return Err(e),
+        };
+        for cell in held_out {
+            let truth = class_of(cell.label == Some(true));
+            by_prior.add(class_of(margin(prior, &cell.features) > 0.0), truth);
+            by_adapted.add(class_of(margin(&adapted, &cell.features) > 0.0), truth);
+        }
+    }
+    let (prior_miou, adapted_miou) = (by_prior.scores().miou, by_adapted.scores().miou);
+    (check.prior_miou, check.adapted_miou) = (Some(prior_miou), Some(adapted_miou));
+    check.adapted = adapted_miou >= prior_miou + MIN_CHECK_GAIN;
+    let verdict = match check.adapted {
+        true => "the adapted model replaces the prior",
+        false => "the prior is kept",
+    };
+    check.why = format!(
+        "{verdict}: on the drive's own evidence held out of the fit ({held}) the adapted model scores mIoU {:.1}, the prior {:.1}",
+        100.0 * adapted_miou,
+        100.0 * prior_miou
+    );
+    Ok(check)
+}
+
+fn class_of(traversable: bool) -> CellClass {
+    match traversable {
+        true => CellClass::Traversable,
+        false => CellClass::NonTraversable,
+    }
+}
+
+/// A model's margin of a cell's geometric features, its prior's added (the `sum`
+/// learner's models), each by its reduced set where it has one.
+fn margin(model: &SvmModel, features: &[f32]) -> f32 {
+    let mut scratch = model.scratch();
+    let own = model.cell_margin(features, None, &mut scratch, true);
+    match &model.prior {
+        Some(prior) => own + model.prior_weight * margin(prior, features),
+        None => own,
+    }
 }
 
 /// The labelled cells as a training set.
@@ -379,16 +551,9 @@ fn confident_cells(
     unknown: &[DriveCell],
     margin: f32,
 ) -> (Vec<DriveCell>, Vec<DriveCell>) {
-    let geometric = model;
-    let mut scratch = geometric.scratch();
     let (mut confident, mut unsure) = (Vec::new(), Vec::new());
     for cell in unknown {
-        let mut value = geometric.cell_margin(&cell.features, None, &mut scratch, true);
-        if let Some(prior) = &model.prior {
-            let mut prior_scratch = prior.scratch();
-            value += model.prior_weight
-                * prior.cell_margin(&cell.features, None, &mut prior_scratch, true);
-        }
+        let value = self::margin(model, &cell.features);
         if value.abs() >= margin {
             confident.push(DriveCell {
                 label: Some(value > 0.0),

@@ -32,6 +32,18 @@ pub enum LabelRule {
     Offroad,
 }
 
+impl LabelRule {
+    pub const ALL: [LabelRule; 2] = [LabelRule::Road, LabelRule::Offroad];
+
+    /// Its name in settings (`ground_truth.rule`, `classifier.model`).
+    pub fn name(self) -> &'static str {
+        match self {
+            LabelRule::Road => "road",
+            LabelRule::Offroad => "offroad",
+        }
+    }
+}
+
 /// The classes of a label set under a rule: which are traversable, which do not
 /// vote, and every id the set defines (others are unknown to it).
 #[derive(Clone, Debug, PartialEq, Eq)]

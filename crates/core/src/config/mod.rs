@@ -56,6 +56,11 @@ pub struct AppearanceConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ClassifierConfig {
+    /// Which model classifies: `"road"` (a car's road, default) or `"offroad"` (a
+    /// robot that may drive on grass, dirt and low vegetation), the models compiled
+    /// in, named by the rule of [`LabelRule`] they learnt; anything else is a model
+    /// file's path (`--model` names one too).
+    pub model: ModelChoice,
     /// Predict with the model's reduced set (a few hundred kernel centres fitted to
     /// the exact decision function) when it has one; false: all support vectors
     /// (default true).
@@ -66,6 +71,52 @@ pub struct ClassifierConfig {
     /// model's fallback (`"fallback"`).
     #[serde(default)]
     pub foreign_remission: ForeignRemissionPolicy,
+}
+
+/// A model compiled into travmap, by the rule of what is traversable it learnt, or a
+/// model file; written as the rule's name or the file's path.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ModelChoice {
+    Embedded(LabelRule),
+    File(std::path::PathBuf),
+}
+
+impl ModelChoice {
+    /// `road` and `offroad` are the compiled-in models; anything else a path (a file
+    /// called `road` is `./road`).
+    pub fn parse(text: &str) -> Self {
+        match text {
+            "road" => ModelChoice::Embedded(LabelRule::Road),
+            "offroad" => ModelChoice::Embedded(LabelRule::Offroad),
+            path => ModelChoice::File(path.into()),
+        }
+    }
+}
+
+impl std::fmt::Display for ModelChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ModelChoice::Embedded(rule) => f.write_str(rule.name()),
+            ModelChoice::File(path) => write!(f, "{}", path.display()),
+        }
+    }
+}
+
+impl Serialize for ModelChoice {
+    fn serialize<S: serde::Serializer>(
+        &self,
+        serializer: S,
+    ) -> std::result::Result<S::Ok, S::Error> {
+        serializer.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for ModelChoice {
+    fn deserialize<D: serde::Deserializer<'de>>(
+        deserializer: D,
+    ) -> std::result::Result<Self, D::Error> {
+        Ok(Self::parse(&String::deserialize(deserializer)?))
+    }
 }
 
 /// What a model does with remission far outside its training range.
@@ -271,6 +322,7 @@ impl Default for AppearanceConfig {
 impl Default for ClassifierConfig {
     fn default() -> Self {
         Self {
+            model: ModelChoice::Embedded(LabelRule::Road),
             use_reduced_set: true,
             foreign_remission: ForeignRemissionPolicy::Notice,
         }

@@ -62,6 +62,51 @@ impl TimingReport {
     }
 }
 
+/// A margin this close to the decision boundary is a cell the model is unsure of.
+pub const UNSURE_MARGIN: f32 = 1.0;
+/// A drive whose share of unsure cells exceeds this fits the model poorly: unlike the
+/// drives it learnt from (docs/method.md, "Knowing when it is not sure": no
+/// held-out pair of the cross-dataset study below 60 mIoU stayed under it, none
+/// above 85 went over).
+pub const POOR_FIT_UNSURE_SHARE: f64 = 0.30;
+
+/// How well drives fit the model, without labels: the share of predictable cells
+/// whose margin lies within [`UNSURE_MARGIN`] of the decision boundary. On the drives
+/// a model learnt from about a fifth; on another sensor or another kind of ground it
+/// rises, and the scores fall.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Fit {
+    /// Predictable cells, and those the model was unsure of.
+    pub cells: u64,
+    pub unsure_cells: u64,
+    /// `unsure_cells / cells` (0 without cells).
+    pub unsure_share: f64,
+    /// Over [`POOR_FIT_UNSURE_SHARE`].
+    pub poor: bool,
+}
+
+impl Fit {
+    fn of(cells: u64, unsure_cells: u64) -> Self {
+        let unsure_share = match cells {
+            0 => 0.0,
+            n => unsure_cells as f64 / n as f64,
+        };
+        Self {
+            cells,
+            unsure_cells,
+            unsure_share,
+            poor: unsure_share > POOR_FIT_UNSURE_SHARE,
+        }
+    }
+
+    /// The predictable cells of a frame's margins and those within the unsure margin.
+    pub fn counts(margins: &[f32]) -> (u64, u64) {
+        let predicted = margins.iter().filter(|m| !m.is_nan());
+        let unsure = margins.iter().filter(|m| m.abs() < UNSURE_MARGIN).count();
+        (predicted.count() as u64, unsure as u64)
+    }
+}
+
 /// Metrics of predictions against ground truth over a set of frames.
 #[derive(Clone, Debug, Serialize)]
 pub struct EvaluationReport {
@@ -92,6 +137,8 @@ pub struct EvaluationReport {
     /// sensor's scale), classified by the fallback model; the first one's figures.
     pub frames_foreign_remission: usize,
     pub foreign_remission: Option<ForeignRemission>,
+    /// How well the frames fit the model (no labels needed).
+    pub fit: Fit,
     pub timings_ms: TimingReport,
 }
 
@@ -108,6 +155,8 @@ pub struct Evaluation {
     non_finite_remission_points: u64,
     frames_foreign_remission: usize,
     foreign_remission: Option<ForeignRemission>,
+    predicted_cells: u64,
+    unsure_cells: u64,
     filtered: Confusion,
     unfiltered: Confusion,
     timings: Vec<StageTimings>,
@@ -124,6 +173,11 @@ impl Evaluation {
         }
         self.frames_without_remission += result.without_remission as usize;
         self.non_finite_remission_points += result.non_finite_remission as u64;
+        if let Some(margins) = &result.margins {
+            let (cells, unsure) = Fit::counts(margins);
+            self.predicted_cells += cells;
+            self.unsure_cells += unsure;
+        }
         if let Some(foreign) = result.foreign_remission {
             self.frames_foreign_remission += 1;
             self.foreign_remission.get_or_insert(foreign);
@@ -161,6 +215,7 @@ impl Evaluation {
             non_finite_remission_points: self.non_finite_remission_points,
             frames_foreign_remission: self.frames_foreign_remission,
             foreign_remission: self.foreign_remission,
+            fit: Fit::of(self.predicted_cells, self.unsure_cells),
             timings_ms: TimingReport::of(&self.timings),
         }
     }

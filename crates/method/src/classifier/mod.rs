@@ -66,6 +66,31 @@ pub struct AdaptationSummary {
     pub hybrid: String,
     #[serde(default)]
     pub fallback: String,
+    /// The check against the prior that decided whether the adapted model replaces
+    /// it (absent in files from before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub check: Option<AdaptationCheck>,
+}
+
+/// How an adapted model fared against its prior on what the drives themselves
+/// show, and whether it replaced the prior: cells the vehicle drove over
+/// (traversable) and cells over its clearance (not), held out of the fit a block of
+/// the world at a time (`crates/training/src/adaptation.rs`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AdaptationCheck {
+    /// The adapted model replaces the prior (false: the prior is kept as it was).
+    pub adapted: bool,
+    /// Why, as a person reads it.
+    pub why: String,
+    /// The held-out evidence: footprint and clearance cells, and the blocks of the
+    /// world they lie in.
+    pub footprint_cells: usize,
+    pub clearance_cells: usize,
+    pub blocks: usize,
+    /// mIoU (0..1) of the prior and of the adapted model on the held-out evidence,
+    /// when there was enough of it to compare.
+    pub prior_miou: Option<f64>,
+    pub adapted_miou: Option<f64>,
 }
 
 /// A drive a model was adapted to.
@@ -565,7 +590,7 @@ mod tests {
 
     #[test]
     fn a_model_for_other_cell_sizes_is_refused() {
-        let model = SvmModel::embedded_default().unwrap();
+        let model = SvmModel::embedded(travmap_core::config::LabelRule::Road).unwrap();
         let mut config = Config::default();
         config.grid.cell_size_m = 0.5;
         config.features.subcell_size_m = 0.25;

@@ -6,16 +6,17 @@ use sha2::{Digest, Sha256};
 
 use super::{ReducedSet, SvmModel, TrainingSummary, appearance_feature_names};
 use crate::features::feature_names;
-use travmap_core::config::{Config, FeatureGroup, written_before_groups};
+use travmap_core::config::{Config, FeatureGroup, LabelRule, written_before_groups};
 use travmap_core::error::{Error, Result};
 
 /// The format tag and version of model files this build reads and writes.
 pub const MODEL_FORMAT: &str = "travmap-svm";
 pub const MODEL_VERSION: u32 = 1;
 
-/// The default geometry-only model, trained on the shipped labelled SemanticKITTI
-/// frames (docs/method.md, "The embedded model").
-pub const DEFAULT_MODEL_JSON: &[u8] = include_bytes!("default_model.json");
+/// The models compiled into the binary, one per rule of what is traversable, trained
+/// on every labelled scan shipped (docs/method.md, "The embedded models").
+const ROAD_MODEL_JSON: &[u8] = include_bytes!("road_model.json");
+const OFFROAD_MODEL_JSON: &[u8] = include_bytes!("offroad_model.json");
 
 /// The model file: a JSON document, versioned.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -77,6 +78,11 @@ struct ReducedSetFile {
     training_agreement: f64,
 }
 
+/// What a compiled-in model is called in reports.
+pub fn embedded_name(rule: LabelRule) -> String {
+    format!("embedded {} model", rule.name())
+}
+
 /// Every configuration in a model file (the model's, its hybrid's and fallback's),
 /// read as [`written_before_groups`] says.
 fn older_configs(model: &mut serde_json::Value) {
@@ -91,9 +97,13 @@ fn older_configs(model: &mut serde_json::Value) {
 }
 
 impl SvmModel {
-    /// The model compiled into the binary.
-    pub fn embedded_default() -> Result<Self> {
-        Self::from_json(DEFAULT_MODEL_JSON, "embedded default model")
+    /// The model compiled into the binary that learnt `rule`.
+    pub fn embedded(rule: LabelRule) -> Result<Self> {
+        let json = match rule {
+            LabelRule::Road => ROAD_MODEL_JSON,
+            LabelRule::Offroad => OFFROAD_MODEL_JSON,
+        };
+        Self::from_json(json, &embedded_name(rule))
     }
 
     /// Reads a model file, checking format, version, shapes and finiteness.
@@ -397,27 +407,32 @@ mod tests {
     use crate::features::feature_count;
 
     #[test]
-    fn embedded_model_loads_and_round_trips() {
-        let model = SvmModel::embedded_default().expect("the shipped model must load");
-        assert!(model.support_vector_count() > 0);
-        assert_eq!(
-            model.dimension(),
-            feature_count(&Config::default().features.groups)
-        );
-        model
-            .check_compatible(&Config::default(), "embedded")
-            .unwrap();
-        let again = SvmModel::from_json(&model.to_json(), "round trip").unwrap();
-        assert_eq!(again.to_json(), model.to_json());
-        // It looks at no feature the default training leaves out, and the file says so.
-        let left_out = Config::default().training.left_out_features;
-        assert_eq!(model.left_out_features(), left_out);
-        assert_eq!(again.feature_inverse_std, model.feature_inverse_std);
+    fn embedded_models_load_and_round_trip() {
+        for rule in LabelRule::ALL {
+            let model = SvmModel::embedded(rule).expect("the shipped models must load");
+            assert!(model.support_vector_count() > 0);
+            assert_eq!(
+                model.dimension(),
+                feature_count(&Config::default().features.groups)
+            );
+            model
+                .check_compatible(&Config::default(), "embedded")
+                .unwrap();
+            // Each learnt its rule.
+            assert_eq!(model.config.ground_truth.rule, rule);
+            let again = SvmModel::from_json(&model.to_json(), "round trip").unwrap();
+            assert_eq!(again.to_json(), model.to_json());
+            // It looks at no feature the default training leaves out, and the file
+            // says so.
+            let left_out = Config::default().training.left_out_features;
+            assert_eq!(model.left_out_features(), left_out);
+            assert_eq!(again.feature_inverse_std, model.feature_inverse_std);
+        }
     }
 
     #[test]
     fn a_left_out_feature_must_be_one_of_the_models() {
-        let model = SvmModel::embedded_default().unwrap();
+        let model = SvmModel::embedded(LabelRule::Road).unwrap();
         let mut json: serde_json::Value = serde_json::from_slice(&model.to_json()).unwrap();
         json["left_out_features"] = serde_json::json!(["wheel_count"]);
         let err = SvmModel::from_json(json.to_string().as_bytes(), "m.json")
@@ -431,7 +446,7 @@ mod tests {
 
     #[test]
     fn wrong_version_and_shapes_are_clear_errors() {
-        let model = SvmModel::embedded_default().unwrap();
+        let model = SvmModel::embedded(LabelRule::Road).unwrap();
         let mut json: serde_json::Value = serde_json::from_slice(&model.to_json()).unwrap();
         json["version"] = 99.into();
         let err = SvmModel::from_json(json.to_string().as_bytes(), "m.json")
