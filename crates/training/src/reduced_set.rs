@@ -142,7 +142,8 @@ pub(super) fn fit_folded_reduced_set(
 /// `model` does) with weights and bias by weighted ridge least squares to `target`
 /// on at most `training.reduced_set_samples` of `rows` (raw features, row-major),
 /// in `model`'s kernel (`target_of` is given two scratch spaces for the models it
-/// runs). None when there are no more candidates than centres.
+/// runs); then `training.reduced_set_refinements` steps that move the centres
+/// ([`Expansion::refine`]). None when there are no more candidates than centres.
 fn fit_expansion(
     model: &SvmModel,
     candidates: &[f32],
@@ -160,70 +161,165 @@ fn fit_expansion(
     let mut chosen: Vec<usize> = (0..rows.len() / d).collect();
     rng.shuffle(&mut chosen);
     chosen.truncate(t.reduced_set_samples.max(1));
-
-    // Design matrix: the kernel to every centre plus a column of ones for the bias.
+    // The samples standardised, and the exact decision value at each.
+    let samples: Vec<(f64, Vec<f32>)> = chosen
+        .par_iter()
+        .map_init(<[PredictionScratch; 3]>::default, |[own, other, scratch], &i| {
+            let features = &rows[i * d..(i + 1) * d];
+            let target = target_of(features, [own, other]) as f64;
+            (target, model.standardise(features, scratch).to_vec())
+        })
+        .collect();
+    let expansion = Expansion {
+        target: nalgebra::DVector::from_iterator(samples.len(), samples.iter().map(|s| s.0)),
+        samples: samples.into_iter().flat_map(|s| s.1).collect(),
+        gamma: model.gamma,
+        d,
+    };
+    let mut fitted = expansion.solve(centres)?;
+    for _ in 0..t.reduced_set_refinements {
+        fitted = expansion.refine(fitted);
+    }
     let m = t.reduced_set_size;
-    let gamma = model.gamma;
-    // Rows are computed on all cores a block at a time (the matrix is column-major,
-    // so a block is copied in; whole, the copy would double the matrix's memory).
-    let by_column = Columns::new(&centres, d);
-    let mut design = nalgebra::DMatrix::<f64>::zeros(chosen.len(), m + 1);
-    let mut target = nalgebra::DVector::<f64>::zeros(chosen.len());
-    for (block, indices) in chosen.chunks(DESIGN_BLOCK_ROWS).enumerate() {
-        let block_rows: Vec<(f64, Vec<f64>)> = indices
-            .par_iter()
-            .map_init(
-                <[PredictionScratch; 3]>::default,
-                |[own, other, scratch], &i| {
-                    let features = &rows[i * d..(i + 1) * d];
-                    let target = target_of(features, [own, other]) as f64;
-                    let z = model.standardise(features, scratch);
-                    let mut kernel = vec![0f64; m];
-                    by_column.sums(z, 0, &mut kernel, |q, c| ((c - q) as f64).powi(2));
-                    for k in &mut kernel {
-                        *k = (-gamma * *k).exp();
-                    }
-                    (target, kernel)
-                },
-            )
-            .collect();
-        for (offset, (value, kernel)) in block_rows.into_iter().enumerate() {
-            let r = block * DESIGN_BLOCK_ROWS + offset;
-            target[r] = value;
-            for (j, k) in kernel.into_iter().enumerate() {
-                design[(r, j)] = k;
-            }
-            design[(r, m)] = 1.0;
-        }
-    }
-    // Rows near the decision boundary decide signs: weight them up, w = 1 / (1 + f^2).
-    let mut weighted = design.clone();
-    let mut weighted_target = target.clone();
-    for r in 0..chosen.len() {
-        let w = (1.0 / (1.0 + target[r] * target[r])).sqrt();
-        weighted.row_mut(r).scale_mut(w);
-        weighted_target[r] *= w;
-    }
-    let mut normal = gram(&weighted);
-    let right = transposed_times(&weighted, &weighted_target);
-    // A small ridge keeps the system positive definite when centres nearly coincide.
-    let ridge = 1e-6 * (0..=m).map(|j| normal[(j, j)]).fold(0.0, f64::max);
-    for j in 0..=m {
-        normal[(j, j)] += ridge;
-    }
-    let solution = normal.cholesky()?.solve(&right);
-    let fitted = &design * &solution;
-    let agreeing = fitted
-        .iter()
-        .zip(target.iter())
+    let agreeing = (fitted.values.iter().zip(expansion.target.iter()))
         .filter(|(f, e)| (**f > 0.0) == (**e > 0.0))
         .count();
     Some(ReducedSet::new(
-        centres,
-        solution.iter().take(m).map(|&w| w as f32).collect(),
-        solution[m] as f32,
-        agreeing as f64 / chosen.len() as f64,
+        fitted.centres,
+        fitted.solution.iter().take(m).map(|&w| w as f32).collect(),
+        fitted.solution[m] as f32,
+        agreeing as f64 / expansion.target.len() as f64,
     ))
+}
+
+/// What a reduced set is fitted to: standardised samples (row-major, `d` values
+/// each), the exact decision value at each, and the kernel's gamma.
+struct Expansion {
+    samples: Vec<f32>,
+    target: nalgebra::DVector<f64>,
+    gamma: f64,
+    d: usize,
+}
+
+/// Kernel centres with their fitted weights and bias (`solution`, the bias last),
+/// the expansion's value at each sample, and its weighted squared error there.
+struct Fitted {
+    centres: Vec<f32>,
+    solution: nalgebra::DVector<f64>,
+    kernel: nalgebra::DMatrix<f64>,
+    values: nalgebra::DVector<f64>,
+    error: f64,
+}
+
+impl Expansion {
+    /// A sample's weight in the fit: samples near the decision boundary decide
+    /// signs, so they count more, `1 / (1 + f^2)`.
+    fn weight(&self, sample: usize) -> f64 {
+        1.0 / (1.0 + self.target[sample] * self.target[sample])
+    }
+
+    /// The weights and bias of `centres` by weighted ridge least squares.
+    fn solve(&self, centres: Vec<f32>) -> Option<Fitted> {
+        let (d, n) = (self.d, self.target.len());
+        let m = centres.len() / d;
+        // Design matrix: the kernel to every centre plus a column of ones for the
+        // bias. Rows are computed on all cores a block at a time (the matrix is
+        // column-major, so a block is copied in; whole, the copy would double the
+        // matrix's memory).
+        let by_column = Columns::new(&centres, d);
+        let mut design = nalgebra::DMatrix::<f64>::zeros(n, m + 1);
+        for (block, rows) in self.samples.chunks(DESIGN_BLOCK_ROWS * d).enumerate() {
+            let block_rows: Vec<Vec<f64>> = rows
+                .par_chunks_exact(d)
+                .map(|z| {
+                    let mut kernel = vec![0f64; m];
+                    by_column.sums(z, 0, &mut kernel, |q, c| ((c - q) as f64).powi(2));
+                    kernel.iter_mut().for_each(|k| *k = (-self.gamma * *k).exp());
+                    kernel
+                })
+                .collect();
+            for (offset, kernel) in block_rows.into_iter().enumerate() {
+                let r = block * DESIGN_BLOCK_ROWS + offset;
+                for (j, k) in kernel.into_iter().enumerate() {
+                    design[(r, j)] = k;
+                }
+                design[(r, m)] = 1.0;
+            }
+        }
+        let mut weighted = design.clone();
+        let mut weighted_target = self.target.clone();
+        for r in 0..n {
+            let w = self.weight(r).sqrt();
+            weighted.row_mut(r).scale_mut(w);
+            weighted_target[r] *= w;
+        }
+        let mut normal = gram(&weighted);
+        let right = transposed_times(&weighted, &weighted_target);
+        // A small ridge keeps the system positive definite when centres nearly coincide.
+        let ridge = 1e-6 * (0..=m).map(|j| normal[(j, j)]).fold(0.0, f64::max);
+        for j in 0..=m {
+            normal[(j, j)] += ridge;
+        }
+        let solution = normal.cholesky()?.solve(&right);
+        let values = &design * &solution;
+        let error = (0..n)
+            .map(|r| self.weight(r) * (self.target[r] - values[r]).powi(2))
+            .sum();
+        Some(Fitted {
+            centres,
+            solution,
+            kernel: design,
+            values,
+            error,
+        })
+    }
+
+    /// One step of the centres down the gradient of the weighted squared error, its
+    /// length found by halving from a step that moves the farthest centre 0.1 (in
+    /// standard deviations), with the weights re-solved at each try; `fitted` as it
+    /// was when no step lowers the error.
+    fn refine(&self, fitted: Fitted) -> Fitted {
+        let (d, n) = (self.d, self.target.len());
+        let m = fitted.centres.len() / d;
+        // dE/dc_j = -4 gamma beta_j sum_i w_i r_i K_ij (z_i - c_j)
+        let residual: Vec<f64> = (0..n)
+            .map(|r| self.weight(r) * (self.target[r] - fitted.values[r]))
+            .collect();
+        let descent: Vec<f64> = (0..m)
+            .into_par_iter()
+            .flat_map_iter(|j| {
+                let (mut along, mut total) = (vec![0f64; d], 0f64);
+                for (r, z) in self.samples.chunks_exact(d).enumerate() {
+                    let k = residual[r] * fitted.kernel[(r, j)];
+                    total += k;
+                    for (a, &v) in along.iter_mut().zip(z) {
+                        *a += k * v as f64;
+                    }
+                }
+                let scale = 4.0 * self.gamma * fitted.solution[j];
+                let centre = &fitted.centres[j * d..(j + 1) * d];
+                (0..d).map(move |k| scale * (along[k] - total * centre[k] as f64))
+            })
+            .collect();
+        let longest = descent
+            .chunks_exact(d)
+            .map(|g| g.iter().map(|v| v * v).sum::<f64>().sqrt())
+            .fold(0.0, f64::max);
+        if longest == 0.0 {
+            return fitted;
+        }
+        let mut step = 0.1 / longest;
+        for _ in 0..4 {
+            let moved: Vec<f32> = (fitted.centres.iter().zip(&descent))
+                .map(|(&c, &g)| (c as f64 + step * g) as f32)
+                .collect();
+            match self.solve(moved) {
+                Some(better) if better.error < fitted.error => return better,
+                _ => step *= 0.5,
+            }
+        }
+        fitted
+    }
 }
 
 /// Columns of the Gram matrix's panels multiplied at a time, at most.
