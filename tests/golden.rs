@@ -91,6 +91,7 @@ fn metrics(m: &FrameMetrics) -> Value {
         "miou": f32_value(m.miou),
         "f1": f32_value(m.f1),
         "dropped_points": m.dropped_points,
+        "unsure_cells": m.unsure_cells,
     })
 }
 

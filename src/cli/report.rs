@@ -22,6 +22,8 @@ pub fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {
         "c": model.c,
         "gamma": model.gamma,
         "trained_on": model.training.sources,
+        // Whether adaptation replaced the prior, and why (adapted models only).
+        "adaptation": model.training.adaptation.as_ref().and_then(|a| a.check.as_ref()),
     })
 }
 

@@ -28,7 +28,7 @@ use travmap_core::config::Config;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
 use travmap_core::posing::Posing;
-use travmap_drive::scoring::evaluation::{Evaluation, EvaluationReport};
+use travmap_drive::scoring::evaluation::{Evaluation, EvaluationReport, Fit};
 use travmap_drive::scoring::metrics::Confusion;
 use travmap_drive::{Handed, Selection};
 use travmap_formats::mcap::writer::Compression;
@@ -268,6 +268,7 @@ fn metrics_message(result: &FrameResult, classes: &[CellClass], world_frame: &st
         f1: scores.map_or(f32::NAN, |s| s.f1 as f32),
         latency_ms: result.timings.latency_ms as f32,
         dropped_points: result.dropped_points as u32,
+        unsure_cells: result.margins.as_deref().map_or(0, |m| Fit::counts(m).1) as u32,
     }
 }
 

@@ -376,6 +376,9 @@ pub struct FrameMetrics {
     /// Points of the scan dropped as no return (a NaN or infinite coordinate, or
     /// the sensor's origin).
     pub dropped_points: u32,
+    /// Predictable cells whose classifier margin lies within 1 of the boundary:
+    /// cells the model was unsure of (their share says how well the drive fits it).
+    pub unsure_cells: u32,
 }
 
 /// The definition (ros2msg, its dependencies with it) of a message type travmap
