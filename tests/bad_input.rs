@@ -793,3 +793,47 @@ fn a_scan_whose_remission_is_nan_is_classified_without_remission_and_said() {
         ],
     );
 }
+
+/// Files options name: a device is refused before a byte is read (/dev/zero filled
+/// 12 GB), a FIFO no process writes is refused instead of blocking the open, and a
+/// shell's <(...) still works.
+#[test]
+fn option_files_that_are_devices_or_pipes_without_a_writer_are_refused() {
+    let dir = sequence();
+    let seq = arg(dir.path());
+    for (option, device) in [("--model", "/dev/zero"), ("--config", "/dev/urandom")] {
+        let err = clean_failure(travmap(&["run", seq, option, device]));
+        assert_contains(&err, &[device, "a device or a socket, not a file"]);
+    }
+    let fifo = dir.path().join("settings.toml");
+    let name = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: mkfifo on a new path in this test's own folder.
+    assert_eq!(unsafe { libc::mkfifo(name.as_ptr(), 0o600) }, 0);
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_travmap"))
+        .args(["run", seq, "--config", arg(&fifo)])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let waited = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if waited.elapsed().as_secs() > 20 {
+            child.kill().unwrap();
+            panic!("travmap blocked on a FIFO without a writer");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let err = clean_failure(child.wait_with_output().unwrap());
+    assert_contains(&err, &["a pipe that gave nothing"]);
+    // <(...): a pipe whose writer has written and gone.
+    let out = std::process::Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "{} run {seq} --json --config <(printf '[grid]\\nsize_m = 24.0\\n') | tail -n 1",
+            env!("CARGO_BIN_EXE_travmap")
+        ))
+        .output()
+        .unwrap();
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(summary["config"]["grid"]["size_m"], 24.0);
+}

@@ -36,6 +36,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use travmap_core::Config;
 use travmap_core::config::{ModelChoice, PoseSource};
+use travmap_core::option_files::{MODEL_MAX_BYTES, read_option_file};
 use travmap_core::stopwatch::Stopwatch;
 use travmap_drive::Selection;
 use travmap_io::ros_drive::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics};
@@ -78,11 +79,23 @@ pub struct Settings {
         help_heading = "Configuration"
     )]
     poses: Option<String>,
+    /// The configuration once loaded: the file is read once (a `<(...)` pipe can be
+    /// read only once).
+    #[arg(skip)]
+    loaded: std::sync::OnceLock<Config>,
 }
 
 impl Settings {
     /// The effective configuration: defaults, then the file, then each `--set`.
     pub fn load(&self) -> Result<Config> {
+        if let Some(config) = self.loaded.get() {
+            return Ok(config.clone());
+        }
+        let config = self.read()?;
+        Ok(self.loaded.get_or_init(|| config).clone())
+    }
+
+    fn read(&self) -> Result<Config> {
         let mut config = match &self.config {
             Some(path) => Config::from_toml_file(path)?,
             None => Config::default(),
@@ -643,8 +656,7 @@ impl ModelArg {
 pub fn load_model(choice: &ModelChoice, config: &Config) -> Result<(SvmModel, String)> {
     let (model, name) = match choice {
         ModelChoice::File(path) => {
-            let bytes = std::fs::read(path)
-                .with_context(|| format!("cannot read model {}", path.display()))?;
+            let bytes = read_option_file(path, MODEL_MAX_BYTES).context("cannot read the model")?;
             let name = path.display().to_string();
             (SvmModel::from_json(&bytes, &name)?, name)
         }

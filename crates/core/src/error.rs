@@ -142,6 +142,11 @@ pub enum Error {
     #[error("{path}: {message}")]
     Sequence { path: PathBuf, message: String },
 
+    /// A file an option names (a model, a configuration, a calibration) that cannot
+    /// be read, and why.
+    #[error("{path}: {problem}")]
+    OptionFile { path: PathBuf, problem: String },
+
     #[error("{path} does not exist")]
     InputMissing { path: PathBuf },
 
@@ -470,7 +475,8 @@ impl Error {
     /// The file the error is about, when there is one (for `--json` errors).
     pub fn path(&self) -> Option<&std::path::Path> {
         match self {
-            Error::Io { path, .. }
+            Error::OptionFile { path, .. }
+            | Error::Io { path, .. }
             | Error::NoSpace { path, .. }
             | Error::WriterStopped { path, .. }
             | Error::Write { path, .. }

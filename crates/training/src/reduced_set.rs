@@ -164,11 +164,14 @@ fn fit_expansion(
     // The samples standardised, and the exact decision value at each.
     let samples: Vec<(f64, Vec<f32>)> = chosen
         .par_iter()
-        .map_init(<[PredictionScratch; 3]>::default, |[own, other, scratch], &i| {
-            let features = &rows[i * d..(i + 1) * d];
-            let target = target_of(features, [own, other]) as f64;
-            (target, model.standardise(features, scratch).to_vec())
-        })
+        .map_init(
+            <[PredictionScratch; 3]>::default,
+            |[own, other, scratch], &i| {
+                let features = &rows[i * d..(i + 1) * d];
+                let target = target_of(features, [own, other]) as f64;
+                (target, model.standardise(features, scratch).to_vec())
+            },
+        )
         .collect();
     let expansion = Expansion {
         target: nalgebra::DVector::from_iterator(samples.len(), samples.iter().map(|s| s.0)),
@@ -234,7 +237,9 @@ impl Expansion {
                 .map(|z| {
                     let mut kernel = vec![0f64; m];
                     by_column.sums(z, 0, &mut kernel, |q, c| ((c - q) as f64).powi(2));
-                    kernel.iter_mut().for_each(|k| *k = (-self.gamma * *k).exp());
+                    kernel
+                        .iter_mut()
+                        .for_each(|k| *k = (-self.gamma * *k).exp());
                     kernel
                 })
                 .collect();

@@ -13,6 +13,7 @@ mod training;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::option_files::{TEXT_MAX_BYTES, read_option_text};
 
 pub use adaptation::{AdaptConfig, Learner, OwnPoints, VehicleConfig};
 pub use labels::{ClassRule, LabelRule, LabelSet, parse_label_map};
@@ -414,7 +415,7 @@ impl Config {
         let Some(path) = &self.ground_truth.label_map else {
             return Ok(());
         };
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = read_option_text(path, TEXT_MAX_BYTES)?;
         let classes = parse_label_map(&text)
             .map_err(|problem| Error::Config(format!("label map {}: {problem}", path.display())))?;
         self.ground_truth.label_map_classes = Some(classes);
@@ -423,7 +424,7 @@ impl Config {
 
     /// Reads a TOML file; fields it does not name keep their defaults.
     pub fn from_toml_file(path: &std::path::Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = read_option_text(path, TEXT_MAX_BYTES)?;
         toml::from_str(&text).map_err(|e| Error::Config(format!("{}: {e}", path.display())))
     }
 

@@ -10,6 +10,7 @@ pub mod robosense;
 pub mod velodyne;
 
 use std::path::Path;
+use travmap_core::option_files::{TEXT_MAX_BYTES, read_option_text};
 
 use crate::packets::hesai::{
     HesaiAssembler, HesaiCalibration, HesaiModel, PANDAR_SCAN, pandar_scan_message,
@@ -153,7 +154,7 @@ impl PacketCalibration {
 
 /// An angle table file read by `parse`; its errors name the file.
 fn table_file<T>(file: &Path, parse: fn(&str) -> Result<T, String>) -> Result<T, String> {
-    let text = std::fs::read_to_string(file).map_err(|e| named(Some(file), e.to_string()))?;
+    let text = read_option_text(file, TEXT_MAX_BYTES).map_err(|e| e.to_string())?;
     parse(&text).map_err(|e| named(Some(file), e))
 }
 

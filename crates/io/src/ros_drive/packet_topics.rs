@@ -5,6 +5,7 @@
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::{Path, PathBuf};
+use travmap_core::option_files::{TEXT_MAX_BYTES, read_option_text};
 
 use super::by_topic::LidarCalibrations;
 use crate::packets::hesai::{HesaiAssembler, HesaiCalibration};
@@ -416,7 +417,7 @@ pub(crate) fn ouster_metadata_beside(capture: &Path) -> Option<(PathBuf, OusterM
 
 /// An Ouster's metadata JSON file (`--lidar-calibration`).
 fn ouster_metadata_file(file: &std::path::Path) -> Result<OusterMetadata, String> {
-    let text = std::fs::read_to_string(file).map_err(|e| format!("{}: {e}", file.display()))?;
+    let text = read_option_text(file, TEXT_MAX_BYTES).map_err(|e| e.to_string())?;
     OusterMetadata::from_json(&text).map_err(|e| format!("{}: {e}", file.display()))
 }
 

@@ -2,6 +2,7 @@
 //! built in for the fixed-geometry models or read from velodyne_pointcloud's YAML.
 
 use std::f64::consts::PI;
+use travmap_core::option_files::{TEXT_MAX_BYTES, read_option_text};
 
 use serde::Deserialize;
 
@@ -145,8 +146,8 @@ impl Calibration {
     pub fn for_model(model: VelodyneModel, file: Option<&std::path::Path>) -> Result<Self, String> {
         let calibration = match file {
             Some(file) => {
-                let text = std::fs::read_to_string(file)
-                    .map_err(|e| format!("cannot read --lidar-calibration {}: {e}", file.display()))?;
+                let text = read_option_text(file, TEXT_MAX_BYTES)
+                    .map_err(|e| format!("cannot read --lidar-calibration: {e}"))?;
                 Self::from_yaml(&text)
                     .map_err(|e| format!("--lidar-calibration {}: {e}", file.display()))?
             }
