@@ -17,6 +17,7 @@ pub mod payloads;
 pub mod ros_drive;
 mod skips;
 mod source;
+mod yaml;
 
 pub use kitti::KittiSequence;
 pub use skips::{Skip, SkipLog, why_none_read};

@@ -58,7 +58,7 @@ pub fn listed_storage_files(directory: &Path) -> Vec<PathBuf> {
     let Ok(text) = std::fs::read_to_string(directory.join("metadata.yaml")) else {
         return Vec::new();
     };
-    let Ok(metadata) = serde_yaml_ng::from_str::<Metadata>(&text) else {
+    let Ok(metadata) = crate::yaml::from_str::<Metadata>(&text) else {
         return Vec::new();
     };
     let listed = metadata.rosbag2_bagfile_information.relative_file_paths;
@@ -93,7 +93,7 @@ impl Rosbag2Directory {
         };
         let text =
             std::fs::read_to_string(&metadata_path).map_err(|e| Error::io(&metadata_path, e))?;
-        let metadata: Metadata = serde_yaml_ng::from_str(&text)
+        let metadata: Metadata = crate::yaml::from_str(&text)
             .map_err(|e| problem(format!("not rosbag2 metadata: {e}")))?;
         let information = metadata.rosbag2_bagfile_information;
         let compression = information.compression().map_err(problem)?;
@@ -213,9 +213,9 @@ fn decompress_file(compressed: &Path, into: &mut Option<tempfile::TempDir>) -> R
 /// as `metadata.yaml` reads, `rosbags` without the outer key; text that is neither
 /// says nothing.
 pub(crate) fn says_zstd_messages(text: &str) -> std::result::Result<bool, String> {
-    let information = serde_yaml_ng::from_str::<Metadata>(text)
+    let information = crate::yaml::from_str::<Metadata>(text)
         .map(|metadata| metadata.rosbag2_bagfile_information)
-        .or_else(|_| serde_yaml_ng::from_str::<Information>(text));
+        .or_else(|_| crate::yaml::from_str::<Information>(text));
     match information {
         Ok(information) => Ok(information.compression()? == Compression::ZstdMessages),
         Err(_) => Ok(false),

@@ -95,7 +95,7 @@ impl Calibration {
     /// `rot_correction`, `vert_correction` in radians, offsets in metres;
     /// `distance_resolution`).
     pub fn from_yaml(text: &str) -> Result<Self, String> {
-        let file: CalibrationFile = serde_yaml_ng::from_str(text).map_err(|e| e.to_string())?;
+        let file: CalibrationFile = crate::yaml::from_str(text)?;
         Self::of_entries(file.lasers, file.distance_resolution.unwrap_or(0.002))
     }
 
