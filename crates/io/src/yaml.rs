@@ -49,7 +49,11 @@ mod tests {
 
     #[test]
     fn flow_nesting_is_bounded_and_quotes_and_comments_do_not_count() {
-        let deep = format!("custom_data: {}{}", "[".repeat(100_000), "]".repeat(100_000));
+        let deep = format!(
+            "custom_data: {}{}",
+            "[".repeat(100_000),
+            "]".repeat(100_000)
+        );
         let started = std::time::Instant::now();
         let err = from_str::<serde_yaml_ng::Value>(&deep).unwrap_err();
         assert!(err.contains("nest 100000 deep"), "{err}");

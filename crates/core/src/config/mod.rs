@@ -169,6 +169,9 @@ pub struct GridConfig {
     pub min_points: usize,
 }
 
+/// The most bins `features.curvity_bins` may ask for.
+pub const MAX_CURVITY_BINS: usize = 4096;
+
 /// METHOD.md section 4.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -545,8 +548,13 @@ impl Config {
         if self.grid.min_points == 0 {
             return fail("grid.min_points must be >= 1".into());
         }
-        if self.features.curvity_bins == 0 {
-            return fail("features.curvity_bins must be >= 1".into());
+        // Each cell's histogram is as long as this: past a few thousand bins, most stay
+        // empty at any point count, and 2^32 took minutes and 4 GB a frame.
+        if !(1..=MAX_CURVITY_BINS).contains(&self.features.curvity_bins) {
+            return fail(format!(
+                "features.curvity_bins must be in 1..={MAX_CURVITY_BINS}, got {}",
+                self.features.curvity_bins
+            ));
         }
         let a = &self.appearance;
         if [a.hue_bins, a.saturation_bins, a.value_bins]
@@ -662,6 +670,19 @@ mod tests {
         assert_eq!(config.grid.cell_size_m, 0.4);
         std::fs::write(&path, "[grid]\nbogus = 1\n").unwrap();
         assert!(Config::from_toml_file(&path).is_err());
+    }
+
+    #[test]
+    fn curvity_bins_are_bounded() {
+        let mut config = Config::default();
+        config.set("features.curvity_bins=4294967295").unwrap();
+        let message = config.validate().unwrap_err().to_string();
+        assert!(
+            message.contains("features.curvity_bins must be in 1..=4096, got 4294967295"),
+            "{message}"
+        );
+        config.set("features.curvity_bins=4096").unwrap();
+        assert!(config.validate().is_ok());
     }
 
     #[test]
