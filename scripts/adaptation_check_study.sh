@@ -27,10 +27,11 @@ row() {
     before=$("$T" eval "$path" "${settings[@]}" 2>/dev/null | tail -n 1 |
         jq -r '.report.scores.miou * 1000 | round / 10')
     after=$("$T" eval "$path" --adapt "${settings[@]}" 2>/dev/null | tail -n 1 |
-        jq -r '[(.report.scores.miou * 1000 | round / 10), (if .model.adaptation.adapted then "adapted" else "kept" end), .model.adaptation.prior_miou, .model.adaptation.adapted_miou] | @tsv')
-    read -r adapted verdict prior_check adapted_check <<<"$after"
-    local check=""
-    [ "$prior_check" != "null" ] && check=$(printf "%.1f / %.1f" "$(jq -n "$prior_check * 100")" "$(jq -n "$adapted_check * 100")")
+        jq -r '(.report.scores.miou * 1000 | round / 10 | tostring) + "\t"
+            + (.model.adaptation | (if .adapted then "adapted" else "kept" end) + "\t"
+            + (if .prior_miou == null then (if (.why | test("guessed")) then "footprint guessed" else "too little evidence" end)
+               else "\(.prior_miou * 1000 | round / 10) / \(.adapted_miou * 1000 | round / 10)" end))')
+    IFS=$'\t' read -r adapted verdict check <<<"$after"
     echo "| $(basename "$prior" .json) | $name | $rule | $before | $adapted | $verdict | $check |"
 }
 

@@ -860,3 +860,37 @@ fn deeply_nested_yaml_is_refused_at_once() {
         assert!(started.elapsed().as_secs() < 5, "{args:?}");
     }
 }
+
+/// A PLY header of 100,000 vertex properties made each chunk of records 50 GB,
+/// reserved before the data was compared with what the header said (an abort under
+/// an 8 GiB limit): chunks are bounded in bytes, and the short data is the error.
+#[test]
+fn a_ply_header_of_many_properties_is_refused_without_reserving_its_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("wide.ply");
+    let properties: String = (0..100_000)
+        .map(|i| format!("property double p{i}\n"))
+        .collect();
+    let header = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex 16000\n{properties}property float x\nproperty float y\nproperty float z\nend_header\n"
+    );
+    std::fs::write(&ply, [header.as_bytes(), &[0u8; 1000]].concat()).unwrap();
+    let out = std::process::Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v 4000000; exec {} map {} -o {}",
+            env!("CARGO_BIN_EXE_travmap"),
+            arg(&ply),
+            arg(&dir.path().join("map.png"))
+        ))
+        .output()
+        .unwrap();
+    let err = clean_failure(out);
+    assert_contains(
+        &err,
+        &[
+            "the header says 16000 vertices of 800012 bytes",
+            "but 1000 bytes of data follow",
+        ],
+    );
+}

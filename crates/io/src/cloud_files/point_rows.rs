@@ -9,6 +9,9 @@ use travmap_formats::ros::{PointCloud2, datatype};
 
 /// Points per chunk: 1-2 MB of rows for the usual layouts.
 pub const CHUNK_POINTS: usize = 1 << 16;
+/// Bytes per chunk at most: a header of many properties (100,000 in a PLY: 800 kB a
+/// record) would make [`CHUNK_POINTS`] records 50 GB.
+const CHUNK_BYTES: usize = 16 << 20;
 
 /// What the body of a file holds, as its header says.
 pub struct Rows<'a> {
@@ -28,7 +31,8 @@ pub enum Encoding {
 }
 
 /// Reads the `rows.points` records of `body`, giving each chunk of up to
-/// [`CHUNK_POINTS`] to `on_chunk` as a cloud of that many points (height 1).
+/// [`CHUNK_POINTS`] (and [`CHUNK_BYTES`]) to `on_chunk` as a cloud of that many
+/// points (height 1).
 pub fn read_rows(
     body: &mut impl BufRead,
     rows: &Rows,
@@ -46,7 +50,7 @@ pub fn read_rows(
     let mut line = String::new();
     let mut done = 0;
     while done < rows.points {
-        let n = CHUNK_POINTS.min(rows.points - done);
+        let n = (CHUNK_POINTS.min(CHUNK_BYTES / step.max(1)).max(1)).min(rows.points - done);
         chunk.data.clear();
         match encoding {
             Encoding::Binary => {
