@@ -8,7 +8,9 @@
 #
 # Columns: seq 00 frames 0-2 (prior trained on seq 07 only), seq 07 frame 964
 # (prior trained on seq 00 only), RELLIS-3D 000104 with the off-road and the road
-# rule (prior: the embedded model). Needs ../shared/data; TRAVMAP names the binary.
+# rule (prior: the embedded road model). Adaptation is unchecked here
+# (adapt.check = false): the study compares learners, not the check. Needs
+# ../shared/data; TRAVMAP names the binary.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 T=${TRAVMAP:-target/release/travmap}
@@ -31,7 +33,7 @@ fi
 
 # Prints "Acc/mIoU/TNR" of one eval.
 score() {
-    "$T" eval "$@" --json 2>/dev/null | python3 -c '
+    "$T" eval "$@" --set adapt.check=false --json 2>/dev/null | python3 -c '
 import json, sys
 for line in sys.stdin:
     d = json.loads(line)

@@ -337,13 +337,24 @@ pub fn adapt(
             check: Some(check),
         }
     };
-    let check = check_against_prior(
-        &labelled,
-        counts.straight_path_frames == counts.frames,
-        &|cells| fit(&to_set(cells, &unknown), false),
-        prior,
-        config.training.seed,
-    )?;
+    let check = match a.check {
+        true => check_against_prior(
+            &labelled,
+            counts.straight_path_frames == counts.frames,
+            &|cells| fit(&to_set(cells, &unknown), false),
+            prior,
+            config.training.seed,
+        )?,
+        false => AdaptationCheck {
+            adapted: true,
+            why: "the adapted model replaces the prior unchecked (adapt.check = false)".into(),
+            footprint_cells: 0,
+            clearance_cells: 0,
+            blocks: 0,
+            prior_miou: None,
+            adapted_miou: None,
+        },
+    };
     notices.push(format!("{}: {}", path.display(), check.why));
     if !check.adapted {
         let mut kept = original_prior.clone();

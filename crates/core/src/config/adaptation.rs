@@ -115,6 +115,10 @@ pub struct AdaptConfig {
     /// Self-labelled cells the SVM is fitted on at most, a seeded random subset,
     /// half of each label (default 10,000: a 60-frame drive adapts in seconds).
     pub max_cells: usize,
+    /// The adapted model replaces the prior only where the drive's own evidence held
+    /// out of the fit shows it better (default true); false adapts unchecked (the
+    /// learner studies of docs/method.md).
+    pub check: bool,
 }
 
 impl Default for AdaptConfig {
@@ -134,6 +138,7 @@ impl Default for AdaptConfig {
             unlabelled_weight: 0.0,
             min_footprint_cells: 50,
             max_cells: 10_000,
+            check: true,
         }
     }
 }
