@@ -79,8 +79,12 @@ fn adapt_is_deterministic_records_its_provenance_and_never_reads_labels() {
     };
     let dir = tempfile::tempdir().unwrap();
     let (first, second) = (dir.path().join("a.json"), dir.path().join("b.json"));
-    let summary = json_summary(&["adapt", arg(&sample), "-o", arg(&first)]);
-    write_output("adapt", &sample, &second, &[]);
+    // Unchecked: the learner's model, which the check would not take over the
+    // in-sample prior (a test of its own below).
+    let unchecked = ["--set", "adapt.check=false"];
+    let summary =
+        json_summary(&[&["adapt", arg(&sample), "-o", arg(&first)][..], &unchecked].concat());
+    write_output("adapt", &sample, &second, &unchecked);
     // The same model but for the seconds it took.
     assert!(
         learnt(&read_json(&first)) == learnt(&read_json(&second)),
@@ -91,7 +95,7 @@ fn adapt_is_deterministic_records_its_provenance_and_never_reads_labels() {
     let adaptation = &model["training"]["adaptation"];
     assert_eq!(adaptation["self_supervised"], true);
     assert_eq!(adaptation["learner"], "sum");
-    assert_eq!(adaptation["prior"], "embedded default model");
+    assert_eq!(adaptation["prior"], "embedded road model");
     assert_eq!(adaptation["inputs"][0]["frames"], 6);
     assert_eq!(summary["prior"]["sha256"], adaptation["prior_sha256"]);
     for count in ["footprint_cells", "negative_cells", "unknown_cells"] {
@@ -132,7 +136,7 @@ fn adapt_is_deterministic_records_its_provenance_and_never_reads_labels() {
     assert_contains(
         &said,
         &[
-            "(no labels read) from embedded default model",
+            "(no labels read) from embedded road model",
             "every scored frame is a scan this model was trained on",
         ],
     );
@@ -144,7 +148,7 @@ fn adapt_is_deterministic_records_its_provenance_and_never_reads_labels() {
         let copy_dir = tempfile::tempdir().unwrap();
         let copy = sample_copy(&sample, copy_dir.path(), labels, None);
         let model = copy_dir.path().join("m.json");
-        write_output("adapt", &copy, &model, &[]);
+        write_output("adapt", &copy, &model, &unchecked);
         assert!(
             learnt(&read_json(&model)) == learnt(&read_json(&first)),
             "labels changed the adapted model"
@@ -203,7 +207,12 @@ fn clouds_without_remission_adapt_the_fallback() {
         std::fs::write(clouds.join(name.file_name().unwrap()), pcd).unwrap();
     }
     let model = dir.path().join("m.json");
-    let settings = ["--set", "adapt.min_footprint_cells=20"];
+    let settings = [
+        "--set",
+        "adapt.min_footprint_cells=20",
+        "--set",
+        "adapt.check=false",
+    ];
     let out = travmap(&[&["adapt", arg(&clouds), "-o", arg(&model)][..], &settings].concat());
     let err = crate::common::stderr(&out);
     assert!(out.status.success(), "{err}");
@@ -297,6 +306,8 @@ fn the_footprint_is_learnt_against_the_unknown_cells_when_they_weigh() {
         "adapt.geometric_negatives=false",
         "--set",
         "adapt.unlabelled_weight=1",
+        "--set",
+        "adapt.check=false",
     ]));
     let summary: Value = serde_json::from_str(out.lines().last().unwrap()).unwrap();
     let adaptation = &summary["adaptation"];
@@ -493,7 +504,8 @@ fn the_default_adaptation_meets_the_study_targets() {
         for (k, column) in columns.iter().enumerate() {
             let column = [&column[..], &["--set", grid]].concat();
             let prior = miou(&column);
-            let adapted = miou(&[&column[..], &["--adapt"]].concat());
+            // The learner, unchecked: the check has its own test.
+            let adapted = miou(&[&column[..], &["--adapt", "--set", "adapt.check=false"]].concat());
             // The road rule on RELLIS-3D calls the grass the robot drove on not
             // traversable: adaptation learns the opposite by design (docs/method.md,
             // "What adaptation cannot know"), so that column is reported, not bounded.
@@ -513,4 +525,65 @@ fn the_default_adaptation_meets_the_study_targets() {
     }
     let mean = gains.iter().sum::<f64>() / gains.len() as f64;
     assert!(mean >= 3.0, "mean mIoU gain {mean:.2}: {gains:?}");
+}
+
+/// The check: an adapted model replaces its prior only where the drive's own
+/// evidence, held out of the fit, shows it better. The in-sample prior of the city
+/// sample is kept (it already classifies the evidence), nuScenes scene 0002's road is
+/// misread enough that the adapted model wins, and a single scan with one pose has
+/// only a guessed footprint, which proves nothing. Never below the prior.
+#[test]
+fn adaptation_replaces_the_prior_only_where_the_drive_shows_it_better() {
+    let (Some(city), Some(scene), Some(rellis)) = (
+        crate::common::sample(),
+        shared_data("nuscenes-lidarseg-scene-0002"),
+        shared_data("rellis3d-000001/sequences/00"),
+    ) else {
+        return;
+    };
+    let cases = [
+        (
+            city,
+            "semantickitti",
+            false,
+            "the prior is kept: on the drive's own evidence",
+        ),
+        (
+            scene,
+            "nuscenes",
+            true,
+            "the adapted model replaces the prior: on the drive's own evidence",
+        ),
+        (
+            rellis,
+            "rellis3d",
+            false,
+            "the prior is kept: the footprint was guessed",
+        ),
+    ];
+    for (path, labels, adapted, said) in cases {
+        let labels = format!("ground_truth.labels=\"{labels}\"");
+        let eval = |adapt: &[&str]| {
+            let out =
+                travmap(&[&["eval", arg(&path), "--set", &labels, "--json"][..], adapt].concat());
+            let err = crate::common::stderr(&out);
+            let doc: Value = serde_json::from_str(success(out).lines().last().unwrap()).unwrap();
+            (doc, err)
+        };
+        let (prior, _) = eval(&[]);
+        let (after, err) = eval(&["--adapt"]);
+        let check = &after["model"]["adaptation"];
+        assert_eq!(check["adapted"], adapted, "{}: {check}", path.display());
+        assert!(err.contains(said), "{err}");
+        let miou = |doc: &Value| doc["report"]["scores"]["miou"].as_f64().unwrap();
+        match adapted {
+            true => assert!(
+                miou(&after) > miou(&prior),
+                "{} -> {}",
+                miou(&prior),
+                miou(&after)
+            ),
+            false => assert_eq!(miou(&after), miou(&prior)),
+        }
+    }
 }

@@ -11,7 +11,7 @@ use travmap_drive::scoring::evaluation::{Evaluation, EvaluationReport};
 use travmap_drive::scoring::metrics::Confusion;
 use travmap_drive::scoring::metrics::Scores;
 use travmap_drive::{Fingerprints, Selection};
-use travmap_method::classifier::SvmModel;
+use travmap_method::classifier::{AdaptationSummary, SvmModel};
 
 use super::adapt::AdaptFlag;
 use super::{
@@ -119,7 +119,13 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
             ),
             None => "no hybrid model".into(),
         };
+        let kept = |a: &AdaptationSummary| a.check.as_ref().is_some_and(|c| !c.adapted);
         let learnt = match &model.training.adaptation {
+            Some(adaptation) if kept(adaptation) => format!(
+                "{} as it was (adaptation's check kept it), trained on {}",
+                adaptation.prior,
+                model.training.sources.join("; ")
+            ),
             Some(adaptation) => format!(
                 "adapted to {} (no labels read) from {}",
                 model.training.sources.join("; "),
