@@ -589,6 +589,26 @@ fn descriptors_are_written_through_and_a_fifo_without_reader_is_an_error() {
     );
     let bytes = std::fs::read(&redirected).unwrap();
     assert!(bytes.starts_with(b"\x89MCAP0\r\n") && bytes.ends_with(b"\x89MCAP0\r\n"));
+    // The descriptors' own names, whose folders no file can be created in (a probe
+    // for the temporary file once failed there).
+    for name in ["/dev/fd/1", "/proc/self/fd/1"] {
+        let status = Command::new(env!("CARGO_BIN_EXE_travmap"))
+            .args([
+                "convert",
+                arg(&sample),
+                "-o",
+                name,
+                "-q",
+                "--frames",
+                "0..2",
+            ])
+            .stdout(std::fs::File::create(&redirected).unwrap())
+            .status()
+            .unwrap();
+        assert!(status.success(), "{name}");
+        let bytes = std::fs::read(&redirected).unwrap();
+        assert!(bytes.ends_with(b"\x89MCAP0\r\n"), "{name}");
+    }
 
     let fifo = dir.path().join("fifo");
     assert!(

@@ -578,6 +578,10 @@ pub fn parse_frame_range(text: &str) -> Result<Range<usize>> {
         number(a, 0)?..number(b, usize::MAX - 1)? + 1
     } else if let Some((a, b)) = text.split_once("..") {
         number(a, 0)?..number(b, usize::MAX)?
+    } else if text.trim().is_empty() {
+        bail!(
+            "frame range `{text}` is empty: give N, A..B (A to B-1), A..=B or A.. (`..` for every frame)"
+        );
     } else {
         let n = number(text, 0)?;
         n..n + 1
@@ -714,6 +718,9 @@ mod tests {
         assert_eq!(parse_frame_range("5..").unwrap(), 5..usize::MAX);
         assert!(parse_frame_range("3..3").is_err());
         assert!(parse_frame_range("a..3").is_err());
+        let empty = parse_frame_range("").unwrap_err().to_string();
+        assert!(empty.contains("is empty"), "{empty}");
+        assert_eq!(parse_frame_range("..").unwrap(), 0..usize::MAX);
         let reversed = parse_frame_range("2..=1").unwrap_err().to_string();
         assert!(reversed.contains("ends before it starts"), "{reversed}");
     }

@@ -134,12 +134,14 @@ pub fn check_output_file(output: &Path, inputs: &InputFiles) -> Result<Preflight
             output: output.to_path_buf(),
         });
     }
+    // A device, a FIFO or a descriptor (/dev/stdout, /dev/fd/1, /proc/self/fd/1,
+    // wherever the shell pointed it) is written straight through, nothing beside it.
+    if crate::atomic::is_stream(output) {
+        return Ok(Preflight::default());
+    }
     if let Ok(metadata) = std::fs::metadata(output) {
         use std::os::unix::fs::{FileTypeExt, PermissionsExt};
         let kind = metadata.file_type();
-        if kind.is_char_device() || kind.is_fifo() {
-            return Ok(Preflight::default());
-        }
         let special = match () {
             _ if kind.is_block_device() => Some("a block device"),
             _ if kind.is_socket() => Some("a socket"),

@@ -532,11 +532,18 @@ impl Config {
         positive("training.block_size_m", self.training.block_size_m)?;
         check_within("training.tolerance", self.training.tolerance, (1e-9, 1.0))
             .map_err(Error::Config)?;
-        let cells = self.grid.cells_per_side();
-        if !(1..=4096).contains(&cells) {
-            return fail(format!(
-                "grid.size_m / grid.cell_size_m gives {cells} cells per side; expected 1..=4096"
-            ));
+        // The training grid is the grid's size set to training.grid_size_m: each is
+        // checked by the setting that makes it.
+        for (setting, size_m) in [
+            ("grid.size_m", self.grid.size_m),
+            ("training.grid_size_m", self.training.grid_size_m),
+        ] {
+            let cells = (size_m / self.grid.cell_size_m).round() as usize;
+            if !(1..=4096).contains(&cells) {
+                return fail(format!(
+                    "{setting} / grid.cell_size_m gives {cells} cells per side; expected 1..=4096"
+                ));
+            }
         }
         let ratio = self.grid.cell_size_m / self.features.subcell_size_m;
         if (ratio - ratio.round()).abs() > 1e-6 || !(1.0..=16.0).contains(&ratio.round()) {
@@ -670,6 +677,17 @@ mod tests {
         assert_eq!(config.grid.cell_size_m, 0.4);
         std::fs::write(&path, "[grid]\nbogus = 1\n").unwrap();
         assert!(Config::from_toml_file(&path).is_err());
+    }
+
+    #[test]
+    fn the_training_grid_is_checked_by_its_own_setting() {
+        let mut config = Config::default();
+        config.set("training.grid_size_m=0.1").unwrap();
+        let message = config.validate().unwrap_err().to_string();
+        assert!(
+            message.contains("training.grid_size_m / grid.cell_size_m gives 0 cells"),
+            "{message}"
+        );
     }
 
     #[test]

@@ -180,6 +180,14 @@ fn read_header(read: &mut impl BufRead) -> Result<PcdHeader, String> {
             "WIDTH {width} x HEIGHT {height} is not POINTS {points}"
         ));
     }
+    // A field of no values holds no data, so its neighbours' bytes would be read as
+    // another field's: PCL writes COUNT 1 for scalars, never 0.
+    if let Some(empty) = columns.iter().find(|c| c.count == 0 || c.size == 0) {
+        return Err(format!(
+            "field {} has SIZE {} and COUNT {}: every field holds at least one value of at least one byte",
+            empty.name, empty.size, empty.count
+        ));
+    }
     let mut fields = Vec::with_capacity(columns.len());
     let mut point_step = 0usize;
     for column in &columns {
@@ -387,6 +395,21 @@ mod tests {
             assert_eq!(points.points, POINTS.to_vec());
             assert_eq!(points.remission, travmap_core::frame::RemissionScale::Unit);
         }
+    }
+
+    #[test]
+    fn a_field_of_no_values_is_refused() {
+        let header = HEADER.replace("COUNT 1 1 1 1", "COUNT 0 1 1 1");
+        let binary = [format!("{header}DATA binary\n").into_bytes(), rows()].concat();
+        let err = parse_pcd(&binary, "lidar").unwrap_err();
+        assert!(err.contains("field x has SIZE 4 and COUNT 0"), "{err}");
+        let header = HEADER.replace("SIZE 4 4 4 4", "SIZE 4 4 0 4");
+        let binary = [format!("{header}DATA binary\n").into_bytes(), rows()].concat();
+        assert!(
+            parse_pcd(&binary, "lidar")
+                .unwrap_err()
+                .contains("field z has SIZE 0")
+        );
     }
 
     #[test]

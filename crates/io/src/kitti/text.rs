@@ -134,20 +134,28 @@ fn parse_numbers(path: &Path, line_no: usize, text: &str) -> Result<Vec<f64>> {
 /// from orthonormal is not a rotation written out, but a corrupt file.
 const ORTHONORMALITY_TOLERANCE: f64 = 1e-3;
 
-/// Errors unless `m` is a rotation and a translation.
+/// Errors unless `m` is a rotation and a translation: its 3x3 block orthonormal, and
+/// not a reflection (orthonormal with determinant -1, a mirrored frame: the cloud
+/// would be mirrored, and mapped as another street).
 fn check_rigid(path: &Path, line_no: usize, what: &str, m: &Matrix4<f64>) -> Result<()> {
     let error = travmap_core::geometry::orthonormality_error(m);
-    if error <= ORTHONORMALITY_TOLERANCE {
-        Ok(())
+    let determinant = m.fixed_view::<3, 3>(0, 0).determinant();
+    let problem = if error > ORTHONORMALITY_TOLERANCE {
+        format!(
+            "its 3x3 block R is {error:.3e} from R^T R = I (tolerance {ORTHONORMALITY_TOLERANCE:e})"
+        )
+    } else if determinant < 0.0 {
+        format!(
+            "its 3x3 block is a reflection (determinant {determinant:.3}), not a rotation: a mirrored frame"
+        )
     } else {
-        Err(Error::parse(
-            path,
-            line_no,
-            format!(
-                "{what} is not a rigid transform: its 3x3 block R is {error:.3e} from R^T R = I (tolerance {ORTHONORMALITY_TOLERANCE:e})"
-            ),
-        ))
-    }
+        return Ok(());
+    };
+    Err(Error::parse(
+        path,
+        line_no,
+        format!("{what} is not a rigid transform: {problem}"),
+    ))
 }
 
 /// A 3x4 row-major matrix of 12 numbers as a 4x4 with last row 0 0 0 1.
@@ -283,6 +291,29 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Vec<u64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_reflection_is_no_pose_and_no_calibration() {
+        let path = Path::new("poses.txt");
+        let mirrored = "-1 0 0 0 0 1 0 0 0 0 1 0";
+        let err = parse_poses(&format!("1 0 0 0 0 1 0 0 0 0 1 0\n{mirrored}\n"), path)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("poses.txt:2") && err.contains("a reflection (determinant -1.000)"),
+            "{err}"
+        );
+        let calibration = format!("P0: 1 0 0 0 0 1 0 0 0 0 1 0\nTr: {mirrored}\n");
+        let err = parse_calibration(&calibration, Path::new("calib.txt"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.starts_with(
+                "calib.txt:2: Tr is not a rigid transform: its 3x3 block is a reflection"
+            ),
+            "{err}"
+        );
+    }
 
     #[test]
     fn a_calibration_that_is_not_rigid_is_reported_at_its_line() {
