@@ -894,3 +894,19 @@ fn a_ply_header_of_many_properties_is_refused_without_reserving_its_size() {
         ],
     );
 }
+
+/// A FIFO among the scans blocked the open for ever: it is refused by its kind,
+/// named, and `--keep-going` skips it.
+#[test]
+fn a_fifo_among_the_scans_is_refused_not_waited_for() {
+    let dir = sequence();
+    let scan = dir.path().join("velodyne/000001.bin");
+    std::fs::remove_file(&scan).unwrap();
+    let name = std::ffi::CString::new(scan.to_str().unwrap()).unwrap();
+    // SAFETY: mkfifo on a path of this test's own folder.
+    assert_eq!(unsafe { libc::mkfifo(name.as_ptr(), 0o600) }, 0);
+    let err = clean_failure(travmap(&["run", arg(dir.path())]));
+    assert_contains(&err, &["000001.bin: a pipe", "not a file"]);
+    let out = travmap(&["run", arg(dir.path()), "--keep-going"]);
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
+}

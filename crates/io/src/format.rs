@@ -128,6 +128,26 @@ const MAGICS: &[(&[u8], std::result::Result<InputFormat, &str>)] = &[
     (b"\x7fELF", Err("an executable")),
 ];
 
+/// The bytes of a data file a drive holds (a scan, its labels, an image): a pipe,
+/// a device or a socket among them is refused by its kind before it is opened (a
+/// FIFO no process writes blocked the open for ever).
+pub fn read_data_file(path: &Path) -> Result<Vec<u8>> {
+    refuse_special(path)?;
+    std::fs::read(path).map_err(|e| Error::io(path, e))
+}
+
+/// Errors when `path` is a pipe, a device or a socket, naming which.
+pub fn refuse_special(path: &Path) -> Result<()> {
+    let kind = std::fs::metadata(path).map(|m| m.file_type());
+    match kind.ok().as_ref().and_then(special_file) {
+        Some(what) => Err(Error::Sequence {
+            path: path.to_path_buf(),
+            message: format!("{what}, not a file"),
+        }),
+        None => Ok(()),
+    }
+}
+
 /// What a file that is neither a regular file nor a folder is, in words.
 pub(crate) fn special_file(file_type: &std::fs::FileType) -> Option<&'static str> {
     use std::os::unix::fs::FileTypeExt;

@@ -65,6 +65,22 @@ where
     let mut reader = las::Reader::new(read)
         .map_err(|e| format!("not a readable LAS / LAZ header (cut off or damaged?): {e}"))?;
     let header = reader.header();
+    // A scale of 0 puts every point at the offset (the cloud collapses), a negative
+    // one mirrors the axis: no writer means either, and the map would be of nothing
+    // or of a mirrored site.
+    let transforms = header.transforms();
+    for (axis, transform) in [
+        ("x", transforms.x),
+        ("y", transforms.y),
+        ("z", transforms.z),
+    ] {
+        if !(transform.scale.is_finite() && transform.scale > 0.0) {
+            return Err(format!(
+                "the header's {axis} scale is {}: a positive scale expected (0 collapses the cloud onto one point, a negative scale mirrors it)",
+                transform.scale
+            ));
+        }
+    }
     let bounds = header.bounds();
     let origin_m = local_origin([bounds.min.x, bounds.min.y, bounds.min.z]);
     let crs_wkt = header.get_wkt_crs_bytes().map(|bytes| {
@@ -212,6 +228,19 @@ mod tests {
             assert_eq!(p[3], 900.0, "the intensity as stored");
         }
         assert!(stream_las(&dir.path().join("missing.las"), &mut |_| Ok(())).is_err());
+
+        // The header's x scale (bytes 131..139 of a LAS header) set to 0, then -0.001.
+        for scale in [0.0f64, -0.001] {
+            let mut bytes = std::fs::read(&path).unwrap();
+            bytes[131..139].copy_from_slice(&scale.to_le_bytes());
+            let bad = dir.path().join("bad.las");
+            std::fs::write(&bad, bytes).unwrap();
+            let err = stream_las(&bad, &mut |_| Ok(())).err().unwrap();
+            assert!(
+                err.contains(&format!("the header's x scale is {scale}")),
+                "{err}"
+            );
+        }
     }
 
     /// GPS times from two interleaved sequences (two flight lines, or two sensors'

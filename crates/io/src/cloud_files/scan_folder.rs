@@ -124,7 +124,7 @@ impl ScanFolder {
     /// Frame `index`, posed at the identity (registration poses it).
     pub fn read_frame(&self, index: usize) -> Result<Frame> {
         let path = &self.files[index];
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::format::read_data_file(path)?;
         let (points, remission, dropped_points) = match self.format {
             ScanFormat::Bin => {
                 let mut points = parse_scan(&bytes, path)?;

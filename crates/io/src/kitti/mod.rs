@@ -225,7 +225,7 @@ impl KittiSequence {
         let label_path = self.label_path(index);
         let mut labels = if self.read_labels && label_path.is_file() {
             let points = points_in_velodyne.len();
-            let bytes = std::fs::read(&label_path).map_err(|e| Error::io(&label_path, e))?;
+            let bytes = crate::format::read_data_file(&label_path)?;
             Some(match self.label_width {
                 LabelWidth::U32 => parse_labels(&bytes, &label_path, &scan_path, points)?,
                 LabelWidth::U8 => parse_byte_labels(&bytes, &label_path, &scan_path, points)?,
@@ -249,7 +249,7 @@ impl KittiSequence {
                 });
             }
             (true, Some(path)) => {
-                let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+                let bytes = crate::format::read_data_file(&path)?;
                 self.calibration.camera_2_image(decode_png(&bytes, &path)?)
             }
             _ => None,
@@ -286,6 +286,7 @@ impl KittiSequence {
 /// Every point is kept, non-finite ones too, so that labels still line up.
 pub fn read_scan(path: &Path) -> Result<Vec<[f32; 4]>> {
     let io_error = |e| Error::io(path, e);
+    crate::format::refuse_special(path)?;
     let mut file = std::fs::File::open(path).map_err(io_error)?;
     // Read straight into the points: a scan is 2 MB, and parsing a copy of the
     // file's bytes cost as much as reading them.
@@ -358,7 +359,7 @@ pub fn drop_non_returns(points: &mut Vec<[f32; 4]>, labels: Option<&mut Vec<u32>
 
 /// Reads a SemanticKITTI `.label` file (uint32 per point) and checks its count.
 pub fn read_labels(path: &Path, scan_path: &Path, points: usize) -> Result<Vec<u32>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::format::read_data_file(path)?;
     parse_labels(&bytes, path, scan_path, points)
 }
 
