@@ -46,6 +46,7 @@ pub(super) fn run_child(
         .stdout(Stdio::null())
         .stderr(Stdio::piped());
     pin_to_cpus(&mut command, threads);
+    stop_with_parent(&mut command);
     let watch = Stopwatch::start();
     let mut child = command
         .spawn()
@@ -108,6 +109,26 @@ pub(super) fn synced_write_seconds(directory: &Path, bytes: u64) -> Option<f64> 
 /// one-thread row runs on one core: reading, writing and compressing have threads
 /// of their own, which rayon's thread count alone would let spread.
 #[cfg(target_os = "linux")]
+/// The child gets SIGTERM when this process ends, whatever ends it: a signal that
+/// arrives between the child's start and [`temporaries::track_child`] (or a SIGKILL)
+/// left it running on, writing into a folder already removed.
+#[cfg(target_os = "linux")]
+fn stop_with_parent(command: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    // SAFETY: between fork and exec the closure makes one system call, with no
+    // allocation and no lock; bench starts its children from its main thread, which
+    // lives until the process ends (the signal follows the thread that forked).
+    unsafe {
+        command.pre_exec(|| {
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+            Ok(())
+        });
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn stop_with_parent(_command: &mut Command) {}
+
 fn pin_to_cpus(command: &mut Command, threads: usize) {
     use std::os::unix::process::CommandExt;
     let set_bytes = std::mem::size_of::<libc::cpu_set_t>();

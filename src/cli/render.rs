@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use serde_json::json;
+use travmap_core::temporaries;
 use travmap_outputs::atomic::Staged;
 use travmap_outputs::rendering;
 
@@ -70,6 +71,9 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
     if created_dir {
         std::fs::create_dir(output_path)
             .with_context(|| format!("cannot create {}", output_path.display()))?;
+        // A folder this run made is a temporary until its pictures are in place: a
+        // signal removes it with them.
+        temporaries::track(output_path);
     }
     let selections = [selection];
     let bar = output.progress(frame_count(&selections), "rendering");
@@ -89,18 +93,18 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         bar.inc(1);
         Ok(())
     });
-    if let Err(error) = rendered {
-        drop(staged);
-        if created_dir {
-            let _ = std::fs::remove_dir(output_path);
+    let rendered = rendered.and_then(|()| match written.is_empty() {
+        true => bail!("no frame was rendered"),
+        false => Ok(staged.commit()?),
+    });
+    if created_dir {
+        temporaries::forget(output_path);
+        if rendered.is_err() {
+            let _ = std::fs::remove_dir_all(output_path);
         }
-        return Err(error);
     }
+    rendered?;
     bar.finish();
-    if written.is_empty() {
-        bail!("no frame was rendered");
-    }
-    staged.commit()?;
     if output.json {
         let fields = json!({
             "output": path_text(output_path),

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 use clap_complete::Shell;
+use travmap_outputs::atomic::Staged;
 
 use super::Outcome;
 
@@ -57,27 +58,42 @@ pub fn completions(args: CompletionsArgs, mut command: clap::Command) -> Result<
 }
 
 pub fn man(args: ManArgs, command: clap::Command) -> Result<Outcome> {
+    let created = !args.output.exists();
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("cannot make {}", args.output.display()))?;
-    let mut written = vec![page(&args.output, "travmap", &command)?];
-    for sub in command.get_subcommands() {
-        let name = format!("travmap-{}", sub.get_name());
-        let sub = sub.clone().display_name(&name).bin_name(&name);
-        written.push(page(&args.output, &name, &sub)?);
+    // Every page staged, then all renamed into place: a full disk leaves none (nor
+    // the folder, when this run made it).
+    let written = write_pages(&args.output, &command);
+    if written.is_err() && created {
+        let _ = std::fs::remove_dir_all(&args.output);
     }
+    let written = written?;
     for path in &written {
         println!("wrote {}", path.display());
     }
     Ok(Outcome::Complete)
 }
 
-/// `command`'s page, `dir/name.1`, written whole (through a temporary file).
-fn page(dir: &Path, name: &str, command: &clap::Command) -> Result<PathBuf> {
+/// The pages of `command` and each subcommand into `dir`, all or none.
+fn write_pages(dir: &Path, command: &clap::Command) -> Result<Vec<PathBuf>> {
+    let mut staged = Staged::default();
+    let mut written = vec![page(&mut staged, dir, "travmap", command)?];
+    for sub in command.get_subcommands() {
+        let name = format!("travmap-{}", sub.get_name());
+        let sub = sub.clone().display_name(&name).bin_name(&name);
+        written.push(page(&mut staged, dir, &name, &sub)?);
+    }
+    staged.commit()?;
+    Ok(written)
+}
+
+/// `command`'s page, `dir/name.1`, staged.
+fn page(staged: &mut Staged, dir: &Path, name: &str, command: &clap::Command) -> Result<PathBuf> {
     let mut roff = Vec::new();
     clap_mangen::Man::new(command.clone())
         .title(name.to_uppercase())
         .render(&mut roff)?;
     let path = dir.join(format!("{name}.1"));
-    travmap_outputs::atomic::write_atomically(&path, &roff)?;
+    staged.write(&path, &roff)?;
     Ok(path)
 }

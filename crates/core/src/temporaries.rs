@@ -35,10 +35,20 @@ pub fn forget_child(pid: u32) {
     }
 }
 
-/// Registers a temporary file or folder until [`forget`].
+/// Registers a temporary file or folder until [`forget`]; once [`clean_up`] has
+/// begun it is removed at once (a worker thread that made it after the clean-up ran
+/// would otherwise leave it behind).
 pub fn track(path: &Path) {
+    if cleaning_up() {
+        remove(path);
+        return;
+    }
     if let Ok(mut paths) = TEMPORARIES.lock() {
         paths.push(path.to_path_buf());
+    }
+    // The clean-up may have begun, and removed what was registered, meanwhile.
+    if cleaning_up() {
+        remove(path);
     }
 }
 
@@ -96,13 +106,15 @@ fn running(pid: u32) -> bool {
 /// Removes every registered file and folder.
 fn remove_all() {
     if let Ok(paths) = TEMPORARIES.lock() {
-        for path in paths.iter() {
-            match path.is_dir() {
-                true => std::fs::remove_dir_all(path).ok(),
-                false => std::fs::remove_file(path).ok(),
-            };
-        }
+        paths.iter().for_each(|path| remove(path));
     }
+}
+
+fn remove(path: &Path) {
+    match path.is_dir() {
+        true => std::fs::remove_dir_all(path).ok(),
+        false => std::fs::remove_file(path).ok(),
+    };
 }
 
 #[cfg(test)]
