@@ -40,7 +40,7 @@ fn eval_with_no_flags_prints_the_papers_table() {
         assert!(out.contains(column), "missing {column}:\n{out}");
     }
     assert!(out.contains("over 3 frames"), "{out}");
-    assert!(out.contains("embedded default model"), "{out}");
+    assert!(out.contains("embedded road model"), "{out}");
 }
 
 #[test]
@@ -229,7 +229,7 @@ fn a_model_trained_for_other_features_is_refused() {
     assert_contains(
         &err,
         &[
-            "embedded default model was trained with features.curvity_bins = 160",
+            "embedded road model was trained with features.curvity_bins = 160",
             "--set features.curvity_bins=160",
         ],
     );

@@ -89,8 +89,12 @@ impl SkipLog {
         self.keep_going
     }
 
+    /// The frames skipped, by frame number (frames are read on several threads, so
+    /// they are met in no fixed order).
     pub fn skipped(&self) -> Vec<Skip> {
-        self.skipped.lock().map(|s| s.clone()).unwrap_or_default()
+        let mut skipped = self.skipped.lock().map(|s| s.clone()).unwrap_or_default();
+        skipped.sort_by_key(|s| s.frame);
+        skipped
     }
 }
 
