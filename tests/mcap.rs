@@ -642,6 +642,51 @@ fn a_damaged_chunk_stops_with_its_offset_or_is_stepped_over_with_keep_going() {
         reasons.iter().any(|r| r.contains("no transform")),
         "{reasons:?}"
     );
+    // One skip per lost scan, each under its number in the intact file (the chunk's
+    // message index lists its clouds): frames 4 and 5 were one skip at the next
+    // cloud, and the numbers after a lost stretch shifted down.
+    let skipped: Vec<(u64, bool)> = (doc["skipped"].as_array().unwrap().iter())
+        .map(|s| {
+            (
+                s["frame"].as_u64().unwrap(),
+                s["reason"].as_str().unwrap().contains(&chunk),
+            )
+        })
+        .collect();
+    assert_eq!(skipped, [(3, false), (4, true), (5, true)]);
+    let frames = |input: &Path| -> Vec<(u64, u64)> {
+        let out = travmap(&["run", arg(input), "--json", "--keep-going"]);
+        let (frames, _) = crate::common::json_records(&crate::common::stdout(&out));
+        (frames.iter())
+            .map(|f| {
+                (
+                    f["frame"].as_u64().unwrap(),
+                    f["stamp_ns"].as_u64().unwrap(),
+                )
+            })
+            .collect()
+    };
+    let intact = frames(&dir.path().join("drive.mcap"));
+    let read = frames(&damaged);
+    assert_eq!(
+        read,
+        intact[..3],
+        "the frames read keep the intact file's numbers and stamps"
+    );
+    let only_five = travmap(&[
+        "run",
+        arg(&damaged),
+        "--json",
+        "--keep-going",
+        "--frames",
+        "5",
+    ]);
+    let (frames_five, summary) = crate::common::json_records(&crate::common::stdout(&only_five));
+    assert!(frames_five.is_empty());
+    assert_eq!(
+        summary["skipped"][0]["frame"], 5,
+        "--frames and the report agree"
+    );
     // annotate and convert read on past it too, and write a whole file.
     for command in ["annotate", "convert"] {
         let out = dir.path().join(format!("{command}.mcap"));

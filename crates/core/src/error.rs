@@ -181,6 +181,9 @@ pub enum Error {
         start_s: f64,
         end_s: f64,
         problem: String,
+        /// The messages it lost, topic and log time, where the file lists them apart
+        /// from the damage (an MCAP's message indexes): the frames they were.
+        lost: Vec<(String, u64)>,
     },
 
     /// One message that does not read, in a container that reads on past it (a

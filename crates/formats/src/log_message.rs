@@ -110,6 +110,9 @@ pub struct ChunkSpan {
     pub bytes: std::ops::Range<usize>,
     pub start_ns: u64,
     pub end_ns: u64,
+    /// The messages its damage lost, topic and log time in log order, where the file
+    /// lists them apart from the damage (an MCAP's message indexes); empty where not.
+    pub lost: Vec<(String, u64)>,
 }
 
 /// Why a message could not be read; with `chunk`, only that chunk's messages are

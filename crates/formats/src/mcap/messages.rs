@@ -219,7 +219,7 @@ impl<'a> Messages<'a> {
                     self.spare.push(buffer);
                     Err(Damage {
                         problem,
-                        chunk: Some(span),
+                        chunk: Some(self.with_lost(span, 0)),
                     })
                 }
                 Pending::Chunk {
@@ -261,7 +261,7 @@ impl<'a> Messages<'a> {
                             }
                             Err(Damage {
                                 problem,
-                                chunk: Some(span),
+                                chunk: Some(self.with_lost(span, at)),
                             })
                         }
                     }
@@ -273,6 +273,37 @@ impl<'a> Messages<'a> {
                 Err(damage) => return Some(Err(damage)),
             }
         }
+    }
+
+    /// `span` with the messages it loses from byte `from` of its records on, as the
+    /// message index records after the chunk list them: topic and log time, in log
+    /// order (none where the file has no index after the chunk).
+    fn with_lost(&self, mut span: ChunkSpan, from: usize) -> ChunkSpan {
+        let walk = RecordWalk {
+            bytes: self.walk.bytes,
+            offset: span.bytes.end,
+        };
+        let indexes = walk
+            .map_while(Result::ok)
+            .take_while(|(_, opcode, _)| *opcode == op::MESSAGE_INDEX)
+            .filter(|(_, _, body)| check_lengths(op::MESSAGE_INDEX, body).is_ok());
+        for (_, _, body) in indexes {
+            let channel = u16::from_le_bytes([body[0], body[1]]);
+            let Some(topic) = self.channels.get(channel).map(|c| c.topic.clone()) else {
+                continue;
+            };
+            // Entries of (log time, offset in the chunk's records), 16 bytes each.
+            for entry in body[6..].chunks_exact(16) {
+                let word = |at: usize| {
+                    u64::from_le_bytes(entry[at..at + 8].try_into().unwrap_or_default())
+                };
+                if word(8) >= from as u64 {
+                    span.lost.push((topic.clone(), word(0)));
+                }
+            }
+        }
+        span.lost.sort_by_key(|(_, log_time_ns)| *log_time_ns);
+        span
     }
 
     /// Reads one record: a message is returned, a schema or channel remembered.

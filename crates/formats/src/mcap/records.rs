@@ -214,6 +214,7 @@ pub(crate) fn chunk_span(bytes: std::ops::Range<usize>, body: &[u8]) -> ChunkSpa
         bytes,
         start_ns: time(0),
         end_ns: time(8),
+        lost: Vec::new(),
     }
 }
 
@@ -272,6 +273,7 @@ fn damaged_span(offset: usize, resume: usize, indexed: &[(usize, u64, u64)]) -> 
         bytes: offset..resume,
         start_ns: inside.clone().map(|c| c.1).min().unwrap_or(0),
         end_ns: inside.map(|c| c.2).max().unwrap_or(0),
+        lost: Vec::new(),
     }
 }
 

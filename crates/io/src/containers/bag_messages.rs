@@ -77,6 +77,7 @@ impl<'a> BagMessages<'a> {
                 bytes: offset..offset,
                 start_ns,
                 end_ns,
+                lost: Vec::new(),
             }),
         }
     }

@@ -244,6 +244,7 @@ impl Log {
                                     start_s: chunk.start_ns as f64 * 1e-9,
                                     end_s: chunk.end_ns as f64 * 1e-9,
                                     problem,
+                                    lost: chunk.lost,
                                 });
                             }
                             Err(Damage { problem, .. }) => {

@@ -302,6 +302,48 @@ impl DriveFrames<'_> {
     }
 }
 
+impl DriveFrames<'_> {
+    /// The clouds of the drive's topic a damaged chunk lost, as the file's index
+    /// lists them (the index pass numbered them as frames); none where it lists none,
+    /// and for packets, whose scans cannot be counted so.
+    fn lost_clouds(&self, error: &Error) -> usize {
+        match error {
+            Error::LogChunk { lost, .. } if self.assembler.is_none() => (lost.iter())
+                .filter(|(topic, _)| *topic == self.drive.cloud_topic)
+                .count(),
+            _ => 0,
+        }
+    }
+}
+
+/// The damage of a chunk, as the error of one cloud it lost.
+fn cloud_lost_in(error: &Error) -> Error {
+    match error {
+        Error::LogChunk {
+            path,
+            offset,
+            start_s,
+            end_s,
+            problem,
+            ..
+        } => Error::LogChunk {
+            path: path.clone(),
+            offset: *offset,
+            start_s: *start_s,
+            end_s: *end_s,
+            problem: problem.clone(),
+            lost: Vec::new(),
+        },
+        other => Error::Sequence {
+            path: other
+                .path()
+                .map(std::path::Path::to_path_buf)
+                .unwrap_or_default(),
+            message: other.to_string(),
+        },
+    }
+}
+
 impl Iterator for DriveFrames<'_> {
     type Item = Result<Frame>;
 
@@ -327,9 +369,22 @@ impl Iterator for DriveFrames<'_> {
                 Some(Ok(message)) => message,
                 None => break,
                 // A corrupt stretch of the file: with --keep-going, what came before counts.
-                // A damaged chunk: its clouds were never indexed, the rest follows.
+                // A damaged chunk whose clouds the file's index lists: each is a frame
+                // of its own, skipped (the index pass numbered them); else the damage
+                // is skipped at the cloud that follows it.
                 Some(Err(error)) if error.is_lost_stretch() => {
-                    if let Err(error) = self.skips.handle(self.next_cloud, error) {
+                    let lost = self.lost_clouds(&error);
+                    let skipped = match lost {
+                        0 => self.skips.handle(self.next_cloud, error),
+                        _ => {
+                            let frames = self.next_cloud..self.next_cloud + lost;
+                            self.next_cloud += lost;
+                            (frames.filter(|frame| self.frames.contains(frame))).try_for_each(
+                                |frame| self.skips.handle(frame, cloud_lost_in(&error)),
+                            )
+                        }
+                    };
+                    if let Err(error) = skipped {
                         self.stream_ended = true;
                         return Some(Err(error));
                     }

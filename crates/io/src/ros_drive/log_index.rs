@@ -405,6 +405,9 @@ impl LogIndex {
             ..Default::default()
         };
         let (mut damaged_chunks, mut first_damage, mut lost_messages) = (0, None, Vec::new());
+        // Messages damaged chunks lost, where the file lists them: (topic, the
+        // messages of the topic indexed before them, log time).
+        let mut lost_in_chunks: Vec<(String, usize, u64)> = Vec::new();
         // Of clouds and images this pass reads the header alone, of the types it does
         // not decode nothing.
         let parts = |topic: &str, schema_name: &str| match ros2_type_name(schema_name).as_ref() {
@@ -424,6 +427,12 @@ impl LogIndex {
                     damaged_chunks += 1;
                     if let Error::LogMessageLost(lost) = &error {
                         lost_messages.push(lost.clone());
+                    }
+                    if let Error::LogChunk { lost, .. } = &error {
+                        for (topic, log_time_ns) in lost {
+                            let indexed = contents.cloud_stamps.get(topic).map_or(0, |c| c.1.len());
+                            lost_in_chunks.push((topic.clone(), indexed, *log_time_ns));
+                        }
                     }
                     first_damage.get_or_insert(error);
                 }
@@ -455,10 +464,24 @@ impl LogIndex {
             }
         })?;
         let mut merged = contents.merged_topics(path, options, &cloud_topic)?;
-        let (mut cloud_frame, stamps_ns) = contents
+        let (mut cloud_frame, mut stamps_ns) = contents
             .cloud_stamps
             .remove(&cloud_topic)
             .unwrap_or_default();
+        // The clouds damaged chunks lost keep their places among the frames, so that
+        // frame numbers are the intact file's (packets' scans cannot be counted so).
+        if contents.packets.model(&cloud_topic).is_none() {
+            let lost = lost_in_chunks
+                .iter()
+                .filter(|(topic, ..)| *topic == cloud_topic);
+            for (inserted, (_, indexed, log_time_ns)) in lost.enumerate() {
+                let at = indexed + inserted;
+                // Stamps stay in order whatever clock the others came from.
+                let low = at.checked_sub(1).map_or(0, |i| stamps_ns[i]);
+                let high = stamps_ns.get(at).copied().unwrap_or(u64::MAX);
+                stamps_ns.insert(at, (*log_time_ns).clamp(low, high.max(low)));
+            }
+        }
         let read: Vec<&str> = (std::iter::once(cloud_topic.as_str()))
             .chain(merged.iter().map(|m| m.topic.as_str()))
             .collect();

@@ -108,6 +108,7 @@ impl PcapFile {
                             bytes: at..at,
                             start_ns: stamp_ns,
                             end_ns: stamp_ns,
+                            lost: Vec::new(),
                         }),
                     }));
                 }
@@ -221,6 +222,7 @@ fn damage(stretch: Damaged) -> Damage {
             bytes: stretch.start..stretch.resume,
             start_ns: stretch.after_ns.min(end_ns),
             end_ns,
+            lost: Vec::new(),
         }),
     }
 }
