@@ -61,9 +61,7 @@ pub fn scan_to_drive(
     let points_in_drive = Arc::new(points_in_drive);
     let remission: Option<Vec<f32>> = (frame.remission.is_usable(scaling))
         .then(|| frame.points_in_velodyne.iter().map(|p| p[3]).collect());
-    let non_finite_remission = (remission.iter().flatten())
-        .filter(|r| !r.is_finite())
-        .count();
+    let non_finite_remission = remission.as_deref().map_or(0, count_non_finite);
     DriveScan {
         index: frame.index,
         stamp_ns: frame.stamp_ns,
@@ -73,6 +71,19 @@ pub fn scan_to_drive(
         remission: remission.filter(|_| non_finite_remission == 0),
         non_finite_remission,
         moments,
+    }
+}
+
+/// How many of `values` are NaN or infinite: first whether any is, in a pass that
+/// vectorises (an exponent of all ones is what NaN and infinity share), then the
+/// count where one is (a scan of valid remission costs the one pass).
+fn count_non_finite(values: &[f32]) -> usize {
+    const EXPONENT: u32 = 0x7f80_0000;
+    let special = |v: &f32| v.to_bits() & EXPONENT == EXPONENT;
+    let any = values.iter().fold(false, |any, v| any | special(v));
+    match any {
+        true => values.iter().filter(|v| special(v)).count(),
+        false => 0,
     }
 }
 
