@@ -25,9 +25,9 @@ row() {
     settings=(--model "$prior" --set "ground_truth.labels=\"$labels\"" --set "ground_truth.rule=\"$rule\"" --json -q)
     local before after
     before=$("$T" eval "$path" "${settings[@]}" 2>/dev/null | tail -n 1 |
-        jq -r '.report.scores.miou * 1000 | round / 10')
+        jq -r '.scores.miou * 1000 | round / 10')
     after=$("$T" eval "$path" --adapt "${settings[@]}" 2>/dev/null | tail -n 1 |
-        jq -r '(.report.scores.miou * 1000 | round / 10 | tostring) + "\t"
+        jq -r '(.scores.miou * 1000 | round / 10 | tostring) + "\t"
             + (.model.adaptation | (if .adapted then "adapted" else "kept" end) + "\t"
             + (if .prior_miou == null then (if (.why | test("guessed")) then "footprint guessed" else "too little evidence" end)
                else "\(.prior_miou * 1000 | round / 10) / \(.adapted_miou * 1000 | round / 10)" end))')

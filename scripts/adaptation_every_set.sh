@@ -35,7 +35,7 @@ row() {
         cells+=" | $("$T" eval "$D/$set" --set "ground_truth.labels=\"$labels\"" \
             --set "ground_truth.rule=\"$rule\"" --set adapt.check=false --json -q "$@" 2>/dev/null | python3 -c '
 import json, sys
-print("%.1f" % (100 * json.loads(sys.stdin.readlines()[-1])["report"]["scores"]["miou"]))')"
+print("%.1f" % (100 * json.loads(sys.stdin.readlines()[-1])["scores"]["miou"]))')"
     done
     echo "| $name$cells |"
 }

@@ -38,7 +38,7 @@ import json, sys
 for line in sys.stdin:
     d = json.loads(line)
     if d.get("type") == "summary":
-        s = d["report"]["scores"]
+        s = d["scores"]
         print("%.1f/%.1f/%.1f" % (100 * s["accuracy"], 100 * s["miou"], 100 * s["tnr"]))'
 }
 

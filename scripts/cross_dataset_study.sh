@@ -60,7 +60,7 @@ score() {
     path=$(echo "$SETS" | awk -v n="$1" '$1 == n { print $2 }')
     dataset=$(echo "$SETS" | awk -v n="$1" '$1 == n { print $3 }')
     "$T" eval "$path" --model "$2" --set "$(labels "$dataset")" "${settings[@]}" --json 2>/dev/null |
-        jq -r 'select(.type == "summary") | .report
+        jq -r 'select(.type == "summary")
             | "\(.scores.miou * 100) \(.fit.unsure_share * 100) \(.fit.poor)"' |
         tee -a "$work/pairs" |
         awk '{ printf "%.1f | %.1f %% | %s", $1, $2, ($3 == "true" ? "poor" : "") }'

@@ -103,7 +103,7 @@ fn adapt_is_deterministic_records_its_provenance_and_never_reads_labels() {
             adaptation[count].as_u64().unwrap() > 50,
             "{count}: {adaptation}"
         );
-        assert_eq!(summary["counts"][count], adaptation[count]);
+        assert_eq!(summary[count], adaptation[count]);
     }
     // It fitted what the drive uses: no hybrid (the sample has no images) and no
     // fallback (every scan has remission): the prior's is carried.
@@ -310,7 +310,7 @@ fn the_footprint_is_learnt_against_the_unknown_cells_when_they_weigh() {
         "adapt.check=false",
     ]));
     let summary: Value = serde_json::from_str(out.lines().last().unwrap()).unwrap();
-    let adaptation = &summary["adaptation"];
+    let adaptation = &summary;
     assert_eq!(adaptation["negative_cells"], 0);
     let unknown = adaptation["unknown_cells"].as_u64().unwrap();
     let fitted = adaptation["fitted_cells"].as_u64().unwrap();
@@ -331,7 +331,7 @@ fn the_footprint_is_learnt_against_the_unknown_cells_when_they_weigh() {
         .unwrap(),
     )
     .unwrap();
-    let confusion = &report["report"]["confusion"];
+    let confusion = &report["confusion"];
     let called_obstacles = confusion["tn"].as_u64().unwrap() + confusion["fn"].as_u64().unwrap();
     assert!(called_obstacles > 0, "{confusion}");
     // A weight below 0 is refused, naming the setting.
@@ -383,7 +383,7 @@ fn one_scan_gets_a_straight_footprint_with_a_notice() {
         ],
     );
     let (_, summary) = crate::common::json_records(&success(output));
-    assert_eq!(summary["counts"]["straight_path_frames"], 1);
+    assert_eq!(summary["straight_path_frames"], 1);
 }
 
 #[test]
@@ -473,7 +473,7 @@ fn the_default_adaptation_meets_the_study_targets() {
     write_output("train", &seq00, &prior_kitti, &[arg(&seq07)]);
     let miou = |args: &[&str]| -> f64 {
         let doc = json_summary(&[&["eval"], args].concat());
-        100.0 * doc["report"]["scores"]["miou"].as_f64().unwrap()
+        100.0 * doc["scores"]["miou"].as_f64().unwrap()
     };
     let rellis_rule = |rule: &str| format!("ground_truth.rule=\"{rule}\"");
     let (offroad, road) = (rellis_rule("offroad"), rellis_rule("road"));
@@ -575,7 +575,7 @@ fn adaptation_replaces_the_prior_only_where_the_drive_shows_it_better() {
         let check = &after["model"]["adaptation"];
         assert_eq!(check["adapted"], adapted, "{}: {check}", path.display());
         assert!(err.contains(said), "{err}");
-        let miou = |doc: &Value| doc["report"]["scores"]["miou"].as_f64().unwrap();
+        let miou = |doc: &Value| doc["scores"]["miou"].as_f64().unwrap();
         match adapted {
             true => assert!(
                 miou(&after) > miou(&prior),

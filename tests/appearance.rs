@@ -205,14 +205,12 @@ fn colour_separates_what_geometry_cannot() {
     );
     let eval = |input: &str| json_summary(&quick(&["eval", input, "--model", model]));
     let doc = eval(seq);
-    let hybrid = doc["report"]["unfiltered_scores"]["accuracy"]
-        .as_f64()
-        .unwrap();
-    let geometric = doc["geometry_only_report"]["unfiltered_scores"]["accuracy"]
+    let hybrid = doc["unfiltered_scores"]["accuracy"].as_f64().unwrap();
+    let geometric = doc["geometry_only"]["unfiltered_scores"]["accuracy"]
         .as_f64()
         .unwrap();
     eprintln!("colour scene, SVM accuracy: hybrid {hybrid:.3}, geometry only {geometric:.3}");
-    assert!(doc["report"]["cells_with_appearance"].as_u64().unwrap() > 500);
+    assert!(doc["cells_with_appearance"].as_u64().unwrap() > 500);
     assert!(hybrid > 0.95, "hybrid {hybrid}");
     assert!(
         geometric < 0.8,
@@ -223,13 +221,13 @@ fn colour_separates_what_geometry_cannot() {
     crate::common::write_output("convert", seq, &drive, &[]);
     let from_mcap = eval(arg(&drive));
     assert_eq!(
-        from_mcap["report"]["cells_with_appearance"],
-        doc["report"]["cells_with_appearance"]
+        from_mcap["cells_with_appearance"],
+        doc["cells_with_appearance"]
     );
-    assert_eq!(from_mcap["report"]["confusion"], doc["report"]["confusion"]);
+    assert_eq!(from_mcap["confusion"], doc["confusion"]);
     assert_eq!(
-        from_mcap["geometry_only_report"]["confusion"],
-        doc["geometry_only_report"]["confusion"]
+        from_mcap["geometry_only"]["confusion"],
+        doc["geometry_only"]["confusion"]
     );
     // annotate reads the images for the hybrid model and predicts as eval does; for
     // the embedded geometry-only model, which they cannot change, it reads none.
@@ -240,13 +238,13 @@ fn colour_separates_what_geometry_cannot() {
             model,
         ]
         .concat();
-        json_summary(&quick(&args))["evaluation"].clone()
+        json_summary(&quick(&args))
     };
     let with_hybrid = annotated(&["--model", model]);
-    assert_eq!(with_hybrid["confusion"], doc["report"]["confusion"]);
+    assert_eq!(with_hybrid["confusion"], doc["confusion"]);
     assert_eq!(
         with_hybrid["cells_with_appearance"],
-        doc["report"]["cells_with_appearance"]
+        doc["cells_with_appearance"]
     );
     assert_eq!(annotated(&[])["frames_with_images"], 0);
     // The text output shows both rows.

@@ -137,7 +137,7 @@ fn run_json(dir: &Path) -> Vec<serde_json::Value> {
         .into_iter()
         .map(|mut value| {
             if let Some(object) = value.as_object_mut() {
-                object.retain(|key, _| key != "input" && key != "timings_ms");
+                object.retain(|key, _| key != "input" && key != "timings");
             }
             value
         })

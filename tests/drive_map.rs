@@ -99,7 +99,7 @@ fn the_fused_map_scores_at_least_as_well_as_the_frames() {
         return;
     };
     let json = crate::common::json_summary(&["eval", arg(&seq)]);
-    let per_frame = &json["report"]["scores"];
+    let per_frame = &json["scores"];
     let fused = &json["drive_map"]["scores"];
     eprintln!("per frame {per_frame}\nfused {fused}");
     for score in ["accuracy", "miou"] {

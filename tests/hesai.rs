@@ -306,7 +306,7 @@ fn bench_tools_times_decoding_a_packet_log() {
         (&"convert".into(), &"packets".into())
     );
     assert_eq!(convert["frames"], 4, "{convert}");
-    assert!(convert["recorded_s"].as_f64().unwrap() > 0.0, "{convert}");
+    assert!(convert["recorded_ms"].as_f64().unwrap() > 0.0, "{convert}");
     assert!(
         convert["one_thread"]["real_time"].as_f64().unwrap() > 0.0,
         "{convert}"

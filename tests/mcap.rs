@@ -50,7 +50,7 @@ fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
     let from_mcap = dir.path().join("b.mcap");
     let a = json_summary(&["annotate", arg(&seq), "-o", arg(&from_kitti)]);
     let b = json_summary(&["annotate", arg(&drive), "-o", arg(&from_mcap)]);
-    assert_eq!(a["evaluation"]["confusion"], b["evaluation"]["confusion"]);
+    assert_eq!(a["confusion"], b["confusion"]);
     for topic in ["/travmap/prediction", "/travmap/ground_truth"] {
         let (x, y) = (
             messages::<OccupancyGrid>(&from_kitti, topic),
@@ -629,7 +629,7 @@ fn a_damaged_chunk_stops_with_its_offset_or_is_stepped_over_with_keep_going() {
     );
     let doc: Value =
         serde_json::from_str(crate::common::stdout(&output).lines().last().unwrap()).unwrap();
-    assert_eq!(doc["report"]["frames"], 3, "frames 0-2 carry ground truth");
+    assert_eq!(doc["scored_frames"], 3, "frames 0-2 carry ground truth");
     let reasons: Vec<&str> = doc["skipped"]
         .as_array()
         .unwrap()

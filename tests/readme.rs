@@ -126,16 +126,15 @@ fn check_crossval_rows(settings: &[&str], filtered_label: &str, svm_label: &str)
         args.extend(["--set", setting]);
     }
     let doc: Value = serde_json::from_str(&success(travmap(&args))).unwrap();
-    let evaluation = &doc["report"]["evaluation"];
-    let confusion = &evaluation["confusion"];
+    let confusion = &doc["confusion"];
     let cells = ["tp", "tn", "fp", "fn"]
         .iter()
         .map(|k| confusion[k].as_u64().unwrap())
         .sum();
     let mut stale = Vec::new();
     for (label, scores) in [
-        (filtered_label, &evaluation["scores"]),
-        (svm_label, &evaluation["unfiltered_scores"]),
+        (filtered_label, &doc["scores"]),
+        (svm_label, &doc["unfiltered_scores"]),
     ] {
         let row = table_row(label, scores, cells);
         if !readme.contains(&row) {
@@ -192,7 +191,7 @@ fn the_held_out_scores_are_what_crossval_prints() {
     }
     let doc: Value = serde_json::from_str(&success(travmap(&args))).unwrap();
     let column = |held_out: usize, key: &str| {
-        let scores = &doc["report"]["held_out"][held_out]["evaluation"]["scores"];
+        let scores = &doc["held_out"][held_out]["scores"];
         format!("{:.1}", 100.0 * scores[key].as_f64().unwrap())
     };
     let cell = |held_out| {
@@ -286,10 +285,7 @@ fn every_labelled_set_scores_what_the_docs_say() {
             ];
             args.extend(*adapt);
             let doc: Value = serde_json::from_str(&success(travmap(&args))).unwrap();
-            let miou = format!(
-                "{:.1}",
-                100.0 * doc["report"]["scores"]["miou"].as_f64().unwrap()
-            );
+            let miou = format!("{:.1}", 100.0 * doc["scores"]["miou"].as_f64().unwrap());
             if &miou != quoted {
                 let how = adapt.unwrap_or("");
                 stale.push(format!(
@@ -307,5 +303,187 @@ fn every_labelled_set_scores_what_the_docs_say() {
         stale.is_empty(),
         "docs/method.md's table of every labelled set is stale:\n{}",
         stale.join("\n")
+    );
+}
+
+/// What docs/guide.md shows of a record: arrays cut to their first three elements,
+/// numbers to four decimals, the configuration left out and the files written in
+/// `dir` named as `-o` gave them.
+fn as_shown(value: &Value, dir: &str) -> Value {
+    match value {
+        Value::Object(fields) => Value::Object(
+            fields
+                .iter()
+                .map(|(key, value)| match key.as_str() {
+                    "config" => (
+                        key.clone(),
+                        "(the effective configuration: `travmap config --json`)".into(),
+                    ),
+                    _ => (key.clone(), as_shown(value, dir)),
+                })
+                .collect(),
+        ),
+        Value::Array(items) => {
+            let mut shown: Vec<Value> = items.iter().take(3).map(|v| as_shown(v, dir)).collect();
+            if items.len() > 3 {
+                shown.push("...".into());
+            }
+            Value::Array(shown)
+        }
+        Value::Number(n) if n.is_f64() => {
+            serde_json::json!((n.as_f64().unwrap() * 1e4).round() / 1e4)
+        }
+        Value::String(text) => text.replace(dir, "").into(),
+        other => other.clone(),
+    }
+}
+
+/// `value` with every measured time or rate left out: what two runs of one binary
+/// on one input print alike.
+fn without_times(value: &Value) -> Value {
+    let timed = |key: &str| {
+        key.ends_with("_ms")
+            || key.ends_with("_per_s")
+            || key.ends_with("_per_second")
+            || key.ends_with("_mib")
+            || matches!(
+                key,
+                "speedup" | "latency_over_floor" | "real_time" | "roofline_ratio" | "output_bytes"
+            )
+    };
+    match value {
+        Value::Object(fields) => Value::Object(
+            fields
+                .iter()
+                .map(|(key, value)| match timed(key) {
+                    true => (key.clone(), Value::Null),
+                    false => (key.clone(), without_times(value)),
+                })
+                .collect(),
+        ),
+        Value::Array(items) => Value::Array(items.iter().map(without_times).collect()),
+        other => other.clone(),
+    }
+}
+
+/// Fails unless `record` keeps the `--json` convention: a summary is flat (no
+/// `report`, `counts` or `evaluation` wrapper) and says its schema's version; every
+/// duration is in milliseconds (no key in seconds, at any depth).
+fn assert_json_convention(record: &Value, command: &str) {
+    fn keys(value: &Value, found: &mut Vec<String>) {
+        match value {
+            Value::Object(fields) => fields.iter().for_each(|(key, value)| {
+                found.push(key.clone());
+                keys(value, found);
+            }),
+            Value::Array(items) => items.iter().for_each(|item| keys(item, found)),
+            _ => {}
+        }
+    }
+    if record["type"] == "summary" {
+        assert_eq!(record["schema_version"], 2, "{command}: {record}");
+        for wrapper in ["report", "counts", "evaluation"] {
+            assert!(
+                record.get(wrapper).is_none(),
+                "{command}: `{wrapper}` in {record}"
+            );
+        }
+    }
+    let mut found = Vec::new();
+    keys(record, &mut found);
+    for key in found {
+        let in_seconds = (key.ends_with("_s") && !key.ends_with("_per_s")) || key == "seconds";
+        assert!(!in_seconds, "{command}: `{key}` is not in milliseconds");
+    }
+}
+
+/// docs/guide.md's sample records, each under the command that printed it (every
+/// command that prints JSON but `config`): they keep the convention, and as shown
+/// differ from a run of this binary in nothing but measured times (an older model's
+/// sha256 or scores fail). `TRAVMAP_BLESS=1` writes what this binary prints.
+#[test]
+fn the_json_samples_in_the_guide_are_what_the_commands_print() {
+    if crate::common::sample().is_none() {
+        return;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let path = root.join("docs/guide.md");
+    let mut guide = std::fs::read_to_string(&path).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let prefix = format!("{}/", dir.path().display());
+    let mut samples = 0;
+    let mut stale = Vec::new();
+    let mut at = 0;
+    while let Some(found) = guide[at..].find("`travmap ") {
+        let start = at + found + 1;
+        let end = start + guide[start..].find('`').unwrap();
+        let command = guide[start..end].to_string();
+        at = end;
+        let block = "\n\n```json\n";
+        if !guide[end..].starts_with(&format!("`{block}")) || !command.contains("--json") {
+            continue;
+        }
+        let body_start = end + 1 + block.len();
+        let body_end = body_start + guide[body_start..].find("```").unwrap();
+        let words: Vec<String> = command
+            .split_whitespace()
+            .skip(1)
+            .map(|word| word.trim_matches('\''))
+            .map(str::to_string)
+            .collect();
+        // Files the command writes go to a temporary folder, named there as shown.
+        let args: Vec<String> = words
+            .iter()
+            .enumerate()
+            .map(|(i, word)| match i > 0 && words[i - 1] == "-o" {
+                true => format!("{prefix}{word}"),
+                false => word.clone(),
+            })
+            .collect();
+        let out = travmap(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        let printed = success(out);
+        let records: Vec<Value> = printed
+            .lines()
+            .map(|line| serde_json::from_str(line).unwrap())
+            .collect();
+        records
+            .iter()
+            .for_each(|record| assert_json_convention(record, &command));
+        assert_eq!(records.last().unwrap()["type"], "summary", "{command}");
+        let shown: Vec<Value> = records.iter().map(|r| as_shown(r, &prefix)).collect();
+        let text: String = shown.iter().map(|v| format!("{v}\n")).collect();
+        let in_guide: Vec<Value> = guide[body_start..body_end]
+            .lines()
+            .map(|line| serde_json::from_str(line).unwrap())
+            .collect();
+        // A model a command trains records its training seconds: its sha256 differs
+        // from run to run.
+        let compared = |record: &Value| {
+            let mut record = without_times(record);
+            if matches!(record["command"].as_str(), Some("train" | "adapt")) {
+                record["model"]["sha256"] = Value::Null;
+            }
+            record
+        };
+        let same = shown.len() == in_guide.len()
+            && shown
+                .iter()
+                .zip(&in_guide)
+                .all(|(a, b)| compared(a) == compared(b));
+        if !same {
+            stale.push(command.clone());
+            guide.replace_range(body_start..body_end, &text);
+        }
+        samples += 1;
+        at = body_start;
+    }
+    assert!(samples >= 10, "docs/guide.md shows {samples} JSON samples");
+    if std::env::var("TRAVMAP_BLESS").as_deref() == Ok("1") {
+        std::fs::write(&path, guide).unwrap();
+        return;
+    }
+    assert!(
+        stale.is_empty(),
+        "docs/guide.md's JSON samples of {stale:?} are not what those commands print: write them with TRAVMAP_BLESS=1 cargo test --release --test integration readme::the_json_samples"
     );
 }

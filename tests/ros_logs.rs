@@ -86,7 +86,7 @@ fn one_frame_routes() -> Option<(tempfile::TempDir, PathBuf, PathBuf)> {
 /// model; annotate only for a model that uses them): frames with an image, and
 /// cells with appearance values.
 fn images(input: &Path) -> (Value, Value) {
-    let report = crate::common::json_summary(&["eval", arg(input)])["report"].clone();
+    let report = crate::common::json_summary(&["eval", arg(input)]);
     (
         report["frames_with_images"].clone(),
         report["cells_with_appearance"].clone(),
@@ -107,8 +107,7 @@ fn messages_on(path: &Path, topics: &[&str]) -> Vec<(String, u64, Vec<u8>)> {
 
 /// The scores of `eval --json` on `input`: confusion and filtered / unfiltered scores.
 fn scores(input: &Path) -> Value {
-    let summary = crate::common::json_summary(&["eval", arg(input)]);
-    let report = &summary["report"];
+    let report = crate::common::json_summary(&["eval", arg(input)]);
     serde_json::json!([
         report["confusion"],
         report["scores"],
@@ -313,12 +312,9 @@ fn a_log_laid_out_as_nuscenes_reads_with_its_mounts_on_tf() {
     let chosen = ["--cloud-topic", "/lidar_top"];
     let summary = crate::common::json_summary(&[&["eval", arg(&nuscenes)][..], &chosen].concat());
     let original = crate::common::json_summary(&["eval", arg(&drive)]);
-    assert_eq!(summary["report"]["frames"], 3);
-    assert_eq!(
-        summary["report"]["confusion"],
-        original["report"]["confusion"]
-    );
-    assert_eq!(summary["report"]["scores"], original["report"]["scores"]);
+    assert_eq!(summary["scored_frames"], 3);
+    assert_eq!(summary["confusion"], original["confusion"]);
+    assert_eq!(summary["scores"], original["scores"]);
 }
 
 #[test]
@@ -826,8 +822,8 @@ fn several_pose_topics_are_chosen_between_by_name() {
     assert_contains(&crate::common::stderr(&out), &["poses from /pose"]);
     let (_, summary) = crate::common::json_records(&success(out));
     assert_eq!(
-        summary["report"]["scores"],
-        crate::common::json_summary(&["eval", arg(&drive)])["report"]["scores"]
+        summary["scores"],
+        crate::common::json_summary(&["eval", arg(&drive)])["scores"]
     );
     let err = clean_failure(travmap(&["eval", arg(&two), "--pose-topic", "/gnss"]));
     assert_contains(

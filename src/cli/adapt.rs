@@ -15,7 +15,7 @@ use travmap_training::adaptation::{Adapted, adapt as adapt_model};
 
 use super::{
     Inputs, ModelArg, Outcome, Output, check_output, counted, frame_count, model_json,
-    note_extension, outcome, path_text, print_json_summary, setting_word,
+    note_extension, outcome, path_text, print_json_summary, setting_word, with_summary,
 };
 
 /// Adapt a model to the ground the given drives cover, from the drives alone
@@ -52,16 +52,23 @@ pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
     let model = &adapted.model;
     let summary = model.training.adaptation.as_ref();
     if output.json {
+        // The self-label counts at the top, beside what was fitted and the check's
+        // verdict (the model file's record of its inputs is the summary's `inputs`).
         let fields = json!({
             "output": path_text(model_path),
             "model": model_json(model, &model_path.display().to_string()),
             "prior": {"name": prior_name, "sha256": prior.sha256_hex()},
-            "counts": adapted.counts,
-            "adaptation": summary,
             "support_vectors": adapted.fitted().support_vector_count(),
+            "fitted_cells": summary.map(|s| s.fitted_cells),
+            "learner": summary.map(|s| s.learner),
+            "self_supervised": summary.map(|s| s.self_supervised),
+            "hybrid": summary.map(|s| &s.hybrid),
+            "fallback": summary.map(|s| &s.fallback),
+            "check": summary.and_then(|s| s.check.as_ref()),
             "elapsed_ms": model.training.seconds * 1e3,
             "config": config,
         });
+        let fields = with_summary(fields, &adapted.counts)?;
         print_json_summary("adapt", &selections, fields)?;
     } else if !output.quiet {
         let counts = &adapted.counts;

@@ -134,7 +134,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
         if let Some(s) = summary.evaluation.scores {
             println!(
                 "{} with ground truth: Acc {:.1} mIoU {:.1} F1 {:.1} (filtered)",
-                counted(summary.evaluation.frames, "frame"),
+                counted(summary.evaluation.scored_frames, "frame"),
                 100.0 * s.accuracy,
                 100.0 * s.miou,
                 100.0 * s.f1

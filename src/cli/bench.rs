@@ -9,7 +9,9 @@ use serde_json::json;
 use travmap_drive::scoring::benchmark::benchmark;
 
 use super::bench_tools::{bench_tools, print_tools_table};
-use super::{Inputs, ModelArg, Outcome, images_for, model_json, outcome, print_json_summary};
+use super::{
+    Inputs, ModelArg, Outcome, images_for, model_json, outcome, print_json_summary, with_summary,
+};
 
 /// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
 #[derive(Args)]
@@ -63,8 +65,8 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
     }
     let report = benchmark(&selection, config, &model, repeats)?;
     if output.json {
-        let mut fields =
-            json!({"config": config, "model": model_json(&model, &model_name), "report": report});
+        let fields = json!({"config": config, "model": model_json(&model, &model_name)});
+        let mut fields = with_summary(fields, &report)?;
         if let Some(tools) = &tools {
             fields["tools"] = serde_json::to_value(tools)?;
         }
@@ -94,20 +96,20 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
         "{:<34} {:>9} {:>9}",
         "stage (1 thread, frame by frame)", "median ms", "p95 ms"
     )?;
-    let t = &report.stages_ms;
+    let t = &report.timings;
     for (name, spread) in [
-        ("read + image decode (not in latency)", t.read),
+        ("read + image decode (not in latency)", t.read_ms),
         (
             "registration (--poses registration)",
             report.registration_ms,
         ),
-        ("integrate", t.integrate),
-        ("grid", t.grid),
-        ("geometric features", t.features),
-        ("appearance: projection + voting", t.appearance),
-        ("classify", t.classify),
-        ("filter", t.filter),
-        ("latency: scan in to filtered grid", t.latency),
+        ("integrate", t.integrate_ms),
+        ("grid", t.grid_ms),
+        ("geometric features", t.features_ms),
+        ("appearance: projection + voting", t.appearance_ms),
+        ("classify", t.classify_ms),
+        ("filter", t.filter_ms),
+        ("latency: scan in to filtered grid", t.latency_ms),
     ] {
         writeln!(out, "{name:<34} {:>9.3} {:>9.3}", spread.median, spread.p95)?;
     }

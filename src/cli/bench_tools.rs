@@ -194,11 +194,21 @@ impl ToolSpec {
     }
 }
 
+/// Seconds as the milliseconds every `--json` duration is.
+fn seconds_as_ms<S: serde::Serializer, T: Copy + Into<Option<f64>>>(
+    seconds: &T,
+    serializer: S,
+) -> Result<S::Ok, S::Error> {
+    use serde::Serialize;
+    (*seconds).into().map(|s| s * 1e3).serialize(serializer)
+}
+
 /// A tool on one thread count: medians over the repeats.
 #[derive(Serialize)]
 pub struct ToolTiming {
     /// `RAYON_NUM_THREADS` of the child.
     threads: usize,
+    #[serde(serialize_with = "seconds_as_ms", rename = "wall_ms")]
     wall_s: f64,
     /// Selected frames per second of wall time (the child's start to its exit).
     frames_per_second: f64,
@@ -211,6 +221,7 @@ pub struct ToolTiming {
     peak_rss_mib: Option<f64>,
     /// The roofline: `travmap run` on the same frames and threads, the method alone
     /// (None for convert), ...
+    #[serde(serialize_with = "seconds_as_ms", rename = "method_ms")]
     method_s: Option<f64>,
     /// ... and the wall time over the larger of that and the row's
     /// `synced_write_s`.
@@ -244,9 +255,11 @@ pub struct ToolRow {
     /// Frames the tool read: the bench's selection (a log's every frame for
     /// convert), and the time they span as recorded.
     frames: usize,
+    #[serde(serialize_with = "seconds_as_ms", rename = "recorded_ms")]
     recorded_s: Option<f64>,
     /// Seconds `dd conv=fsync` took to write the tool's output size to the same
     /// folder: the disk's part of the roofline.
+    #[serde(serialize_with = "seconds_as_ms", rename = "synced_write_ms")]
     synced_write_s: Option<f64>,
     #[serde(flatten)]
     outcome: ToolOutcome,

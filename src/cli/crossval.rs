@@ -13,7 +13,7 @@ use travmap_training::crossval::{
 };
 
 use super::eval::write_table;
-use super::{Inputs, Outcome, outcome, print_json_summary};
+use super::{Inputs, Outcome, outcome, print_json_summary, with_summary};
 
 /// Held-out scores: spatially-blocked CV over one input's frames, or each of several
 /// inputs held out in turn.
@@ -52,11 +52,8 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
     bar.finish();
     let sources: Vec<String> = selections.iter().map(Selection::describe).collect();
     if output.json {
-        print_json_summary(
-            "crossval",
-            &selections,
-            json!({"config": config, "report": report}),
-        )?;
+        let fields = with_summary(json!({"config": config}), &report)?;
+        print_json_summary("crossval", &selections, fields)?;
         return Ok(outcome(&selections));
     }
     let mut out = std::io::stdout().lock();
@@ -78,7 +75,7 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
             f.c,
             f.gamma,
             f.support_vectors,
-            f.training_seconds
+            f.training_ms / 1e3
         )?;
     }
     write_table(&mut out, &report.evaluation, false)?;
@@ -112,11 +109,8 @@ fn print_leave_one_out(
     json: bool,
 ) -> Result<()> {
     if json {
-        return print_json_summary(
-            "crossval",
-            selections,
-            json!({"config": config, "report": report}),
-        );
+        let fields = with_summary(json!({"config": config}), report)?;
+        return print_json_summary("crossval", selections, fields);
     }
     let mut out = std::io::stdout().lock();
     writeln!(

@@ -4,7 +4,7 @@
 use std::collections::HashSet;
 use std::io::Write;
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use clap::Args;
 use serde_json::json;
 use travmap_drive::scoring::evaluation::{Evaluation, EvaluationReport};
@@ -16,7 +16,8 @@ use travmap_method::classifier::{AdaptationSummary, SvmModel};
 use super::adapt::AdaptFlag;
 use super::{
     Inputs, ModelArg, Outcome, counted, fit_said, foreign_remission_said, frame_count, model_json,
-    notice_unknown_labels, other_rule_said, outcome, print_json_summary, without_remission_said,
+    notice_unknown_labels, other_rule_said, outcome, print_json_summary, with_summary,
+    without_remission_said,
 };
 
 /// Score predictions against SemanticKITTI ground truth (the paper's table).
@@ -77,6 +78,15 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     };
     let mut training_frames = 0usize;
     let (report, fused) = evaluate(&model, "evaluating", &mut training_frames)?;
+    if report.scored_frames == 0 {
+        let looked: Vec<String> = (selections.iter())
+            .map(|s| s.source.where_labels_are_read())
+            .collect();
+        bail!(
+            "no frame of the input has labels to score against (looked for {}; a frame is scored when every scan of its window has them): nothing to score. `travmap run` classifies frames without labels",
+            looked.join("; ")
+        );
+    }
     // Each world cell once: the drive's fused map against its fused ground truth.
     let fused_scored = fused.tp + fused.tn + fused.fp + fused.r#fn;
     let fused_scores = (fused_scored > 0).then(|| fused.scores());
@@ -94,18 +104,14 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     notice_unknown_labels(&report, config);
     let sources: Vec<String> = selections.iter().map(Selection::describe).collect();
     if output.json {
-        print_json_summary(
-            "eval",
-            &selections,
-            json!({
-                "config": config,
-                "model": model_json(&model, &model_name),
-                "report": report,
-                "geometry_only_report": geometry_only,
-                "drive_map": {"confusion": fused, "scores": fused_scores},
-                "training_frames_scored": training_frames,
-            }),
-        )?;
+        let fields = json!({
+            "config": config,
+            "model": model_json(&model, &model_name),
+            "geometry_only": geometry_only,
+            "drive_map": {"confusion": fused, "scores": fused_scores},
+            "training_frames_scored": training_frames,
+        });
+        print_json_summary("eval", &selections, with_summary(fields, &report)?)?;
         return Ok(outcome(&selections));
     }
     let mut out = std::io::stdout().lock();
@@ -144,12 +150,6 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     }
     if let Some(said) = other_rule_said(&model, config) {
         writeln!(out, "note: {said}")?;
-    }
-    if report.frames == 0 {
-        writeln!(
-            out,
-            "no frame has ground truth (labels/ for every scan of its window): nothing to score"
-        )?;
     }
     write_table(&mut out, &report, true)?;
     if let Some(scores) = fused_scores {
@@ -201,8 +201,12 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         }
         None => writeln!(out, "the model has no hybrid part: geometry only")?,
     }
-    if report.frames > 0 {
-        writeln!(out, "{}", training_note(training_frames, report.frames))?;
+    if report.scored_frames > 0 {
+        writeln!(
+            out,
+            "{}",
+            training_note(training_frames, report.scored_frames)
+        )?;
     }
     Ok(outcome(&selections))
 }
@@ -258,7 +262,7 @@ pub(super) fn write_table(
         format!("{name:<22}{cells} {latency:>11}")
     };
     let latency = if with_latency {
-        format!("{:.2} ms", report.timings_ms.latency.median)
+        format!("{:.2} ms", report.timings.latency_ms.median)
     } else {
         "n/a".into()
     };
@@ -298,23 +302,23 @@ pub(super) fn write_table(
         c.fp,
         c.r#fn,
         c.unknown,
-        counted(report.frames, "frame")
+        counted(report.scored_frames, "frame")
     )?;
-    let t = &report.timings_ms;
+    let t = &report.timings;
     if !with_latency {
         return Ok(());
     }
     writeln!(
         out,
         "median ms per frame: read {:.2}, integrate {:.2}, grid {:.2}, features {:.2}, appearance {:.2}, classify {:.2}, filter {:.2}; latency p95 {:.2}",
-        t.read.median,
-        t.integrate.median,
-        t.grid.median,
-        t.features.median,
-        t.appearance.median,
-        t.classify.median,
-        t.filter.median,
-        t.latency.p95
+        t.read_ms.median,
+        t.integrate_ms.median,
+        t.grid_ms.median,
+        t.features_ms.median,
+        t.appearance_ms.median,
+        t.classify_ms.median,
+        t.filter_ms.median,
+        t.latency_ms.p95
     )?;
     Ok(())
 }

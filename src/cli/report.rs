@@ -38,6 +38,11 @@ pub fn print_json_frame(mut fields: serde_json::Value) -> Result<()> {
     print_json_line(&fields)
 }
 
+/// The major version of every command's `--json` schema (`schemas/json/`): raised
+/// when a record changes shape (2: the summary's figures at its top level, every
+/// duration in `_ms`).
+pub const SCHEMA_VERSION: u32 = 2;
+
 /// The `summary` record of [`print_json_frame`]'s convention: `fields` with the
 /// command, the inputs (unless `fields` names them) and the skipped frames.
 pub fn print_json_summary(
@@ -47,6 +52,7 @@ pub fn print_json_summary(
 ) -> Result<()> {
     fields["type"] = "summary".into();
     fields["command"] = command.into();
+    fields["schema_version"] = SCHEMA_VERSION.into();
     if fields.get("inputs").is_none() {
         fields["inputs"] = selections.iter().map(input_json).collect::<Vec<_>>().into();
     }

@@ -77,7 +77,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                     "cells_per_side": result.layout.cells_per_side,
                     "min_corner_in_world": result.layout.min_corner_in_world(),
                     "cells": cells,
-                    "timings_ms": result.timings,
+                    "timings": result.timings,
                     "dropped_points": result.dropped_points,
                     "remission": result.remission,
                     "without_remission": result.without_remission,
@@ -114,7 +114,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                 "config": config,
                 "model": model_json(&model, &model_name),
                 "frames": frames,
-                "latency_ms": report.timings_ms.latency,
+                "timings": report.timings,
                 "dropped_points": report.dropped_points,
                 "frames_without_remission": report.frames_without_remission,
                 "fit": report.fit,
@@ -123,7 +123,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         return Ok(outcome(&selections));
     }
     if !output.quiet {
-        let latency = report.timings_ms.latency;
+        let latency = report.timings.latency_ms;
         match frames {
             0 => writeln!(stdout, "no frame was read")?,
             _ => writeln!(

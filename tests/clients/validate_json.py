@@ -2,7 +2,7 @@
 
 usage: validate_json.py SCHEMA_DIR COMMAND STDOUT_FILE STDERR_FILE
 Every stdout line must match schemas/json/COMMAND.schema.json; an error record on
-stderr (when the file is not empty) must match error.schema.json. Prints the number
+stderr (a line that is a JSON object) must match error.schema.json. Prints the number
 of records checked; exits non-zero with the first violation.
 """
 
@@ -28,9 +28,10 @@ def main() -> None:
         for line in lines:
             output.validate(json.loads(line))
             checked += 1
-    errors = Path(stderr).read_text().strip()
+    # Notices are lines of text on stderr; an error is its last line, one JSON object.
+    errors = [line for line in Path(stderr).read_text().splitlines() if line.startswith("{")]
     if errors:
-        validator(schema_dir, "error").validate(json.loads(errors.splitlines()[-1]))
+        validator(schema_dir, "error").validate(json.loads(errors[-1]))
         checked += 1
     print(json.dumps({"checked": checked}))
 

@@ -119,6 +119,8 @@ pub struct AnnotationSummary {
     pub frames: usize,
     pub passthrough_messages: usize,
     pub output_bytes: u64,
+    /// Its figures stand beside the others in a `--json` summary.
+    #[serde(flatten)]
     pub evaluation: EvaluationReport,
 }
 

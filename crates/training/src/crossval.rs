@@ -68,13 +68,15 @@ pub struct FoldReport {
     pub c: f64,
     pub gamma: f64,
     pub support_vectors: usize,
-    pub training_seconds: f64,
+    pub training_ms: f64,
 }
 
 #[derive(Clone, Debug, Serialize)]
 pub struct CrossValidationReport {
     pub block_size_m: f64,
     pub folds: Vec<FoldReport>,
+    /// The held-out scores; its figures stand beside the folds in JSON.
+    #[serde(flatten)]
     pub evaluation: EvaluationReport,
     /// When a camera saw cells: the paper's ablation on those cells alone.
     pub camera_ablation: Vec<AblationRow>,
@@ -225,7 +227,7 @@ fn out_of_fold(
             c: model.c,
             gamma: model.gamma,
             support_vectors: model.support_vector_count(),
-            training_seconds: model.training.seconds,
+            training_ms: model.training.seconds * 1e3,
         });
         models.push(Some(model));
     }
@@ -265,13 +267,15 @@ pub struct HeldOutReport {
     pub c: f64,
     pub gamma: f64,
     pub support_vectors: usize,
+    #[serde(flatten)]
     pub evaluation: EvaluationReport,
 }
 
 #[derive(Clone, Debug, Serialize)]
 pub struct LeaveOneOutReport {
     pub held_out: Vec<HeldOutReport>,
-    /// Every held-out frame scored together.
+    /// Every held-out frame scored together; its figures stand at the top in JSON.
+    #[serde(flatten)]
     pub pooled: EvaluationReport,
 }
 

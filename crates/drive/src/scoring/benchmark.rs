@@ -36,7 +36,7 @@ pub struct BenchmarkReport {
     pub support_vectors: usize,
     /// One frame at a time, one thread, posed as the source is (`register` holds
     /// the registration when its poses are estimated).
-    pub stages_ms: TimingReport,
+    pub timings: TimingReport,
     /// The floor ([`floor_ms`]): moving the window's points into the frame's grid
     /// and counting them per cell, nothing else; one thread, per frame.
     pub floor_ms: Spread,
@@ -165,9 +165,9 @@ pub fn benchmark(
         predictable_cells: Spread::of(&cells).median,
         points_in_grid: Spread::of(&points).median,
         support_vectors: model.support_vector_count(),
-        latency_over_floor: TimingReport::of(&timings).latency.median / floor.median,
+        latency_over_floor: TimingReport::of(&timings).latency_ms.median / floor.median,
         floor_ms: floor,
-        stages_ms: TimingReport::of(&timings),
+        timings: TimingReport::of(&timings),
         registration_ms: Spread::of(&registration_ms),
         registration_lost,
         speedup: all_cores.frames_per_second / one_thread.frames_per_second,

@@ -29,19 +29,20 @@ impl Spread {
     }
 }
 
-/// Per-stage spreads of the frame timings, milliseconds.
+/// Per-stage spreads of the frame timings, milliseconds (named as [`StageTimings`]'
+/// figures are, so that a frame record and a summary say one name per figure).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct TimingReport {
-    pub read: Spread,
+    pub read_ms: Spread,
     /// Scan registration (0 when the poses are recorded).
-    pub register: Spread,
-    pub integrate: Spread,
-    pub grid: Spread,
-    pub features: Spread,
-    pub appearance: Spread,
-    pub classify: Spread,
-    pub filter: Spread,
-    pub latency: Spread,
+    pub register_ms: Spread,
+    pub integrate_ms: Spread,
+    pub grid_ms: Spread,
+    pub features_ms: Spread,
+    pub appearance_ms: Spread,
+    pub classify_ms: Spread,
+    pub filter_ms: Spread,
+    pub latency_ms: Spread,
 }
 
 impl TimingReport {
@@ -49,15 +50,15 @@ impl TimingReport {
         let spread =
             |f: fn(&StageTimings) -> f64| Spread::of(&timings.iter().map(f).collect::<Vec<_>>());
         Self {
-            read: spread(|t| t.read_ms),
-            register: spread(|t| t.register_ms),
-            integrate: spread(|t| t.integrate_ms),
-            grid: spread(|t| t.grid_ms),
-            features: spread(|t| t.features_ms),
-            appearance: spread(|t| t.appearance_ms),
-            classify: spread(|t| t.classify_ms),
-            filter: spread(|t| t.filter_ms),
-            latency: spread(|t| t.latency_ms),
+            read_ms: spread(|t| t.read_ms),
+            register_ms: spread(|t| t.register_ms),
+            integrate_ms: spread(|t| t.integrate_ms),
+            grid_ms: spread(|t| t.grid_ms),
+            features_ms: spread(|t| t.features_ms),
+            appearance_ms: spread(|t| t.appearance_ms),
+            classify_ms: spread(|t| t.classify_ms),
+            filter_ms: spread(|t| t.filter_ms),
+            latency_ms: spread(|t| t.latency_ms),
         }
     }
 }
@@ -111,7 +112,7 @@ impl Fit {
 #[derive(Clone, Debug, Serialize)]
 pub struct EvaluationReport {
     /// Frames with ground truth that were scored.
-    pub frames: usize,
+    pub scored_frames: usize,
     /// After the outlier filter: the method's output.
     pub confusion: Confusion,
     /// None (`null` in JSON) without a scored frame: no score is 0.
@@ -139,7 +140,7 @@ pub struct EvaluationReport {
     pub foreign_remission: Option<ForeignRemission>,
     /// How well the frames fit the model (no labels needed).
     pub fit: Fit,
-    pub timings_ms: TimingReport,
+    pub timings: TimingReport,
 }
 
 /// Accumulates frame results into an [`EvaluationReport`].
@@ -202,7 +203,7 @@ impl Evaluation {
 
     pub fn report(&self) -> EvaluationReport {
         EvaluationReport {
-            frames: self.frames,
+            scored_frames: self.frames,
             confusion: self.filtered,
             scores: (self.frames > 0).then(|| self.filtered.scores()),
             unfiltered_scores: (self.frames > 0).then(|| self.unfiltered.scores()),
@@ -216,7 +217,7 @@ impl Evaluation {
             frames_foreign_remission: self.frames_foreign_remission,
             foreign_remission: self.foreign_remission,
             fit: Fit::of(self.predicted_cells, self.unsure_cells),
-            timings_ms: TimingReport::of(&self.timings),
+            timings: TimingReport::of(&self.timings),
         }
     }
 }
