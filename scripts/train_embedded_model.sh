@@ -13,22 +13,28 @@
 # TRAVMAP names the binary (default target/release/travmap), DATA the data.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-T=${TRAVMAP:-target/release/travmap}
-D=${DATA:-../shared/data}
+T=$(realpath "${TRAVMAP:-target/release/travmap}")
+D=$(realpath "${DATA:-../shared/data}")
 OUT=${1:-crates/method/src/classifier}
-# A fixed place, so that the models' record of their sources is the same every time.
+mkdir -p "$OUT"
+OUT=$(realpath "$OUT")
+# A fixed place, so that the models' record of their sources is the same every time;
+# each model is trained from inside it, so that it names its datasets, not this folder.
 work=target/embedded-model
-mkdir -p "$work" "$OUT"
 for rule in road offroad; do
     R="ground_truth.rule=\"$rule\""
-    "$T" dataset -q -o "$work/$rule-semantickitti.parquet" --set "$R" \
-        "$D/semantickitti-00/sequences/00" "$D/semantickitti-00-more/sequences/00" \
-        "$D/semantickitti-07-000000/sequences/07" "$D/semantickitti-07-000964/sequences/07" \
-        "$D/semantickitti-unknown-000850/sequences/00"
-    "$T" dataset -q -o "$work/$rule-rellis3d.parquet" --set 'ground_truth.labels="rellis3d"' --set "$R" \
-        "$D/rellis3d-000001/sequences/00" "$D/rellis3d-000104/sequences/00"
-    "$T" dataset -q -o "$work/$rule-nuscenes.parquet" --set 'ground_truth.labels="nuscenes"' --set "$R" \
-        "$D/nuscenes-lidarseg-scene-1072" "$D/nuscenes-lidarseg-scene-0002"
-    "$T" train -q -o "$OUT/${rule}_model.json" --set "$R" \
-        "$work/$rule-semantickitti.parquet" "$work/$rule-rellis3d.parquet" "$work/$rule-nuscenes.parquet"
+    mkdir -p "$work/$rule"
+    (
+        cd "$work/$rule"
+        "$T" dataset -q -o semantickitti.parquet --set "$R" \
+            "$D/semantickitti-00/sequences/00" "$D/semantickitti-00-more/sequences/00" \
+            "$D/semantickitti-07-000000/sequences/07" "$D/semantickitti-07-000964/sequences/07" \
+            "$D/semantickitti-unknown-000850/sequences/00"
+        "$T" dataset -q -o rellis3d.parquet --set 'ground_truth.labels="rellis3d"' --set "$R" \
+            "$D/rellis3d-000001/sequences/00" "$D/rellis3d-000104/sequences/00"
+        "$T" dataset -q -o nuscenes.parquet --set 'ground_truth.labels="nuscenes"' --set "$R" \
+            "$D/nuscenes-lidarseg-scene-1072" "$D/nuscenes-lidarseg-scene-0002"
+        "$T" train -q -o "$OUT/${rule}_model.json" --set "$R" \
+            semantickitti.parquet rellis3d.parquet nuscenes.parquet
+    )
 done

@@ -75,9 +75,14 @@ fn main() -> ExitCode {
     };
     match outcome {
         Ok(Outcome::Complete) => ExitCode::SUCCESS,
-        Ok(Outcome::Skipped(frames)) => {
+        Ok(Outcome::Incomplete { skipped, lost }) => {
             if !json {
-                eprintln!("completed with {}", cli::counted(frames, "skipped frame"));
+                let what = [(skipped, "skipped frame"), (lost, "lost part of an input")]
+                    .into_iter()
+                    .filter(|(n, _)| *n > 0)
+                    .map(|(n, noun)| cli::counted(n, noun))
+                    .collect::<Vec<_>>();
+                eprintln!("completed with {}", what.join(" and "));
             }
             ExitCode::from(3)
         }

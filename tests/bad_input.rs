@@ -432,9 +432,54 @@ fn training_without_labels_is_an_error_and_writes_nothing() {
     let err = clean_failure(travmap(&["train", arg(dir.path()), "-o", arg(&model)]));
     assert_contains(&err, &["no labelled cells"]);
     assert!(!model.exists());
-    // Evaluation without labels runs and says there is nothing to score.
-    let out = success(eval(dir.path()));
-    assert_contains(&out, &["no frame has ground truth"]);
+    // Evaluation without labels is an error too: nothing to score.
+    let err = clean_failure(eval(dir.path()));
+    assert_contains(&err, &["no frame of the input has labels"]);
+}
+
+#[test]
+fn an_empty_folder_or_a_folder_of_separate_logs_is_said_to_be_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let err = clean_failure(travmap(&["run", arg(dir.path())]));
+    assert_contains(&err, &["is an empty folder; travmap reads KITTI"]);
+    assert!(!err.contains("poses.txt"), "not read as a sequence: {err}");
+    std::fs::write(dir.path().join("notes.txt"), "x").unwrap();
+    let err = clean_failure(travmap(&["run", arg(dir.path())]));
+    assert_contains(&err, &["no velodyne/ folder"]);
+    // Two logs of their own side by side are not one recording ...
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
+    let logs = tempfile::tempdir().unwrap();
+    for (name, frames) in [("morning.mcap", "0..2"), ("evening.mcap", "2..4")] {
+        let log = logs.path().join(name);
+        success(travmap(&[
+            "convert",
+            arg(&seq),
+            "--frames",
+            frames,
+            "-o",
+            arg(&log),
+        ]));
+    }
+    let err = clean_failure(travmap(&["run", arg(logs.path())]));
+    assert_contains(
+        &err,
+        &[
+            "a folder of 2 separate logs",
+            "evening.mcap",
+            "give each log",
+        ],
+    );
+    // ... where the splits of one are.
+    for (from, to) in [
+        ("morning.mcap", "drive_0.mcap"),
+        ("evening.mcap", "drive_1.mcap"),
+    ] {
+        std::fs::rename(logs.path().join(from), logs.path().join(to)).unwrap();
+    }
+    let out = travmap(&["run", arg(logs.path())]);
+    assert_contains(&success(out), &["frame"]);
 }
 
 #[test]

@@ -645,7 +645,12 @@ fn set_takes_bare_text_and_every_configuration_mistake_is_a_usage_error() {
     for (assignment, named) in [
         ("grid.size_m=-5", "grid.size_m must be > 0"),
         ("integration.poses=bogus", "`auto`, `tf`"),
-        ("grid.size_m=abc", "`grid.size_m`: `abc` is not a float"),
+        (
+            "grid.size_m=abc",
+            "`grid.size_m`: `abc` is not a number (e.g. grid.size_m=12.0)",
+        ),
+        ("integration.scans=x", "`x` is not a whole number"),
+        ("filter.enabled=yes", "`yes` is not true or false"),
         (
             "ground_truth.label_map=/no/such/map.toml",
             "/no/such/map.toml",
@@ -653,7 +658,12 @@ fn set_takes_bare_text_and_every_configuration_mistake_is_a_usage_error() {
     ] {
         let err = crate::common::usage_error(travmap(&["config", "--set", assignment]));
         assert!(err.contains(named), "--set {assignment}: {err}");
+        // A number wants no quoting: TOML's hint about strings would mislead.
+        assert!(!err.contains("must be quoted"), "--set {assignment}: {err}");
     }
+    // A range as other tools write it is said in this tool's words.
+    let err = crate::common::usage_error(travmap(&["run", "/nonexistent", "--frames", "0-2"]));
+    assert_contains(&err, &["`0..3` or `0..=2`"]);
 }
 
 #[test]
@@ -755,6 +765,9 @@ fn completions_and_man_pages_are_generated() {
         page.contains(".TH TRAVMAP-ANNOTATE 1") && page.contains("travmap\\-annotate"),
         "{page}"
     );
+    // The synopsis is the command as typed.
+    let synopsis = &page[page.find(".SH SYNOPSIS").unwrap()..];
+    assert!(synopsis.contains("\\fBtravmap annotate\\fR"), "{synopsis}");
     assert_eq!(
         std::fs::read_dir(dir.path()).unwrap().count(),
         16,

@@ -14,7 +14,7 @@ use travmap_method::grid::CellClass;
 use travmap_outputs::dataset::reading::{Labels, read_training_rows};
 use travmap_training::TrainingSet;
 
-use crate::common::{arg, assert_contains, clean_failure, json_summary, travmap};
+use crate::common::{arg, assert_contains, clean_failure, json_summary, travmap, with_settings};
 
 /// A grid search small enough for a test (`--set` settings): the point is the comparison.
 const QUICK_TRAINING: [&str; 3] = [
@@ -253,4 +253,97 @@ fn corrupt_datasets_are_errors_naming_the_file_not_panics() {
         assert_contains(&err, &[name, "corrupt Parquet file", panic]);
         assert!(!model.exists());
     }
+}
+
+/// The cells of `seq` written into the folder `dir` as parts of at most about
+/// `rows` rows (whole frames each).
+fn dataset_parts(seq: &Path, dir: &Path, rows: &str) -> Value {
+    let folder = format!("{}/", dir.display());
+    json_summary(&["dataset", arg(seq), "-o", &folder, "--rows-per-part", rows])
+}
+
+#[test]
+fn a_folder_gets_part_files_of_whole_frames_that_train_as_the_single_file() {
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let single = dir.path().join("cells.parquet");
+    let one = dataset(&seq, &single, &[]);
+    let folder = dir.path().join("cells");
+    // About 4,500 rows a frame: a part closes at the frame that reaches 5,000 rows.
+    let parts = dataset_parts(&seq, &folder, "5000");
+    assert_eq!(parts["rows"], one["rows"]);
+    let files: Vec<String> = (parts["outputs"].as_array().unwrap().iter())
+        .map(|f| f.as_str().unwrap().to_string())
+        .collect();
+    let names: Vec<String> = std::fs::read_dir(&folder)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(files.len() >= 3, "{files:?}");
+    assert_eq!(names.len(), files.len(), "nothing but the parts: {names:?}");
+    for (index, file) in files.iter().enumerate() {
+        assert!(
+            file.ends_with(&format!("part-{index:05}.parquet")),
+            "{file}"
+        );
+    }
+    // The folder trains on the very rows of the single file.
+    let config = travmap_core::Config::default();
+    let rows = |path: &Path| {
+        let mut set = TrainingSet::default();
+        read_training_rows(path, &config, &mut set, Labels::GroundTruth).unwrap();
+        set
+    };
+    let (from_file, from_parts) = (rows(&single), rows(&folder));
+    assert_eq!(from_parts.features, from_file.features);
+    assert_eq!(from_parts.traversable, from_file.traversable);
+    assert_eq!(from_parts.centre_in_world, from_file.centre_in_world);
+    let model = dir.path().join("m.json");
+    let trained = json_summary(&with_settings(
+        &["train", arg(&folder), "-o", arg(&model)],
+        &QUICK_TRAINING,
+    ));
+    assert_eq!(trained["cells"], from_file.len());
+    assert_eq!(trained["inputs"][0]["path"], arg(&folder));
+    // Written again in fewer parts, the folder holds only the new ones.
+    let again = dataset_parts(&seq, &folder, "1000000");
+    assert_eq!(again["outputs"].as_array().unwrap().len(), 1);
+    assert_eq!(std::fs::read_dir(&folder).unwrap().count(), 1);
+    // A folder of something else is no dataset.
+    let mut set = TrainingSet::default();
+    let err = read_training_rows(dir.path(), &config, &mut set, Labels::GroundTruth)
+        .unwrap_err()
+        .to_string();
+    assert_contains(&err, &["without part-NNNNN.parquet files"]);
+}
+
+#[test]
+#[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
+fn pyarrow_duckdb_and_polars_read_the_parts_as_one_table() {
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
+    let Some(python) = crate::common::env_var(
+        "TRAVMAP_CLIENT_PYTHON",
+        "a Python with pyarrow, duckdb and polars",
+    ) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let single = dir.path().join("cells.parquet");
+    dataset(&seq, &single, &[]);
+    let folder = dir.path().join("cells");
+    let parts = dataset_parts(&seq, &folder, "5000");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/read_parquet_parts.py");
+    let out = crate::common::run_client(
+        std::process::Command::new(&python)
+            .arg(&script)
+            .arg(&folder)
+            .arg(&single),
+    );
+    let read: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(read["rows"], parts["rows"]);
+    assert_eq!(read["parts"], parts["outputs"].as_array().unwrap().len());
 }

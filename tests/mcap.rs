@@ -1073,7 +1073,8 @@ fn a_recording_cut_short_is_read_as_far_as_it_goes() {
     let whole = std::fs::read(&drive).unwrap();
     let footer = whole.len() - 8 - 29;
     let summary_start = u64::from_le_bytes(whole[footer + 9..footer + 17].try_into().unwrap());
-    let frames_of = |name: &str, bytes: &[u8]| {
+    // Frames read, the exit code and what the summary counts as lost.
+    let read = |name: &str, bytes: &[u8]| {
         let path = dir.path().join(name);
         std::fs::write(&path, bytes).unwrap();
         let output = travmap(&["run", arg(&path), "--json"]);
@@ -1082,15 +1083,65 @@ fn a_recording_cut_short_is_read_as_far_as_it_goes() {
             &err,
             &["without its summary and closing magic", "mcap recover"],
         );
-        let (frames, _) = crate::common::json_records(&success(output));
-        frames.len()
+        let (frames, summary) = crate::common::json_records(&crate::common::stdout(&output));
+        (frames.len(), output.status.code(), summary["lost"].clone())
     };
-    assert_eq!(
-        frames_of("no-summary.mcap", &whole[..summary_start as usize]),
-        6
+    // Cut after its data section: the summary alone is lost, none of the drive.
+    let (frames, code, lost) = read("no-summary.mcap", &whole[..summary_start as usize]);
+    assert_eq!((frames, code, lost), (6, Some(0), serde_json::json!([])));
+    // Cut inside a chunk: the complete chunks' frames, the rest counted as lost.
+    let (frames, code, lost) = read("cut.mcap", &whole[..whole.len() * 4 / 5]);
+    assert!((1..6).contains(&frames), "{frames} frames");
+    assert_eq!(code, Some(3), "completed with a part of the input lost");
+    assert_contains(
+        lost[0]["reason"].as_str().unwrap(),
+        &["cut short at byte", "is lost"],
     );
-    let cut = frames_of("cut.mcap", &whole[..whole.len() * 2 / 3]);
-    assert!((1..6).contains(&cut), "{cut} frames");
+    // Cut before its first complete chunk: nothing complete, said so.
+    let path = dir.path().join("half.mcap");
+    std::fs::write(&path, &whole[..whole.len() / 2]).unwrap();
+    let err = clean_failure(travmap(&["run", arg(&path)]));
+    assert_contains(&err, &["nothing complete to read"]);
+}
+
+/// The first chunk damaged (it holds the schemas and channels, as every chunk
+/// after it does not): --keep-going reads the channels from the summary and the
+/// frames of the intact chunk, as it does for damage further on.
+#[test]
+fn a_damaged_first_chunk_is_stepped_over_with_keep_going() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_, good)) = crate::common::sample_as_mcap(dir.path(), &[]) else {
+        return;
+    };
+    let mut bytes = std::fs::read(&good).unwrap();
+    // The first record after the magic and the header is the first chunk.
+    let header = 8 + 9 + u64::from_le_bytes(bytes[9..17].try_into().unwrap()) as usize;
+    assert_eq!(bytes[header], 0x06, "a chunk");
+    bytes[header + 2000] ^= 0x55;
+    let damaged = dir.path().join("first.mcap");
+    std::fs::write(&damaged, bytes).unwrap();
+    let err = clean_failure(travmap(&["run", arg(&damaged)]));
+    assert_contains(
+        &err,
+        &["the chunk at byte", "--keep-going reads on past it"],
+    );
+    let output = travmap(&["run", arg(&damaged), "--keep-going", "--json"]);
+    assert_eq!(
+        output.status.code(),
+        Some(3),
+        "{}",
+        crate::common::stderr(&output)
+    );
+    let (frames, summary) = crate::common::json_records(&crate::common::stdout(&output));
+    let read: Vec<u64> = (frames.iter())
+        .map(|f| f["frame"].as_u64().unwrap())
+        .collect();
+    let skipped: Vec<u64> = (summary["skipped"].as_array().unwrap().iter())
+        .map(|s| s["frame"].as_u64().unwrap())
+        .collect();
+    assert!(!read.is_empty(), "the intact chunk's frames are read");
+    assert_eq!(read.len() + skipped.len(), 6, "{read:?} {skipped:?}");
+    assert!(skipped.contains(&0), "{skipped:?}");
 }
 
 /// A record damaged in the middle of a complete MCAP (its summary and closing magic

@@ -262,6 +262,49 @@ fn a_nav2_map_beside_an_input_or_twice_named_is_refused() {
 }
 
 #[test]
+fn a_nav2_map_alone_is_written_and_every_file_is_named() {
+    let Some(seq) = crate::common::sample() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let yaml = dir.path().join("site.yaml");
+    let alone = crate::common::success(crate::common::travmap(&[
+        "map",
+        arg(&seq),
+        "--nav2",
+        arg(&yaml),
+    ]));
+    let pgm = dir.path().join("site.pgm");
+    crate::common::assert_contains(&alone, &["wrote", "site.yaml", "site.pgm"]);
+    assert!(yaml.exists() && pgm.exists());
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        2,
+        "nothing else"
+    );
+    // The picture and the cells are each named as written.
+    let (png, cells) = (dir.path().join("m.png"), dir.path().join("c.parquet"));
+    let both = crate::common::success(crate::common::travmap(&[
+        "map",
+        arg(&seq),
+        "-o",
+        arg(&png),
+        "--cells",
+        arg(&cells),
+    ]));
+    crate::common::assert_contains(
+        &both,
+        &[
+            &format!("wrote {} (the map's picture)", png.display()),
+            &format!("wrote {} (", cells.display()),
+        ],
+    );
+    // A map that writes nothing is a usage error.
+    let err = crate::common::usage_error(crate::common::travmap(&["map", arg(&seq)]));
+    crate::common::assert_contains(&err, &["-o map.png", "--cells", "--nav2"]);
+}
+
+#[test]
 fn annotate_writes_the_final_map_once_on_a_latched_map_topic() {
     let Some(seq) = crate::common::sample() else {
         return;

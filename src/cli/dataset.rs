@@ -1,18 +1,21 @@
 //! `travmap dataset`: one Parquet row per predictable cell per frame, on the
 //! training grid (`training.grid_size_m`), the cells `train` learns from.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::Args;
 use serde_json::json;
+use travmap_core::Config;
 use travmap_core::config::ModelChoice;
+use travmap_core::temporaries;
 use travmap_drive::{Fingerprints, Selection};
-use travmap_outputs::dataset::DatasetWriter;
+use travmap_method::classifier::SvmModel;
+use travmap_outputs::dataset::{DEFAULT_ROWS_PER_PART, DatasetSummary, DatasetWriter, Layout};
 
 use super::{
-    Inputs, Outcome, check_output, counted, frame_count, load_model, note_extension, outcome,
-    path_text, print_json_summary, with_summary,
+    Inputs, Outcome, check_output, check_output_dir, counted, frame_count, load_model,
+    note_extension, outcome, path_text, print_json_summary, with_summary,
 };
 
 /// Write a Parquet table of cells to train on, one row per predictable cell per frame
@@ -21,14 +24,20 @@ use super::{
 /// prediction, on the training grid.
 #[derive(Args)]
 #[command(
-    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap dataset SEQ -o cells.parquet\n  travmap dataset drive.mcap -o cells.parquet --model model.json"
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap dataset SEQ -o cells.parquet\n  travmap dataset long_drive.mcap -o cells/\n  travmap dataset drive.mcap -o cells.parquet --model model.json"
 )]
 pub struct DatasetArgs {
     #[command(flatten)]
     inputs: Inputs,
-    /// Where to write the Parquet file.
+    /// Where to write the cells: a folder (`cells/`, or one that exists) gets
+    /// part-00000.parquet, ... that pyarrow.dataset, DuckDB and Polars read as one
+    /// table; any other name, one Parquet file.
     #[arg(short, long)]
     output: PathBuf,
+    /// Rows a part file of a folder holds (parts close at the end of the frame that
+    /// reaches it); the memory a long drive takes stays that of one part.
+    #[arg(long, value_name = "ROWS", default_value_t = DEFAULT_ROWS_PER_PART, value_parser = clap::value_parser!(u64).range(1..))]
+    rows_per_part: u64,
     /// Add the prediction of this model: `road`, `offroad` or a model file (by
     /// default no prediction column values).
     #[arg(long, value_name = "MODEL")]
@@ -44,8 +53,19 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
         Some(ModelChoice::File(path)) => Some(path.as_path()),
         _ => None,
     };
-    check_output(output_path, &args.inputs.files(model_file))?;
-    note_extension(output_path, "parquet", "a Parquet file");
+    let layout = match output_path.is_dir() || path_text(output_path).ends_with('/') {
+        true => Layout::Parts {
+            rows_per_part: args.rows_per_part,
+        },
+        false => Layout::File,
+    };
+    match layout {
+        Layout::File => {
+            check_output(output_path, &args.inputs.files(model_file))?;
+            note_extension(output_path, "parquet", "a Parquet file");
+        }
+        Layout::Parts { .. } => check_output_dir(output_path, &args.inputs.files(model_file))?,
+    }
     let mut selections = args.inputs.open(config.appearance.enabled)?;
     let model = match &choice {
         Some(choice) => Some(load_model(choice, config)?.0),
@@ -59,27 +79,42 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
         selection.fingerprint_scans = Fingerprints::Labelled;
     }
     let bar = output.progress(frame_count(&selections), "extracting cells");
-    let mut writer = DatasetWriter::create(output_path, config)?;
-    for selection in &selections {
-        let source = selection.source.path().display().to_string();
-        selection.run::<anyhow::Error>(&grid_config, model.as_ref(), |result| {
-            writer.push_frame(&source, &result)?;
-            bar.inc(1);
-            Ok(())
-        })?;
+    // A folder this run makes is a temporary until its parts are in place.
+    let created_dir = layout != Layout::File && !output_path.exists();
+    if created_dir {
+        std::fs::create_dir(output_path)
+            .with_context(|| format!("cannot create {}", output_path.display()))?;
+        temporaries::track(output_path);
     }
-    let inputs: Vec<String> = selections.iter().map(Selection::describe).collect();
-    let skipped: Vec<_> = selections.iter().flat_map(|s| s.source.skipped()).collect();
-    let summary = writer.finish(&inputs.join("; "), &skipped)?;
+    let written = write_cells(
+        &selections,
+        &grid_config,
+        model.as_ref(),
+        output_path,
+        layout,
+        &|| bar.inc(1),
+    );
+    if created_dir {
+        temporaries::forget(output_path);
+        if written.is_err() {
+            let _ = std::fs::remove_dir_all(output_path);
+        }
+    }
+    let summary = written?;
     let seconds = bar.finish();
     if output.json {
         let cells_per_s = summary.rows as f64 / seconds;
-        let fields = json!({"output": path_text(output_path), "config": config, "elapsed_ms": seconds * 1e3, "cells_per_s": cells_per_s});
+        let files: Vec<String> = summary.files.iter().map(|f| path_text(f)).collect();
+        let fields = json!({"output": path_text(output_path), "outputs": files, "config": config, "elapsed_ms": seconds * 1e3, "cells_per_s": cells_per_s});
         let fields = with_summary(fields, &summary)?;
         print_json_summary("dataset", &selections, fields)?;
     } else if !output.quiet {
+        let parts = match layout {
+            Layout::File => String::new(),
+            Layout::Parts { .. } => format!(" in {}", counted(summary.files.len(), "part file")),
+        };
         println!(
-            "wrote {}: {} from {} ({} labelled, {} with appearance), {:.0} cells/s",
+            "wrote {}{parts}: {} from {} ({} labelled, {} with appearance), {:.0} cells/s",
             output_path.display(),
             counted(summary.rows, "cell"),
             counted(summary.frames, "frame"),
@@ -89,4 +124,28 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
         );
     }
     Ok(outcome(&selections))
+}
+
+/// The predictable cells of every frame of `selections` on the training grid, into
+/// the dataset at `path`.
+fn write_cells(
+    selections: &[Selection],
+    grid_config: &Config,
+    model: Option<&SvmModel>,
+    path: &Path,
+    layout: Layout,
+    on_frame: &dyn Fn(),
+) -> Result<DatasetSummary> {
+    let mut writer = DatasetWriter::create(path, grid_config, layout)?;
+    for selection in selections {
+        let source = selection.source.path().display().to_string();
+        selection.run::<anyhow::Error>(grid_config, model, |result| {
+            writer.push_frame(&source, &result)?;
+            on_frame();
+            Ok(())
+        })?;
+    }
+    let inputs: Vec<String> = selections.iter().map(Selection::describe).collect();
+    let skipped: Vec<_> = selections.iter().flat_map(|s| s.source.skipped()).collect();
+    Ok(writer.finish(&inputs.join("; "), &skipped)?)
 }

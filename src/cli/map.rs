@@ -26,15 +26,16 @@ use super::{
     "A KITTI odometry / SemanticKITTI sequence directory, a recorded log (MCAP, ROS 1 bag, rosbag2 directory or .db3), a folder of .pcd / .bin scans, or one saved point cloud of a site (.pcd or .ply)"
 )))]
 #[command(
-    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap map SEQ -o map.png\n  travmap map drive.mcap -o map.png --nav2 site.yaml\n  travmap map site.las -o site.png --cells cells.parquet"
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap map SEQ -o map.png\n  travmap map drive.mcap -o map.png --nav2 site.yaml\n  travmap map drive.mcap --nav2 site.yaml\n  travmap map site.las -o site.png --cells cells.parquet"
 )]
 pub struct MapArgs {
     #[command(flatten)]
     inputs: Inputs,
     /// The PNG to write: the fused map with the trajectory (and, with ground truth,
-    /// the fused ground truth and the errors).
+    /// the fused ground truth and the errors). A map needs at least one of -o,
+    /// --cells and --nav2.
     #[arg(short, long)]
-    output: PathBuf,
+    output: Option<PathBuf>,
     /// Also write the fused cells as a Parquet table.
     #[arg(long, value_name = "PARQUET")]
     cells: Option<PathBuf>,
@@ -71,7 +72,7 @@ impl Nav2ModeArg {
 pub fn map(args: MapArgs) -> Result<Outcome> {
     let cell_px = args.cell_pixels;
     let config = args.inputs.settings.load()?;
-    let (output, output_path) = (args.inputs.output, args.output.as_path());
+    let (output, output_path) = (args.inputs.output, args.output.as_deref());
     let inputs = args.inputs.files(args.model.file(&config).as_deref());
     let nav2_mode = args.nav2_mode.mode();
     let nav2_image = args.nav2.as_deref().map(|yaml| image_path(yaml, nav2_mode));
@@ -84,11 +85,16 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
             yaml.with_extension("yaml").display()
         )));
     }
-    let outputs: Vec<&Path> = [Some(output_path), args.cells.as_deref()]
+    let outputs: Vec<&Path> = [output_path, args.cells.as_deref()]
         .into_iter()
         .chain([args.nav2.as_deref(), nav2_image.as_deref()])
         .flatten()
         .collect();
+    let Some(&first_output) = outputs.first() else {
+        return Err(usage(
+            "map writes a picture (-o map.png), the fused cells (--cells cells.parquet) or a nav2 map (--nav2 site.yaml): give at least one".into(),
+        ));
+    };
     check_distinct_outputs(&outputs)?;
     for path in &outputs {
         check_output(path, &inputs)?;
@@ -114,7 +120,9 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
             check_output(&image.with_extension("prj"), &inputs)?;
         }
     }
-    note_extension(output_path, "png", "a PNG image");
+    if let Some(path) = output_path {
+        note_extension(path, "png", "a PNG image");
+    }
     let selections = [selection];
     let bar = output.progress(frame_count(&selections), "mapping");
     let mut trajectory = Vec::new();
@@ -131,7 +139,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let cell_size_m = lattice.cell_size_m;
     if frames == 0 {
         return Err(Error::NothingWritten {
-            path: output_path.to_path_buf(),
+            path: first_output.to_path_buf(),
             inputs: selections[0].describe(),
             why: travmap_io::why_none_read(&selections[0].source.skipped()),
         }
@@ -139,9 +147,11 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     }
     // The cells are the map from here on: its tiles (most of a site map's memory) go.
     drop(map);
-    let picture = render_drive_map(&cells, &trajectory, &lattice, cell_px)?;
     let mut staged = Staged::default();
-    staged.write(output_path, &encode_png(&picture))?;
+    if let Some(path) = output_path {
+        let picture = render_drive_map(&cells, &trajectory, &lattice, cell_px)?;
+        staged.write(path, &encode_png(&picture))?;
+    }
     if let Some(path) = &args.cells {
         write_map_cells(&mut staged, path, &cells)?;
     }
@@ -170,7 +180,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let area_m2 = seen as f64 * cell_size_m.powi(2);
     if output.json {
         let fields = json!({
-            "output": path_text(output_path),
+            "output": path_text(output_path.unwrap_or(first_output)),
             "outputs": outputs.iter().copied().chain(nav2.iter().flat_map(|n| n.gis_files.iter().map(PathBuf::as_path))).map(path_text).collect::<Vec<_>>(),
             "cells_output": args.cells.as_deref().map(path_text),
             "nav2": nav2,
@@ -190,12 +200,21 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
         print_json_summary("map", &selections, fields)?;
     } else if !output.quiet {
         println!(
-            "wrote {} ({} fused into {}, {area_m2:.0} m2; map {:.1} KiB)",
-            output_path.display(),
+            "{} fused into {}, {area_m2:.0} m2 (map {:.1} KiB)",
             counted(frames, "frame"),
             counted(seen, "cell"),
             memory_bytes as f64 / 1024.0
         );
+        if let Some(path) = output_path {
+            println!("wrote {} (the map's picture)", path.display());
+        }
+        if let Some(path) = &args.cells {
+            println!(
+                "wrote {} ({}, Parquet)",
+                path.display(),
+                counted(cells.len(), "cell")
+            );
+        }
         if let Some(nav2) = &nav2 {
             println!(
                 "wrote {} and {} (nav2 map_server, {}: {} x {} cells of {} m, origin ({:.2}, {:.2}) in frame {})",
@@ -211,6 +230,9 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
                 nav2.origin[1],
                 nav2.frame
             );
+            for file in &nav2.gis_files {
+                println!("wrote {} (the image's georeference)", file.display());
+            }
         }
         if let (Some(fused), Some(frames)) = (fused_scores, per_frame.scores) {
             println!(

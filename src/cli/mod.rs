@@ -52,7 +52,11 @@ use travmap_outputs::preflight::{
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Outcome {
     Complete,
-    Skipped(usize),
+    /// Frames skipped, and parts of inputs lost otherwise (a recording cut short).
+    Incomplete {
+        skipped: usize,
+        lost: usize,
+    },
 }
 
 /// The configuration: defaults, then a file, then `--set`s.
@@ -582,6 +586,13 @@ pub fn parse_frame_range(text: &str) -> Result<Range<usize>> {
         bail!(
             "frame range `{text}` is empty: give N, A..B (A to B-1), A..=B or A.. (`..` for every frame)"
         );
+    } else if let Some((a, b)) = text.split_once('-') {
+        // `0-2` as other tools write ranges: said in this tool's words, both ways.
+        let (a, b) = (number(a, 0)?, number(b, 0)?);
+        bail!(
+            "frame range `{text}`: write a range as A..B (B left out) or A..=B: `{a}..{}` or `{a}..={b}`",
+            b + 1
+        );
     } else {
         let n = number(text, 0)?;
         n..n + 1
@@ -687,7 +698,7 @@ pub fn frame_count(selections: &[Selection]) -> u64 {
 
 /// Prints every skipped frame to stderr, once, and says how the command ended.
 pub fn outcome(selections: &[Selection]) -> Outcome {
-    let mut skipped = 0;
+    let (mut skipped, mut lost) = (0, 0);
     for selection in selections {
         for skip in selection.source.skipped() {
             eprintln!(
@@ -698,11 +709,14 @@ pub fn outcome(selections: &[Selection]) -> Outcome {
             );
             skipped += 1;
         }
+        for why in selection.source.lost() {
+            eprintln!("lost: {why}");
+            lost += 1;
+        }
     }
-    if skipped == 0 {
-        Outcome::Complete
-    } else {
-        Outcome::Skipped(skipped)
+    match (skipped, lost) {
+        (0, 0) => Outcome::Complete,
+        (skipped, lost) => Outcome::Incomplete { skipped, lost },
     }
 }
 

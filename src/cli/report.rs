@@ -59,6 +59,14 @@ pub fn print_json_summary(
     if let (Some(output), None) = (fields.get("output"), fields.get("outputs")) {
         fields["outputs"] = json!([output]);
     }
+    fields["lost"] = selections
+        .iter()
+        .flat_map(|s| {
+            let input = s.source.path().display().to_string();
+            (s.source.lost().iter()).map(move |why| json!({"input": input, "reason": why}))
+        })
+        .collect::<Vec<_>>()
+        .into();
     fields["skipped"] = selections
         .iter()
         .flat_map(|s| {

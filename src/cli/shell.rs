@@ -79,8 +79,11 @@ fn write_pages(dir: &Path, command: &clap::Command) -> Result<Vec<PathBuf>> {
     let mut staged = Staged::default();
     let mut written = vec![page(&mut staged, dir, "travmap", command)?];
     for sub in command.get_subcommands() {
+        // The page is travmap-eval(1), as git's are; its synopsis is the command
+        // typed: `travmap eval`.
         let name = format!("travmap-{}", sub.get_name());
-        let sub = sub.clone().display_name(&name).bin_name(&name);
+        let typed = format!("travmap {}", sub.get_name());
+        let sub = sub.clone().display_name(&name).bin_name(typed);
         written.push(page(&mut staged, dir, &name, &sub)?);
     }
     staged.commit()?;

@@ -8,6 +8,7 @@ use clap::Args;
 use serde_json::json;
 use travmap_drive::Fingerprints;
 use travmap_outputs::atomic::write_atomically;
+use travmap_outputs::dataset::part_files;
 use travmap_outputs::dataset::reading::{Labels, read_training_rows};
 use travmap_training::crossval::collect_training_set;
 use travmap_training::{TrainingSet, train as train_model};
@@ -20,7 +21,7 @@ use super::{
 /// Train the SVM (grid search over C and gamma, spatially-blocked CV).
 #[derive(Args)]
 #[command(
-    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap train SEQ -o model.json\n  travmap train cells.parquet more.parquet -o model.json\n  travmap train SEQ -o model.json --set 'training.c_values=[10]'"
+    after_long_help = "Examples (SEQ: a KITTI sequence folder, e.g. ../shared/data/semantickitti-00/sequences/00):\n  travmap train SEQ -o model.json\n  travmap train cells.parquet more_cells/ -o model.json\n  travmap train SEQ -o model.json --set 'training.c_values=[10]'"
 )]
 pub struct TrainArgs {
     #[command(flatten)]
@@ -48,13 +49,14 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
     let model_path = args.output.as_path();
     check_output(model_path, &args.inputs.files(None))?;
     note_extension(model_path, "json", "a travmap model (JSON)");
-    // Cell datasets (`travmap dataset`) join the cells of the drives given.
-    let (datasets, drives): (Vec<PathBuf>, Vec<PathBuf>) = args
-        .inputs
-        .sequences
-        .iter()
-        .cloned()
-        .partition(|path| path.extension().is_some_and(|e| e == "parquet"));
+    // Cell datasets (`travmap dataset`: a file, or a folder of part files) join the
+    // cells of the drives given.
+    let is_dataset = |path: &PathBuf| {
+        path.extension().is_some_and(|e| e == "parquet")
+            || (path.is_dir() && part_files(path).is_ok())
+    };
+    let (datasets, drives): (Vec<PathBuf>, Vec<PathBuf>) =
+        args.inputs.sequences.iter().cloned().partition(is_dataset);
     if args.labels == LabelArg::Pseudo && !drives.is_empty() {
         bail!(
             "--labels pseudo learns from Parquet datasets (`travmap dataset` writes their pseudo_label column); {} is a drive: extract it with `travmap dataset` first, or adapt to it with `travmap adapt`",

@@ -223,8 +223,32 @@ pub fn detect(path: &Path) -> Result<InputFormat> {
 /// What a directory holds: a rosbag2 log, a KITTI sequence, a folder of scans; or,
 /// refused with where to point instead, a folder of sequences or a dataset root.
 fn directory_format(path: &Path) -> Result<InputFormat> {
-    if path.join("metadata.yaml").is_file() || !storage_files(path).is_empty() {
+    let storage = storage_files(path);
+    if path.join("metadata.yaml").is_file() {
         return Ok(InputFormat::Rosbag2);
+    }
+    if !storage.is_empty() {
+        // Without its metadata, a folder is one recording only where its files are
+        // named as rosbag2 splits one (NAME_0.mcap, NAME_1.mcap, ...): separate logs
+        // side by side are not one drive.
+        return match one_recordings_files(&storage) {
+            true => Ok(InputFormat::Rosbag2),
+            false => {
+                let names: Vec<String> = (storage.iter().take(4))
+                    .filter_map(|f| Some(f.file_name()?.to_string_lossy().into_owned()))
+                    .collect();
+                Err(unsupported(
+                    path,
+                    format!(
+                        "a folder of {} separate logs ({}{}), not one rosbag2 recording (whose files are NAME_0.mcap, NAME_1.mcap, ..., or listed in its metadata.yaml): give each log as an input of its own, e.g. {}",
+                        storage.len(),
+                        names.join(", "),
+                        if storage.len() > 4 { ", ..." } else { "" },
+                        storage[0].display()
+                    ),
+                ))
+            }
+        };
     }
     if is_sequence(path) {
         return Ok(InputFormat::Kitti);
@@ -254,8 +278,37 @@ fn directory_format(path: &Path) -> Result<InputFormat> {
     if holds_scans(path) {
         return Ok(InputFormat::ScanFolder);
     }
-    // Read as a sequence, it names the file it misses.
-    Ok(InputFormat::Kitti)
+    // With its scans, read as a sequence: it names the file it misses.
+    if path.join("velodyne").is_dir() {
+        return Ok(InputFormat::Kitti);
+    }
+    let what = match std::fs::read_dir(path).map(|mut entries| entries.next().is_none()) {
+        Ok(true) => "an empty folder",
+        _ => {
+            "a folder of no input travmap reads (not a KITTI sequence: no velodyne/ folder of scans)"
+        }
+    };
+    Err(unsupported(path, what.into()))
+}
+
+/// Whether storage files found without a `metadata.yaml` are one recording's: one
+/// file, or the numbered splits of one name.
+fn one_recordings_files(files: &[PathBuf]) -> bool {
+    let split_of = |file: &PathBuf| -> Option<String> {
+        let name = file.file_name()?.to_str()?;
+        let name = name.strip_suffix(".zstd").unwrap_or(name);
+        let stem = name.rsplit_once('.')?.0;
+        let (bag, index) = stem.rsplit_once('_')?;
+        index.parse::<u64>().ok().map(|_| bag.to_string())
+    };
+    match files {
+        [_] => true,
+        [first, rest @ ..] => {
+            let bag = split_of(first);
+            bag.is_some() && rest.iter().all(|file| split_of(file) == bag)
+        }
+        [] => false,
+    }
 }
 
 /// Whether `dir` is a KITTI sequence: its scans, and its calibration or poses (a

@@ -49,6 +49,9 @@ pub fn why_none_read(skipped: &[Skip]) -> String {
 pub struct SkipLog {
     keep_going: bool,
     skipped: std::sync::Arc<std::sync::Mutex<Vec<Skip>>>,
+    /// What of the input could not be read beside whole frames (a recording cut
+    /// short), in words: read on past, with or without --keep-going, and counted.
+    lost: Vec<String>,
 }
 
 impl SkipLog {
@@ -57,7 +60,18 @@ impl SkipLog {
         Self {
             keep_going,
             skipped: Default::default(),
+            lost: Vec::new(),
         }
+    }
+
+    /// Records a part of the input that could not be read (`why`, in words).
+    pub fn record_lost(&mut self, why: String) {
+        self.lost.push(why);
+    }
+
+    /// The parts of the input that could not be read, besides skipped frames.
+    pub fn lost(&self) -> &[String] {
+        &self.lost
     }
 
     /// Records `error` for `frame` when keeping going, else returns it.

@@ -119,7 +119,7 @@ impl Source {
     /// around (an unindexed bag, poses estimated, ...) as soon as it is known, before
     /// anything can fail later.
     pub fn open(path: &Path, options: &SourceOptions, on_notice: &dyn Fn(&str)) -> Result<Self> {
-        let skips = SkipLog::new(options.keep_going);
+        let mut skips = SkipLog::new(options.keep_going);
         let (recording, record) = match format::detect(path)? {
             InputFormat::ScanFolder if let Some(sequence) = velodyne_of_sequence(path, options) => {
                 return Err(Error::Sequence {
@@ -159,6 +159,9 @@ impl Source {
             format => {
                 let log = Log::open(path, format)?;
                 log.notices().iter().for_each(|notice| on_notice(notice));
+                log.lost_to_cuts()
+                    .into_iter()
+                    .for_each(|lost| skips.record_lost(lost));
                 // A log's poses depend on its transform tree: the drive decides as it opens.
                 let drive = RosDrive::open(log, &options.log, options.poses)?;
                 drive.notice().into_iter().for_each(on_notice);
@@ -344,6 +347,12 @@ impl Source {
     /// The frames skipped so far.
     pub fn skipped(&self) -> Vec<Skip> {
         self.skips.skipped()
+    }
+
+    /// The parts of the input that could not be read besides whole frames (a
+    /// recording cut short), in words.
+    pub fn lost(&self) -> &[String] {
+        self.skips.lost()
     }
 
     pub fn path(&self) -> &Path {

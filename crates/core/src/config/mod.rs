@@ -466,6 +466,19 @@ impl Config {
         let list_field = current.is_none_or(toml::Value::is_array) && !text_field;
         let parsed = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
             Ok(mut parsed) => parsed.remove("v").filter(|v| v.is_str() || !text_field),
+            // A number or a switch is said as such, with the value it has now for an
+            // example; TOML's own words help with lists and quoting.
+            Err(_) if current.is_some_and(|c| c.is_float() || c.is_integer() || c.is_bool()) => {
+                let current = current.expect("matched above");
+                let wanted = match current {
+                    toml::Value::Boolean(_) => "true or false",
+                    toml::Value::Integer(_) => "a whole number",
+                    _ => "a number",
+                };
+                return Err(Error::Config(format!(
+                    "`{key}`: `{value}` is not {wanted} (e.g. {key}={current})"
+                )));
+            }
             Err(e) if !text_field => {
                 return Err(Error::Config(format!(
                     "`{key}`: `{value}` is not a {} (TOML: {})",

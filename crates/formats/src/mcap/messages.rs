@@ -98,12 +98,11 @@ impl<'a> Messages<'a> {
     /// These messages, the `damaged` stretches stepped over: each is a damaged chunk
     /// whose messages are lost, read on after it.
     /// The summary's schemas and channels are read first, so that messages after a
-    /// damaged chunk that held their channel still read.
+    /// damaged chunk that held their channel still read, the first chunk among
+    /// them (damage found only as it is read, a bad CRC, included).
     pub fn stepping_over(mut self, damaged: Vec<(ChunkSpan, String)>) -> Self {
         let whole = self.walk.bytes.ends_with(MAGIC);
-        if let Some(summary) =
-            summary_start(self.walk.bytes).filter(|_| whole && !damaged.is_empty())
-        {
+        if let Some(summary) = summary_start(self.walk.bytes).filter(|_| whole) {
             let walk = RecordWalk {
                 bytes: self.walk.bytes,
                 offset: summary,

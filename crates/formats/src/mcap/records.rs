@@ -194,6 +194,9 @@ pub struct Layout {
     /// For a file cut short (a recorder killed before it wrote the summary, or in the
     /// middle of a record): where its last complete record ends.
     pub cut_at: Option<usize>,
+    /// Its data section ends with its DataEnd record: a file cut after it lost its
+    /// summary alone, none of the recording.
+    pub data_complete: bool,
     /// The bag's metadata a rosbag2 MCAP keeps (its `rosbag2` metadata record's
     /// `serialized_metadata`): whether its messages are compressed one by one.
     pub rosbag2_metadata: Option<String>,
@@ -408,6 +411,7 @@ pub fn check_chunk_sizes(map: &[u8]) -> Result<Layout, String> {
     }
     Ok(Layout {
         cut_at: (!(data_end && whole)).then_some(complete),
+        data_complete: data_end,
         rosbag2_metadata,
         damaged,
     })

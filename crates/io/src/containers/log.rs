@@ -155,6 +155,17 @@ impl Log {
         (self.files.iter()).any(|file| matches!(file, LogFile::Pcap(_)))
     }
 
+    /// What each file cut short lost: everything recorded after its last complete
+    /// record, in words.
+    pub fn lost_to_cuts(&self) -> Vec<String> {
+        (self.files.iter())
+            .filter_map(|file| match file {
+                LogFile::Mcap(mcap) => mcap.lost_to_cut(),
+                _ => None,
+            })
+            .collect()
+    }
+
     /// Whether a file of the log was cut short (read as far as it goes).
     pub fn is_cut(&self) -> bool {
         self.files
@@ -355,6 +366,8 @@ pub struct McapFile {
     map: bytes::Bytes,
     /// For a file cut short: where its last complete record ends.
     cut_at: Option<usize>,
+    /// Cut or not, its data section is whole (its DataEnd record read).
+    data_complete: bool,
     /// Damaged stretches its messages step over.
     damaged: Vec<(ChunkSpan, String)>,
     /// Its own copy of a rosbag2 bag's metadata says each message is a zstd frame.
@@ -382,9 +395,20 @@ impl McapFile {
             file,
             map,
             cut_at: layout.cut_at,
+            data_complete: layout.data_complete,
             damaged: layout.damaged,
             zstd_messages: zstd_messages.unwrap_or(false),
         })
+    }
+
+    /// What a file cut short lost: None for a whole file.
+    fn lost_to_cut(&self) -> Option<String> {
+        let cut_at = self.cut_at.filter(|_| !self.data_complete)?;
+        Some(format!(
+            "{}: cut short at byte {} (no summary, no closing magic): what was recorded after its last complete record, at byte {cut_at}, is lost",
+            self.path.display(),
+            self.map.len()
+        ))
     }
 
     /// What a file cut short holds, for a notice: None for a whole file.

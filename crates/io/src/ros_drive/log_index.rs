@@ -451,6 +451,11 @@ impl LogIndex {
                     path: path.to_path_buf(),
                     problem: format!("{topic}: {problem}"),
                 },
+                // A recording cut before its first complete chunk lists no topics.
+                (None, None) if log.is_cut() => Error::LogContainer {
+                    path: path.to_path_buf(),
+                    problem: "cut short (no summary, no closing magic) before the first complete message of a LiDAR topic: nothing complete to read".into(),
+                },
                 // A capture has no topics to list: what it holds is its datagrams.
                 (None, None) => match log.capture_datagrams() {
                     Some(datagrams) if contents.cloud_stamps.is_empty() => Error::LogContainer {

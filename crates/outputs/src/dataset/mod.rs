@@ -18,7 +18,7 @@ mod columns;
 pub mod reading;
 
 use std::io::BufWriter;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use parquet::basic::{Compression, ZstdLevel};
@@ -105,16 +105,77 @@ fn schema(features: &[String], appearance: &[String], self_labels: bool) -> Stri
     format!("message travmap_cells {{ {}; }}", fields.join("; "))
 }
 
-/// A cell dataset being written; atomically, like every output.
-pub struct DatasetWriter {
+/// Where a dataset goes: one Parquet file, or a folder of part files that
+/// pyarrow.dataset, DuckDB and Polars read as one table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    File,
+    /// `part-00000.parquet`, ... of whole frames, a part closed once it holds
+    /// `rows_per_part` rows or more: each part's footer, the writer's memory that
+    /// grows with the rows, stays this small however long the drive.
+    Parts {
+        rows_per_part: u64,
+    },
+}
+
+/// Rows a part holds by default: 2^20 (about 230 frames of the 36 m training grid,
+/// 60 MB of zstd Parquet).
+pub const DEFAULT_ROWS_PER_PART: u64 = 1 << 20;
+
+/// The name of part `index` of a dataset folder.
+fn part_name(index: usize) -> String {
+    format!("part-{index:05}.parquet")
+}
+
+/// Whether `name` is a part file's (`part-NNNNN.parquet`).
+fn is_part_name(name: &str) -> bool {
+    name.strip_prefix("part-")
+        .and_then(|rest| rest.strip_suffix(".parquet"))
+        .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// The part files of the dataset folder `dir`, in order.
+pub fn part_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
+    let mut parts: Vec<PathBuf> = entries
+        .filter_map(|entry| entry.ok())
+        .filter(|entry| entry.file_name().to_str().is_some_and(is_part_name))
+        .map(|entry| entry.path())
+        .collect();
+    parts.sort();
+    if parts.is_empty() {
+        return Err(Error::Dataset {
+            path: dir.to_path_buf(),
+            message: "a folder without part-NNNNN.parquet files: not a dataset `travmap dataset -o DIR/` wrote".into(),
+        });
+    }
+    Ok(parts)
+}
+
+/// The Parquet file being written: one dataset file, or one part of a folder.
+struct FileWriter {
     writer: SerializedFileWriter<BufWriter<WritebackFile>>,
     output: AtomicFile,
-    columns: Columns,
-    appearance_len: usize,
-    summary: DatasetSummary,
+    rows: u64,
     /// The SHA-256 of every labelled scan whose cells the file holds, so that a
     /// model trained on it knows its training scans by content.
     labelled_scans: Vec<String>,
+}
+
+/// A cell dataset being written; atomically, like every output: a folder's parts
+/// appear together when the last is complete, and replace the parts of an earlier
+/// dataset there.
+pub struct DatasetWriter {
+    path: PathBuf,
+    layout: Layout,
+    schema: Arc<parquet::schema::types::Type>,
+    properties: Arc<WriterProperties>,
+    file: Option<FileWriter>,
+    /// Parts complete and synced, not yet in place.
+    written: Vec<AtomicFile>,
+    columns: Columns,
+    appearance_len: usize,
+    summary: DatasetSummary,
 }
 
 /// What a dataset holds, for the summary.
@@ -127,10 +188,14 @@ pub struct DatasetSummary {
     /// Rows the vehicle drove over, and rows with a self-label.
     pub footprint_rows: u64,
     pub pseudo_labelled_rows: u64,
+    /// The files written: the dataset file, or every part of the folder.
+    #[serde(skip)]
+    pub files: Vec<PathBuf>,
 }
 
 impl DatasetWriter {
-    pub fn create(path: &Path, config: &Config) -> Result<Self> {
+    /// A dataset at `path` (a folder that exists, for [`Layout::Parts`]).
+    pub fn create(path: &Path, config: &Config, layout: Layout) -> Result<Self> {
         let appearance = appearance_columns(config);
         let features = feature_names(&config.features.groups);
         let schema =
@@ -148,37 +213,62 @@ impl DatasetWriter {
         for column in DICTIONARY_COLUMNS {
             properties = properties.set_column_dictionary_enabled(ColumnPath::from(column), true);
         }
-        let properties = properties.build();
-        let (output, file) = AtomicFile::create(path)?;
-        let writer = SerializedFileWriter::new(
-            BufWriter::with_capacity(1 << 20, WritebackFile::new(file)),
-            Arc::new(schema),
-            Arc::new(properties),
-        )
-        .map_err(|e| parquet_failure(path, &output, e))?;
-        Ok(Self {
-            writer,
-            output,
+        let mut writer = Self {
+            path: path.to_path_buf(),
+            layout,
+            schema: Arc::new(schema),
+            properties: Arc::new(properties.build()),
+            file: None,
+            written: Vec::new(),
             columns: Columns::new(features.len(), appearance.len()),
             appearance_len: appearance.len(),
             summary: DatasetSummary::default(),
-            labelled_scans: Vec::new(),
-        })
+        };
+        // A single file is created before any work, so that an output that cannot
+        // be written is said at once.
+        if layout == Layout::File {
+            writer.open_file()?;
+        }
+        Ok(writer)
+    }
+
+    fn open_file(&mut self) -> Result<&mut FileWriter> {
+        if self.file.is_none() {
+            let path = match self.layout {
+                Layout::File => self.path.clone(),
+                Layout::Parts { .. } => self.path.join(part_name(self.written.len())),
+            };
+            let (output, file) = AtomicFile::create(&path)?;
+            let writer = SerializedFileWriter::new(
+                BufWriter::with_capacity(1 << 20, WritebackFile::new(file)),
+                self.schema.clone(),
+                self.properties.clone(),
+            )
+            .map_err(|e| parquet_failure(&path, &output, e))?;
+            self.file = Some(FileWriter {
+                writer,
+                output,
+                rows: 0,
+                labelled_scans: Vec::new(),
+            });
+        }
+        Ok(self.file.as_mut().expect("opened above"))
     }
 
     /// Appends the predictable cells of one frame.
     pub fn push_frame(&mut self, source: &str, result: &FrameResult) -> Result<()> {
-        if let (Some(sha), Some(_)) = (&result.scan_sha256, &result.ground_truth) {
-            self.labelled_scans.push(sha.clone());
-        }
         if result.features.dimension != self.columns.features.len() {
             return Err(Error::Dataset {
-                path: self.output_path(),
+                path: self.path.clone(),
                 message: format!(
                     "{source} frame {}: no usable remission (intensity) for the remission columns; extract without them (--set features.groups=[\"context\"])",
                     result.index
                 ),
             });
+        }
+        let file = self.open_file()?;
+        if let (Some(sha), Some(_)) = (&result.scan_sha256, &result.ground_truth) {
+            file.labelled_scans.push(sha.clone());
         }
         let source = ByteArray::from(source);
         let classes = |grid: &Option<Vec<CellClass>>, cell: usize| {
@@ -230,22 +320,25 @@ impl DatasetWriter {
             c.footprint.push(footprint);
             c.pseudo_label.push(pseudo);
         }
-        if self.columns.len() >= ROW_GROUP_ROWS {
-            self.flush()?;
+        let part_rows = self.file.as_ref().map_or(0, |f| f.rows) + self.columns.len() as u64;
+        match self.layout {
+            Layout::Parts { rows_per_part } if part_rows >= rows_per_part => self.close_file()?,
+            _ if self.columns.len() >= ROW_GROUP_ROWS => self.flush()?,
+            _ => {}
         }
         Ok(())
     }
 
     fn flush(&mut self) -> Result<()> {
         let rows = self.columns.len();
-        if rows == 0 {
+        let Some(file) = self.file.as_mut().filter(|_| rows > 0) else {
             return Ok(());
-        }
+        };
         let columns = &self.columns;
-        let path = self.output_path();
-        let output = &self.output;
+        let path = file.output.path().to_path_buf();
+        let output = &file.output;
         let fail = |e| parquet_failure(&path, output, e);
-        let mut group = self.writer.next_row_group().map_err(fail)?;
+        let mut group = file.writer.next_row_group().map_err(fail)?;
         let mut index = 0;
         while let Some(mut column) = group.next_column().map_err(fail)? {
             write_column(column.untyped(), columns, index).map_err(fail)?;
@@ -253,40 +346,62 @@ impl DatasetWriter {
             index += 1;
         }
         group.close().map_err(fail)?;
+        file.rows += rows as u64;
         self.columns.clear();
         Ok(())
     }
 
-    fn output_path(&self) -> std::path::PathBuf {
-        self.output.path().to_path_buf()
-    }
-
-    /// Writes the last row group and the footer, then renames the file into place;
-    /// `inputs` and their `skipped` frames say why, when no frame was read.
-    pub fn finish(mut self, inputs: &str, skipped: &[Skip]) -> Result<DatasetSummary> {
-        if self.summary.frames == 0 {
-            return Err(Error::NothingWritten {
-                path: self.output_path(),
-                inputs: inputs.to_string(),
-                why: why_none_read(skipped),
-            });
-        }
+    /// Writes the file's last row group and footer and syncs it, to be renamed into
+    /// place with the others.
+    fn close_file(&mut self) -> Result<()> {
         self.flush()?;
-        if !self.labelled_scans.is_empty() {
-            let scans = serde_json::to_string(&self.labelled_scans).expect("strings serialise");
-            (self.writer).append_key_value_metadata(KeyValue::new(SCANS_KEY.into(), scans));
+        let Some(mut file) = self.file.take() else {
+            return Ok(());
+        };
+        if !file.labelled_scans.is_empty() {
+            let scans = serde_json::to_string(&file.labelled_scans).expect("strings serialise");
+            (file.writer).append_key_value_metadata(KeyValue::new(SCANS_KEY.into(), scans));
         }
-        let path = self.output_path();
-        let output = &self.output;
-        let file = self
+        let path = file.output.path().to_path_buf();
+        let output = &file.output;
+        let written = file
             .writer
             .into_inner()
             .map_err(|e| parquet_failure(&path, output, e))?
             .into_inner()
             .map_err(|e| write_failure(&path, output, Some(e.into_error()), None))?
             .into_inner();
-        sync_output(&file).map_err(|source| write_failure(&path, output, Some(source), None))?;
-        self.output.commit()?;
+        sync_output(&written).map_err(|source| write_failure(&path, output, Some(source), None))?;
+        self.written.push(file.output);
+        Ok(())
+    }
+
+    /// Writes the last row group and footer, then renames the file (or every part)
+    /// into place, removing a folder's parts of an earlier dataset; `inputs` and
+    /// their `skipped` frames say why, when no frame was read.
+    pub fn finish(mut self, inputs: &str, skipped: &[Skip]) -> Result<DatasetSummary> {
+        if self.summary.frames == 0 {
+            return Err(Error::NothingWritten {
+                path: self.path.clone(),
+                inputs: inputs.to_string(),
+                why: why_none_read(skipped),
+            });
+        }
+        self.close_file()?;
+        let files: Vec<PathBuf> = self
+            .written
+            .iter()
+            .map(|f| f.path().to_path_buf())
+            .collect();
+        self.written.into_iter().try_for_each(AtomicFile::commit)?;
+        if let Layout::Parts { .. } = self.layout {
+            for earlier in part_files(&self.path).unwrap_or_default() {
+                if !files.contains(&earlier) {
+                    std::fs::remove_file(&earlier).map_err(|e| Error::io(&earlier, e))?;
+                }
+            }
+        }
+        self.summary.files = files;
         Ok(self.summary)
     }
 }

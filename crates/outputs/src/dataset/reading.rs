@@ -1,5 +1,5 @@
-//! Cell datasets read back: the labelled rows of a `travmap dataset` file (or one
-//! rewritten by pyarrow, DuckDB or Polars) into a [`TrainingSet`], after checking
+//! Cell datasets read back: the labelled rows of a `travmap dataset` file or folder
+//! of part files (or a file rewritten by pyarrow, DuckDB or Polars) into a [`TrainingSet`], after checking
 //! that its cells were computed with the same feature settings. Column types are
 //! checked before the parquet crate's typed readers (which panic on a mismatch),
 //! and panics inside the parquet crate on corrupt files are contained as errors.
@@ -15,7 +15,7 @@ use parquet::schema::types::SchemaDescriptor;
 
 use super::{
     CONFIG_KEY, FORMAT, FORMAT_1, FORMAT_KEY, MAX_VALUES_PER_FILE_BYTE, READ_BATCH_ROWS, SCANS_KEY,
-    appearance_columns, feature_settings, schema,
+    appearance_columns, feature_settings, part_files, schema,
 };
 use travmap_core::Config;
 use travmap_core::config::written_before_groups;
@@ -149,6 +149,11 @@ pub fn read_training_rows(
     set: &mut TrainingSet,
     labels: Labels,
 ) -> Result<usize> {
+    if path.is_dir() {
+        return (part_files(path)?.iter())
+            .map(|part| read_training_rows(part, config, set, labels))
+            .sum();
+    }
     // In memory: the parquet crate reads a `File` with many small unbuffered reads,
     // millions of them on some corrupt page headers (15 s for a 26 kB file). The
     // rows take more memory than the compressed file does anyway.
