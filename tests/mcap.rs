@@ -654,6 +654,11 @@ fn a_damaged_chunk_stops_with_its_offset_or_is_stepped_over_with_keep_going() {
         })
         .collect();
     assert_eq!(skipped, [(3, false), (4, true), (5, true)]);
+    // The report agrees with itself: the frames read include those skipped, in order.
+    assert_eq!(
+        doc["inputs"][0]["frames"],
+        serde_json::json!({"start": 0, "end": 5, "count": 6})
+    );
     let frames = |input: &Path| -> Vec<(u64, u64)> {
         let out = travmap(&["run", arg(input), "--json", "--keep-going"]);
         let (frames, _) = crate::common::json_records(&crate::common::stdout(&out));
@@ -908,7 +913,8 @@ fn corrupt_mcap_files_are_clear_errors() {
     let err = clean_failure(travmap(&["eval", &write("crc.mcap", &flipped)]));
     assert_contains(&err, &["crc.mcap", "Chunk CRC failed"]);
     // Cut a few bytes into the first chunk, or inside the first record's opcode and
-    // length: its complete records hold no cloud, and it says so.
+    // length: nothing complete was recorded, and it says so (not that the log has no
+    // cloud topic).
     for (name, end, complete) in [("cut.mcap", 100, 42), ("head.mcap", 12, 8)] {
         let err = clean_failure(travmap(&["eval", &write(name, &bytes[..end])]));
         let read_to = format!("up to byte {complete}");
@@ -918,7 +924,7 @@ fn corrupt_mcap_files_are_clear_errors() {
                 name,
                 "without its summary",
                 &read_to,
-                "no PointCloud2 topic",
+                "nothing complete to read",
             ],
         );
     }
