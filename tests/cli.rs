@@ -41,6 +41,17 @@ fn eval_with_no_flags_prints_the_papers_table() {
     }
     assert!(out.contains("over 3 frames"), "{out}");
     assert!(out.contains("embedded road model"), "{out}");
+    // The model line names the datasets it learnt from, not the folder it was built in.
+    let model = out.lines().find(|l| l.starts_with("model:")).unwrap();
+    assert_contains(
+        model,
+        &[
+            "semantickitti.parquet",
+            "rellis3d.parquet",
+            "nuscenes.parquet",
+        ],
+    );
+    assert!(!model.contains("target/"), "{model}");
 }
 
 #[test]

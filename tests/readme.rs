@@ -220,6 +220,23 @@ fn the_held_out_scores_are_what_crossval_prints() {
     );
 }
 
+/// The README installs what CI tests: the dependency versions Cargo.lock pins.
+#[test]
+fn the_readme_installs_the_locked_dependencies() {
+    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md"));
+    let readme = readme.unwrap();
+    let installs: Vec<&str> = (readme.lines())
+        .filter(|l| l.contains("cargo install"))
+        .collect();
+    assert!(
+        !installs.is_empty(),
+        "the README no longer says how to install"
+    );
+    for line in installs {
+        assert!(line.contains("--locked"), "{line}");
+    }
+}
+
 #[test]
 fn the_configuration_in_the_guide_is_what_travmap_config_prints() {
     let printed = success(travmap(&["config"]));

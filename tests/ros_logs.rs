@@ -82,11 +82,18 @@ fn one_frame_routes() -> Option<(tempfile::TempDir, PathBuf, PathBuf)> {
     Some((dir, drive, routes))
 }
 
-/// What reaches the method of `input`'s camera (`eval` reads images whatever the
-/// model; annotate only for a model that uses them): frames with an image, and
-/// cells with appearance values.
+/// What reaches the method of `input`'s camera (read for a model that uses it: the
+/// off-road model has a hybrid part): frames with an image, and cells with
+/// appearance values.
 fn images(input: &Path) -> (Value, Value) {
-    let report = crate::common::json_summary(&["eval", arg(input)]);
+    let out = crate::common::success(travmap(&[
+        "run",
+        arg(input),
+        "--model",
+        "offroad",
+        "--json",
+    ]));
+    let (_, report) = crate::common::json_records(&out);
     (
         report["frames_with_images"].clone(),
         report["cells_with_appearance"].clone(),

@@ -117,6 +117,8 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                 "timings": report.timings,
                 "dropped_points": report.dropped_points,
                 "frames_without_remission": report.frames_without_remission,
+                "frames_with_images": report.frames_with_images,
+                "cells_with_appearance": report.cells_with_appearance,
                 "fit": report.fit,
             }),
         )?;
