@@ -436,3 +436,29 @@ fn ouster_metadata_of_every_firmware_reads() {
     let os0 = read("1_14_6cccd_os-882002000138-128_legacy.json");
     assert_eq!(os0.beam_to_lidar_mm[(0, 3)], 27.67);
 }
+
+/// A capture holding nothing but part of one turn (ouster-sdk's FUSA dual-profile
+/// test capture: the SDK returns that partial scan) is one frame, said as such with
+/// how much of the turn it covers; it had no frame ("the input has no frames").
+#[test]
+fn a_capture_of_part_of_one_turn_is_one_frame() {
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ouster-sdk");
+    let capture = fixtures.join("OS-1-128_767798045_1024x10_20230712_120049.pcap");
+    // Its metadata, saved beside it as the SDK saves it, is found by its name.
+    let output = crate::common::travmap(&["run", capture.to_str().unwrap(), "--json"]);
+    let err = crate::common::stderr(&output);
+    crate::common::assert_contains(
+        &err,
+        &[
+            "holds nothing but part of one turn of the sensor (128 of the turn's 1024 columns, 12 % of a turn): read as one frame",
+        ],
+    );
+    let (frames, _) = crate::common::json_records(&crate::common::success(output));
+    assert_eq!(frames.len(), 1);
+    // Its points: the SDK's 16,373 first returns, and the second returns apart from
+    // them (travmap keeps a second return 0.1 m or more from the first).
+    let source = travmap_io::Source::open(&capture, &Default::default(), &|_| {}).unwrap();
+    let read: Vec<_> = source.read(&(0..usize::MAX)).map(Result::unwrap).collect();
+    let points = read[0].points_in_velodyne.len() + read[0].dropped_points;
+    assert!((16_373..=16_373 + 1_089).contains(&points), "{points}");
+}

@@ -488,6 +488,10 @@ mod tests {
     #[test]
     fn directories_are_rosbag2_with_metadata_else_kitti_and_missing_paths_say_so() {
         let dir = tempfile::tempdir().unwrap();
+        // An empty folder is said to be one, not read as a sequence missing its files.
+        let err = detect(dir.path()).unwrap_err().to_string();
+        assert!(err.contains("is an empty folder"), "{err}");
+        std::fs::create_dir(dir.path().join("velodyne")).unwrap();
         assert_eq!(detect(dir.path()).unwrap(), InputFormat::Kitti);
         std::fs::write(dir.path().join("metadata.yaml"), "x").unwrap();
         assert_eq!(detect(dir.path()).unwrap(), InputFormat::Rosbag2);

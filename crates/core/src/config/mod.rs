@@ -675,7 +675,7 @@ mod tests {
         );
         let err = config.set("grid.size_m=abc").unwrap_err().to_string();
         assert!(
-            err.contains("grid.size_m") && err.contains("float"),
+            err.contains("grid.size_m") && err.contains("not a number"),
             "{err}"
         );
     }

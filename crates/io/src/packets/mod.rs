@@ -201,6 +201,19 @@ impl PacketAssembler {
         })
     }
 
+    /// The scan gathered at the end of a log that completed none (a capture of part
+    /// of one turn), with how much of the turn it covers in words; None where there
+    /// is none, and for Velodyne, Hesai and RoboSense packets, whose partial turns
+    /// are not read.
+    pub fn finish_partial_turn(&mut self) -> Option<(PacketScan, String)> {
+        match self {
+            Self::Ouster(assembler) => assembler
+                .finish()
+                .map(|(scan, columns, turn)| (scan, partial_turn_said(columns, turn))),
+            Self::Velodyne(_) | Self::Hesai(_) | Self::Robosense(_) => None,
+        }
+    }
+
     /// Adds the packets of a message of type `message_type`, recorded at
     /// `log_time_ns`; the scans they complete.
     pub fn push_message(
@@ -222,4 +235,12 @@ impl PacketAssembler {
         }
         Ok(scans)
     }
+}
+
+/// How much of a turn `columns` of a turn's `per_turn` cover, in words.
+pub(crate) fn partial_turn_said(columns: u32, per_turn: u16) -> String {
+    format!(
+        "{columns} of the turn's {per_turn} columns, {:.0} % of a turn",
+        100.0 * f64::from(columns) / f64::from(per_turn)
+    )
 }

@@ -476,6 +476,18 @@ impl Iterator for DriveFrames<'_> {
             }
         }
         self.stream_ended = true;
+        // A log of part of one turn: the index made that part its one frame.
+        if self.next_cloud == 0
+            && self.drive.partial_turn.is_some()
+            && self.frames.contains(&0)
+            && let Some((scan, _)) = self
+                .assembler
+                .as_mut()
+                .and_then(|a| a.finish_partial_turn())
+        {
+            self.next_cloud = 1;
+            self.pending = Some((0, Cloud::Packets(scan.points)));
+        }
         let pending = self.pending.take();
         self.ready.extend(pending);
         while let Some((index, cloud)) = self.ready.pop_front() {

@@ -382,6 +382,9 @@ pub(crate) struct LogIndex {
     /// For a packet topic: the packets of its first and second scans, when the
     /// first took fewer than half the second's (the recording began mid-turn).
     pub(crate) partial_first_scan: Option<(usize, usize)>,
+    /// When the cloud topic's packets hold nothing but part of one turn: how much of
+    /// the turn, in words (its one frame is that part).
+    pub(crate) partial_turn: Option<String>,
     /// Packet topics' calibrations recorded in the log (an Ouster's metadata).
     pub(crate) recorded_calibrations: HashMap<String, PacketCalibration>,
     /// The Ouster metadata file found beside a capture, when packets were read with it.
@@ -440,6 +443,7 @@ impl LogIndex {
             }
         }
         contents.transforms.sort();
+        let partial_turns = contents.packets.partial_turns(&mut contents.cloud_stamps);
         (contents.packets)
             .name_ouster_frames(contents.transforms.children(), &mut contents.cloud_stamps);
         // Without the clouds the damage took, the damage is the error to report.
@@ -537,6 +541,9 @@ impl LogIndex {
             })?;
         let packets = contents.packets.model(&cloud_topic);
         let partial_first_scan = contents.packets.partial_first_scan(&cloud_topic);
+        let partial_turn = (partial_turns.into_iter())
+            .find(|(topic, _)| *topic == cloud_topic)
+            .map(|(_, said)| said);
         let recorded_calibrations = (std::iter::once(&cloud_topic)
             .chain(merged.iter().map(|m| &m.topic)))
         .filter_map(|t| Some((t.clone(), contents.packets.recorded_calibration(t)?)))
@@ -554,6 +561,7 @@ impl LogIndex {
             damaged_chunks,
             lost_messages,
             partial_first_scan,
+            partial_turn,
             recorded_calibrations,
             ouster_metadata_beside: contents
                 .packets

@@ -89,6 +89,8 @@ pub struct RosDrive {
     pub(crate) stamps_ns: Vec<u64>,
     /// See [`LogIndex`]: the packets of the first two scans, the first partial.
     partial_first_scan: Option<(usize, usize)>,
+    /// See [`LogIndex`]: the packets hold nothing but part of one turn, its frame.
+    pub(crate) partial_turn: Option<String>,
     transforms: TransformTree,
     pub(crate) camera: Option<CameraSource>,
     /// Whether frames carry the camera's images (default true): see
@@ -202,6 +204,14 @@ impl RosDrive {
             let said = notice.take().map(|n| format!("{n}; ")).unwrap_or_default();
             notice = Some(format!("{said}{}: {lens}", log.path().display()));
         }
+        if let Some(covered) = &index.partial_turn {
+            let said = notice.take().map(|n| format!("{n}; ")).unwrap_or_default();
+            notice = Some(format!(
+                "{said}{}: {} holds nothing but part of one turn of the sensor ({covered}): read as one frame",
+                log.path().display(),
+                index.cloud_topic
+            ));
+        }
         // A Helios 32 sends packets of the same form: the reading is said.
         if let Some((PacketModel::Robosense(model), _)) = &packets {
             let said = notice.take().map(|n| format!("{n}; ")).unwrap_or_default();
@@ -222,6 +232,7 @@ impl RosDrive {
             world_frame,
             stamps_ns: index.stamps_ns,
             partial_first_scan: index.partial_first_scan,
+            partial_turn: index.partial_turn,
             transforms: index.transforms,
             camera: index.camera,
             read_images: true,

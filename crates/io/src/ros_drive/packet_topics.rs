@@ -15,7 +15,7 @@ use crate::packets::ouster::{
 };
 use crate::packets::robosense::{RobosenseAssembler, RobosenseCalibration};
 use crate::packets::velodyne::{DecoderSettings, ScanCutter};
-use crate::packets::{PacketCalibration, PacketModel, packet_message};
+use crate::packets::{PacketCalibration, PacketModel, packet_message, partial_turn_said};
 use travmap_formats::ros::MessageEncoding;
 
 /// Ouster packets held while no metadata says how to read them: at most this many
@@ -356,6 +356,30 @@ impl PacketTopics {
     pub(crate) fn recorded_calibration(&self, topic: &str) -> Option<PacketCalibration> {
         (self.ouster_calibrations.get(topic))
             .map(|m| PacketCalibration::Ouster(Box::new(m.clone())))
+    }
+
+    /// The scan each Ouster topic that completed none was gathering when the log
+    /// ended (a capture of part of one turn), stamped into `cloud_stamps` as its
+    /// one frame: (topic, how much of the turn it covers, in words). The frames'
+    /// pass reads it as such ([`crate::packets::PacketAssembler::finish_partial_turn`]).
+    pub(crate) fn partial_turns(
+        &mut self,
+        cloud_stamps: &mut HashMap<String, (String, Vec<u64>)>,
+    ) -> Vec<(String, String)> {
+        let mut partial = Vec::new();
+        for (topic, (_, cut)) in &mut self.topics {
+            let Some((_, stamps)) = cloud_stamps.get_mut(topic).filter(|(_, s)| s.is_empty())
+            else {
+                continue;
+            };
+            if let PacketCut::Ouster(assembler) = cut
+                && let Some((scan, columns, turn)) = assembler.finish()
+            {
+                stamps.push(scan.stamp_ns);
+                partial.push((topic.clone(), partial_turn_said(columns, turn)));
+            }
+        }
+        partial
     }
 
     /// The packets of the first and second scans, when the first took fewer than

@@ -27,6 +27,8 @@ pub struct OusterAssembler {
     stamp_ns: Option<u64>,
     to_log_clock_ns: i64,
     decode_points: bool,
+    /// Valid columns of the scan being gathered.
+    columns: u32,
 }
 
 impl OusterAssembler {
@@ -55,6 +57,7 @@ impl OusterAssembler {
             stamp_ns: None,
             to_log_clock_ns: 0,
             decode_points: true,
+            columns: 0,
         }
     }
 
@@ -101,6 +104,7 @@ impl OusterAssembler {
             self.to_log_clock_ns = (i128::from(stamp_ns) - i128::from(last.timestamp_ns)) as i64;
             self.stamp_ns = Some(first.timestamp_ns);
         }
+        self.columns += columns().count() as u32;
         if self.decode_points {
             self.decode(packet);
         }
@@ -148,8 +152,18 @@ impl OusterAssembler {
         }
     }
 
+    /// The scan gathered since the last one handed on, however little of the turn
+    /// it holds (a capture of part of one turn): the scan, and its valid columns of
+    /// the turn's.
+    pub fn finish(&mut self) -> Option<(PacketScan, u32, u16)> {
+        let columns = self.columns;
+        let scan = self.hand_on()?;
+        Some((scan, columns, self.model.columns_per_frame))
+    }
+
     /// The scan gathered so far, if it has any column.
     fn hand_on(&mut self) -> Option<PacketScan> {
+        self.columns = 0;
         self.handed_on = self.frame_id.take();
         let stamp_ns = self.stamp_ns.take()?;
         Some(PacketScan {
