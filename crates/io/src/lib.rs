@@ -1,6 +1,6 @@
 //! Stage 0, reading: a drive into [`Frame`](travmap_core::frame::Frame)s (METHOD.md
 //! section 1). A [`Source`] is whatever holds a drive, told apart by content
-//! ([`format`]): a KITTI / SemanticKITTI sequence ([`kitti`]), a recorded log
+//! ([`format`](mod@format)): a KITTI / SemanticKITTI sequence ([`kitti`]), a recorded log
 //! ([`ros_drive`] over the [`containers`]: MCAP, ROS 1 bag, rosbag2, pcap), a folder
 //! of scans or one saved cloud ([`cloud_files`]). LiDAR [`packets`] become scans;
 //! [`payloads`] turn cloud and image messages into points and pixels. Nothing here

@@ -38,7 +38,7 @@ pub fn temporary_path(path: &Path) -> std::io::Result<PathBuf> {
 const NAME_MAX: usize = 255;
 
 /// How the temporary names of output `name` begin, up to the process id: `.NAME.tmp-`,
-/// NAME cut (at a character) so that the whole fits in [`NAME_MAX`] with the largest
+/// NAME cut (at a character) so that the whole fits in `NAME_MAX` with the largest
 /// process id (a valid 253-byte name once could not be written).
 pub fn temporary_prefix(name: &str) -> String {
     const LARGEST_PID_DIGITS: usize = 7;
@@ -142,7 +142,7 @@ pub fn sync_output(file: &File) -> std::io::Result<()> {
 const WRITEBACK_BYTES: u64 = 8 << 20;
 
 /// A file that asks the kernel to start writing its bytes to the disk every
-/// [`WRITEBACK_BYTES`] (Linux's `sync_file_range`, which does not wait), so that the
+/// `WRITEBACK_BYTES` (Linux's `sync_file_range`, which does not wait), so that the
 /// `fsync` at the end finds most of them written: a large output's final sync went
 /// from waiting on all of it (75 ms for annotate's 176 MB here, 4 ms with it) to its last part.
 /// Elsewhere a plain file.

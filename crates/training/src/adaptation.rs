@@ -6,7 +6,7 @@
 //! read (`Source::set_read_labels`).
 //!
 //! The adapted model replaces the prior only where the drives show it is better
-//! ([`check_against_prior`]): on the cells the vehicle drove over and the cells over
+//! (`check_against_prior`): on the cells the vehicle drove over and the cells over
 //! its clearance, evidence that owes nothing to the prior, held out of the fit a
 //! block of the world at a time. Otherwise the prior is kept, and the model file says
 //! why.

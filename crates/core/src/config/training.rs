@@ -77,7 +77,7 @@ pub struct TrainingConfig {
     pub weigh_inputs: WeighInputs,
     /// Features the model does not look at (their standardised values are all 0, so
     /// they add nothing to the kernel's distances); default
-    /// [`SENSOR_DEPENDENT_FEATURES`] (docs/method.md "Streets and sensors it has never
+    /// `SENSOR_DEPENDENT_FEATURES` (docs/method.md "Streets and sensors it has never
     /// seen"). `[]` is the paper's method.
     pub left_out_features: Vec<String>,
 }

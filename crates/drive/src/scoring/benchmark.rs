@@ -37,7 +37,7 @@ pub struct BenchmarkReport {
     /// One frame at a time, one thread, posed as the source is (`register` holds
     /// the registration when its poses are estimated).
     pub timings: TimingReport,
-    /// The floor ([`floor_ms`]): moving the window's points into the frame's grid
+    /// The floor (`floor_ms`): moving the window's points into the frame's grid
     /// and counting them per cell, nothing else; one thread, per frame.
     pub floor_ms: Spread,
     /// Median latency over the floor's median.

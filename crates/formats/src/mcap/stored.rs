@@ -102,7 +102,7 @@ fn message_index(body: &[u8]) -> Option<(u16, u64)> {
 /// The file's chunks as stored, when they hold every message and their message
 /// indexes say which: None for a file with messages outside chunks, a chunk
 /// without message indexes, or a channel that neither the data section nor the
-/// summary declares. Lengths are checked as [`check_chunk_sizes`] does.
+/// summary declares. Lengths are checked as `check_chunk_sizes` does.
 pub fn stored_log(map: &Bytes) -> Option<StoredLog> {
     let mut log = StoredLog::default();
     // Where the message index records after the last chunk start; None once another

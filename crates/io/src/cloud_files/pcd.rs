@@ -93,7 +93,7 @@ pub fn parse_pcd(bytes: &[u8], frame_id: &str) -> Result<PointCloud2, String> {
     Ok(cloud)
 }
 
-/// Reads the PCD file at `path` a chunk of points at a time (see [`read_rows`]),
+/// Reads the PCD file at `path` a chunk of points at a time (see `read_rows`),
 /// so memory stays the chunk's: ascii and binary data stream from the file;
 /// binary_compressed data (LZF over whole columns) is decompressed whole first.
 pub fn stream_pcd(

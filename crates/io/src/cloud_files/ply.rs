@@ -94,7 +94,7 @@ pub fn parse_ply(bytes: &[u8], frame_id: &str) -> Result<PointCloud2, String> {
     Ok(cloud)
 }
 
-/// Reads the PLY file at `path` a chunk of vertices at a time (see [`read_rows`]),
+/// Reads the PLY file at `path` a chunk of vertices at a time (see `read_rows`),
 /// so memory stays the chunk's whatever the file's size.
 pub fn stream_ply(
     path: &Path,

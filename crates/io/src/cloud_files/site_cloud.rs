@@ -11,7 +11,7 @@
 //! of many passes is denser than the 3-scan window the model was trained on, and
 //! `integration.scans` is 1 (the tile is the whole window).
 //!
-//! The file is read once, a chunk at a time, into a [`BucketStore`] (points by
+//! The file is read once, a chunk at a time, into a `BucketStore` (points by
 //! bucket of half a tile; past a bound, in a temporary file), and each tile is read
 //! back from its four buckets when it is the method's turn: memory stays bounded
 //! whatever the cloud's size.

@@ -32,7 +32,7 @@ pub struct BagMessages<'a> {
 }
 
 impl<'a> BagMessages<'a> {
-    /// Every message of `bag` in file order, of each the [`Part`] `parts` says
+    /// Every message of `bag` in file order, of each the `Part` `parts` says
     /// (all of it when None); up to `threads` chunks decompressed at once.
     pub fn new(bag: &'a BagFile, threads: usize, parts: Option<Parts<'a>>) -> Self {
         Self {

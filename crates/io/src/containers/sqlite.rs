@@ -3,7 +3,7 @@
 //! SQLite is the bundled library (no system one needed), and a `.db3` is opened
 //! immutable and read-only: reading never creates a journal or `-shm` file beside an
 //! input (one with a write-ahead log beside it is read from a copy:
-//! [`super::sqlite_wal`]). Messages come in the order they were written (their row
+//! `super::sqlite_wal`). Messages come in the order they were written (their row
 //! ids), as they do from an MCAP file.
 
 use std::collections::{HashMap, VecDeque};
@@ -61,7 +61,7 @@ impl SqliteFile {
         &self.path
     }
 
-    /// Said when its messages are read from a copy (see [`Readable`]).
+    /// Said when its messages are read from a copy (see `Readable`).
     pub fn notice(&self) -> Option<&str> {
         self.readable.notice.as_deref()
     }

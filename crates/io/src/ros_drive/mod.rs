@@ -113,7 +113,7 @@ pub struct RosDrive {
 
 impl RosDrive {
     /// Reads `log`'s topics, cloud stamps and transforms in one pass
-    /// ([`LogIndex`]), and poses the clouds as [`decide`] says, from `poses`.
+    /// (`LogIndex`), and poses the clouds as [`decide`] says, from `poses`.
     pub fn open(log: Log, options: &LogOptions, poses: PoseSource) -> Result<Self> {
         let mut index = LogIndex::read(&log, options, poses)?;
         let packet_topics = usize::from(index.packets.is_some())

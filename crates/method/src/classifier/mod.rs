@@ -3,8 +3,8 @@
 //!
 //! Input: a [`FeatureGrid`]. Output: one [`CellClass`] per cell. Prediction runs over
 //! a flat f32 support-vector matrix with precomputed squared norms and one reused
-//! buffer per grid, no allocation per cell. Training lives in [`training`], the
-//! solver in [`smo`].
+//! buffer per grid, no allocation per cell. Training lives in `training`, the
+//! solver in `smo`.
 
 pub mod kernel;
 pub mod model_file;

@@ -9,7 +9,7 @@
 //! of {azimuth u16 in 0.01 degree, one {distance u16, reflectivity u8 (XT, QT64: and
 //! a reserved byte)} per laser}, and a tail holding the return mode, the UTC date and
 //! the microseconds of the packet. Dual-return modes put the returns of one firing in
-//! consecutive blocks. [`Layout`] holds each model's sizes and offsets.
+//! consecutive blocks. `Layout` holds each model's sizes and offsets.
 //!
 //! Points are in Hesai's frame as nebula writes it: +y at azimuth 0 (forward), +x at
 //! 90 degrees (clockwise seen from above), z up. A channel's azimuth is its block's
