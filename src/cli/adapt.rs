@@ -110,7 +110,7 @@ pub fn adapted_model(
     prior_name: &str,
     output: &Output,
 ) -> Result<(Adapted, Vec<Selection>)> {
-    let mut selections = inputs.open(config.appearance.enabled)?;
+    let mut selections = inputs.open(config, config.appearance.enabled)?;
     let bar = output.progress(frame_count(&selections), "adapting");
     let adapted = adapt_model(&mut selections, config, prior, prior_name, &mut || {
         bar.inc(1)

@@ -90,7 +90,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     let (model, model_name) =
         (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;
     // Images only where the model reads them; they are copied through either way.
-    let selection = args.inputs.open_one(images_for(&model, config))?;
+    let selection = args.inputs.open_one(config, images_for(&model, config))?;
     let mut metadata = BTreeMap::from([
         (
             "travmap_version".to_string(),

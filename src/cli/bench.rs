@@ -48,7 +48,7 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
     let tools = args
         .tools
         .then(|| {
-            let input = args.inputs.open_one(false)?;
+            let input = args.inputs.open_one(config, false)?;
             bench_tools(
                 &args.inputs,
                 &input,
@@ -58,7 +58,7 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
         })
         .transpose()?;
     let (model, model_name) = args.model.load(config)?;
-    let selection = args.inputs.open_one(images_for(&model, config))?;
+    let selection = args.inputs.open_one(config, images_for(&model, config))?;
     if let (Some(tools), false) = (&tools, output.json) {
         let out = &mut std::io::stdout().lock();
         print_tools_table(out, &selection.describe(), tools, tool_repeats)?;

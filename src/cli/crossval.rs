@@ -33,7 +33,7 @@ pub struct CrossvalArgs {
 pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = args.inputs.output;
-    let selections = args.inputs.open(config.appearance.enabled)?;
+    let selections = args.inputs.open(config, config.appearance.enabled)?;
     if selections.len() > 1 && !args.spatial {
         let bar = output.progress(selections.len() as u64, "holding out");
         let report = leave_one_input_out(&selections, config, &|message| {

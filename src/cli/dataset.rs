@@ -66,7 +66,7 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
         }
         Layout::Parts { .. } => check_output_dir(output_path, &args.inputs.files(model_file))?,
     }
-    let mut selections = args.inputs.open(config.appearance.enabled)?;
+    let mut selections = args.inputs.open(config, config.appearance.enabled)?;
     let model = match &choice {
         Some(choice) => Some(load_model(choice, config)?.0),
         None => None,

@@ -39,7 +39,7 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     let output = args.inputs.output;
     let (model, model_name) =
         (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;
-    let mut selections = args.inputs.open(config.appearance.enabled)?;
+    let mut selections = args.inputs.open(config, config.appearance.enabled)?;
     // Training scans are recognised by content, not by the path as typed.
     let trained_on: HashSet<&str> = model
         .training

@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use travmap_core::error::Error;
 use travmap_drive::scoring::evaluation::Evaluation;
 use travmap_drive::scoring::metrics::Confusion;
 use travmap_io::SourceOptions;
@@ -104,11 +103,11 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let site_tile_m = Some(config.grid.size_m);
     let options = SourceOptions {
         site_tile_m,
-        ..args.inputs.source_options()?
+        ..args.inputs.source_options(&config)?
     };
     let selection = args
         .inputs
-        .open_one_as(&options, images_for(&model, &config))?;
+        .open_one_as(&options, &config, images_for(&model, &config))?;
     let config = &config;
     let georeference = selection.source.georeference();
     if let (Some(image), Some(georeference)) = (&nav2_image, &georeference) {
@@ -138,12 +137,9 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let (lattice, frames, memory_bytes) = (map.lattice(), map.frames(), map.memory_bytes());
     let cell_size_m = lattice.cell_size_m;
     if frames == 0 {
-        return Err(Error::NothingWritten {
-            path: first_output.to_path_buf(),
-            inputs: selections[0].describe(),
-            why: travmap_io::why_none_read(&selections[0].source.skipped()),
-        }
-        .into());
+        let selection = &selections[0];
+        let skipped = selection.source.skipped();
+        return Err(travmap_io::nothing_read(first_output, selection.describe(), &skipped).into());
     }
     // The cells are the map from here on: its tiles (most of a site map's memory) go.
     drop(map);

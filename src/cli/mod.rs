@@ -344,9 +344,9 @@ pub struct Inputs {
 
 impl Inputs {
     /// How the inputs are read: the flags given, and the configuration's poses.
-    pub fn source_options(&self) -> Result<SourceOptions> {
+    pub fn source_options(&self, config: &Config) -> Result<SourceOptions> {
         Ok(SourceOptions {
-            poses: self.settings.load()?.integration.poses,
+            poses: config.integration.poses,
             keep_going: self.keep_going,
             log: self.sensors.log_options(LogOptions {
                 world_frame: self.world_frame.clone(),
@@ -384,9 +384,11 @@ impl Inputs {
         arguments
     }
 
-    /// Opens every input; `read_images` decodes camera images into the frames.
-    pub fn open(&self, read_images: bool) -> Result<Vec<Selection>> {
-        self.open_paths(&self.sequences, &self.source_options()?, read_images)
+    /// Opens every input under `config` (the command's, loaded once);
+    /// `read_images` decodes camera images into the frames.
+    pub fn open(&self, config: &Config, read_images: bool) -> Result<Vec<Selection>> {
+        let options = self.source_options(config)?;
+        self.open_paths(&self.sequences, &options, config, read_images)
     }
 
     /// Opens `paths` (some of the inputs) as [`Inputs::open`] does, read as
@@ -395,17 +397,17 @@ impl Inputs {
         &self,
         paths: &[PathBuf],
         options: &SourceOptions,
+        config: &Config,
         read_images: bool,
     ) -> Result<Vec<Selection>> {
         refuse_repeats(paths)?;
-        let config = self.settings.load()?;
         let notice = |notice: &str| eprintln!("notice: {notice}");
         paths
             .iter()
             .map(|path| {
                 let mut selection =
                     open_selection(path, self.frames.clone(), options, read_images)?;
-                selection.survey(&config, &notice)?;
+                selection.survey(config, &notice)?;
                 Ok(selection)
             })
             .collect()
@@ -424,14 +426,19 @@ impl Inputs {
 
     /// Opens the one input of a command that takes one (clap has checked that it is
     /// one: [`one_input`]).
-    pub fn open_one(&self, read_images: bool) -> Result<Selection> {
-        self.open_one_as(&self.source_options()?, read_images)
+    pub fn open_one(&self, config: &Config, read_images: bool) -> Result<Selection> {
+        self.open_one_as(&self.source_options(config)?, config, read_images)
     }
 
     /// Opens the one input, read as `options` say.
-    pub fn open_one_as(&self, options: &SourceOptions, read_images: bool) -> Result<Selection> {
+    pub fn open_one_as(
+        &self,
+        options: &SourceOptions,
+        config: &Config,
+        read_images: bool,
+    ) -> Result<Selection> {
         Ok(self
-            .open_paths(&self.sequences, options, read_images)?
+            .open_paths(&self.sequences, options, config, read_images)?
             .remove(0))
     }
 }

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use travmap_core::error::Error;
 use travmap_drive::scoring::evaluation::Spread;
 use travmap_outputs::trajectory::{TrajectoryFormat, write_trajectory};
 
@@ -40,7 +39,7 @@ pub fn odometry(args: OdometryArgs) -> Result<Outcome> {
     let config = args.inputs.settings.load()?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
     check_output(output_path, &args.inputs.files(None))?;
-    let mut selection = args.inputs.open_one(false)?;
+    let mut selection = args.inputs.open_one(&config, false)?;
     // Registration needs no labels: one short cannot stop it.
     selection.source.set_read_labels(false);
     let selections = [selection];
@@ -52,12 +51,9 @@ pub fn odometry(args: OdometryArgs) -> Result<Outcome> {
         Format::Tum => TrajectoryFormat::Tum,
     };
     if poses.is_empty() {
-        return Err(Error::NothingWritten {
-            path: output_path.to_path_buf(),
-            inputs: selections[0].describe(),
-            why: travmap_io::why_none_read(&selections[0].source.skipped()),
-        }
-        .into());
+        let selection = &selections[0];
+        let skipped = selection.source.skipped();
+        return Err(travmap_io::nothing_read(output_path, selection.describe(), &skipped).into());
     }
     write_trajectory(output_path, &poses, format)?;
     let register_ms = Spread::of(&poses.iter().map(|p| p.register_ms).collect::<Vec<_>>());

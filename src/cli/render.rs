@@ -56,7 +56,7 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         check_output(output_path, &inputs)?;
     }
     let (model, _) = args.model.load(config)?;
-    let selection = args.inputs.open_one(images_for(&model, config))?;
+    let selection = args.inputs.open_one(config, images_for(&model, config))?;
     if args.all
         && output_path
             .extension()

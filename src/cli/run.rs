@@ -33,7 +33,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let config = args.inputs.settings.load()?;
     let output = args.inputs.output;
     let (model, model_name) = args.model.load(&config)?;
-    let mut selections = args.inputs.open(images_for(&model, &config))?;
+    let mut selections = args.inputs.open(&config, images_for(&model, &config))?;
     // `run` prints no scores: labels it does not need cannot stop it.
     for selection in &mut selections {
         selection.source.set_read_labels(false);

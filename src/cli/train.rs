@@ -70,9 +70,9 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
     let mut selections = if drives.is_empty() {
         Vec::new()
     } else {
-        let options = args.inputs.source_options()?;
+        let options = args.inputs.source_options(config)?;
         args.inputs
-            .open_paths(&drives, &options, config.appearance.enabled)?
+            .open_paths(&drives, &options, config, config.appearance.enabled)?
     };
     // The model records which scans it learnt from, so `eval` can tell them apart.
     for selection in &mut selections {

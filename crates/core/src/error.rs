@@ -97,7 +97,7 @@ pub enum Error {
     NothingWritten {
         path: PathBuf,
         inputs: String,
-        /// The skipped frames in words (`travmap_io::why_none_read`).
+        /// The skipped frames in words (`travmap_io::nothing_read` builds it).
         why: String,
     },
 

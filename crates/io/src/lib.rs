@@ -20,5 +20,5 @@ mod source;
 mod yaml;
 
 pub use kitti::KittiSequence;
-pub use skips::{Skip, SkipLog, why_none_read};
+pub use skips::{Skip, SkipLog, nothing_read};
 pub use source::{Georeference, Source, SourceKind, SourceOptions, WORLD_FRAME};

@@ -27,11 +27,20 @@ fn without_keep_going_hint(reason: &str) -> String {
     said.trim_end().to_string()
 }
 
-/// Why a run read no frame, in words for [`Error::NothingWritten`]: the skips (the
-/// first one's reason), or that none was selected.
-///
-/// [`Error::NothingWritten`]: travmap_core::error::Error::NothingWritten
-pub fn why_none_read(skipped: &[Skip]) -> String {
+/// The error of a command that read no frame of `inputs` (in words), so that
+/// `output` is not written: with the skips (the first one's reason), or that none
+/// was selected. Every command says it so.
+pub fn nothing_read(output: &std::path::Path, inputs: String, skipped: &[Skip]) -> Error {
+    Error::NothingWritten {
+        path: output.to_path_buf(),
+        inputs,
+        why: why_none_read(skipped),
+    }
+}
+
+/// Why a run read no frame, in words: the skips (the first one's reason), or that
+/// none was selected.
+fn why_none_read(skipped: &[Skip]) -> String {
     match skipped.first() {
         Some(first) => format!(
             "{} skipped; frame {}: {}",

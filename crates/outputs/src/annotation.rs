@@ -384,11 +384,12 @@ pub fn annotate(
         on_handed,
     )?;
     if frames == 0 {
-        return Err(Error::NothingWritten {
-            path: output.to_path_buf(),
-            inputs: selection.source.path().display().to_string(),
-            why: travmap_io::why_none_read(&selection.source.skipped()),
-        });
+        let inputs = selection.source.path().display().to_string();
+        return Err(travmap_io::nothing_read(
+            output,
+            inputs,
+            &selection.source.skipped(),
+        ));
     }
     if let Some(writer) = &kitti_passthrough {
         let written = &writer.summary;

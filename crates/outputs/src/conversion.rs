@@ -584,11 +584,8 @@ pub fn convert_kitti(
         }
     }
     if writer.summary.frames == 0 {
-        return Err(Error::NothingWritten {
-            path: output.to_path_buf(),
-            inputs: sequence.dir().display().to_string(),
-            why: travmap_io::why_none_read(&skips.skipped()),
-        });
+        let inputs = sequence.dir().display().to_string();
+        return Err(travmap_io::nothing_read(output, inputs, &skips.skipped()));
     }
     sink.finish()?;
     let mut summary = writer.summary;

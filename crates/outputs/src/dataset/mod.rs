@@ -34,7 +34,7 @@ use crate::atomic::{AtomicFile, WritebackFile, parquet_failure, sync_output, wri
 use travmap_core::Config;
 use travmap_core::config::FeatureGroup;
 use travmap_core::error::{Error, Result};
-use travmap_io::{Skip, why_none_read};
+use travmap_io::{Skip, nothing_read};
 use travmap_method::features::feature_names;
 use travmap_method::grid::CellClass;
 use travmap_method::pipeline::FrameResult;
@@ -381,11 +381,7 @@ impl DatasetWriter {
     /// their `skipped` frames say why, when no frame was read.
     pub fn finish(mut self, inputs: &str, skipped: &[Skip]) -> Result<DatasetSummary> {
         if self.summary.frames == 0 {
-            return Err(Error::NothingWritten {
-                path: self.path.clone(),
-                inputs: inputs.to_string(),
-                why: why_none_read(skipped),
-            });
+            return Err(nothing_read(&self.path, inputs.to_string(), skipped));
         }
         self.close_file()?;
         let files: Vec<PathBuf> = self
