@@ -1,5 +1,5 @@
 //! Entry points of the cargo fuzz targets in `fuzz/` for the readers of this crate
-//! (`travmap::fuzzing` gathers them with the library's own), also run by the corpus
+//! (`travmap_fuzzing` gathers them with the other crates'), also run by the corpus
 //! replay and mutation tests in `tests/`: each feeds arbitrary bytes to one parser
 //! of untrusted input. Any result is fine, an error or a value; a panic,
 //! an abort or an allocation out of proportion to the input is a bug.
