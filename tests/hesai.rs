@@ -284,7 +284,7 @@ fn scans_cut_for_their_stamps_alone_are_the_decoded_scans() {
         assert!(decoded.len() >= 2, "{bag}");
         assert!(decoded.iter().all(|scan| !scan.points.is_empty()));
         assert!(cut.iter().all(|scan| scan.points.is_empty()));
-        let stamps = |scans: &[travmap_io::packets::velodyne::PacketScan]| -> Vec<u64> {
+        let stamps = |scans: &[travmap_io::packets::PacketScan]| -> Vec<u64> {
             scans.iter().map(|scan| scan.stamp_ns).collect()
         };
         assert_eq!(stamps(&cut), stamps(&decoded), "{bag}");

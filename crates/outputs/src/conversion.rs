@@ -38,8 +38,8 @@ use travmap_formats::ros::{
 };
 use travmap_io::KittiSequence;
 use travmap_io::SkipLog;
+use travmap_io::packets::PacketScan;
 use travmap_io::packets::ouster::{OUSTER_PACKET_MESSAGES, PACKET_MSG_SCHEMA};
-use travmap_io::packets::velodyne::PacketScan;
 use travmap_io::ros_drive::RosDrive;
 
 pub const CLOUD_TOPIC: &str = "/velodyne_points";

@@ -5,9 +5,14 @@
 //! index and the drive's frames.
 
 pub mod hesai;
+mod message;
 pub mod ouster;
 pub mod robosense;
+mod scan;
 pub mod velodyne;
+
+pub(crate) use message::{PacketField, ScanMessage, packets_message};
+pub use scan::{PacketPoint, PacketScan, to_log_clock_ns};
 
 use std::path::Path;
 use travmap_core::option_files::{TEXT_MAX_BYTES, read_option_text};
@@ -23,8 +28,8 @@ use crate::packets::robosense::{
     robosense_scan_message,
 };
 use crate::packets::velodyne::{
-    Calibration, Decoder, DecoderSettings, PacketField, PacketScan, ScanAssembler, ScanMessage,
-    VELODYNE_SCAN, VelodyneModel, packets_message, scan_message,
+    Calibration, Decoder, DecoderSettings, ScanAssembler, VELODYNE_SCAN, VelodyneModel,
+    scan_message,
 };
 use travmap_formats::ros::MessageEncoding;
 

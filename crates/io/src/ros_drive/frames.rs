@@ -7,8 +7,8 @@ use std::ops::Range;
 
 use super::log_index::HeaderOnly;
 use super::merged_clouds::{MergedCloud, MergedContent, merge};
-use crate::packets::velodyne::{PacketScan, VelodynePoint};
 use crate::packets::{PacketAssembler, PacketCalibration, PacketModel};
+use crate::packets::{PacketPoint, PacketScan};
 use crate::payloads::cloud::{CloudPoints, check_some_finite, cloud_points};
 use crate::payloads::livox::decode_cloud;
 use crate::ros_drive::{IMAGE_PAIRING_NS, RosDrive};
@@ -208,7 +208,7 @@ fn assembler(packets: Option<&(PacketModel, PacketCalibration)>) -> Option<Packe
 }
 
 /// A scan cut from packets as a cloud: intensity on the 0..1 byte scale.
-fn packet_points(points: &[VelodynePoint]) -> CloudPoints {
+fn packet_points(points: &[PacketPoint]) -> CloudPoints {
     CloudPoints {
         points: (points.iter())
             .map(|p| {
@@ -225,7 +225,7 @@ fn packet_points(points: &[VelodynePoint]) -> CloudPoints {
 /// A cloud as the log holds it: a PointCloud2 message, or a scan cut from packets.
 enum Cloud {
     Message(LogMessage),
-    Packets(Vec<VelodynePoint>),
+    Packets(Vec<PacketPoint>),
 }
 
 /// The frames of a drive, streamed: see [`RosDrive::read`]. A cloud is handed on

@@ -2,7 +2,7 @@
 
 use super::calibration::HesaiCalibration;
 use super::model::{DistanceUnit, HesaiModel, Layout, packet_time_ns, returns_of};
-use crate::packets::velodyne::{PacketScan, VelodynePoint, to_log_clock_ns};
+use crate::packets::{PacketPoint, PacketScan, to_log_clock_ns};
 
 /// Two returns of one firing closer than this are one surface: the first is dropped.
 const DUAL_RETURN_THRESHOLD_M: f32 = 0.1;
@@ -208,20 +208,17 @@ impl HesaiAssembler {
                     }
                     let horizontal = distance * self.elevation_cos[laser];
                     let corrected = normalised(azimuth);
-                    self.scans[self.laser_scan[laser]]
-                        .points
-                        .push(VelodynePoint {
-                            xyz_m: [
-                                horizontal * sin,
-                                horizontal * cos,
-                                distance * self.elevation_sin[laser],
-                            ],
-                            intensity: reflectivity,
-                            ring: laser as u16,
-                            azimuth_centideg: (corrected.to_degrees() * 100.0) as u16 % 36_000,
-                            time_ns: packet_ns
-                                .saturating_add_signed(offset_ns(first_block + k, laser)),
-                        });
+                    self.scans[self.laser_scan[laser]].points.push(PacketPoint {
+                        xyz_m: [
+                            horizontal * sin,
+                            horizontal * cos,
+                            distance * self.elevation_sin[laser],
+                        ],
+                        intensity: reflectivity,
+                        ring: laser as u16,
+                        azimuth_centideg: (corrected.to_degrees() * 100.0) as u16 % 36_000,
+                        time_ns: packet_ns.saturating_add_signed(offset_ns(first_block + k, laser)),
+                    });
                 }
             }
         }

@@ -4,7 +4,7 @@
 
 use super::metadata::OusterMetadata;
 use super::packet::OusterModel;
-use crate::packets::velodyne::{PacketScan, VelodynePoint};
+use crate::packets::{PacketPoint, PacketScan};
 
 /// A second return closer than this to the first is the same surface.
 const DUAL_RETURN_THRESHOLD_MM: u32 = 100;
@@ -21,7 +21,7 @@ pub struct OusterAssembler {
     /// The frame id being gathered, and the last one handed on.
     frame_id: Option<u32>,
     handed_on: Option<u32>,
-    points: Vec<VelodynePoint>,
+    points: Vec<PacketPoint>,
     /// The scan's first column's time, and the shift from the sensor's clock to
     /// the log's at the packet that held it.
     stamp_ns: Option<u64>,
@@ -137,7 +137,7 @@ impl OusterAssembler {
                     let (direction, origin) =
                         (self.directions[beams + beam], self.origins[beams + beam]);
                     let range_m = range_mm as f32 / 1000.0;
-                    self.points.push(VelodynePoint {
+                    self.points.push(PacketPoint {
                         xyz_m: std::array::from_fn(|k| origin[k] + range_m * direction[k]),
                         intensity: reflectivity,
                         ring: self.rings[beam],

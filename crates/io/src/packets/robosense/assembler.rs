@@ -7,7 +7,7 @@ use super::model::{
     BLOCK_BYTES, BLOCK_ID, BLOCKS, CHANNEL_FIRING_US, DISTANCE_UNIT_M, FIRING_US, HEADER_BYTES,
     LENS_OFFSET_M, RANGE_M, RobosenseModel, TIME_AT,
 };
-use crate::packets::velodyne::{PacketScan, VelodynePoint, to_log_clock_ns};
+use crate::packets::{PacketPoint, PacketScan, to_log_clock_ns};
 
 const ROUND_CENTIDEG: i32 = 36_000;
 /// Blocks further apart than this span the field of view's blind part.
@@ -267,7 +267,7 @@ impl RobosenseAssembler {
                 let (sin_v, cos_v) = self.vertical_sin_cos[laser];
                 let (sin_c, cos_c) = sin_cos(corrected);
                 let (sin_h, cos_h) = sin_cos(horizontal);
-                points.push(VelodynePoint {
+                points.push(PacketPoint {
                     xyz_m: [
                         distance * cos_v * cos_c + LENS_OFFSET_M * cos_h,
                         -distance * cos_v * sin_c - LENS_OFFSET_M * sin_h,

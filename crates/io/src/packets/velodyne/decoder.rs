@@ -5,6 +5,7 @@ use super::calibration::Calibration;
 use super::packet::{
     BANK_FLAGS, BLOCK_BYTES, BLOCKS, CENTIDEGREES, DUAL_RETURN, RETURN_MODE_AT, VelodyneModel,
 };
+use crate::packets::PacketPoint;
 
 /// Which returns and angles make points.
 #[derive(Clone, Debug, PartialEq)]
@@ -42,19 +43,6 @@ impl DecoderSettings {
             centideg >= min || centideg <= max
         }
     }
-}
-
-/// One decoded return.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct VelodynePoint {
-    /// x, y, z in the sensor frame, metres.
-    pub xyz_m: [f32; 3],
-    pub intensity: u8,
-    pub ring: u16,
-    /// Azimuth after correction, 0.01 degree clockwise from +x.
-    pub azimuth_centideg: u16,
-    /// Time of the firing: the packet's stamp plus the firing's offset, ns.
-    pub time_ns: u64,
 }
 
 /// Decodes packets of one model with one calibration.
@@ -129,7 +117,7 @@ impl Decoder {
         &self,
         packet: &[u8],
         stamp_ns: u64,
-        out: &mut Vec<VelodynePoint>,
+        out: &mut Vec<PacketPoint>,
     ) -> Result<(), String> {
         let model = VelodyneModel::of_packet(packet)?;
         if model != self.model {
@@ -231,7 +219,7 @@ impl Decoder {
                 let x = xy * cos_rot + laser.horiz_offset_m * sin_rot;
                 let y = -(xy * sin_rot - laser.horiz_offset_m * cos_rot);
                 let z = distance * laser.sin_vert + laser.vert_offset_m * laser.cos_vert;
-                out.push(VelodynePoint {
+                out.push(PacketPoint {
                     xyz_m: [x, y, z],
                     intensity: packet[k + 2],
                     ring: laser.ring,

@@ -29,11 +29,10 @@ mod packet;
 mod scans;
 
 pub use calibration::Calibration;
-pub use decoder::{Decoder, DecoderSettings, VelodynePoint};
-pub(crate) use message::{PacketField, packets_message};
-pub use message::{ScanMessage, VELODYNE_SCAN, scan_message};
+pub use decoder::{Decoder, DecoderSettings};
+pub use message::{VELODYNE_SCAN, scan_message};
 pub use packet::{PACKET_BYTES, VelodyneModel};
-pub use scans::{PacketScan, ScanAssembler, ScanCutter, to_log_clock_ns};
+pub use scans::{ScanAssembler, ScanCutter};
 
 #[cfg(test)]
 mod tests {

@@ -1,7 +1,8 @@
 //! A stream of Velodyne packets cut into scans at a cut angle.
 
-use super::decoder::{Decoder, VelodynePoint};
+use super::decoder::Decoder;
 use super::packet::{BLOCK_BYTES, BLOCKS, CENTIDEGREES, VelodyneModel};
+use crate::packets::{PacketPoint, PacketScan};
 
 /// Where a stream of packets is cut into scans: nebula's rule, on the azimuths of
 /// each packet's first and last block only (the index pass needs no points).
@@ -39,40 +40,12 @@ impl ScanCutter {
     }
 }
 
-/// A complete scan.
-#[derive(Clone, Debug)]
-pub struct PacketScan {
-    pub stamp_ns: u64,
-    pub points: Vec<VelodynePoint>,
-}
-
-impl PacketScan {
-    /// The scan, its stamp and its points' times moved by `shift_ns` (from the
-    /// sensor's clock to the log's).
-    pub fn shifted(mut self, shift_ns: i64) -> Self {
-        self.stamp_ns = self.stamp_ns.saturating_add_signed(shift_ns);
-        for point in &mut self.points {
-            point.time_ns = point.time_ns.saturating_add_signed(shift_ns);
-        }
-        self
-    }
-}
-
-/// What moves a packet's time in the sensor's clock (`sensor_ns`) to the log's, by
-/// the stamp it was recorded with (0: unknown, the sensor's clock is the log's).
-pub fn to_log_clock_ns(stamp_ns: u64, sensor_ns: u64) -> i64 {
-    match stamp_ns {
-        0 => 0,
-        stamp_ns => (i128::from(stamp_ns) - i128::from(sensor_ns)) as i64,
-    }
-}
-
 /// Packets in, scans out: [`ScanCutter`]'s cuts, the points past the cut carried
 /// into the next scan.
 pub struct ScanAssembler {
     decoder: Decoder,
     cutter: ScanCutter,
-    points: Vec<VelodynePoint>,
+    points: Vec<PacketPoint>,
     stamp_ns: Option<u64>,
 }
 
@@ -99,7 +72,7 @@ impl ScanAssembler {
         }
         // Trailing points within 90 degrees past the cut begin the next scan.
         let phase = self.cutter.phase_centideg;
-        let past_cut = |p: &VelodynePoint| {
+        let past_cut = |p: &PacketPoint| {
             (CENTIDEGREES + u32::from(p.azimuth_centideg) - phase) % CENTIDEGREES < 9_000
         };
         let keep = self.points.len() - self.points.iter().rev().take_while(|p| past_cut(p)).count();
