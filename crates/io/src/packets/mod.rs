@@ -5,10 +5,10 @@
 //! index and the drive's frames.
 
 pub mod hesai;
-mod message;
+pub(crate) mod message;
 pub mod ouster;
 pub mod robosense;
-mod scan;
+pub(crate) mod scan;
 pub mod velodyne;
 
 pub(crate) use message::{PacketField, ScanMessage, packets_message};

@@ -2,7 +2,7 @@
 
 use super::calibration::HesaiCalibration;
 use super::model::{DistanceUnit, HesaiModel, Layout, packet_time_ns, returns_of};
-use crate::packets::{PacketPoint, PacketScan, to_log_clock_ns};
+use crate::packets::scan::{PacketPoint, PacketScan, to_log_clock_ns};
 
 /// Two returns of one firing closer than this are one surface: the first is dropped.
 const DUAL_RETURN_THRESHOLD_M: f32 = 0.1;

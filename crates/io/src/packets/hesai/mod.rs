@@ -31,7 +31,7 @@ pub use assembler::HesaiAssembler;
 pub use calibration::HesaiCalibration;
 pub use model::HesaiModel;
 
-use super::{PacketField, ScanMessage, packets_message};
+use super::message::{PacketField, ScanMessage, packets_message};
 use travmap_formats::ros::MessageEncoding;
 
 /// The message type that carries Hesai packets.

@@ -4,7 +4,7 @@
 
 use super::metadata::OusterMetadata;
 use super::packet::OusterModel;
-use crate::packets::{PacketPoint, PacketScan};
+use crate::packets::scan::{PacketPoint, PacketScan};
 
 /// A second return closer than this to the first is the same surface.
 const DUAL_RETURN_THRESHOLD_MM: u32 = 100;

@@ -19,7 +19,7 @@ pub use assembler::OusterAssembler;
 pub use metadata::OusterMetadata;
 pub use packet::{OusterModel, Profile};
 
-use super::ScanMessage;
+use super::message::ScanMessage;
 use travmap_formats::ros::MessageEncoding;
 
 /// ouster_ros's packet message: ROS 2 (`ouster_sensor_msgs`, `ouster_msgs` before

@@ -7,7 +7,7 @@ use super::model::{
     BLOCK_BYTES, BLOCK_ID, BLOCKS, CHANNEL_FIRING_US, DISTANCE_UNIT_M, FIRING_US, HEADER_BYTES,
     LENS_OFFSET_M, RANGE_M, RobosenseModel, TIME_AT,
 };
-use crate::packets::{PacketPoint, PacketScan, to_log_clock_ns};
+use crate::packets::scan::{PacketPoint, PacketScan, to_log_clock_ns};
 
 const ROUND_CENTIDEG: i32 = 36_000;
 /// Blocks further apart than this span the field of view's blind part.

@@ -35,7 +35,7 @@ pub use assembler::RobosenseAssembler;
 pub use calibration::RobosenseCalibration;
 pub use model::RobosenseModel;
 
-use super::{PacketField, ScanMessage, packets_message};
+use super::message::{PacketField, ScanMessage, packets_message};
 use travmap_formats::ros::MessageEncoding;
 
 /// The message type that carries RoboSense packets.

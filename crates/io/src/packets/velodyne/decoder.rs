@@ -5,7 +5,7 @@ use super::calibration::Calibration;
 use super::packet::{
     BANK_FLAGS, BLOCK_BYTES, BLOCKS, CENTIDEGREES, DUAL_RETURN, RETURN_MODE_AT, VelodyneModel,
 };
-use crate::packets::PacketPoint;
+use crate::packets::scan::PacketPoint;
 
 /// Which returns and angles make points.
 #[derive(Clone, Debug, PartialEq)]

@@ -2,7 +2,7 @@
 
 use super::decoder::Decoder;
 use super::packet::{BLOCK_BYTES, BLOCKS, CENTIDEGREES, VelodyneModel};
-use crate::packets::{PacketPoint, PacketScan};
+use crate::packets::scan::{PacketPoint, PacketScan};
 
 /// Where a stream of packets is cut into scans: nebula's rule, on the azimuths of
 /// each packet's first and last block only (the index pass needs no points).
