@@ -13,16 +13,20 @@ use travmap_method::classifier::SvmModel;
 use travmap_method::training_set::TrainingSet;
 use travmap_outputs::dataset::reading::{Labels, read_training_rows};
 
+/// The readers' targets, which come first.
+const READERS: usize = travmap_io::fuzzing::TARGETS.len();
+
 /// Every target by name: the fuzz target `NAME` calls `TARGETS[NAME]`, and its seed
-/// corpus is `fuzz/seeds/NAME/`.
-pub const TARGETS: [(&str, Target); 24] = {
-    let mut all = [("model", model as Target); 24];
+/// corpus is `fuzz/seeds/NAME/`. The readers' targets, then `model` and
+/// `dataset_file`.
+pub const TARGETS: [(&str, Target); READERS + 2] = {
+    let mut all = [("model", model as Target); READERS + 2];
     let mut i = 0;
-    while i < travmap_io::fuzzing::TARGETS.len() {
+    while i < READERS {
         all[i] = travmap_io::fuzzing::TARGETS[i];
         i += 1;
     }
-    all[23] = ("dataset_file", dataset_file);
+    all[READERS + 1] = ("dataset_file", dataset_file);
     all
 };
 
