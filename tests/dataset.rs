@@ -35,16 +35,21 @@ fn train_error(input: &Path, model: &Path, extra: &[&str]) -> String {
     clean_failure(travmap(&args))
 }
 
+/// The shipped sample and the Python that has pyarrow, DuckDB and Polars; None (the
+/// reason printed) without either.
+fn sample_and_client() -> Option<(std::path::PathBuf, String)> {
+    let seq = crate::common::sample()?;
+    let python = crate::common::env_var(
+        "TRAVMAP_CLIENT_PYTHON",
+        "a Python with pyarrow, duckdb and polars",
+    )?;
+    Some((seq, python))
+}
+
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
-    let Some(seq) = crate::common::sample() else {
-        return;
-    };
-    let Some(python) = crate::common::env_var(
-        "TRAVMAP_CLIENT_PYTHON",
-        "a Python with pyarrow, duckdb and polars",
-    ) else {
+    let Some((seq, python)) = sample_and_client() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -322,13 +327,7 @@ fn a_folder_gets_part_files_of_whole_frames_that_train_as_the_single_file() {
 #[test]
 #[ignore = "needs the real clients: source .ci/clients.sh, then cargo test --release -- --ignored"]
 fn pyarrow_duckdb_and_polars_read_the_parts_as_one_table() {
-    let Some(seq) = crate::common::sample() else {
-        return;
-    };
-    let Some(python) = crate::common::env_var(
-        "TRAVMAP_CLIENT_PYTHON",
-        "a Python with pyarrow, duckdb and polars",
-    ) else {
+    let Some((seq, python)) = sample_and_client() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();

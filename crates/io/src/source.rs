@@ -204,24 +204,17 @@ impl Source {
     /// Where this drive's labels are read from, as a person reads it (said when none
     /// were found).
     pub fn where_labels_are_read(&self) -> String {
-        match &self.recording {
-            Recording::Kitti(..) => format!(
-                "{}: labels/NNNNNN.label beside velodyne/NNNNNN.bin",
-                self.path().display()
-            ),
-            Recording::Log(..) => format!(
-                "{}: a `label` field of its point clouds (as `travmap convert` writes from SemanticKITTI)",
-                self.path().display()
-            ),
-            Recording::Scans(..) => format!(
-                "{}: a folder of scans carries no labels (a KITTI sequence's labels/ does)",
-                self.path().display()
-            ),
-            Recording::Site(..) => format!(
-                "{}: a `label` field of the cloud's points",
-                self.path().display()
-            ),
-        }
+        let place = match &self.recording {
+            Recording::Kitti(..) => "labels/NNNNNN.label beside velodyne/NNNNNN.bin",
+            Recording::Log(..) => {
+                "a `label` field of its point clouds (as `travmap convert` writes from SemanticKITTI)"
+            }
+            Recording::Scans(..) => {
+                "a folder of scans carries no labels (a KITTI sequence's labels/ does)"
+            }
+            Recording::Site(..) => "a `label` field of the cloud's points",
+        };
+        format!("{}: {place}", self.path().display())
     }
 
     /// The KITTI sequence, when the drive is one (convert, annotate's passthrough).
