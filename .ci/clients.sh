@@ -2,7 +2,7 @@
 # up and exported for the shell that sources this file:
 #   source .ci/clients.sh && cargo test --release -- --ignored
 # Python mcap + mcap-ros2-support, rosbags, the Foxglove SDK, Ouster's SDK, rerun-sdk, pyarrow, DuckDB,
-# Polars, jsonschema and scapy (packet captures); Ray and pytest for the fleet script's tests (fleet/); Node @mcap/core +
+# Polars, jsonschema and scapy (packet captures); Ray and pytest; the travmap wheel (last); Node @mcap/core +
 # @foxglove/rosmsg2-serialization (tests/clients/package-lock.json); Chromium for
 # rerun's web viewer (tests/viewer.rs), from Debian, as root or through sudo.
 python3 -m venv target/client-venv
@@ -28,3 +28,14 @@ if command -v chromium >/dev/null 2>&1; then
     export TRAVMAP_CHROMIUM="$(command -v chromium)"
     chromium --version
 fi
+# The Python wheel (scripts/build_wheel.sh: the module and the command), installed
+# into a fresh virtual environment as a user installs it, with what its tests
+# (python/tests/, run by tests/python.rs) read beside it.
+python3 -m venv target/maturin-venv
+target/maturin-venv/bin/pip install --quiet --disable-pip-version-check "maturin==1.16.0"
+MATURIN="$PWD/target/maturin-venv/bin/maturin" scripts/build_wheel.sh >/dev/null
+rm -rf target/wheel-venv
+python3 -m venv target/wheel-venv
+target/wheel-venv/bin/pip install --quiet --disable-pip-version-check target/wheels/travmap-*.whl \
+    "numpy==2.4.6" "pyarrow==26.0.1" "pytest==9.2.0" "mcap==1.6.0" "mcap-ros2-support==0.6.0" "ray==2.60.0"
+export TRAVMAP_WHEEL_PYTHON="$PWD/target/wheel-venv/bin/python"

@@ -13,8 +13,8 @@ use travmap_outputs::annotation::{AnnotationOptions, CloudPoints, DRIVE_MAP_EVER
 use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;
 use super::{
-    Inputs, ModelArg, Outcome, check_output, counted, fit_said, frame_count, images_for,
-    model_json, note_extension, notice_drives, outcome, path_text, print_json_summary, print_wrote,
+    Inputs, ModelArg, Outcome, check_output, counted, fit_said, frame_count, model_json,
+    note_extension, notice_drives, outcome, path_text, print_json_summary, print_wrote,
     with_summary,
 };
 
@@ -90,7 +90,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
     let (model, model_name) =
         (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;
     // Images only where the model reads them; they are copied through either way.
-    let selection = args.inputs.open_one(config, images_for(&model, config))?;
+    let selection = args.inputs.open_one(config, model.reads_images(config))?;
     let mut metadata = BTreeMap::from([
         (
             "travmap_version".to_string(),

@@ -9,9 +9,7 @@ use serde_json::json;
 use travmap_drive::scoring::benchmark::benchmark;
 
 use super::bench_tools::{bench_tools, print_tools_table};
-use super::{
-    Inputs, ModelArg, Outcome, images_for, model_json, outcome, print_json_summary, with_summary,
-};
+use super::{Inputs, ModelArg, Outcome, model_json, outcome, print_json_summary, with_summary};
 
 /// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
 #[derive(Args)]
@@ -58,7 +56,7 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
         })
         .transpose()?;
     let (model, model_name) = args.model.load(config)?;
-    let selection = args.inputs.open_one(config, images_for(&model, config))?;
+    let selection = args.inputs.open_one(config, model.reads_images(config))?;
     if let (Some(tools), false) = (&tools, output.json) {
         let out = &mut std::io::stdout().lock();
         print_tools_table(out, &selection.describe(), tools, tool_repeats)?;

@@ -93,7 +93,13 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
         log: args.sensors.log_options(LogOptions::default())?,
         ..SourceOptions::default()
     };
-    let selection = open_selection(&args.sequence, Some(frames.clone()), &options, false)?;
+    let selection = open_selection(
+        &args.sequence,
+        Some(frames.clone()),
+        &options,
+        false,
+        &super::say,
+    )?;
     let selections = [selection];
     let source = &selections[0].source;
     if let Some(drive) = source.log() {

@@ -14,8 +14,8 @@ use travmap_method::classifier::SvmModel;
 use travmap_outputs::dataset::{DEFAULT_ROWS_PER_PART, DatasetSummary, DatasetWriter, Layout};
 
 use super::{
-    Inputs, Outcome, check_output, check_output_dir, counted, frame_count, load_model,
-    note_extension, outcome, path_text, print_json_summary, with_summary,
+    Inputs, Outcome, check_output, check_output_dir, counted, frame_count, note_extension, outcome,
+    path_text, print_json_summary, with_summary,
 };
 
 /// Write a Parquet table of cells to train on, one row per predictable cell per frame
@@ -68,7 +68,7 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     }
     let mut selections = args.inputs.open(config, config.appearance.enabled)?;
     let model = match &choice {
-        Some(choice) => Some(load_model(choice, config)?.0),
+        Some(choice) => Some(SvmModel::load(choice, config)?.0),
         None => None,
     };
     let grid_config = config.for_training_cells();

@@ -15,8 +15,8 @@ use travmap_outputs::preflight::check_distinct_outputs;
 use travmap_outputs::rendering::encode_png;
 
 use super::{
-    Inputs, ModelArg, Outcome, check_output, counted, fit_said, frame_count, images_for,
-    model_json, note_extension, notice_drives, outcome, path_text, print_json_summary, usage,
+    Inputs, ModelArg, Outcome, check_output, counted, fit_said, frame_count, model_json,
+    note_extension, notice_drives, outcome, path_text, print_json_summary, usage,
 };
 
 /// Fuse every frame's prediction (and ground truth) into one map of the drive.
@@ -107,7 +107,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     };
     let selection = args
         .inputs
-        .open_one_as(&options, &config, images_for(&model, &config))?;
+        .open_one_as(&options, &config, model.reads_images(&config))?;
     let config = &config;
     let georeference = selection.source.georeference();
     if let (Some(image), Some(georeference)) = (&nav2_image, &georeference) {

@@ -31,18 +31,17 @@ use std::io::IsTerminal;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use travmap_core::Config;
-use travmap_core::config::{ModelChoice, PoseSource};
-use travmap_core::option_files::{MODEL_MAX_BYTES, read_option_file};
+use travmap_core::config::ModelChoice;
 use travmap_core::stopwatch::Stopwatch;
 use travmap_drive::Selection;
+pub use travmap_drive::opening::{Remark, open_selection, parse_frame_range};
+use travmap_io::SourceOptions;
 use travmap_io::ros_drive::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics};
-use travmap_io::{Source, SourceKind, SourceOptions};
 use travmap_method::classifier::SvmModel;
-use travmap_method::classifier::model_file::embedded_name;
 use travmap_outputs::preflight::{
     InputFiles, Preflight, check_output_directory, check_output_file,
 };
@@ -113,8 +112,7 @@ impl Settings {
             config.set(&format!("integration.poses={poses}"))?;
         }
         // A configuration that cannot be used is a mistake in the command line.
-        config.load_label_map().map_err(|e| usage(format!("{e}")))?;
-        config.validate().map_err(|e| usage(format!("{e}")))?;
+        config.ready().map_err(|e| usage(format!("{e}")))?;
         Ok(config)
     }
 
@@ -269,12 +267,7 @@ pub struct Sensors {
 impl Sensors {
     /// `options` reading these topics with these calibrations.
     pub fn log_options(&self, options: LogOptions) -> Result<LogOptions> {
-        let (cloud_topic, merged_topics) = match self.cloud_topic.as_slice() {
-            [] => (None, MergedTopics::None),
-            [all] if all == "all" => (None, MergedTopics::All),
-            [one] => (Some(one.clone()), MergedTopics::None),
-            [first, more @ ..] => (Some(first.clone()), MergedTopics::Topics(more.to_vec())),
-        };
+        let (cloud_topic, merged_topics) = MergedTopics::from_arguments(&self.cloud_topic);
         Ok(LogOptions {
             cloud_topic,
             merged_topics,
@@ -406,7 +399,7 @@ impl Inputs {
             .iter()
             .map(|path| {
                 let mut selection =
-                    open_selection(path, self.frames.clone(), options, read_images)?;
+                    open_selection(path, self.frames.clone(), options, read_images, &say)?;
                 selection.survey(config, &notice)?;
                 Ok(selection)
             })
@@ -505,111 +498,9 @@ pub fn check_output_dir(output: &Path, inputs: &InputFiles) -> Result<()> {
     Ok(())
 }
 
-/// Opens one input and checks that it has frames in `frames`; without `frames`,
-/// every frame but a packet log's first when the recording began mid-turn (a part
-/// of a rotation, too few points to register or to map), with a notice.
-pub fn open_selection(
-    path: &Path,
-    frames: Option<Range<usize>>,
-    options: &SourceOptions,
-    read_images: bool,
-) -> Result<Selection> {
-    let mut source = Source::open(path, options, &|notice| eprintln!("notice: {notice}"))?;
-    if source.kind() == SourceKind::Kitti {
-        let log = &options.log;
-        let mcap_only = [
-            ("--cloud-topic", &log.cloud_topic),
-            ("--world-frame", &log.world_frame),
-            ("--camera-topic", &log.camera_topic),
-            ("--pose-topic", &log.pose_topic),
-        ];
-        for (flag, _) in mcap_only.iter().filter(|(_, value)| value.is_some()) {
-            eprintln!(
-                "warning: {flag} applies to recorded logs (MCAP, ROS 1 bag, rosbag2); {} is a KITTI directory, so it is ignored there",
-                path.display()
-            );
-        }
-        if matches!(options.poses, PoseSource::Tf | PoseSource::Odometry) {
-            eprintln!(
-                "warning: --poses {} names a recorded log's poses; {} is a KITTI directory, whose poses.txt is used",
-                options.poses.name(),
-                path.display()
-            );
-        }
-    }
-    source.set_read_images(read_images);
-    let frames = match (frames, source.partial_first_scan()) {
-        (Some(frames), _) => frames,
-        (None, None) => 0..usize::MAX,
-        (None, Some((first, second))) => {
-            eprintln!(
-                "notice: {}: frame 0 is the part of a rotation the recording began with ({first} packets, against {second} in frame 1): left out (--frames 0.. reads it)",
-                path.display()
-            );
-            1..usize::MAX
-        }
-    };
-    let frames = &frames;
-    if source.frames_in(frames).is_empty() {
-        let all = source.frames();
-        let has = match (all.first(), all.last()) {
-            (Some(first), Some(last)) => format!("frames {first}..={last}"),
-            _ => "no frames".into(),
-        };
-        bail!(
-            "{}: no scans in {} (the input has {has})",
-            path.display(),
-            describe_frames(frames),
-        );
-    }
-    // A range past the end is read as far as the input goes, and said so.
-    let last = source.frames().last().copied();
-    if let Some(last) = last.filter(|&last| frames.end != usize::MAX && frames.end > last + 1) {
-        eprintln!(
-            "notice: {}: {} goes past its last frame, {last}: reading {}..={last}",
-            path.display(),
-            describe_frames(frames),
-            frames.start.max(source.frames()[0])
-        );
-    }
-    Ok(Selection::new(source, frames.clone()))
-}
-
-/// Parses a frame range: `A..B` (B excluded), `A..=B`, `A..`, `..B` or a single `N`.
-pub fn parse_frame_range(text: &str) -> Result<Range<usize>> {
-    let number = |s: &str, default: usize| -> Result<usize> {
-        let s = s.trim();
-        if s.is_empty() {
-            return Ok(default);
-        }
-        s.parse()
-            .with_context(|| format!("frame range `{text}`: `{s}` is not a frame number"))
-    };
-    let range = if let Some((a, b)) = text.split_once("..=") {
-        number(a, 0)?..number(b, usize::MAX - 1)? + 1
-    } else if let Some((a, b)) = text.split_once("..") {
-        number(a, 0)?..number(b, usize::MAX)?
-    } else if text.trim().is_empty() {
-        bail!(
-            "frame range `{text}` is empty: give N, A..B (A to B-1), A..=B or A.. (`..` for every frame)"
-        );
-    } else if let Some((a, b)) = text.split_once('-') {
-        // `0-2` as other tools write ranges: said in this tool's words, both ways.
-        let (a, b) = (number(a, 0)?, number(b, 0)?);
-        bail!(
-            "frame range `{text}`: write a range as A..B (B left out) or A..=B: `{a}..{}` or `{a}..={b}`",
-            b + 1
-        );
-    } else {
-        let n = number(text, 0)?;
-        n..n + 1
-    };
-    if range.is_empty() {
-        bail!(
-            "frame range `{text}` selects no frame: it ends before it starts (A..B is A to B-1, A..=B is A to B)"
-        );
-    }
-    Ok(range)
+/// Prints a remark of opening a drive on stderr, as `notice: ...` or `warning: ...`.
+pub fn say(remark: Remark, text: &str) {
+    eprintln!("{}: {text}", remark.word());
 }
 
 /// A scan rate in Hz: LiDARs spin at about 1 to 100 Hz; far outside that is a typo.
@@ -628,15 +519,6 @@ pub fn parse_finite(text: &str) -> Result<f64, String> {
         Ok(value) if value.is_finite() => Ok(value),
         Ok(_) => Err(format!("a finite number, got {text}")),
         Err(_) => Err(format!("`{text}` is not a number")),
-    }
-}
-
-/// A frame range as a person writes it: `frames 6..` (to the end), `frames 2..=5`.
-pub fn describe_frames(frames: &Range<usize>) -> String {
-    match frames.end {
-        usize::MAX => format!("frames {}..", frames.start),
-        end if end == frames.start + 1 => format!("frame {}", frames.start),
-        end => format!("frames {}..={}", frames.start, end - 1),
     }
 }
 
@@ -669,30 +551,8 @@ impl ModelArg {
 
     /// The model, checked against `config`, and the name to report it by.
     pub fn load(&self, config: &Config) -> Result<(SvmModel, String)> {
-        load_model(&self.choice(config), config)
+        Ok(SvmModel::load(&self.choice(config), config)?)
     }
-}
-
-/// The chosen model, compiled in or a file, checked against `config`; with the name
-/// to report it by.
-pub fn load_model(choice: &ModelChoice, config: &Config) -> Result<(SvmModel, String)> {
-    let (model, name) = match choice {
-        ModelChoice::File(path) => {
-            let bytes = read_option_file(path, MODEL_MAX_BYTES).context("cannot read the model")?;
-            let name = path.display().to_string();
-            (SvmModel::from_json(&bytes, &name)?, name)
-        }
-        ModelChoice::Embedded(rule) => (SvmModel::embedded(*rule)?, embedded_name(*rule)),
-    };
-    model.check_compatible(config, &name)?;
-    Ok((model, name))
-}
-
-/// Whether a command that classifies with `model` (and shows no appearance itself)
-/// needs the frames' camera images: only when appearance is on and the model reads it
-/// (a hybrid part); decoding them costs more than the rest of the method.
-pub fn images_for(model: &SvmModel, config: &Config) -> bool {
-    config.appearance.enabled && model.uses_appearance()
 }
 
 /// Frames the selections will hand on, for progress bars.
@@ -724,32 +584,5 @@ pub fn outcome(selections: &[Selection]) -> Outcome {
     match (skipped, lost) {
         (0, 0) => Outcome::Complete,
         (skipped, lost) => Outcome::Incomplete { skipped, lost },
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn frame_ranges() {
-        assert_eq!(parse_frame_range("0..3").unwrap(), 0..3);
-        assert_eq!(parse_frame_range("2..=4").unwrap(), 2..5);
-        assert_eq!(parse_frame_range("7").unwrap(), 7..8);
-        assert_eq!(parse_frame_range("5..").unwrap(), 5..usize::MAX);
-        assert!(parse_frame_range("3..3").is_err());
-        assert!(parse_frame_range("a..3").is_err());
-        let empty = parse_frame_range("").unwrap_err().to_string();
-        assert!(empty.contains("is empty"), "{empty}");
-        assert_eq!(parse_frame_range("..").unwrap(), 0..usize::MAX);
-        let reversed = parse_frame_range("2..=1").unwrap_err().to_string();
-        assert!(reversed.contains("ends before it starts"), "{reversed}");
-    }
-
-    #[test]
-    fn frame_ranges_read_as_written() {
-        assert_eq!(describe_frames(&(6..usize::MAX)), "frames 6..");
-        assert_eq!(describe_frames(&(2..6)), "frames 2..=5");
-        assert_eq!(describe_frames(&(964..965)), "frame 964");
     }
 }

@@ -11,8 +11,8 @@ use travmap_outputs::atomic::Staged;
 use travmap_outputs::rendering;
 
 use super::{
-    Inputs, ModelArg, Outcome, check_output, check_output_dir, counted, frame_count, images_for,
-    outcome, path_text, print_json_summary, usage,
+    Inputs, ModelArg, Outcome, check_output, check_output_dir, counted, frame_count, outcome,
+    path_text, print_json_summary, usage,
 };
 
 /// Draw ground truth, prediction and errors of a frame side by side as PNG.
@@ -56,7 +56,7 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         check_output(output_path, &inputs)?;
     }
     let (model, _) = args.model.load(config)?;
-    let selection = args.inputs.open_one(config, images_for(&model, config))?;
+    let selection = args.inputs.open_one(config, model.reads_images(config))?;
     if args.all
         && output_path
             .extension()

@@ -10,8 +10,8 @@ use travmap_drive::scoring::evaluation::Evaluation;
 use travmap_method::grid::CellClass;
 
 use super::{
-    Inputs, ModelArg, Outcome, fit_said, frame_count, images_for, model_json, notice_drives,
-    outcome, path_text, print_json_frame, print_json_summary,
+    Inputs, ModelArg, Outcome, fit_said, frame_count, model_json, notice_drives, outcome,
+    path_text, print_json_frame, print_json_summary,
 };
 
 /// Predict the filtered traversability grid of every frame.
@@ -33,7 +33,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let config = args.inputs.settings.load()?;
     let output = args.inputs.output;
     let (model, model_name) = args.model.load(&config)?;
-    let mut selections = args.inputs.open(&config, images_for(&model, &config))?;
+    let mut selections = args.inputs.open(&config, model.reads_images(&config))?;
     // `run` prints no scores: labels it does not need cannot stop it.
     for selection in &mut selections {
         selection.source.set_read_labels(false);

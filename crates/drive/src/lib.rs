@@ -4,6 +4,7 @@
 //! drive map, the one place that map is fed. Every command goes through here, the
 //! benchmark included ([`Selection::load`], [`Selection::run_loaded`]).
 
+pub mod opening;
 pub mod scoring;
 
 use std::collections::{BTreeMap, BTreeSet};

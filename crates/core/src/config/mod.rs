@@ -413,6 +413,13 @@ impl Config {
         config
     }
 
+    /// Reads what the settings name (the label map) and checks every field: the
+    /// configuration as the stages take it, once its file and settings are applied.
+    pub fn ready(&mut self) -> Result<()> {
+        self.load_label_map()?;
+        self.validate()
+    }
+
     /// Reads the label map `ground_truth.label_map` names, if any.
     pub fn load_label_map(&mut self) -> Result<()> {
         let Some(path) = &self.ground_truth.label_map else {

@@ -34,3 +34,17 @@ pub enum MergedTopics {
     /// Every cloud or packet topic but the frames' own.
     All,
 }
+
+impl MergedTopics {
+    /// The frames' own topic and the topics merged into its scans, from the LiDAR
+    /// topics named (`--cloud-topic`, repeated): the first, with the others merged
+    /// in; `all` merges every cloud and packet topic.
+    pub fn from_arguments(topics: &[String]) -> (Option<String>, MergedTopics) {
+        match topics {
+            [] => (None, MergedTopics::None),
+            [all] if all == "all" => (None, MergedTopics::All),
+            [one] => (Some(one.clone()), MergedTopics::None),
+            [first, more @ ..] => (Some(first.clone()), MergedTopics::Topics(more.to_vec())),
+        }
+    }
+}

@@ -287,6 +287,13 @@ impl SvmModel {
                 .any(|model| model.uses_appearance())
     }
 
+    /// Whether classifying under `config` needs the frames' camera images: only when
+    /// appearance is on and the model reads it; decoding them costs more than the
+    /// rest of the method.
+    pub fn reads_images(&self, config: &Config) -> bool {
+        config.appearance.enabled && self.uses_appearance()
+    }
+
     /// Errors when `config` would compute features differently from the training
     /// cells; the error names the first setting that differs, both values, and the
     /// `--set` that runs the model as trained. `model_name` names the model file.

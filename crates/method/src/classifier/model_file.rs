@@ -6,8 +6,9 @@ use sha2::{Digest, Sha256};
 
 use super::{ReducedSet, SvmModel, TrainingSummary, appearance_feature_names};
 use crate::features::feature_names;
-use travmap_core::config::{Config, FeatureGroup, LabelRule, written_before_groups};
+use travmap_core::config::{Config, FeatureGroup, LabelRule, ModelChoice, written_before_groups};
 use travmap_core::error::{Error, Result};
+use travmap_core::option_files::{MODEL_MAX_BYTES, read_option_file};
 
 /// The format tag and version of model files this build reads and writes.
 pub const MODEL_FORMAT: &str = "travmap-svm";
@@ -97,6 +98,27 @@ fn older_configs(model: &mut serde_json::Value) {
 }
 
 impl SvmModel {
+    /// The chosen model, compiled in or a file, checked against `config`; with the
+    /// name to report it by.
+    pub fn load(choice: &ModelChoice, config: &Config) -> Result<(Self, String)> {
+        let (model, name) = Self::read(choice)?;
+        model.check_compatible(config, &name)?;
+        Ok((model, name))
+    }
+
+    /// The chosen model as stored, not yet checked against a configuration; with
+    /// the name to report it by.
+    pub fn read(choice: &ModelChoice) -> Result<(Self, String)> {
+        match choice {
+            ModelChoice::File(path) => {
+                let bytes = read_option_file(path, MODEL_MAX_BYTES)?;
+                let name = path.display().to_string();
+                Ok((Self::from_json(&bytes, &name)?, name))
+            }
+            ModelChoice::Embedded(rule) => Ok((Self::embedded(*rule)?, embedded_name(*rule))),
+        }
+    }
+
     /// The model compiled into the binary that learnt `rule`.
     pub fn embedded(rule: LabelRule) -> Result<Self> {
         let json = match rule {

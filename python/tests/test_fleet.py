@@ -1,6 +1,6 @@
-"""The fleet script on a local Ray (2 CPUs) over a handful of converted MCAP files,
-one of them corrupt. Needs TRAVMAP_BIN (tests/fleet.rs sets it) and the shared
-data beside the repository."""
+"""`python -m travmap.fleet` on a local Ray (2 CPUs) over a handful of converted MCAP
+files, one of them corrupt, with the travmap command the wheel installed. Needs the
+shared data beside the repository."""
 
 import json
 import os
@@ -12,15 +12,13 @@ import pyarrow.parquet as pq
 import pytest
 import ray
 
-import travmap_fleet
+import travmap
+from travmap import fleet as travmap_fleet
 
-TRAVMAP = os.environ.get("TRAVMAP_BIN", "")
-SEQUENCE = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "semantickitti-00" / "sequences" / "00"
+TRAVMAP = travmap.binary()
+SEQUENCE = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "semantickitti-00" / "sequences" / "00"
 
-pytestmark = pytest.mark.skipif(
-    not (os.path.exists(TRAVMAP) and SEQUENCE.is_dir()),
-    reason="TRAVMAP_BIN or ../shared/data missing",
-)
+pytestmark = pytest.mark.skipif(not SEQUENCE.is_dir(), reason="../shared/data missing")
 
 
 @pytest.fixture(scope="module")

@@ -9,15 +9,16 @@ bad data) is reported, not retried, since it would fail the same way again. The
 run ends with a summary of files, frames, skipped frames and failures, printed and
 written to OUT_DIR/fleet-summary.json.
 
-    python travmap_fleet.py annotate 'logs/**/*.mcap' --out-dir annotated/
-    python travmap_fleet.py dataset 'logs/**/*.mcap' --out-dir cells/ -- --set training.grid_size_m=24
-    python travmap_fleet.py annotate 'logs/**/*.mcap' --out-dir annotated/ --adapt
+    python -m travmap.fleet annotate 'logs/**/*.mcap' --out-dir annotated/
+    python -m travmap.fleet dataset 'logs/**/*.mcap' --out-dir cells/ -- --set training.grid_size_m=24
+    python -m travmap.fleet annotate 'logs/**/*.mcap' --out-dir annotated/ --adapt
 
 `--adapt` adapts the model to each drive before annotating it (`travmap annotate
 --adapt`: self-supervised, from the drive itself; docs/method.md "Adaptation").
 
-On a cluster, start Ray there and pass `--address auto` (or set RAY_ADDRESS); the
-travmap binary must be at `--travmap` on every node.
+On a cluster, start Ray there and pass `--address auto` (or set RAY_ADDRESS); every
+node runs the travmap command its own `pip install travmap` put beside this module
+(or the one `--travmap` names).
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import ray
+
+from ._commands import binary
 
 # What each command writes, by the suffix of its output.
 SUFFIXES = {"annotate": ".annotated.mcap", "dataset": ".cells.parquet"}
@@ -164,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("command", choices=sorted(SUFFIXES))
     parser.add_argument("inputs", nargs="+", help="MCAP files or glob patterns (quoted; ** recurses)")
     parser.add_argument("--out-dir", required=True)
-    parser.add_argument("--travmap", default="travmap", help="the travmap binary on every node")
+    parser.add_argument("--travmap", default=None, help="the travmap binary on every node (default: the package's own)")
     parser.add_argument("--address", default=None, help="Ray cluster address (default: RAY_ADDRESS or a local Ray)")
     parser.add_argument("--num-cpus", type=int, default=None, help="CPUs of a local Ray")
     parser.add_argument("--retries", type=int, default=2, help="re-runs of a travmap that was killed")
@@ -176,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
         extra = ["--adapt", *extra]
     inputs = [path for pattern in args.inputs for path in (glob.glob(pattern, recursive=True) or [pattern])]
     ray.init(address=args.address, num_cpus=args.num_cpus if args.address is None else None)
-    summary = run_fleet(args.command, inputs, args.out_dir, args.travmap, extra, args.retries)
+    summary = run_fleet(args.command, inputs, args.out_dir, args.travmap or binary(), extra, args.retries)
     print(
         f"{summary.files} files: {summary.done} done, {summary.already_done} already done, "
         f"{summary.failed} failed; {summary.frames} frames, {summary.skipped_frames} skipped frames, "

@@ -1,0 +1,33 @@
+"""travmap: traversability maps from recorded drives, in Python.
+
+The same library as the `travmap` command (which this package also installs):
+
+    import travmap
+    drive = travmap.open("sequences/00")            # any input the command reads
+    for frame in drive:                              # frame.points: N x 4 float32
+        ...
+    for grid in travmap.run("drive.mcap", model="road"):
+        grid.classes, grid.decision, grid.features  # [row, col] NumPy arrays
+    table = travmap.dataset(["sequences/00"])       # labelled cells, a pyarrow.Table
+    scores = travmap.eval("sequences/00")           # `travmap eval --json`'s summary
+
+Errors raise TravmapError with the command's message and exit code.
+"""
+
+from ._travmap import Drive, Frame, Frames, Grid, Grids, Model, TravmapError, open, run
+from ._commands import binary, dataset, eval
+
+__all__ = [
+    "Drive",
+    "Frame",
+    "Frames",
+    "Grid",
+    "Grids",
+    "Model",
+    "TravmapError",
+    "binary",
+    "dataset",
+    "eval",
+    "open",
+    "run",
+]

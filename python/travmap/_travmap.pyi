@@ -1,0 +1,134 @@
+"""Type stubs of travmap's native module (crates/python)."""
+
+import os
+from typing import Iterator, Mapping, Optional, Sequence, Union
+
+import numpy as np
+import numpy.typing as npt
+
+FrameSelection = Union[None, int, range, str]
+Texts = Union[str, Sequence[str]]
+
+class TravmapError(Exception):
+    """What the command line reports as `error: ...`; `exit_code` 1 an error,
+    2 a mistake in the arguments or settings, 3 completed with frames skipped."""
+
+    exit_code: int
+
+class Frame:
+    """One LiDAR scan as read."""
+
+    index: int
+    stamp_ns: int
+    points: npt.NDArray[np.float32]
+    """N x 4: x, y, z (metres, sensor frame) and remission (0..1, or 0 when unusable)."""
+    labels: Optional[npt.NDArray[np.uint32]]
+    world_from_sensor: npt.NDArray[np.float64]
+    """4 x 4: the sensor's pose in the drive's world frame."""
+    image: Optional[npt.NDArray[np.uint8]]
+    """H x W x 3 RGB camera image."""
+    image_from_sensor: Optional[npt.NDArray[np.float64]]
+    """3 x 4: homogeneous sensor coordinates to homogeneous pixels."""
+    dropped_points: int
+    remission: str
+    sensors: list[str]
+
+class Frames(Iterator[Frame]):
+    def __iter__(self) -> "Frames": ...
+    def __next__(self) -> Frame: ...
+
+class Drive:
+    """A drive opened by `travmap.open`: iterate it for its frames."""
+
+    path: os.PathLike
+    kind: str
+    frames: list[int]
+    notices: list[str]
+    skipped: list[tuple[int, str]]
+    lost: list[str]
+    world_frame: str
+    def __len__(self) -> int: ...
+    def __iter__(self) -> Frames: ...
+
+class Grid:
+    """One frame's grid; arrays are [row, col], row 0 at min y, col 0 at min x."""
+
+    index: int
+    stamp_ns: int
+    cell_size_m: float
+    cells_per_side: int
+    min_corner_in_world: tuple[float, float]
+    cells: npt.NDArray[np.int8]
+    """Occupancy after the filter, as `run --json`: 0 traversable, 100 not, -1 unknown."""
+    classes: npt.NDArray[np.int8]
+    """Class after the filter: 1 traversable, 0 not, -1 unknown."""
+    predicted: npt.NDArray[np.int8]
+    """Class before the filter."""
+    decision: npt.NDArray[np.float32]
+    """Margin (> 0 traversable), NaN where unpredictable."""
+    predictable: npt.NDArray[np.bool_]
+    features: npt.NDArray[np.float32]
+    """[row, col, feature], named by feature_names."""
+    feature_names: list[str]
+    world_from_sensor: npt.NDArray[np.float64]
+    timings: dict[str, float]
+    dropped_points: int
+    remission: str
+    without_remission: bool
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """(x_min, x_max, y_min, y_max) in world metres, for imshow(extent=...)."""
+
+class Grids(Iterator[Grid]):
+    def __iter__(self) -> "Grids": ...
+    def __next__(self) -> Grid: ...
+
+class Model:
+    """"road", "offroad" (compiled in) or a model file's path."""
+
+    name: str
+    support_vectors: int
+    feature_names: list[str]
+    uses_appearance: bool
+    def __init__(self, model: str = "road") -> None: ...
+    def run(self, drive: Drive) -> Grids:
+        """The grids of every frame of `drive`, in order, as they are computed."""
+
+def open(
+    path: Union[str, os.PathLike],
+    frames: FrameSelection = None,
+    *,
+    config: Union[str, os.PathLike, None] = None,
+    set: Union[Mapping[str, object], Texts, None] = None,
+    poses: Optional[str] = None,
+    cloud_topic: Optional[Texts] = None,
+    lidar_calibration: Optional[Texts] = None,
+    lidar_frame: Optional[Texts] = None,
+    world_frame: Optional[str] = None,
+    camera_topic: Optional[str] = None,
+    pose_topic: Optional[str] = None,
+    rate: Optional[float] = None,
+    keep_going: bool = False,
+    images: bool = True,
+) -> Drive:
+    """Opens any input the `travmap` command reads."""
+
+def run(
+    path: Union[str, os.PathLike],
+    model: Union[Model, str, None] = None,
+    frames: FrameSelection = None,
+    *,
+    config: Union[str, os.PathLike, None] = None,
+    set: Union[Mapping[str, object], Texts, None] = None,
+    poses: Optional[str] = None,
+    cloud_topic: Optional[Texts] = None,
+    lidar_calibration: Optional[Texts] = None,
+    lidar_frame: Optional[Texts] = None,
+    world_frame: Optional[str] = None,
+    camera_topic: Optional[str] = None,
+    pose_topic: Optional[str] = None,
+    rate: Optional[float] = None,
+    keep_going: bool = False,
+    images: Optional[bool] = None,
+) -> Grids:
+    """Each frame's grid, as `travmap run` computes it."""
