@@ -58,6 +58,16 @@ const CRATES: &[(&str, &str, &[&str])] = &[
         ],
     ),
     (
+        "crates/python",
+        "travmap-python",
+        &[
+            "travmap-core",
+            "travmap-io",
+            "travmap-method",
+            "travmap-drive",
+        ],
+    ),
+    (
         ".",
         "travmap",
         &[

@@ -60,6 +60,8 @@ def test_frames_are_the_scans_with_their_labels_and_poses():
     first = frames[0]
     raw = np.fromfile(SAMPLE / "velodyne" / "000000.bin", dtype=np.float32).reshape(-1, 4)
     assert first.points.dtype == np.float32 and first.points.flags["C_CONTIGUOUS"]
+    # The array wraps the reader's own buffer: NumPy allocated none and copied nothing.
+    assert not first.points.flags["OWNDATA"] and first.points.base is not None
     np.testing.assert_array_equal(first.points, raw)
     labels = np.fromfile(SAMPLE / "labels" / "000000.label", dtype=np.uint32)
     np.testing.assert_array_equal(first.labels, labels)
