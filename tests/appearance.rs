@@ -4,9 +4,6 @@
 use std::path::{Path, PathBuf};
 
 use crate::common::{arg, json_summary, success, travmap};
-use travmap_core::frame::CameraImage;
-use travmap_io::kitti::{read_calibration, read_scan};
-use travmap_io::payloads::image::decode_png;
 
 /// The matrix of `key` (3x4, or 3x3 for R0_rect) in a KITTI calib file, parsed by
 /// hand (independent of travmap).
@@ -20,65 +17,6 @@ fn calib_matrix(path: &Path, key: &str) -> Vec<f64> {
         .skip(1)
         .map(|v| v.parse().unwrap())
         .collect()
-}
-
-#[test]
-fn every_point_of_the_camera_cropped_kitti_scan_lands_in_its_image() {
-    let Some(dir) = crate::common::shared_data("kitti-object-000008/training") else {
-        return;
-    };
-    let calib_path = dir.join("calib/000008.txt");
-    let calibration = read_calibration(&calib_path).unwrap();
-    let image_path = dir.join("image_2/000008.png");
-    let image = decode_png(&std::fs::read(&image_path).unwrap(), &image_path).unwrap();
-    assert_eq!((image.width, image.height), (1242, 375));
-    let camera = CameraImage::new(
-        &calibration.projections[2].unwrap(),
-        &calibration.cam0_from_velodyne,
-        image,
-    );
-    let points = read_scan(&dir.join("velodyne_reduced/000008.bin")).unwrap();
-    assert_eq!(points.len(), 17_238);
-    let mut inside = 0;
-    for p in &points {
-        let px = camera
-            .project([p[0] as f64, p[1] as f64, p[2] as f64])
-            .expect("in front of the camera");
-        if px[0] >= 0.0 && px[1] >= 0.0 && px[0] < 1242.0 && px[1] < 375.0 {
-            inside += 1;
-        }
-    }
-    assert_eq!(inside, points.len());
-
-    // Pixels of a few points against P2 * R0_rect * Tr_velo_to_cam computed here by hand.
-    let p2 = calib_matrix(&calib_path, "P2");
-    let r0 = calib_matrix(&calib_path, "R0_rect");
-    let tr = calib_matrix(&calib_path, "Tr_velo_to_cam");
-    for &i in &[0usize, 5000, 17_237] {
-        let v = [
-            points[i][0] as f64,
-            points[i][1] as f64,
-            points[i][2] as f64,
-            1.0,
-        ];
-        let cam: Vec<f64> = (0..3)
-            .map(|r| (0..4).map(|c| tr[4 * r + c] * v[c]).sum())
-            .collect();
-        let rect: Vec<f64> = (0..3)
-            .map(|r| (0..3).map(|c| r0[3 * r + c] * cam[c]).sum())
-            .collect();
-        let h: Vec<f64> = (0..3)
-            .map(|r| (0..3).map(|c| p2[4 * r + c] * rect[c]).sum::<f64>() + p2[4 * r + 3])
-            .collect();
-        let expected = [h[0] / h[2], h[1] / h[2]];
-        let got = camera.project([v[0], v[1], v[2]]).unwrap();
-        assert!(
-            (got[0] - expected[0]).abs() < 1e-9 && (got[1] - expected[1]).abs() < 1e-9,
-            "point {i}: {got:?} vs {expected:?}"
-        );
-    }
-    // Behind the camera: no pixel.
-    assert!(camera.project([-10.0, 0.0, 0.0]).is_none());
 }
 
 /// A flat road whose left half (y > 0) is green vegetation and right half grey road,
@@ -102,9 +40,13 @@ fn write_colour_scene(dir: &Path, meta: &Path, frames: usize) {
 
     // The image: every pixel's ray hits the plane z = -1.73 in the velodyne frame
     // left (green) or right (grey) of y = 0; above the horizon, sky.
-    let calibration = read_calibration(&dir.join("calib.txt")).unwrap();
-    let p2 = calibration.projections[2].unwrap();
-    let velodyne_from_cam0 = calibration.cam0_from_velodyne.try_inverse().unwrap();
+    let calib = dir.join("calib.txt");
+    let p2 = nalgebra::Matrix3x4::from_row_slice(&calib_matrix(&calib, "P2"));
+    let mut cam0_from_velodyne = nalgebra::Matrix4::identity();
+    (cam0_from_velodyne.fixed_view_mut::<3, 4>(0, 0)).copy_from(
+        &nalgebra::Matrix3x4::from_row_slice(&calib_matrix(&calib, "Tr")),
+    );
+    let velodyne_from_cam0 = cam0_from_velodyne.try_inverse().unwrap();
     let (fx, fy, cx, cy) = (p2[(0, 0)], p2[(1, 1)], p2[(0, 2)], p2[(1, 2)]);
     let t = [p2[(0, 3)] / fx, p2[(1, 3)] / fy, p2[(2, 3)]];
     let origin = velodyne_from_cam0 * nalgebra::Vector4::new(-t[0], -t[1], -t[2], 1.0);

@@ -355,8 +355,7 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
     let dir = tempfile::tempdir().unwrap();
     let picture = dir.path().join("frame.png");
     write_output("render", &seq, &picture, &["--frame", "2"]);
-    let bytes = std::fs::read(&picture).unwrap();
-    let image = travmap_io::payloads::image::decode_png(&bytes, &picture).unwrap();
+    let image = crate::common::read_png(&picture);
     assert_eq!((image.width, image.height), (3 * 240 + 2 * GAP_PX, 240));
 
     // The same frame through the library: every cell's colour in every panel.

@@ -23,8 +23,7 @@ fn the_picture_shows_the_fused_map_truth_and_errors_cell_by_cell() {
         &png,
         &["--cell-pixels", "8", "--cells", arg(&cells_path)],
     );
-    let image =
-        travmap_io::payloads::image::decode_png(&std::fs::read(&png).unwrap(), &png).unwrap();
+    let image = crate::common::read_png(&png);
     let cells = crate::common::fused_drive(&seq);
     let picture = MapPicture::of(&cells, 8);
     let panel = picture.cells[0] as u32 * 8;

@@ -6,8 +6,8 @@ use std::path::Path;
 
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{PointCloud2, TfMessage, datatype, decode};
-use travmap_io::containers::log::Log;
-use travmap_io::format::InputFormat;
+use travmap_io::InputFormat;
+use travmap_io::Log;
 use travmap_outputs::writing::McapSink;
 
 /// Rewrites the converted drive `from` into `to` with each cloud's intensity

@@ -12,8 +12,7 @@ use serde_json::Value;
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{OccupancyGrid, PointCloud2, decode};
 use travmap_io::KittiSequence;
-use travmap_io::payloads::cloud::{check_some_finite, cloud_points};
-use travmap_io::ros_drive::LogOptions;
+use travmap_io::LogOptions;
 use travmap_io::{Source, SourceOptions};
 use travmap_outputs::writing::McapSink;
 
@@ -943,63 +942,6 @@ fn corrupt_mcap_files_are_clear_errors() {
     let err = clean_failure(travmap(&["eval", &write("huge.mcap", &huge)]));
     let declared = format!("chunk at byte {chunk} declares 1099511627776 bytes");
     assert_contains(&err, &["huge.mcap", &declared]);
-}
-
-#[test]
-fn clouds_whose_data_disagree_with_their_layout_are_errors() {
-    use travmap_formats::ros::{Header, PointCloud2, PointField, datatype};
-    let cloud = |data_len: usize, fields: Vec<PointField>| PointCloud2 {
-        header: Header::default(),
-        height: 2,
-        width: 3,
-        fields,
-        is_bigendian: false,
-        point_step: 12,
-        row_step: 36,
-        // Small finite floats, none at the origin.
-        data: (1..=data_len).map(|i| i as u8).collect(),
-        is_dense: true,
-    };
-    let error = |data_len, fields| cloud_points(&cloud(data_len, fields)).err().unwrap();
-    let err = error(60, PointField::xyz_float32());
-    assert_contains(&err, &["data holds 60 bytes", "need 72"]);
-    let err = error(72, vec![PointField::scalar("y", 4, datatype::FLOAT32)]);
-    assert_contains(&err, &["no `x` field"]);
-    let err = error(72, vec![PointField::scalar("x", 10, datatype::FLOAT32)]);
-    assert_contains(&err, &["outside point_step"]);
-    assert_eq!(
-        cloud_points(&cloud(72, PointField::xyz_float32()))
-            .unwrap()
-            .points
-            .len(),
-        6
-    );
-    // A header that claims 4 billion points over 72 bytes: refused before any
-    // allocation, which is bounded by the bytes present.
-    let mut huge = cloud(72, PointField::xyz_float32());
-    (huge.width, huge.height, huge.row_step) = (1 << 31, 1 << 31, 12 << 31);
-    let err = cloud_points(&huge).err().unwrap();
-    assert!(err.contains("data holds 72 bytes"), "{err}");
-    // A header that claims no points over 72 bytes of them: the driver did not
-    // fill it in; reading zero points would map an empty scene.
-    let mut unfilled = cloud(72, PointField::xyz_float32());
-    unfilled.width = 0;
-    let err = cloud_points(&unfilled).err().unwrap();
-    assert_contains(
-        &err,
-        &["width 0 x height 2", "data holds 72 bytes (6 points"],
-    );
-    // Every point NaN: nothing to map, said rather than scored as empty.
-    let nan = f32::NAN.to_le_bytes().repeat(18);
-    let points = cloud_points(&PointCloud2 {
-        data: nan,
-        ..cloud(72, PointField::xyz_float32())
-    })
-    .unwrap();
-    let err = check_some_finite(points.points.len(), points.dropped)
-        .err()
-        .unwrap();
-    assert_contains(&err, &["every one of its 6 points has a NaN"]);
 }
 
 #[test]

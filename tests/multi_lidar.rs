@@ -12,9 +12,9 @@ use crate::common::{
 };
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use travmap_formats::mcap::writer::Compression;
-use travmap_io::containers::log::Log;
-use travmap_io::format::InputFormat;
-use travmap_io::ros_drive::{LogOptions, MergedTopics};
+use travmap_io::InputFormat;
+use travmap_io::Log;
+use travmap_io::{LogOptions, MergedTopics};
 use travmap_io::{Source, SourceOptions};
 use travmap_outputs::conversion::scan_to_cloud;
 use travmap_outputs::writing::McapSink;

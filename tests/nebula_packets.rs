@@ -8,9 +8,12 @@ use std::path::Path;
 use crate::common::{arg, json_records, nebula_fixture, success, travmap};
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{Header, NebulaPacket, NebulaPackets, Time};
-use travmap_io::containers::log::Log;
-use travmap_io::format::InputFormat;
-use travmap_io::packets::{NEBULA_PACKETS, PacketModel, packet_message};
+use travmap_io::InputFormat;
+use travmap_io::Log;
+use travmap_io::{PacketModel, packet_message};
+
+/// The type of nebula's own packet message.
+const NEBULA_PACKETS: &str = "nebula_msgs/msg/NebulaPackets";
 use travmap_outputs::writing::McapSink;
 
 fn time(ns: u64) -> Time {

@@ -12,25 +12,6 @@ use nalgebra::Isometry3;
 use serde_json::Value;
 use travmap_io::KittiSequence;
 
-/// The poses of a KITTI-format trajectory file.
-fn read_trajectory(path: &Path) -> Vec<Isometry3<f64>> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .map(|line| {
-            let v: Vec<f64> = line
-                .split_whitespace()
-                .map(|x| x.parse().unwrap())
-                .collect();
-            let m = nalgebra::Matrix4::new(
-                v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], v[10], v[11], 0.0, 0.0,
-                0.0, 1.0,
-            );
-            travmap_core::geometry::rigid(&m)
-        })
-        .collect()
-}
-
 /// Per step: (translation error cm, rotation error degrees) of `estimated` against
 /// `truth`, both world_from_velodyne, as the shared bench script computes them.
 fn step_errors(estimated: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> Vec<(f64, f64)> {
@@ -55,7 +36,7 @@ fn registration_tracks_the_shipped_drive_within_kiss_icp_figures() {
     let dir = tempfile::tempdir().unwrap();
     let poses = dir.path().join("poses.txt");
     write_output("odometry", &sample, &poses, &[]);
-    let estimated = read_trajectory(&poses);
+    let estimated = crate::common::read_trajectory(&poses);
     let sequence = KittiSequence::open(&sample, None, &|_| {}).unwrap();
     let truth: Vec<Isometry3<f64>> = (0..6)
         .map(|i| sequence.read_frame(i).unwrap().world_from_velodyne)

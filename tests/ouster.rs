@@ -12,10 +12,10 @@ use std::process::Command;
 
 use crate::common::{assert_contains, clean_failure, run_client, write_output};
 use travmap_formats::ros::{OccupancyGrid, Time, decode};
-use travmap_io::containers::log::Log;
-use travmap_io::format::InputFormat;
-use travmap_io::packets::ouster::{OusterMetadata, string_message};
-use travmap_io::packets::{PacketAssembler, PacketCalibration, PacketModel};
+use travmap_io::InputFormat;
+use travmap_io::Log;
+use travmap_io::OusterMetadata;
+use travmap_io::{PacketAssembler, PacketCalibration, PacketModel};
 
 const PROFILES: [&str; 6] = [
     "LEGACY",
@@ -80,8 +80,7 @@ fn recorded_metadata(log: &Path) -> OusterMetadata {
     let message = (log.messages().map(Result::unwrap))
         .find(|m| m.connection.topic == "/ouster/metadata")
         .unwrap();
-    let text = string_message(&message.data, message.connection.encoding().unwrap()).unwrap();
-    OusterMetadata::from_json(&text).unwrap()
+    OusterMetadata::from_message(&message.data, message.connection.encoding().unwrap()).unwrap()
 }
 
 /// The scans of `log` are three, stamped with their first columns on the log's

@@ -8,9 +8,9 @@ use std::path::Path;
 use std::process::Command;
 
 use crate::common::{arg, assert_contains, nebula_fixture, run_client};
-use travmap_io::containers::log::Log;
-use travmap_io::format::InputFormat;
-use travmap_io::packets::packet_message;
+use travmap_io::InputFormat;
+use travmap_io::Log;
+use travmap_io::packet_message;
 
 /// Every packet of a packet log, as `write_pcap.py` reads them.
 fn packets_file(log: &Path, out: &Path) {

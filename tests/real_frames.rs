@@ -6,7 +6,6 @@ use std::collections::HashMap;
 use travmap_core::config::RemissionScaling;
 use travmap_core::geometry::Moments;
 use travmap_io::KittiSequence;
-use travmap_io::kitti::{read_labels, read_poses, read_scan};
 use travmap_method::integration::{DriveScan, scan_to_drive};
 
 const VOXEL_M: f32 = 0.5;
@@ -88,7 +87,8 @@ fn consecutive_scans_coincide_in_the_world_frame() {
         let first: Vec<[f32; 3]> = first.iter().map(|p| [p[0], p[1], p[2]]).collect();
         let unaligned = mean_nearest_distance(&first, &unmoved, [0.0; 3]);
         // The cam0 pose applied to velodyne points as it is, without Tr: a frame mix-up.
-        let cam0_pose = read_poses(&dir.join("poses.txt")).unwrap()[pair[1].index];
+        let cam0_pose =
+            crate::common::read_trajectory(&dir.join("poses.txt"))[pair[1].index].to_homogeneous();
         let mixed_up: Vec<[f32; 3]> = unmoved
             .iter()
             .map(|p| {
@@ -193,13 +193,9 @@ fn labels_join_the_right_points() {
         .unwrap();
     let labels = frame.labels.unwrap();
     let scan_path = subset.join("velodyne/000000.bin");
-    let points = read_scan(&scan_path).unwrap();
-    let subset_labels = read_labels(
-        &subset.join("labels/000000.label"),
-        &scan_path,
-        points.len(),
-    )
-    .unwrap();
+    let points = crate::common::kitti_scan(&scan_path);
+    let subset_labels = crate::common::kitti_labels(&subset.join("labels/000000.label"));
+    assert_eq!(subset_labels.len(), points.len());
     for ((p, l), &i) in points.iter().zip(&subset_labels).zip(&indices) {
         assert_eq!(*p, frame.points_in_velodyne[i]);
         assert_eq!(*l, labels[i]);

@@ -12,8 +12,8 @@ use crate::common::{
 };
 use serde_json::Value;
 use travmap_formats::ros::{OccupancyGrid, PointCloud2, decode};
-use travmap_io::containers::log::Log;
-use travmap_io::format::{InputFormat, detect};
+use travmap_io::Log;
+use travmap_io::{InputFormat, detect};
 
 /// The routes `ros_routes.py` writes, by name.
 const ROUTES: [&str; 14] = [

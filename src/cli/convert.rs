@@ -7,9 +7,7 @@ use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use travmap_formats::mcap::writer::Compression;
-use travmap_io::ros_drive::LogOptions;
-use travmap_io::ros_drive::RosDrive;
-use travmap_io::{SkipLog, SourceOptions};
+use travmap_io::{LogOptions, RosDrive, SkipLog, SourceOptions};
 use travmap_outputs::conversion::{convert_kitti, convert_log};
 use travmap_outputs::preflight::InputFiles;
 

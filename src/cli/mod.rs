@@ -39,8 +39,7 @@ use travmap_core::config::ModelChoice;
 use travmap_core::stopwatch::Stopwatch;
 use travmap_drive::Selection;
 pub use travmap_drive::opening::{Remark, open_selection, parse_frame_range};
-use travmap_io::SourceOptions;
-use travmap_io::ros_drive::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics};
+use travmap_io::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics, SourceOptions};
 use travmap_method::classifier::SvmModel;
 use travmap_outputs::preflight::{
     InputFiles, Preflight, check_output_directory, check_output_file,

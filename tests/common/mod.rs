@@ -324,30 +324,90 @@ pub fn nebula_fixture(relative: &str) -> PathBuf {
         .join(relative)
 }
 
-/// nebula's ground-truth scan `relative` (a PCD named for the stamp of the message
-/// during which nebula completed it): that stamp, and its points.
-pub fn nebula_ground_truth(relative: &str) -> (u64, Vec<[f32; 3]>) {
-    let path = nebula_fixture(relative);
-    let stamp = path.file_stem().unwrap().to_str().unwrap().parse().unwrap();
-    let cloud =
-        travmap_io::cloud_files::pcd::parse_pcd(&std::fs::read(&path).unwrap(), "lidar").unwrap();
-    let points = travmap_io::payloads::cloud::cloud_points(&cloud)
-        .unwrap()
-        .points;
-    (stamp, points.iter().map(|p| [p[0], p[1], p[2]]).collect())
+/// The scans a packet log's LiDAR packets make through the library's packet face:
+/// the model told from the first packet, its built-in calibration, the scans cut
+/// as every command cuts them.
+pub fn packet_scans(log_path: &Path) -> Vec<travmap_io::PacketScan> {
+    use travmap_io::{
+        Log, PACKET_MESSAGES, PacketAssembler, PacketCalibration, PacketModel, detect,
+        packet_message,
+    };
+    let log = Log::open(log_path, detect(log_path).unwrap()).unwrap();
+    let mut assembler = None;
+    let mut scans = Vec::new();
+    for message in log.messages() {
+        let message = message.unwrap();
+        let type_name = message.connection.type_name().into_owned();
+        if !PACKET_MESSAGES.contains(&type_name.as_str()) {
+            continue;
+        }
+        let encoding = message.connection.encoding().unwrap();
+        let assembler = assembler.get_or_insert_with(|| {
+            let first = packet_message(&type_name, &message.data, encoding, 0).unwrap();
+            let model = PacketModel::of_packet(&type_name, first.packets[0].1).unwrap();
+            let calibration = PacketCalibration::for_model(model, None).unwrap();
+            PacketAssembler::new(model, &calibration).unwrap()
+        });
+        let cut = assembler.push_message(&type_name, &message.data, encoding, message.log_time_ns);
+        scans.extend(cut.unwrap());
+    }
+    scans
 }
 
-/// The same points in the same order as nebula's, each within `tolerance_m`.
-pub fn point_for_point(name: &str, truth: &[[f32; 3]], decoded: &[[f32; 3]], tolerance_m: f32) {
-    assert_eq!(decoded.len(), truth.len(), "{name}: point count");
-    let worst = truth
-        .iter()
-        .zip(decoded)
-        .map(|(t, d)| (0..3).map(|i| (t[i] - d[i]).abs()).fold(0.0, f32::max))
-        .fold(0.0, f32::max);
-    println!(
-        "{name}: {} points, in nebula's order, the farthest {worst:e} m from nebula's",
-        truth.len()
+/// An 8-bit RGB PNG (travmap's pictures, KITTI's camera images), read with the png
+/// crate: its pixels, row by row.
+pub fn read_png(path: &Path) -> travmap_core::frame::RgbImage {
+    let bytes = std::fs::read(path).unwrap();
+    let mut reader = png::Decoder::new(std::io::Cursor::new(bytes))
+        .read_info()
+        .unwrap();
+    let mut buffer = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buffer).unwrap();
+    assert_eq!(
+        (info.color_type, info.bit_depth),
+        (png::ColorType::Rgb, png::BitDepth::Eight),
+        "{}",
+        path.display()
     );
-    assert!(worst <= tolerance_m, "{name}: a point {worst} m off");
+    buffer.truncate(info.buffer_size());
+    travmap_core::frame::RgbImage {
+        width: info.width,
+        height: info.height,
+        rgb: buffer,
+    }
+}
+
+/// The poses of a KITTI-format trajectory file (`poses.txt`, `odometry` output),
+/// read by hand.
+pub fn read_trajectory(path: &Path) -> Vec<nalgebra::Isometry3<f64>> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(|line| {
+            let v: Vec<f64> = line
+                .split_whitespace()
+                .map(|x| x.parse().unwrap())
+                .collect();
+            let m = nalgebra::Matrix4::new(
+                v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], v[10], v[11], 0.0, 0.0,
+                0.0, 1.0,
+            );
+            travmap_core::geometry::rigid(&m)
+        })
+        .collect()
+}
+
+/// A KITTI `.bin` scan read by hand: x, y, z, remission a point.
+pub fn kitti_scan(path: &Path) -> Vec<[f32; 4]> {
+    let bytes = std::fs::read(path).unwrap();
+    let value = |b: &[u8]| f32::from_le_bytes(b.try_into().unwrap());
+    let point = |p: &[u8]| [0, 4, 8, 12].map(|at| value(&p[at..at + 4]));
+    bytes.chunks_exact(16).map(point).collect()
+}
+
+/// A SemanticKITTI `.label` file read by hand: a u32 a point.
+pub fn kitti_labels(path: &Path) -> Vec<u32> {
+    let bytes = std::fs::read(path).unwrap();
+    let label = |b: &[u8]| u32::from_le_bytes(b.try_into().unwrap());
+    bytes.chunks_exact(4).map(label).collect()
 }

@@ -9,11 +9,9 @@ use std::path::Path;
 use std::time::Instant;
 
 use travmap_formats::log_message::LogMessage;
-use travmap_io::containers::log::Log;
-use travmap_io::format::InputFormat;
-use travmap_io::packets::ouster::{OusterMetadata, string_message};
-use travmap_io::packets::{
-    PACKET_MESSAGES, PacketAssembler, PacketCalibration, PacketModel, packet_message,
+use travmap_io::{
+    InputFormat, Log, OusterMetadata, PACKET_MESSAGES, PacketAssembler, PacketCalibration,
+    PacketModel, packet_message,
 };
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -26,8 +24,7 @@ fn ouster_metadata(messages: &[LogMessage]) -> Option<OusterMetadata> {
     let message = messages
         .iter()
         .find(|m| m.connection.topic.ends_with("/metadata"))?;
-    let text = string_message(&message.data, message.connection.encoding()?).ok()?;
-    OusterMetadata::from_json(&text).ok()
+    OusterMetadata::from_message(&message.data, message.connection.encoding()?).ok()
 }
 
 fn main() {

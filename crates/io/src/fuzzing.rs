@@ -8,9 +8,8 @@ use std::path::Path;
 
 use crate::Source;
 use crate::SourceOptions;
-use crate::kitti::{
-    drop_non_returns, parse_calibration, parse_labels, parse_poses, parse_scan, parse_times,
-};
+use crate::kitti::text::{parse_calibration, parse_poses, parse_times};
+use crate::kitti::{drop_non_returns, parse_labels, parse_scan};
 use crate::payloads::cloud::cloud_points;
 use crate::payloads::image::{image_pixels, jpeg_pixels};
 use crate::payloads::livox::{LIVOX_CUSTOM_MESSAGES, decode_cloud};

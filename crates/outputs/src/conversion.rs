@@ -36,11 +36,9 @@ use travmap_formats::ros::{
     RegionOfInterest, TfMessage, Time, Transform, TransformStamped, Vector3, datatype, encode,
     known_schema, ros1_to_cdr,
 };
-use travmap_io::KittiSequence;
-use travmap_io::SkipLog;
-use travmap_io::packets::PacketScan;
-use travmap_io::packets::ouster::{OUSTER_PACKET_MESSAGES, PACKET_MSG_SCHEMA};
-use travmap_io::ros_drive::RosDrive;
+use travmap_io::{
+    KittiSequence, OUSTER_PACKET_MESSAGES, PACKET_MSG_SCHEMA, PacketScan, RosDrive, SkipLog,
+};
 
 pub const CLOUD_TOPIC: &str = "/velodyne_points";
 pub const IMAGE_TOPIC: &str = "/camera_2/image/compressed";

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use crate::atomic::{TEMPORARY_INFIX, temporary_path, temporary_prefix};
 use travmap_core::error::{Error, Result};
-use travmap_io::containers::rosbag2::listed_storage_files;
+use travmap_io::listed_storage_files;
 
 /// A file's identity on this machine: (device, inode).
 type FileId = (u64, u64);

@@ -13,8 +13,9 @@ use travmap_core::Config;
 use travmap_core::frame::Frame as ReadFrame;
 use travmap_drive::Selection;
 use travmap_drive::opening::{open_selection, parse_frame_range};
-use travmap_io::ros_drive::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics};
-use travmap_io::{SourceOptions, WORLD_FRAME};
+use travmap_io::{
+    LidarCalibrations, LidarFrames, LogOptions, MergedTopics, SourceOptions, WORLD_FRAME,
+};
 
 use crate::Failure;
 use crate::stream::Stream;

@@ -112,10 +112,6 @@ impl ScanFolder {
         &self.notice
     }
 
-    pub fn frame_count(&self) -> usize {
-        self.files.len()
-    }
-
     /// Frame numbers in `range`: positions in name order.
     pub fn frames_in(&self, range: &Range<usize>) -> Vec<usize> {
         (range.start.min(self.files.len())..range.end.min(self.files.len())).collect()

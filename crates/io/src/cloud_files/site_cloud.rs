@@ -65,6 +65,8 @@ pub struct SiteCloud {
     /// that keeps float32 precise; else zero), and the CRS the file names.
     origin_m: [f64; 3],
     crs_wkt: Option<String>,
+    /// Points of a LAS / LAZ file left out for a non-finite coordinate.
+    dropped: usize,
 }
 
 impl SiteCloud {
@@ -116,7 +118,7 @@ impl SiteCloud {
                 largest_intensity = batch.iter().map(|p| p[3]).fold(largest_intensity, f32::max);
                 keep(batch, None)
             })
-            .map(|place| Some((place.origin_m, place.crs_wkt))),
+            .map(|place| Some((place.origin_m, place.crs_wkt, place.dropped))),
             SiteCloudFormat::Ply => stream_ply(path, &mut keep_cloud).map(|()| None),
             SiteCloudFormat::Pcd => stream_pcd(path, &mut keep_cloud).map(|()| None),
         };
@@ -132,7 +134,7 @@ impl SiteCloud {
             Some(_) => (RemissionScale::Missing, 0.0),
             None => remission_scale(intensity_datatype, largest_intensity),
         };
-        let (origin_m, crs_wkt) = place.unwrap_or(([0.0; 3], None));
+        let (origin_m, crs_wkt, dropped) = place.unwrap_or(([0.0; 3], None, 0));
         if points == 0 {
             return Err(fail("the cloud holds no point".into()));
         }
@@ -178,6 +180,7 @@ impl SiteCloud {
             tile_m: grid_size_m,
             origin_m,
             crs_wkt,
+            dropped,
         })
     }
 
@@ -205,6 +208,12 @@ impl SiteCloud {
             let [x, y, z] = self.origin_m;
             notice += &format!(
                 "; the map's frame is the file's coordinates minus ({x}, {y}, {z}), which keeps float32 precise"
+            );
+        }
+        if self.dropped > 0 {
+            notice += &format!(
+                "; {} points without finite coordinates left out",
+                self.dropped
             );
         }
         let spilled = self.store.spilled_bytes();

@@ -18,9 +18,7 @@ use crate::format::{InputFormat, refuse};
 use travmap_core::error::{Error, LostMessage, Result};
 use travmap_formats::foxglove;
 use travmap_formats::log_message::{ChunkSpan, HEADER_BYTES};
-pub use travmap_formats::log_message::{
-    Connection, Damage, FileMap, FileMessages, LogMessage, Part, Parts,
-};
+pub use travmap_formats::log_message::{Connection, Damage, FileMap, LogMessage, Part, Parts};
 use travmap_formats::mcap::messages::Messages;
 use travmap_formats::mcap::records::check_chunk_sizes;
 use travmap_formats::mcap::stored::{Release, StoredLog, stored_log};

@@ -17,10 +17,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Matrix4};
 
-pub use crate::kitti::text::{
-    Calibration, parse_calibration, parse_poses, parse_times, read_calibration, read_poses,
-    read_times,
-};
+pub use crate::kitti::text::{Calibration, read_calibration, read_poses, read_times};
 use crate::payloads::cloud::{check_some_finite, is_return};
 use crate::payloads::image::decode_png;
 use travmap_core::error::{Error, Result};
@@ -357,13 +354,8 @@ pub fn drop_non_returns(points: &mut Vec<[f32; 4]>, labels: Option<&mut Vec<u32>
     retain_points(points, labels, |p| is_return(p[0], p[1], p[2]))
 }
 
-/// Reads a SemanticKITTI `.label` file (uint32 per point) and checks its count.
-pub fn read_labels(path: &Path, scan_path: &Path, points: usize) -> Result<Vec<u32>> {
-    let bytes = crate::format::read_data_file(path)?;
-    parse_labels(&bytes, path, scan_path, points)
-}
-
-/// [`read_labels`] on the file's bytes; `path` names it in errors.
+/// A SemanticKITTI `.label` file's bytes (uint32 per point), its count checked;
+/// `path` names it in errors.
 pub fn parse_labels(
     bytes: &[u8],
     path: &Path,
@@ -529,7 +521,7 @@ mod tests {
     fn label_count_must_match_point_count() {
         let dir = tempfile::tempdir().unwrap();
         let path = write(dir.path(), "a.label", &[0u8; 12]);
-        let err = read_labels(&path, Path::new("a.bin"), 4)
+        let err = parse_labels(&std::fs::read(&path).unwrap(), &path, Path::new("a.bin"), 4)
             .unwrap_err()
             .to_string();
         assert!(err.contains("3 labels for 4 points"), "{err}");
@@ -560,3 +552,6 @@ mod tests {
         assert_eq!(read_times(&path).unwrap(), vec![0, 103_735_900]);
     }
 }
+
+#[cfg(test)]
+mod camera_tests;

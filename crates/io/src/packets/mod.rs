@@ -12,7 +12,7 @@ pub(crate) mod scan;
 pub mod velodyne;
 
 pub(crate) use message::{PacketField, ScanMessage, packets_message};
-pub use scan::{PacketPoint, PacketScan, to_log_clock_ns};
+pub use scan::{PacketPoint, PacketScan};
 
 use std::path::Path;
 use travmap_core::option_files::{TEXT_MAX_BYTES, read_option_text};

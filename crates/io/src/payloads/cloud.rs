@@ -352,4 +352,66 @@ mod tests {
         let (read, _) = raw_cloud_points(&cloud(0, 3, &[])).unwrap();
         assert!(read.points.is_empty() && read.dropped == 0);
     }
+
+    #[test]
+    fn clouds_whose_data_disagree_with_their_layout_are_errors() {
+        use travmap_formats::ros::Header;
+        let assert_contains = |text: &str, parts: &[&str]| {
+            for part in parts {
+                assert!(text.contains(part), "{part:?} not in: {text}");
+            }
+        };
+        let cloud = |data_len: usize, fields: Vec<PointField>| PointCloud2 {
+            header: Header::default(),
+            height: 2,
+            width: 3,
+            fields,
+            is_bigendian: false,
+            point_step: 12,
+            row_step: 36,
+            // Small finite floats, none at the origin.
+            data: (1..=data_len).map(|i| i as u8).collect(),
+            is_dense: true,
+        };
+        let error = |data_len, fields| cloud_points(&cloud(data_len, fields)).err().unwrap();
+        let err = error(60, PointField::xyz_float32());
+        assert_contains(&err, &["data holds 60 bytes", "need 72"]);
+        let err = error(72, vec![PointField::scalar("y", 4, datatype::FLOAT32)]);
+        assert_contains(&err, &["no `x` field"]);
+        let err = error(72, vec![PointField::scalar("x", 10, datatype::FLOAT32)]);
+        assert_contains(&err, &["outside point_step"]);
+        assert_eq!(
+            cloud_points(&cloud(72, PointField::xyz_float32()))
+                .unwrap()
+                .points
+                .len(),
+            6
+        );
+        // A header that claims 4 billion points over 72 bytes: refused before any
+        // allocation, which is bounded by the bytes present.
+        let mut huge = cloud(72, PointField::xyz_float32());
+        (huge.width, huge.height, huge.row_step) = (1 << 31, 1 << 31, 12 << 31);
+        let err = cloud_points(&huge).err().unwrap();
+        assert!(err.contains("data holds 72 bytes"), "{err}");
+        // A header that claims no points over 72 bytes of them: the driver did not
+        // fill it in; reading zero points would map an empty scene.
+        let mut unfilled = cloud(72, PointField::xyz_float32());
+        unfilled.width = 0;
+        let err = cloud_points(&unfilled).err().unwrap();
+        assert_contains(
+            &err,
+            &["width 0 x height 2", "data holds 72 bytes (6 points"],
+        );
+        // Every point NaN: nothing to map, said rather than scored as empty.
+        let nan = f32::NAN.to_le_bytes().repeat(18);
+        let points = cloud_points(&PointCloud2 {
+            data: nan,
+            ..cloud(72, PointField::xyz_float32())
+        })
+        .unwrap();
+        let err = check_some_finite(points.points.len(), points.dropped)
+            .err()
+            .unwrap();
+        assert_contains(&err, &["every one of its 6 points has a NaN"]);
+    }
 }

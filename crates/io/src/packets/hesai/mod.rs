@@ -51,3 +51,6 @@ pub fn pandar_scan_message(
         PacketField::FixedSized(PANDAR_PACKET_DATA_BYTES),
     )
 }
+
+#[cfg(test)]
+mod nebula_tests;

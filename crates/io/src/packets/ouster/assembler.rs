@@ -185,7 +185,7 @@ mod tests {
     use nalgebra::Matrix4;
 
     use super::*;
-    use crate::packets::ouster::Profile;
+    use crate::packets::ouster::packet::Profile;
 
     /// Four beams, 16 columns a turn, four columns a packet, LEGACY.
     fn metadata() -> OusterMetadata {

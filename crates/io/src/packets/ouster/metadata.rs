@@ -6,6 +6,7 @@
 
 use nalgebra::Matrix4;
 use serde_json::Value;
+use travmap_formats::ros::MessageEncoding;
 
 use super::packet::{OusterModel, Profile};
 
@@ -28,6 +29,12 @@ pub struct OusterMetadata {
 }
 
 impl OusterMetadata {
+    /// The metadata a log recorded as a `std_msgs/String` message (ouster-ros's
+    /// `/metadata` topic).
+    pub fn from_message(data: &[u8], encoding: MessageEncoding) -> Result<Self, String> {
+        Self::from_json(&super::string_message(data, encoding)?)
+    }
+
     pub fn from_json(text: &str) -> Result<Self, String> {
         let root: Value =
             serde_json::from_str(text).map_err(|e| format!("not Ouster metadata JSON: {e}"))?;

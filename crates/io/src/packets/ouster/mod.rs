@@ -17,7 +17,7 @@ mod packet;
 
 pub use assembler::OusterAssembler;
 pub use metadata::OusterMetadata;
-pub use packet::{OusterModel, Profile};
+pub use packet::OusterModel;
 
 use super::message::ScanMessage;
 use travmap_formats::ros::MessageEncoding;

@@ -57,3 +57,6 @@ pub fn robosense_scan_message(
         PacketField::FlagThenFixedSized(ROBOSENSE_PACKET_DATA_BYTES),
     )
 }
+
+#[cfg(test)]
+mod nebula_tests;

@@ -31,7 +31,7 @@ mod scans;
 pub use calibration::Calibration;
 pub use decoder::{Decoder, DecoderSettings};
 pub use message::{VELODYNE_SCAN, scan_message};
-pub use packet::{PACKET_BYTES, VelodyneModel};
+pub use packet::VelodyneModel;
 pub use scans::{ScanAssembler, ScanCutter};
 
 #[cfg(test)]
@@ -42,7 +42,7 @@ mod tests {
     /// A single-return packet of `model` whose block `b` points at azimuth
     /// `first + b * step` and whose every return is `distance_raw` at intensity 100.
     fn packet(product: u8, first: u16, step: u16, distance_raw: u16) -> Vec<u8> {
-        let mut p = vec![0u8; PACKET_BYTES];
+        let mut p = vec![0u8; packet::PACKET_BYTES];
         for b in 0..BLOCKS {
             let at = b * BLOCK_BYTES;
             p[at..at + 2].copy_from_slice(&0xEEFFu16.to_le_bytes());
@@ -168,3 +168,6 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod nebula_tests;
