@@ -18,7 +18,7 @@ use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
 use travmap_core::posing::{DriveFrame, Posing};
 use travmap_core::stopwatch::Stopwatch;
-use travmap_io::{Source, SourceKind};
+use travmap_io::Source;
 use travmap_method::classifier::SvmModel;
 use travmap_method::footprint::Trajectory;
 use travmap_method::fusion::DriveMap;
@@ -179,7 +179,14 @@ impl Selection {
             .flat_map(|&(a, b)| [a, b])
             .chain(body_frames.iter().copied().filter(|_| find_body))
             .collect();
+        // The survey looks at points alone: images decoded and labels read for it would
+        // only cost (a camera image a frame decodes slower than the rest of a frame).
+        let (images, labels) = self.source.reads();
+        self.source.set_read_images(false);
+        self.source.set_read_labels(false);
         let scans = self.read_some(&wanted);
+        self.source.set_read_images(images);
+        self.source.set_read_labels(labels);
         let scan = |f: &usize| {
             scans
                 .get(f)
@@ -222,19 +229,9 @@ impl Selection {
         &self.survey
     }
 
-    /// The frames `wanted` that read, by number: one at a time where the source
-    /// reads any frame directly, in one pass over the stretch they span in a log.
+    /// The frames `wanted` that read, by number.
     fn read_some(&self, wanted: &BTreeSet<usize>) -> BTreeMap<usize, Frame> {
-        let (Some(&first), Some(&last)) = (wanted.first(), wanted.last()) else {
-            return BTreeMap::new();
-        };
-        let one_pass = matches!(self.source.kind(), SourceKind::Log | SourceKind::PacketLog);
-        let ranges: Vec<Range<usize>> = match one_pass {
-            true => std::iter::once(first..last + 1).collect(),
-            false => wanted.iter().map(|&f| f..f + 1).collect(),
-        };
-        (ranges.iter())
-            .flat_map(|range| self.source.read(range))
+        (self.source.read_only(wanted))
             .filter_map(|frame| frame.ok().filter(|f| wanted.contains(&f.index)))
             .map(|frame| (frame.index, frame))
             .collect()

@@ -2,6 +2,7 @@
 //! the one place that decides), and posed once by [`decide`]. What holds it
 //! ([`Recording`]) stays inside: callers ask the [`Source`].
 
+use std::collections::BTreeSet;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
@@ -109,6 +110,8 @@ pub struct Source {
     drive: DriveFrame,
     /// Frames carry their points' labels (false: read as if unlabelled).
     read_labels: bool,
+    /// Frames carry their camera images (where the input has them).
+    read_images: bool,
     /// The frames skipped as unreadable (`--keep-going`), whichever pass met them.
     skips: SkipLog,
 }
@@ -153,6 +156,7 @@ impl Source {
                     posing: Posing::Recorded,
                     drive: DriveFrame::default(),
                     read_labels: true,
+                    read_images: true,
                     skips,
                 });
             }
@@ -182,6 +186,7 @@ impl Source {
             posing,
             drive: DriveFrame::default(),
             read_labels: true,
+            read_images: true,
             skips,
         };
         if let Some((_, first)) = source.recorded_poses()?.first() {
@@ -316,6 +321,7 @@ impl Source {
     /// Whether frames carry their camera images (default true): see
     /// [`KittiSequence::set_read_images`] and [`RosDrive::set_read_images`].
     pub fn set_read_images(&mut self, read_images: bool) {
+        self.read_images = read_images;
         match &mut self.recording {
             Recording::Kitti(sequence) => sequence.set_read_images(read_images),
             Recording::Log(drive) => drive.set_read_images(read_images),
@@ -330,6 +336,12 @@ impl Source {
         if let Recording::Kitti(sequence) = &mut self.recording {
             sequence.set_read_labels(read_labels);
         }
+    }
+
+    /// Whether frames carry their camera images and their labels: what
+    /// [`Self::set_read_images`] and [`Self::set_read_labels`] last said.
+    pub fn reads(&self) -> (bool, bool) {
+        (self.read_images, self.read_labels)
     }
 
     /// Where unreadable frames (and frames a later stage cannot use) are recorded.
@@ -398,7 +410,27 @@ impl Source {
         &'a self,
         range: &Range<usize>,
     ) -> Box<dyn Iterator<Item = Result<Frame>> + 'a> {
-        let frames = self.read_recording(range);
+        self.read_some(range, None)
+    }
+
+    /// The frames of `frames` alone, in order, read as [`Self::read`] reads them: in
+    /// one pass over a log, its other clouds passed over undecoded.
+    pub fn read_only<'a>(
+        &'a self,
+        frames: &BTreeSet<usize>,
+    ) -> Box<dyn Iterator<Item = Result<Frame>> + 'a> {
+        let (Some(&first), Some(&last)) = (frames.first(), frames.last()) else {
+            return Box::new(std::iter::empty());
+        };
+        self.read_some(&(first..last + 1), Some(frames.clone()))
+    }
+
+    fn read_some<'a>(
+        &'a self,
+        range: &Range<usize>,
+        only: Option<BTreeSet<usize>>,
+    ) -> Box<dyn Iterator<Item = Result<Frame>> + 'a> {
+        let frames = self.read_recording(range, only);
         if self.read_labels {
             return frames;
         }
@@ -408,21 +440,26 @@ impl Source {
     fn read_recording<'a>(
         &'a self,
         range: &Range<usize>,
+        only: Option<BTreeSet<usize>>,
     ) -> Box<dyn Iterator<Item = Result<Frame>> + 'a> {
+        let wanted = |frames: Vec<usize>| match &only {
+            Some(only) => frames.into_iter().filter(|f| only.contains(f)).collect(),
+            None => frames,
+        };
         match &self.recording {
             Recording::Kitti(sequence) => Box::new(frame_by_frame(
-                sequence.frames_in(range),
+                wanted(sequence.frames_in(range)),
                 &self.skips,
                 |index| sequence.read_frame(index),
             )),
-            Recording::Log(drive) => Box::new(drive.read(range, &self.skips)),
+            Recording::Log(drive) => Box::new(drive.read_only(range, only.clone(), &self.skips)),
             Recording::Scans(folder) => Box::new(frame_by_frame(
-                folder.frames_in(range),
+                wanted(folder.frames_in(range)),
                 &self.skips,
                 |index| folder.read_frame(index),
             )),
             Recording::Site(site) => Box::new(frame_by_frame(
-                site.frames_in(range),
+                wanted(site.frames_in(range)),
                 &self.skips,
                 |index| site.read_frame(index),
             )),

@@ -17,7 +17,10 @@
 use std::collections::{HashMap, HashSet};
 
 use nalgebra::{Isometry3, Point3};
+use rayon::prelude::*;
 use travmap_core::frame::retain_points;
+
+use crate::voxel_map::{KeyHash, pack};
 
 /// Side of the sensor-frame voxels whose persistence is counted, metres.
 const VOXEL_M: f32 = 0.2;
@@ -80,6 +83,15 @@ fn voxel_of(p: [f32; 3], size_m: f32) -> Voxel {
     p.map(|v| (v / size_m).floor() as i32)
 }
 
+/// A voxel as one key of the fast hash (21 bits an axis: the sensor-frame voxels
+/// near the body and the drive-frame voxels of a survey span far fewer).
+fn key(v: Voxel) -> u64 {
+    pack(v.map(|i| i as u64))
+}
+
+/// Keys of voxels, hashed fast: a survey's scans hold about a million points.
+type VoxelKeys = HashSet<u64, KeyHash>;
+
 fn centre_of(v: Voxel) -> [f32; 3] {
     v.map(|i| (i as f32 + 0.5) * VOXEL_M)
 }
@@ -92,16 +104,17 @@ pub fn find_vehicle_box(scans: &[(Isometry3<f64>, &[[f32; 4]])]) -> Option<Vehic
         return None;
     }
     // 1. How many scans fill each voxel of the sensor frame near the sensor.
-    let mut filled: HashMap<Voxel, usize> = HashMap::new();
-    for (_, points) in scans {
-        let voxels: HashSet<Voxel> = points
-            .iter()
-            .filter(|p| p[0].hypot(p[1]) <= REACH_M)
-            .map(|p| voxel_of([p[0], p[1], p[2]], VOXEL_M))
-            .collect();
-        for voxel in voxels {
-            *filled.entry(voxel).or_default() += 1;
-        }
+    let near: Vec<HashSet<Voxel, KeyHash>> = (scans.par_iter())
+        .map(|(_, points)| {
+            (points.iter())
+                .filter(|p| p[0].hypot(p[1]) <= REACH_M)
+                .map(|p| voxel_of([p[0], p[1], p[2]], VOXEL_M))
+                .collect()
+        })
+        .collect();
+    let mut filled: HashMap<Voxel, usize, KeyHash> = HashMap::default();
+    for voxel in near.into_iter().flatten() {
+        *filled.entry(voxel).or_default() += 1;
     }
     let needed = (PERSISTENT_SHARE * scans.len() as f64).ceil() as usize;
     let floor_m = ground_z_m(scans)? + ABOVE_GROUND_M;
@@ -115,37 +128,33 @@ pub fn find_vehicle_box(scans: &[(Isometry3<f64>, &[[f32; 4]])]) -> Option<Vehic
     }
     // 2. Which of them the world keeps: each scan's points by world voxel.
     let support_voxel = |p: [f32; 3]| voxel_of(p, WORLD_SUPPORT_M);
-    let world: Vec<HashSet<Voxel>> = scans
-        .iter()
-        .map(|(world_from_sensor, points)| {
-            points
-                .iter()
-                .map(|p| {
-                    let w = world_from_sensor * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                    support_voxel([w.x as f32, w.y as f32, w.z as f32])
-                })
-                .collect()
-        })
-        .collect();
     // And by 1 m columns: where a scan saw anything at all (a body's old place is
     // seen as the road under it; a wall beyond a scan's reach is not seen).
-    let columns: Vec<HashSet<[i32; 2]>> = world
-        .iter()
-        .map(|voxels| {
-            (voxels.iter())
-                .map(|v| [v[0], v[1]].map(|i| ((i as f32 + 0.5) * WORLD_SUPPORT_M).floor() as i32))
-                .collect()
+    let column_of =
+        |v: Voxel| [v[0], v[1]].map(|i| ((i as f32 + 0.5) * WORLD_SUPPORT_M).floor() as i32);
+    let (world, columns): (Vec<VoxelKeys>, Vec<VoxelKeys>) = (scans.par_iter())
+        .map(|(world_from_sensor, points)| {
+            let (mut voxels, mut columns) = (VoxelKeys::default(), VoxelKeys::default());
+            for p in points.iter() {
+                let w = world_from_sensor * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                let voxel = support_voxel([w.x as f32, w.y as f32, w.z as f32]);
+                let [x, y] = column_of(voxel);
+                voxels.insert(key(voxel));
+                columns.insert(key([x, y, 0]));
+            }
+            (voxels, columns)
         })
-        .collect();
+        .unzip();
     let sees = |scan: usize, w: [f32; 3]| {
         let c = [w[0].floor() as i32, w[1].floor() as i32];
-        (-1..=1).any(|dx| (-1..=1).any(|dy| columns[scan].contains(&[c[0] + dx, c[1] + dy])))
+        (-1..=1)
+            .any(|dx| (-1..=1).any(|dy| columns[scan].contains(&key([c[0] + dx, c[1] + dy, 0]))))
     };
     let kept_by = |scan: usize, w: [f32; 3]| {
         let v = support_voxel(w);
         (-1..=1).any(|dx| {
             (-1..=1).any(|dy| {
-                (-1..=1).any(|dz| world[scan].contains(&[v[0] + dx, v[1] + dy, v[2] + dz]))
+                (-1..=1).any(|dz| world[scan].contains(&key([v[0] + dx, v[1] + dy, v[2] + dz])))
             })
         })
     };

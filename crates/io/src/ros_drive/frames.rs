@@ -2,7 +2,7 @@
 //! (PointCloud2 messages, or scans cut from LiDAR packets) handed on when the next
 //! one arrives, with the camera image and the other sensors' clouds nearest in time.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeSet, VecDeque};
 use std::ops::Range;
 
 use super::log_index::HeaderOnly;
@@ -79,6 +79,17 @@ impl RosDrive {
     /// camera image nearest in time (within 50 ms) when the drive has a camera. With
     /// `--keep-going` (`skips`), unreadable frames are recorded and left out.
     pub fn read<'a>(&'a self, frames: &Range<usize>, skips: &'a SkipLog) -> DriveFrames<'a> {
+        self.read_only(frames, None, skips)
+    }
+
+    /// [`Self::read`] of the frames of `frames` that are in `only` (all without it):
+    /// the others' clouds are passed over undecoded.
+    pub fn read_only<'a>(
+        &'a self,
+        frames: &Range<usize>,
+        only: Option<BTreeSet<usize>>,
+        skips: &'a SkipLog,
+    ) -> DriveFrames<'a> {
         // Only the topics frames are made of are read: a log's other cameras, say,
         // are not copied (nor, from SQLite, read).
         let camera = (self.camera.as_ref()).filter(|_| self.read_images);
@@ -103,6 +114,7 @@ impl RosDrive {
             stream: Box::new(self.log.messages_in_parts(1, std::sync::Arc::new(parts))),
             // Clouds the index left out (past a cut end) are not frames.
             frames: frames.start..frames.end.min(self.frame_count()),
+            only,
             pending: None,
             ready: VecDeque::new(),
             assembler: self.assembler(),
@@ -238,6 +250,8 @@ pub struct DriveFrames<'a> {
     unreported: Vec<LostMessage>,
     stream: Box<dyn Iterator<Item = Result<LogMessage>> + 'a>,
     frames: Range<usize>,
+    /// The frames of `frames` wanted, when not all are.
+    only: Option<BTreeSet<usize>>,
     /// The cloud waiting for the next one: (frame number, cloud).
     pending: Option<(usize, Cloud)>,
     /// Clouds to hand on, in order (a packet message can complete several scans).
@@ -464,7 +478,12 @@ impl Iterator for DriveFrames<'_> {
                 self.next_cloud += 1;
                 if current >= self.frames.end {
                     self.stream_ended = true;
-                } else if current >= self.frames.start {
+                } else if current >= self.frames.start
+                    && self
+                        .only
+                        .as_ref()
+                        .is_none_or(|only| only.contains(&current))
+                {
                     self.pending = Some((current, cloud));
                 }
                 self.ready.extend(finished);
