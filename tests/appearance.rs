@@ -209,7 +209,7 @@ fn a_cell_keeps_its_colour_five_frames_later_after_the_grid_moved() {
     }
     let mut config = travmap_core::Config::default();
     config.grid.size_m = 24.0;
-    let sequence = travmap_io::KittiSequence::open(&seq, None, &|_| {}).unwrap();
+    let sequence = crate::common::read_frames(&seq);
     let mut pipeline = Pipeline::new(
         &config,
         travmap_core::posing::Posing::Recorded,
@@ -218,7 +218,7 @@ fn a_cell_keeps_its_colour_five_frames_later_after_the_grid_moved() {
     .unwrap();
     let results: Vec<_> = (0..6)
         .map(|i| {
-            let frame = sequence.read_frame(i).unwrap();
+            let frame = sequence[i].clone();
             pipeline.process_frame(frame, None).unwrap()
         })
         .collect();

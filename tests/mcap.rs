@@ -11,7 +11,6 @@ use crate::common::{
 use serde_json::Value;
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{OccupancyGrid, PointCloud2, decode};
-use travmap_io::KittiSequence;
 use travmap_io::LogOptions;
 use travmap_io::{Source, SourceOptions};
 use travmap_outputs::writing::McapSink;
@@ -24,14 +23,14 @@ fn converted_drive_gives_the_same_frames_and_grids_as_the_kitti_directory() {
     };
 
     // The frames read back: same points, labels, stamps and poses, bit for bit.
-    let kitti = KittiSequence::open(&seq, None, &|_| {}).unwrap();
+    let kitti = crate::common::read_frames(&seq);
     let source = Source::open(&drive, &SourceOptions::default(), &|_| {}).unwrap();
     assert_eq!(source.frames().len(), 6);
     assert_eq!(source.world_frame(), "map");
     let mut index = 0;
     for frame in source.read(&(0..6)) {
         let frame = frame.unwrap();
-        let expected = kitti.read_frame(index).unwrap();
+        let expected = &kitti[index];
         assert_eq!(frame.index, expected.index);
         assert_eq!(frame.stamp_ns, expected.stamp_ns);
         assert_eq!(frame.points_in_velodyne, expected.points_in_velodyne);
@@ -131,14 +130,14 @@ fn the_cloud_is_the_scan_in_the_grid_the_whole_scan_or_none() {
     let in_grid = messages::<PointCloud2>(&grid_file, "/travmap/cloud");
     let whole = messages::<PointCloud2>(&all_file, "/travmap/cloud");
     assert_eq!((in_grid.len(), whole.len()), (4, 4));
-    let sequence = KittiSequence::open(&seq, None, &|_| {}).unwrap();
+    let sequence = crate::common::read_frames(&seq);
     for (frame, (((_, grid), (_, truth)), ((_, in_grid), (_, whole)))) in grids
         .iter()
         .zip(&truths)
         .zip(in_grid.iter().zip(&whole))
         .enumerate()
     {
-        let scan_points = sequence.read_frame(frame).unwrap().points_in_velodyne.len();
+        let scan_points = sequence[frame].points_in_velodyne.len();
         assert_eq!(whole.width as usize, scan_points, "frame {frame}");
         // Each point with the values of its cell, -1 outside the grid.
         let (origin, r, side) = (&grid.info.origin.position, grid.info.resolution as f64, 30);
@@ -184,9 +183,8 @@ fn check_client_summary(client: &str, entries: &[Value], seq: &Path, runs: &[Val
     assert_eq!(on("/tf").len(), 6, "{client}");
     assert_eq!(on("/travmap/metrics").len(), 6, "{client}");
     assert_eq!(on("/travmap/ground_truth").len(), 3, "{client}");
-    let sequence = KittiSequence::open(seq, None, &|_| {}).unwrap();
-    for (cloud, index) in on("/velodyne_points").iter().zip(0..) {
-        let frame = sequence.read_frame(index).unwrap();
+    let sequence = crate::common::read_frames(seq);
+    for (cloud, frame) in on("/velodyne_points").iter().zip(&sequence) {
         assert_eq!(cloud["points"], frame.points_in_velodyne.len(), "{client}");
         // Clients print each float32 as its shortest double; compare as float32.
         let as_f32 = |v: &Value| -> Vec<f32> {

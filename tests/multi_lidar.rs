@@ -108,7 +108,7 @@ fn two_sensors_merge_into_the_scans_they_were_cut_from() {
     // The library: every scan holds both sensors but the last, all points in the
     // front sensor's frame, back where they were.
     let merged = Source::open(&log_path, &merging_every_topic(), &|_| {}).unwrap();
-    assert_eq!(merged.log().unwrap().cloud_topic(), "/front_points");
+    assert_eq!(cloud_topic(&merged), "/front_points");
     let source = Source::open(&seq, &Default::default(), &|_| {}).unwrap();
     let originals: Vec<_> = source.read(&(0..usize::MAX)).map(Result::unwrap).collect();
     let frames: Vec<_> = merged.read(&(0..usize::MAX)).map(Result::unwrap).collect();
@@ -298,7 +298,7 @@ fn packet_topics_merge_as_clouds_do() {
     sink.finish().unwrap();
 
     let merged = Source::open(&log_path, &merging_every_topic(), &|_| {}).unwrap();
-    assert_eq!(merged.log().unwrap().cloud_topic(), "/front/pandar_packets");
+    assert_eq!(cloud_topic(&merged), "/front/pandar_packets");
     let frames: Vec<_> = merged.read(&(0..usize::MAX)).map(Result::unwrap).collect();
     assert_eq!(frames.len(), 4);
     for frame in &frames {
@@ -394,6 +394,14 @@ fn packet_topics_merge_as_clouds_do() {
 
 /// Reading a log with every cloud or packet topic merged into the scans
 /// (`--cloud-topic all`).
+/// The topic a log's frames' scans come from.
+fn cloud_topic(source: &Source) -> String {
+    match source.recorded() {
+        travmap_io::Recorded::Log(log) => log.cloud_topic().to_string(),
+        _ => panic!("{} is not a log", source.path().display()),
+    }
+}
+
 fn merging_every_topic() -> SourceOptions {
     SourceOptions {
         log: LogOptions {

@@ -10,7 +10,6 @@ use crate::common::{
 };
 use nalgebra::Isometry3;
 use serde_json::Value;
-use travmap_io::KittiSequence;
 
 /// Per step: (translation error cm, rotation error degrees) of `estimated` against
 /// `truth`, both world_from_velodyne, as the shared bench script computes them.
@@ -37,9 +36,8 @@ fn registration_tracks_the_shipped_drive_within_kiss_icp_figures() {
     let poses = dir.path().join("poses.txt");
     write_output("odometry", &sample, &poses, &[]);
     let estimated = crate::common::read_trajectory(&poses);
-    let sequence = KittiSequence::open(&sample, None, &|_| {}).unwrap();
-    let truth: Vec<Isometry3<f64>> = (0..6)
-        .map(|i| sequence.read_frame(i).unwrap().world_from_velodyne)
+    let truth: Vec<Isometry3<f64>> = (crate::common::read_frames(&sample).iter())
+        .map(|frame| frame.world_from_velodyne)
         .collect();
     assert_eq!(estimated.len(), 6);
     let errors = step_errors(&estimated, &truth);

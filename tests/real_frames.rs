@@ -5,7 +5,6 @@ use std::collections::HashMap;
 
 use travmap_core::config::RemissionScaling;
 use travmap_core::geometry::Moments;
-use travmap_io::KittiSequence;
 use travmap_method::integration::{DriveScan, scan_to_drive};
 
 const VOXEL_M: f32 = 0.5;
@@ -52,10 +51,13 @@ fn mean_nearest_distance(fixed: &[[f32; 3]], moving: &[[f32; 3]], sensor: [f32; 
 }
 
 /// The scans in the sequence's world, which is its first scan's frame (its drive frame).
-fn world_scans(sequence: &KittiSequence, frames: std::ops::Range<usize>) -> Vec<DriveScan> {
+fn world_scans(
+    sequence: &[travmap_core::frame::Frame],
+    frames: std::ops::Range<usize>,
+) -> Vec<DriveScan> {
     frames
         .map(|i| {
-            let frame = sequence.read_frame(i).unwrap();
+            let frame = sequence[i].clone();
             let pose = frame.world_from_velodyne;
             scan_to_drive(frame, &pose, RemissionScaling::AsRead)
         })
@@ -67,23 +69,20 @@ fn consecutive_scans_coincide_in_the_world_frame() {
     let Some(dir) = crate::common::sample() else {
         return;
     };
-    let sequence = KittiSequence::open(&dir, None, &|_| {}).unwrap();
+    let sequence = crate::common::read_frames(&dir);
     let scans = world_scans(&sequence, 0..6);
     for pair in scans.windows(2) {
         let sensor = pair[1].sensor_in_drive.map(|v| v as f32);
         let aligned =
             mean_nearest_distance(&pair[0].points_in_drive, &pair[1].points_in_drive, sensor);
         // The same scan left in its own velodyne frame: the car's motion shows.
-        let raw = sequence.read_frame(pair[1].index).unwrap();
+        let raw = sequence[pair[1].index].clone();
         let unmoved: Vec<[f32; 3]> = raw
             .points_in_velodyne
             .iter()
             .map(|p| [p[0], p[1], p[2]])
             .collect();
-        let first = &sequence
-            .read_frame(pair[0].index)
-            .unwrap()
-            .points_in_velodyne;
+        let first = &sequence[pair[0].index].points_in_velodyne;
         let first: Vec<[f32; 3]> = first.iter().map(|p| [p[0], p[1], p[2]]).collect();
         let unaligned = mean_nearest_distance(&first, &unmoved, [0.0; 3]);
         // The cam0 pose applied to velodyne points as it is, without Tr: a frame mix-up.
@@ -94,7 +93,7 @@ fn consecutive_scans_coincide_in_the_world_frame() {
             .map(|p| {
                 let v =
                     cam0_pose * nalgebra::Vector4::new(p[0] as f64, p[1] as f64, p[2] as f64, 1.0);
-                [v.x as f32, v.y as f32, v.z as f32]
+                [v[0] as f32, v[1] as f32, v[2] as f32]
             })
             .collect();
         let mixed_up = mean_nearest_distance(&first, &mixed_up, [0.0; 3]);
@@ -130,7 +129,7 @@ fn the_road_lies_in_the_world_xy_plane() {
     let Some(dir) = crate::common::sample() else {
         return;
     };
-    let sequence = KittiSequence::open(&dir, None, &|_| {}).unwrap();
+    let sequence = crate::common::read_frames(&dir);
     for scan in world_scans(&sequence, 0..3) {
         let labels = scan.labels.as_ref().expect("frames 0-2 are labelled");
         let mut road = Moments::default();
@@ -160,14 +159,16 @@ fn shipped_scans_and_labels_match_their_provenance() {
     let Some(dir) = crate::common::sample() else {
         return;
     };
-    let sequence = KittiSequence::open(&dir, None, &|_| {}).unwrap();
-    assert_eq!(sequence.frames(), &[0, 1, 2, 3, 4, 5]);
+    let sequence = crate::common::read_frames(&dir);
+    let numbers: Vec<usize> = sequence.iter().map(|f| f.index).collect();
+    assert_eq!(numbers, [0, 1, 2, 3, 4, 5]);
     let counts: Vec<usize> = (0..6)
-        .map(|i| sequence.read_frame(i).unwrap().points_in_velodyne.len())
+        .map(|i| sequence[i].clone().points_in_velodyne.len())
         .collect();
     assert_eq!(counts, [124668, 124605, 124478, 124167, 123969, 123924]);
-    assert!((0..3).all(|i| sequence.has_labels(i)) && !sequence.has_labels(3));
-    let stamps: Vec<u64> = (0..3).map(|i| sequence.stamp_ns(i).unwrap()).collect();
+    let labelled: Vec<bool> = sequence.iter().map(|f| f.labels.is_some()).collect();
+    assert_eq!(labelled, [true, true, true, false, false, false]);
+    let stamps: Vec<u64> = sequence[..3].iter().map(|f| f.stamp_ns).collect();
     assert_eq!(stamps, [0, 103_735_900, 207_338_100]);
 }
 
@@ -187,10 +188,7 @@ fn labels_join_the_right_points() {
         8766, 65, 3829, 6474, 6590, 4106, 5927, 2873, 1495, 2210, 946, 9473, 4990, 7150, 7285,
         1042, 7475, 6645, 6029, 5251,
     ];
-    let frame = KittiSequence::open(&full, None, &|_| {})
-        .unwrap()
-        .read_frame(0)
-        .unwrap();
+    let frame = crate::common::read_frames(&full).remove(0);
     let labels = frame.labels.unwrap();
     let scan_path = subset.join("velodyne/000000.bin");
     let points = crate::common::kitti_scan(&scan_path);
@@ -211,10 +209,10 @@ fn frames_in_batches_equal_frames_one_by_one() {
     let Some(dir) = crate::common::sample() else {
         return;
     };
-    let sequence = KittiSequence::open(&dir, None, &|_| {}).unwrap();
+    let sequence = crate::common::read_frames(&dir);
     let model = SvmModel::embedded(travmap_core::config::LabelRule::Road).unwrap();
     let config = travmap_core::Config::default();
-    let frames: Vec<_> = (0..6).map(|i| sequence.read_frame(i).unwrap()).collect();
+    let frames: Vec<_> = (0..6).map(|i| sequence[i].clone()).collect();
     let pipeline = || Pipeline::new(&config, Posing::Recorded, DriveFrame::default()).unwrap();
     let posed = |pipeline: &mut Pipeline, frames: &[Frame]| -> Vec<_> {
         let pose = |f: &Frame| pipeline.pose(f.clone()).unwrap();

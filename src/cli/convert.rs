@@ -7,7 +7,7 @@ use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use travmap_formats::mcap::writer::Compression;
-use travmap_io::{LogOptions, RosDrive, SkipLog, SourceOptions};
+use travmap_io::{LogOptions, Recorded, RecordedLog, SourceOptions};
 use travmap_outputs::conversion::{convert_kitti, convert_log};
 use travmap_outputs::preflight::InputFiles;
 
@@ -99,22 +99,22 @@ pub fn convert(args: ConvertArgs) -> Result<Outcome> {
         &super::say,
     )?;
     let selections = [selection];
-    let source = &selections[0].source;
-    if let Some(drive) = source.log() {
-        if args.frames.is_some() {
-            bail!("--frames applies to KITTI input; a log is converted whole");
+    let sequence = match selections[0].source.recorded() {
+        Recorded::Log(drive) => {
+            if args.frames.is_some() {
+                bail!("--frames applies to KITTI input; a log is converted whole");
+            }
+            return convert_whole_log(&drive, output_path, compression, &output, &selections);
         }
-        let skips = source.skip_log();
-        return convert_whole_log(drive, skips, output_path, compression, &output, &selections);
-    }
-    let Some(sequence) = source.kitti() else {
-        bail!("convert takes a KITTI sequence directory or a recorded log, not a folder of scans");
+        Recorded::Kitti(sequence) => sequence,
+        Recorded::FramesOnly => bail!(
+            "convert takes a KITTI sequence directory or a recorded log, not a folder of scans"
+        ),
     };
     let bar = output.progress(frame_count(&selections), "converting");
     let start_ns = (start_time_s * 1e9).round() as u64;
     let summary = convert_kitti(
-        sequence,
-        source.skip_log(),
+        &sequence,
         &frames,
         output_path,
         compression,
@@ -218,15 +218,14 @@ impl Written {
 
 /// `convert` of a recorded log: every message, as ROS 2 where travmap knows the type.
 fn convert_whole_log(
-    drive: &RosDrive,
-    skips: &SkipLog,
+    drive: &RecordedLog,
     output_path: &std::path::Path,
     compression: Compression,
     output: &Output,
     selections: &[travmap_drive::Selection],
 ) -> Result<Outcome> {
     let bar = output.progress(drive.frame_count() as u64, "converting");
-    let summary = convert_log(drive, skips, output_path, compression, &|topic, count| {
+    let summary = convert_log(drive, output_path, compression, &|topic, count| {
         if topic == drive.cloud_topic() {
             bar.inc(count);
         }

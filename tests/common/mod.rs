@@ -411,3 +411,10 @@ pub fn kitti_labels(path: &Path) -> Vec<u32> {
     let label = |b: &[u8]| u32::from_le_bytes(b.try_into().unwrap());
     bytes.chunks_exact(4).map(label).collect()
 }
+
+/// Every frame of an input, read through the library's face as the commands read
+/// them (default options).
+pub fn read_frames(input: &Path) -> Vec<travmap_core::frame::Frame> {
+    let source = travmap_io::Source::open(input, &Default::default(), &|_| {}).unwrap();
+    source.read(&(0..usize::MAX)).map(Result::unwrap).collect()
+}

@@ -15,6 +15,7 @@ pub mod fuzzing;
 mod kitti;
 mod packets;
 mod payloads;
+mod recorded;
 mod ros_drive;
 mod skips;
 mod source;
@@ -28,8 +29,6 @@ pub use containers::log::Log;
 pub use containers::rosbag2::listed_storage_files;
 /// What an input is, by its content.
 pub use format::{InputFormat, detect};
-/// The recordings a conversion copies from: a KITTI sequence and a recorded log.
-pub use kitti::KittiSequence;
 /// LiDAR packets decoded into scans, every vendor behind one face: the packet
 /// messages read, the model told from the packets (or an Ouster's metadata), its
 /// calibration, and the assembler that cuts scans; the Ouster packet messages a
@@ -38,7 +37,8 @@ pub use packets::ouster::{OUSTER_PACKET_MESSAGES, OusterMetadata, PACKET_MSG_SCH
 pub use packets::{
     PACKET_MESSAGES, PacketAssembler, PacketCalibration, PacketModel, PacketScan, packet_message,
 };
-pub use ros_drive::RosDrive;
+/// What an input recorded beside its frames, for the outputs that copy or convert it.
+pub use recorded::{Recorded, RecordedKitti, RecordedLog};
 /// A recorded log's options: its LiDAR topics, their calibrations and frames.
 pub use ros_drive::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics};
 /// Frames left out as unreadable (`--keep-going`), and the error when none was read.

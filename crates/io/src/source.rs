@@ -15,6 +15,7 @@ use super::skips::{Skip, SkipLog};
 use crate::cloud_files::scan_folder::ScanFolder;
 use crate::cloud_files::site_cloud::SiteCloud;
 use crate::containers::log::Log;
+use crate::recorded::{Recorded, RecordedKitti, RecordedLog};
 use travmap_core::config::PoseSource;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
@@ -222,19 +223,14 @@ impl Source {
         format!("{}: {place}", self.path().display())
     }
 
-    /// The KITTI sequence, when the drive is one (convert, annotate's passthrough).
-    pub fn kitti(&self) -> Option<&KittiSequence> {
+    /// What the input recorded beside its frames (convert, annotate's
+    /// passthrough), read with this source's skip log.
+    pub fn recorded(&self) -> Recorded<'_> {
+        let skips = &self.skips;
         match &self.recording {
-            Recording::Kitti(sequence) => Some(sequence),
-            _ => None,
-        }
-    }
-
-    /// The recorded log, when the drive is one (convert, annotate's passthrough).
-    pub fn log(&self) -> Option<&RosDrive> {
-        match &self.recording {
-            Recording::Log(drive) => Some(drive),
-            _ => None,
+            Recording::Kitti(sequence) => Recorded::Kitti(RecordedKitti { sequence, skips }),
+            Recording::Log(drive) => Recorded::Log(RecordedLog { drive, skips }),
+            Recording::Scans(..) | Recording::Site(..) => Recorded::FramesOnly,
         }
     }
 
@@ -247,7 +243,10 @@ impl Source {
     /// When the drive is a packet log that began mid-turn: the packets of frame 0 (a
     /// part of a rotation) and of frame 1.
     pub fn partial_first_scan(&self) -> Option<(usize, usize)> {
-        self.log().and_then(RosDrive::partial_first_scan)
+        match &self.recording {
+            Recording::Log(drive) => drive.partial_first_scan(),
+            _ => None,
+        }
     }
 
     /// Where the world frame lies on the Earth or in a file's coordinates, when the
@@ -318,8 +317,9 @@ impl Source {
         }
     }
 
-    /// Whether frames carry their camera images (default true): see
-    /// [`KittiSequence::set_read_images`] and [`RosDrive::set_read_images`].
+    /// Whether frames carry their camera images (default true). Decoding one costs
+    /// more than the rest of the method, and without images a log's image messages
+    /// are not even parsed.
     pub fn set_read_images(&mut self, read_images: bool) {
         self.read_images = read_images;
         match &mut self.recording {
@@ -452,7 +452,7 @@ impl Source {
                 &self.skips,
                 |index| sequence.read_frame(index),
             )),
-            Recording::Log(drive) => Box::new(drive.read_only(range, only.clone(), &self.skips)),
+            Recording::Log(drive) => Box::new(drive.read(range, only.clone(), &self.skips)),
             Recording::Scans(folder) => Box::new(frame_by_frame(
                 wanted(folder.frames_in(range)),
                 &self.skips,

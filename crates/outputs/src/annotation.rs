@@ -36,6 +36,7 @@ use travmap_formats::ros::{
     FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion,
     TfMessage, Time, TransformStamped, Vector3, datatype,
 };
+use travmap_io::Recorded;
 use travmap_method::classifier::SvmModel;
 use travmap_method::grid::CellClass;
 use travmap_method::pipeline::FrameResult;
@@ -289,20 +290,23 @@ pub fn annotate(
     // A KITTI frame's messages are made from the frame as the method's reader reads
     // it (not read a second time), and written as they come, ahead of its results.
     let mut kitti_passthrough = None;
-    let source = &selection.source;
-    let skips = source.skip_log();
     // A folder of scans or a site cloud has no messages to pass through.
-    let passthrough_kitti = source.kitti().filter(|_| options.passthrough);
+    let recorded = selection.source.recorded();
+    let (passthrough_kitti, passthrough_log) = match &recorded {
+        _ if !options.passthrough => (None, None),
+        Recorded::Kitti(sequence) => (Some(sequence), None),
+        Recorded::Log(drive) => (None, Some(drive)),
+        Recorded::FramesOnly => (None, None),
+    };
     if let Some(sequence) = passthrough_kitti {
         kitti_passthrough = Some(KittiFrameWriter::new(sequence));
     }
-    if let Some(drive) = source.log().filter(|_| options.passthrough) {
+    if let Some(drive) = passthrough_log {
         sink.copy_chunks_by_time();
-        passthrough_messages =
-            write_log_messages(&mut sink, drive, skips, true, &|_, _| {})?.messages;
+        passthrough_messages = write_log_messages(&mut sink, drive, true, &|_, _| {})?.messages;
     }
     let encode_passthrough = |frame: &Frame| match passthrough_kitti {
-        Some(sequence) => encode_kitti_frame(sequence, skips, frame, 0),
+        Some(sequence) => encode_kitti_frame(sequence, frame, 0),
         None => Ok(None),
     };
     let world_frame = selection.source.world_frame().to_string();

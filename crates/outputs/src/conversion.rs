@@ -37,7 +37,7 @@ use travmap_formats::ros::{
     known_schema, ros1_to_cdr,
 };
 use travmap_io::{
-    KittiSequence, OUSTER_PACKET_MESSAGES, PACKET_MSG_SCHEMA, PacketScan, RosDrive, SkipLog,
+    OUSTER_PACKET_MESSAGES, PACKET_MSG_SCHEMA, PacketScan, RecordedKitti, RecordedLog,
 };
 
 pub const CLOUD_TOPIC: &str = "/velodyne_points";
@@ -98,21 +98,12 @@ fn ouster_schema(ros2_name: &str) -> Option<&'static str> {
 /// own sequence numbers, none decompressed.
 pub fn write_log_messages(
     sink: &mut McapSink,
-    drive: &RosDrive,
-    skips: &SkipLog,
+    drive: &RecordedLog,
     as_recorded: bool,
     on_messages: &dyn Fn(&str, u64),
 ) -> Result<LogCopySummary> {
     let mut summary = LogCopySummary::default();
-    let stored = drive.stored().filter(|stored| {
-        let schema_name = |id| stored.schemas.iter().find(|(s, _)| s.id == id);
-        let translated = |c: &mcap::records::Channel| match c.message_encoding.as_str() {
-            encoding if foxglove::reads(encoding) => schema_name(c.schema_id)
-                .is_some_and(|(s, _)| foxglove::ros_equivalent(&s.name).is_some()),
-            encoding => MessageEncoding::from_name(encoding) == Some(MessageEncoding::Ros1),
-        };
-        !stored.channels.iter().any(translated)
-    });
+    let stored = drive.stored().filter(|stored| !stored.needs_translation());
     if let Some(stored) = stored {
         let topics: HashMap<u16, String> = stored
             .channels
@@ -140,7 +131,7 @@ pub fn write_log_messages(
             return Ok(summary);
         }
     }
-    for message in drive.messages(skips) {
+    for message in drive.messages() {
         let message = message?;
         on_messages(&message.connection.topic, 1);
         let connection = &message.connection;
@@ -210,17 +201,16 @@ pub fn write_log_messages(
 
 /// Converts every message of `drive` into `output` (see [`write_log_messages`]).
 pub fn convert_log(
-    drive: &RosDrive,
-    skips: &SkipLog,
+    drive: &RecordedLog,
     output: &Path,
     compression: Compression,
     on_messages: &dyn Fn(&str, u64),
 ) -> Result<LogCopySummary> {
     let mut sink = McapSink::create(output, compression)?;
     // Converting is asked for a compression; passing through is not.
-    let mut summary = write_log_messages(&mut sink, drive, skips, false, on_messages)?;
-    if let Some(scans) = drive.packet_scans(skips) {
-        let mut partial_first = drive.partial_first_scan().is_some();
+    let mut summary = write_log_messages(&mut sink, drive, false, on_messages)?;
+    if let Some(scans) = drive.packet_scans() {
+        let mut partial_first = drive.begins_mid_turn();
         for decoded in scans {
             let decoded = decoded?;
             if partial_first && decoded.topic == drive.cloud_topic() {
@@ -413,14 +403,13 @@ pub fn camera_info(k: &Matrix3<f64>, width: u32, height: u32, stamp_ns: u64) -> 
 }
 
 /// `/tf_static`: velodyne -> camera_0 from Tr, camera_0 -> camera_2 from P2's baseline.
-fn static_transforms(sequence: &KittiSequence, stamp_ns: u64) -> TfMessage {
-    let calibration = sequence.calibration();
+fn static_transforms(sequence: &RecordedKitti, stamp_ns: u64) -> TfMessage {
     let mut transforms = vec![TransformStamped {
         header: header(stamp_ns, VELODYNE_FRAME),
         child_frame_id: CAMERA_0_FRAME.into(),
-        transform: transform_from_pose(&calibration.velodyne_from_camera_0()),
+        transform: transform_from_pose(&sequence.velodyne_from_camera_0()),
     }];
-    if let Some((_, camera_0_from_camera_2)) = calibration.camera_2() {
+    if let Some((_, camera_0_from_camera_2)) = sequence.camera_2() {
         transforms.push(TransformStamped {
             header: header(stamp_ns, CAMERA_0_FRAME),
             child_frame_id: CAMERA_2_FRAME.into(),
@@ -441,30 +430,17 @@ pub struct EncodedFrame {
 }
 
 /// The messages of `frame`, read from `sequence` (its image from its file, as
-/// recorded); None when they cannot be made and `skips` keeps going past
+/// recorded); None when they cannot be made and the sequence keeps going past
 /// unreadable frames, which records the skip.
 pub fn encode_kitti_frame(
-    sequence: &KittiSequence,
-    skips: &SkipLog,
+    sequence: &RecordedKitti,
     frame: &Frame,
     start_ns: u64,
 ) -> Result<Option<EncodedFrame>> {
-    kept(skips, frame.index, encode_frame(sequence, frame, start_ns))
+    sequence.kept(frame.index, encode_frame(sequence, frame, start_ns))
 }
 
-/// `encoded`, or None for a frame `skips` skips (`--keep-going`).
-fn kept(
-    skips: &SkipLog,
-    index: usize,
-    encoded: Result<EncodedFrame>,
-) -> Result<Option<EncodedFrame>> {
-    match encoded {
-        Ok(encoded) => Ok(Some(encoded)),
-        Err(error) => skips.handle(index, error).map(|()| None),
-    }
-}
-
-fn encode_frame(sequence: &KittiSequence, frame: &Frame, start_ns: u64) -> Result<EncodedFrame> {
+fn encode_frame(sequence: &RecordedKitti, frame: &Frame, start_ns: u64) -> Result<EncodedFrame> {
     let index = frame.index;
     let stamp_ns = start_ns + frame.stamp_ns;
     let cloud = scan_cloud_with(frame, stamp_ns, scan_cloud_data(frame));
@@ -475,10 +451,7 @@ fn encode_frame(sequence: &KittiSequence, frame: &Frame, start_ns: u64) -> Resul
             transform: transform_from_pose(&frame.world_from_velodyne),
         }],
     };
-    let image = match (
-        sequence.image_path(index),
-        sequence.calibration().camera_2(),
-    ) {
+    let image = match (sequence.image_path(index), sequence.camera_2()) {
         (Some(path), Some((k, _))) => {
             let png = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
             let (width, height) = png_size(&png).ok_or_else(|| Error::Sequence {
@@ -508,12 +481,12 @@ fn encode_frame(sequence: &KittiSequence, frame: &Frame, start_ns: u64) -> Resul
 /// Writes KITTI frames' messages into a sink in frame order, `/tf_static` before
 /// the first, and counts them.
 pub struct KittiFrameWriter<'a> {
-    sequence: &'a KittiSequence,
+    sequence: &'a RecordedKitti<'a>,
     pub summary: ConversionSummary,
 }
 
 impl<'a> KittiFrameWriter<'a> {
-    pub fn new(sequence: &'a KittiSequence) -> Self {
+    pub fn new(sequence: &'a RecordedKitti<'a>) -> Self {
         let summary = ConversionSummary {
             frames: 0,
             images: 0,
@@ -555,8 +528,7 @@ impl<'a> KittiFrameWriter<'a> {
 /// Converts the frames of `sequence` in `frames` into `output`. `on_frame` is called
 /// after each written frame.
 pub fn convert_kitti(
-    sequence: &KittiSequence,
-    skips: &SkipLog,
+    sequence: &RecordedKitti,
     frames: &Range<usize>,
     output: &Path,
     compression: Compression,
@@ -566,14 +538,14 @@ pub fn convert_kitti(
     let mut sink = McapSink::create(output, compression)?;
     let mut writer = KittiFrameWriter::new(sequence);
     for batch in sequence.frames_in(frames).chunks(BATCH) {
-        // A frame whose files are unreadable stops the conversion, unless `skips`
-        // keeps going, which skips and records it.
+        // A frame whose files are unreadable stops the conversion, unless the
+        // sequence keeps going, which skips and records it.
         let encoded: Vec<Option<EncodedFrame>> = batch
             .par_iter()
             .map(|&index| {
                 let frame = sequence.read_frame(index);
                 let encoded = frame.and_then(|frame| encode_frame(sequence, &frame, start_ns));
-                kept(skips, index, encoded)
+                sequence.kept(index, encoded)
             })
             .collect::<Result<_>>()?;
         for frame in encoded.into_iter().flatten() {
@@ -583,7 +555,11 @@ pub fn convert_kitti(
     }
     if writer.summary.frames == 0 {
         let inputs = sequence.dir().display().to_string();
-        return Err(travmap_io::nothing_read(output, inputs, &skips.skipped()));
+        return Err(travmap_io::nothing_read(
+            output,
+            inputs,
+            &sequence.skips().skipped(),
+        ));
     }
     sink.finish()?;
     let mut summary = writer.summary;

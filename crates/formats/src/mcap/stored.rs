@@ -7,8 +7,10 @@ use std::ops::Range;
 use bytes::Bytes;
 use mcap::records::{Record, op};
 
+use crate::foxglove;
 use crate::log_message::FileMap;
 use crate::mcap::records::{RecordWalk, check_lengths, chunk_parts};
+use crate::ros::MessageEncoding;
 
 /// One channel's part of a stored chunk.
 pub struct StoredChannel {
@@ -60,6 +62,19 @@ impl StoredLog {
     pub fn messages(&self) -> u64 {
         let chunks = self.chunks.iter().flat_map(|chunk| &chunk.channels);
         chunks.map(|channel| channel.messages).sum()
+    }
+
+    /// Whether some channel holds messages that are read as ROS 2 only once
+    /// re-encoded: ROS 1's, or a Foxglove schema that stands for a ROS type. Without
+    /// one, the chunks can be copied as stored.
+    pub fn needs_translation(&self) -> bool {
+        let schema_name = |id| self.schemas.iter().find(|(s, _)| s.id == id);
+        let translated = |c: &mcap::records::Channel| match c.message_encoding.as_str() {
+            encoding if foxglove::reads(encoding) => schema_name(c.schema_id)
+                .is_some_and(|(s, _)| foxglove::ros_equivalent(&s.name).is_some()),
+            encoding => MessageEncoding::from_name(encoding) == Some(MessageEncoding::Ros1),
+        };
+        self.channels.iter().any(translated)
     }
 
     /// Collects a schema or channel record (once per id: the summary repeats them).

@@ -151,11 +151,6 @@ impl KittiSequence {
         &self.calibration
     }
 
-    /// Frame numbers with a scan, ascending.
-    pub fn frames(&self) -> &[usize] {
-        &self.frames
-    }
-
     /// Frame numbers with a scan inside `range`.
     pub fn frames_in(&self, range: &Range<usize>) -> Vec<usize> {
         self.frames
@@ -163,11 +158,6 @@ impl KittiSequence {
             .copied()
             .filter(|f| range.contains(f))
             .collect()
-    }
-
-    /// True when frame `index` has a label file.
-    pub fn has_labels(&self, index: usize) -> bool {
-        self.label_path(index).is_file()
     }
 
     /// `T_world_velo(i) = inv(Tr) * pose_i * Tr` (METHOD.md section 1): the pose file

@@ -77,14 +77,9 @@ impl RosDrive {
 
     /// The frames in `frames`, streamed in one pass over the file, each with the
     /// camera image nearest in time (within 50 ms) when the drive has a camera. With
-    /// `--keep-going` (`skips`), unreadable frames are recorded and left out.
-    pub fn read<'a>(&'a self, frames: &Range<usize>, skips: &'a SkipLog) -> DriveFrames<'a> {
-        self.read_only(frames, None, skips)
-    }
-
-    /// [`Self::read`] of the frames of `frames` that are in `only` (all without it):
-    /// the others' clouds are passed over undecoded.
-    pub fn read_only<'a>(
+    /// `--keep-going` (`skips`), unreadable frames are recorded and left out. With
+    /// `only`, just those of them: the others' clouds are passed over undecoded.
+    pub fn read<'a>(
         &'a self,
         frames: &Range<usize>,
         only: Option<BTreeSet<usize>>,
