@@ -32,7 +32,7 @@ impl OusterMetadata {
     /// The metadata a log recorded as a `std_msgs/String` message (ouster-ros's
     /// `/metadata` topic).
     pub fn from_message(data: &[u8], encoding: MessageEncoding) -> Result<Self, String> {
-        Self::from_json(&super::string_message(data, encoding)?)
+        Self::from_json(&string_message(data, encoding)?)
     }
 
     pub fn from_json(text: &str) -> Result<Self, String> {
@@ -240,6 +240,16 @@ fn default_beam_origin_mm(product_line: Option<&str>) -> f64 {
     } else {
         12.163
     }
+}
+
+/// The text of a `std_msgs/String` message.
+pub fn string_message(data: &[u8], encoding: MessageEncoding) -> Result<String, String> {
+    #[derive(serde::Deserialize)]
+    struct StringMessage {
+        data: String,
+    }
+    let message: StringMessage = encoding.decode(data)?;
+    Ok(message.data)
 }
 
 #[cfg(test)]

@@ -16,7 +16,7 @@ mod metadata;
 mod packet;
 
 pub use assembler::OusterAssembler;
-pub use metadata::OusterMetadata;
+pub use metadata::{OusterMetadata, string_message};
 pub use packet::OusterModel;
 
 use super::message::ScanMessage;
@@ -70,16 +70,6 @@ pub fn packet_msg_message(
         stamp_ns: log_time_ns,
         packets: vec![(log_time_ns, packet)],
     })
-}
-
-/// The text of a `std_msgs/String` message.
-pub fn string_message(data: &[u8], encoding: MessageEncoding) -> Result<String, String> {
-    #[derive(serde::Deserialize)]
-    struct StringMessage {
-        data: String,
-    }
-    let message: StringMessage = encoding.decode(data)?;
-    Ok(message.data)
 }
 
 /// The metadata topic of packet topic `topic`: the one in its namespace
