@@ -48,6 +48,11 @@ const CRATES: &[(&str, &str, &[&str])] = &[
         ],
     ),
     (
+        "crates/bench",
+        "travmap-bench",
+        &["travmap-core", "travmap-drive"],
+    ),
+    (
         "crates/fuzzing",
         "travmap-fuzzing",
         &[
@@ -78,6 +83,7 @@ const CRATES: &[(&str, &str, &[&str])] = &[
             "travmap-drive",
             "travmap-training",
             "travmap-outputs",
+            "travmap-bench",
         ],
     ),
 ];

@@ -1,5 +1,6 @@
 //! `travmap bench`: per-stage latency (median, p95) and throughput on 1 thread and
-//! all cores; with `--tools`, the subcommands' own throughput (`bench_tools.rs`).
+//! all cores; with `--tools`, the subcommands' own throughput (`travmap-bench`,
+//! the `bench-tools` feature).
 
 use std::io::Write;
 
@@ -8,7 +9,6 @@ use clap::Args;
 use serde_json::json;
 use travmap_drive::scoring::benchmark::benchmark;
 
-use super::bench_tools::{bench_tools, print_tools_table};
 use super::{Inputs, ModelArg, Outcome, model_json, outcome, print_json_summary, with_summary};
 
 /// Per-stage latency (median, p95) and throughput on 1 thread and all cores.
@@ -45,21 +45,13 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
     let tool_repeats = usize::from(args.tool_repeats);
     let tools = args
         .tools
-        .then(|| {
-            let input = args.inputs.open_one(config, false)?;
-            bench_tools(
-                &args.inputs,
-                &input,
-                args.model.model.as_deref().map(std::path::Path::new),
-                tool_repeats,
-            )
-        })
+        .then(|| tools::time(&args, config, tool_repeats))
         .transpose()?;
     let (model, model_name) = args.model.load(config)?;
     let selection = args.inputs.open_one(config, model.reads_images(config))?;
     if let (Some(tools), false) = (&tools, output.json) {
         let out = &mut std::io::stdout().lock();
-        print_tools_table(out, &selection.describe(), tools, tool_repeats)?;
+        tools::print_tools_table(out, &selection.describe(), tools, tool_repeats)?;
     }
     let report = benchmark(&selection, config, &model, repeats)?;
     if output.json {
@@ -140,4 +132,45 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
         report.speedup
     )?;
     Ok(outcome(std::slice::from_ref(&selection)))
+}
+
+/// `--tools`: the subcommands timed as child processes (`travmap-bench`), or,
+/// built without the `bench-tools` feature, refused.
+#[cfg(feature = "bench-tools")]
+mod tools {
+    use anyhow::Result;
+    pub use travmap_bench::{ToolRow, print_tools_table};
+
+    pub fn time(
+        args: &super::BenchArgs,
+        config: &travmap_core::Config,
+        repeats: usize,
+    ) -> Result<Vec<ToolRow>> {
+        let input = args.inputs.open_one(config, false)?;
+        let model = args.model.model.as_deref().map(std::path::Path::new);
+        travmap_bench::bench_tools(&args.inputs.child_flags(), &input, model, repeats)
+    }
+}
+
+#[cfg(not(feature = "bench-tools"))]
+mod tools {
+    use anyhow::Result;
+
+    /// No rows can be made without the feature.
+    #[derive(serde::Serialize)]
+    pub enum ToolRow {}
+
+    pub fn time(_: &super::BenchArgs, _: &travmap_core::Config, _: usize) -> Result<Vec<ToolRow>> {
+        let why = "--tools: this travmap was built without the bench-tools feature";
+        Err(crate::cli::usage(why.into()))
+    }
+
+    pub fn print_tools_table(
+        _: &mut impl std::io::Write,
+        _: &str,
+        _: &[ToolRow],
+        _: usize,
+    ) -> Result<()> {
+        Ok(())
+    }
 }

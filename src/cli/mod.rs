@@ -5,8 +5,8 @@
 pub mod adapt;
 pub mod annotate;
 pub mod bench;
-pub mod bench_tools;
-mod child_runs;
+#[cfg(feature = "bench-tools")]
+mod child_flags;
 pub mod config;
 pub mod convert;
 pub mod crossval;
@@ -26,7 +26,6 @@ pub use report::{
     print_json_summary, print_wrote, setting_word, with_summary, without_remission_said,
 };
 
-use std::ffi::OsString;
 use std::io::IsTerminal;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -114,28 +113,6 @@ impl Settings {
         config.ready().map_err(|e| usage(format!("{e}")))?;
         Ok(config)
     }
-
-    /// The flags that give a child travmap this configuration (`bench --tools`).
-    pub fn as_arguments(&self) -> Vec<OsString> {
-        let sets = self.sets.iter().map(|set| ("--set", Some(set.into())));
-        flags(
-            [
-                ("--config", self.config.clone().map(OsString::from)),
-                ("--poses", self.poses.clone().map(OsString::from)),
-            ]
-            .into_iter()
-            .chain(sets),
-        )
-    }
-}
-
-/// `--flag value` for every flag that has a value.
-fn flags<'a>(pairs: impl IntoIterator<Item = (&'a str, Option<OsString>)>) -> Vec<OsString> {
-    pairs
-        .into_iter()
-        .filter_map(|(flag, value)| Some([OsString::from(flag), value?]))
-        .flatten()
-        .collect()
 }
 
 /// A mistake in the command line that clap's grammar cannot see (a `--set` typo,
@@ -283,15 +260,6 @@ impl Sensors {
     pub fn calibrations(&self) -> LidarCalibrations {
         LidarCalibrations::from_arguments(&self.lidar_calibration).unwrap_or_default()
     }
-
-    /// The flags that give a child travmap these topics and calibrations.
-    fn arguments(&self) -> impl Iterator<Item = (&'static str, Option<OsString>)> + '_ {
-        let topics = (self.cloud_topic.iter()).map(|t| ("--cloud-topic", Some(t.into())));
-        let calibrations =
-            (self.lidar_calibration.iter()).map(|file| ("--lidar-calibration", Some(file.into())));
-        let frames = (self.lidar_frame.iter()).map(|frame| ("--lidar-frame", Some(frame.into())));
-        topics.chain(calibrations).chain(frames)
-    }
 }
 
 /// The drives a command reads, the frames of each, and how to read them.
@@ -349,31 +317,6 @@ impl Inputs {
             rate_hz: self.rate,
             site_tile_m: None,
         })
-    }
-
-    /// The flags that give a child travmap the LiDAR topics and calibrations.
-    pub fn sensor_arguments(&self) -> Vec<OsString> {
-        flags(self.sensors.arguments())
-    }
-
-    /// The flags that make a child travmap read an input as this command does
-    /// (`bench --tools`): the log's topics and world frame, the scan rate and the
-    /// configuration; not `--frames`, which the caller adds where it applies.
-    pub fn reading_arguments(&self) -> Vec<OsString> {
-        let mut arguments = flags(self.sensors.arguments().chain([
-            (
-                "--world-frame",
-                self.world_frame.clone().map(OsString::from),
-            ),
-            (
-                "--camera-topic",
-                self.camera_topic.clone().map(OsString::from),
-            ),
-            ("--pose-topic", self.pose_topic.clone().map(OsString::from)),
-            ("--rate", self.rate.map(|hz| hz.to_string().into())),
-        ]));
-        arguments.extend(self.settings.as_arguments());
-        arguments
     }
 
     /// Opens every input under `config` (the command's, loaded once);

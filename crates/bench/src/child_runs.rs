@@ -13,10 +13,10 @@ use travmap_core::temporaries;
 
 /// One run of a child: its wall time, output size and peak memory.
 #[derive(Debug)]
-pub(super) struct ChildRun {
-    pub(super) wall_s: f64,
-    pub(super) output_bytes: u64,
-    pub(super) peak_rss_mib: Option<f64>,
+pub(crate) struct ChildRun {
+    pub(crate) wall_s: f64,
+    pub(crate) output_bytes: u64,
+    pub(crate) peak_rss_mib: Option<f64>,
 }
 
 /// Runs `executable arguments` on `threads` rayon threads and times it; a child
@@ -24,7 +24,7 @@ pub(super) struct ChildRun {
 /// stderr. `output` (the file the child writes, if any) is removed first: a child
 /// that replaced the last run's output would be timed freeing its blocks too (0.1 s
 /// of a 0.65 s `annotate` here, for 160 MB on ext4).
-pub(super) fn run_child(
+pub(crate) fn run_child(
     executable: &Path,
     arguments: &[OsString],
     threads: usize,
@@ -86,7 +86,7 @@ pub(super) fn run_child(
 /// Seconds `dd conv=fsync` takes to write `bytes` (in whole MiB, at least one) into
 /// `directory` and sync them: what the disk alone needs for an output of that size,
 /// durable as travmap's outputs are. None where dd cannot run.
-pub(super) fn synced_write_seconds(directory: &Path, bytes: u64) -> Option<f64> {
+pub(crate) fn synced_write_seconds(directory: &Path, bytes: u64) -> Option<f64> {
     let file = directory.join("synced-write.bin");
     let mut of = OsString::from("of=");
     of.push(&file);
@@ -210,10 +210,10 @@ fn wait_with_peak_rss(mut child: Child) -> std::io::Result<(ExitStatus, Option<f
 
 /// A directory under the system's temporary directory, named with this process's
 /// id, removed with everything in it when dropped.
-pub(super) struct TemporaryDirectory(pub(super) PathBuf);
+pub(crate) struct TemporaryDirectory(pub(crate) PathBuf);
 
 impl TemporaryDirectory {
-    pub(super) fn create() -> Result<Self> {
+    pub(crate) fn create() -> Result<Self> {
         let path = std::env::temp_dir().join(format!("travmap-bench-{}", std::process::id()));
         // Left by an earlier process with this id that was killed: nobody else's.
         let _ = std::fs::remove_dir_all(&path);

@@ -1,4 +1,5 @@
-//! `travmap bench --tools`: the subcommands themselves (`convert`, `annotate`,
+//! `travmap bench --tools`, outside the binary's own code (the `bench-tools`
+//! feature): the subcommands themselves (`convert`, `annotate`,
 //! `dataset`, `adapt`) run as child processes of this executable on the bench's input, on one
 //! thread and on all cores; frames/s, MB/s written, times real time and the child's
 //! peak memory. Unlike the method table these include the disk, decoding,
@@ -14,8 +15,23 @@ use serde::Serialize;
 use travmap_drive::Selection;
 use travmap_drive::scoring::evaluation::Spread;
 
-use super::Inputs;
-use super::child_runs::{ChildRun, TemporaryDirectory, run_child, synced_write_seconds};
+mod child_runs;
+
+use child_runs::{ChildRun, TemporaryDirectory, run_child, synced_write_seconds};
+
+/// How the bench's input is read, as the flags a child travmap takes.
+#[derive(Clone, Debug, Default)]
+pub struct ChildFlags {
+    /// The bench's `--frames`, when given.
+    pub frames: Option<std::ops::Range<usize>>,
+    /// The LiDAR topics, calibrations and frames (all a log's `convert` takes).
+    pub sensors: Vec<OsString>,
+    /// Everything that says how the input is read: the sensors' flags, the world
+    /// frame, camera and pose topics, the scan rate and the configuration.
+    pub reading: Vec<OsString>,
+    /// The configuration alone (for the MCAP the convert row wrote).
+    pub settings: Vec<OsString>,
+}
 
 /// Which file a row's tool reads.
 #[derive(Clone, Copy)]
@@ -127,7 +143,7 @@ impl ToolSpec {
         &self,
         input: &Path,
         output: &Path,
-        inputs: &Inputs,
+        inputs: &ChildFlags,
         given_kind: &str,
         model: Option<&Path>,
     ) -> Vec<OsString> {
@@ -151,7 +167,7 @@ impl ToolSpec {
     fn method_arguments(
         &self,
         input: &Path,
-        inputs: &Inputs,
+        inputs: &ChildFlags,
         given_kind: &str,
         model: Option<&Path>,
     ) -> Option<Vec<OsString>> {
@@ -167,7 +183,7 @@ impl ToolSpec {
     /// the input, and the model.
     fn reading_arguments(
         &self,
-        inputs: &Inputs,
+        inputs: &ChildFlags,
         given_kind: &str,
         model: Option<&Path>,
     ) -> Vec<OsString> {
@@ -182,10 +198,10 @@ impl ToolSpec {
             arguments.extend(["--frames".into(), range.into()]);
         }
         match (self.tool, self.input) {
-            ("convert", _) if whole_log => arguments.extend(inputs.sensor_arguments()),
+            ("convert", _) if whole_log => arguments.extend(inputs.sensors.iter().cloned()),
             ("convert", _) => {}
-            (_, ToolInput::Given) => arguments.extend(inputs.reading_arguments()),
-            (_, ToolInput::Converted) => arguments.extend(inputs.settings.as_arguments()),
+            (_, ToolInput::Given) => arguments.extend(inputs.reading.iter().cloned()),
+            (_, ToolInput::Converted) => arguments.extend(inputs.settings.iter().cloned()),
         }
         if let ("annotate" | "adapt", Some(model)) = (self.tool, model) {
             arguments.extend(["--model".into(), model.into()]);
@@ -276,10 +292,11 @@ impl ToolRow {
     }
 }
 
-/// Every row of [`ROWS`] on `selection` (the one input of `inputs`), each run
-/// `repeats` times on one thread and on all cores; `model` goes to `annotate`.
+/// Every row of the tools table (convert, annotate, dataset, adapt) on `selection`
+/// (read as `inputs` say), each run `repeats` times on one thread and on all cores;
+/// `model` goes to `annotate`.
 pub fn bench_tools(
-    inputs: &Inputs,
+    inputs: &ChildFlags,
     selection: &Selection,
     model: Option<&Path>,
     repeats: usize,
@@ -471,35 +488,32 @@ impl ToolTiming {
 
 #[cfg(test)]
 mod tests {
-    use clap::Parser;
-
     use super::*;
 
-    /// Bench's input arguments, as the command line gives them.
-    #[derive(Parser)]
-    struct Line {
-        #[command(flatten)]
-        inputs: Inputs,
+    fn flags(texts: &[&str]) -> Vec<OsString> {
+        texts.iter().map(OsString::from).collect()
+    }
+
+    /// `bench seq --frames 2..=4 --set grid.size_m=16 --cloud-topic /points`, as the
+    /// command line hands it on (its own test: `src/cli/mod.rs`).
+    fn given() -> ChildFlags {
+        ChildFlags {
+            frames: Some(2..5),
+            sensors: flags(&["--cloud-topic", "/points"]),
+            reading: flags(&["--cloud-topic", "/points", "--set", "grid.size_m=16"]),
+            settings: flags(&["--set", "grid.size_m=16"]),
+        }
     }
 
     #[test]
     fn each_row_gets_the_flags_its_tool_takes() {
-        let line = Line::parse_from([
-            "bench",
-            "seq",
-            "--frames",
-            "2..=4",
-            "--set",
-            "grid.size_m=16",
-            "--cloud-topic",
-            "/points",
-        ]);
+        let inputs = given();
         let command = |row: usize, input: &str| {
             ROWS[row]
                 .arguments(
                     Path::new(input),
                     Path::new("out"),
-                    &line.inputs,
+                    &inputs,
                     "kitti",
                     Some(Path::new("m.json")),
                 )
@@ -509,11 +523,14 @@ mod tests {
                 .join(" ")
         };
         assert_eq!(command(0, "seq"), "convert seq -o out -q --frames 2..5");
-        let open_ended = Line::parse_from(["bench", "seq", "--frames", "3.."]);
+        let open_ended = ChildFlags {
+            frames: Some(3..usize::MAX),
+            ..ChildFlags::default()
+        };
         let arguments = ROWS[0].arguments(
             Path::new("seq"),
             Path::new("out"),
-            &open_ended.inputs,
+            &open_ended,
             "kitti",
             None,
         );
@@ -522,7 +539,7 @@ mod tests {
         let log = ROWS[0].arguments(
             Path::new("d.mcap"),
             Path::new("out"),
-            &line.inputs,
+            &inputs,
             "packets",
             None,
         );
