@@ -27,14 +27,14 @@ const CRATES: &[(&str, &str, &[&str])] = &[
     ),
     ("crates/method", "travmap-method", &["travmap-core"]),
     (
-        "crates/drive",
-        "travmap-drive",
+        "crates/run",
+        "travmap-run",
         &["travmap-core", "travmap-io", "travmap-method"],
     ),
     (
         "crates/training",
         "travmap-training",
-        &["travmap-core", "travmap-drive", "travmap-method"],
+        &["travmap-core", "travmap-run", "travmap-method"],
     ),
     (
         "crates/outputs",
@@ -44,13 +44,13 @@ const CRATES: &[(&str, &str, &[&str])] = &[
             "travmap-formats",
             "travmap-io",
             "travmap-method",
-            "travmap-drive",
+            "travmap-run",
         ],
     ),
     (
         "crates/bench",
         "travmap-bench",
-        &["travmap-core", "travmap-drive"],
+        &["travmap-core", "travmap-run"],
     ),
     (
         "crates/fuzzing",
@@ -69,7 +69,7 @@ const CRATES: &[(&str, &str, &[&str])] = &[
             "travmap-core",
             "travmap-io",
             "travmap-method",
-            "travmap-drive",
+            "travmap-run",
         ],
     ),
     (
@@ -80,7 +80,7 @@ const CRATES: &[(&str, &str, &[&str])] = &[
             "travmap-formats",
             "travmap-io",
             "travmap-method",
-            "travmap-drive",
+            "travmap-run",
             "travmap-training",
             "travmap-outputs",
             "travmap-bench",

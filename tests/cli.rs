@@ -364,7 +364,7 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
         travmap_method::classifier::SvmModel::embedded(travmap_core::config::LabelRule::Road)
             .unwrap();
     let source = travmap_io::Source::open(Path::new(&seq), &Default::default(), &|_| {}).unwrap();
-    let selection = travmap_drive::Selection::new(source, 2..3);
+    let selection = travmap_run::DriveRun::new(source, 2..3);
     let mut result = None;
     selection
         .run::<travmap_core::Error>(&config, Some(&model), |r| {

@@ -7,11 +7,11 @@
 use std::path::Path;
 
 use serde_json::Value;
-use travmap_drive::Selection;
 use travmap_io::{Source, SourceOptions};
 use travmap_method::classifier::SvmModel;
 use travmap_method::grid::CellClass;
 use travmap_outputs::dataset::reading::{Labels, read_training_rows};
+use travmap_run::DriveRun;
 use travmap_training::TrainingSet;
 
 use crate::common::{arg, assert_contains, clean_failure, json_summary, travmap, with_settings};
@@ -95,7 +95,7 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     let mut config = travmap_core::Config::default();
     config.grid.size_m = config.training.grid_size_m;
     let source = Source::open(&seq, &SourceOptions::default(), &|_| {}).unwrap();
-    let mut selection = Selection::new(source, frame..frame + 1);
+    let mut selection = DriveRun::new(source, frame..frame + 1);
     selection.follow_trajectory(&config).unwrap();
     let mut results = Vec::new();
     selection

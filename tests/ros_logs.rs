@@ -663,7 +663,7 @@ fn appearance_of(input: &Path) -> Vec<Option<Vec<f32>>> {
         travmap_method::classifier::SvmModel::embedded(travmap_core::config::LabelRule::Road)
             .unwrap();
     let source = travmap_io::Source::open(input, &Default::default(), &|_| {}).unwrap();
-    let selection = travmap_drive::Selection::new(source, 0..usize::MAX);
+    let selection = travmap_run::DriveRun::new(source, 0..usize::MAX);
     let mut cells = Vec::new();
     selection
         .run::<travmap_core::Error>(&config, Some(&model), |result| {

@@ -8,9 +8,9 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use travmap_core::Config;
-use travmap_drive::Selection;
 use travmap_method::classifier::SvmModel;
 use travmap_outputs::atomic::write_atomically;
+use travmap_run::DriveRun;
 use travmap_training::adaptation::{Adapted, adapt as adapt_model};
 
 use super::{
@@ -109,7 +109,7 @@ pub fn adapted_model(
     prior: &SvmModel,
     prior_name: &str,
     output: &Output,
-) -> Result<(Adapted, Vec<Selection>)> {
+) -> Result<(Adapted, Vec<DriveRun>)> {
     let mut selections = inputs.open(config, config.appearance.enabled)?;
     let bar = output.progress(frame_count(&selections), "adapting");
     let adapted = adapt_model(&mut selections, config, prior, prior_name, &mut || {

@@ -7,7 +7,7 @@ use std::io::Write;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap_drive::scoring::benchmark::benchmark;
+use travmap_run::scoring::benchmark::benchmark;
 
 use super::{Inputs, ModelArg, Outcome, model_json, outcome, print_json_summary, with_summary};
 

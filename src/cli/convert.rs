@@ -194,7 +194,7 @@ impl Written {
         compression: Compression,
         output: &Output,
         seconds: f64,
-        selections: &[travmap_drive::Selection],
+        selections: &[travmap_run::DriveRun],
     ) -> Result<Outcome> {
         if output.json {
             let fields = json!({"output": path_text(output_path), "compression": compression, "elapsed_ms": seconds * 1e3});
@@ -222,7 +222,7 @@ fn convert_whole_log(
     output_path: &std::path::Path,
     compression: Compression,
     output: &Output,
-    selections: &[travmap_drive::Selection],
+    selections: &[travmap_run::DriveRun],
 ) -> Result<Outcome> {
     let bar = output.progress(drive.frame_count() as u64, "converting");
     let summary = convert_log(drive, output_path, compression, &|topic, count| {

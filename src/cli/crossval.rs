@@ -7,7 +7,7 @@ use std::io::Write;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap_drive::Selection;
+use travmap_run::DriveRun;
 use travmap_training::crossval::{
     CrossValidationReport, LeaveOneOutReport, cross_validate, leave_one_input_out,
 };
@@ -50,7 +50,7 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
         bar.inc(1);
     })?;
     bar.finish();
-    let sources: Vec<String> = selections.iter().map(Selection::describe).collect();
+    let sources: Vec<String> = selections.iter().map(DriveRun::describe).collect();
     if output.json {
         let fields = with_summary(json!({"config": config}), &report)?;
         print_json_summary("crossval", &selections, fields)?;
@@ -104,7 +104,7 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
 
 fn print_leave_one_out(
     report: &LeaveOneOutReport,
-    selections: &[Selection],
+    selections: &[DriveRun],
     config: &travmap_core::Config,
     json: bool,
 ) -> Result<()> {

@@ -9,9 +9,9 @@ use serde_json::json;
 use travmap_core::Config;
 use travmap_core::config::ModelChoice;
 use travmap_core::temporaries;
-use travmap_drive::{Fingerprints, Selection};
 use travmap_method::classifier::SvmModel;
 use travmap_outputs::dataset::{DEFAULT_ROWS_PER_PART, DatasetSummary, DatasetWriter, Layout};
+use travmap_run::{DriveRun, Fingerprints};
 
 use super::{
     Inputs, Outcome, check_output, check_output_dir, counted, frame_count, note_extension, outcome,
@@ -129,7 +129,7 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
 /// The predictable cells of every frame of `selections` on the training grid, into
 /// the dataset at `path`.
 fn write_cells(
-    selections: &[Selection],
+    selections: &[DriveRun],
     grid_config: &Config,
     model: Option<&SvmModel>,
     path: &Path,
@@ -145,7 +145,7 @@ fn write_cells(
             Ok(())
         })?;
     }
-    let inputs: Vec<String> = selections.iter().map(Selection::describe).collect();
+    let inputs: Vec<String> = selections.iter().map(DriveRun::describe).collect();
     let skipped: Vec<_> = selections.iter().flat_map(|s| s.source.skipped()).collect();
     Ok(writer.finish(&inputs.join("; "), &skipped)?)
 }

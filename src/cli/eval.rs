@@ -7,11 +7,11 @@ use std::io::Write;
 use anyhow::{Result, bail};
 use clap::Args;
 use serde_json::json;
-use travmap_drive::scoring::evaluation::{Evaluation, EvaluationReport};
-use travmap_drive::scoring::metrics::Confusion;
-use travmap_drive::scoring::metrics::Scores;
-use travmap_drive::{Fingerprints, Selection};
 use travmap_method::classifier::{AdaptationSummary, SvmModel};
+use travmap_run::scoring::evaluation::{Evaluation, EvaluationReport};
+use travmap_run::scoring::metrics::Confusion;
+use travmap_run::scoring::metrics::Scores;
+use travmap_run::{DriveRun, Fingerprints};
 
 use super::adapt::AdaptFlag;
 use super::{
@@ -102,7 +102,7 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         _ => None,
     };
     notice_unknown_labels(&report, config);
-    let sources: Vec<String> = selections.iter().map(Selection::describe).collect();
+    let sources: Vec<String> = selections.iter().map(DriveRun::describe).collect();
     if output.json {
         let fields = json!({
             "config": config,

@@ -5,14 +5,14 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use travmap_drive::scoring::evaluation::Evaluation;
-use travmap_drive::scoring::metrics::Confusion;
 use travmap_io::SourceOptions;
 use travmap_outputs::atomic::Staged;
 use travmap_outputs::drive_map::{render_drive_map, write_map_cells};
 use travmap_outputs::nav2_map::{Nav2Mode, gis_world_file, image_path, write_nav2_map};
 use travmap_outputs::preflight::check_distinct_outputs;
 use travmap_outputs::rendering::encode_png;
+use travmap_run::scoring::evaluation::Evaluation;
+use travmap_run::scoring::metrics::Confusion;
 
 use super::{
     Inputs, ModelArg, Outcome, check_output, counted, fit_said, frame_count, model_json,

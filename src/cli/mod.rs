@@ -36,13 +36,13 @@ use indicatif::{ProgressBar, ProgressStyle};
 use travmap_core::Config;
 use travmap_core::config::ModelChoice;
 use travmap_core::stopwatch::Stopwatch;
-use travmap_drive::Selection;
-pub use travmap_drive::opening::{Remark, open_selection, parse_frame_range};
 use travmap_io::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics, SourceOptions};
 use travmap_method::classifier::SvmModel;
 use travmap_outputs::preflight::{
     InputFiles, Preflight, check_output_directory, check_output_file,
 };
+use travmap_run::DriveRun;
+pub use travmap_run::opening::{Remark, open_selection, parse_frame_range};
 
 /// How a command ended: exit code 0, or 3 when it completed but skipped frames
 /// (`--keep-going`), as the mcap CLI reports data loss.
@@ -321,7 +321,7 @@ impl Inputs {
 
     /// Opens every input under `config` (the command's, loaded once);
     /// `read_images` decodes camera images into the frames.
-    pub fn open(&self, config: &Config, read_images: bool) -> Result<Vec<Selection>> {
+    pub fn open(&self, config: &Config, read_images: bool) -> Result<Vec<DriveRun>> {
         let options = self.source_options(config)?;
         self.open_paths(&self.sequences, &options, config, read_images)
     }
@@ -334,7 +334,7 @@ impl Inputs {
         options: &SourceOptions,
         config: &Config,
         read_images: bool,
-    ) -> Result<Vec<Selection>> {
+    ) -> Result<Vec<DriveRun>> {
         refuse_repeats(paths)?;
         let notice = |notice: &str| eprintln!("notice: {notice}");
         paths
@@ -361,7 +361,7 @@ impl Inputs {
 
     /// Opens the one input of a command that takes one (clap has checked that it is
     /// one: [`one_input`]).
-    pub fn open_one(&self, config: &Config, read_images: bool) -> Result<Selection> {
+    pub fn open_one(&self, config: &Config, read_images: bool) -> Result<DriveRun> {
         self.open_one_as(&self.source_options(config)?, config, read_images)
     }
 
@@ -371,7 +371,7 @@ impl Inputs {
         options: &SourceOptions,
         config: &Config,
         read_images: bool,
-    ) -> Result<Selection> {
+    ) -> Result<DriveRun> {
         Ok(self
             .open_paths(&self.sequences, options, config, read_images)?
             .remove(0))
@@ -498,7 +498,7 @@ impl ModelArg {
 }
 
 /// Frames the selections will hand on, for progress bars.
-pub fn frame_count(selections: &[Selection]) -> u64 {
+pub fn frame_count(selections: &[DriveRun]) -> u64 {
     selections
         .iter()
         .map(|s| s.source.frames_in(&s.frames).len() as u64)
@@ -506,7 +506,7 @@ pub fn frame_count(selections: &[Selection]) -> u64 {
 }
 
 /// Prints every skipped frame to stderr, once, and says how the command ended.
-pub fn outcome(selections: &[Selection]) -> Outcome {
+pub fn outcome(selections: &[DriveRun]) -> Outcome {
     let (mut skipped, mut lost) = (0, 0);
     for selection in selections {
         for skip in selection.source.skipped() {

@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use travmap_drive::scoring::evaluation::Spread;
 use travmap_outputs::trajectory::{TrajectoryFormat, write_trajectory};
+use travmap_run::scoring::evaluation::Spread;
 
 use super::{Inputs, Outcome, check_output, frame_count, outcome, path_text, print_json_summary};
 

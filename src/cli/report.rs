@@ -7,11 +7,11 @@ use anyhow::Result;
 use serde_json::json;
 use travmap_core::Config;
 use travmap_core::config::{ForeignRemissionPolicy, LabelRule, LabelSet};
-use travmap_drive::Selection;
-use travmap_drive::scoring::evaluation::{
+use travmap_method::classifier::SvmModel;
+use travmap_run::DriveRun;
+use travmap_run::scoring::evaluation::{
     EvaluationReport, Fit, POOR_FIT_UNSURE_SHARE, UNSURE_MARGIN,
 };
-use travmap_method::classifier::SvmModel;
 
 /// The model's identity in JSON outputs.
 pub fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {
@@ -47,7 +47,7 @@ pub const SCHEMA_VERSION: u32 = 2;
 /// command, the inputs (unless `fields` names them) and the skipped frames.
 pub fn print_json_summary(
     command: &str,
-    selections: &[Selection],
+    selections: &[DriveRun],
     mut fields: serde_json::Value,
 ) -> Result<()> {
     fields["type"] = "summary".into();
@@ -87,7 +87,7 @@ pub fn path_text(path: &Path) -> String {
 }
 
 /// One input of a `--json` summary: its path and the frames read from it.
-pub fn input_json(selection: &Selection) -> serde_json::Value {
+pub fn input_json(selection: &DriveRun) -> serde_json::Value {
     let frames = selection.source.frames_in(&selection.frames);
     let range = match (frames.first(), frames.last()) {
         (Some(first), Some(last)) => json!({"start": first, "end": last, "count": frames.len()}),

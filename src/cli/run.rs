@@ -6,8 +6,8 @@ use std::io::Write;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use travmap_drive::scoring::evaluation::Evaluation;
 use travmap_method::grid::CellClass;
+use travmap_run::scoring::evaluation::Evaluation;
 
 use super::{
     Inputs, ModelArg, Outcome, fit_said, frame_count, model_json, notice_drives, outcome,

@@ -6,10 +6,10 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::Args;
 use serde_json::json;
-use travmap_drive::Fingerprints;
 use travmap_outputs::atomic::write_atomically;
 use travmap_outputs::dataset::part_files;
 use travmap_outputs::dataset::reading::{Labels, read_training_rows};
+use travmap_run::Fingerprints;
 use travmap_training::crossval::collect_training_set;
 use travmap_training::{TrainingSet, train as train_model};
 

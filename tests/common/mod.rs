@@ -286,7 +286,7 @@ pub fn fused_drive(seq: &Path) -> Vec<travmap_method::fusion::FusedCell> {
             .unwrap();
     let source = travmap_io::Source::open(seq, &Default::default(), &|_| {}).unwrap();
     let drive = source.drive_frame();
-    let selection = travmap_drive::Selection::new(source, 0..usize::MAX);
+    let selection = travmap_run::DriveRun::new(source, 0..usize::MAX);
     let mut map = travmap_method::fusion::DriveMap::new(config.grid.cell_size_m, drive);
     selection
         .run::<travmap_core::Error>(&config, Some(&model), |result| {

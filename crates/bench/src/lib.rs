@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use serde::Serialize;
-use travmap_drive::Selection;
-use travmap_drive::scoring::evaluation::Spread;
+use travmap_run::DriveRun;
+use travmap_run::scoring::evaluation::Spread;
 
 mod child_runs;
 
@@ -297,7 +297,7 @@ impl ToolRow {
 /// `model` goes to `annotate`.
 pub fn bench_tools(
     inputs: &ChildFlags,
-    selection: &Selection,
+    selection: &DriveRun,
     model: Option<&Path>,
     repeats: usize,
 ) -> Result<Vec<ToolRow>> {

@@ -28,9 +28,6 @@ use travmap_core::config::Config;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
 use travmap_core::posing::Posing;
-use travmap_drive::scoring::evaluation::{Evaluation, EvaluationReport, Fit};
-use travmap_drive::scoring::metrics::Confusion;
-use travmap_drive::{Handed, Selection};
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{
     FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion,
@@ -40,6 +37,9 @@ use travmap_io::Recorded;
 use travmap_method::classifier::SvmModel;
 use travmap_method::grid::CellClass;
 use travmap_method::pipeline::FrameResult;
+use travmap_run::scoring::evaluation::{Evaluation, EvaluationReport, Fit};
+use travmap_run::scoring::metrics::Confusion;
+use travmap_run::{DriveRun, RunEvent};
 
 pub const PREDICTION_TOPIC: &str = "/travmap/prediction";
 pub const GROUND_TRUTH_TOPIC: &str = "/travmap/ground_truth";
@@ -277,7 +277,7 @@ fn metrics_message(result: &FrameResult, classes: &[CellClass], world_frame: &st
 
 /// Annotates `selection` into `output`; `metadata` goes into the `travmap` record.
 pub fn annotate(
-    selection: &Selection,
+    selection: &DriveRun,
     config: &Config,
     model: &SvmModel,
     metadata: BTreeMap<String, String>,
@@ -319,15 +319,15 @@ pub fn annotate(
     let mut frames = 0;
     let mut last_stamp_ns = 0;
     let mut cadence = DriveMapCadence::new(options.drive_map_every);
-    let on_handed = |handed: Handed<'_, Option<EncodedFrame>>| {
+    let on_handed = |handed: RunEvent<'_, Option<EncodedFrame>>| {
         let (result, drive_map) = match handed {
-            Handed::Read(encoded) => {
+            RunEvent::Read(encoded) => {
                 return match (&mut kitti_passthrough, encoded) {
                     (Some(writer), Some(frame)) => writer.write(&mut sink, frame),
                     _ => Ok(()),
                 };
             }
-            Handed::Result(result, drive_map) => (result, drive_map),
+            RunEvent::Result(result, drive_map) => (result, drive_map),
         };
         let classes = result.filtered.as_deref().unwrap_or(&[]);
         let stamp = result.stamp_ns;

@@ -234,7 +234,7 @@ pub fn render_drive_map(
 /// staged to appear with the command's other outputs.
 pub fn write_map_cells(staged: &mut Staged, path: &Path, cells: &[FusedCell]) -> Result<()> {
     let schema = parquet::schema::parser::parse_message_type(
-        "message travmap_drive_map { REQUIRED DOUBLE x_m; REQUIRED DOUBLE y_m; \
+        "message travmap_run_map { REQUIRED DOUBLE x_m; REQUIRED DOUBLE y_m; \
          REQUIRED DOUBLE evidence; REQUIRED DOUBLE probability; REQUIRED INT32 observations; \
          OPTIONAL BOOLEAN predicted_traversable; OPTIONAL BOOLEAN ground_truth_traversable; }",
     )

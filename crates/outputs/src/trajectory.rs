@@ -7,7 +7,7 @@ use std::path::Path;
 
 use crate::atomic::write_atomically;
 use travmap_core::error::Result;
-use travmap_drive::EstimatedPose;
+use travmap_run::EstimatedPose;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TrajectoryFormat {

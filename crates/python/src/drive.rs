@@ -11,11 +11,11 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyRange, PyRangeMethods};
 use travmap_core::Config;
 use travmap_core::frame::Frame as ReadFrame;
-use travmap_drive::Selection;
-use travmap_drive::opening::{open_selection, parse_frame_range};
 use travmap_io::{
     LidarCalibrations, LidarFrames, LogOptions, MergedTopics, SourceOptions, WORLD_FRAME,
 };
+use travmap_run::DriveRun;
+use travmap_run::opening::{open_selection, parse_frame_range};
 
 use crate::Failure;
 use crate::stream::Stream;
@@ -131,16 +131,16 @@ impl Opening {
             images: asked,
         } = self;
         let notices = Mutex::new(Vec::new());
-        let heard = |remark: travmap_drive::opening::Remark, text: &str| {
+        let heard = |remark: travmap_run::opening::Remark, text: &str| {
             let mut notices = notices.lock().unwrap_or_else(|p| p.into_inner());
             notices.push(format!("{}: {text}", remark.word()));
         };
         let selection = Python::attach(|py| {
-            py.detach(|| -> Result<Selection, Failure> {
+            py.detach(|| -> Result<DriveRun, Failure> {
                 let mut selection =
                     open_selection(&path, frames, &options, asked.unwrap_or(images), &heard)?;
                 selection.source.set_read_labels(labels);
-                let notice = |text: &str| heard(travmap_drive::opening::Remark::Notice, text);
+                let notice = |text: &str| heard(travmap_run::opening::Remark::Notice, text);
                 selection.survey(&config, &notice)?;
                 Ok(selection)
             })
@@ -254,7 +254,7 @@ pub(crate) fn open(
 /// opening it noticed.
 #[pyclass(module = "travmap", frozen)]
 pub struct Drive {
-    pub(crate) selection: Arc<Selection>,
+    pub(crate) selection: Arc<DriveRun>,
     pub(crate) config: Config,
     notices: Vec<String>,
 }

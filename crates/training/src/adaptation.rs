@@ -20,14 +20,14 @@ use super::{REMISSION_COLUMNS, Reduce, Search, config_without_remission, train_b
 use travmap_core::config::{Config, FeatureGroup, Learner};
 use travmap_core::error::{Error, Result};
 use travmap_core::random::SplitMix64;
-use travmap_drive::scoring::metrics::Confusion;
-use travmap_drive::{Fingerprints, Selection};
 use travmap_method::classifier::{AdaptationCheck, AdaptationSummary, AdaptedInput, SvmModel};
 use travmap_method::features::feature_count;
 use travmap_method::footprint::PathKind;
 use travmap_method::grid::CellClass;
 use travmap_method::self_labels::over_clearance;
 use travmap_method::training_set::TrainingSet;
+use travmap_run::scoring::metrics::Confusion;
+use travmap_run::{DriveRun, Fingerprints};
 
 /// One self-labelled (or unknown) cell of a drive.
 #[derive(Clone)]
@@ -108,7 +108,7 @@ impl Adapted {
 /// Adapts `prior` (named `prior_name`) to the drives of `selections`: see the
 /// module documentation. `on_frame` is called after each frame read.
 pub fn adapt(
-    selections: &mut [Selection],
+    selections: &mut [DriveRun],
     config: &Config,
     prior: &SvmModel,
     prior_name: &str,
@@ -384,7 +384,7 @@ pub fn adapt(
         model = outer;
     }
     model.training.adaptation = Some(summary(&model, drive.len(), check));
-    model.training.sources = selections.iter().map(Selection::describe).collect();
+    model.training.sources = selections.iter().map(DriveRun::describe).collect();
     // It read no labels: what it knows of labelled scans is the prior's, so eval
     // still tells the prior's training scans from held-out ones.
     model.training.frame_sha256 = original_prior.training.frame_sha256.clone();

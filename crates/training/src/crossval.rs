@@ -7,18 +7,18 @@ use serde::Serialize;
 use super::train;
 use travmap_core::config::{Config, FeatureGroup};
 use travmap_core::error::{Error, Result};
-use travmap_drive::Selection;
-use travmap_drive::scoring::evaluation::{Evaluation, EvaluationReport};
 use travmap_method::classifier::{PredictionScratch, SvmModel};
 use travmap_method::filter::OutlierFilter;
 use travmap_method::grid::CellClass;
 use travmap_method::pipeline::FrameResult;
 use travmap_method::training_set::{TrainingSet, spatial_folds};
+use travmap_run::DriveRun;
+use travmap_run::scoring::evaluation::{Evaluation, EvaluationReport};
 
 /// Collects the labelled cells of the selected frames on the training grid
 /// (`training.grid_size_m`).
 pub fn collect_training_set<'a>(
-    selections: impl IntoIterator<Item = &'a Selection>,
+    selections: impl IntoIterator<Item = &'a DriveRun>,
     config: &Config,
     on_frame: &mut dyn FnMut(),
 ) -> Result<TrainingSet> {
@@ -106,7 +106,7 @@ const ABLATION: [(&str, bool, bool); 4] = [
 /// then filtered and scored like a normal run, so no test cell's world position is
 /// ever a training cell.
 pub fn cross_validate(
-    selections: &[Selection],
+    selections: &[DriveRun],
     config: &Config,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<CrossValidationReport> {
@@ -142,7 +142,7 @@ fn seen_cells(frames: &[FrameResult]) -> Vec<Vec<bool>> {
 /// The cross-validation again with each feature set of [`ABLATION`], scored on the
 /// cells of `seen` (per frame, as the full run saw them).
 fn camera_ablation(
-    selections: &[Selection],
+    selections: &[DriveRun],
     config: &Config,
     seen: &[Vec<bool>],
     progress: &(dyn Fn(&str) + Sync),
@@ -180,7 +180,7 @@ fn camera_ablation(
 /// The folds' models and every labelled frame predicted by the model of the fold
 /// each of its cells is in (filtered as a run filters).
 fn out_of_fold(
-    selections: &[Selection],
+    selections: &[DriveRun],
     config: &Config,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<(Vec<FoldReport>, Vec<FrameResult>)> {
@@ -284,7 +284,7 @@ pub struct LeaveOneOutReport {
 /// spatial blocks are needed: different inputs are different places. This is how
 /// the model fares on a scene it has never seen.
 pub fn leave_one_input_out(
-    selections: &[Selection],
+    selections: &[DriveRun],
     config: &Config,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<LeaveOneOutReport> {

@@ -22,7 +22,6 @@ use travmap_core::config::{
 };
 use travmap_core::error::{Error, Result};
 use travmap_core::random::SplitMix64;
-use travmap_drive::scoring::metrics::Confusion;
 use travmap_method::classifier::{
     ReducedSet, SearchResult, SvmModel, TrainingSummary, appearance_feature_names,
     model_feature_names,
@@ -31,6 +30,7 @@ use travmap_method::feature_groups::REMISSION_NAMES;
 use travmap_method::features::{FEATURE_COUNT, feature_count};
 use travmap_method::grid::CellClass;
 pub use travmap_method::training_set::{TrainingSet, spatial_folds};
+use travmap_run::scoring::metrics::Confusion;
 
 /// Mean and 1/deviation of each feature; constant features get 1, those `config`
 /// leaves out 0 (every standardised value 0: no part in the kernel's distances).

@@ -6,7 +6,7 @@
 use serde::Serialize;
 
 use crate::scoring::evaluation::{Spread, TimingReport};
-use crate::{ReadFrame, Selection};
+use crate::{DriveRun, ReadFrame};
 use travmap_core::config::Config;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
@@ -67,9 +67,9 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool> {
 
 /// Benchmarks the selected frames, each measurement repeated `repeats` times. The
 /// frames are read once; every run then goes through the selection as every command
-/// does ([`Selection::run_loaded`]), posed as its source says.
+/// does ([`DriveRun::run_loaded`]), posed as its source says.
 pub fn benchmark(
-    selection: &Selection,
+    selection: &DriveRun,
     config: &Config,
     model: &SvmModel,
     repeats: usize,

@@ -1,8 +1,9 @@
-//! Where reading meets the method: a [`Selection`] is a [`Source`] and the frames
-//! of it to use; [`scoring`] says how good and how fast the result was. [`Selection::run`] feeds them through a [`Pipeline`] built for the
-//! source's posing, and [`Selection::run_mapped`] also fuses every result into the
-//! drive map, the one place that map is fed. Every command goes through here, the
-//! benchmark included ([`Selection::load`], [`Selection::run_loaded`]).
+//! Where reading meets the method: a [`DriveRun`] is a [`Source`] and the frames
+//! of it to run; [`scoring`] says how good and how fast the result was.
+//! [`DriveRun::run`] feeds them through a [`Pipeline`] built for the source's
+//! posing, and [`DriveRun::run_mapped`] also fuses every result into the drive map,
+//! the one place that map is fed; [`opening`] opens a drive as every front end does. Every command goes through here, the
+//! benchmark included ([`DriveRun::load`], [`DriveRun::run_loaded`]).
 
 pub mod opening;
 pub mod scoring;
@@ -38,17 +39,17 @@ struct Batches {
 }
 
 /// A frame posed, waiting for the rest of the pipeline.
-struct Arrival {
+struct PosedFrame {
     posed: Posed,
     read_ms: f64,
     scan_sha256: Option<String>,
 }
 
-/// What a command makes of each frame as it is read ([`Selection::run_mapped_beside`]).
-pub type Beside<'a, B> = &'a (dyn Fn(&Frame) -> Result<B> + Sync);
+/// What a command makes of each frame as it is read ([`DriveRun::run_mapped_beside`]).
+pub type OnRead<'a, B> = &'a (dyn Fn(&Frame) -> Result<B> + Sync);
 
-/// What [`Selection::run_mapped_beside`] hands on, in the order it comes.
-pub enum Handed<'a, B> {
+/// What [`DriveRun::run_mapped_beside`] hands on, in the order it comes.
+pub enum RunEvent<'a, B> {
     /// What `beside` made of a frame as it was read.
     Read(B),
     /// A frame's result, with the drive map so far (it included).
@@ -56,7 +57,7 @@ pub enum Handed<'a, B> {
 }
 
 /// What the reading and method stages send on to the command's.
-enum Step<B> {
+enum StageOutput<B> {
     Read(B),
     Result(Box<FrameResult>),
 }
@@ -93,15 +94,15 @@ pub struct EstimatedPose {
 }
 
 /// A drive and the frames of it to use.
-pub struct Selection {
+pub struct DriveRun {
     pub source: Source,
     pub frames: Range<usize>,
     /// Which results carry their scan's SHA-256 (`FrameResult::scan_sha256`): it
     /// costs a few milliseconds a frame, so only where a frame's identity matters.
     pub fingerprint_scans: Fingerprints,
-    /// The drive's trajectory, once followed ([`Selection::follow_trajectory`]).
+    /// The drive's trajectory, once followed ([`DriveRun::follow_trajectory`]).
     trajectory: Option<Arc<Trajectory>>,
-    /// What [`Selection::survey`] found.
+    /// What [`DriveRun::survey`] found.
     survey: Survey,
 }
 
@@ -115,7 +116,7 @@ pub enum Fingerprints {
 }
 
 /// What a look at a few of a drive's scans found before the method runs
-/// ([`Selection::survey`]).
+/// ([`DriveRun::survey`]).
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct Survey {
     /// The median ground height difference of consecutive scans under the recorded
@@ -134,7 +135,7 @@ const SURVEY_PAIRS: usize = 4;
 /// Scans taken for the vehicle's body, at most.
 const SURVEY_BODY_SCANS: usize = 8;
 
-impl Selection {
+impl DriveRun {
     pub fn new(source: Source, frames: Range<usize>) -> Self {
         Self {
             source,
@@ -311,10 +312,10 @@ impl Selection {
             config,
             model,
             false,
-            None::<Beside<()>>,
+            None::<OnRead<()>>,
             |handed| match handed {
-                Handed::Read(()) => Ok(()),
-                Handed::Result(result, _) => on_frame(*result),
+                RunEvent::Read(()) => Ok(()),
+                RunEvent::Result(result, _) => on_frame(*result),
             },
         )?;
         Ok(())
@@ -332,10 +333,10 @@ impl Selection {
             config,
             model,
             true,
-            None::<Beside<()>>,
+            None::<OnRead<()>>,
             |handed| match handed {
-                Handed::Read(()) => Ok(()),
-                Handed::Result(result, map) => on_frame(*result, map),
+                RunEvent::Read(()) => Ok(()),
+                RunEvent::Result(result, map) => on_frame(*result, map),
             },
         )
     }
@@ -348,8 +349,8 @@ impl Selection {
         &self,
         config: &Config,
         model: Option<&SvmModel>,
-        beside: Beside<B>,
-        on_handed: impl FnMut(Handed<B>) -> Result<(), E>,
+        beside: OnRead<B>,
+        on_handed: impl FnMut(RunEvent<B>) -> Result<(), E>,
     ) -> Result<DriveMap, E> {
         self.run_fusing(config, model, true, Some(beside), on_handed)
     }
@@ -361,8 +362,8 @@ impl Selection {
         config: &Config,
         model: Option<&SvmModel>,
         fuse: bool,
-        beside: Option<Beside<B>>,
-        mut on_handed: impl FnMut(Handed<B>) -> Result<(), E>,
+        beside: Option<OnRead<B>>,
+        mut on_handed: impl FnMut(RunEvent<B>) -> Result<(), E>,
     ) -> Result<DriveMap, E> {
         let mut drive_map = DriveMap::new(config.grid.cell_size_m, self.source.drive_frame());
         let mut pipeline = self.pipeline(config)?;
@@ -382,7 +383,7 @@ impl Selection {
                     if let (Some(beside), Ok(frame)) = (beside, &frame)
                         && frame.index >= self.frames.start
                     {
-                        let beside = beside(frame).map(Step::Read);
+                        let beside = beside(frame).map(StageOutput::Read);
                         let failed = beside.is_err();
                         if made.send(beside).is_err() || failed {
                             return;
@@ -398,7 +399,11 @@ impl Selection {
                     true => arrivals.recv().ok(),
                     false => arrivals.try_recv().ok(),
                 };
-                let mut emit = |result| results.send(Ok(Step::Result(Box::new(result)))).is_ok();
+                let mut emit = |result| {
+                    results
+                        .send(Ok(StageOutput::Result(Box::new(result))))
+                        .is_ok()
+                };
                 let batches = Batches {
                     first: self.frames.start,
                     size: batch_size,
@@ -411,12 +416,12 @@ impl Selection {
             // A failing `on_handed` drops `processed`, which stops the stages above.
             for step in processed {
                 match step? {
-                    Step::Read(made) => on_handed(Handed::Read(made))?,
-                    Step::Result(result) => {
+                    StageOutput::Read(made) => on_handed(RunEvent::Read(made))?,
+                    StageOutput::Result(result) => {
                         if fuse {
                             drive_map.add_result(&result);
                         }
-                        on_handed(Handed::Result(result, &drive_map))?;
+                        on_handed(RunEvent::Result(result, &drive_map))?;
                     }
                 }
             }
@@ -486,7 +491,7 @@ impl Selection {
                     None => break,
                 }
             }
-            let mut batch: Vec<Arrival> = Vec::with_capacity(arrived.len());
+            let mut batch: Vec<PosedFrame> = Vec::with_capacity(arrived.len());
             for arrival in arrived {
                 let (frame, read_ms) = arrival?;
                 let index = frame.index;
@@ -517,7 +522,7 @@ impl Selection {
                 {
                     return Ok(());
                 }
-                batch.push(Arrival {
+                batch.push(PosedFrame {
                     posed,
                     read_ms,
                     scan_sha256,
@@ -534,7 +539,7 @@ impl Selection {
     /// false once `emit` wants no more.
     fn process(
         pipeline: &mut Pipeline,
-        batch: Vec<Arrival>,
+        batch: Vec<PosedFrame>,
         model: Option<&SvmModel>,
         emit: &mut dyn FnMut(FrameResult) -> bool,
     ) -> bool {

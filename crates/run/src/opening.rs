@@ -9,7 +9,7 @@ use travmap_core::config::PoseSource;
 use travmap_core::error::{Error, Result};
 use travmap_io::{Source, SourceKind, SourceOptions};
 
-use crate::Selection;
+use crate::DriveRun;
 
 /// What opening a drive has to say: a notice (how the input is read) or a warning
 /// (something asked for that does not apply to it).
@@ -39,7 +39,7 @@ pub fn open_selection(
     options: &SourceOptions,
     read_images: bool,
     on_remark: &dyn Fn(Remark, &str),
-) -> Result<Selection> {
+) -> Result<DriveRun> {
     let mut source = Source::open(path, options, &|notice| on_remark(Remark::Notice, notice))?;
     if source.kind() == SourceKind::Kitti {
         warn_log_only_flags(path, options, on_remark);
@@ -88,7 +88,7 @@ pub fn open_selection(
             ),
         );
     }
-    Ok(Selection::new(source, frames))
+    Ok(DriveRun::new(source, frames))
 }
 
 /// A KITTI directory has no topics, frames or recorded poses of a log: flags that
