@@ -1,7 +1,7 @@
 //! What every log container yields, and where it reads from: a [`LogMessage`] with
 //! its [`Connection`] (topic, type, encodings), and the read-only [`FileMap`] of a
-//! file. The containers ([`crate::mcap::records`], `travmap_io::containers::bag`, `travmap_io::containers::rosbag2`)
-//! produce these; `travmap_io::containers::log` composes them into one stream.
+//! file. The containers ([`crate::mcap::records`], the readers' ROS 1 bag and rosbag2 containers)
+//! produce these; the readers' `Log` (`travmap_io::Log`) composes them into one stream.
 
 use std::borrow::Cow;
 use std::ops::Range;

@@ -10,10 +10,10 @@ use crate::Source;
 use crate::SourceOptions;
 use crate::kitti::text::{parse_calibration, parse_poses, parse_times};
 use crate::kitti::{drop_non_returns, parse_labels, parse_scan};
+use crate::log_drive::transforms::isometry;
 use crate::payloads::cloud::cloud_points;
 use crate::payloads::image::{image_pixels, jpeg_pixels};
 use crate::payloads::livox::{LIVOX_CUSTOM_MESSAGES, decode_cloud};
-use crate::ros_drive::transforms::isometry;
 use travmap_formats::foxglove;
 use travmap_formats::log_message::Part;
 use travmap_formats::mcap::writer::Compression;
@@ -151,8 +151,8 @@ pub fn ros_tf(data: &[u8]) {
             rotation: pose.orientation,
         });
     }
-    for type_name in crate::ros_drive::pose_topics::POSE_MESSAGES {
-        let mut topic = crate::ros_drive::pose_topics::PoseTopic::default();
+    for type_name in crate::log_drive::pose_topics::POSE_MESSAGES {
+        let mut topic = crate::log_drive::pose_topics::PoseTopic::default();
         let _ = topic.add(type_name, data, travmap_formats::ros::MessageEncoding::Cdr);
     }
 }

@@ -13,10 +13,10 @@ mod format;
 #[cfg(feature = "fuzzing")]
 pub mod fuzzing;
 mod kitti;
+mod log_drive;
 mod packets;
 mod payloads;
 mod recorded;
-mod ros_drive;
 mod skips;
 mod source;
 #[cfg(test)]
@@ -29,6 +29,8 @@ pub use containers::log::Log;
 pub use containers::rosbag2::listed_storage_files;
 /// What an input is, by its content.
 pub use format::{InputFormat, detect};
+/// A recorded log's options: its LiDAR topics, their calibrations and frames.
+pub use log_drive::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics};
 /// LiDAR packets decoded into scans, every vendor behind one face: the packet
 /// messages read, the model told from the packets (or an Ouster's metadata), its
 /// calibration, and the assembler that cuts scans; the Ouster packet messages a
@@ -39,8 +41,6 @@ pub use packets::{
 };
 /// What an input recorded beside its frames, for the outputs that copy or convert it.
 pub use recorded::{Recorded, RecordedKitti, RecordedLog};
-/// A recorded log's options: its LiDAR topics, their calibrations and frames.
-pub use ros_drive::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics};
 /// Frames left out as unreadable (`--keep-going`), and the error when none was read.
 pub use skips::{Skip, SkipLog, nothing_read};
 /// Where a drive lies on the Earth, when its log says (a UTM or ECEF root).

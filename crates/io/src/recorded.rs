@@ -15,8 +15,8 @@ use travmap_formats::log_message::LogMessage;
 use travmap_formats::mcap::stored::StoredLog;
 
 use crate::kitti::KittiSequence;
-use crate::ros_drive::RosDrive;
-use crate::ros_drive::frames::DecodedScan;
+use crate::log_drive::LogDrive;
+use crate::log_drive::frames::DecodedScan;
 use crate::skips::SkipLog;
 
 /// What an input recorded beside its frames.
@@ -29,7 +29,7 @@ pub enum Recorded<'a> {
 
 /// A recorded log, read as its drive reads it.
 pub struct RecordedLog<'a> {
-    pub(crate) drive: &'a RosDrive,
+    pub(crate) drive: &'a LogDrive,
     pub(crate) skips: &'a SkipLog,
 }
 

@@ -10,7 +10,7 @@ use nalgebra::Isometry3;
 
 use super::format::{self, InputFormat};
 use super::kitti::KittiSequence;
-use super::ros_drive::{LogOptions, RosDrive};
+use super::log_drive::{LogDrive, LogOptions};
 use super::skips::{Skip, SkipLog};
 use crate::cloud_files::scan_folder::ScanFolder;
 use crate::cloud_files::site_cloud::SiteCloud;
@@ -41,7 +41,7 @@ pub struct SourceOptions {
 /// What holds a drive.
 enum Recording {
     Kitti(Box<KittiSequence>),
-    Log(Box<RosDrive>),
+    Log(Box<LogDrive>),
     Scans(Box<ScanFolder>),
     /// One saved point cloud read as tiles (site maps).
     Site(Box<SiteCloud>),
@@ -168,7 +168,7 @@ impl Source {
                     .into_iter()
                     .for_each(|lost| skips.record_lost(lost));
                 // A log's poses depend on its transform tree: the drive decides as it opens.
-                let drive = RosDrive::open(log, &options.log, options.poses)?;
+                let drive = LogDrive::open(log, &options.log, options.poses)?;
                 drive.notice().into_iter().for_each(on_notice);
                 let posing = drive.posing();
                 return Self::posed(Recording::Log(Box::new(drive)), posing, skips);
@@ -393,7 +393,7 @@ impl Source {
         let stamps: Vec<u64> = frames.iter().map(|&f| stamp_ns(f)).collect::<Option<_>>()?;
         let (first, last) = (*stamps.first()?, *stamps.last()?);
         (stamps.len() > 1).then(|| {
-            (last - first + crate::ros_drive::merged_clouds::median_period_ns(&stamps)) as f64
+            (last - first + crate::log_drive::merged_clouds::median_period_ns(&stamps)) as f64
                 * 1e-9
         })
     }

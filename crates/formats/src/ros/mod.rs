@@ -275,7 +275,7 @@ pub struct Odometry {
 }
 
 /// `geometry_msgs/msg/PoseStamped`: a pose in `header.frame_id` (a pose topic's,
-/// `travmap_io::ros_drive::pose_topics`; Foxglove's `PoseInFrame` is read as one).
+/// as the readers read pose topics; Foxglove's `PoseInFrame` is read as one).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PoseStamped {
     pub header: Header,
@@ -293,7 +293,7 @@ pub struct PoseWithCovarianceStamped {
 pub type Covariance6 = FixedArray<f64, 36>;
 
 /// `velodyne_msgs/msg/VelodyneScan`: a turn's raw packets. Read in place for
-/// decoding (`travmap_io::packets::velodyne::scan_message`); this type re-encodes ROS 1 scans as
+/// decoding (the readers' Velodyne scan reader); this type re-encodes ROS 1 scans as
 /// ROS 2.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct VelodyneScan {
@@ -308,7 +308,7 @@ pub struct VelodynePacket {
 }
 
 /// `pandar_msgs/msg/PandarScan`: Hesai packets, each the first `size` bytes of
-/// `data` (read in place by `travmap_io::packets::hesai::pandar_scan_message`).
+/// `data` (read in place by the readers' Hesai scan reader).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PandarScan {
     pub header: Header,
@@ -324,7 +324,7 @@ pub struct PandarPacket {
 
 /// `robosense_msgs/msg/RobosenseScan`: RoboSense packets, data and DIFOP, each the
 /// first `size` bytes of `data` (read in place by
-/// `travmap_io::packets::robosense::robosense_scan_message`); this type gives the
+/// the readers' RoboSense scan reader); this type gives the
 /// schema logs recorded without one lack.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RobosenseScan {
@@ -341,7 +341,7 @@ pub struct RobosensePacket {
 }
 
 /// `nebula_msgs/msg/NebulaPackets`: nebula's packets of any sensor (read in place by
-/// `travmap_io::packets::packet_message`).
+/// `travmap_io::packet_message`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct NebulaPackets {
     pub header: Header,
@@ -510,7 +510,7 @@ pub struct Ros2Message {
 }
 
 /// A ROS 1 message of a type travmap knows (by its ROS 2 name, see
-/// `travmap_io::containers::log::Connection::type_name`) re-encoded as ROS 2 CDR; None for other
+/// `Connection::type_name`) re-encoded as ROS 2 CDR; None for other
 /// types.
 pub fn ros1_to_cdr(type_name: &str, data: &[u8]) -> Option<Result<Ros2Message, String>> {
     fn translate<T: RosMessage>(data: &[u8]) -> Result<Ros2Message, String> {

@@ -21,7 +21,7 @@ pub(crate) struct MergedSensor {
 }
 
 /// A cloud of a merged topic waiting for its scan: its stamp, the topic's place in
-/// [`crate::ros_drive::RosDrive`]'s `merged`, and the cloud.
+/// [`crate::log_drive::LogDrive`]'s `merged`, and the cloud.
 pub(crate) struct MergedCloud {
     pub(crate) stamp_ns: u64,
     pub(crate) topic: usize,

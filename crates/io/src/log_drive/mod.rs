@@ -4,7 +4,7 @@
 //! `nav_msgs/Odometry` topic.
 //!
 //! The log is streamed: one pass at open collects the topics, the cloud stamps and
-//! every transform; [`RosDrive::read`] (`drive_frames.rs`) streams again and decodes
+//! every transform; [`LogDrive::read`] (`drive_frames.rs`) streams again and decodes
 //! only the clouds asked for. Any PointCloud2 layout is accepted: fields at any
 //! offset and order, float32 or float64 coordinates, extra fields, big-endian data,
 //! organised clouds; points that are no return (a NaN or infinite coordinate, or
@@ -27,14 +27,14 @@ use nalgebra::Isometry3;
 use super::packets::{PacketCalibration, PacketModel};
 use super::skips::SkipLog;
 use crate::containers::log::Log;
+pub use crate::log_drive::by_topic::{LidarCalibrations, LidarFrames};
+use crate::log_drive::camera_model::Projection;
+use crate::log_drive::log_index::{CameraSource, LogIndex};
+use crate::log_drive::merged_clouds::{MergedSensor, median_period_ns};
+pub use crate::log_drive::options::{LogOptions, MergedTopics};
+use crate::log_drive::pose_topics::VehiclePoses;
+use crate::log_drive::transforms::TransformTree;
 use crate::payloads::image::image_pixels;
-pub use crate::ros_drive::by_topic::{LidarCalibrations, LidarFrames};
-use crate::ros_drive::camera_model::Projection;
-use crate::ros_drive::log_index::{CameraSource, LogIndex};
-use crate::ros_drive::merged_clouds::{MergedSensor, median_period_ns};
-pub use crate::ros_drive::options::{LogOptions, MergedTopics};
-use crate::ros_drive::pose_topics::VehiclePoses;
-use crate::ros_drive::transforms::TransformTree;
 use travmap_core::config::PoseSource;
 use travmap_core::error::{Error, LostMessage, Result};
 use travmap_core::frame::CameraImage;
@@ -77,7 +77,7 @@ fn place_on_earth(
 }
 
 /// An opened drive.
-pub struct RosDrive {
+pub struct LogDrive {
     pub(crate) path: PathBuf,
     pub(crate) log: Log,
     posing: Posing,
@@ -94,7 +94,7 @@ pub struct RosDrive {
     transforms: TransformTree,
     pub(crate) camera: Option<CameraSource>,
     /// Whether frames carry the camera's images (default true): see
-    /// [`RosDrive::set_read_images`].
+    /// [`LogDrive::set_read_images`].
     pub(crate) read_images: bool,
     /// Chunks the index pass could not read: their messages are lost.
     damaged_chunks: usize,
@@ -111,7 +111,7 @@ pub struct RosDrive {
     pub(crate) period_ns: u64,
 }
 
-impl RosDrive {
+impl LogDrive {
     /// Reads `log`'s topics, cloud stamps and transforms in one pass
     /// (`LogIndex`), and poses the clouds as [`decide`] says, from `poses`.
     pub fn open(log: Log, options: &LogOptions, poses: PoseSource) -> Result<Self> {

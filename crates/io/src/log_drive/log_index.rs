@@ -1,4 +1,4 @@
-//! The one pass over a recorded log that [`crate::ros_drive::RosDrive`] opens with:
+//! The one pass over a recorded log that [`crate::log_drive::LogDrive`] opens with:
 //! the topics, the chosen cloud topic's stamps, every transform (/tf, /tf_static,
 //! Odometry, a pose topic (`pose_topics.rs`), as `--poses` lets them count), camera
 //! intrinsics and image topics.
@@ -358,7 +358,7 @@ impl Contents {
     }
 }
 
-/// What [`crate::ros_drive::RosDrive`] needs of a log, from one pass over it.
+/// What [`crate::log_drive::LogDrive`] needs of a log, from one pass over it.
 pub(crate) struct LogIndex {
     pub(crate) cloud_topic: String,
     /// The clouds' frame (`header.frame_id`).

@@ -1,4 +1,4 @@
-//! A drive's frames, streamed in one pass over its log ([`RosDrive::read`]): clouds
+//! A drive's frames, streamed in one pass over its log ([`LogDrive::read`]): clouds
 //! (PointCloud2 messages, or scans cut from LiDAR packets) handed on when the next
 //! one arrives, with the camera image and the other sensors' clouds nearest in time.
 
@@ -7,11 +7,11 @@ use std::ops::Range;
 
 use super::log_index::HeaderOnly;
 use super::merged_clouds::{MergedCloud, MergedContent, merge};
+use crate::log_drive::{IMAGE_PAIRING_NS, LogDrive};
 use crate::packets::{PacketAssembler, PacketCalibration, PacketModel};
 use crate::packets::{PacketPoint, PacketScan};
 use crate::payloads::cloud::{CloudPoints, check_some_finite, cloud_points};
 use crate::payloads::livox::decode_cloud;
-use crate::ros_drive::{IMAGE_PAIRING_NS, RosDrive};
 use crate::skips::SkipLog;
 use travmap_core::error::{Error, LostMessage, Result};
 use travmap_core::frame::{Frame, RemissionScale};
@@ -25,7 +25,7 @@ pub struct DecodedScan<'a> {
     pub scan: PacketScan,
 }
 
-impl RosDrive {
+impl LogDrive {
     /// The scans of every packet topic read (the cloud topic's and the merged
     /// ones'), cut and decoded in one pass (no poses), in log order; the cloud
     /// topic's with the stamps the index gave them. None without a packet topic.
@@ -235,11 +235,11 @@ enum Cloud {
     Packets(Vec<PacketPoint>),
 }
 
-/// The frames of a drive, streamed: see [`RosDrive::read`]. A cloud is handed on
+/// The frames of a drive, streamed: see [`LogDrive::read`]. A cloud is handed on
 /// when the next one arrives, so that an image written just after its cloud is
 /// found too.
 pub struct DriveFrames<'a> {
-    drive: &'a RosDrive,
+    drive: &'a LogDrive,
     skips: &'a SkipLog,
     /// Lost messages of topics this pass does not read, to report first.
     unreported: Vec<LostMessage>,
@@ -253,7 +253,7 @@ pub struct DriveFrames<'a> {
     ready: VecDeque<(usize, Cloud)>,
     /// Packets into scans, for a packet topic.
     assembler: Option<PacketAssembler>,
-    /// Likewise for each merged topic, in [`RosDrive`]'s `merged` order.
+    /// Likewise for each merged topic, in [`LogDrive`]'s `merged` order.
     merged_assemblers: Vec<Option<PacketAssembler>>,
     /// Clouds of merged topics since a period before the pending cloud.
     merged_clouds: Vec<MergedCloud>,
