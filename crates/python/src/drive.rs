@@ -17,8 +17,8 @@ use travmap_io::{
 use travmap_run::DriveRun;
 use travmap_run::opening::{open_selection, parse_frame_range};
 
-use crate::Failure;
 use crate::stream::Stream;
+use crate::{Failure, shape_error};
 
 /// What a keyword of `open` / `run` sets, and the command-line flag it stands for.
 const KEYWORDS: [&str; 12] = [
@@ -400,7 +400,7 @@ impl Frame {
     fn of(py: Python<'_>, frame: ReadFrame) -> PyResult<Self> {
         let count = frame.points_in_velodyne.len();
         let points = Array2::from_shape_vec((count, 4), frame.points_in_velodyne.into_flattened())
-            .expect("four values a point");
+            .map_err(shape_error)?;
         let none = || py.None();
         let labels = frame.labels.map_or_else(none, |labels| {
             PyArray1::from_vec(py, labels).into_any().unbind()
@@ -408,8 +408,8 @@ impl Frame {
         let (image, image_from_sensor) = match frame.camera {
             Some(camera) => {
                 let (w, h) = (camera.image.width as usize, camera.image.height as usize);
-                let pixels = Array3::from_shape_vec((h, w, 3), camera.image.rgb)
-                    .expect("three bytes a pixel");
+                let pixels =
+                    Array3::from_shape_vec((h, w, 3), camera.image.rgb).map_err(shape_error)?;
                 let projection =
                     Array2::from_shape_fn((3, 4), |(r, c)| camera.image_from_velodyne[(r, c)]);
                 (

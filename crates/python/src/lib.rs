@@ -68,6 +68,12 @@ impl From<travmap_core::Error> for Failure {
     }
 }
 
+/// A buffer that does not fill the array it was to become (a reader's bug, never
+/// the input's): an error, not a crash of the interpreter.
+pub(crate) fn shape_error(error: numpy::ndarray::ShapeError) -> PyErr {
+    pyo3::exceptions::PyRuntimeError::new_err(format!("an array of the wrong shape: {error}"))
+}
+
 #[pymodule]
 fn _travmap(module: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = module.py();

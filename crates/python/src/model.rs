@@ -15,9 +15,9 @@ use travmap_method::features::feature_names;
 use travmap_method::grid::CellClass;
 use travmap_method::pipeline::{FrameResult, StageTimings};
 
-use crate::Failure;
 use crate::drive::{Drive, Opening, pose_array, remission_word};
 use crate::stream::Stream;
+use crate::{Failure, shape_error};
 
 /// A traversability model: `"road"` (a car's road; the default) or `"offroad"` (a
 /// robot that may also drive on grass, dirt and low vegetation), both compiled in,
@@ -237,10 +237,6 @@ impl GridValues {
             without_remission: result.without_remission,
         })
     }
-}
-
-fn shape_error(error: numpy::ndarray::ShapeError) -> PyErr {
-    pyo3::exceptions::PyRuntimeError::new_err(format!("a grid of the wrong shape: {error}"))
 }
 
 /// The stage timings as `run --json` writes them, ms by stage.
