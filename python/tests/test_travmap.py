@@ -147,6 +147,7 @@ def test_settings_and_frames_are_the_command_lines():
     assert len(travmap.open(SAMPLE, frames="3..")) == 3
 
 
+@needs_sample
 def test_a_damaged_file_raises_the_commands_error(tmp_path, converted):
     broken = tmp_path / "broken.mcap"
     broken.write_bytes(converted.read_bytes()[:5000])
@@ -156,6 +157,21 @@ def test_a_damaged_file_raises_the_commands_error(tmp_path, converted):
     command = cli("run", broken)
     assert command.returncode == 1
     assert str(raised.value) in command.stderr
+
+
+@needs_sample
+def test_a_drive_cut_short_warns_where_the_command_exits_3(tmp_path, converted):
+    cut = tmp_path / "cut.mcap"
+    data = converted.read_bytes()
+    cut.write_bytes(data[: len(data) * 4 // 5])
+    with pytest.warns(travmap.TravmapWarning, match="lost part"):
+        grids = list(travmap.run(cut))
+    assert 1 <= len(grids) < 6
+    assert cli("run", cut).returncode == 3
+    drive = travmap.open(cut)
+    with pytest.warns(travmap.TravmapWarning):
+        frames = list(drive)
+    assert drive.lost and len(frames) == len(grids)
 
 
 def test_mistakes_raise_before_any_work(tmp_path):

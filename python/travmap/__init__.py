@@ -11,10 +11,12 @@ The same library as the `travmap` command (which this package also installs):
     table = travmap.dataset(["sequences/00"])       # labelled cells, a pyarrow.Table
     scores = travmap.eval("sequences/00")           # `travmap eval --json`'s summary
 
-Errors raise TravmapError with the command's message and exit code.
+Errors raise TravmapError with the command's message and exit code; a drive read to
+its end with frames skipped or parts lost (where the command exits 3) warns with
+TravmapWarning.
 """
 
-from ._travmap import Drive, Frame, Frames, Grid, Grids, Model, TravmapError, open, run
+from ._travmap import Drive, Frame, Frames, Grid, Grids, Model, TravmapError, TravmapWarning, open, run
 from ._commands import binary, dataset, eval
 
 __all__ = [
@@ -25,6 +27,7 @@ __all__ = [
     "Grids",
     "Model",
     "TravmapError",
+    "TravmapWarning",
     "binary",
     "dataset",
     "eval",

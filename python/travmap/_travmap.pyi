@@ -15,6 +15,10 @@ class TravmapError(Exception):
 
     exit_code: int
 
+class TravmapWarning(UserWarning):
+    """A drive read to its end with frames skipped (keep_going=True) or parts of it
+    lost (a recording cut short): where the command completes with exit code 3."""
+
 class Frame:
     """One LiDAR scan as read."""
 

@@ -267,7 +267,7 @@ impl Drive {
 
     fn __iter__(&self) -> Frames {
         let selection = self.selection.clone();
-        Frames(Stream::spawn(move |sender| {
+        Frames(Stream::spawn(selection.clone(), move |sender| {
             for frame in selection.source.read(&selection.frames) {
                 if !sender.send(frame?) {
                     break;

@@ -19,6 +19,29 @@ pyo3::create_exception!(
      frames skipped (`keep_going=True`)."
 );
 
+pyo3::create_exception!(
+    travmap,
+    TravmapWarning,
+    pyo3::exceptions::PyUserWarning,
+    "A drive read to its end with frames skipped (`keep_going=True`) or parts of it \
+     lost (a recording cut short): where the command completes with exit code 3."
+);
+
+/// Warns when `drive` completed with frames skipped or parts lost, as the command
+/// line exits 3 then: a silent shorter result would look complete.
+pub(crate) fn warn_incomplete(py: Python<'_>, drive: &travmap_run::DriveRun) -> PyResult<()> {
+    let (skipped, lost) = (drive.source.skipped().len(), drive.source.lost().len());
+    if skipped + lost == 0 {
+        return Ok(());
+    }
+    let message = format!(
+        "{}: completed with {skipped} skipped frame(s) and {lost} lost part(s) of the input (Drive.skipped and Drive.lost say which)",
+        drive.source.path().display()
+    );
+    let message = std::ffi::CString::new(message).unwrap_or_default();
+    PyErr::warn(py, &py.get_type::<TravmapWarning>(), &message, 1)
+}
+
 /// A failure as the command line reports it: the message after `error: ` and the
 /// exit code.
 #[derive(Debug)]
@@ -78,6 +101,7 @@ pub(crate) fn shape_error(error: numpy::ndarray::ShapeError) -> PyErr {
 fn _travmap(module: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = module.py();
     module.add("TravmapError", py.get_type::<TravmapError>())?;
+    module.add("TravmapWarning", py.get_type::<TravmapWarning>())?;
     module.add_class::<drive::Drive>()?;
     module.add_class::<drive::Frame>()?;
     module.add_class::<drive::Frames>()?;

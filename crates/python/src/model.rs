@@ -49,7 +49,7 @@ impl Model {
             drive.selection.clone(),
             drive.config.clone(),
         );
-        Ok(Grids(Stream::spawn(move |sender| {
+        Ok(Grids(Stream::spawn(selection.clone(), move |sender| {
             let ran = selection.run::<Stop>(&config, Some(&model), |result| {
                 match sender.send(GridValues::of(result)) {
                     true => Ok(()),
