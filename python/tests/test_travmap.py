@@ -159,6 +159,24 @@ def test_a_damaged_file_raises_the_commands_error(tmp_path, converted):
     assert str(raised.value) in command.stderr
 
 
+def test_what_the_command_says_of_a_drive_is_warned(recwarn):
+    rellis = SHARED / "rellis3d-000104" / "sequences" / "00"
+    if not rellis.is_dir():
+        pytest.skip(f"{rellis} missing")
+    said = [line[len("notice: "):] for line in cli("run", rellis, "-q").stderr.splitlines() if line.startswith("notice: ")]
+    assert any("fit the model poorly" in line for line in said)
+    grids = list(travmap.run(rellis))
+    warned = [str(w.message) for w in recwarn if issubclass(w.category, travmap.TravmapWarning)]
+    # The road model on off-road ground: the command's notices, word for word.
+    assert [line for line in said if "poorly" in line] == [w for w in warned if "poorly" in w]
+    assert grids and all(not w.startswith("notice") for w in warned)
+    # A sample the model knows: nothing to say.
+    if SAMPLE.is_dir():
+        recwarn.clear()
+        list(travmap.run(SAMPLE))
+        assert not [w for w in recwarn if issubclass(w.category, travmap.TravmapWarning)]
+
+
 @needs_sample
 def test_a_drive_cut_short_warns_where_the_command_exits_3(tmp_path, converted):
     cut = tmp_path / "cut.mcap"

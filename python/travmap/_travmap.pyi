@@ -16,8 +16,9 @@ class TravmapError(Exception):
     exit_code: int
 
 class TravmapWarning(UserWarning):
-    """A drive read to its end with frames skipped (keep_going=True) or parts of it
-    lost (a recording cut short): where the command completes with exit code 3."""
+    """What the command says of a drive on stderr (a poor fit to the model, remission
+    it could not use, unknown label ids), or that it was read to its end with frames
+    skipped (keep_going=True) or parts lost, where the command exits 3."""
 
 class Frame:
     """One LiDAR scan as read."""

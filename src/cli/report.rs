@@ -6,12 +6,13 @@ use std::path::Path;
 use anyhow::Result;
 use serde_json::json;
 use travmap_core::Config;
-use travmap_core::config::{ForeignRemissionPolicy, LabelRule, LabelSet};
 use travmap_method::classifier::SvmModel;
 use travmap_run::DriveRun;
-use travmap_run::scoring::evaluation::{
-    EvaluationReport, Fit, POOR_FIT_UNSURE_SHARE, UNSURE_MARGIN,
+use travmap_run::scoring::evaluation::EvaluationReport;
+pub use travmap_run::scoring::remarks::{
+    counted, fit_said, foreign_remission_said, other_rule_said, without_remission_said,
 };
+use travmap_run::scoring::remarks::{drive_notices, unknown_labels_said};
 
 /// The model's identity in JSON outputs.
 pub fn model_json(model: &SvmModel, name: &str) -> serde_json::Value {
@@ -124,14 +125,6 @@ pub fn setting_word(value: &impl serde::Serialize) -> String {
     }
 }
 
-/// `n noun` with the noun in the plural unless n is 1.
-pub fn counted<N: Copy + std::fmt::Display + TryInto<u64>>(n: N, noun: &str) -> String {
-    match n.try_into().ok() {
-        Some(1) => format!("1 {noun}"),
-        _ => format!("{n} {noun}s"),
-    }
-}
-
 /// The line a command that wrote an MCAP ends with:
 /// `wrote PATH (N frames, CONTENTS, M MB, R frames/s)`.
 pub fn print_wrote(path: &Path, frames: usize, contents: &str, bytes: u64, seconds: f64) {
@@ -162,134 +155,17 @@ fn print_json_line(value: &serde_json::Value) -> Result<()> {
     Ok(())
 }
 
-/// What a report says of frames whose remission lay far outside the model's
-/// training range (another sensor's scale), when there were some.
-/// What a command that classifies says of the drives on stderr, even with -q: labels
-/// of ids the label set does not define, remission it could not use or of another
-/// sensor's scale, and a poor fit (each looks like a bad model otherwise).
+/// Says on stderr, even with -q, what the run found of the drives
+/// ([`drive_notices`]).
 pub fn notice_drives(report: &EvaluationReport, model: &SvmModel, config: &Config) {
-    notice_unknown_labels(report, config);
-    let remission = without_remission_said(report)
-        .into_iter()
-        .chain(foreign_remission_said(report, config));
-    for said in remission.chain(fit_said(&report.fit, model).1) {
+    for said in drive_notices(report, model, config) {
         eprintln!("notice: {said}");
     }
 }
 
-/// How well the drives fit the model, in a line; and when poorly, what to do about it.
-pub fn fit_said(fit: &Fit, model: &SvmModel) -> (String, Option<String>) {
-    let share = format!(
-        "{:.1} % of {} predicted cells within the model's margin (|margin| < {UNSURE_MARGIN})",
-        100.0 * fit.unsure_share,
-        fit.cells
-    );
-    let line = format!(
-        "fit: {share}; drives like its training ones: at most {:.0} %",
-        100.0 * POOR_FIT_UNSURE_SHARE
-    );
-    let other = match model.config.ground_truth.rule {
-        LabelRule::Road => LabelRule::Offroad,
-        LabelRule::Offroad => LabelRule::Road,
-    };
-    let notice = fit.poor.then(|| {
-        format!(
-            "these drives fit the model poorly ({share}; its training drives: at most {:.0} %): expect scores below its own; adapt it to them (--adapt), try the {} model if the robot's ground is {} (--model {}), or train on labelled scans of this sensor",
-            100.0 * POOR_FIT_UNSURE_SHARE,
-            other.name(),
-            match other {
-                LabelRule::Offroad => "grass, dirt or low vegetation",
-                LabelRule::Road => "a car's road",
-            },
-            other.name(),
-        )
-    });
-    (line, notice)
-}
-
-/// What is said when the scores count another rule of what is traversable than the
-/// model learnt (the off-road model scored by the road rule looks like a bad model).
-pub fn other_rule_said(model: &SvmModel, config: &Config) -> Option<String> {
-    let (learnt, scored) = (model.config.ground_truth.rule, config.ground_truth.rule);
-    let by_preset = |c: &Config| {
-        c.ground_truth.label_map.is_none() && c.ground_truth.traversable_classes.is_none()
-    };
-    (learnt != scored && by_preset(&model.config) && by_preset(config)).then(|| {
-        format!(
-            "the model learnt the {} rule of what is traversable, these scores count the {} rule (--set ground_truth.rule=\"{}\" scores it by its own)",
-            learnt.name(),
-            scored.name(),
-            learnt.name()
-        )
-    })
-}
-
-/// What is said when frames had no usable remission, and why when some of it was
-/// NaN or infinite (a frame that looks fine but lost its remission features).
-pub fn without_remission_said(report: &EvaluationReport) -> Option<String> {
-    if report.frames_without_remission == 0 {
-        return None;
-    }
-    let why = match report.non_finite_remission_points {
-        0 => String::new(),
-        points => format!("; {points} points' remission was NaN or infinite"),
-    };
-    Some(format!(
-        "{} had no usable remission (intensity{why}): the model's fallback without remission features classified them",
-        counted(report.frames_without_remission, "frame")
-    ))
-}
-
-pub fn foreign_remission_said(report: &EvaluationReport, config: &Config) -> Option<String> {
-    let foreign = report.foreign_remission?;
-    Some(format!(
-        "{} had remission far outside the model's training range (median cell {:.4}, the model learnt {:.2} +- {:.2}: another sensor's scale?): {}",
-        counted(report.frames_foreign_remission, "frame"),
-        foreign.median,
-        foreign.trained_mean,
-        foreign.trained_std,
-        match config.classifier.foreign_remission {
-            ForeignRemissionPolicy::Notice => {
-                "classified as read (--set classifier.foreign_remission=\"fallback\" classifies them without remission)"
-            }
-            ForeignRemissionPolicy::Fallback => {
-                "the model's fallback without remission classified them"
-            }
-        }
-    ))
-}
-
-/// Says on stderr (even with -q) when labels carried ids the label set does not
-/// define: a run scored against another dataset's labels looks like a bad model.
+/// Says on stderr when labels carried ids the label set does not define.
 pub fn notice_unknown_labels(report: &EvaluationReport, config: &Config) {
-    let unknown = &report.unknown_labels;
-    if unknown.points == 0 {
-        return;
+    if let Some(said) = unknown_labels_said(report, config) {
+        eprintln!("notice: {said}");
     }
-    let ids: Vec<String> = unknown.examples.iter().map(u16::to_string).collect();
-    let truth = &config.ground_truth;
-    let label_set = match &truth.label_map {
-        Some(path) => format!("label map {}", path.display()),
-        None => format!("{} label set", truth.labels.name()),
-    };
-    // The presets that define every id seen (the unknown ones among them).
-    let fitting: Vec<&str> = (LabelSet::ALL.iter())
-        .filter(|set| truth.label_map.is_some() || **set != truth.labels)
-        .filter(|set| unknown.examples.iter().all(|&id| set.defines(id)))
-        .map(|set| set.name())
-        .collect();
-    let which = match fitting.as_slice() {
-        [] => "--set ground_truth.labels=..., or a label_map".to_string(),
-        [one] => format!("they fit the {one} label set: --set ground_truth.labels={one}"),
-        several => format!(
-            "they fit the {} label sets: --set ground_truth.labels=...",
-            several.join(" and ")
-        ),
-    };
-    eprintln!(
-        "notice: {} labelled points in {} carry ids the {label_set} does not define (e.g. {}): they count as not traversable; are these another dataset's labels ({which})?",
-        unknown.points,
-        counted(report.frames_with_unknown_labels, "frame"),
-        ids.join(", ")
-    );
 }

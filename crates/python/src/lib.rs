@@ -23,8 +23,10 @@ pyo3::create_exception!(
     travmap,
     TravmapWarning,
     pyo3::exceptions::PyUserWarning,
-    "A drive read to its end with frames skipped (`keep_going=True`) or parts of it \
-     lost (a recording cut short): where the command completes with exit code 3."
+    "What the command says of a drive on stderr: a poor fit to the model, remission \
+     it could not use, labels of ids the label set does not define; or that it was \
+     read to its end with frames skipped (`keep_going=True`) or parts of it lost (a \
+     recording cut short), where the command completes with exit code 3."
 );
 
 /// Warns when `drive` completed with frames skipped or parts lost, as the command
@@ -34,11 +36,18 @@ pub(crate) fn warn_incomplete(py: Python<'_>, drive: &travmap_run::DriveRun) -> 
     if skipped + lost == 0 {
         return Ok(());
     }
-    let message = format!(
-        "{}: completed with {skipped} skipped frame(s) and {lost} lost part(s) of the input (Drive.skipped and Drive.lost say which)",
-        drive.source.path().display()
-    );
-    let message = std::ffi::CString::new(message).unwrap_or_default();
+    warn(
+        py,
+        &format!(
+            "{}: completed with {skipped} skipped frame(s) and {lost} lost part(s) of the input (Drive.skipped and Drive.lost say which)",
+            drive.source.path().display()
+        ),
+    )
+}
+
+/// A `TravmapWarning` saying `notice`.
+pub(crate) fn warn(py: Python<'_>, notice: &str) -> PyResult<()> {
+    let message = std::ffi::CString::new(notice).unwrap_or_default();
     PyErr::warn(py, &py.get_type::<TravmapWarning>(), &message, 1)
 }
 

@@ -14,6 +14,8 @@ use travmap_method::classifier::SvmModel;
 use travmap_method::features::feature_names;
 use travmap_method::grid::CellClass;
 use travmap_method::pipeline::{FrameResult, StageTimings};
+use travmap_run::scoring::evaluation::Evaluation;
+use travmap_run::scoring::remarks::drive_notices;
 
 use crate::drive::{Drive, Opening, pose_array, remission_word};
 use crate::stream::Stream;
@@ -50,14 +52,20 @@ impl Model {
             drive.config.clone(),
         );
         Ok(Grids(Stream::spawn(selection.clone(), move |sender| {
+            let mut evaluation = Evaluation::default();
             let ran = selection.run::<Stop>(&config, Some(&model), |result| {
+                evaluation.add(&result);
                 match sender.send(GridValues::of(result)) {
                     true => Ok(()),
                     false => Err(Stop::NoOneListens),
                 }
             });
             match ran {
-                Ok(()) | Err(Stop::NoOneListens) => Ok(()),
+                Ok(()) => {
+                    sender.say(drive_notices(&evaluation.report(), &model, &config));
+                    Ok(())
+                }
+                Err(Stop::NoOneListens) => Ok(()),
                 Err(Stop::Failed(error)) => Err(Failure::of(&error)),
             }
         })))

@@ -1,0 +1,148 @@
+//! What a run says of the drives it scored, in words every front end uses (the
+//! command line prints them, the Python module warns with them): how well they fit
+//! the model, remission it could not use or of another sensor's scale, labels of
+//! ids the label set does not define, and another rule than the model learnt.
+
+use travmap_core::Config;
+use travmap_core::config::{ForeignRemissionPolicy, LabelRule, LabelSet};
+use travmap_method::classifier::SvmModel;
+
+use super::evaluation::{EvaluationReport, Fit, POOR_FIT_UNSURE_SHARE, UNSURE_MARGIN};
+
+/// `n noun` with the noun in the plural unless n is 1.
+pub fn counted<N: Copy + std::fmt::Display + TryInto<u64>>(n: N, noun: &str) -> String {
+    match n.try_into().ok() {
+        Some(1) => format!("1 {noun}"),
+        _ => format!("{n} {noun}s"),
+    }
+}
+
+/// What is said of the drives even when nothing else is (`-q`): labels of ids the
+/// label set does not define, remission that could not be used or is of another
+/// sensor's scale, and a poor fit (each looks like a bad model otherwise).
+pub fn drive_notices(report: &EvaluationReport, model: &SvmModel, config: &Config) -> Vec<String> {
+    (unknown_labels_said(report, config).into_iter())
+        .chain(without_remission_said(report))
+        .chain(foreign_remission_said(report, config))
+        .chain(fit_said(&report.fit, model).1)
+        .collect()
+}
+
+/// How well the drives fit the model, in a line; and when poorly, what to do about it.
+pub fn fit_said(fit: &Fit, model: &SvmModel) -> (String, Option<String>) {
+    let share = format!(
+        "{:.1} % of {} predicted cells within the model's margin (|margin| < {UNSURE_MARGIN})",
+        100.0 * fit.unsure_share,
+        fit.cells
+    );
+    let line = format!(
+        "fit: {share}; drives like its training ones: at most {:.0} %",
+        100.0 * POOR_FIT_UNSURE_SHARE
+    );
+    let other = match model.config.ground_truth.rule {
+        LabelRule::Road => LabelRule::Offroad,
+        LabelRule::Offroad => LabelRule::Road,
+    };
+    let notice = fit.poor.then(|| {
+        format!(
+            "these drives fit the model poorly ({share}; its training drives: at most {:.0} %): expect scores below its own; adapt it to them (--adapt), try the {} model if the robot's ground is {} (--model {}), or train on labelled scans of this sensor",
+            100.0 * POOR_FIT_UNSURE_SHARE,
+            other.name(),
+            match other {
+                LabelRule::Offroad => "grass, dirt or low vegetation",
+                LabelRule::Road => "a car's road",
+            },
+            other.name(),
+        )
+    });
+    (line, notice)
+}
+
+/// What is said when the scores count another rule of what is traversable than the
+/// model learnt (the off-road model scored by the road rule looks like a bad model).
+pub fn other_rule_said(model: &SvmModel, config: &Config) -> Option<String> {
+    let (learnt, scored) = (model.config.ground_truth.rule, config.ground_truth.rule);
+    let by_preset = |c: &Config| {
+        c.ground_truth.label_map.is_none() && c.ground_truth.traversable_classes.is_none()
+    };
+    (learnt != scored && by_preset(&model.config) && by_preset(config)).then(|| {
+        format!(
+            "the model learnt the {} rule of what is traversable, these scores count the {} rule (--set ground_truth.rule=\"{}\" scores it by its own)",
+            learnt.name(),
+            scored.name(),
+            learnt.name()
+        )
+    })
+}
+
+/// What is said when frames had no usable remission, and why when some of it was
+/// NaN or infinite (a frame that looks fine but lost its remission features).
+pub fn without_remission_said(report: &EvaluationReport) -> Option<String> {
+    if report.frames_without_remission == 0 {
+        return None;
+    }
+    let why = match report.non_finite_remission_points {
+        0 => String::new(),
+        points => format!("; {points} points' remission was NaN or infinite"),
+    };
+    Some(format!(
+        "{} had no usable remission (intensity{why}): the model's fallback without remission features classified them",
+        counted(report.frames_without_remission, "frame")
+    ))
+}
+
+/// What is said of frames whose remission lay far outside the model's training
+/// range (another sensor's scale), when there were some.
+pub fn foreign_remission_said(report: &EvaluationReport, config: &Config) -> Option<String> {
+    let foreign = report.foreign_remission?;
+    Some(format!(
+        "{} had remission far outside the model's training range (median cell {:.4}, the model learnt {:.2} +- {:.2}: another sensor's scale?): {}",
+        counted(report.frames_foreign_remission, "frame"),
+        foreign.median,
+        foreign.trained_mean,
+        foreign.trained_std,
+        match config.classifier.foreign_remission {
+            ForeignRemissionPolicy::Notice => {
+                "classified as read (--set classifier.foreign_remission=\"fallback\" classifies them without remission)"
+            }
+            ForeignRemissionPolicy::Fallback => {
+                "the model's fallback without remission classified them"
+            }
+        }
+    ))
+}
+
+/// What is said when labels carried ids the label set does not define: a run
+/// scored against another dataset's labels looks like a bad model.
+pub fn unknown_labels_said(report: &EvaluationReport, config: &Config) -> Option<String> {
+    let unknown = &report.unknown_labels;
+    if unknown.points == 0 {
+        return None;
+    }
+    let ids: Vec<String> = unknown.examples.iter().map(u16::to_string).collect();
+    let truth = &config.ground_truth;
+    let label_set = match &truth.label_map {
+        Some(path) => format!("label map {}", path.display()),
+        None => format!("{} label set", truth.labels.name()),
+    };
+    // The presets that define every id seen (the unknown ones among them).
+    let fitting: Vec<&str> = (LabelSet::ALL.iter())
+        .filter(|set| truth.label_map.is_some() || **set != truth.labels)
+        .filter(|set| unknown.examples.iter().all(|&id| set.defines(id)))
+        .map(|set| set.name())
+        .collect();
+    let which = match fitting.as_slice() {
+        [] => "--set ground_truth.labels=..., or a label_map".to_string(),
+        [one] => format!("they fit the {one} label set: --set ground_truth.labels={one}"),
+        several => format!(
+            "they fit the {} label sets: --set ground_truth.labels=...",
+            several.join(" and ")
+        ),
+    };
+    Some(format!(
+        "{} labelled points in {} carry ids the {label_set} does not define (e.g. {}): they count as not traversable; are these another dataset's labels ({which})?",
+        unknown.points,
+        counted(report.frames_with_unknown_labels, "frame"),
+        ids.join(", ")
+    ))
+}
