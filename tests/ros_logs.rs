@@ -224,7 +224,7 @@ fn a_livox_custom_msg_reads_as_the_pointcloud2_of_its_points() {
         .messages()
         .map(|m| m.unwrap().connection.schema_name.clone())
         .collect();
-    assert!(schemas.contains(&"livox_log_driver2/msg/CustomMsg".to_string()));
+    assert!(schemas.contains(&"livox_ros_driver2/msg/CustomMsg".to_string()));
     assert!(!schemas.iter().any(|s| s.contains("PointCloud2")));
     // The grids and clouds of the same points, each reflectivity as a uint8
     // intensity of a PointCloud2 (a byte-scale remission, as the Livox's).
@@ -243,7 +243,7 @@ fn a_livox_custom_msg_reads_as_the_pointcloud2_of_its_points() {
     let reference = annotated(&routes.join("rosbag2-mcap-uint8"), "uint8");
     assert_eq!(reference.len(), 12);
     assert!(annotated(&livox, "livox") == reference);
-    // And from a ROS 1 bag of livox_log_driver/CustomMsg, as FAST-LIO's users record.
+    // And from a ROS 1 bag of livox_ros_driver/CustomMsg, as FAST-LIO's users record.
     let ros1 = routes.join("ros1-livox.bag");
     let types: Vec<String> = Log::open(&ros1, detect(&ros1).unwrap())
         .unwrap()
@@ -251,7 +251,7 @@ fn a_livox_custom_msg_reads_as_the_pointcloud2_of_its_points() {
         .map(|m| m.unwrap().connection.schema_name.clone())
         .collect();
     assert!(
-        types.contains(&"livox_log_driver/CustomMsg".to_string()),
+        types.contains(&"livox_ros_driver/CustomMsg".to_string()),
         "{types:?}"
     );
     assert!(annotated(&ros1, "ros1-livox") == reference);

@@ -340,7 +340,7 @@ mod tests {
             "tf2_msgs__TFMessage.msg",
             "velodyne_msgs__VelodyneScan.msg",
             "pandar_msgs__PandarScan.msg",
-            "livox_log_driver2__CustomMsg.msg",
+            "livox_ros_driver2__CustomMsg.msg",
         ] {
             let fields = |path: std::path::PathBuf| -> Vec<String> {
                 std::fs::read_to_string(&path)

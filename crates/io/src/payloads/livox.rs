@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use travmap_formats::ros::{Header, MessageEncoding, PointCloud2, PointField, datatype};
 
-/// `livox_log_driver2/msg/CustomMsg` (ROS 1's `livox_log_driver/CustomMsg` has the same
+/// `livox_ros_driver2/msg/CustomMsg` (ROS 1's `livox_ros_driver/CustomMsg` has the same
 /// fields): a Livox LiDAR's points as its driver publishes them for FAST-LIO and other
 /// LiDAR odometry, in place of a PointCloud2.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -19,7 +19,7 @@ pub struct LivoxCustomMsg {
     pub points: Vec<LivoxPoint>,
 }
 
-/// `livox_log_driver2/msg/CustomPoint`.
+/// `livox_ros_driver2/msg/CustomPoint`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LivoxPoint {
     /// After `timebase`, ns.
@@ -35,8 +35,8 @@ pub struct LivoxPoint {
 
 /// Livox CustomMsg's type names, of its ROS 2 and ROS 1 drivers.
 pub const LIVOX_CUSTOM_MESSAGES: [&str; 2] = [
-    "livox_log_driver2/msg/CustomMsg",
-    "livox_log_driver/msg/CustomMsg",
+    "livox_ros_driver2/msg/CustomMsg",
+    "livox_ros_driver/msg/CustomMsg",
 ];
 
 /// The cloud of a message of type `type_name`: a PointCloud2, or a Livox CustomMsg's
