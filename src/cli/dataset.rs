@@ -10,7 +10,9 @@ use travmap_core::Config;
 use travmap_core::config::ModelChoice;
 use travmap_core::temporaries;
 use travmap_method::classifier::SvmModel;
-use travmap_outputs::dataset::{DEFAULT_ROWS_PER_PART, DatasetSummary, DatasetWriter, Layout};
+use travmap_outputs::dataset::{
+    DEFAULT_ROWS_PER_PART, DatasetFiles, DatasetSummary, DatasetWriter,
+};
 use travmap_run::{DriveRun, Fingerprints};
 
 use super::{
@@ -54,17 +56,19 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
         _ => None,
     };
     let layout = match output_path.is_dir() || path_text(output_path).ends_with('/') {
-        true => Layout::Parts {
+        true => DatasetFiles::Parts {
             rows_per_part: args.rows_per_part,
         },
-        false => Layout::File,
+        false => DatasetFiles::File,
     };
     match layout {
-        Layout::File => {
+        DatasetFiles::File => {
             check_output(output_path, &args.inputs.files(model_file))?;
             note_extension(output_path, "parquet", "a Parquet file");
         }
-        Layout::Parts { .. } => check_output_dir(output_path, &args.inputs.files(model_file))?,
+        DatasetFiles::Parts { .. } => {
+            check_output_dir(output_path, &args.inputs.files(model_file))?
+        }
     }
     let mut selections = args.inputs.open(config, config.appearance.enabled)?;
     let model = match &choice {
@@ -80,7 +84,7 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     }
     let bar = output.progress(frame_count(&selections), "extracting cells");
     // A folder this run makes is a temporary until its parts are in place.
-    let created_dir = layout != Layout::File && !output_path.exists();
+    let created_dir = layout != DatasetFiles::File && !output_path.exists();
     if created_dir {
         std::fs::create_dir(output_path)
             .with_context(|| format!("cannot create {}", output_path.display()))?;
@@ -110,8 +114,10 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
         print_json_summary("dataset", &selections, fields)?;
     } else if !output.quiet {
         let parts = match layout {
-            Layout::File => String::new(),
-            Layout::Parts { .. } => format!(" in {}", counted(summary.files.len(), "part file")),
+            DatasetFiles::File => String::new(),
+            DatasetFiles::Parts { .. } => {
+                format!(" in {}", counted(summary.files.len(), "part file"))
+            }
         };
         println!(
             "wrote {}{parts}: {} from {} ({} labelled, {} with appearance), {:.0} cells/s",
@@ -133,7 +139,7 @@ fn write_cells(
     grid_config: &Config,
     model: Option<&SvmModel>,
     path: &Path,
-    layout: Layout,
+    layout: DatasetFiles,
     on_frame: &dyn Fn(),
 ) -> Result<DatasetSummary> {
     let mut writer = DatasetWriter::create(path, grid_config, layout)?;

@@ -215,7 +215,7 @@ pub fn ros1_message(data: &[u8]) {
 /// count, read as YAML, for the models without a built-in one).
 pub fn velodyne_scan(data: &[u8]) {
     use crate::packets::velodyne::{
-        Calibration, Decoder, DecoderSettings, ScanAssembler, VelodyneModel, scan_message,
+        Decoder, DecoderSettings, ScanAssembler, VelodyneCalibration, VelodyneModel, scan_message,
     };
     use travmap_formats::ros::MessageEncoding;
     for encoding in [MessageEncoding::Cdr, MessageEncoding::Ros1] {
@@ -229,7 +229,7 @@ pub fn velodyne_scan(data: &[u8]) {
         else {
             continue;
         };
-        let calibration = Calibration::builtin(model).or_else(|| {
+        let calibration = VelodyneCalibration::builtin(model).or_else(|| {
             let lasers: String = (0..model.lasers())
                 .map(|i| {
                     let elevation = (i as f64 - 64.0) * 0.005;
@@ -238,7 +238,7 @@ pub fn velodyne_scan(data: &[u8]) {
                     )
                 })
                 .collect();
-            Calibration::from_yaml(&format!("lasers:\n{lasers}")).ok()
+            VelodyneCalibration::from_yaml(&format!("lasers:\n{lasers}")).ok()
         });
         let Some(Ok(decoder)) =
             calibration.map(|c| Decoder::new(model, c, DecoderSettings::default()))

@@ -7,13 +7,13 @@
 
 use std::ops::Add;
 
-pub(super) struct Columns {
+pub(super) struct SampleColumns {
     /// `dimension` columns of `count` values each.
     values: Vec<f32>,
     count: usize,
 }
 
-impl Columns {
+impl SampleColumns {
     /// From row-major `rows` of `dimension` values.
     pub fn new(rows: &[f32], dimension: usize) -> Self {
         let count = rows.len() / dimension.max(1);
@@ -90,7 +90,7 @@ mod tests {
             .map(|_| rng.uniform(-1e3, 1e3) as f32 * rng.uniform(0.0, 1e-3) as f32)
             .collect();
         let query: Vec<f32> = (0..d).map(|_| rng.uniform(-5.0, 5.0) as f32).collect();
-        let columns = Columns::new(&rows, d);
+        let columns = SampleColumns::new(&rows, d);
         let mut dots = vec![0f32; 30];
         columns.sums(&query, 7, &mut dots, |q, s| q * s);
         let mut distances = vec![0f64; 30];

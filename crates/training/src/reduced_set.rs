@@ -6,7 +6,7 @@ use std::ops::Range;
 
 use rayon::prelude::*;
 
-use super::columns::Columns;
+use super::columns::SampleColumns;
 use travmap_method::training_set::TrainingSet;
 
 /// Rows of the reduced set's design matrix computed at a time.
@@ -34,7 +34,7 @@ fn k_means(
     for _ in 0..iterations {
         // The nearest centres on all cores; the sums in the points' order, so the
         // centres are the same whatever the thread count.
-        let by_column = Columns::new(&centres, d);
+        let by_column = SampleColumns::new(&centres, d);
         let nearest: Vec<usize> = points
             .par_chunks_exact(d)
             .map_init(
@@ -229,7 +229,7 @@ impl Expansion {
         // bias. Rows are computed on all cores a block at a time (the matrix is
         // column-major, so a block is copied in; whole, the copy would double the
         // matrix's memory).
-        let by_column = Columns::new(&centres, d);
+        let by_column = SampleColumns::new(&centres, d);
         let mut design = nalgebra::DMatrix::<f64>::zeros(n, m + 1);
         for (block, rows) in self.samples.chunks(DESIGN_BLOCK_ROWS * d).enumerate() {
             let block_rows: Vec<Vec<f64>> = rows

@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::columns::Columns;
+use super::columns::SampleColumns;
 use super::working_set::{Duals, Scratch, most_violating, partner, positive_curvature};
 
 /// A row is split across cores in pieces of at least this many entries (they are
@@ -59,7 +59,7 @@ struct KernelRows<'a> {
     problem: &'a Problem<'a>,
     gamma: f32,
     squared_norms: Vec<f32>,
-    columns: Columns,
+    columns: SampleColumns,
     rows: Vec<Option<Arc<[f32]>>>,
     last_used: Vec<u64>,
     cached: Vec<usize>,
@@ -79,7 +79,7 @@ impl<'a> KernelRows<'a> {
             problem,
             gamma: gamma as f32,
             squared_norms,
-            columns: Columns::new(problem.samples, problem.dimension),
+            columns: SampleColumns::new(problem.samples, problem.dimension),
             rows: vec![None; n],
             last_used: vec![0; n],
             cached: Vec::new(),

@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Matrix4};
 
-pub use crate::kitti::text::{Calibration, read_calibration, read_poses, read_times};
+pub use crate::kitti::text::{KittiCalibration, read_calibration, read_poses, read_times};
 use crate::payloads::cloud::{check_some_finite, is_return};
 use crate::payloads::image::decode_png;
 use travmap_core::error::{Error, Result};
@@ -43,7 +43,7 @@ const KEYFRAME_RATE_HZ: f64 = 2.0;
 #[derive(Clone, Debug)]
 pub struct KittiSequence {
     dir: PathBuf,
-    calibration: Calibration,
+    calibration: KittiCalibration,
     /// `pose_i` of poses.txt: cam0 of frame i in the first cam0 frame.
     first_cam0_from_cam0: Vec<Matrix4<f64>>,
     stamps_ns: Vec<u64>,
@@ -79,7 +79,7 @@ impl KittiSequence {
             read_calibration(&calib_path)?
         } else {
             said("no calib.txt: the poses in poses.txt are taken as the LiDAR's own, and there is no camera".into());
-            Calibration::lidar_alone()
+            KittiCalibration::lidar_alone()
         };
         let first_cam0_from_cam0 = read_poses(&dir.join("poses.txt"))?;
         let frames = list_scans(&dir.join("velodyne"))?;
@@ -147,7 +147,7 @@ impl KittiSequence {
         &self.dir
     }
 
-    pub fn calibration(&self) -> &Calibration {
+    pub fn calibration(&self) -> &KittiCalibration {
         &self.calibration
     }
 

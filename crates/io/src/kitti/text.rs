@@ -1,4 +1,4 @@
-//! KITTI's text files: `calib.txt` (into a [`Calibration`]), `poses.txt` and
+//! KITTI's text files: `calib.txt` (into a [`KittiCalibration`]), `poses.txt` and
 //! `times.txt`. Every number is checked, every matrix that should be rigid is, and
 //! errors name the file and line.
 
@@ -12,14 +12,14 @@ use travmap_core::geometry::rigid;
 
 /// KITTI calibration: the camera projections and velodyne -> cam0.
 #[derive(Clone, Debug)]
-pub struct Calibration {
+pub struct KittiCalibration {
     /// `P0..P3` as 4x4 with a last row 0 0 0 1; `None` where calib.txt lacks them.
     pub projections: [Option<Matrix4<f64>>; 4],
     /// `Tr`: maps velodyne coordinates to cam0 coordinates.
     pub cam0_from_velodyne: Matrix4<f64>,
 }
 
-impl Calibration {
+impl KittiCalibration {
     /// A LiDAR without a camera, whose poses are its own: `Tr` the identity.
     pub fn lidar_alone() -> Self {
         Self {
@@ -186,12 +186,12 @@ fn top_rows(path: &Path, line_no: usize, values: &[f64], columns: usize) -> Resu
 /// Reads `calib.txt`: `KEY: numbers` lines. The odometry format has `Tr` (velodyne
 /// -> rectified cam0); the object format has `R0_rect` (9 numbers) and
 /// `Tr_velo_to_cam`, and then `Tr = R0_rect * Tr_velo_to_cam`. `P0..P3` are optional.
-pub fn read_calibration(path: &Path) -> Result<Calibration> {
+pub fn read_calibration(path: &Path) -> Result<KittiCalibration> {
     parse_calibration(&read_text(path)?, path)
 }
 
 /// [`read_calibration`] on the file's text; `path` names it in errors.
-pub fn parse_calibration(text: &str, path: &Path) -> Result<Calibration> {
+pub fn parse_calibration(text: &str, path: &Path) -> Result<KittiCalibration> {
     let mut projections = [None; 4];
     // Each matrix with the line it was read from.
     let (mut tr, mut rectification, mut velo_to_cam) = (None, None, None);
@@ -230,7 +230,7 @@ pub fn parse_calibration(text: &str, path: &Path) -> Result<Calibration> {
         }
     };
     check_rigid(path, line_no, what, &cam0_from_velodyne)?;
-    Ok(Calibration {
+    Ok(KittiCalibration {
         projections: projections.map(|p| p.map(|(_, m)| m)),
         cam0_from_velodyne,
     })

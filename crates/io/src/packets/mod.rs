@@ -28,7 +28,7 @@ use crate::packets::robosense::{
     robosense_scan_message,
 };
 use crate::packets::velodyne::{
-    Calibration, Decoder, DecoderSettings, ScanAssembler, VELODYNE_SCAN, VelodyneModel,
+    Decoder, DecoderSettings, ScanAssembler, VELODYNE_SCAN, VelodyneCalibration, VelodyneModel,
     scan_message,
 };
 use travmap_formats::ros::MessageEncoding;
@@ -123,7 +123,7 @@ pub fn packet_message<'a>(
 /// with its packets (`packet_topics.rs`).
 #[derive(Clone, Debug)]
 pub enum PacketCalibration {
-    Velodyne(Calibration),
+    Velodyne(VelodyneCalibration),
     Hesai(HesaiCalibration),
     Robosense(RobosenseCalibration),
     Ouster(Box<OusterMetadata>),
@@ -135,7 +135,9 @@ impl PacketCalibration {
             PacketModel::Ouster(_) => {
                 Err("an Ouster's metadata is read with its packets, by the log index".into())
             }
-            PacketModel::Velodyne(model) => Calibration::for_model(model, file).map(Self::Velodyne),
+            PacketModel::Velodyne(model) => {
+                VelodyneCalibration::for_model(model, file).map(Self::Velodyne)
+            }
             // A table of another model is refused here, naming both.
             PacketModel::Hesai(model) => {
                 let calibration = match file {

@@ -20,7 +20,7 @@ impl<T> Nullable<T> {
 
 /// The rows of one row group, by column.
 #[derive(Default)]
-pub(super) struct Columns {
+pub(super) struct RowGroupColumns {
     pub(super) source: Vec<ByteArray>,
     pub(super) frame: Vec<i64>,
     pub(super) stamp_ns: Vec<i64>,
@@ -39,7 +39,7 @@ pub(super) struct Columns {
     pub(super) pseudo_label: Nullable<bool>,
 }
 
-impl Columns {
+impl RowGroupColumns {
     pub(super) fn new(feature_count: usize, appearance_len: usize) -> Self {
         Self {
             features: vec![Vec::new(); feature_count],
@@ -114,7 +114,7 @@ impl<T> RowBuffer for Vec<T> {
 /// Writes column `index` of the schema from `columns`.
 pub(super) fn write_column(
     writer: &mut ColumnWriter<'_>,
-    columns: &Columns,
+    columns: &RowGroupColumns,
     index: usize,
 ) -> parquet::errors::Result<()> {
     let features = 8..8 + columns.features.len();

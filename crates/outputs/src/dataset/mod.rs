@@ -28,7 +28,7 @@ use parquet::file::properties::WriterProperties;
 use parquet::file::writer::SerializedFileWriter;
 use parquet::schema::types::ColumnPath;
 
-use columns::{Columns, write_column};
+use columns::{RowGroupColumns, write_column};
 
 use crate::atomic::{AtomicFile, WritebackFile, parquet_failure, sync_output, write_failure};
 use travmap_core::Config;
@@ -108,7 +108,7 @@ fn schema(features: &[String], appearance: &[String], self_labels: bool) -> Stri
 /// Where a dataset goes: one Parquet file, or a folder of part files that
 /// pyarrow.dataset, DuckDB and Polars read as one table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Layout {
+pub enum DatasetFiles {
     File,
     /// `part-00000.parquet`, ... of whole frames, a part closed once it holds
     /// `rows_per_part` rows or more: each part's footer, the writer's memory that
@@ -167,13 +167,13 @@ struct FileWriter {
 /// dataset there.
 pub struct DatasetWriter {
     path: PathBuf,
-    layout: Layout,
+    layout: DatasetFiles,
     schema: Arc<parquet::schema::types::Type>,
     properties: Arc<WriterProperties>,
     file: Option<FileWriter>,
     /// Parts complete and synced, not yet in place.
     written: Vec<AtomicFile>,
-    columns: Columns,
+    columns: RowGroupColumns,
     appearance_len: usize,
     summary: DatasetSummary,
 }
@@ -194,8 +194,8 @@ pub struct DatasetSummary {
 }
 
 impl DatasetWriter {
-    /// A dataset at `path` (a folder that exists, for [`Layout::Parts`]).
-    pub fn create(path: &Path, config: &Config, layout: Layout) -> Result<Self> {
+    /// A dataset at `path` (a folder that exists, for [`DatasetFiles::Parts`]).
+    pub fn create(path: &Path, config: &Config, layout: DatasetFiles) -> Result<Self> {
         let appearance = appearance_columns(config);
         let features = feature_names(&config.features.groups);
         let schema =
@@ -220,13 +220,13 @@ impl DatasetWriter {
             properties: Arc::new(properties.build()),
             file: None,
             written: Vec::new(),
-            columns: Columns::new(features.len(), appearance.len()),
+            columns: RowGroupColumns::new(features.len(), appearance.len()),
             appearance_len: appearance.len(),
             summary: DatasetSummary::default(),
         };
         // A single file is created before any work, so that an output that cannot
         // be written is said at once.
-        if layout == Layout::File {
+        if layout == DatasetFiles::File {
             writer.open_file()?;
         }
         Ok(writer)
@@ -235,8 +235,8 @@ impl DatasetWriter {
     fn open_file(&mut self) -> Result<&mut FileWriter> {
         if self.file.is_none() {
             let path = match self.layout {
-                Layout::File => self.path.clone(),
-                Layout::Parts { .. } => self.path.join(part_name(self.written.len())),
+                DatasetFiles::File => self.path.clone(),
+                DatasetFiles::Parts { .. } => self.path.join(part_name(self.written.len())),
             };
             let (output, file) = AtomicFile::create(&path)?;
             let writer = SerializedFileWriter::new(
@@ -322,7 +322,9 @@ impl DatasetWriter {
         }
         let part_rows = self.file.as_ref().map_or(0, |f| f.rows) + self.columns.len() as u64;
         match self.layout {
-            Layout::Parts { rows_per_part } if part_rows >= rows_per_part => self.close_file()?,
+            DatasetFiles::Parts { rows_per_part } if part_rows >= rows_per_part => {
+                self.close_file()?
+            }
             _ if self.columns.len() >= ROW_GROUP_ROWS => self.flush()?,
             _ => {}
         }
@@ -390,7 +392,7 @@ impl DatasetWriter {
             .map(|f| f.path().to_path_buf())
             .collect();
         self.written.into_iter().try_for_each(AtomicFile::commit)?;
-        if let Layout::Parts { .. } = self.layout {
+        if let DatasetFiles::Parts { .. } = self.layout {
             for earlier in part_files(&self.path).unwrap_or_default() {
                 if !files.contains(&earlier) {
                     std::fs::remove_file(&earlier).map_err(|e| Error::io(&earlier, e))?;

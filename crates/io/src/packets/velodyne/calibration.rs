@@ -24,7 +24,7 @@ pub(super) struct Laser {
 
 /// A sensor's calibration: its lasers' angles and offsets, by laser id.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Calibration {
+pub struct VelodyneCalibration {
     pub(super) lasers: Vec<Laser>,
     pub(super) distance_resolution_m: f32,
 }
@@ -65,7 +65,7 @@ const VLP32C_AZIMUTH_OFFSET_DEG: [f64; 32] = [
     -4.2, 1.4, -4.2, 4.2, -1.4, 1.4, -1.4, 1.4, -1.4, 1.4, -4.2, 4.2, -1.4, 1.4, -1.4,
 ];
 
-impl Calibration {
+impl VelodyneCalibration {
     /// The model's own table, for the models whose geometry is fixed (VLP-16,
     /// VLP-32C); the others need a calibration file.
     pub fn builtin(model: VelodyneModel) -> Option<Self> {

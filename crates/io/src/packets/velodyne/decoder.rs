@@ -1,7 +1,7 @@
 //! One Velodyne packet into points: nebula's azimuth interpolation, range and field
 //! of view (see the module above for where it departs from the manuals).
 
-use super::calibration::Calibration;
+use super::calibration::VelodyneCalibration;
 use super::packet::{
     BANK_FLAGS, BLOCK_BYTES, BLOCKS, CENTIDEGREES, DUAL_RETURN, RETURN_MODE_AT, VelodyneModel,
 };
@@ -48,7 +48,7 @@ impl DecoderSettings {
 /// Decodes packets of one model with one calibration.
 pub struct Decoder {
     model: VelodyneModel,
-    calibration: Calibration,
+    calibration: VelodyneCalibration,
     settings: DecoderSettings,
     sin_table: Vec<f32>,
     cos_table: Vec<f32>,
@@ -57,7 +57,7 @@ pub struct Decoder {
 impl Decoder {
     pub fn new(
         model: VelodyneModel,
-        calibration: Calibration,
+        calibration: VelodyneCalibration,
         settings: DecoderSettings,
     ) -> Result<Self, String> {
         if calibration.lasers() != model.lasers() {

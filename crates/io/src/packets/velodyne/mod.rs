@@ -28,7 +28,7 @@ mod message;
 mod packet;
 mod scans;
 
-pub use calibration::Calibration;
+pub use calibration::VelodyneCalibration;
 pub use decoder::{Decoder, DecoderSettings};
 pub use message::{VELODYNE_SCAN, scan_message};
 pub use packet::VelodyneModel;
@@ -80,7 +80,7 @@ mod tests {
 
     #[test]
     fn a_vlp16_return_lands_at_its_range_elevation_and_azimuth() {
-        let calibration = Calibration::builtin(VelodyneModel::Vlp16).unwrap();
+        let calibration = VelodyneCalibration::builtin(VelodyneModel::Vlp16).unwrap();
         let decoder = Decoder::new(
             VelodyneModel::Vlp16,
             calibration,
@@ -117,11 +117,11 @@ mod tests {
 
     #[test]
     fn the_builtin_vlp32c_table_ranks_its_rings_by_elevation() {
-        let calibration = Calibration::builtin(VelodyneModel::Vlp32c).unwrap();
+        let calibration = VelodyneCalibration::builtin(VelodyneModel::Vlp32c).unwrap();
         assert_eq!(calibration.lasers[0].ring, 0, "-25 degrees is the lowest");
         assert_eq!(calibration.lasers[29].ring, 31, "+15 degrees the highest");
         assert!((calibration.lasers[0].rot_centideg + 140.0).abs() < 1e-9);
-        assert!(Calibration::builtin(VelodyneModel::Vls128).is_none());
+        assert!(VelodyneCalibration::builtin(VelodyneModel::Vls128).is_none());
         assert!(
             Decoder::new(
                 VelodyneModel::Vlp16,
@@ -134,7 +134,7 @@ mod tests {
 
     #[test]
     fn scans_are_cut_where_the_azimuth_crosses_the_cut_angle() {
-        let calibration = Calibration::builtin(VelodyneModel::Vlp32c).unwrap();
+        let calibration = VelodyneCalibration::builtin(VelodyneModel::Vlp32c).unwrap();
         let decoder = Decoder::new(
             VelodyneModel::Vlp32c,
             calibration,

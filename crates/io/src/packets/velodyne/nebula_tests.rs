@@ -4,7 +4,9 @@
 
 use std::collections::HashMap;
 
-use super::{Calibration, Decoder, DecoderSettings, ScanAssembler, VelodyneModel, scan_message};
+use super::{
+    Decoder, DecoderSettings, ScanAssembler, VelodyneCalibration, VelodyneModel, scan_message,
+};
 use crate::containers::log::Log;
 use crate::format::InputFormat;
 use crate::test_data::{nebula_fixture, nebula_ground_truth, repository_file};
@@ -46,7 +48,7 @@ fn decode_like_nebula(
     settings: DecoderSettings,
 ) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
     let (truth_stamp, truth) = nebula_ground_truth(truth);
-    let calibration = Calibration::builtin(model).unwrap();
+    let calibration = VelodyneCalibration::builtin(model).unwrap();
     let mut assembler = ScanAssembler::new(Decoder::new(model, calibration, settings).unwrap());
     let log = Log::open(&nebula_fixture(bag), InputFormat::Rosbag2).unwrap();
     for message in log.messages() {
