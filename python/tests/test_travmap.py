@@ -202,6 +202,8 @@ def test_mistakes_raise_before_any_work(tmp_path):
         assert typo.value.exit_code == 2 and "size_mm" in str(typo.value)
         with pytest.raises(travmap.TravmapError, match="no scans in frames 40..=41"):
             travmap.open(SAMPLE, frames="40..42")
+        with pytest.raises(travmap.TravmapError, match="scan rate of 0.01 to 1000 Hz, got 0.0"):
+            travmap.open(SAMPLE, rate=0)
         with pytest.raises(TypeError, match="cloud_topics"):
             travmap.open(SAMPLE, cloud_topics="/points")
     with pytest.raises(travmap.TravmapError):

@@ -42,7 +42,7 @@ use travmap_outputs::preflight::{
     InputFiles, Preflight, check_output_directory, check_output_file,
 };
 use travmap_run::DriveRun;
-pub use travmap_run::opening::{Remark, open_selection, parse_frame_range};
+pub use travmap_run::opening::{Remark, open_selection, parse_frame_range, scan_rate_hz};
 
 /// How a command ended: exit code 0, or 3 when it completed but skipped frames
 /// (`--keep-going`), as the mcap CLI reports data loss.
@@ -447,12 +447,7 @@ pub fn say(remark: Remark, text: &str) {
 
 /// A scan rate in Hz: LiDARs spin at about 1 to 100 Hz; far outside that is a typo.
 fn parse_rate_hz(text: &str) -> Result<f64, String> {
-    let hz = parse_finite(text)?;
-    if (0.01..=1000.0).contains(&hz) {
-        Ok(hz)
-    } else {
-        Err(format!("a scan rate of 0.01 to 1000 Hz, got {text}"))
-    }
+    scan_rate_hz(parse_finite(text)?).map_err(|expected| format!("{expected}, got {text}"))
 }
 
 /// A number that is not NaN or infinite.

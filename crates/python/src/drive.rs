@@ -15,12 +15,13 @@ use travmap_io::{
     LidarCalibrations, LidarFrames, LogOptions, MergedTopics, SourceOptions, WORLD_FRAME,
 };
 use travmap_run::DriveRun;
-use travmap_run::opening::{open_selection, parse_frame_range};
+use travmap_run::opening::{open_selection, parse_frame_range, scan_rate_hz};
 
 use crate::stream::Stream;
 use crate::{Failure, shape_error};
 
-/// What a keyword of `open` / `run` sets, and the command-line flag it stands for.
+/// The keywords `open` and `run` take: the command line's flags by their long names,
+/// and `images` (whether camera images are decoded), the module's own.
 const KEYWORDS: [&str; 12] = [
     "config",
     "set",
@@ -42,7 +43,7 @@ pub(crate) struct Opening {
     pub(crate) config: Config,
     options: SourceOptions,
     frames: Option<Range<usize>>,
-    pub(crate) images: Option<bool>,
+    images: Option<bool>,
 }
 
 impl Opening {
@@ -109,7 +110,12 @@ impl Opening {
             poses: config.integration.poses,
             keep_going: flag_value("keep_going").map_or(Ok(false), |v| v.is_truthy())?,
             log,
-            rate_hz: flag_value("rate").map(|v| v.extract()).transpose()?,
+            rate_hz: (flag_value("rate").map(|v| v.extract::<f64>()).transpose()?)
+                .map(|hz| {
+                    scan_rate_hz(hz)
+                        .map_err(|expected| Failure::usage(format!("rate: {expected}, got {hz:?}")))
+                })
+                .transpose()?,
             site_tile_m: None,
         };
         let images = flag_value("images").map(|v| v.is_truthy()).transpose()?;

@@ -159,6 +159,16 @@ pub fn parse_frame_range(text: &str) -> std::result::Result<Range<usize>, String
     Ok(range)
 }
 
+/// A folder of scans' rate, Hz, when its file names are not times: LiDARs spin at
+/// about 1 to 100 Hz; far outside that is a typo.
+/// Errs with what was expected (the caller says what it got, as the user wrote it).
+pub fn scan_rate_hz(hz: f64) -> std::result::Result<f64, &'static str> {
+    match (0.01..=1000.0).contains(&hz) {
+        true => Ok(hz),
+        false => Err("a scan rate of 0.01 to 1000 Hz"),
+    }
+}
+
 /// A frame range as a person writes it: `frames 6..` (to the end), `frames 2..=5`.
 pub fn describe_frames(frames: &Range<usize>) -> String {
     match frames.end {
