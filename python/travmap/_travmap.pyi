@@ -5,9 +5,27 @@ from typing import Iterator, Mapping, Optional, Sequence, Union
 
 import numpy as np
 import numpy.typing as npt
+from typing_extensions import TypedDict, Unpack
 
 FrameSelection = Union[None, int, range, str]
 Texts = Union[str, Sequence[str]]
+
+class Settings(TypedDict, total=False):
+    """The keywords of `open` and `run`: the command line's flags by their long names;
+    `images` decodes camera images (`open`: yes; `run`: when the model reads them)."""
+
+    config: Union[str, os.PathLike]
+    set: Union[Mapping[str, object], Texts]
+    poses: str
+    cloud_topic: Texts
+    lidar_calibration: Texts
+    lidar_frame: Texts
+    world_frame: str
+    camera_topic: str
+    pose_topic: str
+    rate: float
+    keep_going: bool
+    images: bool
 
 class TravmapError(Exception):
     """What the command line reports as `error: ...`; `exit_code` 1 an error,
@@ -102,19 +120,7 @@ class Model:
 def open(
     path: Union[str, os.PathLike],
     frames: FrameSelection = None,
-    *,
-    config: Union[str, os.PathLike, None] = None,
-    set: Union[Mapping[str, object], Texts, None] = None,
-    poses: Optional[str] = None,
-    cloud_topic: Optional[Texts] = None,
-    lidar_calibration: Optional[Texts] = None,
-    lidar_frame: Optional[Texts] = None,
-    world_frame: Optional[str] = None,
-    camera_topic: Optional[str] = None,
-    pose_topic: Optional[str] = None,
-    rate: Optional[float] = None,
-    keep_going: bool = False,
-    images: bool = True,
+    **settings: Unpack[Settings],
 ) -> Drive:
     """Opens any input the `travmap` command reads."""
 
@@ -122,18 +128,6 @@ def run(
     path: Union[str, os.PathLike],
     model: Union[Model, str, None] = None,
     frames: FrameSelection = None,
-    *,
-    config: Union[str, os.PathLike, None] = None,
-    set: Union[Mapping[str, object], Texts, None] = None,
-    poses: Optional[str] = None,
-    cloud_topic: Optional[Texts] = None,
-    lidar_calibration: Optional[Texts] = None,
-    lidar_frame: Optional[Texts] = None,
-    world_frame: Optional[str] = None,
-    camera_topic: Optional[str] = None,
-    pose_topic: Optional[str] = None,
-    rate: Optional[float] = None,
-    keep_going: bool = False,
-    images: Optional[bool] = None,
+    **settings: Unpack[Settings],
 ) -> Grids:
     """Each frame's grid, as `travmap run` computes it."""
