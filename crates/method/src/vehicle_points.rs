@@ -92,6 +92,12 @@ fn key(v: Voxel) -> u64 {
 /// Keys of voxels, hashed fast: a survey's scans hold about a million points.
 type VoxelKeys = HashSet<u64, KeyHash>;
 
+/// A point's squared horizontal distance from the sensor: compared with squared
+/// distances, as `hypot` costs more than the rest of a million points' work.
+fn horizontal_sq(p: &[f32; 4]) -> f32 {
+    p[0] * p[0] + p[1] * p[1]
+}
+
 fn centre_of(v: Voxel) -> [f32; 3] {
     v.map(|i| (i as f32 + 0.5) * VOXEL_M)
 }
@@ -107,7 +113,7 @@ pub fn find_vehicle_box(scans: &[(Isometry3<f64>, &[[f32; 4]])]) -> Option<Vehic
     let near: Vec<HashSet<Voxel, KeyHash>> = (scans.par_iter())
         .map(|(_, points)| {
             (points.iter())
-                .filter(|p| p[0].hypot(p[1]) <= REACH_M)
+                .filter(|p| horizontal_sq(p) <= REACH_M * REACH_M)
                 .map(|p| voxel_of([p[0], p[1], p[2]], VOXEL_M))
                 .collect()
         })
@@ -132,11 +138,29 @@ pub fn find_vehicle_box(scans: &[(Isometry3<f64>, &[[f32; 4]])]) -> Option<Vehic
     // seen as the road under it; a wall beyond a scan's reach is not seen).
     let column_of =
         |v: Voxel| [v[0], v[1]].map(|i| ((i as f32 + 0.5) * WORLD_SUPPORT_M).floor() as i32);
+    // Only the world around the surveyed sensors is asked about: a persistent
+    // voxel's places lie as far from a sensor as the voxel from the sensor frame's
+    // origin, and a place asks about points within 2.2 m of it along x and y.
+    let reach_m = (persistent.iter())
+        .map(|&v| centre_of(v).map(f64::from))
+        .map(|c| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt())
+        .fold(0.0, f64::max)
+        + 3.0;
+    let sensors_in_world: Vec<[f64; 2]> = (scans.iter())
+        .map(|(world_from_sensor, _)| world_from_sensor.translation.vector.xy().into())
+        .collect();
+    let asked_about = |w: &Point3<f64>| {
+        (sensors_in_world.iter())
+            .any(|s| (w.x - s[0]).abs() <= reach_m && (w.y - s[1]).abs() <= reach_m)
+    };
     let (world, columns): (Vec<VoxelKeys>, Vec<VoxelKeys>) = (scans.par_iter())
         .map(|(world_from_sensor, points)| {
             let (mut voxels, mut columns) = (VoxelKeys::default(), VoxelKeys::default());
             for p in points.iter() {
                 let w = world_from_sensor * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                if !asked_about(&w) {
+                    continue;
+                }
                 let voxel = support_voxel([w.x as f32, w.y as f32, w.z as f32]);
                 let [x, y] = column_of(voxel);
                 voxels.insert(key(voxel));
@@ -201,7 +225,7 @@ fn ground_z_m(scans: &[(Isometry3<f64>, &[[f32; 4]])]) -> Option<f32> {
     let mut heights: Vec<f32> = scans
         .iter()
         .flat_map(|(_, points)| points.iter())
-        .filter(|p| (REACH_M..=15.0).contains(&p[0].hypot(p[1])) && p[2].is_finite())
+        .filter(|p| (REACH_M * REACH_M..=225.0).contains(&horizontal_sq(p)) && p[2].is_finite())
         .map(|p| p[2])
         .collect();
     if heights.is_empty() {

@@ -14,6 +14,7 @@ use std::sync::Arc;
 
 use nalgebra::{Isometry3, Vector3};
 
+use rayon::prelude::*;
 use travmap_core::config::{Config, OwnPoints, RefinePoses};
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::Frame;
@@ -24,7 +25,7 @@ use travmap_method::classifier::SvmModel;
 use travmap_method::footprint::Trajectory;
 use travmap_method::fusion::DriveMap;
 use travmap_method::pipeline::{FrameResult, Pipeline, Posed};
-use travmap_method::pose_check::ground_disagreement_m;
+use travmap_method::pose_check::{ScanGround, ground_disagreement_m};
 use travmap_method::registration::RegistrationError;
 use travmap_method::vehicle_points::{SURVEY_SPACING_M, VehicleBox, find_vehicle_box};
 
@@ -193,8 +194,13 @@ impl DriveRun {
                 .get(f)
                 .map(|s| (&poses[f], s.points_in_velodyne.as_slice()))
         };
+        // Each scan's ground once, the scans at once.
+        let paired: BTreeSet<usize> = pairs.iter().flat_map(|&(a, b)| [a, b]).collect();
+        let grounds: BTreeMap<usize, ScanGround> = (paired.par_iter())
+            .filter_map(|f| scan(f).map(|(pose, points)| (*f, ScanGround::of(pose, points))))
+            .collect();
         let mut disagreements: Vec<f64> = (pairs.iter())
-            .filter_map(|(a, b)| ground_disagreement_m(scan(a)?, scan(b)?))
+            .filter_map(|(a, b)| ground_disagreement_m(grounds.get(a)?, grounds.get(b)?))
             .collect();
         disagreements.sort_by(f64::total_cmp);
         let path = self.source.path().display().to_string();

@@ -102,11 +102,20 @@ impl LogDrive {
             true => Part::Whole,
             false => Part::Nothing,
         };
+        // A few frames picked from many are read before the method runs (a survey),
+        // while the cores are free; every frame, beside the method's work.
+        let threads = match only {
+            Some(_) => rayon::current_num_threads(),
+            None => 1,
+        };
         DriveFrames {
             drive: self,
             skips,
             unreported,
-            stream: Box::new(self.log.messages_in_parts(1, std::sync::Arc::new(parts))),
+            stream: Box::new(
+                self.log
+                    .messages_in_parts(threads, std::sync::Arc::new(parts)),
+            ),
             // Clouds the index left out (past a cut end) are not frames.
             frames: frames.start..frames.end.min(self.frame_count()),
             only,
