@@ -14,8 +14,10 @@ pub(crate) mod text;
 use std::io::Read;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use nalgebra::{Isometry3, Matrix4};
+use rayon::prelude::*;
 
 pub use crate::kitti::text::{KittiCalibration, read_calibration, read_poses, read_times};
 use crate::payloads::cloud::{check_some_finite, is_return};
@@ -46,6 +48,9 @@ pub struct KittiSequence {
     calibration: KittiCalibration,
     /// `pose_i` of poses.txt: cam0 of frame i in the first cam0 frame.
     first_cam0_from_cam0: Vec<Matrix4<f64>>,
+    /// `world_from_velodyne` of every pose, once asked for ([`Self::recorded_poses`]):
+    /// a drive asks several times, and each of a sequence's 4,541 costs 2 us.
+    world_from_velodyne: OnceLock<Vec<Isometry3<f64>>>,
     stamps_ns: Vec<u64>,
     /// Frame numbers that have a `velodyne/NNNNNN.bin`, ascending.
     frames: Vec<usize>,
@@ -123,6 +128,7 @@ impl KittiSequence {
             dir: dir.to_path_buf(),
             calibration,
             first_cam0_from_cam0,
+            world_from_velodyne: OnceLock::new(),
             stamps_ns,
             frames,
             read_images: true,
@@ -172,21 +178,35 @@ impl KittiSequence {
                 frame: index,
                 lines: self.first_cam0_from_cam0.len(),
             })?;
-        let tr = self.calibration.cam0_from_velodyne;
-        let velodyne_from_cam0 = tr.try_inverse().ok_or_else(|| Error::Parse {
+        Ok(rigid(
+            &(self.velodyne_from_cam0()? * pose * self.calibration.cam0_from_velodyne),
+        ))
+    }
+
+    fn velodyne_from_cam0(&self) -> Result<Matrix4<f64>> {
+        (self.calibration.cam0_from_velodyne.try_inverse()).ok_or_else(|| Error::Parse {
             path: self.dir.join("calib.txt"),
             line: 0,
             message: "Tr is not invertible".into(),
-        })?;
-        Ok(rigid(&(velodyne_from_cam0 * pose * tr)))
+        })
     }
 
     /// Every pose poses.txt holds, frame number and `world_from_velodyne`: also
     /// those of frames past the last scan here.
     pub fn recorded_poses(&self) -> Result<Vec<(usize, Isometry3<f64>)>> {
-        (0..self.first_cam0_from_cam0.len())
-            .map(|index| Ok((index, self.world_from_velodyne(index)?)))
-            .collect()
+        if self.world_from_velodyne.get().is_none() {
+            let (velodyne_from_cam0, tr) = (
+                self.velodyne_from_cam0()?,
+                self.calibration.cam0_from_velodyne,
+            );
+            let poses = (self.first_cam0_from_cam0.par_iter())
+                .map(|pose| rigid(&(velodyne_from_cam0 * pose * tr)))
+                .collect();
+            // Another thread may have laid them first: the same poses.
+            let _ = self.world_from_velodyne.set(poses);
+        }
+        let poses = self.world_from_velodyne.get().expect("laid above");
+        Ok(poses.iter().copied().enumerate().collect())
     }
 
     pub fn stamp_ns(&self, index: usize) -> Result<u64> {
