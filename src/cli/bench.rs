@@ -7,6 +7,7 @@ use std::io::Write;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
+use travmap_run::report::tables::stage_table;
 use travmap_run::scoring::benchmark::benchmark;
 
 use super::{Inputs, ModelArg, Outcome, model_json, outcome, print_json_summary, with_summary};
@@ -67,70 +68,7 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
     if !output.quiet {
         writeln!(out, "input: {}", selection.describe())?;
     }
-    writeln!(
-        out,
-        "{} timed frames x {} repeats; n = {} scans of {:.0} points, {} x {} grid of {} m ({:.0} predictable cells, {:.0} points in grid); {model_name}, {} support vectors",
-        report.timed_frames,
-        report.repeats,
-        config.integration.scans,
-        report.mean_points_per_scan,
-        config.grid.cells_per_side(),
-        config.grid.cells_per_side(),
-        config.grid.cell_size_m,
-        report.predictable_cells,
-        report.points_in_grid,
-        report.support_vectors
-    )?;
-    writeln!(
-        out,
-        "{:<34} {:>9} {:>9}",
-        "stage (1 thread, frame by frame)", "median ms", "p95 ms"
-    )?;
-    let t = &report.timings;
-    for (name, spread) in [
-        ("read + image decode (not in latency)", t.read_ms),
-        (
-            "registration (--poses registration)",
-            report.registration_ms,
-        ),
-        ("integrate", t.integrate_ms),
-        ("grid", t.grid_ms),
-        ("geometric features", t.features_ms),
-        ("appearance: projection + voting", t.appearance_ms),
-        ("classify", t.classify_ms),
-        ("filter", t.filter_ms),
-        ("latency: scan in to filtered grid", t.latency_ms),
-    ] {
-        writeln!(out, "{name:<34} {:>9.3} {:>9.3}", spread.median, spread.p95)?;
-    }
-    writeln!(
-        out,
-        "{:<34} {:>9.3} {:>9.3}   latency = {:.1}x the floor",
-        "floor: move + count in cells",
-        report.floor_ms.median,
-        report.floor_ms.p95,
-        report.latency_over_floor
-    )?;
-    if report.registration_lost > 0 {
-        writeln!(
-            out,
-            "  ({} scans over the repeats did not register; the map started again from each)",
-            report.registration_lost
-        )?;
-    }
-    writeln!(
-        out,
-        "{:<34} {:>9}",
-        "write", "not in this table: see `bench --tools`"
-    )?;
-    writeln!(
-        out,
-        "throughput (whole selection, rayon across frames): {:.1} frames/s on 1 thread, {:.1} frames/s on {} threads ({:.2}x)",
-        report.one_thread.frames_per_second,
-        report.all_cores.frames_per_second,
-        report.all_cores.threads,
-        report.speedup
-    )?;
+    write!(out, "{}", stage_table(&report, config, &model_name))?;
     Ok(outcome(std::slice::from_ref(&selection)))
 }
 

@@ -12,8 +12,8 @@ use travmap_training::crossval::{
     CrossValidationReport, LeaveOneOutReport, cross_validate, leave_one_input_out,
 };
 
-use super::eval::write_table;
 use super::{Inputs, Outcome, outcome, print_json_summary, with_summary};
+use travmap_run::report::tables::score_table;
 
 /// Held-out scores: spatially-blocked CV over one input's frames, or each of several
 /// inputs held out in turn.
@@ -78,7 +78,7 @@ pub fn crossval(args: CrossvalArgs) -> Result<Outcome> {
             f.training_ms / 1e3
         )?;
     }
-    write_table(&mut out, &report.evaluation, false)?;
+    write!(out, "{}", score_table(&report.evaluation, false))?;
     if let Some(first) = report.camera_ablation.first() {
         let c = &first.evaluation.confusion;
         writeln!(
@@ -123,9 +123,9 @@ fn print_leave_one_out(
             "held out {}: trained on {} cells, C {} gamma {}, {} support vectors",
             held.input, held.training_cells, held.c, held.gamma, held.support_vectors
         )?;
-        write_table(&mut out, &held.evaluation, false)?;
+        write!(out, "{}", score_table(&held.evaluation, false))?;
     }
     writeln!(out, "pooled over every held-out frame:")?;
-    write_table(&mut out, &report.pooled, false)?;
+    write!(out, "{}", score_table(&report.pooled, false))?;
     Ok(())
 }

@@ -30,7 +30,7 @@ use std::io::IsTerminal;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use travmap_core::Config;
@@ -42,7 +42,9 @@ use travmap_outputs::preflight::{
     InputFiles, Preflight, check_output_directory, check_output_file,
 };
 use travmap_run::DriveRun;
-pub use travmap_run::opening::{Remark, open_selection, parse_frame_range, scan_rate_hz};
+pub use travmap_run::opening::{
+    Remark, open_selection, parse_frame_range, refuse_repeats, scan_rate_hz,
+};
 
 /// How a command ended: exit code 0, or 3 when it completed but skipped frames
 /// (`--keep-going`), as the mcap CLI reports data loss.
@@ -376,32 +378,6 @@ impl Inputs {
             .open_paths(&self.sequences, options, config, read_images)?
             .remove(0))
     }
-}
-
-/// A file's device and inode: the same under every name it has.
-type FileId = Option<(u64, u64)>;
-
-/// The same input twice (however spelled, or hard-linked under another name) would
-/// count its frames twice.
-fn refuse_repeats(paths: &[PathBuf]) -> Result<()> {
-    use std::os::unix::fs::MetadataExt;
-    let file_id = |path: &Path| std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()));
-    let mut seen: Vec<(PathBuf, FileId, &Path)> = Vec::new();
-    for path in paths {
-        let canonical = std::fs::canonicalize(path).unwrap_or_else(|_| path.clone());
-        let id = file_id(path);
-        let same =
-            |(c, i, _): &&(PathBuf, FileId, &Path)| *c == canonical || (id.is_some() && *i == id);
-        if let Some((_, _, first)) = seen.iter().find(same) {
-            bail!(
-                "{} and {} are the same input; give each input once",
-                first.display(),
-                path.display()
-            );
-        }
-        seen.push((canonical, id, path));
-    }
-    Ok(())
 }
 
 /// Before any work: the file `output` replaces none of `inputs` and can be written.

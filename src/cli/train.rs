@@ -10,12 +10,13 @@ use travmap_outputs::atomic::write_atomically;
 use travmap_outputs::dataset::part_files;
 use travmap_outputs::dataset::reading::{Labels, read_training_rows};
 use travmap_run::Fingerprints;
+use travmap_run::report::tables::training_text;
 use travmap_training::crossval::collect_training_set;
 use travmap_training::{TrainingSet, train as train_model};
 
 use super::{
     Inputs, Outcome, check_output, frame_count, input_json, model_json, note_extension, outcome,
-    path_text, print_json_summary, setting_word,
+    path_text, print_json_summary,
 };
 
 /// Train the SVM (grid search over C and gamma, spatially-blocked CV).
@@ -117,12 +118,6 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
     })?;
     bar.finish();
     write_atomically(model_path, &model.to_json())?;
-    let best = model
-        .training
-        .search
-        .iter()
-        .find(|r| r.c == model.c && r.gamma == model.gamma)
-        .copied();
     if output.json {
         let doc = json!({
             "output": path_text(model_path),
@@ -149,55 +144,7 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
         });
         print_json_summary("train", &selections, doc)?;
     } else if !output.quiet {
-        println!(
-            "trained on {} cells ({} traversable) from {}",
-            model.training.samples,
-            model.training.traversable_samples,
-            model.training.sources.join("; ")
-        );
-        if model.training.samples < set.len() {
-            println!(
-                "  a seeded random {} of the {} cells (training.max_fit_samples)",
-                model.training.samples,
-                set.len()
-            );
-        }
-        println!(
-            "grid search (spatially-blocked {}-fold CV, cells before filtering; by {} (training.criterion), class weights {} (training.class_weights)):",
-            config.training.folds,
-            setting_word(&config.training.criterion),
-            setting_word(&config.training.class_weights)
-        );
-        for r in &model.training.search {
-            println!(
-                "  C {:>8} gamma {:>8}  accuracy {:.1} %  mIoU {:.1} %",
-                r.c,
-                r.gamma,
-                100.0 * r.accuracy,
-                100.0 * r.miou
-            );
-        }
-        let (accuracy, miou) = best.map_or((0.0, 0.0), |b| (b.accuracy, b.miou));
-        println!(
-            "chosen C {} gamma {} (CV accuracy {:.1} %, mIoU {:.1} %): {} support vectors, {} solver iterations, {:.1} s",
-            model.c,
-            model.gamma,
-            100.0 * accuracy,
-            100.0 * miou,
-            model.support_vector_count(),
-            model.training.solver_iterations,
-            model.training.seconds
-        );
-        match &model.hybrid {
-            Some(h) => println!(
-                "hybrid model (geometry + appearance) on the {} cells a camera saw: C {} gamma {}, {} support vectors",
-                h.training.samples,
-                h.c,
-                h.gamma,
-                h.support_vector_count()
-            ),
-            None => println!("no hybrid model: no labelled cell was seen by a camera"),
-        }
+        print!("{}", training_text(&model, set.len(), config));
         println!("wrote {}", model_path.display());
     }
     Ok(outcome(&selections))

@@ -43,6 +43,9 @@ pub enum Error {
     #[error("{first} and {second} name the same file; give each output its own")]
     SameOutputTwice { first: PathBuf, second: PathBuf },
 
+    #[error("{first} and {second} are the same input; give each input once")]
+    SameInputTwice { first: PathBuf, second: PathBuf },
+
     #[error("{path}: no space left on device (wrote {written_bytes}{} bytes); nothing was left behind", expected_bytes.map(|b| format!(" of {b}")).unwrap_or_default())]
     NoSpace {
         path: PathBuf,
@@ -511,7 +514,8 @@ impl Error {
             | Error::LogEncoding { path, .. }
             | Error::Registration { path, .. }
             | Error::Transform { path, .. }
-            | Error::Adaptation { path, .. } => Some(path),
+            | Error::Adaptation { path, .. }
+            | Error::SameInputTwice { second: path, .. } => Some(path),
             Error::OutputIsInput { output, .. }
             | Error::OutputIsDirectory { output }
             | Error::OutputIsSpecial { output, .. }

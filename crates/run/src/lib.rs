@@ -6,6 +6,7 @@
 //! benchmark included ([`DriveRun::load`], [`DriveRun::run_loaded`]).
 
 pub mod opening;
+pub mod report;
 pub mod scoring;
 
 use std::collections::{BTreeMap, BTreeSet};

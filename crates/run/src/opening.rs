@@ -3,7 +3,7 @@
 //! ranges that do not apply to it.
 
 use std::ops::Range;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use travmap_core::config::PoseSource;
 use travmap_core::error::{Error, Result};
@@ -176,6 +176,31 @@ pub fn describe_frames(frames: &Range<usize>) -> String {
         end if end == frames.start + 1 => format!("frame {}", frames.start),
         end => format!("frames {}..={}", frames.start, end - 1),
     }
+}
+
+/// A file's device and inode: the same under every name it has.
+type FileId = Option<(u64, u64)>;
+
+/// The same input twice (however spelled, or hard-linked under another name) would
+/// count its frames twice.
+pub fn refuse_repeats(paths: &[PathBuf]) -> Result<()> {
+    use std::os::unix::fs::MetadataExt;
+    let file_id = |path: &Path| std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()));
+    let mut seen: Vec<(PathBuf, FileId, &Path)> = Vec::new();
+    for path in paths {
+        let canonical = std::fs::canonicalize(path).unwrap_or_else(|_| path.clone());
+        let id = file_id(path);
+        let same =
+            |(c, i, _): &&(PathBuf, FileId, &Path)| *c == canonical || (id.is_some() && *i == id);
+        if let Some((_, _, first)) = seen.iter().find(same) {
+            return Err(Error::SameInputTwice {
+                first: first.to_path_buf(),
+                second: path.clone(),
+            });
+        }
+        seen.push((canonical, id, path));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -1,8 +1,15 @@
-//! Evaluation: metrics and timings accumulated over frames.
+//! Evaluation: metrics and timings accumulated over frames, and a model scored on
+//! drives ([`score_drives`]).
+
+use std::collections::HashSet;
 
 use serde::Serialize;
+use travmap_core::Config;
+use travmap_core::error::{Error, Result};
+use travmap_method::classifier::SvmModel;
 
 use crate::scoring::metrics::{Confusion, Scores};
+use crate::{DriveRun, Fingerprints};
 use travmap_method::classifier::ForeignRemission;
 use travmap_method::ground_truth::UnknownLabels;
 use travmap_method::pipeline::{FrameResult, StageTimings};
@@ -220,6 +227,55 @@ impl Evaluation {
             timings: TimingReport::of(&self.timings),
         }
     }
+}
+
+/// A model scored on drives: its frames' report, the drives' fused maps against
+/// their fused ground truth (each world cell once), and how many scored frames are
+/// scans it was trained on.
+#[derive(Clone, Debug)]
+pub struct DriveScores {
+    pub report: EvaluationReport,
+    pub fused: Confusion,
+    /// None when the model does not record the scans it learnt from.
+    pub training_frames: Option<usize>,
+}
+
+/// Runs `model` over `selections` and scores every frame with ground truth;
+/// `on_frame` hears each frame done. Training scans are recognised by content, not
+/// by their path as typed: the labelled scans are fingerprinted when the model
+/// records its own.
+pub fn score_drives(
+    selections: &mut [DriveRun],
+    config: &Config,
+    model: &SvmModel,
+    mut on_frame: impl FnMut(),
+) -> Result<DriveScores> {
+    let trained_on: HashSet<&str> = (model.training.frame_sha256.iter())
+        .map(String::as_str)
+        .collect();
+    if !trained_on.is_empty() {
+        for selection in selections.iter_mut() {
+            selection.fingerprint_scans = Fingerprints::Labelled;
+        }
+    }
+    let mut evaluation = Evaluation::default();
+    let mut fused = Confusion::default();
+    let mut training_frames = 0;
+    for selection in selections.iter() {
+        let drive_map = selection.run_mapped::<Error>(config, Some(model), |result, _| {
+            on_frame();
+            let seen = (result.scan_sha256.as_deref()).is_some_and(|s| trained_on.contains(s));
+            training_frames += usize::from(seen && result.ground_truth.is_some());
+            evaluation.add(&result);
+            Ok(())
+        })?;
+        fused.merge(&Confusion::of_drive_map(&drive_map.cells()));
+    }
+    Ok(DriveScores {
+        report: evaluation.report(),
+        fused,
+        training_frames: (!trained_on.is_empty()).then_some(training_frames),
+    })
 }
 
 #[cfg(test)]
