@@ -805,3 +805,26 @@ fn a_cut_frame_range_and_an_odd_extension_are_said() {
         &["is written as an MCAP file"],
     );
 }
+
+#[test]
+fn the_vehicle_box_a_survey_finds_given_back_maps_the_same_unsurveyed() {
+    let Some(scene) = crate::common::shared_data("nuscenes-lidarseg-scene-1072") else {
+        return;
+    };
+    let cells = |stdout: &str| -> Vec<Value> {
+        let (frames, _) = crate::common::json_records(stdout);
+        frames.into_iter().map(|f| f["cells"].clone()).collect()
+    };
+    let surveyed = travmap(&["run", arg(&scene), "--json"]);
+    let said = crate::common::stderr(&surveyed);
+    let setting = said
+        .split("--set '")
+        .nth(1)
+        .and_then(|rest| rest.split('\'').next())
+        .unwrap_or_else(|| panic!("the notice gives the box as a setting: {said}"));
+    assert!(setting.starts_with("vehicle.own_points_box_m=["), "{setting}");
+    let given = travmap(&["run", arg(&scene), "--json", "--set", setting]);
+    let unsaid = crate::common::stderr(&given);
+    assert!(!unsaid.contains("own points found"), "{unsaid}");
+    assert_eq!(cells(&success(given)), cells(&success(surveyed)));
+}

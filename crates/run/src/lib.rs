@@ -224,9 +224,20 @@ impl DriveRun {
         }
         if let Some(found) = &self.survey.vehicle_box {
             let (min, max) = (found.min_m, found.max_m);
+            // The box is the vehicle's, not the log's: given, every log of the vehicle
+            // leaves out the same points, and none is surveyed for it.
+            let corners: Vec<String> = (min.iter().chain(&max))
+                .map(|v| format!("{}", (v * 100.0).round() / 100.0))
+                .collect();
             on_notice(&format!(
-                "{path}: the vehicle's own points found in the sensor frame (x {:.1} to {:.1}, y {:.1} to {:.1}, z {:.1} to {:.1} m): left out of every scan (vehicle.own_points)",
-                min[0], max[0], min[1], max[1], min[2], max[2]
+                "{path}: the vehicle's own points found in the sensor frame (x {:.1} to {:.1}, y {:.1} to {:.1}, z {:.1} to {:.1} m): left out of every scan (vehicle.own_points; the same box for every log of this vehicle, unsurveyed: --set 'vehicle.own_points_box_m=[{}]')",
+                min[0],
+                max[0],
+                min[1],
+                max[1],
+                min[2],
+                max[2],
+                corners.join(", ")
             ));
         }
         Ok(&self.survey)

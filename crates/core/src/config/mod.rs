@@ -395,12 +395,13 @@ pub fn written_before_groups(config: &mut serde_json::Value) {
     }
 }
 
-/// Fields that are unset by default, so absent from a serialised configuration.
-/// Fields that may be absent, and whether each holds text (the rest hold lists).
+/// Fields that are unset by default, so absent from a serialised configuration,
+/// and whether each holds text (the rest hold lists).
 const OPTIONAL_FIELDS: &[(&str, &str, bool)] = &[
     ("ground_truth", "label_map", true),
     ("ground_truth", "traversable_classes", false),
     ("ground_truth", "ignored_classes", false),
+    ("vehicle", "own_points_box_m", false),
 ];
 
 impl Config {
@@ -708,6 +709,28 @@ mod tests {
             message.contains("training.grid_size_m / grid.cell_size_m gives 0 cells"),
             "{message}"
         );
+    }
+
+    #[test]
+    fn every_field_unset_by_default_can_be_set() {
+        let mut config = Config::default();
+        config.set("ground_truth.label_map=/p/map.toml").unwrap();
+        config.set("ground_truth.traversable_classes=[40, 44]").unwrap();
+        config.set("ground_truth.ignored_classes=[0]").unwrap();
+        // As the survey's notice spells the box it found.
+        config
+            .set("vehicle.own_points_box_m=[-0.8, -1.4, -1, 0.8, 2, 0.2]")
+            .unwrap();
+        assert_eq!(
+            config.vehicle.own_points_box_m,
+            Some([-0.8, -1.4, -1.0, 0.8, 2.0, 0.2])
+        );
+        assert_eq!(config.ground_truth.traversable_classes, Some(vec![40, 44]));
+        // Every field serialised with a value is one `set` knows of.
+        let table = toml::Table::try_from(&config).unwrap();
+        for (section, field, _) in OPTIONAL_FIELDS {
+            assert!(table[*section].get(*field).is_some(), "{section}.{field}");
+        }
     }
 
     #[test]
