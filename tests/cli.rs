@@ -807,7 +807,7 @@ fn a_cut_frame_range_and_an_odd_extension_are_said() {
 }
 
 #[test]
-fn the_vehicle_box_a_survey_finds_given_back_maps_the_same_unsurveyed() {
+fn what_the_surveys_find_given_back_maps_the_same_unsurveyed() {
     let Some(scene) = crate::common::shared_data("nuscenes-lidarseg-scene-1072") else {
         return;
     };
@@ -822,9 +822,24 @@ fn the_vehicle_box_a_survey_finds_given_back_maps_the_same_unsurveyed() {
         .nth(1)
         .and_then(|rest| rest.split('\'').next())
         .unwrap_or_else(|| panic!("the notice gives the box as a setting: {said}"));
-    assert!(setting.starts_with("vehicle.own_points_box_m=["), "{setting}");
-    let given = travmap(&["run", arg(&scene), "--json", "--set", setting]);
+    assert!(
+        setting.starts_with("vehicle.own_points_box_m=["),
+        "{setting}"
+    );
+    // And the poses' refinement the other survey decided (nuScenes' 2-D poses).
+    let refine = "integration.refine_poses=always";
+    assert_contains(&said, &[&format!("--set {refine})")]);
+    let given = travmap(&[
+        "run",
+        arg(&scene),
+        "--json",
+        "--set",
+        setting,
+        "--set",
+        refine,
+    ]);
     let unsaid = crate::common::stderr(&given);
     assert!(!unsaid.contains("own points found"), "{unsaid}");
+    assert!(!unsaid.contains("lay the ground"), "{unsaid}");
     assert_eq!(cells(&success(given)), cells(&success(surveyed)));
 }

@@ -159,7 +159,13 @@ impl DriveRun {
         let refine = config.integration.refine_poses;
         let find_body = config.vehicle.own_points == OwnPoints::Auto
             && config.vehicle.own_points_box_m.is_none();
-        if !recorded || (refine == RefinePoses::Never && !find_body) {
+        if !recorded {
+            return Ok(&self.survey);
+        }
+        // Told whether to refine, the survey measures nothing for it.
+        self.survey.refine_poses = refine == RefinePoses::Always;
+        let measure_poses = refine == RefinePoses::Auto;
+        if !measure_poses && !find_body {
             return Ok(&self.survey);
         }
         let reach = self.frames.start..self.frames.end.min(self.frames.start + SURVEY_REACH_FRAMES);
@@ -176,7 +182,7 @@ impl DriveRun {
                 let at = frames.binary_search(f).ok()?;
                 Some((*f, *frames.get(at + 1)?))
             })
-            .take(SURVEY_PAIRS)
+            .take(if measure_poses { SURVEY_PAIRS } else { 0 })
             .collect();
         let wanted: BTreeSet<usize> = (pairs.iter())
             .flat_map(|&(a, b)| [a, b])
@@ -206,14 +212,12 @@ impl DriveRun {
         disagreements.sort_by(f64::total_cmp);
         let path = self.source.path().display().to_string();
         self.survey.pose_disagreement_m = disagreements.get(disagreements.len() / 2).copied();
-        self.survey.refine_poses = match (refine, self.survey.pose_disagreement_m) {
-            (RefinePoses::Always, _) => true,
-            (RefinePoses::Auto, Some(apart)) => apart > config.integration.pose_disagreement_m,
-            _ => false,
-        };
-        if let (true, Some(apart)) = (self.survey.refine_poses, self.survey.pose_disagreement_m) {
+        if let Some(apart) = self.survey.pose_disagreement_m
+            && apart > config.integration.pose_disagreement_m
+        {
+            self.survey.refine_poses = true;
             on_notice(&format!(
-                "{path}: consecutive scans lay the ground a median {apart:.2} m apart under the recorded poses (a 2-D localisation's?): each scan is registered to the window from its recorded pose (integration.refine_poses)"
+                "{path}: consecutive scans lay the ground a median {apart:.2} m apart under the recorded poses (a 2-D localisation's?): each scan is registered to the window from its recorded pose (integration.refine_poses; for every log of this localisation, unsurveyed: --set integration.refine_poses=always)"
             ));
         }
         if find_body {

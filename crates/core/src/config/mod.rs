@@ -715,7 +715,9 @@ mod tests {
     fn every_field_unset_by_default_can_be_set() {
         let mut config = Config::default();
         config.set("ground_truth.label_map=/p/map.toml").unwrap();
-        config.set("ground_truth.traversable_classes=[40, 44]").unwrap();
+        config
+            .set("ground_truth.traversable_classes=[40, 44]")
+            .unwrap();
         config.set("ground_truth.ignored_classes=[0]").unwrap();
         // As the survey's notice spells the box it found.
         config
