@@ -61,7 +61,7 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     };
     notice_unknown_labels(report, config);
     let fused = &scored.fused;
-    let fused_scores = (fused.tp + fused.tn + fused.fp + fused.r#fn > 0).then(|| fused.scores());
+    let fused_scores = fused.scores_if_predicted();
     if output.json {
         let fields = json!({
             "config": config,

@@ -169,7 +169,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
         .transpose()?;
     staged.commit()?;
     let fused = Confusion::of_drive_map(&cells);
-    let fused_scores = (fused.tp + fused.tn + fused.fp + fused.r#fn > 0).then(|| fused.scores());
+    let fused_scores = fused.scores_if_predicted();
     let per_frame = per_frame.report();
     notice_drives(&per_frame, &model, config);
     let seen = cells.iter().filter(|c| c.observations > 0).count();

@@ -85,10 +85,10 @@ pub fn score_table(report: &EvaluationReport, with_latency: bool) -> String {
 
 /// The drive map's scores, each world cell once; None when no cell was scored.
 pub fn fused_line(fused: &Confusion) -> Option<String> {
-    let scored = fused.tp + fused.tn + fused.fp + fused.r#fn;
-    let scores = (scored > 0).then(|| fused.scores())?;
+    let scores = fused.scores_if_predicted()?;
     Some(format!(
-        "fused drive map ({scored} world cells, each once): Acc {:.1} mIoU {:.1} F1 {:.1} FPR {:.1} TPR {:.1}",
+        "fused drive map ({} world cells, each once): Acc {:.1} mIoU {:.1} F1 {:.1} FPR {:.1} TPR {:.1}",
+        fused.predicted(),
         scores.accuracy * 100.0,
         scores.miou * 100.0,
         scores.f1 * 100.0,

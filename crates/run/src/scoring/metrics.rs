@@ -77,6 +77,16 @@ impl Confusion {
         self.tp + self.tn + self.fp + self.r#fn + self.unknown
     }
 
+    /// Cells both predicted and with ground truth: TP + TN + FP + FN.
+    pub fn predicted(&self) -> u64 {
+        self.tp + self.tn + self.fp + self.r#fn
+    }
+
+    /// [`Self::scores`], when some cell was predicted.
+    pub fn scores_if_predicted(&self) -> Option<Scores> {
+        (self.predicted() > 0).then(|| self.scores())
+    }
+
     /// Rates are conditional (TPR = TP / (TP + FN)), as in the paper's table; an
     /// empty denominator gives 0.
     pub fn scores(&self) -> Scores {
