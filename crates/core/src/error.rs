@@ -292,6 +292,8 @@ pub enum Error {
     Model {
         source_name: String,
         message: String,
+        /// The model's file, when it is one (not a compiled-in model).
+        file: Option<std::path::PathBuf>,
     },
 
     #[error(
@@ -299,6 +301,8 @@ pub enum Error {
     )]
     ModelVersion {
         source_name: String,
+        /// The model's file, when it is one.
+        file: Option<std::path::PathBuf>,
         format: String,
         version: String,
         expected_format: &'static str,
@@ -478,6 +482,14 @@ impl Error {
         matches!(self, Error::LogChunk { .. } | Error::LogMessageLost(_))
     }
 
+    /// A model's error said of `path`, the file the model was read from.
+    pub fn of_model_file(mut self, path: &std::path::Path) -> Self {
+        if let Error::Model { file, .. } | Error::ModelVersion { file, .. } = &mut self {
+            *file = Some(path.to_path_buf());
+        }
+        self
+    }
+
     /// The file the error is about, when there is one (for `--json` errors).
     pub fn path(&self) -> Option<&std::path::Path> {
         match self {
@@ -516,6 +528,7 @@ impl Error {
             | Error::Transform { path, .. }
             | Error::Adaptation { path, .. }
             | Error::SameInputTwice { second: path, .. } => Some(path),
+            Error::Model { file, .. } | Error::ModelVersion { file, .. } => file.as_deref(),
             Error::OutputIsInput { output, .. }
             | Error::OutputIsDirectory { output }
             | Error::OutputIsSpecial { output, .. }

@@ -6,7 +6,10 @@ use sha2::{Digest, Sha256};
 
 use super::{ReducedSet, SvmModel, TrainingSummary, appearance_feature_names};
 use crate::features::feature_names;
-use travmap_core::config::{Config, FeatureGroup, LabelRule, ModelChoice, written_before_groups};
+use travmap_core::config::{
+    Config, FeatureGroup, LabelRule, MAX_SVM_C, MAX_SVM_GAMMA, ModelChoice, check_within,
+    written_before_groups,
+};
 use travmap_core::error::{Error, Result};
 use travmap_core::option_files::{MODEL_MAX_BYTES, read_option_file};
 
@@ -63,6 +66,36 @@ struct ModelFile {
     /// The reduced set is fitted to this model's margin plus the prior's.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     reduced_set_includes_prior: bool,
+    /// A few cells and the decisions this model made of them when it was written: a
+    /// file whose parameters were changed since (by hand, or by a broken copy)
+    /// decides them otherwise, and is refused (absent in files from before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    check_cells: Option<CheckCells>,
+}
+
+/// Cells a model file decides as it did when written ([`ModelFile::check_cells`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CheckCells {
+    /// Raw (unstandardised) feature rows, one per cell.
+    features: Vec<Vec<f32>>,
+    /// The margin (decision value minus threshold) over every support vector, per cell.
+    exact: Vec<f32>,
+    /// The margin by the reduced set, per cell (empty without one).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    reduced: Vec<f32>,
+}
+
+/// Cells a model file stores to check it by ([`CheckCells`]): its support vectors
+/// spread over the list, which lie near the boundary, where a changed parameter
+/// moves the decision most.
+const CHECK_CELL_COUNT: usize = 8;
+
+/// How far a margin recomputed from a file may lie from the stored one: another
+/// CPU's `exp` may differ in the last bit; a changed parameter moves margins by
+/// hundredths or more.
+fn reproduces(stored: f32, computed: f32) -> bool {
+    (stored - computed).abs() <= 1e-3 * (1.0 + stored.abs())
 }
 
 fn is_zero(value: &f32) -> bool {
@@ -97,6 +130,75 @@ fn older_configs(model: &mut serde_json::Value) {
     }
 }
 
+/// A model file's bytes: its JSON on one line.
+fn file_bytes(file: &ModelFile) -> Vec<u8> {
+    let mut bytes = serde_json::to_vec(file).expect("model serialises");
+    bytes.push(b'\n');
+    bytes
+}
+
+/// Whether a model's stored decisions are recomputed when it is read: a file's are;
+/// the compiled-in models' are checked by the unit tests instead.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Decisions {
+    Checked,
+    Trusted,
+}
+
+/// The first number of a JSON document beyond what an f32 holds, with its path
+/// (`support_vectors[3][2]`) and its value as written.
+fn beyond_f32(value: &serde_json::Value, path: String) -> Option<(String, String)> {
+    use serde_json::Value;
+    match value {
+        Value::Number(n) => {
+            let v = n.as_f64()?;
+            (v.abs() > f64::from(f32::MAX)).then(|| (path, format!("{v:e}")))
+        }
+        Value::Array(items) => (items.iter().enumerate())
+            .find_map(|(i, item)| beyond_f32(item, format!("{path}[{i}]"))),
+        Value::Object(fields) => fields.iter().find_map(|(key, item)| {
+            let inner = match path.is_empty() {
+                true => key.clone(),
+                false => format!("{path}.{key}"),
+            };
+            beyond_f32(item, inner)
+        }),
+        _ => None,
+    }
+}
+
+/// Why a model file's decision could not depend on the cell, if it could not: no
+/// support vectors, or offsets beyond what every kernel term together can outweigh
+/// (every cell would get one class).
+fn constant_decision(file: &ModelFile) -> Option<String> {
+    if file.support_vectors.is_empty() {
+        return Some("no support vectors: a model decides by at least one (was it trained on cells of one class?)".into());
+    }
+    let weights: f64 = file.dual_coefficients.iter().map(|a| f64::from(a.abs())).sum();
+    let offset = file.rho + file.threshold;
+    if offset.abs() >= weights {
+        return Some(format!(
+            "`rho` {} and `threshold` {} outweigh every support vector together (their coefficients' magnitudes sum to {weights:.4}): every cell would be called {}",
+            file.rho,
+            file.threshold,
+            if offset > 0.0 { "not traversable" } else { "traversable" }
+        ));
+    }
+    let reduced = file.reduced_set.as_ref()?;
+    if reduced.weights.is_empty() {
+        return Some("a reduced set of no centres: it would decide every cell alike".into());
+    }
+    let weights: f64 = reduced.weights.iter().map(|w| f64::from(w.abs())).sum();
+    let offset = f64::from(reduced.bias) - file.threshold;
+    (offset.abs() >= weights).then(|| {
+        format!(
+            "the reduced set's `bias` {} outweighs its centres together (their weights' magnitudes sum to {weights:.4}): every cell would be called {}",
+            reduced.bias,
+            if offset > 0.0 { "traversable" } else { "not traversable" }
+        )
+    })
+}
+
 impl SvmModel {
     /// The chosen model, compiled in or a file, checked against `config`; with the
     /// name to report it by.
@@ -113,7 +215,9 @@ impl SvmModel {
             ModelChoice::File(path) => {
                 let bytes = read_option_file(path, MODEL_MAX_BYTES)?;
                 let name = path.display().to_string();
-                Ok((Self::from_json(&bytes, &name)?, name))
+                let model =
+                    Self::from_json(&bytes, &name).map_err(|e| e.of_model_file(path))?;
+                Ok((model, name))
             }
             ModelChoice::Embedded(rule) => Ok((Self::embedded(*rule)?, embedded_name(*rule))),
         }
@@ -132,8 +236,10 @@ impl SvmModel {
         let file: ModelFile = serde_json::from_slice(json).map_err(|e| Error::Model {
             source_name: name.clone(),
             message: format!("malformed model: {e}"),
+            file: None,
         })?;
-        Self::from_model_file(file, &name)
+        // Its stored decisions are checked by the unit tests, not at every start.
+        Self::from_model_file(file, &name, Decisions::Trusted)
     }
 
     /// Reads a model file, checking format, version, shapes and finiteness.
@@ -141,6 +247,7 @@ impl SvmModel {
         let fail = |message: String| Error::Model {
             source_name: source_name.to_string(),
             message,
+            file: None,
         };
         let header: serde_json::Value = serde_json::from_slice(bytes)
             .map_err(|e| fail(format!("not a JSON model file: {e}")))?;
@@ -149,11 +256,18 @@ impl SvmModel {
         if format != Some(MODEL_FORMAT) || version != Some(MODEL_VERSION as u64) {
             return Err(Error::ModelVersion {
                 source_name: source_name.to_string(),
+                file: None,
                 format: format.unwrap_or("none").to_string(),
                 version: version.map_or("none".into(), |v| v.to_string()),
                 expected_format: MODEL_FORMAT,
                 expected_version: MODEL_VERSION,
             });
+        }
+        if let Some((path, value)) = beyond_f32(&header, String::new()) {
+            return Err(fail(format!(
+                "`{path}` is {value}, beyond the range of the 32-bit numbers a model computes with (magnitude at most {:e})",
+                f32::MAX
+            )));
         }
         let mut header = header;
         older_configs(&mut header);
@@ -161,17 +275,18 @@ impl SvmModel {
         // would not.
         let file: ModelFile = serde_path_to_error::deserialize(header)
             .map_err(|e| fail(format!("malformed model: `{}`: {}", e.path(), e.inner())))?;
-        Self::from_model_file(file, source_name)
+        Self::from_model_file(file, source_name, Decisions::Checked)
     }
 
     /// The model of a file read, checked.
-    fn from_model_file(file: ModelFile, source_name: &str) -> Result<Self> {
+    fn from_model_file(file: ModelFile, source_name: &str, decisions: Decisions) -> Result<Self> {
         let fail = |message: String| Error::Model {
             source_name: source_name.to_string(),
             message,
+            file: None,
         };
         let names = feature_names(&file.config.features.groups);
-        let model = Self::from_file(file, source_name, &names)?;
+        let model = Self::from_file(file, source_name, &names, decisions)?;
         let uses_remission = model
             .config
             .features
@@ -186,10 +301,16 @@ impl SvmModel {
     }
 
     /// Checks and loads one model of a file; `expected_names` are its features.
-    fn from_file(file: ModelFile, source_name: &str, expected_names: &[String]) -> Result<Self> {
+    fn from_file(
+        file: ModelFile,
+        source_name: &str,
+        expected_names: &[String],
+        decisions: Decisions,
+    ) -> Result<Self> {
         let fail = |message: String| Error::Model {
             source_name: source_name.to_string(),
             message,
+            file: None,
         };
         let d = expected_names.len();
         if file.feature_names != expected_names {
@@ -241,21 +362,18 @@ impl SvmModel {
                 sv[at]
             ))
         };
+        // C and gamma as training searches and fits them; a decision's offsets as
+        // 32-bit numbers hold them.
+        let largest = f64::from(f32::MAX);
         let scalars = [
-            ("gamma", file.gamma, true),
-            ("rho", file.rho, false),
-            ("threshold", file.threshold, false),
+            ("c", file.c, (0.0, MAX_SVM_C)),
+            ("gamma", file.gamma, (0.0, MAX_SVM_GAMMA)),
+            ("rho", file.rho, (-largest, largest)),
+            ("threshold", file.threshold, (-largest, largest)),
         ];
         let in_scalars = || {
-            scalars.iter().find_map(|&(name, value, positive)| {
-                (!value.is_finite() || (positive && value <= 0.0)).then(|| {
-                    let expected = if positive {
-                        "a positive number"
-                    } else {
-                        "a finite number"
-                    };
-                    format!("`{name}` is {value}, {expected} expected")
-                })
+            scalars.iter().find_map(|&(name, value, range)| {
+                check_within(&format!("`{name}`"), value, range).err()
             })
         };
         let in_std = || {
@@ -269,6 +387,7 @@ impl SvmModel {
             .or_else(in_vectors)
             .or_else(in_scalars)
             .or_else(in_std)
+            .or_else(|| constant_decision(&file))
         {
             return Err(fail(problem));
         }
@@ -290,6 +409,7 @@ impl SvmModel {
                     *hybrid,
                     &format!("{source_name} (hybrid model)"),
                     &names,
+                    decisions,
                 )?))
             }
             None => None,
@@ -305,7 +425,9 @@ impl SvmModel {
                 }
                 let names = feature_names(&features.groups);
                 let source = format!("{source_name} (fallback model)");
-                Some(Box::new(Self::from_file(*fallback, &source, &names)?))
+                Some(Box::new(Self::from_file(
+                    *fallback, &source, &names, decisions,
+                )?))
             }
             None => None,
         };
@@ -318,7 +440,7 @@ impl SvmModel {
                         "prior model: features {names:?}, expected {expected_names:?}"
                     )));
                 }
-                Some(Box::new(Self::from_file(*prior, &source, &names)?))
+                Some(Box::new(Self::from_file(*prior, &source, &names, decisions)?))
             }
             None => None,
         };
@@ -383,7 +505,90 @@ impl SvmModel {
         model.prior = prior;
         model.prior_weight = file.prior_weight;
         model.reduced_set_includes_prior = file.reduced_set_includes_prior;
+        if let (Some(cells), Decisions::Checked) = (&file.check_cells, decisions) {
+            model.decides_as_written(cells).map_err(fail)?;
+        }
         Ok(model)
+    }
+
+    /// The cells a file of this model stores to check it by, and their margins
+    /// ([`CheckCells`]); none without support vectors.
+    fn check_cells(&self) -> Option<CheckCells> {
+        let count = self.support_vector_count();
+        if count == 0 {
+            return None;
+        }
+        let raw = self.support_vectors_raw();
+        let d = self.dimension();
+        let taken = CHECK_CELL_COUNT.min(count);
+        let features: Vec<Vec<f32>> = (0..taken)
+            .map(|k| k * count / taken)
+            .map(|i| raw[i * d..(i + 1) * d].to_vec())
+            .collect();
+        let (exact, reduced) = features.iter().map(|row| self.slow_margins(row)).unzip::<_, _, Vec<_>, Vec<_>>();
+        Some(CheckCells {
+            features,
+            exact,
+            reduced: reduced.into_iter().flatten().collect(),
+        })
+    }
+
+    /// A cell's margin over every support vector, and by the reduced set when there
+    /// is one: the obvious sums in f64, the same on every CPU (the fast kernel's
+    /// order and fused steps differ between CPUs; a file's bytes must not).
+    fn slow_margins(&self, row: &[f32]) -> (f32, Option<f32>) {
+        let z: Vec<f64> = (row.iter().zip(&self.feature_mean).zip(&self.feature_inverse_std))
+            .map(|((&x, &m), &s)| f64::from((x - m) * s))
+            .collect();
+        let gamma = self.gamma;
+        let expansion = |centres: &[f32], weights: &[f32]| -> f64 {
+            (centres.chunks_exact(z.len()).zip(weights))
+                .map(|(centre, &w)| {
+                    let squared: f64 = (centre.iter().zip(&z))
+                        .map(|(&c, &v)| (f64::from(c) - v).powi(2))
+                        .sum();
+                    f64::from(w) * (-gamma * squared).exp()
+                })
+                .sum()
+        };
+        let threshold = f64::from(self.threshold);
+        let exact = expansion(&self.support_vectors, &self.dual_coefficients)
+            - f64::from(self.rho)
+            - threshold;
+        let reduced = (self.reduced_set.as_ref())
+            .map(|r| expansion(&r.centres, &r.weights) + f64::from(r.bias) - threshold);
+        (exact as f32, reduced.map(|m| m as f32))
+    }
+
+    /// Whether this model, as read, decides the file's check cells as the model that
+    /// wrote it did; the first that differs, said, if not.
+    fn decides_as_written(&self, cells: &CheckCells) -> std::result::Result<(), String> {
+        let d = self.dimension();
+        let n = cells.features.len();
+        let reduced_count = if self.reduced_set.is_some() { n } else { 0 };
+        if cells.features.iter().any(|row| row.len() != d)
+            || cells.exact.len() != n
+            || cells.reduced.len() != reduced_count
+        {
+            return Err(format!(
+                "`check_cells`: rows of {d} values, and a margin per row ({reduced_count} by the reduced set) expected"
+            ));
+        }
+        for (i, row) in cells.features.iter().enumerate() {
+            let (exact, reduced) = self.slow_margins(row);
+            let stored = [Some(cells.exact[i]), cells.reduced.get(i).copied()];
+            let names = ["the margin", "the reduced set's margin"];
+            for ((name, stored), computed) in names.iter().zip(stored).zip([Some(exact), reduced]) {
+                if let (Some(stored), Some(computed)) = (stored, computed)
+                    && !reproduces(stored, computed)
+                {
+                    return Err(format!(
+                        "its parameters do not decide the cells stored with it as when it was written ({name} of check cell {i}: the file says {stored}, these parameters give {computed}); the file was changed after it was written: train or adapt it again"
+                    ));
+                }
+            }
+        }
+        Ok(())
     }
 
     fn to_file(&self) -> ModelFile {
@@ -422,18 +627,29 @@ impl SvmModel {
             prior: self.prior.as_ref().map(|p| Box::new(p.to_file())),
             prior_weight: self.prior_weight,
             reduced_set_includes_prior: self.reduced_set_includes_prior,
+            check_cells: self.check_cells(),
         }
     }
 
     pub fn to_json(&self) -> Vec<u8> {
-        let mut bytes = serde_json::to_vec(&self.to_file()).expect("model serialises");
-        bytes.push(b'\n');
-        bytes
+        file_bytes(&self.to_file())
     }
 
-    /// SHA-256 of the model file, to name exactly which model produced a result.
+    /// SHA-256 of the model file with its training times left out (`seconds` as 0
+    /// at every level), to name exactly which model produced a result: the same
+    /// cells and settings give the same hash, however long training took.
     pub fn sha256_hex(&self) -> String {
-        Sha256::digest(self.to_json())
+        fn untimed(file: &mut ModelFile) {
+            file.training.seconds = 0.0;
+            for inner in [&mut file.hybrid, &mut file.fallback, &mut file.prior] {
+                if let Some(inner) = inner {
+                    untimed(inner);
+                }
+            }
+        }
+        let mut file = self.to_file();
+        untimed(&mut file);
+        Sha256::digest(file_bytes(&file))
             .iter()
             .map(|b| format!("{b:02x}"))
             .collect()
@@ -511,5 +727,109 @@ mod tests {
             .to_string();
         assert!(err.contains("coefficients"), "{err}");
         assert!(SvmModel::from_json(b"{", "m.json").is_err());
+    }
+
+    /// The road model's file with `edit` applied, read back: the error, if refused.
+    fn refusal(edit: impl Fn(&mut serde_json::Value)) -> Option<String> {
+        let model = SvmModel::embedded(LabelRule::Road).unwrap();
+        let mut json: serde_json::Value = serde_json::from_slice(&model.to_json()).unwrap();
+        edit(&mut json);
+        SvmModel::from_json(json.to_string().as_bytes(), "m.json")
+            .err()
+            .map(|e| e.to_string())
+    }
+
+    #[test]
+    fn numbers_beyond_f32_are_said_as_written() {
+        let err = refusal(|m| m["gamma"] = serde_json::json!(1e300)).unwrap();
+        assert!(err.contains("`gamma` is 1e300, beyond the range"), "{err}");
+        let err = refusal(|m| m["rho"] = serde_json::json!(-1e300)).unwrap();
+        assert!(err.contains("`rho` is -1e300"), "{err}");
+        let err = refusal(|m| m["support_vectors"][3][2] = serde_json::json!(1e39)).unwrap();
+        assert!(err.contains("`support_vectors[3][2]` is 1e39"), "{err}");
+    }
+
+    #[test]
+    fn implausible_parameters_are_refused() {
+        let err = refusal(|m| m["gamma"] = serde_json::json!(5e4)).unwrap();
+        assert!(err.contains("`gamma` must be in (0.0, 10000.0], got 50000.0"), "{err}");
+        let err = refusal(|m| m["c"] = serde_json::json!(0.0)).unwrap();
+        assert!(err.contains("`c` must be in"), "{err}");
+        // An offset no kernel sum can outweigh: one class for every cell.
+        let err = refusal(|m| m["rho"] = serde_json::json!(1e30)).unwrap();
+        assert!(err.contains("every cell would be called not traversable"), "{err}");
+        let err = refusal(|m| m["reduced_set"]["bias"] = serde_json::json!(1e6)).unwrap();
+        assert!(err.contains("every cell would be called traversable"), "{err}");
+    }
+
+    #[test]
+    fn a_model_without_support_vectors_is_refused() {
+        let empty = |m: &mut serde_json::Value| {
+            m["support_vectors"] = serde_json::json!([]);
+            m["dual_coefficients"] = serde_json::json!([]);
+            m["check_cells"] = serde_json::Value::Null;
+        };
+        // With its reduced set (which stood in for the support vectors it lost) and
+        // without.
+        let err = refusal(empty).unwrap();
+        assert!(err.contains("no support vectors"), "{err}");
+        let err = refusal(|m| {
+            empty(m);
+            m["reduced_set"] = serde_json::Value::Null;
+        })
+        .unwrap();
+        assert!(err.contains("no support vectors"), "{err}");
+        let err = refusal(|m| {
+            m["reduced_set"]["centres"] = serde_json::json!([]);
+            m["reduced_set"]["weights"] = serde_json::json!([]);
+        })
+        .unwrap();
+        assert!(err.contains("a reduced set of no centres"), "{err}");
+    }
+
+    #[test]
+    fn a_file_changed_after_writing_is_refused_by_its_check_cells() {
+        // Plausible values each, but not the model's: its stored margins say so.
+        for (field, value) in [("gamma", 0.5), ("rho", 2.0), ("threshold", 0.3)] {
+            let err = refusal(|m| m[field] = serde_json::json!(value)).unwrap();
+            assert!(
+                err.contains("do not decide the cells stored with it") && err.contains("m.json"),
+                "{field}: {err}"
+            );
+        }
+        let err = refusal(|m| m["reduced_set"]["bias"] = serde_json::json!(0.0)).unwrap();
+        assert!(err.contains("the reduced set's margin of check cell"), "{err}");
+        let err = refusal(|m| m["dual_coefficients"][0] = serde_json::json!(0.0)).unwrap();
+        assert!(err.contains("check cell 0"), "{err}");
+        // A model file written before check cells existed is read as before.
+        assert_eq!(refusal(|m| m["check_cells"] = serde_json::Value::Null), None);
+    }
+
+    #[test]
+    fn the_fast_kernel_gives_the_check_cells_slow_margins() {
+        for rule in LabelRule::ALL {
+            let model = SvmModel::embedded(rule).unwrap();
+            let cells = model.check_cells().unwrap();
+            let mut scratch = model.scratch();
+            for (row, slow) in cells.features.iter().zip(&cells.exact) {
+                let fast = model.exact_decision_value(row, &mut scratch) - model.threshold;
+                assert!((fast - slow).abs() < 1e-3, "{rule:?}: fast {fast}, slow {slow}");
+            }
+            for (row, slow) in cells.features.iter().zip(&cells.reduced) {
+                let fast = model.decision_value(row, &mut scratch) - model.threshold;
+                assert!((fast - slow).abs() < 1e-3, "{rule:?}: fast {fast}, slow {slow}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_model_files_error_names_its_file() {
+        let dir = std::env::temp_dir().join(format!("travmap-model-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("m.json");
+        std::fs::write(&path, b"{\"format\": \"travmap-svm\", \"version\": 1}").unwrap();
+        let err = SvmModel::read(&ModelChoice::File(path.clone())).unwrap_err();
+        assert_eq!(err.path(), Some(path.as_path()));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
