@@ -8,6 +8,7 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use travmap_core::Config;
+use travmap_core::config::ModelChoice;
 use travmap_method::classifier::SvmModel;
 use travmap_outputs::atomic::write_atomically;
 use travmap_run::DriveRun;
@@ -15,7 +16,7 @@ use travmap_training::adaptation::{Adapted, adapt as adapt_model};
 
 use super::{
     Inputs, ModelArg, Outcome, Output, check_output, counted, frame_count, model_json,
-    note_extension, outcome, path_text, print_json_summary, setting_word, with_summary,
+    note_extension, notice, outcome, path_text, print_json_summary, setting_word, with_summary,
 };
 
 /// Adapt a model to the ground the given drives cover, from the drives alone
@@ -38,19 +39,25 @@ pub struct AdaptArgs {
 }
 
 pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
-    let config = &args.inputs.settings.load()?;
+    let config = &args.model.config(&args.inputs.settings)?;
     let output = &args.inputs.output;
     let model_path = args.output.as_path();
     check_output(
         model_path,
-        &args.inputs.files(args.model.file(config).as_deref()),
+        &args.inputs.files(ModelArg::file(config).as_deref()),
     )?;
     note_extension(model_path, "json", "a travmap model (JSON)");
-    let (prior, prior_name) = args.model.load(config)?;
+    let (prior, prior_name) = args.inputs.settings.load_model(config)?;
     let started = std::time::Instant::now();
-    let (adapted, selections) = adapted_model(&args.inputs, config, &prior, &prior_name, output)?;
+    let (mut adapted, selections) =
+        adapted_model(&args.inputs, config, &prior, &prior_name, output)?;
     // The run's own time: a kept prior's file records its own training's.
     let elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
+    let replaced = adapted.replaced_prior();
+    if replaced {
+        // A configuration read back from the file chooses this model.
+        adapted.model.config.classifier.model = ModelChoice::File(model_path.to_path_buf());
+    }
     write_atomically(model_path, &adapted.model.to_json())?;
     let model = &adapted.model;
     let summary = model.training.adaptation.as_ref();
@@ -83,18 +90,23 @@ pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
             counts.unknown_cells
         );
         let fitted = adapted.fitted();
-        println!(
-            "adapted {}{prior_name} (adapt.learner {}, C {} gamma {}): {} support vectors on {} cells",
-            match adapted.fallback_fitted {
-                true => "the fallback without remission of ",
-                false => "",
-            },
-            setting_word(&config.adapt.learner),
-            fitted.c,
-            fitted.gamma,
-            fitted.support_vector_count(),
-            summary.map_or(0, |s| s.fitted_cells)
-        );
+        match summary.and_then(|s| s.check.as_ref()) {
+            Some(check) if !check.adapted => {
+                println!("kept {prior_name} as it was: {}", check.why);
+            }
+            _ => println!(
+                "adapted {}{prior_name} (adapt.learner {}, C {} gamma {}): {} support vectors on {} cells",
+                match adapted.fallback_fitted {
+                    true => "the fallback without remission of ",
+                    false => "",
+                },
+                setting_word(&config.adapt.learner),
+                fitted.c,
+                fitted.gamma,
+                fitted.support_vector_count(),
+                summary.map_or(0, |s| s.fitted_cells)
+            ),
+        }
         println!("wrote {}", model_path.display());
     }
     Ok(outcome(&selections))
@@ -116,8 +128,8 @@ pub fn adapted_model(
         bar.inc(1)
     })?;
     bar.finish();
-    for notice in &adapted.notices {
-        eprintln!("notice: {notice}");
+    for said in &adapted.notices {
+        notice(said);
     }
     Ok((adapted, selections))
 }
@@ -144,6 +156,11 @@ impl AdaptFlag {
             return Ok((model, name));
         }
         let (adapted, _) = adapted_model(inputs, config, &model, &name, output)?;
-        Ok((adapted.model, format!("{name}, adapted to these drives")))
+        // A kept prior is the model it was (its line says adaptation kept it).
+        let name = match adapted.replaced_prior() {
+            true => format!("{name}, adapted to these drives"),
+            false => name,
+        };
+        Ok((adapted.model, name))
     }
 }

@@ -9,6 +9,8 @@ use clap::{Args, ValueEnum};
 use serde_json::json;
 use travmap_outputs::annotation;
 use travmap_outputs::annotation::{AnnotationOptions, CloudPoints, DRIVE_MAP_EVERY};
+use travmap_run::report::tables::model_line;
+use travmap_run::scoring::remarks::FitRemedies;
 
 use super::adapt::AdaptFlag;
 use super::convert::CompressionArg;
@@ -68,11 +70,11 @@ enum CloudArg {
 }
 
 pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
-    let config = &args.inputs.settings.load()?;
+    let config = &args.model.config(&args.inputs.settings)?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
     check_output(
         output_path,
-        &args.inputs.files(args.model.file(config).as_deref()),
+        &args.inputs.files(ModelArg::file(config).as_deref()),
     )?;
     note_extension(output_path, "mcap", "an MCAP file");
     let options = AnnotationOptions {
@@ -88,7 +90,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
         drive_map_every: args.drive_map_every,
     };
     let (model, model_name) =
-        (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;
+        (args.adapt).apply(&args.inputs, config, args.inputs.settings.load_model(config)?, &output)?;
     // Images only where the model reads them; they are copied through either way.
     let selection = args.inputs.open_one(config, model.reads_images(config))?;
     let mut metadata = BTreeMap::from([
@@ -99,6 +101,10 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
         ("config".to_string(), serde_json::to_string(config)?),
         ("model".to_string(), model_name.clone()),
         ("model_sha256".to_string(), model.sha256_hex()),
+        (
+            "model_rule".to_string(),
+            model.config.ground_truth.rule.name().to_string(),
+        ),
         ("input".to_string(), selection.describe()),
     ]);
     // An adapted model says how: self-supervised, from which prior and cells.
@@ -123,6 +129,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
         let fields = with_summary(fields, &summary)?;
         print_json_summary("annotate", &selections, fields)?;
     } else if !output.quiet {
+        println!("{}", model_line(&model, &model_name));
         let copied = format!("{} messages copied through", summary.passthrough_messages);
         print_wrote(
             output_path,
@@ -140,8 +147,9 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
                 100.0 * s.f1
             );
         }
-        println!("{}", fit_said(&summary.evaluation.fit, &model).0);
+        println!("{}", fit_said(&summary.evaluation.fit));
     }
-    notice_drives(&summary.evaluation, &model, config);
+    let remedies = FitRemedies::of(&selections, true, None);
+    notice_drives(&summary.evaluation, &model, config, remedies);
     Ok(outcome(&selections))
 }

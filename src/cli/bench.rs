@@ -36,7 +36,7 @@ pub struct BenchArgs {
 }
 
 pub fn bench(args: BenchArgs) -> Result<Outcome> {
-    let config = &args.inputs.settings.load()?;
+    let config = &args.model.config(&args.inputs.settings)?;
     let output = args.inputs.output;
     let repeats = usize::from(args.repeats);
     // The tools first, before the model is loaded, while this process is small (a
@@ -48,7 +48,7 @@ pub fn bench(args: BenchArgs) -> Result<Outcome> {
         .tools
         .then(|| tools::time(&args, config, tool_repeats))
         .transpose()?;
-    let (model, model_name) = args.model.load(config)?;
+    let (model, model_name) = args.inputs.settings.load_model(config)?;
     let selection = args.inputs.open_one(config, model.reads_images(config))?;
     if let (Some(tools), false) = (&tools, output.json) {
         let out = &mut std::io::stdout().lock();

@@ -7,17 +7,17 @@ use anyhow::{Context, Result};
 use clap::Args;
 use serde_json::json;
 use travmap_core::Config;
-use travmap_core::config::ModelChoice;
 use travmap_core::temporaries;
 use travmap_method::classifier::SvmModel;
 use travmap_outputs::dataset::{
-    DEFAULT_ROWS_PER_PART, DatasetFiles, DatasetSummary, DatasetWriter,
+    DEFAULT_ROWS_PER_PART, DatasetFiles, DatasetSummary, DatasetWriter, check_dataset_folder,
 };
+use travmap_run::report::tables::model_line;
 use travmap_run::{DriveRun, Fingerprints};
 
 use super::{
-    Inputs, Outcome, check_output, check_output_dir, counted, frame_count, note_extension, outcome,
-    path_text, print_json_summary, with_summary,
+    Inputs, ModelArg, Outcome, check_output, check_output_dir, counted, frame_count, model_json,
+    note_extension, outcome, path_text, print_json_summary, with_summary,
 };
 
 /// Write a Parquet table of cells to train on, one row per predictable cell per frame
@@ -47,14 +47,12 @@ pub struct DatasetArgs {
 }
 
 pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
-    let config = &args.inputs.settings.load()?;
+    let config = &args.inputs.settings.load_with_model(args.model.as_deref())?;
     let output = args.inputs.output;
     let output_path = args.output.as_path();
-    let choice = args.model.as_deref().map(ModelChoice::parse);
-    let model_file = match &choice {
-        Some(ModelChoice::File(path)) => Some(path.as_path()),
-        _ => None,
-    };
+    // The model predicts only when one is asked for.
+    let model_file = args.model.as_ref().and_then(|_| ModelArg::file(config));
+    let model_file = model_file.as_deref();
     let layout = match output_path.is_dir() || path_text(output_path).ends_with('/') {
         true => DatasetFiles::Parts {
             rows_per_part: args.rows_per_part,
@@ -67,12 +65,13 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
             note_extension(output_path, "parquet", "a Parquet file");
         }
         DatasetFiles::Parts { .. } => {
-            check_output_dir(output_path, &args.inputs.files(model_file))?
+            check_output_dir(output_path, &args.inputs.files(model_file))?;
+            check_dataset_folder(output_path)?;
         }
     }
     let mut selections = args.inputs.open(config, config.appearance.enabled)?;
-    let model = match &choice {
-        Some(choice) => Some(SvmModel::load(choice, config)?.0),
+    let model = match &args.model {
+        Some(_) => Some(args.inputs.settings.load_model(config)?),
         None => None,
     };
     let grid_config = config.for_training_cells();
@@ -93,7 +92,7 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     let written = write_cells(
         &selections,
         &grid_config,
-        model.as_ref(),
+        model.as_ref().map(|(model, name)| (model, name.as_str())),
         output_path,
         layout,
         &|| bar.inc(1),
@@ -109,10 +108,14 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
     if output.json {
         let cells_per_s = summary.rows as f64 / seconds;
         let files: Vec<String> = summary.files.iter().map(|f| path_text(f)).collect();
-        let fields = json!({"output": path_text(output_path), "outputs": files, "config": config, "elapsed_ms": seconds * 1e3, "cells_per_s": cells_per_s});
+        let model = model.as_ref().map(|(model, name)| model_json(model, name));
+        let fields = json!({"output": path_text(output_path), "outputs": files, "config": config, "model": model, "elapsed_ms": seconds * 1e3, "cells_per_s": cells_per_s});
         let fields = with_summary(fields, &summary)?;
         print_json_summary("dataset", &selections, fields)?;
     } else if !output.quiet {
+        if let Some((model, name)) = &model {
+            println!("{}", model_line(model, name));
+        }
         let parts = match layout {
             DatasetFiles::File => String::new(),
             DatasetFiles::Parts { .. } => {
@@ -137,12 +140,14 @@ pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
 fn write_cells(
     selections: &[DriveRun],
     grid_config: &Config,
-    model: Option<&SvmModel>,
+    model: Option<(&SvmModel, &str)>,
     path: &Path,
     layout: DatasetFiles,
     on_frame: &dyn Fn(),
 ) -> Result<DatasetSummary> {
-    let mut writer = DatasetWriter::create(path, grid_config, layout)?;
+    let record = model.map(|(model, name)| model_json(model, name).to_string());
+    let mut writer = DatasetWriter::create(path, grid_config, layout, record)?;
+    let model = model.map(|(model, _)| model);
     for selection in selections {
         let source = selection.source.path().display().to_string();
         selection.run::<anyhow::Error>(grid_config, model, |result| {

@@ -3,7 +3,7 @@
 
 use std::io::Write;
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use travmap_core::Config;
@@ -11,12 +11,12 @@ use travmap_method::classifier::SvmModel;
 use travmap_run::DriveRun;
 use travmap_run::report::tables::{fused_line, model_line, score_table, training_note};
 use travmap_run::scoring::evaluation::{DriveScores, score_drives};
+use travmap_run::scoring::remarks::FitRemedies;
 
 use super::adapt::AdaptFlag;
 use super::{
-    Inputs, ModelArg, Outcome, Output, counted, fit_said, foreign_remission_said, frame_count,
-    model_json, notice_unknown_labels, other_rule_said, outcome, print_json_summary, with_summary,
-    without_remission_said,
+    Inputs, ModelArg, Outcome, Output, counted, fit_said, frame_count, model_json, notice_drives,
+    other_rule_said, outcome, print_json_summary, with_summary,
 };
 
 /// Score predictions against SemanticKITTI ground truth (the paper's table).
@@ -34,21 +34,23 @@ pub struct EvalArgs {
 }
 
 pub fn eval(args: EvalArgs) -> Result<Outcome> {
-    let config = &args.inputs.settings.load()?;
+    let config = &args.model.config(&args.inputs.settings)?;
     let output = args.inputs.output;
-    let (model, model_name) =
-        (args.adapt).apply(&args.inputs, config, args.model.load(config)?, &output)?;
+    let loaded = args.inputs.settings.load_model(config)?;
     let mut selections = args.inputs.open(config, config.appearance.enabled)?;
+    // Before adapting (the longer work): a drive without labels has nothing to score.
+    if args.adapt.adapt {
+        for selection in &selections {
+            if !selection.has_labels()? {
+                return Err(nothing_to_score(std::slice::from_ref(selection)));
+            }
+        }
+    }
+    let (model, model_name) = (args.adapt).apply(&args.inputs, config, loaded, &output)?;
     let scored = score(&mut selections, config, &model, output, "evaluating")?;
     let report = &scored.report;
     if report.scored_frames == 0 {
-        let looked: Vec<String> = (selections.iter())
-            .map(|s| s.source.where_labels_are_read())
-            .collect();
-        bail!(
-            "no frame of the input has labels to score against (looked for {}; a frame is scored when every scan of its window has them): nothing to score. `travmap run` classifies frames without labels",
-            looked.join("; ")
-        );
+        return Err(nothing_to_score(&selections));
     }
     // The ablation of the paper: the same frames without appearance features.
     let geometry_only = match &model.hybrid {
@@ -59,7 +61,8 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
         }
         _ => None,
     };
-    notice_unknown_labels(report, config);
+    let remedies = FitRemedies::of(&selections, true, scored.training_frames);
+    notice_drives(report, &model, config, remedies);
     let fused = &scored.fused;
     let fused_scores = fused.scores_if_predicted();
     if output.json {
@@ -87,17 +90,7 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     if let Some(line) = fused_line(fused) {
         writeln!(out, "{line}")?;
     }
-    if let Some(said) = without_remission_said(report) {
-        writeln!(out, "{said}")?;
-    }
-    if let Some(said) = foreign_remission_said(report, config) {
-        writeln!(out, "{said}")?;
-    }
-    let (fit, poor_fit) = fit_said(&report.fit, &model);
-    writeln!(out, "{fit}")?;
-    if let Some(said) = poor_fit {
-        writeln!(out, "notice: {said}")?;
-    }
+    writeln!(out, "{}", fit_said(&report.fit))?;
     if report.dropped_points > 0 {
         let were = if report.dropped_points == 1 {
             "was"
@@ -128,6 +121,17 @@ pub fn eval(args: EvalArgs) -> Result<Outcome> {
     let note = training_note(scored.training_frames, report.scored_frames);
     writeln!(out, "{note}")?;
     Ok(outcome(&selections))
+}
+
+/// The error of drives without labels to score against.
+fn nothing_to_score(selections: &[DriveRun]) -> anyhow::Error {
+    let looked: Vec<String> = (selections.iter())
+        .map(|s| s.source.where_labels_are_read())
+        .collect();
+    anyhow::anyhow!(
+        "no frame of the input has labels to score against (looked for {}; a frame is scored when every scan of its window has them): nothing to score. `travmap run` classifies frames without labels",
+        looked.join("; ")
+    )
 }
 
 /// `model` scored on the drives, under a progress bar saying `message`.

@@ -11,6 +11,8 @@ use travmap_outputs::drive_map::{render_drive_map, write_map_cells};
 use travmap_outputs::nav2_map::{Nav2Mode, gis_world_file, image_path, write_nav2_map};
 use travmap_outputs::preflight::check_distinct_outputs;
 use travmap_outputs::rendering::encode_png;
+use travmap_run::report::tables::model_line;
+use travmap_run::scoring::remarks::FitRemedies;
 use travmap_run::scoring::evaluation::Evaluation;
 use travmap_run::scoring::metrics::Confusion;
 
@@ -70,9 +72,9 @@ impl Nav2ModeArg {
 
 pub fn map(args: MapArgs) -> Result<Outcome> {
     let cell_px = args.cell_pixels;
-    let config = args.inputs.settings.load()?;
+    let config = args.model.config(&args.inputs.settings)?;
     let (output, output_path) = (args.inputs.output, args.output.as_deref());
-    let inputs = args.inputs.files(args.model.file(&config).as_deref());
+    let inputs = args.inputs.files(ModelArg::file(&config).as_deref());
     let nav2_mode = args.nav2_mode.mode();
     let nav2_image = args.nav2.as_deref().map(|yaml| image_path(yaml, nav2_mode));
     // The image's own name would be its YAML's and its image's at once.
@@ -98,7 +100,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     for path in &outputs {
         check_output(path, &inputs)?;
     }
-    let (model, model_name) = args.model.load(&config)?;
+    let (model, model_name) = args.inputs.settings.load_model(&config)?;
     // One saved point cloud is a site: tiles of the grid's size.
     let site_tile_m = Some(config.grid.size_m);
     let options = SourceOptions {
@@ -149,7 +151,14 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
         staged.write(path, &encode_png(&picture))?;
     }
     if let Some(path) = &args.cells {
-        write_map_cells(&mut staged, path, &cells)?;
+        let metadata = vec![
+            ("travmap.config".into(), serde_json::to_string(config)?),
+            (
+                "travmap.model".into(),
+                model_json(&model, &model_name).to_string(),
+            ),
+        ];
+        write_map_cells(&mut staged, path, &cells, metadata)?;
     }
     let world_frame = selections[0].source.world_frame();
     let nav2 = args
@@ -171,7 +180,12 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     let fused = Confusion::of_drive_map(&cells);
     let fused_scores = fused.scores_if_predicted();
     let per_frame = per_frame.report();
-    notice_drives(&per_frame, &model, config);
+    notice_drives(
+        &per_frame,
+        &model,
+        config,
+        FitRemedies::of(&selections, false, None),
+    );
     let seen = cells.iter().filter(|c| c.observations > 0).count();
     let area_m2 = seen as f64 * cell_size_m.powi(2);
     if output.json {
@@ -195,6 +209,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
         });
         print_json_summary("map", &selections, fields)?;
     } else if !output.quiet {
+        println!("{}", model_line(&model, &model_name));
         println!(
             "{} fused into {}, {area_m2:.0} m2 (map {:.1} KiB)",
             counted(frames, "frame"),
@@ -241,7 +256,7 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
                 frames.f1 * 100.0
             );
         }
-        println!("{}", fit_said(&per_frame.fit, &model).0);
+        println!("{}", fit_said(&per_frame.fit));
     }
     Ok(outcome(&selections))
 }

@@ -21,9 +21,9 @@ pub mod shell;
 pub mod train;
 
 pub use report::{
-    counted, fit_said, foreign_remission_said, input_json, model_json, notice_drives,
-    notice_unknown_labels, other_rule_said, path_text, print_json_error, print_json_frame,
-    print_json_summary, print_wrote, setting_word, with_summary, without_remission_said,
+    counted, fit_said, input_json, model_json, notice, notice_drives, other_rule_said, path_text,
+    print_json_error, print_json_frame, print_json_summary, print_wrote, say_once, setting_word,
+    with_summary,
 };
 
 use std::io::IsTerminal;
@@ -34,7 +34,7 @@ use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use travmap_core::Config;
-use travmap_core::config::ModelChoice;
+use travmap_core::config::{AssemblyError, ConfigSources, ModelChoice};
 use travmap_core::stopwatch::Stopwatch;
 use travmap_io::{LidarCalibrations, LidarFrames, LogOptions, MergedTopics, SourceOptions};
 use travmap_method::classifier::SvmModel;
@@ -82,38 +82,58 @@ pub struct Settings {
         help_heading = "Configuration"
     )]
     poses: Option<String>,
-    /// The configuration once loaded: the file is read once (a `<(...)` pipe can be
-    /// read only once).
+    /// The configuration once loaded, and where its model was named: the file is
+    /// read once (a `<(...)` pipe can be read only once).
     #[arg(skip)]
-    loaded: std::sync::OnceLock<Config>,
+    loaded: std::sync::OnceLock<(Config, Option<String>)>,
 }
 
 impl Settings {
-    /// The effective configuration: defaults, then the file, then each `--set`.
+    /// The effective configuration of a command that chooses no model: defaults,
+    /// then the file, then each `--set`.
     pub fn load(&self) -> Result<Config> {
-        if let Some(config) = self.loaded.get() {
-            return Ok(config.clone());
-        }
-        let config = self.read()?;
-        Ok(self.loaded.get_or_init(|| config).clone())
+        self.load_with_model(None)
     }
 
-    fn read(&self) -> Result<Config> {
-        let mut config = match &self.config {
-            Some(path) => Config::from_toml_file(path)?,
-            None => Config::default(),
+    /// The effective configuration, with `model` (`--model`) as its
+    /// `classifier.model`: said once when the file or a `--set` named another.
+    pub fn load_with_model(&self, model: Option<&str>) -> Result<Config> {
+        if let Some((config, _)) = self.loaded.get() {
+            return Ok(config.clone());
+        }
+        let loaded = self.read(model)?;
+        Ok(self.loaded.get_or_init(|| loaded).0.clone())
+    }
+
+    /// The model `config` (this one's, loaded) chooses, checked against it, and the
+    /// name to report it by; its errors say where it was named, when a file or a
+    /// `--set` named it.
+    pub fn load_model(&self, config: &Config) -> Result<(SvmModel, String)> {
+        let named_by = self.loaded.get().and_then(|(_, named_by)| named_by.as_deref());
+        SvmModel::load(&config.classifier.model, config).map_err(|error| match named_by {
+            Some(named_by) => anyhow::Error::from(error).context(format!("the model of {named_by}")),
+            None => error.into(),
+        })
+    }
+
+    fn read(&self, model: Option<&str>) -> Result<(Config, Option<String>)> {
+        let poses = self.poses.iter().map(|poses| format!("integration.poses={poses}"));
+        let assignments: Vec<String> = self.sets.iter().cloned().chain(poses).collect();
+        let sources = ConfigSources {
+            file: self.config.as_deref(),
+            assignments: &assignments,
+            model,
+            ..Default::default()
         };
-        for assignment in &self.sets {
-            config
-                .set(assignment)
-                .map_err(|e| usage(format!("--set {assignment}: {e}")))?;
-        }
-        if let Some(poses) = &self.poses {
-            config.set(&format!("integration.poses={poses}"))?;
-        }
         // A configuration that cannot be used is a mistake in the command line.
-        config.ready().map_err(|e| usage(format!("{e}")))?;
-        Ok(config)
+        let assembled = sources.assemble().map_err(|e| match e {
+            AssemblyError::File(error) => anyhow::Error::from(error),
+            AssemblyError::Usage(message) => usage(message),
+        })?;
+        if let Some(said) = assembled.model_notice {
+            notice(&said);
+        }
+        Ok((assembled.config, assembled.model_named_by))
     }
 }
 
@@ -338,13 +358,12 @@ impl Inputs {
         read_images: bool,
     ) -> Result<Vec<DriveRun>> {
         refuse_repeats(paths)?;
-        let notice = |notice: &str| eprintln!("notice: {notice}");
         paths
             .iter()
             .map(|path| {
                 let mut selection =
                     open_selection(path, self.frames.clone(), options, read_images, &say)?;
-                selection.survey(config, &notice)?;
+                selection.survey(config, &|text: &str| notice(text))?;
                 Ok(selection)
             })
             .collect()
@@ -416,9 +435,10 @@ pub fn check_output_dir(output: &Path, inputs: &InputFiles) -> Result<()> {
     Ok(())
 }
 
-/// Prints a remark of opening a drive on stderr, as `notice: ...` or `warning: ...`.
+/// Prints a remark of opening a drive on stderr, as `notice: ...` or `warning: ...`,
+/// once however often the drive is opened.
 pub fn say(remark: Remark, text: &str) {
-    eprintln!("{}: {text}", remark.word());
+    say_once(&format!("{}: {text}", remark.word()));
 }
 
 /// A scan rate in Hz: LiDARs spin at about 1 to 100 Hz; far outside that is a typo.
@@ -446,25 +466,18 @@ pub struct ModelArg {
 }
 
 impl ModelArg {
-    /// Which model: `--model`, else the configuration's.
-    pub fn choice(&self, config: &Config) -> ModelChoice {
-        match &self.model {
-            Some(text) => ModelChoice::parse(text),
-            None => config.classifier.model.clone(),
-        }
+    /// The command's effective configuration: `settings`, with this model as its
+    /// `classifier.model` (the one every output records).
+    pub fn config(&self, settings: &Settings) -> Result<Config> {
+        settings.load_with_model(self.model.as_deref())
     }
 
     /// The model file chosen, if a file was: an input, which no output may replace.
-    pub fn file(&self, config: &Config) -> Option<PathBuf> {
-        match self.choice(config) {
-            ModelChoice::File(path) => Some(path),
+    pub fn file(config: &Config) -> Option<PathBuf> {
+        match &config.classifier.model {
+            ModelChoice::File(path) => Some(path.clone()),
             ModelChoice::Embedded(_) => None,
         }
-    }
-
-    /// The model, checked against `config`, and the name to report it by.
-    pub fn load(&self, config: &Config) -> Result<(SvmModel, String)> {
-        Ok(SvmModel::load(&self.choice(config), config)?)
     }
 }
 

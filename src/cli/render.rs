@@ -9,10 +9,11 @@ use serde_json::json;
 use travmap_core::temporaries;
 use travmap_outputs::atomic::Staged;
 use travmap_outputs::rendering;
+use travmap_run::report::tables::model_line;
 
 use super::{
-    Inputs, ModelArg, Outcome, check_output, check_output_dir, counted, frame_count, outcome,
-    path_text, print_json_summary, usage,
+    Inputs, ModelArg, Outcome, check_output, check_output_dir, counted, frame_count, model_json,
+    outcome, path_text, print_json_summary, usage,
 };
 
 /// Draw ground truth, prediction and errors of a frame side by side as PNG.
@@ -47,15 +48,15 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         (None, false) => unreachable!("clap requires --frame unless --all"),
     }
     let cell_px = args.cell_pixels;
-    let config = &args.inputs.settings.load()?;
+    let config = &args.model.config(&args.inputs.settings)?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
-    let inputs = args.inputs.files(args.model.file(config).as_deref());
+    let inputs = args.inputs.files(ModelArg::file(config).as_deref());
     if args.all {
         check_output_dir(output_path, &inputs)?;
     } else {
         check_output(output_path, &inputs)?;
     }
-    let (model, _) = args.model.load(config)?;
+    let (model, model_name) = args.inputs.settings.load_model(config)?;
     let selection = args.inputs.open_one(config, model.reads_images(config))?;
     if args.all
         && output_path
@@ -109,10 +110,12 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         let fields = json!({
             "output": path_text(output_path),
             "config": config,
+            "model": model_json(&model, &model_name),
             "outputs": written.iter().map(|p| path_text(p)).collect::<Vec<_>>(),
         });
         print_json_summary("render", &selections, fields)?;
     } else if !output.quiet {
+        println!("{}", model_line(&model, &model_name));
         println!(
             "wrote {}: ground truth | prediction | errors (orange false positive, blue false negative)",
             counted(written.len(), "picture")

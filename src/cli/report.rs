@@ -12,10 +12,8 @@ pub use travmap_run::report::json::{
     input_json, model_json, path_text, setting_word, with_summary,
 };
 use travmap_run::scoring::evaluation::EvaluationReport;
-pub use travmap_run::scoring::remarks::{
-    counted, fit_said, foreign_remission_said, other_rule_said, without_remission_said,
-};
-use travmap_run::scoring::remarks::{drive_notices, unknown_labels_said};
+pub use travmap_run::scoring::remarks::{counted, fit_said, other_rule_said};
+use travmap_run::scoring::remarks::{FitRemedies, drive_notices};
 
 /// Prints a `frame` record ([`travmap_run::report::json`]).
 pub fn print_json_frame(fields: serde_json::Value) -> Result<()> {
@@ -54,17 +52,31 @@ fn print_json_line(value: &serde_json::Value) -> Result<()> {
     Ok(())
 }
 
-/// Says on stderr, even with -q, what the run found of the drives
-/// ([`drive_notices`]).
-pub fn notice_drives(report: &EvaluationReport, model: &SvmModel, config: &Config) {
-    for said in drive_notices(report, model, config) {
-        eprintln!("notice: {said}");
+/// Says on stderr, in every mode (`-q`, `--json` too), what the run found of the
+/// drives ([`drive_notices`]).
+pub fn notice_drives(
+    report: &EvaluationReport,
+    model: &SvmModel,
+    config: &Config,
+    remedies: FitRemedies,
+) {
+    for said in drive_notices(report, model, config, remedies) {
+        notice(&said);
     }
 }
 
-/// Says on stderr when labels carried ids the label set does not define.
-pub fn notice_unknown_labels(report: &EvaluationReport, config: &Config) {
-    if let Some(said) = unknown_labels_said(report, config) {
-        eprintln!("notice: {said}");
+/// Prints `notice: TEXT` on stderr, unless this run said it already: a drive read
+/// twice (adapted to, then scored) says what it found once.
+pub fn notice(text: &str) {
+    say_once(&format!("notice: {text}"));
+}
+
+/// Prints `line` on stderr unless this run printed it already.
+pub fn say_once(line: &str) {
+    static SAID: std::sync::Mutex<std::collections::BTreeSet<String>> =
+        std::sync::Mutex::new(std::collections::BTreeSet::new());
+    let mut said = SAID.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    if said.insert(line.to_string()) {
+        eprintln!("{line}");
     }
 }

@@ -8,6 +8,7 @@ use clap::Args;
 use serde_json::json;
 use travmap_method::grid::CellClass;
 use travmap_run::scoring::evaluation::Evaluation;
+use travmap_run::scoring::remarks::FitRemedies;
 
 use super::{
     Inputs, ModelArg, Outcome, fit_said, frame_count, model_json, notice_drives, outcome,
@@ -30,9 +31,9 @@ pub struct RunArgs {
 }
 
 pub fn run(args: RunArgs) -> Result<Outcome> {
-    let config = args.inputs.settings.load()?;
+    let config = args.model.config(&args.inputs.settings)?;
     let output = args.inputs.output;
-    let (model, model_name) = args.model.load(&config)?;
+    let (model, model_name) = args.inputs.settings.load_model(&config)?;
     let mut selections = args.inputs.open(&config, model.reads_images(&config))?;
     // `run` prints no scores: labels it does not need cannot stop it.
     for selection in &mut selections {
@@ -107,6 +108,8 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     bar.finish();
     let report = evaluation.report();
     if output.json {
+        let remedies = FitRemedies::of(&selections, false, None);
+        notice_drives(&report, &model, &config, remedies);
         print_json_summary(
             "run",
             &selections,
@@ -134,9 +137,10 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                 latency.median, latency.p95
             )?,
         }
-        writeln!(stdout, "{}", fit_said(&report.fit, &model).0)?;
+        writeln!(stdout, "{}", fit_said(&report.fit))?;
     }
-    notice_drives(&report, &model, &config);
+    let remedies = FitRemedies::of(&selections, false, None);
+    notice_drives(&report, &model, &config, remedies);
     Ok(outcome(&selections))
 }
 

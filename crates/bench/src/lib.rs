@@ -231,7 +231,7 @@ pub struct ToolTiming {
     /// Bytes of the output file (1 MB = 10^6 bytes) per second of wall time.
     megabytes_per_second: f64,
     /// The frames' recorded time per second of wall time; None without stamps.
-    real_time: Option<f64>,
+    recorded_s_per_wall_s: Option<f64>,
     /// The child's peak resident set (`ru_maxrss`), MiB; None where the platform
     /// does not report it.
     peak_rss_mib: Option<f64>,
@@ -437,8 +437,8 @@ pub fn print_tools_table(
                 "{label:<34} {:>8.1} {:>8.1} {:>8} {:>8} {:>8.1} {:>8.1} {:>8} {:>8} {:>6.2}x {:>8} {:>8} {:>8}",
                 one_thread.frames_per_second,
                 all_cores.frames_per_second,
-                figure(one_thread.real_time, 1),
-                figure(all_cores.real_time, 1),
+                figure(one_thread.recorded_s_per_wall_s, 1),
+                figure(all_cores.recorded_s_per_wall_s, 1),
                 one_thread.megabytes_per_second,
                 all_cores.megabytes_per_second,
                 figure(one_thread.peak_rss_mib, 0),
@@ -467,7 +467,7 @@ impl ToolTiming {
             wall_s,
             frames_per_second: frames as f64 / wall_s,
             megabytes_per_second: output_bytes * 1e-6 / wall_s,
-            real_time: recorded_s.map(|recorded_s| recorded_s / wall_s),
+            recorded_s_per_wall_s: recorded_s.map(|recorded_s| recorded_s / wall_s),
             peak_rss_mib: (!rss.is_empty()).then(|| median(rss)),
             method_s: None,
             roofline_ratio: None,

@@ -231,8 +231,14 @@ pub fn render_drive_map(
 }
 
 /// The fused cells as a Parquet table: one row per cell some frame saw or labelled,
-/// staged to appear with the command's other outputs.
-pub fn write_map_cells(staged: &mut Staged, path: &Path, cells: &[FusedCell]) -> Result<()> {
+/// staged to appear with the command's other outputs; `metadata` (key, JSON text)
+/// says what made them (`travmap.config`, `travmap.model`).
+pub fn write_map_cells(
+    staged: &mut Staged,
+    path: &Path,
+    cells: &[FusedCell],
+    metadata: Vec<(String, String)>,
+) -> Result<()> {
     let schema = parquet::schema::parser::parse_message_type(
         "message travmap_run_map { REQUIRED DOUBLE x_m; REQUIRED DOUBLE y_m; \
          REQUIRED DOUBLE evidence; REQUIRED DOUBLE probability; REQUIRED INT32 observations; \
@@ -242,6 +248,11 @@ pub fn write_map_cells(staged: &mut Staged, path: &Path, cells: &[FusedCell]) ->
     let properties = WriterProperties::builder()
         .set_compression(Compression::ZSTD(ZstdLevel::default()))
         .set_created_by(concat!("travmap ", env!("CARGO_PKG_VERSION")).into())
+        .set_key_value_metadata(Some(
+            (metadata.into_iter())
+                .map(|(key, value)| parquet::file::metadata::KeyValue::new(key, value))
+                .collect(),
+        ))
         .build();
     let (output, file) = AtomicFile::create(path)?;
     let fail = |e| parquet_failure(path, &output, e);

@@ -10,6 +10,7 @@ use numpy::{PyArray1, PyArray2, PyArray3};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyRange, PyRangeMethods};
 use travmap_core::Config;
+use travmap_core::config::{AssemblyError, ConfigSources, Spelling};
 use travmap_core::frame::Frame as ReadFrame;
 use travmap_io::{
     LidarCalibrations, LidarFrames, LogOptions, MergedTopics, SourceOptions, WORLD_FRAME,
@@ -166,18 +167,22 @@ fn configuration(
     assignments: &[String],
     poses: Option<String>,
 ) -> Result<Config, Failure> {
-    let mut config = match file {
-        Some(path) => Config::from_toml_file(&path)?,
-        None => Config::default(),
-    };
     let poses = poses.map(|poses| format!("integration.poses={poses}"));
-    for assignment in assignments.iter().chain(&poses) {
-        config
-            .set(assignment)
-            .map_err(|e| Failure::usage(format!("set {assignment}: {e}")))?;
+    let assignments: Vec<String> = assignments.iter().cloned().chain(poses).collect();
+    let sources = ConfigSources {
+        file: file.as_deref(),
+        assignments: &assignments,
+        model: None,
+        spelling: Spelling {
+            assignment: "set",
+            model: "model=",
+        },
+    };
+    match sources.assemble() {
+        Ok(assembled) => Ok(assembled.config),
+        Err(AssemblyError::File(error)) => Err(error.into()),
+        Err(AssemblyError::Usage(message)) => Err(Failure::usage(message)),
     }
-    config.ready().map_err(|e| Failure::usage(e.to_string()))?;
-    Ok(config)
 }
 
 /// `set={"grid.size_m": 24}` or `set=["grid.size_m=24"]`, as `SECTION.KEY=VALUE`.

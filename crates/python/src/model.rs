@@ -15,7 +15,7 @@ use travmap_method::features::feature_names;
 use travmap_method::grid::CellClass;
 use travmap_method::pipeline::{FrameResult, StageTimings};
 use travmap_run::scoring::evaluation::Evaluation;
-use travmap_run::scoring::remarks::drive_notices;
+use travmap_run::scoring::remarks::{FitRemedies, drive_notices};
 
 use crate::drive::{Drive, Opening, pose_array, remission_word};
 use crate::stream::Stream;
@@ -62,7 +62,8 @@ impl Model {
             });
             match ran {
                 Ok(()) => {
-                    sender.say(drive_notices(&evaluation.report(), &model, &config));
+                    let remedies = FitRemedies::of(std::slice::from_ref(&*selection), false, None);
+                    sender.say(drive_notices(&evaluation.report(), &model, &config, remedies));
                     Ok(())
                 }
                 Err(Stop::NoOneListens) => Ok(()),

@@ -632,6 +632,28 @@ impl DriveRun {
         self.source.skip_log().handle(frame, error)
     }
 
+    /// Whether the frames run are posed scans, more than one: a drive whose
+    /// footprint adaptation can learn from (a single scan, or scans each alone, show
+    /// none).
+    pub fn moves(&self) -> bool {
+        self.source.posing() != travmap_core::posing::Posing::Alone
+            && self.source.frames_in(&self.frames).len() > 1
+    }
+
+    /// Whether the drive carries labels to score against, by its first and last
+    /// frame read alone: a command that needs them says so before any other work.
+    pub fn has_labels(&self) -> Result<bool> {
+        let frames = self.source.frames_in(&self.frames);
+        let ends: std::collections::BTreeSet<usize> =
+            frames.first().into_iter().chain(frames.last()).copied().collect();
+        for frame in self.source.read_only(&ends) {
+            if frame?.labels.is_some() {
+                return Ok(true);
+            }
+        }
+        Ok(false)
+    }
+
     /// The input and the frames of it, as a person reads them.
     pub fn describe(&self) -> String {
         let frames = self.source.frames_in(&self.frames);

@@ -96,6 +96,13 @@ pub struct Adapted {
 }
 
 impl Adapted {
+    /// Whether the adapted model replaced the prior (false: the prior is kept, its
+    /// file says why).
+    pub fn replaced_prior(&self) -> bool {
+        let check = self.model.training.adaptation.as_ref().and_then(|a| a.check.as_ref());
+        check.is_none_or(|check| check.adapted)
+    }
+
     /// The part of the model fitted to the drives.
     pub fn fitted(&self) -> &SvmModel {
         match (&self.model.fallback, self.fallback_fitted) {
@@ -206,19 +213,22 @@ pub fn adapt(
         path: path.clone(),
         problem,
     };
-    if counts.footprint_cells < a.min_footprint_cells {
-        return Err(refuse(format!(
-            "{} footprint cells (cells the vehicle drove over that hold points), at least {} needed (adapt.min_footprint_cells): the vehicle moved {trajectory_m:.1} m over the drive; a vehicle standing still or a drive this short shows too little of its ground. Adapt on a longer drive",
-            counts.footprint_cells, a.min_footprint_cells
-        )));
-    }
+    // A drive that shows too little of its ground, or no obstacle, cannot show that
+    // an adapted model is better: the prior is kept, and the file says why.
     let unlabelled_learnt = a.unlabelled_weight > 0.0 && counts.unknown_cells > 0;
-    if counts.negative_cells == 0 && !unlabelled_learnt {
-        return Err(refuse(format!(
-            "no cell is an obstacle (over vehicle.clearance_m = {} m) or rejected by the prior with a margin of -{} or less, so every self-label says traversable; lower adapt.negative_margin, learn the unknown cells as negatives (adapt.unlabelled_weight) or adapt on a drive with obstacles",
+    let too_little = if counts.footprint_cells < a.min_footprint_cells {
+        Some(format!(
+            "the prior is kept: the drive shows {} footprint cells (cells the vehicle drove over that hold points), at least {} needed (adapt.min_footprint_cells): the vehicle moved {trajectory_m:.1} m; a vehicle standing still or a drive this short shows too little of its ground to adapt to",
+            counts.footprint_cells, a.min_footprint_cells
+        ))
+    } else if counts.negative_cells == 0 && !unlabelled_learnt {
+        Some(format!(
+            "the prior is kept: no cell is an obstacle (over vehicle.clearance_m = {} m) or rejected by the prior with a margin of -{} or less, so every self-label says traversable; lower adapt.negative_margin, learn the unknown cells as negatives (adapt.unlabelled_weight) or adapt on a drive with obstacles",
             config.vehicle.clearance_m, a.negative_margin
-        )));
-    }
+        ))
+    } else {
+        None
+    };
 
     // Frames without usable remission give cells without its columns, and are
     // classified by the model's fallback: then the prior's fallback is what is
@@ -337,28 +347,35 @@ pub fn adapt(
             check: Some(check),
         }
     };
-    let check = match a.check {
-        true => check_against_prior(
+    let unchecked = |adapted: bool, why: String| AdaptationCheck {
+        adapted,
+        why,
+        footprint_samples: 0,
+        clearance_samples: 0,
+        blocks: 0,
+        prior_miou: None,
+        adapted_miou: None,
+    };
+    let check = match (too_little, a.check) {
+        (Some(why), _) => unchecked(false, why),
+        (None, true) => check_against_prior(
             &labelled,
             counts.straight_path_frames == counts.frames,
             &|cells| fit(&to_set(cells, &unknown), false),
             prior,
             config.training.seed,
         )?,
-        false => AdaptationCheck {
-            adapted: true,
-            why: "the adapted model replaces the prior unchecked (adapt.check = false)".into(),
-            footprint_cells: 0,
-            clearance_cells: 0,
-            blocks: 0,
-            prior_miou: None,
-            adapted_miou: None,
-        },
+        (None, false) => unchecked(
+            true,
+            "the adapted model replaces the prior unchecked (adapt.check = false)".into(),
+        ),
     };
     notices.push(format!("{}: {}", path.display(), check.why));
     if !check.adapted {
         let mut kept = original_prior.clone();
         kept.training.adaptation = Some(summary(&kept, 0, check));
+        // What it is, named as this run named it.
+        kept.config.classifier.model = original_config.classifier.model.clone();
         return Ok(Adapted {
             model: kept,
             counts,
@@ -427,29 +444,29 @@ fn check_against_prior(
             .map(|v| (v / CHECK_BLOCK_M).floor() as i64)
     };
     let evidence: Vec<&DriveCell> = labelled.iter().filter(|c| c.evidence).collect();
-    let footprint_cells = evidence.iter().filter(|c| c.label == Some(true)).count();
-    let clearance_cells = evidence.len() - footprint_cells;
+    let footprint_samples = evidence.iter().filter(|c| c.label == Some(true)).count();
+    let clearance_samples = evidence.len() - footprint_samples;
     let mut blocks: Vec<[i64; 2]> = evidence.iter().map(|c| block(c)).collect();
     blocks.sort_unstable();
     blocks.dedup();
     let mut check = AdaptationCheck {
         adapted: false,
         why: String::new(),
-        footprint_cells,
-        clearance_cells,
+        footprint_samples,
+        clearance_samples,
         blocks: blocks.len(),
         prior_miou: None,
         adapted_miou: None,
     };
     let held = format!(
-        "{footprint_cells} cells driven over and {clearance_cells} over the clearance, in {} blocks of {CHECK_BLOCK_M} m",
+        "{footprint_samples} samples of cells driven over and {clearance_samples} over the clearance, a world cell once for every frame that saw it, in {} blocks of {CHECK_BLOCK_M} m",
         blocks.len()
     );
     if path_guessed {
         check.why = "the prior is kept: the footprint was guessed (no trajectory beyond one pose), so the drive cannot show that an adapted model is better".into();
         return Ok(check);
     }
-    if footprint_cells.min(clearance_cells) < MIN_CHECK_CELLS || blocks.len() < CHECK_FOLDS {
+    if footprint_samples.min(clearance_samples) < MIN_CHECK_CELLS || blocks.len() < CHECK_FOLDS {
         check.why = format!(
             "the prior is kept: too little of the drive's own evidence to tell an adapted model from it ({held}; at least {MIN_CHECK_CELLS} of each in {CHECK_FOLDS} blocks)"
         );

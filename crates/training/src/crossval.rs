@@ -240,19 +240,23 @@ fn out_of_fold(
     for mut result in frames {
         let (folds_here, rest) = frame_folds.split_at(result.layout.cell_count());
         frame_folds = rest;
-        let predicted: Vec<CellClass> = (0..result.layout.cell_count())
+        // Margins as a run keeps them (NaN where no fold's model predicts), so that
+        // the report's fit is the held-out cells'.
+        let margins: Vec<f32> = (0..result.layout.cell_count())
             .map(|cell| match &models[folds_here[cell]] {
-                Some(model) if result.features.predictable[cell] => model.classify_cell(
+                Some(model) if result.features.predictable[cell] => model.cell_margin(
                     result.features.cell(cell),
                     result.features.appearance(cell),
                     &mut scratch,
                     config.classifier.use_reduced_set,
                 ),
-                _ => CellClass::Unknown,
+                _ => f32::NAN,
             })
             .collect();
+        let predicted: Vec<CellClass> = margins.iter().map(|&m| CellClass::of_margin(m)).collect();
         result.filtered = Some(filter.apply(&predicted, result.layout.cells_per_side));
         result.predicted = Some(predicted);
+        result.margins = Some(margins);
         predicted_frames.push(result);
     }
     Ok((fold_reports, predicted_frames))

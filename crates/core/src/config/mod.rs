@@ -8,6 +8,7 @@
 mod adaptation;
 mod labels;
 mod registration;
+mod sources;
 mod training;
 
 use serde::{Deserialize, Serialize};
@@ -18,6 +19,9 @@ use crate::option_files::{TEXT_MAX_BYTES, read_option_text};
 pub use adaptation::{AdaptConfig, Learner, OwnPoints, VehicleConfig};
 pub use labels::{ClassRule, LabelRule, LabelSet, parse_label_map};
 pub use registration::{PoseSource, RegistrationConfig};
+pub use sources::{
+    Assembled, AssemblyError, ConfigFile, ConfigSources, Spelling, read_toml_file,
+};
 pub use training::{
     ClassWeights, Criterion, MAX_SVM_C, MAX_SVM_GAMMA, TrainingConfig, WeighInputs, check_within,
 };
@@ -83,6 +87,15 @@ pub enum ModelChoice {
 }
 
 impl ModelChoice {
+    /// A model named by a person (`--model`): as [`Self::parse`], but a name of
+    /// nothing is refused rather than read as the path of no file.
+    pub fn named(text: &str) -> std::result::Result<Self, String> {
+        match text.trim().is_empty() {
+            true => Err("road, offroad or a model file's path expected".into()),
+            false => Ok(Self::parse(text)),
+        }
+    }
+
     /// `road` and `offroad` are the compiled-in models; anything else a path (a file
     /// called `road` is `./road`).
     pub fn parse(text: &str) -> Self {
@@ -433,12 +446,6 @@ impl Config {
         Ok(())
     }
 
-    /// Reads a TOML file; fields it does not name keep their defaults.
-    pub fn from_toml_file(path: &std::path::Path) -> Result<Self> {
-        let text = read_option_text(path, TEXT_MAX_BYTES)?;
-        toml::from_str(&text).map_err(|e| Error::Config(format!("{}: {e}", path.display())))
-    }
-
     /// Sets one field from `section.key=value`, the value in TOML syntax
     /// (`grid.size_m=24`, `training.c_values=[1, 10]`); a text field also takes its
     /// value bare (`integration.poses=tf`, `ground_truth.label_map=/p/map.toml`).
@@ -693,11 +700,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("c.toml");
         std::fs::write(&path, "[grid]\nsize_m = 20.0\n").unwrap();
-        let config = Config::from_toml_file(&path).unwrap();
+        let config = read_toml_file(&path).unwrap().config;
         assert_eq!(config.grid.size_m, 20.0);
         assert_eq!(config.grid.cell_size_m, 0.4);
         std::fs::write(&path, "[grid]\nbogus = 1\n").unwrap();
-        assert!(Config::from_toml_file(&path).is_err());
+        assert!(read_toml_file(&path).is_err());
     }
 
     #[test]

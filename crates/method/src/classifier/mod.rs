@@ -82,10 +82,14 @@ pub struct AdaptationCheck {
     pub adapted: bool,
     /// Why, as a person reads it.
     pub why: String,
-    /// The held-out evidence: footprint and clearance cells, and the blocks of the
-    /// world they lie in.
-    pub footprint_cells: usize,
-    pub clearance_cells: usize,
+    /// The held-out evidence: samples of cells driven over and of cells over the
+    /// clearance (a world cell once for every frame that saw it; the summary's
+    /// `footprint_cells` counts distinct world cells), and the blocks of the world
+    /// they lie in.
+    #[serde(alias = "footprint_cells")]
+    pub footprint_samples: usize,
+    #[serde(alias = "clearance_cells")]
+    pub clearance_samples: usize,
     pub blocks: usize,
     /// mIoU (0..1) of the prior and of the adapted model on the held-out evidence,
     /// when there was enough of it to compare.

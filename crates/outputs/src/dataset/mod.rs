@@ -30,7 +30,9 @@ use parquet::schema::types::ColumnPath;
 
 use columns::{RowGroupColumns, write_column};
 
-use crate::atomic::{AtomicFile, WritebackFile, parquet_failure, sync_output, write_failure};
+use crate::atomic::{
+    AtomicFile, WritebackFile, parquet_failure, sync_output, write_atomically, write_failure,
+};
 use travmap_core::Config;
 use travmap_core::config::FeatureGroup;
 use travmap_core::error::{Error, Result};
@@ -63,6 +65,8 @@ const CONFIG_KEY: &str = "travmap.config";
 /// Metadata: the SHA-256 of the labelled scans, a JSON list (absent when unknown).
 const SCANS_KEY: &str = "travmap.labelled_scans";
 const FORMAT_KEY: &str = "travmap.format";
+/// The model whose predictions the file holds (`model` in `--json`): name, SHA-256, rule.
+const MODEL_KEY: &str = "travmap.model";
 const FORMAT: &str = "travmap-cells 2";
 /// The format before `footprint` and `pseudo_label`, still read.
 const FORMAT_1: &str = "travmap-cells 1";
@@ -134,15 +138,58 @@ fn is_part_name(name: &str) -> bool {
         .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
 }
 
-/// The part files of the dataset folder `dir`, in order.
-pub fn part_files(dir: &Path) -> Result<Vec<PathBuf>> {
+/// The file in a dataset folder that lists its parts: the parts a later run may
+/// replace are the ones an earlier run listed, never a file it did not write.
+/// Readers pass it over (pyarrow.dataset ignores names starting with `_`, and it is
+/// not `.parquet`).
+pub const MANIFEST_NAME: &str = "_travmap_dataset.json";
+
+/// The parts a dataset folder's manifest lists, in order (None: no manifest).
+fn listed_parts(dir: &Path) -> Result<Option<Vec<PathBuf>>> {
+    let path = dir.join(MANIFEST_NAME);
+    let text = match std::fs::read_to_string(&path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(Error::io(&path, e)),
+    };
+    let invalid = |message: String| Error::Dataset {
+        path: path.clone(),
+        message,
+    };
+    let manifest: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| invalid(format!("not a dataset manifest: {e}")))?;
+    let names = (manifest.get("parts").and_then(|p| p.as_array()))
+        .ok_or_else(|| invalid("a dataset manifest lists its `parts`".into()))?;
+    names
+        .iter()
+        .map(|name| match name.as_str().filter(|n| is_part_name(n)) {
+            Some(name) => Ok(Some(dir.join(name))),
+            None => Err(invalid(format!("{name} is not a part file's name"))),
+        })
+        .collect::<Result<Option<Vec<_>>>>()
+}
+
+/// The `.parquet` files of `dir`, sorted.
+fn parquet_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
-    let mut parts: Vec<PathBuf> = entries
+    let mut files: Vec<PathBuf> = entries
         .filter_map(|entry| entry.ok())
-        .filter(|entry| entry.file_name().to_str().is_some_and(is_part_name))
         .map(|entry| entry.path())
+        .filter(|path| path.extension().is_some_and(|e| e == "parquet"))
         .collect();
-    parts.sort();
+    files.sort();
+    Ok(files)
+}
+
+/// The part files of the dataset folder `dir`, in order: those its manifest lists,
+/// or (a folder written before manifests) its `part-NNNNN.parquet` files.
+pub fn part_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let parts = match listed_parts(dir)? {
+        Some(parts) => parts,
+        None => (parquet_files(dir)?.into_iter())
+            .filter(|path| (path.file_name().and_then(|n| n.to_str())).is_some_and(is_part_name))
+            .collect(),
+    };
     if parts.is_empty() {
         return Err(Error::Dataset {
             path: dir.to_path_buf(),
@@ -150,6 +197,37 @@ pub fn part_files(dir: &Path) -> Result<Vec<PathBuf>> {
         });
     }
     Ok(parts)
+}
+
+/// Before any work: a dataset folder may hold only the parts an earlier dataset run
+/// listed. Other Parquet files would be read as part of the table by
+/// pyarrow.dataset, DuckDB and Polars, and a run that replaced them would destroy
+/// what it did not write.
+pub fn check_dataset_folder(dir: &Path) -> Result<()> {
+    if !dir.is_dir() {
+        return Ok(());
+    }
+    let listed = listed_parts(dir)?.unwrap_or_default();
+    let others: Vec<String> = (parquet_files(dir)?.into_iter())
+        .filter(|path| !listed.contains(path))
+        .filter_map(|path| path.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect();
+    if others.is_empty() {
+        return Ok(());
+    }
+    let shown: Vec<&str> = others.iter().take(5).map(String::as_str).collect();
+    Err(Error::Dataset {
+        path: dir.to_path_buf(),
+        message: format!(
+            "the folder holds {} Parquet {} this travmap did not write ({}{}): readers of the folder would take {} as part of the dataset, and travmap replaces only parts it listed in {MANIFEST_NAME}; write the dataset to an empty or new folder, or move {} away",
+            others.len(),
+            if others.len() == 1 { "file" } else { "files" },
+            shown.join(", "),
+            if others.len() > shown.len() { ", ..." } else { "" },
+            if others.len() == 1 { "it" } else { "them" },
+            if others.len() == 1 { "it" } else { "them" },
+        ),
+    })
 }
 
 /// The Parquet file being written: one dataset file, or one part of a folder.
@@ -194,21 +272,29 @@ pub struct DatasetSummary {
 }
 
 impl DatasetWriter {
-    /// A dataset at `path` (a folder that exists, for [`DatasetFiles::Parts`]).
-    pub fn create(path: &Path, config: &Config, layout: DatasetFiles) -> Result<Self> {
+    /// A dataset at `path` (a folder that exists, for [`DatasetFiles::Parts`]);
+    /// `model` records the model that predicted its cells, if one did (JSON).
+    pub fn create(
+        path: &Path,
+        config: &Config,
+        layout: DatasetFiles,
+        model: Option<String>,
+    ) -> Result<Self> {
         let appearance = appearance_columns(config);
         let features = feature_names(&config.features.groups);
         let schema =
             parquet::schema::parser::parse_message_type(&schema(&features, &appearance, true))
                 .expect("the cell schema parses");
         let config_json = serde_json::to_string(config).expect("config serialises");
+        let mut metadata = vec![
+            KeyValue::new(FORMAT_KEY.into(), FORMAT.to_string()),
+            KeyValue::new(CONFIG_KEY.into(), config_json),
+        ];
+        metadata.extend(model.map(|model| KeyValue::new(MODEL_KEY.into(), model)));
         let mut properties = WriterProperties::builder()
             .set_compression(Compression::ZSTD(ZstdLevel::default()))
             .set_created_by(concat!("travmap ", env!("CARGO_PKG_VERSION")).into())
-            .set_key_value_metadata(Some(vec![
-                KeyValue::new(FORMAT_KEY.into(), FORMAT.to_string()),
-                KeyValue::new(CONFIG_KEY.into(), config_json),
-            ]))
+            .set_key_value_metadata(Some(metadata))
             .set_dictionary_enabled(false);
         for column in DICTIONARY_COLUMNS {
             properties = properties.set_column_dictionary_enabled(ColumnPath::from(column), true);
@@ -391,11 +477,24 @@ impl DatasetWriter {
             .iter()
             .map(|f| f.path().to_path_buf())
             .collect();
+        let earlier = match self.layout {
+            DatasetFiles::Parts { .. } => listed_parts(&self.path)?.unwrap_or_default(),
+            DatasetFiles::File => Vec::new(),
+        };
         self.written.into_iter().try_for_each(AtomicFile::commit)?;
         if let DatasetFiles::Parts { .. } = self.layout {
-            for earlier in part_files(&self.path).unwrap_or_default() {
-                if !files.contains(&earlier) {
-                    std::fs::remove_file(&earlier).map_err(|e| Error::io(&earlier, e))?;
+            let names: Vec<String> = (files.iter())
+                .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
+                .collect();
+            let manifest = serde_json::json!({"format": FORMAT, "parts": names});
+            write_atomically(&self.path.join(MANIFEST_NAME), format!("{manifest}\n").as_bytes())?;
+            // An earlier dataset's parts this one did not replace.
+            for stale in earlier.iter().filter(|path| !files.contains(path)) {
+                match std::fs::remove_file(stale) {
+                    Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                        return Err(Error::io(stale, e));
+                    }
+                    _ => {}
                 }
             }
         }

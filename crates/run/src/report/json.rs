@@ -67,11 +67,13 @@ pub fn error_record(message: &str, file: Option<&Path>, exit_code: i32) -> Value
     })
 }
 
-/// The model's identity.
+/// The model's identity: its name, SHA-256 and rule, and how it was made.
 pub fn model_json(model: &SvmModel, name: &str) -> Value {
     json!({
         "name": name,
         "sha256": model.sha256_hex(),
+        // The rule of what is traversable it learnt.
+        "rule": model.config.ground_truth.rule.name(),
         "support_vectors": model.support_vector_count(),
         "c": model.c,
         "gamma": model.gamma,

@@ -17,45 +17,116 @@ pub fn counted<N: Copy + std::fmt::Display + TryInto<u64>>(n: N, noun: &str) -> 
     }
 }
 
-/// What is said of the drives even when nothing else is (`-q`): labels of ids the
-/// label set does not define, remission that could not be used or is of another
-/// sensor's scale, and a poor fit (each looks like a bad model otherwise).
-pub fn drive_notices(report: &EvaluationReport, model: &SvmModel, config: &Config) -> Vec<String> {
+/// What a poor fit's notice may advise: only what the command and the drives
+/// allow.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FitRemedies {
+    /// The command adapts with `--adapt` (`eval`, `annotate`); elsewhere adapting
+    /// is `travmap adapt`'s.
+    pub adapt_flag: bool,
+    /// The drives move (posed scans, more than one frame): a footprint to learn
+    /// from. A single scan, or scans each alone, show none.
+    pub drives_move: bool,
+    /// How many of the scored frames the model was trained on (None: unknown).
+    pub training_frames: Option<usize>,
+}
+
+impl FitRemedies {
+    /// The remedies of a command over `drives` (`adapt_flag`: it has `--adapt`).
+    pub fn of(drives: &[crate::DriveRun], adapt_flag: bool, training_frames: Option<usize>) -> Self {
+        Self {
+            adapt_flag,
+            drives_move: drives.iter().any(crate::DriveRun::moves),
+            training_frames,
+        }
+    }
+}
+
+/// What is said of the drives even when nothing else is (`-q`, `--json`): labels
+/// of ids the label set does not define, remission that could not be used or is
+/// of another sensor's scale, and a poor fit (each looks like a bad model otherwise).
+pub fn drive_notices(
+    report: &EvaluationReport,
+    model: &SvmModel,
+    config: &Config,
+    remedies: FitRemedies,
+) -> Vec<String> {
     (unknown_labels_said(report, config).into_iter())
         .chain(without_remission_said(report))
         .chain(foreign_remission_said(report, config))
-        .chain(fit_said(&report.fit, model).1)
+        .chain(poor_fit_said(&report.fit, model, remedies))
         .collect()
 }
 
-/// How well the drives fit the model, in a line; and when poorly, what to do about it.
-pub fn fit_said(fit: &Fit, model: &SvmModel) -> (String, Option<String>) {
-    let share = format!(
+/// How well the drives fit the model, in a line.
+pub fn fit_said(fit: &Fit) -> String {
+    format!(
+        "fit: {}; over {:.0} % a drive fits the model poorly",
+        unsure_share(fit),
+        100.0 * POOR_FIT_UNSURE_SHARE
+    )
+}
+
+fn unsure_share(fit: &Fit) -> String {
+    format!(
         "{:.1} % of {} predicted cells within the model's margin (|margin| < {UNSURE_MARGIN})",
         100.0 * fit.unsure_share,
         fit.cells
-    );
-    let line = format!(
-        "fit: {share}; drives like its training ones: at most {:.0} %",
+    )
+}
+
+/// When the drives fit the model poorly: what that means, and what can be done
+/// about it with this command and these drives.
+pub fn poor_fit_said(fit: &Fit, model: &SvmModel, remedies: FitRemedies) -> Option<String> {
+    if !fit.poor {
+        return None;
+    }
+    let mut said = format!(
+        "these drives fit the model poorly ({}, over {:.0} %: in docs/method.md's cross-dataset study every drive held out of training that scored below 60 mIoU was over it, and none that scored above 85)",
+        unsure_share(fit),
         100.0 * POOR_FIT_UNSURE_SHARE
     );
+    let trained_on = remedies.training_frames.filter(|&n| n > 0);
+    if let Some(n) = trained_on {
+        said += &format!(
+            "; {n} of these frames {} among its training scans, so the model is unsure of this ground even where it was taught: more of the same teaching will not help, another rule of what is traversable may",
+            if n == 1 { "was" } else { "were" }
+        );
+    }
+    let mut remedies_said = Vec::new();
+    let adapted = model.training.adaptation.as_ref();
+    match adapted {
+        Some(adaptation) if adaptation.check.as_ref().is_some_and(|c| !c.adapted) => {
+            said += "; adaptation to these drives kept the model as it was";
+        }
+        Some(_) => said += "; the model is already adapted to drives",
+        None if remedies.drives_move && trained_on.is_none() => {
+            remedies_said.push(match remedies.adapt_flag {
+                true => "adapt it to them (--adapt)".to_string(),
+                false => "adapt it to them (travmap adapt INPUT -o adapted.json, then --model adapted.json)".to_string(),
+            });
+        }
+        None => {}
+    }
     let other = match model.config.ground_truth.rule {
-        LabelRule::Road => LabelRule::Offroad,
-        LabelRule::Offroad => LabelRule::Road,
+        LabelRule::Road => "the offroad model (--model offroad) if the robot may drive on grass, dirt or low vegetation: it calls them traversable, where this model's road rule does not",
+        LabelRule::Offroad => "the road model (--model road) if only a car's road counts: it calls grass, dirt and low vegetation not traversable, where this model's rule does not",
     };
-    let notice = fit.poor.then(|| {
-        format!(
-            "these drives fit the model poorly ({share}; its training drives: at most {:.0} %): expect scores below its own; adapt it to them (--adapt), try the {} model if the robot's ground is {} (--model {}), or train on labelled scans of this sensor",
-            100.0 * POOR_FIT_UNSURE_SHARE,
-            other.name(),
-            match other {
-                LabelRule::Offroad => "grass, dirt or low vegetation",
-                LabelRule::Road => "a car's road",
-            },
-            other.name(),
-        )
-    });
-    (line, notice)
+    remedies_said.push(other.to_string());
+    if trained_on.is_none() {
+        remedies_said.push("train on labelled scans of this sensor (travmap train)".into());
+    }
+    said += &format!(": {}", or_list(&remedies_said));
+    Some(said)
+}
+
+/// `a; b; or c` (the items hold commas of their own).
+fn or_list(items: &[String]) -> String {
+    match items {
+        [] => String::new(),
+        [one] => one.clone(),
+        [rest @ .., last] => format!("{}; or {last}", rest.join("; ")),
+    }
 }
 
 /// What is said when the scores count another rule of what is traversable than the
