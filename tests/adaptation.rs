@@ -239,8 +239,10 @@ fn clouds_without_remission_adapt_the_fallback() {
     );
 }
 
+/// Regression (issue "says what it used", 6): a vehicle standing still failed `adapt`
+/// and `eval --adapt` with exit 1, where a one-pose drive kept the prior with exit 0.
 #[test]
-fn drives_that_show_too_little_are_refused_with_the_reason() {
+fn drives_that_show_too_little_keep_the_prior_with_the_reason() {
     let Some(sample) = crate::common::sample() else {
         return;
     };
@@ -251,21 +253,51 @@ fn drives_that_show_too_little_are_refused_with_the_reason() {
         .lines()
         .count();
     let still = "1 0 0 0 0 1 0 0 0 0 1 0\n".repeat(lines);
-    let copy = sample_copy(&sample, dir.path(), None, Some(still));
+    let copy = sample_copy(
+        &sample,
+        dir.path(),
+        Some(&|from, to| {
+            std::fs::copy(from, to).unwrap();
+        }),
+        Some(still),
+    );
     let model = dir.path().join("m.json");
-    let err = clean_failure(travmap(&["adapt", arg(&copy), "-o", arg(&model)]));
+    let output = travmap(&["adapt", arg(&copy), "-o", arg(&model)]);
+    let out = success(output.clone());
     assert_contains(
-        &err,
+        &stderr(&output),
         &[
-            "cannot adapt to this drive",
+            "the prior is kept",
             "footprint cells",
             "the vehicle moved 0.0 m",
-            "longer drive",
         ],
     );
-    assert!(!model.exists());
+    assert_contains(
+        &out,
+        &["kept embedded road model as it was: the prior is kept"],
+    );
+    assert!(!out.contains("support vectors on 0 cells"), "{out}");
+    let written = read_json(&model);
+    assert_eq!(written["training"]["adaptation"]["check"]["adapted"], false);
+    assert_eq!(written["config"]["classifier"]["model"], "road");
+    // eval --adapt scores with the prior, and says why once.
+    let output = travmap(&["eval", arg(&copy), "--adapt"]);
+    let out = success(output.clone());
+    assert_contains(
+        &out,
+        &[
+            "as it was (adaptation's check kept it)",
+            "travmap (filtered)",
+        ],
+    );
+    assert_eq!(
+        stderr(&output).matches("the prior is kept").count(),
+        1,
+        "{}",
+        stderr(&output)
+    );
     // Nothing the drive calls not traversable: one class.
-    let err = clean_failure(travmap(&[
+    let output = travmap(&[
         "adapt",
         arg(&sample),
         "-o",
@@ -274,16 +306,17 @@ fn drives_that_show_too_little_are_refused_with_the_reason() {
         "adapt.negative_margin=1000",
         "--set",
         "adapt.geometric_negatives=false",
-    ]));
+    ]);
+    success(output.clone());
     assert_contains(
-        &err,
+        &stderr(&output),
         &[
+            "the prior is kept",
             "every self-label says traversable",
             "adapt.negative_margin",
             "adapt.unlabelled_weight",
         ],
     );
-    assert!(!model.exists());
 }
 
 #[test]
@@ -352,14 +385,23 @@ fn eval_and_annotate_adapt_in_one_call() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
+    // On the sample the check keeps the prior: the model is named as what it is.
     let out = success(travmap(&["eval", arg(&sample), "--adapt"]));
-    assert_contains(&out, &["adapted to these drives", "travmap (filtered)"]);
+    assert_contains(
+        &out,
+        &[
+            "model: embedded road model (",
+            "as it was (adaptation's check kept it)",
+            "travmap (filtered)",
+        ],
+    );
+    assert!(!out.contains("adapted to these drives"), "{out}");
     let annotated = dir.path().join("a.mcap");
     write_output(
         "annotate",
         &sample,
         &annotated,
-        &["--frames", "0..3", "--adapt"],
+        &["--frames", "0..3", "--adapt", "--set", "adapt.check=false"],
     );
     let metadata = travmap_metadata(&std::fs::read(&annotated).unwrap());
     let adaptation: Value = serde_json::from_str(&metadata["adaptation"]).unwrap();

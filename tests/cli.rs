@@ -320,7 +320,8 @@ fn bench_tools_times_every_subcommand_as_a_child_process() {
             assert!(rate("megabytes_per_second") > 0.0, "{row}");
             let recorded_s_per_wall_s = recorded_ms / rate("wall_ms");
             assert!(
-                (rate("recorded_s_per_wall_s") - recorded_s_per_wall_s).abs() < 1e-9 * recorded_s_per_wall_s,
+                (rate("recorded_s_per_wall_s") - recorded_s_per_wall_s).abs()
+                    < 1e-9 * recorded_s_per_wall_s,
                 "{row}"
             );
             if let Some(threads) = threads {

@@ -75,7 +75,10 @@ fn bench_tools_times_decoding_a_packet_log() {
     assert_eq!(convert["frames"], 4, "{convert}");
     assert!(convert["recorded_ms"].as_f64().unwrap() > 0.0, "{convert}");
     assert!(
-        convert["one_thread"]["recorded_s_per_wall_s"].as_f64().unwrap() > 0.0,
+        convert["one_thread"]["recorded_s_per_wall_s"]
+            .as_f64()
+            .unwrap()
+            > 0.0,
         "{convert}"
     );
     assert!(rows[3]["skipped"].is_string(), "{}", rows[3]);

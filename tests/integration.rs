@@ -27,6 +27,7 @@ mod never_lose_a_byte;
 mod odometry;
 mod ouster;
 mod pcap;
+mod provenance;
 mod python;
 mod readme;
 mod real_frames;

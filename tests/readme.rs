@@ -365,7 +365,11 @@ fn without_times(value: &Value) -> Value {
             || key.ends_with("_mib")
             || matches!(
                 key,
-                "speedup" | "latency_over_floor" | "recorded_s_per_wall_s" | "roofline_ratio" | "output_bytes"
+                "speedup"
+                    | "latency_over_floor"
+                    | "recorded_s_per_wall_s"
+                    | "roofline_ratio"
+                    | "output_bytes"
             )
     };
     match value {

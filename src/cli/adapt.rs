@@ -8,7 +8,6 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use travmap_core::Config;
-use travmap_core::config::ModelChoice;
 use travmap_method::classifier::SvmModel;
 use travmap_outputs::atomic::write_atomically;
 use travmap_run::DriveRun;
@@ -49,15 +48,9 @@ pub fn adapt(args: AdaptArgs) -> Result<Outcome> {
     note_extension(model_path, "json", "a travmap model (JSON)");
     let (prior, prior_name) = args.inputs.settings.load_model(config)?;
     let started = std::time::Instant::now();
-    let (mut adapted, selections) =
-        adapted_model(&args.inputs, config, &prior, &prior_name, output)?;
+    let (adapted, selections) = adapted_model(&args.inputs, config, &prior, &prior_name, output)?;
     // The run's own time: a kept prior's file records its own training's.
     let elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
-    let replaced = adapted.replaced_prior();
-    if replaced {
-        // A configuration read back from the file chooses this model.
-        adapted.model.config.classifier.model = ModelChoice::File(model_path.to_path_buf());
-    }
     write_atomically(model_path, &adapted.model.to_json())?;
     let model = &adapted.model;
     let summary = model.training.adaptation.as_ref();

@@ -89,8 +89,12 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
         },
         drive_map_every: args.drive_map_every,
     };
-    let (model, model_name) =
-        (args.adapt).apply(&args.inputs, config, args.inputs.settings.load_model(config)?, &output)?;
+    let (model, model_name) = (args.adapt).apply(
+        &args.inputs,
+        config,
+        args.inputs.settings.load_model(config)?,
+        &output,
+    )?;
     // Images only where the model reads them; they are copied through either way.
     let selection = args.inputs.open_one(config, model.reads_images(config))?;
     let mut metadata = BTreeMap::from([

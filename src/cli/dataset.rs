@@ -47,7 +47,10 @@ pub struct DatasetArgs {
 }
 
 pub fn dataset(args: DatasetArgs) -> Result<Outcome> {
-    let config = &args.inputs.settings.load_with_model(args.model.as_deref())?;
+    let config = &args
+        .inputs
+        .settings
+        .load_with_model(args.model.as_deref())?;
     let output = args.inputs.output;
     let output_path = args.output.as_path();
     // The model predicts only when one is asked for.

@@ -12,9 +12,9 @@ use travmap_outputs::nav2_map::{Nav2Mode, gis_world_file, image_path, write_nav2
 use travmap_outputs::preflight::check_distinct_outputs;
 use travmap_outputs::rendering::encode_png;
 use travmap_run::report::tables::model_line;
-use travmap_run::scoring::remarks::FitRemedies;
 use travmap_run::scoring::evaluation::Evaluation;
 use travmap_run::scoring::metrics::Confusion;
+use travmap_run::scoring::remarks::FitRemedies;
 
 use super::{
     Inputs, ModelArg, Outcome, check_output, counted, fit_said, frame_count, model_json,

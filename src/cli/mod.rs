@@ -109,15 +109,23 @@ impl Settings {
     /// name to report it by; its errors say where it was named, when a file or a
     /// `--set` named it.
     pub fn load_model(&self, config: &Config) -> Result<(SvmModel, String)> {
-        let named_by = self.loaded.get().and_then(|(_, named_by)| named_by.as_deref());
+        let named_by = self
+            .loaded
+            .get()
+            .and_then(|(_, named_by)| named_by.as_deref());
         SvmModel::load(&config.classifier.model, config).map_err(|error| match named_by {
-            Some(named_by) => anyhow::Error::from(error).context(format!("the model of {named_by}")),
+            Some(named_by) => {
+                anyhow::Error::from(error).context(format!("the model of {named_by}"))
+            }
             None => error.into(),
         })
     }
 
     fn read(&self, model: Option<&str>) -> Result<(Config, Option<String>)> {
-        let poses = self.poses.iter().map(|poses| format!("integration.poses={poses}"));
+        let poses = self
+            .poses
+            .iter()
+            .map(|poses| format!("integration.poses={poses}"));
         let assignments: Vec<String> = self.sets.iter().cloned().chain(poses).collect();
         let sources = ConfigSources {
             file: self.config.as_deref(),

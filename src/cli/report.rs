@@ -12,8 +12,8 @@ pub use travmap_run::report::json::{
     input_json, model_json, path_text, setting_word, with_summary,
 };
 use travmap_run::scoring::evaluation::EvaluationReport;
-pub use travmap_run::scoring::remarks::{counted, fit_said, other_rule_said};
 use travmap_run::scoring::remarks::{FitRemedies, drive_notices};
+pub use travmap_run::scoring::remarks::{counted, fit_said, other_rule_said};
 
 /// Prints a `frame` record ([`travmap_run::report::json`]).
 pub fn print_json_frame(fields: serde_json::Value) -> Result<()> {

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::Args;
 use serde_json::json;
-use travmap_core::config::ModelChoice;
 use travmap_outputs::atomic::write_atomically;
 use travmap_outputs::dataset::part_files;
 use travmap_outputs::dataset::reading::{Labels, read_training_rows};
@@ -113,13 +112,11 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
         config.training.c_values.len() * config.training.gamma_values.len() * config.training.folds
             + 1;
     let bar = output.progress(searches as u64, "grid search + final fit");
-    let mut model = train_model(&set, config, &|done, total| {
+    let model = train_model(&set, config, &|done, total| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     })?;
     bar.finish();
-    // A configuration read back from the file chooses this model.
-    model.config.classifier.model = ModelChoice::File(model_path.to_path_buf());
     write_atomically(model_path, &model.to_json())?;
     if output.json {
         let doc = json!({

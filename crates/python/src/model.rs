@@ -63,7 +63,12 @@ impl Model {
             match ran {
                 Ok(()) => {
                     let remedies = FitRemedies::of(std::slice::from_ref(&*selection), false, None);
-                    sender.say(drive_notices(&evaluation.report(), &model, &config, remedies));
+                    sender.say(drive_notices(
+                        &evaluation.report(),
+                        &model,
+                        &config,
+                        remedies,
+                    ));
                     Ok(())
                 }
                 Err(Stop::NoOneListens) => Ok(()),

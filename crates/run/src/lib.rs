@@ -644,8 +644,12 @@ impl DriveRun {
     /// frame read alone: a command that needs them says so before any other work.
     pub fn has_labels(&self) -> Result<bool> {
         let frames = self.source.frames_in(&self.frames);
-        let ends: std::collections::BTreeSet<usize> =
-            frames.first().into_iter().chain(frames.last()).copied().collect();
+        let ends: std::collections::BTreeSet<usize> = frames
+            .first()
+            .into_iter()
+            .chain(frames.last())
+            .copied()
+            .collect();
         for frame in self.source.read_only(&ends) {
             if frame?.labels.is_some() {
                 return Ok(true);

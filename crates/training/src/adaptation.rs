@@ -99,7 +99,12 @@ impl Adapted {
     /// Whether the adapted model replaced the prior (false: the prior is kept, its
     /// file says why).
     pub fn replaced_prior(&self) -> bool {
-        let check = self.model.training.adaptation.as_ref().and_then(|a| a.check.as_ref());
+        let check = self
+            .model
+            .training
+            .adaptation
+            .as_ref()
+            .and_then(|a| a.check.as_ref());
         check.is_none_or(|check| check.adapted)
     }
 

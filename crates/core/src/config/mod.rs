@@ -19,9 +19,7 @@ use crate::option_files::{TEXT_MAX_BYTES, read_option_text};
 pub use adaptation::{AdaptConfig, Learner, OwnPoints, VehicleConfig};
 pub use labels::{ClassRule, LabelRule, LabelSet, parse_label_map};
 pub use registration::{PoseSource, RegistrationConfig};
-pub use sources::{
-    Assembled, AssemblyError, ConfigFile, ConfigSources, Spelling, read_toml_file,
-};
+pub use sources::{Assembled, AssemblyError, ConfigFile, ConfigSources, Spelling, read_toml_file};
 pub use training::{
     ClassWeights, Criterion, MAX_SVM_C, MAX_SVM_GAMMA, TrainingConfig, WeighInputs, check_within,
 };

@@ -72,7 +72,11 @@ impl ConfigSources<'_> {
             Some(path) => {
                 let file = read_toml_file(path)?;
                 let named = file.names_model.then(|| {
-                    format!("classifier.model = \"{}\" of {}", file.config.classifier.model, path.display())
+                    format!(
+                        "classifier.model = \"{}\" of {}",
+                        file.config.classifier.model,
+                        path.display()
+                    )
                 });
                 (file.config, named)
             }
@@ -90,8 +94,9 @@ impl ConfigSources<'_> {
         let mut model_notice = None;
         if let Some(text) = self.model {
             let named_by = model_named_by.take();
-            let chosen = ModelChoice::named(text)
-                .map_err(|problem| AssemblyError::Usage(format!("{} {text:?}: {problem}", spelling.model)))?;
+            let chosen = ModelChoice::named(text).map_err(|problem| {
+                AssemblyError::Usage(format!("{} {text:?}: {problem}", spelling.model))
+            })?;
             if let Some(named_by) = named_by.filter(|_| config.classifier.model != chosen) {
                 model_notice = Some(format!(
                     "{} {text} is used, not the {named_by}",
@@ -167,7 +172,10 @@ mod tests {
             ModelChoice::Embedded(LabelRule::Offroad)
         );
         let notice = assembled.model_notice.unwrap();
-        assert!(notice.starts_with("--model offroad is used, not the classifier.model = \"road\" of"), "{notice}");
+        assert!(
+            notice.starts_with("--model offroad is used, not the classifier.model = \"road\" of"),
+            "{notice}"
+        );
         let sets = ["classifier.model=road".to_string()];
         let assembled = ConfigSources {
             assignments: &sets,

@@ -174,14 +174,22 @@ fn constant_decision(file: &ModelFile) -> Option<String> {
     if file.support_vectors.is_empty() {
         return Some("no support vectors: a model decides by at least one (was it trained on cells of one class?)".into());
     }
-    let weights: f64 = file.dual_coefficients.iter().map(|a| f64::from(a.abs())).sum();
+    let weights: f64 = file
+        .dual_coefficients
+        .iter()
+        .map(|a| f64::from(a.abs()))
+        .sum();
     let offset = file.rho + file.threshold;
     if offset.abs() >= weights {
         return Some(format!(
             "`rho` {} and `threshold` {} outweigh every support vector together (their coefficients' magnitudes sum to {weights:.4}): every cell would be called {}",
             file.rho,
             file.threshold,
-            if offset > 0.0 { "not traversable" } else { "traversable" }
+            if offset > 0.0 {
+                "not traversable"
+            } else {
+                "traversable"
+            }
         ));
     }
     let reduced = file.reduced_set.as_ref()?;
@@ -215,8 +223,7 @@ impl SvmModel {
             ModelChoice::File(path) => {
                 let bytes = read_option_file(path, MODEL_MAX_BYTES)?;
                 let name = path.display().to_string();
-                let model =
-                    Self::from_json(&bytes, &name).map_err(|e| e.of_model_file(path))?;
+                let model = Self::from_json(&bytes, &name).map_err(|e| e.of_model_file(path))?;
                 Ok((model, name))
             }
             ModelChoice::Embedded(rule) => Ok((Self::embedded(*rule)?, embedded_name(*rule))),
@@ -440,7 +447,9 @@ impl SvmModel {
                         "prior model: features {names:?}, expected {expected_names:?}"
                     )));
                 }
-                Some(Box::new(Self::from_file(*prior, &source, &names, decisions)?))
+                Some(Box::new(Self::from_file(
+                    *prior, &source, &names, decisions,
+                )?))
             }
             None => None,
         };
@@ -525,7 +534,10 @@ impl SvmModel {
             .map(|k| k * count / taken)
             .map(|i| raw[i * d..(i + 1) * d].to_vec())
             .collect();
-        let (exact, reduced) = features.iter().map(|row| self.slow_margins(row)).unzip::<_, _, Vec<_>, Vec<_>>();
+        let (exact, reduced) = features
+            .iter()
+            .map(|row| self.slow_margins(row))
+            .unzip::<_, _, Vec<_>, Vec<_>>();
         Some(CheckCells {
             features,
             exact,
@@ -537,9 +549,12 @@ impl SvmModel {
     /// is one: the obvious sums in f64, the same on every CPU (the fast kernel's
     /// order and fused steps differ between CPUs; a file's bytes must not).
     fn slow_margins(&self, row: &[f32]) -> (f32, Option<f32>) {
-        let z: Vec<f64> = (row.iter().zip(&self.feature_mean).zip(&self.feature_inverse_std))
-            .map(|((&x, &m), &s)| f64::from((x - m) * s))
-            .collect();
+        let z: Vec<f64> = (row
+            .iter()
+            .zip(&self.feature_mean)
+            .zip(&self.feature_inverse_std))
+        .map(|((&x, &m), &s)| f64::from((x - m) * s))
+        .collect();
         let gamma = self.gamma;
         let expansion = |centres: &[f32], weights: &[f32]| -> f64 {
             (centres.chunks_exact(z.len()).zip(weights))
@@ -752,14 +767,23 @@ mod tests {
     #[test]
     fn implausible_parameters_are_refused() {
         let err = refusal(|m| m["gamma"] = serde_json::json!(5e4)).unwrap();
-        assert!(err.contains("`gamma` must be in (0.0, 10000.0], got 50000.0"), "{err}");
+        assert!(
+            err.contains("`gamma` must be in (0.0, 10000.0], got 50000.0"),
+            "{err}"
+        );
         let err = refusal(|m| m["c"] = serde_json::json!(0.0)).unwrap();
         assert!(err.contains("`c` must be in"), "{err}");
         // An offset no kernel sum can outweigh: one class for every cell.
         let err = refusal(|m| m["rho"] = serde_json::json!(1e30)).unwrap();
-        assert!(err.contains("every cell would be called not traversable"), "{err}");
+        assert!(
+            err.contains("every cell would be called not traversable"),
+            "{err}"
+        );
         let err = refusal(|m| m["reduced_set"]["bias"] = serde_json::json!(1e6)).unwrap();
-        assert!(err.contains("every cell would be called traversable"), "{err}");
+        assert!(
+            err.contains("every cell would be called traversable"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -798,11 +822,17 @@ mod tests {
             );
         }
         let err = refusal(|m| m["reduced_set"]["bias"] = serde_json::json!(0.0)).unwrap();
-        assert!(err.contains("the reduced set's margin of check cell"), "{err}");
+        assert!(
+            err.contains("the reduced set's margin of check cell"),
+            "{err}"
+        );
         let err = refusal(|m| m["dual_coefficients"][0] = serde_json::json!(0.0)).unwrap();
         assert!(err.contains("check cell 0"), "{err}");
         // A model file written before check cells existed is read as before.
-        assert_eq!(refusal(|m| m["check_cells"] = serde_json::Value::Null), None);
+        assert_eq!(
+            refusal(|m| m["check_cells"] = serde_json::Value::Null),
+            None
+        );
     }
 
     #[test]
@@ -813,11 +843,17 @@ mod tests {
             let mut scratch = model.scratch();
             for (row, slow) in cells.features.iter().zip(&cells.exact) {
                 let fast = model.exact_decision_value(row, &mut scratch) - model.threshold;
-                assert!((fast - slow).abs() < 1e-3, "{rule:?}: fast {fast}, slow {slow}");
+                assert!(
+                    (fast - slow).abs() < 1e-3,
+                    "{rule:?}: fast {fast}, slow {slow}"
+                );
             }
             for (row, slow) in cells.features.iter().zip(&cells.reduced) {
                 let fast = model.decision_value(row, &mut scratch) - model.threshold;
-                assert!((fast - slow).abs() < 1e-3, "{rule:?}: fast {fast}, slow {slow}");
+                assert!(
+                    (fast - slow).abs() < 1e-3,
+                    "{rule:?}: fast {fast}, slow {slow}"
+                );
             }
         }
     }

@@ -223,7 +223,11 @@ pub fn check_dataset_folder(dir: &Path) -> Result<()> {
             others.len(),
             if others.len() == 1 { "file" } else { "files" },
             shown.join(", "),
-            if others.len() > shown.len() { ", ..." } else { "" },
+            if others.len() > shown.len() {
+                ", ..."
+            } else {
+                ""
+            },
             if others.len() == 1 { "it" } else { "them" },
             if others.len() == 1 { "it" } else { "them" },
         ),
@@ -487,7 +491,10 @@ impl DatasetWriter {
                 .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
                 .collect();
             let manifest = serde_json::json!({"format": FORMAT, "parts": names});
-            write_atomically(&self.path.join(MANIFEST_NAME), format!("{manifest}\n").as_bytes())?;
+            write_atomically(
+                &self.path.join(MANIFEST_NAME),
+                format!("{manifest}\n").as_bytes(),
+            )?;
             // An earlier dataset's parts this one did not replace.
             for stale in earlier.iter().filter(|path| !files.contains(path)) {
                 match std::fs::remove_file(stale) {

@@ -33,7 +33,11 @@ pub struct FitRemedies {
 
 impl FitRemedies {
     /// The remedies of a command over `drives` (`adapt_flag`: it has `--adapt`).
-    pub fn of(drives: &[crate::DriveRun], adapt_flag: bool, training_frames: Option<usize>) -> Self {
+    pub fn of(
+        drives: &[crate::DriveRun],
+        adapt_flag: bool,
+        training_frames: Option<usize>,
+    ) -> Self {
         Self {
             adapt_flag,
             drives_move: drives.iter().any(crate::DriveRun::moves),
@@ -109,8 +113,12 @@ pub fn poor_fit_said(fit: &Fit, model: &SvmModel, remedies: FitRemedies) -> Opti
         None => {}
     }
     let other = match model.config.ground_truth.rule {
-        LabelRule::Road => "the offroad model (--model offroad) if the robot may drive on grass, dirt or low vegetation: it calls them traversable, where this model's road rule does not",
-        LabelRule::Offroad => "the road model (--model road) if only a car's road counts: it calls grass, dirt and low vegetation not traversable, where this model's rule does not",
+        LabelRule::Road => {
+            "the offroad model (--model offroad) if the robot may drive on grass, dirt or low vegetation: it calls them traversable, where this model's road rule does not"
+        }
+        LabelRule::Offroad => {
+            "the road model (--model road) if only a car's road counts: it calls grass, dirt and low vegetation not traversable, where this model's rule does not"
+        }
     };
     remedies_said.push(other.to_string());
     if trained_on.is_none() {
