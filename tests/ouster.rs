@@ -133,12 +133,14 @@ fn the_fixture_decodes_to_the_sdks_points_and_is_a_drive() {
     let truth = points_file(&fixtures.join("os1-64-1024x10.points"));
     assert_sdks_points(&bag, InputFormat::Rosbag2, &metadata, &truth);
     // A drive: three frames, posed by /tf (the vehicle moves 0.5 m a frame), with no
-    // notice.
+    // notice of how it was read (an indoor Ouster scan fits the road model poorly,
+    // which is said).
     let output = crate::common::travmap(&["run", bag.to_str().unwrap(), "--json"]);
+    let said = crate::common::stderr(&output);
     assert!(
-        crate::common::stderr(&output).is_empty(),
-        "{}",
-        crate::common::stderr(&output)
+        said.lines()
+            .all(|line| line.starts_with("notice: these drives fit the model poorly")),
+        "{said}"
     );
     let (frames, summary) = crate::common::json_records(&crate::common::success(output));
     assert_eq!(frames.len(), 3, "{summary}");

@@ -43,6 +43,9 @@ fn edited_model(dir: &Path, name: &str, edit: impl Fn(&mut Value)) -> std::path:
     path
 }
 
+/// A change to a model file's JSON.
+type Edit = dyn Fn(&mut Value);
+
 /// Regression (item 1): a gamma of 1e300, no support vectors, and a rho that no
 /// kernel sum outweighs were used with exit 0.
 #[test]
@@ -51,7 +54,7 @@ fn broken_model_files_are_refused_naming_the_file_and_the_fault() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let cases: [(&str, &dyn Fn(&mut Value), &str); 4] = [
+    let cases: [(&str, &Edit, &str); 4] = [
         (
             "gamma.json",
             &|m| m["gamma"] = 1e300.into(),

@@ -5,6 +5,7 @@
 //! ([`stopwatch`]) and the run's [`temporaries`]. It knows no file format and no stage of the method.
 
 pub mod config;
+pub mod config_sources;
 pub mod error;
 pub mod frame;
 pub mod geometry;

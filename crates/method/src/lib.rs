@@ -8,6 +8,7 @@
 //! file, no MCAP, no CLI; this crate depends on `travmap-core` alone.
 
 pub mod appearance;
+pub mod asking;
 pub mod classifier;
 pub mod feature_groups;
 pub mod features;

@@ -10,7 +10,7 @@ use numpy::{PyArray1, PyArray2, PyArray3};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyRange, PyRangeMethods};
 use travmap_core::Config;
-use travmap_core::config::{AssemblyError, ConfigSources, Spelling};
+use travmap_core::config_sources::{AssemblyError, ConfigSources, Spelling};
 use travmap_core::frame::Frame as ReadFrame;
 use travmap_io::{
     LidarCalibrations, LidarFrames, LogOptions, MergedTopics, SourceOptions, WORLD_FRAME,

@@ -8,7 +8,6 @@
 mod adaptation;
 mod labels;
 mod registration;
-mod sources;
 mod training;
 
 use serde::{Deserialize, Serialize};
@@ -19,7 +18,6 @@ use crate::option_files::{TEXT_MAX_BYTES, read_option_text};
 pub use adaptation::{AdaptConfig, Learner, OwnPoints, VehicleConfig};
 pub use labels::{ClassRule, LabelRule, LabelSet, parse_label_map};
 pub use registration::{PoseSource, RegistrationConfig};
-pub use sources::{Assembled, AssemblyError, ConfigFile, ConfigSources, Spelling, read_toml_file};
 pub use training::{
     ClassWeights, Criterion, MAX_SVM_C, MAX_SVM_GAMMA, TrainingConfig, WeighInputs, check_within,
 };
@@ -698,11 +696,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("c.toml");
         std::fs::write(&path, "[grid]\nsize_m = 20.0\n").unwrap();
-        let config = read_toml_file(&path).unwrap().config;
+        let config = crate::config_sources::read_toml_file(&path).unwrap().config;
         assert_eq!(config.grid.size_m, 20.0);
         assert_eq!(config.grid.cell_size_m, 0.4);
         std::fs::write(&path, "[grid]\nbogus = 1\n").unwrap();
-        assert!(read_toml_file(&path).is_err());
+        assert!(crate::config_sources::read_toml_file(&path).is_err());
     }
 
     #[test]

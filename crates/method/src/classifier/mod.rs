@@ -159,6 +159,19 @@ impl ReducedSet {
     }
 }
 
+/// Cells a model file decides as it did when written (its `check_cells`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CheckCells {
+    /// Raw (unstandardised) feature rows, one per cell.
+    features: Vec<Vec<f32>>,
+    /// The margin (decision value minus threshold) over every support vector, per cell.
+    exact: Vec<f32>,
+    /// The margin by the reduced set, per cell (empty without one).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    reduced: Vec<f32>,
+}
+
 /// Reusable buffers of prediction, one per thread.
 #[derive(Default)]
 pub struct PredictionScratch {
@@ -202,6 +215,11 @@ pub struct SvmModel {
     /// The reduced set stands for this model's margin plus the prior's (fitted to
     /// their sum), so the prior is not asked again where it is used.
     pub reduced_set_includes_prior: bool,
+    /// The check cells of the file this model was read from (None for a model made
+    /// here): written again as they were, so that a model read and written keeps its
+    /// bytes (its check cells' features, recomputed from standardised support
+    /// vectors, could differ in the last bit).
+    pub(crate) check_cells: Option<CheckCells>,
 }
 
 impl SvmModel {
@@ -237,6 +255,7 @@ impl SvmModel {
             prior: None,
             prior_weight: 0.0,
             reduced_set_includes_prior: false,
+            check_cells: None,
         }
     }
 

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use super::{ReducedSet, SvmModel, TrainingSummary, appearance_feature_names};
+use super::{CheckCells, ReducedSet, SvmModel, TrainingSummary, appearance_feature_names};
 use crate::features::feature_names;
 use travmap_core::config::{
     Config, FeatureGroup, LabelRule, MAX_SVM_C, MAX_SVM_GAMMA, ModelChoice, check_within,
@@ -71,19 +71,6 @@ struct ModelFile {
     /// decides them otherwise, and is refused (absent in files from before it existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     check_cells: Option<CheckCells>,
-}
-
-/// Cells a model file decides as it did when written ([`ModelFile::check_cells`]).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct CheckCells {
-    /// Raw (unstandardised) feature rows, one per cell.
-    features: Vec<Vec<f32>>,
-    /// The margin (decision value minus threshold) over every support vector, per cell.
-    exact: Vec<f32>,
-    /// The margin by the reduced set, per cell (empty without one).
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    reduced: Vec<f32>,
 }
 
 /// Cells a model file stores to check it by ([`CheckCells`]): its support vectors
@@ -517,12 +504,13 @@ impl SvmModel {
         if let (Some(cells), Decisions::Checked) = (&file.check_cells, decisions) {
             model.decides_as_written(cells).map_err(fail)?;
         }
+        model.check_cells = file.check_cells;
         Ok(model)
     }
 
     /// The cells a file of this model stores to check it by, and their margins
     /// ([`CheckCells`]); none without support vectors.
-    fn check_cells(&self) -> Option<CheckCells> {
+    fn new_check_cells(&self) -> Option<CheckCells> {
         let count = self.support_vector_count();
         if count == 0 {
             return None;
@@ -642,7 +630,7 @@ impl SvmModel {
             prior: self.prior.as_ref().map(|p| Box::new(p.to_file())),
             prior_weight: self.prior_weight,
             reduced_set_includes_prior: self.reduced_set_includes_prior,
-            check_cells: self.check_cells(),
+            check_cells: self.check_cells.clone().or_else(|| self.new_check_cells()),
         }
     }
 
@@ -656,10 +644,11 @@ impl SvmModel {
     pub fn sha256_hex(&self) -> String {
         fn untimed(file: &mut ModelFile) {
             file.training.seconds = 0.0;
-            for inner in [&mut file.hybrid, &mut file.fallback, &mut file.prior] {
-                if let Some(inner) = inner {
-                    untimed(inner);
-                }
+            for inner in [&mut file.hybrid, &mut file.fallback, &mut file.prior]
+                .into_iter()
+                .flatten()
+            {
+                untimed(inner);
             }
         }
         let mut file = self.to_file();
@@ -839,7 +828,7 @@ mod tests {
     fn the_fast_kernel_gives_the_check_cells_slow_margins() {
         for rule in LabelRule::ALL {
             let model = SvmModel::embedded(rule).unwrap();
-            let cells = model.check_cells().unwrap();
+            let cells = model.new_check_cells().unwrap();
             let mut scratch = model.scratch();
             for (row, slow) in cells.features.iter().zip(&cells.exact) {
                 let fast = model.exact_decision_value(row, &mut scratch) - model.threshold;

@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{Config, ModelChoice};
+use crate::config::{Config, ModelChoice};
 use crate::error::Error;
 use crate::option_files::{TEXT_MAX_BYTES, read_option_text};
 
