@@ -19,6 +19,7 @@ mod foxglove;
 mod golden;
 mod hesai;
 mod json_output;
+mod labelling;
 mod mcap;
 mod multi_lidar;
 mod nav2;

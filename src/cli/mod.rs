@@ -12,6 +12,7 @@ pub mod convert;
 pub mod crossval;
 pub mod dataset;
 pub mod eval;
+pub mod label;
 pub mod map;
 pub mod odometry;
 pub mod render;

@@ -6,17 +6,23 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::Args;
 use serde_json::json;
+use travmap_core::config::ModelChoice;
+use travmap_method::classifier::SvmModel;
 use travmap_outputs::atomic::write_atomically;
 use travmap_outputs::dataset::part_files;
 use travmap_outputs::dataset::reading::{Labels, read_training_rows};
+use travmap_outputs::labels::read_labels;
 use travmap_run::Fingerprints;
 use travmap_run::report::tables::training_text;
+use travmap_run::scoring::evaluation::{Fit, score_drives};
+use travmap_run::scoring::remarks::taught_fit_said;
 use travmap_training::crossval::collect_training_set;
+use travmap_training::teaching::teach;
 use travmap_training::{TrainingSet, train as train_model};
 
 use super::{
     Inputs, Outcome, check_output, frame_count, input_json, model_json, note_extension, outcome,
-    path_text, print_json_summary,
+    path_text, print_json_summary, usage,
 };
 
 /// Train the SVM (grid search over C and gamma, spatially-blocked CV).
@@ -35,6 +41,13 @@ pub struct TrainArgs {
     /// training sets).
     #[arg(long, value_enum, default_value_t = LabelArg::GroundTruth)]
     labels: LabelArg,
+    /// Learn the given cells (a labels file of `travmap label`, say) together with
+    /// this model's support vectors, which stand for what it learnt: `road`,
+    /// `offroad` or a model file. The cells weigh training.taught_weight each, C and
+    /// gamma are the prior's, and the result is checked against the prior on the
+    /// given cells, held out a block of the world at a time.
+    #[arg(long, value_name = "MODEL")]
+    prior: Option<String>,
 }
 
 /// `--labels`.
@@ -48,7 +61,21 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
     let config = &args.inputs.settings.load()?;
     let output = args.inputs.output;
     let model_path = args.output.as_path();
-    check_output(model_path, &args.inputs.files(None))?;
+    let prior_choice = match args.prior.as_deref().map(ModelChoice::named) {
+        Some(Ok(choice)) => Some(choice),
+        Some(Err(problem)) => return Err(usage(format!("--prior: {problem}"))),
+        None => None,
+    };
+    let prior_file = match &prior_choice {
+        Some(ModelChoice::File(path)) => Some(path.as_path()),
+        _ => None,
+    };
+    check_output(model_path, &args.inputs.files(prior_file))?;
+    // The prior, checked against the cells' settings before they are read.
+    let prior = match &prior_choice {
+        Some(choice) => Some(SvmModel::load(choice, config)?),
+        None => None,
+    };
     note_extension(model_path, "json", "a travmap model (JSON)");
     // Cell datasets (`travmap dataset`: a file, or a folder of part files) join the
     // cells of the drives given.
@@ -88,7 +115,17 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
         set
     };
     let mut inputs: Vec<serde_json::Value> = selections.iter().map(input_json).collect();
+    // Labels files (`travmap label`) name the drives they were asked on.
+    let mut labelled_drives: Vec<PathBuf> = Vec::new();
     for path in &datasets {
+        if let Ok((_, record)) = read_labels(path) {
+            for at in record.asked {
+                let drive = PathBuf::from(at.source);
+                if drive.exists() && !labelled_drives.contains(&drive) {
+                    labelled_drives.push(drive);
+                }
+            }
+        }
         let rows = read_training_rows(path, config, &mut set, labels)?;
         inputs.push(json!({"path": path_text(path), "frames": null, "cells": rows}));
         let kind = match labels {
@@ -108,15 +145,48 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
                 .join(", ")
         );
     }
-    let searches =
-        config.training.c_values.len() * config.training.gamma_values.len() * config.training.folds
-            + 1;
-    let bar = output.progress(searches as u64, "grid search + final fit");
-    let model = train_model(&set, config, &|done, total| {
-        bar.set_length(total as u64);
-        bar.set_position(done as u64);
-    })?;
-    bar.finish();
+    let (model, taught) = match &prior {
+        Some((prior, prior_name)) => {
+            let bar = output.progress(4, "teaching: the check's folds, then the model");
+            let (model, check) = teach(&set, prior, config, &|done, total| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            })?;
+            bar.finish();
+            (model, Some((check, prior, prior_name)))
+        }
+        None => {
+            let searches = config.training.c_values.len()
+                * config.training.gamma_values.len()
+                * config.training.folds
+                + 1;
+            let bar = output.progress(searches as u64, "grid search + final fit");
+            let model = train_model(&set, config, &|done, total| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            })?;
+            bar.finish();
+            (model, None)
+        }
+    };
+    // The drives a labels file's cells were asked on, run by both models: how each
+    // fits them.
+    let labelled_fit = match (&prior, labelled_drives.is_empty()) {
+        (Some((prior, _)), false) => {
+            let options = args.inputs.source_options(config)?;
+            let mut drives = args
+                .inputs
+                .open_paths(&labelled_drives, &options, config, false)?;
+            for drive in &mut drives {
+                drive.source.set_read_labels(false);
+            }
+            let mut fit = |model: &SvmModel| -> Result<Fit> {
+                Ok(score_drives(&mut drives, config, model, || {})?.report.fit)
+            };
+            Some((fit(&model)?, fit(prior)?))
+        }
+        _ => None,
+    };
     write_atomically(model_path, &model.to_json())?;
     if output.json {
         let doc = json!({
@@ -141,10 +211,19 @@ pub fn train(args: TrainArgs) -> Result<Outcome> {
                 "gamma": h.gamma,
                 "search": h.training.search,
             })),
+            "prior": taught.as_ref().map(|(_, prior, name)| model_json(prior, name)),
+            "check": taught.as_ref().map(|(check, _, _)| check),
+            "fit": labelled_fit.as_ref().map(|(taught, prior)| json!({"taught": taught, "prior": prior})),
         });
         print_json_summary("train", &selections, doc)?;
     } else if !output.quiet {
         print!("{}", training_text(&model, set.len(), config));
+        if let Some((check, _, prior_name)) = &taught {
+            println!("taught {prior_name}: {}", check.said());
+        }
+        if let Some((taught, prior)) = &labelled_fit {
+            println!("{}", taught_fit_said(taught, prior));
+        }
         println!("wrote {}", model_path.display());
     }
     Ok(outcome(&selections))

@@ -9,6 +9,7 @@ pub mod atomic;
 pub mod conversion;
 pub mod dataset;
 pub mod drive_map;
+pub mod labels;
 pub mod nav2_map;
 pub mod preflight;
 pub mod rendering;

@@ -5,6 +5,7 @@
 //! the one place that map is fed; [`opening`] opens a drive as every front end does. Every command goes through here, the
 //! benchmark included ([`DriveRun::load`], [`DriveRun::run_loaded`]).
 
+pub mod labelling;
 pub mod opening;
 pub mod report;
 pub mod scoring;

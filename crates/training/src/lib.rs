@@ -11,6 +11,7 @@ mod columns;
 pub mod crossval;
 mod reduced_set;
 pub mod smo;
+pub mod teaching;
 mod working_set;
 
 use rayon::prelude::*;

@@ -554,6 +554,12 @@ impl Config {
         }
         positive("training.grid_size_m", self.training.grid_size_m)?;
         positive("training.block_size_m", self.training.block_size_m)?;
+        check_within(
+            "training.taught_weight",
+            self.training.taught_weight,
+            (0.0, 1e4),
+        )
+        .map_err(Error::Config)?;
         check_within("training.tolerance", self.training.tolerance, (1e-9, 1.0))
             .map_err(Error::Config)?;
         // The training grid is the grid's size set to training.grid_size_m: each is

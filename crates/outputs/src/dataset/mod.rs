@@ -258,6 +258,8 @@ pub struct DatasetWriter {
     columns: RowGroupColumns,
     appearance_len: usize,
     summary: DatasetSummary,
+    /// Key-value metadata each file gets at its end, besides travmap's own.
+    extra_metadata: Vec<KeyValue>,
 }
 
 /// What a dataset holds, for the summary.
@@ -313,6 +315,7 @@ impl DatasetWriter {
             columns: RowGroupColumns::new(features.len(), appearance.len()),
             appearance_len: appearance.len(),
             summary: DatasetSummary::default(),
+            extra_metadata: Vec::new(),
         };
         // A single file is created before any work, so that an output that cannot
         // be written is said at once.
@@ -345,8 +348,43 @@ impl DatasetWriter {
         Ok(self.file.as_mut().expect("opened above"))
     }
 
-    /// Appends the predictable cells of one frame.
+    /// Adds `key` = `value` to the metadata of every file written from here on.
+    pub fn append_metadata(&mut self, key: &str, value: String) {
+        self.extra_metadata.push(KeyValue::new(key.into(), value));
+    }
+
+    /// Appends the predictable cells of one frame, each with its ground truth.
     pub fn push_frame(&mut self, source: &str, result: &FrameResult) -> Result<()> {
+        let truth = |cell: usize| class_of(&result.ground_truth, cell);
+        let cells = (0..result.layout.cell_count()).filter(|&i| result.features.predictable[i]);
+        self.push_rows(source, result, cells.map(|cell| (cell, truth(cell))))
+    }
+
+    /// Appends cells of one frame a person labelled (`travmap label`): each with its
+    /// label as its ground truth.
+    pub fn push_labelled(
+        &mut self,
+        source: &str,
+        result: &FrameResult,
+        labels: &[(usize, bool)],
+    ) -> Result<()> {
+        let cells = labels
+            .iter()
+            .filter(|(cell, _)| result.features.predictable[*cell]);
+        self.push_rows(
+            source,
+            result,
+            cells.map(|&(cell, label)| (cell, Some(label))),
+        )
+    }
+
+    /// Appends rows of one frame: its `cells`, each with its ground truth.
+    fn push_rows(
+        &mut self,
+        source: &str,
+        result: &FrameResult,
+        cells: impl Iterator<Item = (usize, Option<bool>)>,
+    ) -> Result<()> {
         if result.features.dimension != self.columns.features.len() {
             return Err(Error::Dataset {
                 path: self.path.clone(),
@@ -361,20 +399,13 @@ impl DatasetWriter {
             file.labelled_scans.push(sha.clone());
         }
         let source = ByteArray::from(source);
-        let classes = |grid: &Option<Vec<CellClass>>, cell: usize| {
-            grid.as_ref().and_then(|g| match g[cell] {
-                CellClass::Traversable => Some(true),
-                CellClass::NonTraversable => Some(false),
-                CellClass::Unknown => None,
-            })
-        };
         // A frame adds at most a row per cell.
         self.columns
             .reserve(ROW_GROUP_ROWS - 1 + result.layout.cell_count());
         let c = &mut self.columns;
         let summary = &mut self.summary;
         summary.frames += 1;
-        for cell in (0..result.layout.cell_count()).filter(|&i| result.features.predictable[i]) {
+        for (cell, truth) in cells {
             let (col, row) = result.layout.col_row(cell);
             let [x_m, y_m] = result.layout.cell_centre_in_world(cell);
             c.source.push(source.clone());
@@ -398,11 +429,10 @@ impl DatasetWriter {
                 }
                 _ => c.appearance_defined.push(0),
             }
-            let truth = classes(&result.ground_truth, cell);
             summary.labelled_rows += truth.is_some() as u64;
             summary.rows += 1;
             c.ground_truth.push(truth);
-            c.predicted.push(classes(&result.filtered, cell));
+            c.predicted.push(class_of(&result.filtered, cell));
             let footprint = result.footprint.as_ref().is_some_and(|(f, _)| f[cell]);
             let pseudo = result.self_labels.as_ref().and_then(|l| l[cell]);
             summary.footprint_rows += footprint as u64;
@@ -450,6 +480,9 @@ impl DatasetWriter {
         let Some(mut file) = self.file.take() else {
             return Ok(());
         };
+        for pair in &self.extra_metadata {
+            file.writer.append_key_value_metadata(pair.clone());
+        }
         if !file.labelled_scans.is_empty() {
             let scans = serde_json::to_string(&file.labelled_scans).expect("strings serialise");
             (file.writer).append_key_value_metadata(KeyValue::new(SCANS_KEY.into(), scans));
@@ -471,10 +504,15 @@ impl DatasetWriter {
     /// Writes the last row group and footer, then renames the file (or every part)
     /// into place, removing a folder's parts of an earlier dataset; `inputs` and
     /// their `skipped` frames say why, when no frame was read.
-    pub fn finish(mut self, inputs: &str, skipped: &[Skip]) -> Result<DatasetSummary> {
+    pub fn finish(self, inputs: &str, skipped: &[Skip]) -> Result<DatasetSummary> {
         if self.summary.frames == 0 {
             return Err(nothing_read(&self.path, inputs.to_string(), skipped));
         }
+        self.finish_even_empty()
+    }
+
+    /// [`Self::finish`], a table of no rows included (a labels file of skips alone).
+    pub fn finish_even_empty(mut self) -> Result<DatasetSummary> {
         self.close_file()?;
         let files: Vec<PathBuf> = self
             .written
@@ -508,6 +546,16 @@ impl DatasetWriter {
         self.summary.files = files;
         Ok(self.summary)
     }
+}
+
+/// A grid's class of `cell` as a nullable boolean (traversable), None where it is
+/// unknown or there is no grid.
+fn class_of(grid: &Option<Vec<CellClass>>, cell: usize) -> Option<bool> {
+    grid.as_ref().and_then(|g| match g[cell] {
+        CellClass::Traversable => Some(true),
+        CellClass::NonTraversable => Some(false),
+        CellClass::Unknown => None,
+    })
 }
 
 /// The settings that decide a cell's features and label: a dataset made with

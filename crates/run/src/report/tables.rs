@@ -235,13 +235,26 @@ pub fn training_text(model: &SvmModel, cells: usize, config: &Config) -> String 
             training.samples
         );
     }
-    let _ = writeln!(
-        out,
-        "grid search (spatially-blocked {}-fold CV, cells before filtering; by {} (training.criterion), class weights {} (training.class_weights)):",
-        config.training.folds,
-        setting_word(&config.training.criterion),
-        setting_word(&config.training.class_weights)
-    );
+    // C and gamma given (a prior's, adaptation's): no search to report.
+    if training.search.is_empty() {
+        let _ = writeln!(
+            out,
+            "C {} gamma {} as given (no grid search): {} support vectors, {} solver iterations, {:.1} s",
+            model.c,
+            model.gamma,
+            model.support_vector_count(),
+            training.solver_iterations,
+            training.seconds
+        );
+    } else {
+        let _ = writeln!(
+            out,
+            "grid search (spatially-blocked {}-fold CV, cells before filtering; by {} (training.criterion), class weights {} (training.class_weights)):",
+            config.training.folds,
+            setting_word(&config.training.criterion),
+            setting_word(&config.training.class_weights)
+        );
+    }
     for r in &training.search {
         let _ = writeln!(
             out,
@@ -254,7 +267,7 @@ pub fn training_text(model: &SvmModel, cells: usize, config: &Config) -> String 
     }
     let best = (training.search.iter()).find(|r| r.c == model.c && r.gamma == model.gamma);
     let (accuracy, miou) = best.map_or((0.0, 0.0), |b| (b.accuracy, b.miou));
-    let _ = writeln!(
+    let _ = (!training.search.is_empty()).then(|| writeln!(
         out,
         "chosen C {} gamma {} (CV accuracy {:.1} %, mIoU {:.1} %): {} support vectors, {} solver iterations, {:.1} s",
         model.c,
@@ -264,7 +277,7 @@ pub fn training_text(model: &SvmModel, cells: usize, config: &Config) -> String 
         model.support_vector_count(),
         training.solver_iterations,
         training.seconds
-    );
+    ));
     let _ = match &model.hybrid {
         Some(h) => writeln!(
             out,

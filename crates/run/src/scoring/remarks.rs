@@ -128,6 +128,21 @@ pub fn poor_fit_said(fit: &Fit, model: &SvmModel, remedies: FitRemedies) -> Opti
     Some(said)
 }
 
+/// How a taught model fits the drives its cells were labelled on, beside its prior,
+/// in a line.
+pub fn taught_fit_said(taught: &Fit, prior: &Fit) -> String {
+    format!(
+        "fit on the labelled drives: {:.1} % of {} predicted cells within the taught model's margin, {:.1} % within the prior's ({})",
+        100.0 * taught.unsure_share,
+        taught.cells,
+        100.0 * prior.unsure_share,
+        match taught.unsure_share < prior.unsure_share {
+            true => "the taught model fits them better",
+            false => "the taught model fits them no better",
+        }
+    )
+}
+
 /// `a; b; or c` (the items hold commas of their own).
 fn or_list(items: &[String]) -> String {
     match items {
