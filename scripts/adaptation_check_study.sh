@@ -30,13 +30,14 @@ row() {
         jq -r '(.scores.miou * 1000 | round / 10 | tostring) + "\t"
             + (.model.adaptation | (if .adapted then "adapted" else "kept" end) + "\t"
             + (if .prior_miou == null then (if (.why | test("guessed")) then "footprint guessed" else "too little evidence" end)
-               else "\(.prior_miou * 1000 | round / 10) / \(.adapted_miou * 1000 | round / 10)" end))')
-    IFS=$'\t' read -r adapted verdict check <<<"$after"
-    echo "| $(basename "$prior" .json) | $name | $rule | $before | $adapted | $verdict | $check |"
+               else "\(.prior_miou * 1000 | round / 10) / \(.adapted_miou * 1000 | round / 10)" end)
+            + "\t" + (if .confident_unknown > 0 then "\(.flipped_unknown * 1000 / .confident_unknown | round / 10) % of \(.confident_unknown)" else "" end))')
+    IFS=$'\t' read -r adapted verdict check flipped <<<"$after"
+    echo "| $(basename "$prior" .json) | $name | $rule | $before | $adapted | $verdict | $check | $flipped |"
 }
 
-echo "| prior | set | rule | prior mIoU | --adapt mIoU | check | evidence mIoU, prior / adapted |"
-echo "|---|---|---|---|---|---|---|"
+echo "| prior | set | rule | prior mIoU | --adapt mIoU | check | evidence mIoU, prior / adapted | the prior's sure calls off the evidence, turned |"
+echo "|---|---|---|---|---|---|---|---|"
 # The embedded models on every labelled set, each under its own rule.
 SETS="kitti-00 $D/semantickitti-00/sequences/00 semantickitti
 kitti-00-more $D/semantickitti-00-more/sequences/00 semantickitti

@@ -48,6 +48,16 @@ const CRATES: &[(&str, &str, &[&str])] = &[
         ],
     ),
     (
+        "crates/label",
+        "travmap-label",
+        &[
+            "travmap-core",
+            "travmap-method",
+            "travmap-run",
+            "travmap-outputs",
+        ],
+    ),
+    (
         "crates/bench",
         "travmap-bench",
         &["travmap-core", "travmap-run"],
@@ -83,6 +93,7 @@ const CRATES: &[(&str, &str, &[&str])] = &[
             "travmap-run",
             "travmap-training",
             "travmap-outputs",
+            "travmap-label",
             "travmap-bench",
         ],
     ),

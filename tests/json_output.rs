@@ -54,6 +54,7 @@ fn every_command_prints_json_that_matches_its_schema() {
     let (annotated, picture, converted) = (out("a.mcap"), out("f.png"), out("c.mcap"));
     let trajectory = out("poses.txt");
     let adapted = out("adapted.json");
+    let (labels, taught) = (out("labels.parquet"), out("taught.json"));
     let (map_picture, map_cells, nav2) = (out("map.png"), out("map.parquet"), out("site.yaml"));
     let quick = ["training.c_values=[10]", "training.gamma_values=[0.05]"];
     let quick_crossval = [&quick[..], &["training.folds=3"]].concat();
@@ -76,6 +77,22 @@ fn every_command_prints_json_that_matches_its_schema() {
             with_settings(&["crossval", seq, "--frames", "0..3"], &quick_crossval),
         ),
         ("dataset", vec!["dataset", &drive, "-o", &cells]),
+        (
+            "label",
+            vec![
+                "label",
+                seq,
+                "-o",
+                &labels,
+                "--ask",
+                "20",
+                "--answers-from-ground-truth",
+            ],
+        ),
+        (
+            "train",
+            vec!["train", &labels, "--prior", "road", "-o", &taught],
+        ),
         ("adapt", vec!["adapt", seq, "-o", &adapted]),
         ("annotate", vec!["annotate", &drive, "-o", &annotated]),
         (

@@ -20,6 +20,7 @@ use crate::views::{Colouring, bird_eye, cell_in_image, frame_view};
 const PAGE: &str = include_str!("page/index.html");
 const SCRIPT: &str = include_str!("page/app.js");
 const STYLE: &str = include_str!("page/style.css");
+const ICON: &str = include_str!("page/icon.svg");
 
 /// Answers are a few dozen bytes: a larger body is refused unread.
 const MAX_BODY_BYTES: u64 = 4096;
@@ -230,6 +231,7 @@ fn route(
             "text/javascript; charset=utf-8",
             SCRIPT.as_bytes().to_vec(),
         ),
+        (Method::Get, ["icon.svg"]) => bytes(200, "image/svg+xml", ICON.as_bytes().to_vec()),
         (Method::Get, ["style.css"]) => {
             bytes(200, "text/css; charset=utf-8", STYLE.as_bytes().to_vec())
         }

@@ -360,11 +360,14 @@ pub fn adapt(
         blocks: 0,
         prior_miou: None,
         adapted_miou: None,
+        confident_unknown: 0,
+        flipped_unknown: 0,
     };
     let check = match (too_little, a.check) {
         (Some(why), _) => unchecked(false, why),
         (None, true) => check_against_prior(
             &labelled,
+            &unknown,
             counts.straight_path_frames == counts.frames,
             &|cells| fit(&to_set(cells, &unknown), false),
             prior,
@@ -428,6 +431,11 @@ const MIN_CHECK_CELLS: usize = 30;
 /// How much better (mIoU on the held-out evidence) the adapted model must be than
 /// its prior to replace it: less is within what a few hundred cells can tell apart.
 const MIN_CHECK_GAIN: f64 = 0.01;
+/// A margin the prior is sure of (the fit report's).
+const CONFIDENT_MARGIN: f32 = 1.0;
+/// The share of the prior's sure calls on cells the drive says nothing of that the
+/// adapted model may turn: more, and it learnt something the evidence cannot check.
+const MAX_FLIPPED_SHARE: f64 = 1.0;
 
 /// Whether the model `fit` makes of `labelled` may replace `prior`. The evidence is
 /// what the drive shows without the prior: the cells the vehicle drove over
@@ -439,6 +447,7 @@ const MIN_CHECK_GAIN: f64 = 0.01;
 /// two apart, keeps the prior.
 fn check_against_prior(
     labelled: &[DriveCell],
+    unknown: &[DriveCell],
     path_guessed: bool,
     fit: &dyn Fn(&[DriveCell]) -> Result<SvmModel>,
     prior: &SvmModel,
@@ -462,6 +471,8 @@ fn check_against_prior(
         blocks: blocks.len(),
         prior_miou: None,
         adapted_miou: None,
+        confident_unknown: 0,
+        flipped_unknown: 0,
     };
     let held = format!(
         "{footprint_samples} samples of cells driven over and {clearance_samples} over the clearance, a world cell once for every frame that saw it, in {} blocks of {CHECK_BLOCK_M} m",
@@ -484,6 +495,15 @@ fn check_against_prior(
         .map(|(i, b)| (*b, i % CHECK_FOLDS))
         .collect();
     let fold = |cell: &DriveCell| fold_of.get(&block(cell)).copied();
+    // An unknown cell in a block without evidence is held out with the fold its
+    // block's coordinates deal it to.
+    let unknown_fold = |cell: &DriveCell| {
+        fold(cell).unwrap_or_else(|| {
+            let [x, y] = block(cell);
+            (x.wrapping_mul(73_856_093) ^ y.wrapping_mul(19_349_663)).rem_euclid(CHECK_FOLDS as i64)
+                as usize
+        })
+    };
     let (mut by_prior, mut by_adapted) = (Confusion::default(), Confusion::default());
     for k in 0..CHECK_FOLDS {
         let fitted: Vec<DriveCell> = (labelled.iter())
@@ -502,10 +522,28 @@ fn check_against_prior(
             by_prior.add(class_of(margin(prior, &cell.features) > 0.0), truth);
             by_adapted.add(class_of(margin(&adapted, &cell.features) > 0.0), truth);
         }
+        // What the drive cannot show: the cells it says nothing of, where the prior
+        // was sure. A footprint of road alone teaches that off the road is not
+        // traversable, which the evidence cannot see.
+        for cell in unknown.iter().filter(|c| unknown_fold(c) == k) {
+            let by_prior = margin(prior, &cell.features);
+            if by_prior.abs() < CONFIDENT_MARGIN {
+                continue;
+            }
+            check.confident_unknown += 1;
+            let by_adapted = margin(&adapted, &cell.features);
+            check.flipped_unknown += usize::from((by_adapted > 0.0) != (by_prior > 0.0));
+        }
     }
     let (prior_miou, adapted_miou) = (by_prior.scores().miou, by_adapted.scores().miou);
     (check.prior_miou, check.adapted_miou) = (Some(prior_miou), Some(adapted_miou));
-    check.adapted = adapted_miou >= prior_miou + MIN_CHECK_GAIN;
+    let better = adapted_miou >= prior_miou + MIN_CHECK_GAIN;
+    let flipped_share = match check.confident_unknown {
+        0 => 0.0,
+        n => check.flipped_unknown as f64 / n as f64,
+    };
+    let flips_too_many = flipped_share > MAX_FLIPPED_SHARE;
+    check.adapted = better && !flips_too_many;
     let verdict = match check.adapted {
         true => "the adapted model replaces the prior",
         false => "the prior is kept",
@@ -515,6 +553,14 @@ fn check_against_prior(
         100.0 * adapted_miou,
         100.0 * prior_miou
     );
+    if better && flips_too_many {
+        check.why += &format!(
+            ", but of the {} held-out cells the drive says nothing of and the prior was sure of, it calls {:.1} % the other way (at most {:.0} %: beyond, it has learnt what the drive cannot show, as a road footprint teaches that grass is not traversable)",
+            check.confident_unknown,
+            100.0 * flipped_share,
+            100.0 * MAX_FLIPPED_SHARE
+        );
+    }
     Ok(check)
 }
 

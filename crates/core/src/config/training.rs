@@ -82,7 +82,7 @@ pub struct TrainingConfig {
     pub left_out_features: Vec<String>,
     /// With `train --prior`: the weight on C of each cell a person labelled (`travmap
     /// label`) against each of the prior's support vectors, which stand for what the
-    /// prior learnt (default 5, docs/method.md "Teaching it a robot").
+    /// prior learnt (default 20, docs/method.md "Teaching it a robot").
     pub taught_weight: f64,
 }
 
@@ -137,7 +137,7 @@ impl Default for TrainingConfig {
             tune_threshold: false,
             weigh_inputs: WeighInputs::Equally,
             left_out_features: SENSOR_DEPENDENT_FEATURES.map(String::from).to_vec(),
-            taught_weight: 5.0,
+            taught_weight: 20.0,
         }
     }
 }

@@ -140,6 +140,9 @@ async function drawCamera(view) {
   canvas.height = image.height;
   const g = canvas.getContext("2d");
   g.drawImage(image, 0, 0);
+  document.querySelector("#camera-figure figcaption").textContent = outline
+    ? "The camera's view; the chosen cell outlined."
+    : "The camera's view; the chosen cell lies outside it.";
   if (outline) {
     g.lineWidth = Math.max(3, image.width / 300);
     for (const colour of ["#000", "#fff"]) {

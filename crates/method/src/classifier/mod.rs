@@ -95,6 +95,13 @@ pub struct AdaptationCheck {
     /// when there was enough of it to compare.
     pub prior_miou: Option<f64>,
     pub adapted_miou: Option<f64>,
+    /// Held-out cells the drive says nothing of (neither driven over nor an
+    /// obstacle) that the prior was sure of, and those of them the adapted model
+    /// calls the other way.
+    #[serde(default)]
+    pub confident_unknown: usize,
+    #[serde(default)]
+    pub flipped_unknown: usize,
 }
 
 /// A drive a model was adapted to.
