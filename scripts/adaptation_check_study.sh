@@ -5,7 +5,7 @@
 # model of each rule on every labelled set (in-sample); one scan of each labelled
 # sequence alone, with the sequence's whole poses.txt (the footprint follows the
 # real trajectory through one scan); models that never saw a dataset, on that
-# dataset (where the prior is wrong and adaptation should help). About 15 minutes
+# dataset (where the prior is wrong and adaptation should help). About 3 minutes
 # on 2 cores.
 #
 #   scripts/adaptation_check_study.sh

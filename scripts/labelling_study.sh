@@ -7,14 +7,15 @@
 # with the prior's support vectors (`train --prior`), and scored on the held-out
 # dataset's other scenes (filtered mIoU, 12 m grid, their mean).
 #
-#   scripts/labelling_study.sh             # the table (about 10 minutes on 2 cores)
+#   scripts/labelling_study.sh             # the table (about 4 minutes on 2 cores)
 #
 # Labelled scene -> scored scenes: SemanticKITTI sequence 07 (four scans) -> sequence
 # 00 (two sets) and the scan of unknown sequence; RELLIS-3D 000001 -> 000104;
 # nuScenes scene 0002 -> scene 1072. Asking at random is the mean over SEEDS seeds.
 # Needs ../shared/data and jq; TRAVMAP names the binary, DATA the data, ASKS the
 # budgets (default "25 100 400"), SEEDS the random seeds (default "0 1 2"); SETTINGS
-# adds settings to every command, e.g. SETTINGS='--set training.taught_weight=10'.
+# adds settings to every command, e.g. SETTINGS='--set training.taught_weight=10', and
+# ASKING flags to every `label`, e.g. ASKING='--ask-spacing 4'.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 T=${TRAVMAP:-target/release/travmap}

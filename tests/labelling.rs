@@ -91,11 +91,7 @@ fn answers_from_ground_truth_need_labels_and_a_labels_file_answers_its_own_quest
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let unlabelled = dir.path().join("unlabelled");
-    std::fs::create_dir(&unlabelled).unwrap();
-    for item in ["velodyne", "calib.txt", "times.txt", "poses.txt"] {
-        std::os::unix::fs::symlink(drive.join(item), unlabelled.join(item)).unwrap();
-    }
+    let unlabelled = crate::common::without_labels(&drive, dir.path());
     let labels = dir.path().join("labels.parquet");
     let err = clean_failure(travmap(&[
         "label",

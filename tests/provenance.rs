@@ -334,11 +334,7 @@ fn the_same_adaptation_gives_the_same_model_and_eval_checks_labels_first() {
         .collect();
     assert_eq!(hashes[0], hashes[1]);
     // A drive without labels: refused before adapting.
-    let unlabelled = dir.path().join("unlabelled");
-    std::fs::create_dir(&unlabelled).unwrap();
-    for item in ["velodyne", "calib.txt", "times.txt", "poses.txt"] {
-        std::os::unix::fs::symlink(sample.join(item), unlabelled.join(item)).unwrap();
-    }
+    let unlabelled = crate::common::without_labels(&sample, dir.path());
     let err = clean_failure(travmap(&["eval", arg(&unlabelled), "--adapt"]));
     assert_contains(&err, &["no frame of the input has labels"]);
     assert!(

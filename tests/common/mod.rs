@@ -49,6 +49,17 @@ pub fn skip<T>(reason: &str) -> Option<T> {
     None
 }
 
+/// The KITTI sequence `sequence` without its labels: its scans and text files
+/// linked into `dir/unlabelled`.
+pub fn without_labels(sequence: &Path, dir: &Path) -> PathBuf {
+    let unlabelled = dir.join("unlabelled");
+    std::fs::create_dir(&unlabelled).unwrap();
+    for item in ["velodyne", "calib.txt", "times.txt", "poses.txt"] {
+        std::os::unix::fs::symlink(sequence.join(item), unlabelled.join(item)).unwrap();
+    }
+    unlabelled
+}
+
 /// Runs the travmap binary with `args` from the repository root.
 pub fn travmap(args: &[&str]) -> Output {
     std::process::Command::new(env!("CARGO_BIN_EXE_travmap"))

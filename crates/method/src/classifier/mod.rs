@@ -96,8 +96,8 @@ pub struct AdaptationCheck {
     pub prior_miou: Option<f64>,
     pub adapted_miou: Option<f64>,
     /// Held-out cells the drive says nothing of (neither driven over nor an
-    /// obstacle) that the prior was sure of, and those of them the adapted model
-    /// calls the other way.
+    /// obstacle) that the prior was sure were traversable (a margin of 1 or more),
+    /// and those of them the adapted model calls not traversable.
     #[serde(default)]
     pub confident_unknown: usize,
     #[serde(default)]
