@@ -781,7 +781,7 @@ fn completions_and_man_pages_are_generated() {
     assert!(synopsis.contains("\\fBtravmap annotate\\fR"), "{synopsis}");
     assert_eq!(
         std::fs::read_dir(dir.path()).unwrap().count(),
-        16,
+        17,
         "travmap.1 and one per command"
     );
 }
