@@ -75,7 +75,12 @@ fn rows_match_the_pipeline_cell_by_cell_in_pyarrow_duckdb_and_polars() {
     assert_eq!(read["rows"], summary["rows"]);
     assert_eq!(
         read["metadata_keys"],
-        serde_json::json!(["travmap.config", "travmap.format", "travmap.labelled_scans"])
+        serde_json::json!([
+            "travmap.config",
+            "travmap.format",
+            "travmap.labelled_scans",
+            "travmap.model"
+        ])
     );
     let columns = read["columns"].as_array().unwrap();
     assert_eq!(

@@ -355,4 +355,15 @@ fn a_person_answers_by_click_and_key_in_chromium_and_the_file_holds_exactly_that
     );
     assert_eq!(measured["answers"].as_array().unwrap().len(), 4);
     assert!(std::fs::metadata(&shot).unwrap().len() > 10_000);
+    // pyarrow, DuckDB and Polars read the labels file alike (the script checks
+    // that they agree row by row): its three labelled cells.
+    drop(page);
+    let reader = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/read_parquet.py");
+    let read = run_client(Command::new(&python).args([arg(&reader), arg(&labels), "0"]));
+    let read: Value = serde_json::from_slice(&read.stdout).unwrap();
+    assert_eq!(read["rows"], 3, "{read}");
+    assert_contains(
+        &read["metadata_keys"].to_string(),
+        &["travmap.labels", "travmap.model", "travmap.config"],
+    );
 }
