@@ -4,7 +4,8 @@
 # Python mcap + mcap-ros2-support, rosbags, the Foxglove SDK, Ouster's SDK, rerun-sdk, pyarrow, DuckDB,
 # Polars, jsonschema and scapy (packet captures); Ray and pytest; the travmap wheel (last); Node @mcap/core +
 # @foxglove/rosmsg2-serialization (tests/clients/package-lock.json); Chromium for
-# rerun's web viewer (tests/viewer.rs), from Debian, as root or through sudo.
+# rerun's web viewer (tests/viewer.rs) and the labelling page, and Tesseract for the
+# pictures' words (tests/pictures.rs), from Debian, as root or through sudo.
 python3 -m venv target/client-venv
 target/client-venv/bin/pip install --quiet --disable-pip-version-check \
     "mcap==1.6.0" "mcap-ros2-support==0.6.0" "rosbags==0.11.9" "foxglove-sdk==0.30.3" "rerun-sdk==0.41.0" \
@@ -18,15 +19,19 @@ python3 -m venv target/ouster-venv
 target/ouster-venv/bin/pip install --quiet --disable-pip-version-check "ouster-sdk==1.0.1"
 export TRAVMAP_OUSTER_PYTHON="$PWD/target/ouster-venv/bin/python"
 npm ci --prefix tests/clients --no-audit --no-fund --silent
-if ! command -v chromium >/dev/null 2>&1; then
+if ! command -v chromium >/dev/null 2>&1 || ! command -v tesseract >/dev/null 2>&1; then
     apt_get="apt-get"
     [ "$(id -u)" -eq 0 ] || apt_get="sudo -n apt-get"
-    { $apt_get update -qq && DEBIAN_FRONTEND=noninteractive $apt_get install -y -qq chromium >/dev/null; } ||
-        echo "could not install chromium: tests/viewer.rs will fail" >&2
+    { $apt_get update -qq && DEBIAN_FRONTEND=noninteractive $apt_get install -y -qq chromium tesseract-ocr >/dev/null; } ||
+        echo "could not install chromium and tesseract-ocr: tests/viewer.rs, labelling.rs and pictures.rs will fail" >&2
 fi
 if command -v chromium >/dev/null 2>&1; then
     export TRAVMAP_CHROMIUM="$(command -v chromium)"
     chromium --version
+fi
+# Tesseract reads the pictures' words back (tests/pictures.rs).
+if command -v tesseract >/dev/null 2>&1; then
+    export TRAVMAP_TESSERACT="$(command -v tesseract)"
 fi
 # The Python wheel (scripts/build_wheel.sh: the module and the command), installed
 # into a fresh virtual environment as a user installs it, with what its tests

@@ -351,13 +351,23 @@ fn bench_tools_times_every_subcommand_as_a_child_process() {
 #[test]
 fn render_draws_truth_prediction_and_errors_cell_by_cell() {
     use travmap_method::grid::CellClass;
-    use travmap_outputs::rendering::{GAP_PX, cell_origin_px, colour};
+    use travmap_outputs::figure::panel_origin;
+    use travmap_outputs::palette::Palette;
+    use travmap_outputs::rendering::cell_origin_px;
     let Some(seq) = sample() else { return };
     let dir = tempfile::tempdir().unwrap();
     let picture = dir.path().join("frame.png");
     write_output("render", &seq, &picture, &["--frame", "2"]);
     let image = crate::common::read_png(&picture);
-    assert_eq!((image.width, image.height), (3 * 240 + 2 * GAP_PX, 240));
+    // 30 cells of 16 pixels: panels 480 wide, side by side with their titles,
+    // scale bar and legend around them.
+    let (last_x, top) = panel_origin(2, 480);
+    assert!(
+        image.width >= last_x + 480 && image.height > top + 480,
+        "{} x {}",
+        image.width,
+        image.height
+    );
 
     // The same frame through the library: every cell's colour in every panel.
     let config = travmap_core::Config::default();
@@ -375,36 +385,47 @@ fn render_draws_truth_prediction_and_errors_cell_by_cell() {
         .unwrap();
     let result = result.unwrap();
     let (truth, predicted) = (result.ground_truth.unwrap(), result.filtered.unwrap());
-    let class = |c: CellClass| match c {
-        CellClass::Unknown => colour::UNKNOWN,
-        CellClass::Traversable => colour::TRAVERSABLE,
-        CellClass::NonTraversable => colour::NON_TRAVERSABLE,
-    };
+    let palette = Palette::SAFE;
     let pixel = |x: u32, y: u32| {
         let at = 3 * (y * image.width + x) as usize;
         [image.rgb[at], image.rgb[at + 1], image.rgb[at + 2]]
     };
+    // The sensor's marker covers the cells around it.
+    let [min_x, min_y] = result.layout.min_corner_in_world();
+    let sensor = result
+        .layout
+        .cell_of_local(
+            result.sensor_in_world[0] - min_x,
+            result.sensor_in_world[1] - min_y,
+        )
+        .unwrap();
+    let (sensor_col, sensor_row) = result.layout.col_row(sensor);
     let (mut false_positives, mut false_negatives) = (0, 0);
     for cell in 0..900 {
         let (col, row) = result.layout.col_row(cell);
-        let (x, y) = cell_origin_px(col, row, 30, 8);
-        let (cx, cy) = (x + 4, y + 4);
-        assert_eq!(pixel(cx, cy), class(truth[cell]), "truth, cell {cell}");
+        if col.abs_diff(sensor_col) <= 1 && row.abs_diff(sensor_row) <= 1 {
+            continue;
+        }
+        let (x, y) = cell_origin_px(col, row, 30, 16);
+        let at = |panel: usize| {
+            let (px, py) = panel_origin(panel, 480);
+            pixel(px + x + 8, py + y + 8)
+        };
+        assert_eq!(at(0), palette.class(truth[cell]), "truth, cell {cell}");
         assert_eq!(
-            pixel(cx + 240 + GAP_PX, cy),
-            class(predicted[cell]),
+            at(1),
+            palette.class(predicted[cell]),
             "prediction, cell {cell}"
         );
-        let error = pixel(cx + 2 * (240 + GAP_PX), cy);
+        let error = at(2);
+        assert_eq!(
+            error,
+            palette.error(predicted[cell], truth[cell]),
+            "errors, cell {cell}"
+        );
         match (predicted[cell], truth[cell]) {
-            (CellClass::Traversable, CellClass::NonTraversable) => {
-                assert_eq!(error, colour::FALSE_POSITIVE);
-                false_positives += 1;
-            }
-            (CellClass::NonTraversable, CellClass::Traversable) => {
-                assert_eq!(error, colour::FALSE_NEGATIVE);
-                false_negatives += 1;
-            }
+            (CellClass::Traversable, CellClass::NonTraversable) => false_positives += 1,
+            (CellClass::NonTraversable, CellClass::Traversable) => false_negatives += 1,
             _ => {}
         }
     }

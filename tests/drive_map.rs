@@ -5,9 +5,9 @@
 use std::path::Path;
 
 use crate::common::{arg, success, travmap, write_output};
-use travmap_method::grid::CellClass;
 use travmap_outputs::drive_map::MapPicture;
-use travmap_outputs::rendering::{GAP_PX, colour};
+use travmap_outputs::figure::panel_origin;
+use travmap_outputs::palette::Palette;
 
 #[test]
 fn the_picture_shows_the_fused_map_truth_and_errors_cell_by_cell() {
@@ -27,42 +27,36 @@ fn the_picture_shows_the_fused_map_truth_and_errors_cell_by_cell() {
     let cells = crate::common::fused_drive(&seq);
     let picture = MapPicture::of(&cells, 8);
     let panel = picture.cells[0] as u32 * 8;
-    assert_eq!(image.width, 3 * panel + 2 * GAP_PX);
-    let class = |c: CellClass| match c {
-        CellClass::Unknown => colour::UNKNOWN,
-        CellClass::Traversable => colour::TRAVERSABLE,
-        CellClass::NonTraversable => colour::NON_TRAVERSABLE,
-    };
+    let (last_x, _) = panel_origin(2, panel);
+    assert!(image.width >= last_x + panel);
+    let palette = Palette::SAFE;
     // Most of a cell's 64 pixels: the trajectory and the axes are drawn over some.
-    let mostly = |x0: u32, y0: u32, expected: [u8; 3]| {
+    let mostly = |panel_index: usize, x: u32, y: u32, expected: [u8; 3]| {
+        let (x0, y0) = panel_origin(panel_index, panel);
         let mut matching = 0;
-        for y in y0..y0 + 8 {
-            for x in x0..x0 + 8 {
+        for y in y0 + y..y0 + y + 8 {
+            for x in x0 + x..x0 + x + 8 {
                 let at = 3 * (y * image.width + x) as usize;
                 matching += (image.rgb[at..at + 3] == expected) as usize;
             }
         }
-        matching >= 48
+        matching >= 40
     };
     let mut errors = 0;
     for cell in &cells {
         let (x, y) = picture.cell_origin_px(cell.key);
-        assert!(mostly(x, y, class(cell.class)), "prediction, {cell:?}");
         assert!(
-            mostly(x + panel + GAP_PX, y, class(cell.ground_truth)),
+            mostly(0, x, y, palette.class(cell.class)),
+            "prediction, {cell:?}"
+        );
+        assert!(
+            mostly(1, x, y, palette.class(cell.ground_truth)),
             "truth, {cell:?}"
         );
-        let error = match (cell.class, cell.ground_truth) {
-            (CellClass::Traversable, CellClass::NonTraversable) => colour::FALSE_POSITIVE,
-            (CellClass::NonTraversable, CellClass::Traversable) => colour::FALSE_NEGATIVE,
-            (CellClass::Unknown, _) | (_, CellClass::Unknown) => colour::UNKNOWN,
-            _ => colour::CORRECT,
-        };
-        errors += (error == colour::FALSE_POSITIVE || error == colour::FALSE_NEGATIVE) as usize;
-        assert!(
-            mostly(x + 2 * (panel + GAP_PX), y, error),
-            "errors, {cell:?}"
-        );
+        let error = palette.error(cell.class, cell.ground_truth);
+        errors +=
+            (error == palette.false_traversable || error == palette.false_not_traversable) as usize;
+        assert!(mostly(2, x, y, error), "errors, {cell:?}");
     }
     assert!(errors > 0, "the picture shows some errors");
 

@@ -28,6 +28,7 @@ mod never_lose_a_byte;
 mod odometry;
 mod ouster;
 mod pcap;
+mod pictures;
 mod provenance;
 mod python;
 mod readme;

@@ -17,8 +17,8 @@ use travmap_run::scoring::metrics::Confusion;
 use travmap_run::scoring::remarks::FitRemedies;
 
 use super::{
-    Inputs, ModelArg, Outcome, check_output, counted, fit_said, frame_count, model_json,
-    note_extension, notice_drives, outcome, path_text, print_json_summary, usage,
+    Inputs, ModelArg, Outcome, PaletteArg, check_output, counted, fit_said, frame_count,
+    model_json, note_extension, notice_drives, outcome, path_text, print_json_summary, usage,
 };
 
 /// Fuse every frame's prediction (and ground truth) into one map of the drive.
@@ -53,6 +53,8 @@ pub struct MapArgs {
     /// Pixels per cell side (1 to 64).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=64))]
     cell_pixels: u32,
+    #[command(flatten)]
+    palette: PaletteArg,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -147,7 +149,8 @@ pub fn map(args: MapArgs) -> Result<Outcome> {
     drop(map);
     let mut staged = Staged::default();
     if let Some(path) = output_path {
-        let picture = render_drive_map(&cells, &trajectory, &lattice, cell_px)?;
+        let palette = args.palette.palette();
+        let picture = render_drive_map(&cells, &trajectory, &lattice, cell_px, &palette)?;
         staged.write(path, &encode_png(&picture))?;
     }
     if let Some(path) = &args.cells {

@@ -491,6 +491,31 @@ impl ModelArg {
     }
 }
 
+/// The colours of a command's pictures.
+#[derive(Args)]
+pub struct PaletteArg {
+    /// The pictures' colours: `safe` (blue traversable, orange not; apart for every
+    /// common colour vision deficiency, the default) or `classic` (green and red).
+    #[arg(long, value_enum, default_value_t = PaletteName::Safe)]
+    palette: PaletteName,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum PaletteName {
+    Safe,
+    Classic,
+}
+
+impl PaletteArg {
+    pub fn palette(&self) -> travmap_outputs::palette::Palette {
+        use travmap_outputs::palette::Palette;
+        match self.palette {
+            PaletteName::Safe => Palette::SAFE,
+            PaletteName::Classic => Palette::CLASSIC,
+        }
+    }
+}
+
 /// Frames the selections will hand on, for progress bars.
 pub fn frame_count(selections: &[DriveRun]) -> u64 {
     selections

@@ -12,8 +12,8 @@ use travmap_outputs::rendering;
 use travmap_run::report::tables::model_line;
 
 use super::{
-    Inputs, ModelArg, Outcome, check_output, check_output_dir, counted, frame_count, model_json,
-    outcome, path_text, print_json_summary, usage,
+    Inputs, ModelArg, Outcome, PaletteArg, check_output, check_output_dir, counted, frame_count,
+    model_json, outcome, path_text, print_json_summary, usage,
 };
 
 /// Draw ground truth, prediction and errors of a frame side by side as PNG.
@@ -36,9 +36,12 @@ pub struct RenderArgs {
     all: bool,
     #[command(flatten)]
     model: ModelArg,
-    /// Pixels per cell side (1 to 64).
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=64))]
-    cell_pixels: u32,
+    /// Pixels per cell side (1 to 64; default: each panel at least 480 pixels wide,
+    /// 16 a cell for the default 12 m grid).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
+    cell_pixels: Option<u32>,
+    #[command(flatten)]
+    palette: PaletteArg,
 }
 
 pub fn render(mut args: RenderArgs) -> Result<Outcome> {
@@ -47,7 +50,7 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         (None, true) => {}
         (None, false) => unreachable!("clap requires --frame unless --all"),
     }
-    let cell_px = args.cell_pixels;
+    let palette = args.palette.palette();
     let config = &args.model.config(&args.inputs.settings)?;
     let (output, output_path) = (args.inputs.output, args.output.as_path());
     let inputs = args.inputs.files(ModelArg::file(config).as_deref());
@@ -88,7 +91,12 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         };
         staged.write(
             &path,
-            &rendering::encode_png(&rendering::render(&result, cell_px)),
+            &rendering::encode_png(&rendering::render(
+                &result,
+                (args.cell_pixels)
+                    .unwrap_or_else(|| rendering::default_cell_px(result.layout.cells_per_side)),
+                &palette,
+            )),
         )?;
         written.push(path);
         bar.inc(1);
@@ -117,7 +125,7 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
     } else if !output.quiet {
         println!("{}", model_line(&model, &model_name));
         println!(
-            "wrote {}: ground truth | prediction | errors (orange false positive, blue false negative)",
+            "wrote {}: ground truth | prediction | errors, each titled, with a scale bar and the legend of its colours",
             counted(written.len(), "picture")
         );
         for path in &written {

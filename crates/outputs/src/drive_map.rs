@@ -13,7 +13,8 @@ use parquet::file::properties::WriterProperties;
 use parquet::file::writer::SerializedFileWriter;
 
 use crate::atomic::{AtomicFile, Staged, parquet_failure, sync_output, write_failure};
-use crate::rendering::{GAP_PX, class_colour, colour, error_colour};
+use crate::figure::{Panel, Swatch, blank, compose, draw_text, fill_rect};
+use crate::palette::Palette;
 use travmap_core::error::{Error, Result};
 use travmap_core::frame::RgbImage;
 use travmap_formats::ros::{Header, MapMetaData, OccupancyGrid, Pose, Quaternion, Time, Vector3};
@@ -22,12 +23,8 @@ use travmap_method::grid::CellClass;
 
 /// Cells of empty border around the map in the picture.
 const BORDER_CELLS: i64 = 2;
-/// Length of the scale bar, metres.
-pub const SCALE_BAR_M: f64 = 5.0;
 /// Length of each world axis drawn at the origin, metres.
 pub const AXIS_M: f64 = 2.0;
-/// Pixel rows under the panels for the scale bar.
-const FOOTER_PX: u32 = 16;
 
 /// The most cells or pixels one dense image of a map may hold: 2^28 (256 MiB at a
 /// byte each; a 53 km square at 0.4 m cells and 8 pixels a cell, 6.5 km). More is a
@@ -129,16 +126,17 @@ impl MapPicture {
     }
 }
 
-/// The map picture of `cells` (on `lattice`): the fused prediction, and with ground
-/// truth the fused ground truth and the errors; the trajectory (sensor positions, x-y
-/// metres in the world) in white, the world axes at its origin when the picture
-/// shows it (x red, y blue, [`AXIS_M`] long), a black scale bar of [`SCALE_BAR_M`]
-/// under the first panel.
+/// The map picture of `cells` (on `lattice`), in `palette`'s colours: the fused
+/// prediction, and with ground truth the fused ground truth and the errors, each under
+/// its title; the trajectory (sensor positions, x-y metres in the world) in the
+/// marker's colour, the world axes at its origin when the picture shows it
+/// ([`AXIS_M`] long, their ends labelled), a scale bar and a legend below.
 pub fn render_drive_map(
     cells: &[FusedCell],
     trajectory: &[[f64; 2]],
     lattice: &Lattice,
     cell_px: u32,
+    palette: &Palette,
 ) -> Result<RgbImage> {
     let cell_size_m = lattice.cell_size_m;
     let picture = MapPicture::of(cells, cell_px);
@@ -152,52 +150,29 @@ pub fn render_drive_map(
         "--frames chooses a stretch; --cell-pixels 1 draws a pixel a cell",
     )?;
     let (panel_w, panel_h) = picture.panel_px();
-    let width = panels * panel_w + (panels - 1) * GAP_PX;
-    let height = panel_h + FOOTER_PX;
-    let mut image = RgbImage {
-        width,
-        height,
-        rgb: std::iter::repeat_n(colour::BACKGROUND, (width * height) as usize)
-            .flatten()
-            .collect(),
-    };
-    let mut set = |x: u32, y: u32, c: [u8; 3]| {
-        if x < width && y < height {
-            let at = 3 * (y * width + x) as usize;
-            image.rgb[at..at + 3].copy_from_slice(&c);
-        }
-    };
-    let panel_x = |panel: u32| panel * (panel_w + GAP_PX);
-    for panel in 0..panels {
-        for y in 0..panel_h {
-            for x in 0..panel_w {
-                set(panel_x(panel) + x, y, colour::UNKNOWN);
-            }
-        }
-    }
+    let titles = ["fused map", "fused ground truth", "errors"];
+    let mut images: Vec<RgbImage> = (0..panels)
+        .map(|_| blank(panel_w, panel_h, palette.unknown))
+        .collect();
     for cell in cells {
         let (x0, y0) = picture.cell_origin_px(cell.key);
         let colours = [
-            class_colour(cell.class),
-            class_colour(cell.ground_truth),
-            error_colour(cell.class, cell.ground_truth),
+            palette.class(cell.class),
+            palette.class(cell.ground_truth),
+            palette.error(cell.class, cell.ground_truth),
         ];
-        for (panel, c) in colours.iter().enumerate().take(panels as usize) {
-            for y in y0..y0 + cell_px {
-                for x in x0..x0 + cell_px {
-                    set(panel_x(panel as u32) + x, y, *c);
-                }
-            }
+        for (image, colour) in images.iter_mut().zip(colours) {
+            fill_rect(image, x0 as i64, y0 as i64, cell_px, cell_px, colour);
         }
     }
     // Overlays on every panel: the trajectory, then the axes.
     // At most a step a pixel along the picture's diagonal and back, whatever the
     // distance (a trajectory point outside the picture is not drawn).
-    let most_steps = 2 * (width + height) as usize;
+    let most_steps = 2 * (panel_w + panel_h) as usize;
     let steps = |length_m: f64| {
         ((length_m / cell_size_m * cell_px as f64).ceil() as usize * 2).min(most_steps)
     };
-    let mut line = |from: [f64; 2], to: [f64; 2], c: [u8; 3]| {
+    let line = |images: &mut [RgbImage], from: [f64; 2], to: [f64; 2], width: u32, c: [u8; 3]| {
         let n = steps(((to[0] - from[0]).hypot(to[1] - from[1])).max(cell_size_m));
         for i in 0..=n {
             let t = i as f64 / n as f64;
@@ -206,28 +181,58 @@ pub fn render_drive_map(
                 from[1] + t * (to[1] - from[1]),
             );
             if let Some((px, py)) = picture.point_px(x, y, lattice) {
-                for panel in 0..panels {
-                    set(panel_x(panel) + px, py, c);
+                let half = (width / 2) as i64;
+                for image in images.iter_mut() {
+                    fill_rect(image, px as i64 - half, py as i64 - half, width, width, c);
                 }
             }
         }
     };
-    for pair in trajectory.windows(2) {
-        line(pair[0], pair[1], colour::VEHICLE);
-    }
-    if let [only] = trajectory {
-        line(*only, *only, colour::VEHICLE);
-    }
-    line([0.0, 0.0], [AXIS_M, 0.0], [230, 30, 30]);
-    line([0.0, 0.0], [0.0, AXIS_M], [30, 60, 230]);
-    // The scale bar, under the first panel.
-    let bar_px = (SCALE_BAR_M / cell_size_m * cell_px as f64).round() as u32;
-    for y in panel_h + 6..panel_h + 10 {
-        for x in 4..4 + bar_px {
-            set(x, y, [0, 0, 0]);
+    // The trajectory, in the marker's colour over an edge of its own.
+    for (width, colour) in [(3, palette.marker_edge), (1, palette.marker)] {
+        for pair in trajectory.windows(2) {
+            line(&mut images, pair[0], pair[1], width, colour);
+        }
+        if let [only] = trajectory {
+            line(&mut images, *only, *only, width, colour);
         }
     }
-    Ok(image)
+    for (end, name) in [([AXIS_M, 0.0], "x"), ([0.0, AXIS_M], "y")] {
+        line(&mut images, [0.0, 0.0], end, 3, palette.marker_edge);
+        line(&mut images, [0.0, 0.0], end, 1, palette.marker);
+        if let Some((px, py)) = picture.point_px(end[0], end[1], lattice) {
+            for image in images.iter_mut() {
+                draw_text(
+                    image,
+                    px + 3,
+                    py.saturating_sub(18),
+                    name,
+                    15.0,
+                    palette.marker,
+                );
+            }
+        }
+    }
+    let panels: Vec<Panel> = (titles.iter().zip(images))
+        .map(|(title, image)| Panel {
+            title: title.to_string(),
+            image,
+        })
+        .collect();
+    let mut legend: Vec<(Swatch, &str)> = match with_truth {
+        true => palette.legend(),
+        false => palette.legend().into_iter().take(3).collect(),
+    }
+    .into_iter()
+    .map(|(colour, words)| (Swatch::Fill(colour), words))
+    .collect();
+    legend.push((Swatch::Line, "trajectory"));
+    Ok(compose(
+        &panels,
+        &legend,
+        cell_size_m / cell_px as f64,
+        palette,
+    ))
 }
 
 /// The fused cells as a Parquet table: one row per cell some frame saw or labelled,

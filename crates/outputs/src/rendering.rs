@@ -1,44 +1,22 @@
 //! Pictures of a frame, like the paper's figures: the ground-truth grid, the filtered
-//! prediction and the errors side by side, north up, x to the right, the vehicle's
-//! cell outlined in white.
+//! prediction and the errors side by side under their titles, north up, x to the
+//! right, the sensor marked where it stands and faces, with a scale bar in metres and
+//! a legend of every colour (`figure.rs`), in the colours of a [`Palette`].
 
 use travmap_core::frame::RgbImage;
 use travmap_method::grid::CellClass;
 use travmap_method::pipeline::FrameResult;
 
-/// Colours of the panels.
-pub mod colour {
-    pub const UNKNOWN: [u8; 3] = [40, 40, 40];
-    pub const TRAVERSABLE: [u8; 3] = [60, 170, 75];
-    pub const NON_TRAVERSABLE: [u8; 3] = [200, 60, 50];
-    /// Errors panel: right predictions, false positives (predicted traversable, not
-    /// so), false negatives (predicted non-traversable, traversable).
-    pub const CORRECT: [u8; 3] = [200, 200, 200];
-    pub const FALSE_POSITIVE: [u8; 3] = [255, 140, 0];
-    pub const FALSE_NEGATIVE: [u8; 3] = [40, 120, 255];
-    pub const BACKGROUND: [u8; 3] = [255, 255, 255];
-    pub const VEHICLE: [u8; 3] = [255, 255, 255];
-}
+use crate::figure::{Panel, Swatch, blank, compose, draw_sensor};
+use crate::palette::Palette;
 
-/// Pixels between panels.
-pub const GAP_PX: u32 = 8;
+/// The fewest pixels a panel of a frame is wide by default: a person reads it
+/// without zooming.
+pub const MIN_PANEL_PX: u32 = 480;
 
-pub fn class_colour(class: CellClass) -> [u8; 3] {
-    match class {
-        CellClass::Unknown => colour::UNKNOWN,
-        CellClass::Traversable => colour::TRAVERSABLE,
-        CellClass::NonTraversable => colour::NON_TRAVERSABLE,
-    }
-}
-
-pub fn error_colour(predicted: CellClass, truth: CellClass) -> [u8; 3] {
-    use CellClass::{NonTraversable as N, Traversable as T, Unknown as U};
-    match (predicted, truth) {
-        (U, _) | (_, U) => colour::UNKNOWN,
-        (T, N) => colour::FALSE_POSITIVE,
-        (N, T) => colour::FALSE_NEGATIVE,
-        _ => colour::CORRECT,
-    }
+/// Pixels a cell by default: the panel at least [`MIN_PANEL_PX`] wide.
+pub fn default_cell_px(cells_per_side: usize) -> u32 {
+    MIN_PANEL_PX.div_ceil(cells_per_side.max(1) as u32).max(1)
 }
 
 /// Where a cell's square starts in a panel (north up): (x, y) pixel of its top-left.
@@ -49,62 +27,69 @@ pub fn cell_origin_px(col: usize, row: usize, cells_per_side: usize, cell_px: u3
     )
 }
 
-/// Ground truth, prediction and errors of one frame, `cell_px` pixels per cell.
-/// Without ground truth the first and last panels are unknown everywhere.
-pub fn render(result: &FrameResult, cell_px: u32) -> RgbImage {
+/// The heading of the sensor's x axis in the world's x-y plane, radians
+/// counter-clockwise from east.
+fn heading_rad(result: &FrameResult) -> f64 {
+    let x_axis = result.world_from_velodyne.rotation * nalgebra::Vector3::x();
+    x_axis.y.atan2(x_axis.x)
+}
+
+/// Ground truth, prediction and errors of one frame, `cell_px` pixels a cell, in
+/// `palette`'s colours. Without ground truth the first and last panels are unknown
+/// everywhere.
+pub fn render(result: &FrameResult, cell_px: u32, palette: &Palette) -> RgbImage {
     let l = result.layout.cells_per_side;
-    let panel = l as u32 * cell_px;
-    let (width, height) = (3 * panel + 2 * GAP_PX, panel);
-    let mut rgb: Vec<u8> = std::iter::repeat_n(colour::BACKGROUND, (width * height) as usize)
-        .flatten()
-        .collect();
+    let side = l as u32 * cell_px;
     let unknown = vec![CellClass::Unknown; l * l];
     let truth = result.ground_truth.as_deref().unwrap_or(&unknown);
     let predicted = result.filtered.as_deref().unwrap_or(&unknown);
-    let mut fill = |x0: u32, y0: u32, size: u32, c: [u8; 3], outline_only: bool| {
-        for y in y0..y0 + size {
-            for x in x0..x0 + size {
-                let edge = x == x0 || y == y0 || x == x0 + size - 1 || y == y0 + size - 1;
-                if !outline_only || edge {
-                    let at = 3 * (y * width + x) as usize;
-                    rgb[at..at + 3].copy_from_slice(&c);
-                }
-            }
-        }
-    };
-    for cell in 0..l * l {
-        let (col, row) = result.layout.col_row(cell);
-        let (x, y) = cell_origin_px(col, row, l, cell_px);
-        fill(x, y, cell_px, class_colour(truth[cell]), false);
-        fill(
-            x + panel + GAP_PX,
-            y,
-            cell_px,
-            class_colour(predicted[cell]),
-            false,
-        );
-        fill(
-            x + 2 * (panel + GAP_PX),
-            y,
-            cell_px,
-            error_colour(predicted[cell], truth[cell]),
-            false,
-        );
-    }
-    // The vehicle: the sensor's cell, outlined.
+    let colours: [&dyn Fn(usize) -> [u8; 3]; 3] = [
+        &|cell| palette.class(truth[cell]),
+        &|cell| palette.class(predicted[cell]),
+        &|cell| palette.error(predicted[cell], truth[cell]),
+    ];
     let [min_x, min_y] = result.layout.min_corner_in_world();
-    let sensor = result.layout.cell_of_local(
-        result.sensor_in_world[0] - min_x,
-        result.sensor_in_world[1] - min_y,
-    );
-    if let Some(cell) = sensor {
-        let (col, row) = result.layout.col_row(cell);
-        let (x, y) = cell_origin_px(col, row, l, cell_px);
-        for p in 0..3 {
-            fill(x + p * (panel + GAP_PX), y, cell_px, colour::VEHICLE, true);
-        }
-    }
-    RgbImage { width, height, rgb }
+    let pixels_per_m = cell_px as f64 / result.layout.cell_size_m;
+    let sensor_px = [
+        (result.sensor_in_world[0] - min_x) * pixels_per_m,
+        side as f64 - (result.sensor_in_world[1] - min_y) * pixels_per_m,
+    ];
+    let titles = ["ground truth", "prediction (filtered)", "errors"];
+    let panels: Vec<Panel> = (titles.iter().zip(colours))
+        .map(|(title, colour_of)| {
+            let mut image = blank(side, side, palette.unknown);
+            for cell in 0..l * l {
+                let (col, row) = result.layout.col_row(cell);
+                let (x, y) = cell_origin_px(col, row, l, cell_px);
+                crate::figure::fill_rect(
+                    &mut image,
+                    x as i64,
+                    y as i64,
+                    cell_px,
+                    cell_px,
+                    colour_of(cell),
+                );
+            }
+            let size_px = (1.6 * cell_px as f64).max(12.0);
+            draw_sensor(
+                &mut image,
+                sensor_px[0],
+                sensor_px[1],
+                heading_rad(result),
+                size_px,
+                palette,
+            );
+            Panel {
+                title: title.to_string(),
+                image,
+            }
+        })
+        .collect();
+    let mut legend: Vec<(Swatch, &str)> = (palette.legend().into_iter())
+        .map(|(colour, words)| (Swatch::Fill(colour), words))
+        .collect();
+    legend.push((Swatch::Sensor, "sensor, facing its x axis"));
+    compose(&panels, &legend, 1.0 / pixels_per_m, palette)
 }
 
 /// PNG bytes of an RGB image.
