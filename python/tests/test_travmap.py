@@ -113,11 +113,13 @@ def test_grids_are_run_json_cell_for_cell(path):
         assert (grid.index, grid.stamp_ns) == (frame["frame"], frame["stamp_ns"])
         assert (grid.cell_size_m, grid.cells_per_side) == (frame["cell_size_m"], frame["cells_per_side"])
         assert list(grid.min_corner_in_world) == frame["min_corner_in_world"]
-        assert grid.cells.dtype == np.int8 and grid.cells.shape == (grid.cells_per_side,) * 2
-        assert grid.cells.ravel().tolist() == frame["cells"]
+        assert grid.occupancy.dtype == np.int8 and grid.occupancy.shape == (grid.cells_per_side,) * 2
+        assert grid.occupancy.ravel().tolist() == frame["cells"]
+        # The names the arrays had first are the same arrays.
+        assert (grid.cells == grid.occupancy).all() and (grid.classes == grid.traversable).all()
         # The other arrays agree with the occupancy they filtered into.
-        traversable = grid.cells == 0
-        assert ((grid.classes == 1) == traversable).all()
+        traversable = grid.occupancy == 0
+        assert ((grid.traversable == 1) == traversable).all()
         assert not grid.predictable[grid.cells == -1].any() or (grid.cells != -1).any()
         assert grid.features.shape == (grid.cells_per_side, grid.cells_per_side, len(grid.feature_names))
         assert np.isnan(grid.decision[~grid.predictable]).all()

@@ -81,10 +81,16 @@ class Grid:
     cell_size_m: float
     cells_per_side: int
     min_corner_in_world: tuple[float, float]
-    cells: npt.NDArray[np.int8]
-    """Occupancy after the filter, as `run --json`: 0 traversable, 100 not, -1 unknown."""
-    classes: npt.NDArray[np.int8]
-    """Class after the filter: 1 traversable, 0 not, -1 unknown."""
+    occupancy: npt.NDArray[np.int8]
+    """Occupancy after the filter, as `run --json`'s cells and nav2: 0 traversable, 100 not, -1 unknown."""
+    traversable: npt.NDArray[np.int8]
+    """After the filter: 1 traversable, 0 not, -1 unknown."""
+    @property
+    def cells(self) -> npt.NDArray[np.int8]:
+        """occupancy, by the name it had first."""
+    @property
+    def classes(self) -> npt.NDArray[np.int8]:
+        """traversable, by the name it had first."""
     predicted: npt.NDArray[np.int8]
     """Class before the filter."""
     decision: npt.NDArray[np.float32]

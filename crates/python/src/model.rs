@@ -235,8 +235,8 @@ impl GridValues {
             cell_size_m: result.layout.cell_size_m,
             cells_per_side: side,
             min_corner_in_world: (x, y),
-            cells: square(occupancy)?,
-            classes: square(classes)?,
+            occupancy: square(occupancy)?,
+            traversable: square(classes)?,
             predicted: square(predicted)?,
             decision: PyArray2::from_owned_array(py, decision).into_any().unbind(),
             predictable: PyArray2::from_owned_array(py, predictable)
@@ -266,7 +266,7 @@ fn timings_dict(py: Python<'_>, timings: &StageTimings) -> PyResult<Py<PyAny>> {
 
 /// One frame's grid: square arrays indexed `[row, col]`, row 0 the southmost (min
 /// y), col 0 the westmost (min x), as `run --json` lists its `cells` row by row;
-/// `matplotlib.pyplot.imshow(grid.classes, origin="lower", extent=grid.extent)`
+/// `matplotlib.pyplot.imshow(grid.traversable, origin="lower", extent=grid.extent)`
 /// draws it in world metres.
 #[pyclass(module = "travmap", frozen)]
 pub struct Grid {
@@ -283,12 +283,13 @@ pub struct Grid {
     #[pyo3(get)]
     min_corner_in_world: (f64, f64),
     /// int8 occupancy after the outlier filter, as `run --json`'s `cells` and
-    /// nav2's OccupancyGrid: 0 traversable, 100 not, -1 unknown.
+    /// nav2's OccupancyGrid: 0 traversable, 100 not, -1 unknown (`cells` too).
     #[pyo3(get)]
-    cells: Py<PyAny>,
-    /// int8 class after the outlier filter: 1 traversable, 0 not, -1 unknown.
+    occupancy: Py<PyAny>,
+    /// int8 after the outlier filter: 1 traversable, 0 not, -1 unknown (`classes`
+    /// too).
     #[pyo3(get)]
-    classes: Py<PyAny>,
+    traversable: Py<PyAny>,
     /// int8 class as the classifier predicted it, before the filter.
     #[pyo3(get)]
     predicted: Py<PyAny>,
@@ -321,6 +322,18 @@ pub struct Grid {
 
 #[pymethods]
 impl Grid {
+    /// `occupancy`, by the name it had first.
+    #[getter]
+    fn cells(&self, py: Python<'_>) -> Py<PyAny> {
+        self.occupancy.clone_ref(py)
+    }
+
+    /// `traversable`, by the name it had first.
+    #[getter]
+    fn classes(&self, py: Python<'_>) -> Py<PyAny> {
+        self.traversable.clone_ref(py)
+    }
+
     /// (x_min, x_max, y_min, y_max) in world metres, for `imshow(extent=...)`.
     #[getter]
     fn extent(&self) -> (f64, f64, f64, f64) {
