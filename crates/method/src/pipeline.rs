@@ -92,6 +92,9 @@ pub struct FrameResult {
     /// The classifier's margin per cell (decision value minus threshold; NaN where
     /// unpredictable; None without a model).
     pub margins: Option<Vec<f32>>,
+    /// P(traversable) per cell, the margin through the model's calibration (NaN where
+    /// unpredictable; None without a model).
+    pub probabilities: Option<Vec<f32>>,
     /// Ground truth, when every scan of the window has labels.
     pub ground_truth: Option<Vec<CellClass>>,
     /// The cells the vehicle drove over and where its path came from, when the
@@ -483,6 +486,7 @@ impl Pipeline {
                 predicted: None,
                 filtered: None,
                 margins: None,
+                probabilities: None,
                 ground_truth,
                 footprint,
                 self_labels: None,
@@ -527,6 +531,7 @@ impl Pipeline {
                 timed(|| self.filter.apply(&labels, result.layout.cells_per_side));
             result.filtered = Some(filtered);
             result.predicted = Some(labels);
+            result.probabilities = Some(margins.iter().map(|&m| model.probability(m)).collect());
             result.margins = Some(margins);
         }
         // 6b. Self-labels: footprint, confident rejections and obstacles.

@@ -23,6 +23,7 @@ use travmap_core::config::{
 };
 use travmap_core::error::{Error, Result};
 use travmap_core::random::SplitMix64;
+use travmap_method::classifier::calibration::Calibration;
 use travmap_method::classifier::{
     ReducedSet, SearchResult, SvmModel, TrainingSummary, appearance_feature_names,
     model_feature_names,
@@ -507,11 +508,11 @@ fn train_one(
     );
     let mut model = fit(&fit_set, best.c, best.gamma, config);
     model.reduced_set = reduced_set(&model);
+    let best_k = candidates
+        .iter()
+        .position(|&(c, g)| c == best.c && g == best.gamma)
+        .unwrap_or(0);
     if t.tune_threshold {
-        let best_k = candidates
-            .iter()
-            .position(|&(c, g)| c == best.c && g == best.gamma)
-            .unwrap_or(0);
         let values: Vec<(f32, bool)> = held_out
             .iter()
             .filter(|s| s.0 == best_k)
@@ -519,6 +520,13 @@ fn train_one(
             .collect();
         model.threshold = best_threshold(&values, t.criterion);
     }
+    // The margins of the chosen (C, gamma) on cells held out of each fold, as
+    // P(traversable).
+    let margins: Vec<(f32, bool)> = (held_out.iter())
+        .filter(|s| s.0 == best_k)
+        .flat_map(|s| s.1.iter().map(|&(v, t)| (v - model.threshold, t)))
+        .collect();
+    model.calibration = Calibration::fit(&margins);
     progress(total, total);
     model.training.search = search;
     model.training.seconds = started.elapsed().as_secs_f64();

@@ -6,6 +6,7 @@
 //! buffer per grid, no allocation per cell. Training lives in `training`, the
 //! solver in `smo`.
 
+pub mod calibration;
 pub mod kernel;
 pub mod model_file;
 
@@ -227,6 +228,9 @@ pub struct SvmModel {
     /// bytes (its check cells' features, recomputed from standardised support
     /// vectors, could differ in the last bit).
     pub(crate) check_cells: Option<CheckCells>,
+    /// Its margin as P(traversable), fitted to held-out margins when it was trained
+    /// (None for a model adapted or taught, and for files from before it existed).
+    pub calibration: Option<calibration::Calibration>,
 }
 
 impl SvmModel {
@@ -263,7 +267,16 @@ impl SvmModel {
             prior_weight: 0.0,
             reduced_set_includes_prior: false,
             check_cells: None,
+            calibration: None,
         }
+    }
+
+    /// P(traversable) of a margin: by the model's calibration, or by
+    /// [`calibration::UNCALIBRATED`] when it has none; NaN for an unpredictable cell.
+    pub fn probability(&self, margin: f32) -> f32 {
+        self.calibration
+            .unwrap_or(calibration::UNCALIBRATED)
+            .probability(margin)
     }
 
     /// The support vectors with their standardisation undone: the cells (or their

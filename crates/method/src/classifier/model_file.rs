@@ -71,6 +71,9 @@ struct ModelFile {
     /// decides them otherwise, and is refused (absent in files from before it existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     check_cells: Option<CheckCells>,
+    /// The margin as P(traversable) (absent: the uncalibrated sigmoid).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    calibration: Option<super::calibration::Calibration>,
 }
 
 /// Cells a model file stores to check it by ([`CheckCells`]): its support vectors
@@ -505,6 +508,15 @@ impl SvmModel {
             model.decides_as_written(cells).map_err(fail)?;
         }
         model.check_cells = file.check_cells;
+        if let Some(calibration) = file.calibration {
+            if !calibration.is_plausible() {
+                return Err(fail(format!(
+                    "`calibration` a {} b {}: a finite sigmoid rising with the margin (a < 0) expected",
+                    calibration.a, calibration.b
+                )));
+            }
+            model.calibration = Some(calibration);
+        }
         Ok(model)
     }
 
@@ -631,6 +643,7 @@ impl SvmModel {
             prior_weight: self.prior_weight,
             reduced_set_includes_prior: self.reduced_set_includes_prior,
             check_cells: self.check_cells.clone().or_else(|| self.new_check_cells()),
+            calibration: self.calibration,
         }
     }
 

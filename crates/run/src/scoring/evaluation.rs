@@ -11,6 +11,7 @@ use travmap_method::classifier::SvmModel;
 use crate::scoring::metrics::{Confusion, Scores};
 use crate::{DriveRun, Fingerprints};
 use travmap_method::classifier::ForeignRemission;
+use travmap_method::grid::CellClass;
 use travmap_method::ground_truth::UnknownLabels;
 use travmap_method::pipeline::{FrameResult, StageTimings};
 
@@ -146,6 +147,8 @@ pub struct EvaluationReport {
     pub frames_foreign_remission: usize,
     pub foreign_remission: Option<ForeignRemission>,
     /// How well the frames fit the model (no labels needed).
+    /// P(traversable) against the labels (None without labelled predicted cells).
+    pub calibration: Option<CalibrationReport>,
     pub fit: Fit,
     pub timings: TimingReport,
 }
@@ -167,7 +170,73 @@ pub struct Evaluation {
     unsure_cells: u64,
     filtered: Confusion,
     unfiltered: Confusion,
+    reliability: Reliability,
     timings: Vec<StageTimings>,
+}
+
+/// How far the classifier's P(traversable) is from the share of cells that are
+/// traversable, by tenths of P: the reliability diagram's bins.
+#[derive(Clone, Copy, Debug, Default)]
+struct Reliability {
+    /// Per bin: labelled cells, the sum of their P, and how many are traversable.
+    bins: [(u64, f64, u64); RELIABILITY_BINS],
+}
+
+const RELIABILITY_BINS: usize = 10;
+
+impl Reliability {
+    fn add(&mut self, probability: f32, traversable: bool) {
+        let bin = ((probability * RELIABILITY_BINS as f32) as usize).min(RELIABILITY_BINS - 1);
+        let (cells, sum, positives) = &mut self.bins[bin];
+        *cells += 1;
+        *sum += probability as f64;
+        *positives += u64::from(traversable);
+    }
+
+    fn report(&self) -> Option<CalibrationReport> {
+        let total: u64 = self.bins.iter().map(|b| b.0).sum();
+        if total == 0 {
+            return None;
+        }
+        let bins: Vec<ReliabilityBin> = (self.bins.iter().enumerate())
+            .filter(|(_, b)| b.0 > 0)
+            .map(|(i, &(cells, sum, positives))| ReliabilityBin {
+                low: i as f64 / RELIABILITY_BINS as f64,
+                high: (i + 1) as f64 / RELIABILITY_BINS as f64,
+                cells,
+                mean_probability: sum / cells as f64,
+                share_traversable: positives as f64 / cells as f64,
+            })
+            .collect();
+        let ece = (bins.iter())
+            .map(|b| b.cells as f64 / total as f64 * (b.mean_probability - b.share_traversable).abs())
+            .sum();
+        Some(CalibrationReport {
+            cells: total,
+            expected_calibration_error: ece,
+            bins,
+        })
+    }
+}
+
+/// How well the classifier's P(traversable) matches what is so, over the labelled
+/// cells it predicted (before the filter).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CalibrationReport {
+    pub cells: u64,
+    /// The share-weighted mean |P - share traversable| over the bins (0..1).
+    pub expected_calibration_error: f64,
+    pub bins: Vec<ReliabilityBin>,
+}
+
+/// A tenth of P: its cells, their mean P and the share of them traversable.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ReliabilityBin {
+    pub low: f64,
+    pub high: f64,
+    pub cells: u64,
+    pub mean_probability: f64,
+    pub share_traversable: f64,
 }
 
 impl Evaluation {
@@ -202,6 +271,13 @@ impl Evaluation {
             (&result.ground_truth, &result.filtered, &result.predicted)
         {
             self.frames += 1;
+            if let Some(probabilities) = &result.probabilities {
+                for (&p, &t) in probabilities.iter().zip(truth.iter()) {
+                    if !p.is_nan() && t != CellClass::Unknown {
+                        self.reliability.add(p, t == CellClass::Traversable);
+                    }
+                }
+            }
             self.filtered.merge(&Confusion::of_grids(filtered, truth));
             self.unfiltered
                 .merge(&Confusion::of_grids(predicted, truth));
@@ -224,6 +300,7 @@ impl Evaluation {
             frames_foreign_remission: self.frames_foreign_remission,
             foreign_remission: self.foreign_remission,
             fit: Fit::of(self.predicted_cells, self.unsure_cells),
+            calibration: self.reliability.report(),
             timings: TimingReport::of(&self.timings),
         }
     }
