@@ -7,11 +7,13 @@
 #
 #   scripts/calibration_study.sh      # about 6 minutes on 2 cores
 #
-# Needs ../shared/data and jq; TRAVMAP names the binary, DATA the data.
+# Needs ../shared/data and jq; TRAVMAP names the binary, DATA the data; GRID_M the
+# scored grid's side (default 12, the runs'; 36 is the training grid's).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 T=${TRAVMAP:-target/release/travmap}
 D=${DATA:-../shared/data}
+G=${GRID_M:-12}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
@@ -49,7 +51,7 @@ for rule in road offroad; do
         train_without "$rule" "$scene" "$work/model.json"
         while read -r name path dataset _; do
             "$T" eval "$path" --model "$work/model.json" --set "$(labels "$dataset")" \
-                --set "ground_truth.rule=\"$rule\"" --json -q 2>/dev/null | tail -n 1 >"$work/eval.json"
+                --set "ground_truth.rule=\"$rule\"" --set "grid.size_m=$G" --json -q 2>/dev/null | tail -n 1 >"$work/eval.json"
             jq -r --arg rule "$rule" --arg name "$name" \
                 '"| \($rule) | \($name) | \(.calibration.cells) | \(.calibration.expected_calibration_error * 1000 | round / 1000) |"' "$work/eval.json"
             jq -r --arg rule "$rule" '.calibration.bins[] | "\($rule) \(.low) \(.cells) \(.mean_probability * .cells) \(.share_traversable * .cells)"' "$work/eval.json" >>"$work/bins"

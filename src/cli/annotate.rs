@@ -8,7 +8,7 @@ use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use travmap_outputs::annotation;
-use travmap_outputs::annotation::{AnnotationOptions, CloudPoints, DRIVE_MAP_EVERY};
+use travmap_outputs::annotation::{AnnotationOptions, CloudPoints, DRIVE_MAP_EVERY, Layer};
 use travmap_run::report::tables::model_line;
 use travmap_run::scoring::remarks::FitRemedies;
 
@@ -57,9 +57,52 @@ pub struct AnnotateArgs {
     /// final map, after the last frame.
     #[arg(long, value_name = "FRAMES", default_value_t = DRIVE_MAP_EVERY)]
     drive_map_every: usize,
+    /// The float layers of /travmap/grid_map (grid_map_msgs/msg/GridMap), comma
+    /// separated: traversability (calibrated P), elevation, elevation_range, unsure,
+    /// ground_truth (frames with labels); `none` writes no GridMap.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = LayerArg::ALL)]
+    layers: Vec<LayerArg>,
     /// Height of the drawn grids relative to the sensor, metres.
     #[arg(long, default_value_t = -1.73, allow_negative_numbers = true, value_parser = super::parse_finite)]
     grid_height: f64,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum LayerArg {
+    Traversability,
+    Elevation,
+    ElevationRange,
+    Unsure,
+    GroundTruth,
+    None,
+}
+
+impl LayerArg {
+    const ALL: [LayerArg; 5] = [
+        LayerArg::Traversability,
+        LayerArg::Elevation,
+        LayerArg::ElevationRange,
+        LayerArg::Unsure,
+        LayerArg::GroundTruth,
+    ];
+
+    fn layer(self) -> Option<Layer> {
+        match self {
+            LayerArg::Traversability => Some(Layer::Traversability),
+            LayerArg::Elevation => Some(Layer::Elevation),
+            LayerArg::ElevationRange => Some(Layer::ElevationRange),
+            LayerArg::Unsure => Some(Layer::Unsure),
+            LayerArg::GroundTruth => Some(Layer::GroundTruth),
+            LayerArg::None => None,
+        }
+    }
+}
+
+impl std::fmt::Display for LayerArg {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let value = self.to_possible_value().expect("no variant is skipped");
+        f.write_str(value.get_name())
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -88,6 +131,7 @@ pub fn annotate(args: AnnotateArgs) -> Result<Outcome> {
             CloudArg::None => CloudPoints::None,
         },
         drive_map_every: args.drive_map_every,
+        layers: args.layers.iter().filter_map(|l| l.layer()).collect(),
     };
     let (model, model_name) = (args.adapt).apply(
         &args.inputs,

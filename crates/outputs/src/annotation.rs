@@ -8,7 +8,10 @@
 //! class, and `travmap_msgs/msg/FrameMetrics`; every few frames
 //! ([`AnnotationOptions::drive_map_every`]) and after the last, the fused map of the
 //! drive so far on `/travmap/drive_map` (an
-//! OccupancyGrid: 100 x P(not traversable), -1 unseen). With poses from registration,
+//! OccupancyGrid: 100 x P(not traversable), -1 unseen). Per frame too, the same grid
+//! as a `grid_map_msgs/msg/GridMap` of float layers on `/travmap/grid_map`
+//! ([`Layer`]: the calibrated P(traversable), the ground's elevation and its range,
+//! the cells the model is unsure of, the ground truth). With poses from registration,
 //! `/tf` carries them. By default the input's own messages are
 //! copied through (for KITTI input: what `convert` writes), so the file stands alone.
 //! A metadata record `travmap` holds the version, the effective config and the
@@ -30,14 +33,15 @@ use travmap_core::frame::Frame;
 use travmap_core::posing::Posing;
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{
-    FrameMetrics, Header, MapMetaData, OccupancyGrid, PointCloud2, PointField, Pose, Quaternion,
-    TfMessage, Time, TransformStamped, Vector3, datatype,
+    Float32MultiArray, FrameMetrics, GridMap, GridMapInfo, Header, MapMetaData,
+    MultiArrayDimension, MultiArrayLayout, OccupancyGrid, PointCloud2, PointField, Pose,
+    Quaternion, TfMessage, Time, TransformStamped, Vector3, datatype,
 };
 use travmap_io::Recorded;
 use travmap_method::classifier::SvmModel;
 use travmap_method::grid::CellClass;
 use travmap_method::pipeline::FrameResult;
-use travmap_run::scoring::evaluation::{Evaluation, EvaluationReport, Fit};
+use travmap_run::scoring::evaluation::{Evaluation, EvaluationReport, Fit, UNSURE_MARGIN};
 use travmap_run::scoring::metrics::Confusion;
 use travmap_run::{DriveRun, RunEvent};
 
@@ -47,6 +51,45 @@ pub const CLOUD_TOPIC: &str = "/travmap/cloud";
 pub const METRICS_TOPIC: &str = "/travmap/metrics";
 /// The fused map of the drive so far ([`travmap_method::fusion`]).
 pub const DRIVE_MAP_TOPIC: &str = "/travmap/drive_map";
+/// Each frame's float layers, as grid_map publishes them.
+pub const GRID_MAP_TOPIC: &str = "/travmap/grid_map";
+
+/// A float layer of [`GRID_MAP_TOPIC`], by its name there.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layer {
+    /// P(traversable) by the model's calibration, before the outlier filter.
+    Traversability,
+    /// The ground's height under the cell (its lowest point of the frame's scan),
+    /// metres above the grid's pose (the OccupancyGrid's height).
+    Elevation,
+    /// Highest minus lowest point of the cell over the window, metres.
+    ElevationRange,
+    /// 1 where the model's margin lies within 1 of the boundary (the fit report's
+    /// unsure cells), 0 elsewhere.
+    Unsure,
+    /// The labels: 1 traversable, 0 not (frames with ground truth).
+    GroundTruth,
+}
+
+impl Layer {
+    pub const ALL: [Layer; 5] = [
+        Layer::Traversability,
+        Layer::Elevation,
+        Layer::ElevationRange,
+        Layer::Unsure,
+        Layer::GroundTruth,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Layer::Traversability => "traversability",
+            Layer::Elevation => "elevation",
+            Layer::ElevationRange => "elevation_range",
+            Layer::Unsure => "unsure",
+            Layer::GroundTruth => "ground_truth",
+        }
+    }
+}
 /// With [`AnnotationOptions::static_map`]: the final map once, as map_server serves it.
 pub const STATIC_MAP_TOPIC: &str = "/map";
 /// The default of [`AnnotationOptions::drive_map_every`].
@@ -113,6 +156,8 @@ pub struct AnnotationOptions {
     /// long drive they grow with the square of its extent, and a large one waits
     /// longer ([`DRIVE_MAP_BYTES_PER_FRAME`]).
     pub drive_map_every: usize,
+    /// The layers of [`GRID_MAP_TOPIC`] (none: no GridMap).
+    pub layers: Vec<Layer>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -153,6 +198,104 @@ fn grid_message(
             },
         },
         data: classes.iter().map(|&c| c.occupancy()).collect(),
+    }
+}
+
+/// A frame's layers as a GridMap, placed as its OccupancyGrids are (centred on
+/// theirs, `height_m` above the sensor): grid_map's order, column-major from the cell of
+/// largest x and y; NaN where a layer has no value.
+fn grid_map_message(result: &FrameResult, layers: &[Layer], world_frame: &str, height_m: f64) -> GridMap {
+    let layout = &result.layout;
+    let side = layout.cells_per_side;
+    let size_m = side as f64 * layout.cell_size_m;
+    let [min_x, min_y] = layout.min_corner_in_world();
+    let pose_z = result.sensor_in_world[2] + height_m;
+    let nan = f32::NAN;
+    let predictable = |cell: usize| result.features.predictable[cell];
+    let range_column = travmap_method::features::FEATURE_NAMES
+        .iter()
+        .position(|n| *n == "zeta_difference");
+    let value = |layer: Layer, cell: usize| -> f32 {
+        match layer {
+            Layer::Traversability => (result.probabilities.as_ref()).map_or(nan, |p| p[cell]),
+            Layer::Elevation => {
+                let lowest = (result.cells.newest(cell).iter())
+                    .map(|p| p[2])
+                    .min_by(f32::total_cmp);
+                lowest.map_or(nan, |z| (layout.grid_point_in_world([0.0, 0.0, z])[2] - pose_z) as f32)
+            }
+            Layer::ElevationRange => match range_column {
+                Some(column) if predictable(cell) => result.features.cell(cell)[column],
+                _ => nan,
+            },
+            Layer::Unsure => (result.margins.as_ref())
+                .map(|m| m[cell])
+                .filter(|m| !m.is_nan())
+                .map_or(nan, |m| f32::from(u8::from(m.abs() < UNSURE_MARGIN))),
+            Layer::GroundTruth => match result.ground_truth.as_ref().map(|t| t[cell]) {
+                Some(CellClass::Traversable) => 1.0,
+                Some(CellClass::NonTraversable) => 0.0,
+                _ => nan,
+            },
+        }
+    };
+    let layers: Vec<Layer> = (layers.iter().copied())
+        .filter(|&l| l != Layer::GroundTruth || result.ground_truth.is_some())
+        .collect();
+    // grid_map's index (i, j): i along -x, j along -y; stored column-major, j outer.
+    let data = layers
+        .iter()
+        .map(|&layer| {
+            let mut values = Vec::with_capacity(side * side);
+            for j in 0..side {
+                for i in 0..side {
+                    let (col, row) = (side - 1 - i, side - 1 - j);
+                    values.push(value(layer, row * side + col));
+                }
+            }
+            Float32MultiArray {
+                layout: MultiArrayLayout {
+                    dim: vec![
+                        MultiArrayDimension {
+                            label: "column_index".into(),
+                            size: side as u32,
+                            stride: (side * side) as u32,
+                        },
+                        MultiArrayDimension {
+                            label: "row_index".into(),
+                            size: side as u32,
+                            stride: side as u32,
+                        },
+                    ],
+                    data_offset: 0,
+                },
+                data: values,
+            }
+        })
+        .collect();
+    GridMap {
+        header: Header {
+            stamp: Time::from_ns(result.stamp_ns),
+            frame_id: world_frame.into(),
+        },
+        info: GridMapInfo {
+            resolution: layout.cell_size_m,
+            length_x: size_m,
+            length_y: size_m,
+            pose: Pose {
+                position: Vector3 {
+                    x: min_x + size_m / 2.0,
+                    y: min_y + size_m / 2.0,
+                    z: pose_z,
+                },
+                orientation: Quaternion::default(),
+            },
+        },
+        layers: layers.iter().map(|l| l.name().to_string()).collect(),
+        basic_layers: vec![Layer::Traversability.name().to_string()],
+        data,
+        outer_start_index: 0,
+        inner_start_index: 0,
     }
 }
 
@@ -355,6 +498,10 @@ pub fn annotate(
                 stamp,
                 &grid_message(&result, truth, &world_frame, options.grid_height_m),
             )?;
+        }
+        if !options.layers.is_empty() {
+            let layers = grid_map_message(&result, &options.layers, &world_frame, options.grid_height_m);
+            sink.write(GRID_MAP_TOPIC, stamp, &layers)?;
         }
         if let Some(cloud) = cloud_message(&result, classes, &world_frame, options.cloud) {
             sink.write(CLOUD_TOPIC, stamp, &cloud)?;

@@ -244,6 +244,53 @@ pub struct OccupancyGrid {
     pub data: Vec<i8>,
 }
 
+/// `grid_map_msgs/msg/GridMap` (ANYbotics grid_map): float layers over one grid,
+/// each a column-major `Float32MultiArray` whose (0, 0) is the cell of largest x and
+/// y, rows along -x and columns along -y of `info.pose`, NaN where a layer has no
+/// value.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GridMap {
+    pub header: Header,
+    pub info: GridMapInfo,
+    pub layers: Vec<String>,
+    pub basic_layers: Vec<String>,
+    pub data: Vec<Float32MultiArray>,
+    pub outer_start_index: u16,
+    pub inner_start_index: u16,
+}
+
+/// `grid_map_msgs/msg/GridMapInfo`: the cell size, the map's side lengths (metres)
+/// and the pose of its centre.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GridMapInfo {
+    pub resolution: f64,
+    pub length_x: f64,
+    pub length_y: f64,
+    pub pose: Pose,
+}
+
+/// `std_msgs/msg/Float32MultiArray`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Float32MultiArray {
+    pub layout: MultiArrayLayout,
+    pub data: Vec<f32>,
+}
+
+/// `std_msgs/msg/MultiArrayLayout`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MultiArrayLayout {
+    pub dim: Vec<MultiArrayDimension>,
+    pub data_offset: u32,
+}
+
+/// `std_msgs/msg/MultiArrayDimension`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MultiArrayDimension {
+    pub label: String,
+    pub size: u32,
+    pub stride: u32,
+}
+
 /// `geometry_msgs/msg/PoseWithCovariance`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PoseWithCovariance {
@@ -397,6 +444,7 @@ pub fn known_schema(ros2_name: &str) -> Option<&'static str> {
         entry::<PoseStamped>(),
         entry::<TfMessage>(),
         entry::<OccupancyGrid>(),
+        entry::<GridMap>(),
         entry::<VelodyneScan>(),
         entry::<PandarScan>(),
         entry::<RobosenseScan>(),
@@ -448,6 +496,11 @@ ros_message!(
     OccupancyGrid,
     "nav_msgs/msg/OccupancyGrid",
     "nav_msgs__OccupancyGrid.msg"
+);
+ros_message!(
+    GridMap,
+    "grid_map_msgs/msg/GridMap",
+    "grid_map_msgs__GridMap.msg"
 );
 ros_message!(
     VelodyneScan,
