@@ -219,6 +219,77 @@ fn check_client_summary(client: &str, entries: &[Value], seq: &Path, runs: &[Val
         };
         assert_eq!(fields, expected, "{client}");
     }
+    // The float layers: grid_map's geometry and order, placed where the
+    // OccupancyGrids are; the ground-truth layer the same cells as theirs.
+    let layers = on("/travmap/grid_map");
+    let truths = on("/travmap/ground_truth");
+    assert_eq!(layers.len(), runs.len(), "{client}");
+    for (frame, layer) in layers.iter().enumerate() {
+        let grid = &on("/travmap/prediction")[frame];
+        assert_eq!(
+            layer["resolution"].as_f64().unwrap() as f32,
+            grid["resolution"].as_f64().unwrap() as f32,
+            "{client}"
+        );
+        let length: Vec<f64> = (layer["length"].as_array().unwrap().iter())
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(length, [12.0, 12.0], "{client}");
+        for axis in 0..2 {
+            let centre = layer["centre"][axis].as_f64().unwrap();
+            let origin = grid["origin"][axis].as_f64().unwrap();
+            assert!(
+                (centre - (origin + 6.0)).abs() < 1e-9,
+                "{client}: {centre} {origin}"
+            );
+        }
+        let names: Vec<&str> = layer["layers"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(String::as_str)
+            .collect();
+        let expected = if frame < 3 { 5 } else { 4 };
+        assert_eq!(names.len(), expected, "{client}: {names:?}");
+        let traversability = layer["layers"]["traversability"]["values"]
+            .as_array()
+            .unwrap();
+        assert_eq!(traversability.len(), 900, "{client}");
+        assert!(
+            traversability
+                .iter()
+                .filter_map(Value::as_f64)
+                .all(|p| (0.0..=1.0).contains(&p))
+        );
+        assert_eq!(
+            layer["layers"]["traversability"]["dims"],
+            serde_json::json!([["column_index", 30, 900], ["row_index", 30, 30]]),
+            "{client}"
+        );
+        if let Some(truth) = truths.get(frame) {
+            // grid_map (i, j) along -x, -y, column-major; the OccupancyGrid row-major
+            // from its min corner.
+            let values = layer["layers"]["ground_truth"]["values"]
+                .as_array()
+                .unwrap();
+            let cells = truth["cells"].as_array().unwrap();
+            for j in 0..30 {
+                for i in 0..30 {
+                    let cell = &cells[(29 - j) * 30 + (29 - i)];
+                    let expected = match cell.as_i64().unwrap() {
+                        0 => Some(1.0),
+                        100 => Some(0.0),
+                        _ => None,
+                    };
+                    assert_eq!(
+                        values[j * 30 + i].as_f64(),
+                        expected,
+                        "{client}: i {i} j {j}"
+                    );
+                }
+            }
+        }
+    }
     let grids = on("/travmap/prediction");
     assert_eq!(grids.len(), runs.len(), "{client}");
     for (grid, run) in grids.iter().zip(runs) {
@@ -330,10 +401,11 @@ fn decode_with_every_client(
     }
     for (client, entries) in &summaries {
         check_client_summary(client, entries, seq, runs);
-        // 6 clouds, 6 /tf, 1 /tf_static, 6 + 3 grids, 6 classified clouds, 6 metrics, 1 drive map.
+        // 6 clouds, 6 /tf, 1 /tf_static, 6 + 3 grids, 6 grid maps, 6 classified
+        // clouds, 6 metrics, 1 drive map.
         assert_eq!(
             entries.len(),
-            35,
+            41,
             "{client}: every message decoded in {out:?}"
         );
     }

@@ -49,6 +49,16 @@ function summarise(topic, schema, msg, logTime) {
     entry.resolution = msg.info.resolution;
     entry.origin = [msg.info.origin.position.x, msg.info.origin.position.y];
     entry.cells = Array.from(msg.data);
+  } else if (schema === "grid_map_msgs/msg/GridMap") {
+    const pose = msg.info.pose.position;
+    entry.resolution = msg.info.resolution;
+    entry.length = [msg.info.length_x, msg.info.length_y];
+    entry.centre = [pose.x, pose.y, pose.z];
+    entry.basic_layers = msg.basic_layers;
+    entry.layers = Object.fromEntries(msg.layers.map((name, i) => [name, {
+      dims: msg.data[i].layout.dim.map((d) => [d.label, d.size, d.stride]),
+      values: Array.from(msg.data[i].data, (v) => (Number.isNaN(v) ? null : v)),
+    }]));
   } else if (schema === "tf2_msgs/msg/TFMessage") {
     entry.transforms = msg.transforms.map((t) => [
       t.header.frame_id, t.child_frame_id,

@@ -46,6 +46,23 @@ def grid_summary(msg):
     }
 
 
+def grid_map_summary(msg):
+    """The GridMap's geometry, and each layer as numbers (NaN as null)."""
+    layers = {}
+    for name, array in zip(msg.layers, msg.data):
+        dims = [[d.label, int(d.size), int(d.stride)] for d in array.layout.dim]
+        values = [None if math.isnan(v) else float(v) for v in array.data]
+        layers[name] = {"dims": dims, "values": values}
+    pose = msg.info.pose.position
+    return {
+        "resolution": float(msg.info.resolution),
+        "length": [float(msg.info.length_x), float(msg.info.length_y)],
+        "centre": [float(pose.x), float(pose.y), float(pose.z)],
+        "basic_layers": list(msg.basic_layers),
+        "layers": layers,
+    }
+
+
 def summarise(topic, schema, msg, stamp_ns):
     entry = {"topic": topic, "schema": schema, "log_time": int(stamp_ns),
              "stamp": int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
@@ -54,6 +71,8 @@ def summarise(topic, schema, msg, stamp_ns):
         entry.update(cloud_summary(msg))
     elif schema == "nav_msgs/msg/OccupancyGrid":
         entry.update(grid_summary(msg))
+    elif schema == "grid_map_msgs/msg/GridMap":
+        entry.update(grid_map_summary(msg))
     elif schema == "tf2_msgs/msg/TFMessage":
         entry["transforms"] = [[t.header.frame_id, t.child_frame_id, float(t.transform.translation.x),
                                 float(t.transform.translation.y), float(t.transform.translation.z)]
@@ -78,10 +97,11 @@ def with_rosbags(path):
     store = get_typestore(Stores.ROS2_HUMBLE)
     out = []
     with AnyReader([Path(path)], default_typestore=store) as reader:
-        # travmap's own message type comes with its definition in the file.
+        # travmap's own message type and grid_map's come with their definitions in
+        # the file.
         extra = {}
         for conn in reader.connections:
-            if conn.msgtype.startswith("travmap_msgs/"):
+            if conn.msgtype.startswith(("travmap_msgs/", "grid_map_msgs/")):
                 extra.update(get_types_from_msg(conn.msgdef.data, conn.msgtype))
         if extra:
             store.register(extra)

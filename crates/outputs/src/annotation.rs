@@ -204,7 +204,12 @@ fn grid_message(
 /// A frame's layers as a GridMap, placed as its OccupancyGrids are (centred on
 /// theirs, `height_m` above the sensor): grid_map's order, column-major from the cell of
 /// largest x and y; NaN where a layer has no value.
-fn grid_map_message(result: &FrameResult, layers: &[Layer], world_frame: &str, height_m: f64) -> GridMap {
+fn grid_map_message(
+    result: &FrameResult,
+    layers: &[Layer],
+    world_frame: &str,
+    height_m: f64,
+) -> GridMap {
     let layout = &result.layout;
     let side = layout.cells_per_side;
     let size_m = side as f64 * layout.cell_size_m;
@@ -222,7 +227,9 @@ fn grid_map_message(result: &FrameResult, layers: &[Layer], world_frame: &str, h
                 let lowest = (result.cells.newest(cell).iter())
                     .map(|p| p[2])
                     .min_by(f32::total_cmp);
-                lowest.map_or(nan, |z| (layout.grid_point_in_world([0.0, 0.0, z])[2] - pose_z) as f32)
+                lowest.map_or(nan, |z| {
+                    (layout.grid_point_in_world([0.0, 0.0, z])[2] - pose_z) as f32
+                })
             }
             Layer::ElevationRange => match range_column {
                 Some(column) if predictable(cell) => result.features.cell(cell)[column],
@@ -500,7 +507,12 @@ pub fn annotate(
             )?;
         }
         if !options.layers.is_empty() {
-            let layers = grid_map_message(&result, &options.layers, &world_frame, options.grid_height_m);
+            let layers = grid_map_message(
+                &result,
+                &options.layers,
+                &world_frame,
+                options.grid_height_m,
+            );
             sink.write(GRID_MAP_TOPIC, stamp, &layers)?;
         }
         if let Some(cloud) = cloud_message(&result, classes, &world_frame, options.cloud) {

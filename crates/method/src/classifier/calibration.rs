@@ -50,7 +50,10 @@ impl Calibration {
         if positives == 0.0 || negatives == 0.0 {
             return None;
         }
-        let (high, low) = ((positives + 1.0) / (positives + 2.0), 1.0 / (negatives + 2.0));
+        let (high, low) = (
+            (positives + 1.0) / (positives + 2.0),
+            1.0 / (negatives + 2.0),
+        );
         // Targets for P(traversable) = 1 / (1 + exp(a f + b)).
         let data: Vec<(f64, f64)> = (values.iter())
             .map(|&(f, t)| (f as f64, if t { high } else { low }))
@@ -137,7 +140,10 @@ mod tests {
             })
             .collect();
         let fitted = Calibration::fit(&values).unwrap();
-        assert!((fitted.a + 2.0).abs() < 0.1 && (fitted.b - 0.5).abs() < 0.1, "{fitted:?}");
+        assert!(
+            (fitted.a + 2.0).abs() < 0.1 && (fitted.b - 0.5).abs() < 0.1,
+            "{fitted:?}"
+        );
         assert!((fitted.probability(0.25) - 0.5).abs() < 0.03);
     }
 

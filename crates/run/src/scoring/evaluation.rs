@@ -209,7 +209,9 @@ impl Reliability {
             })
             .collect();
         let ece = (bins.iter())
-            .map(|b| b.cells as f64 / total as f64 * (b.mean_probability - b.share_traversable).abs())
+            .map(|b| {
+                b.cells as f64 / total as f64 * (b.mean_probability - b.share_traversable).abs()
+            })
             .sum();
         Some(CalibrationReport {
             cells: total,
