@@ -123,6 +123,11 @@ def test_grids_are_run_json_cell_for_cell(path):
         assert not grid.predictable[grid.cells == -1].any() or (grid.cells != -1).any()
         assert grid.features.shape == (grid.cells_per_side, grid.cells_per_side, len(grid.feature_names))
         assert np.isnan(grid.decision[~grid.predictable]).all()
+        # The layers a planner reads: P rises with the margin, unsure where it is small.
+        p, d = grid.probability[grid.predictable], grid.decision[grid.predictable]
+        assert (np.diff(p[np.argsort(d)]) >= -1e-6).all() and (0 <= p).all() and (p <= 1).all()
+        assert (grid.unsure[grid.predictable] == (np.abs(d) < 1)).all()
+        assert np.nanmin(grid.elevation_range) >= 0 and np.isfinite(grid.elevation).any()
         assert grid.remission == frame["remission"] and grid.without_remission == frame["without_remission"]
         assert set(grid.timings) == set(frame["timings"])
 

@@ -95,6 +95,14 @@ class Grid:
     """Class before the filter."""
     decision: npt.NDArray[np.float32]
     """Margin (> 0 traversable), NaN where unpredictable."""
+    probability: npt.NDArray[np.float32]
+    """P(traversable) by the model's calibration, before the filter; NaN where unpredictable."""
+    elevation: npt.NDArray[np.float32]
+    """World z of the ground under the cell (its lowest point of the scan), m; NaN without points."""
+    elevation_range: npt.NDArray[np.float32]
+    """Highest minus lowest point of the cell over the window, m; NaN where unpredictable."""
+    unsure: npt.NDArray[np.float32]
+    """1 where |margin| < 1, 0 elsewhere, NaN where unpredictable."""
     predictable: npt.NDArray[np.bool_]
     features: npt.NDArray[np.float32]
     """[row, col, feature], named by feature_names."""

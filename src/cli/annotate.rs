@@ -7,8 +7,9 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
+use travmap_method::layers::Layer;
 use travmap_outputs::annotation;
-use travmap_outputs::annotation::{AnnotationOptions, CloudPoints, DRIVE_MAP_EVERY, Layer};
+use travmap_outputs::annotation::{AnnotationOptions, CloudPoints, DRIVE_MAP_EVERY};
 use travmap_run::report::tables::model_line;
 use travmap_run::scoring::remarks::FitRemedies;
 

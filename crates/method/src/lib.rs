@@ -18,6 +18,7 @@ pub mod fusion;
 pub mod grid;
 pub mod ground_truth;
 pub mod integration;
+pub mod layers;
 pub mod pipeline;
 pub mod pose_check;
 pub mod registration;

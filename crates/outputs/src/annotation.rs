@@ -10,7 +10,7 @@
 //! drive so far on `/travmap/drive_map` (an
 //! OccupancyGrid: 100 x P(not traversable), -1 unseen). Per frame too, the same grid
 //! as a `grid_map_msgs/msg/GridMap` of float layers on `/travmap/grid_map`
-//! ([`Layer`]: the calibrated P(traversable), the ground's elevation and its range,
+//! (`travmap_method::layers`: the calibrated P(traversable), the ground's elevation and its range,
 //! the cells the model is unsure of, the ground truth). With poses from registration,
 //! `/tf` carries them. By default the input's own messages are
 //! copied through (for KITTI input: what `convert` writes), so the file stands alone.
@@ -40,8 +40,9 @@ use travmap_formats::ros::{
 use travmap_io::Recorded;
 use travmap_method::classifier::SvmModel;
 use travmap_method::grid::CellClass;
+use travmap_method::layers::{Layer, layer_values};
 use travmap_method::pipeline::FrameResult;
-use travmap_run::scoring::evaluation::{Evaluation, EvaluationReport, Fit, UNSURE_MARGIN};
+use travmap_run::scoring::evaluation::{Evaluation, EvaluationReport, Fit};
 use travmap_run::scoring::metrics::Confusion;
 use travmap_run::{DriveRun, RunEvent};
 
@@ -53,43 +54,6 @@ pub const METRICS_TOPIC: &str = "/travmap/metrics";
 pub const DRIVE_MAP_TOPIC: &str = "/travmap/drive_map";
 /// Each frame's float layers, as grid_map publishes them.
 pub const GRID_MAP_TOPIC: &str = "/travmap/grid_map";
-
-/// A float layer of [`GRID_MAP_TOPIC`], by its name there.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Layer {
-    /// P(traversable) by the model's calibration, before the outlier filter.
-    Traversability,
-    /// The ground's height under the cell (its lowest point of the frame's scan),
-    /// metres above the grid's pose (the OccupancyGrid's height).
-    Elevation,
-    /// Highest minus lowest point of the cell over the window, metres.
-    ElevationRange,
-    /// 1 where the model's margin lies within 1 of the boundary (the fit report's
-    /// unsure cells), 0 elsewhere.
-    Unsure,
-    /// The labels: 1 traversable, 0 not (frames with ground truth).
-    GroundTruth,
-}
-
-impl Layer {
-    pub const ALL: [Layer; 5] = [
-        Layer::Traversability,
-        Layer::Elevation,
-        Layer::ElevationRange,
-        Layer::Unsure,
-        Layer::GroundTruth,
-    ];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Layer::Traversability => "traversability",
-            Layer::Elevation => "elevation",
-            Layer::ElevationRange => "elevation_range",
-            Layer::Unsure => "unsure",
-            Layer::GroundTruth => "ground_truth",
-        }
-    }
-}
 /// With [`AnnotationOptions::static_map`]: the final map once, as map_server serves it.
 pub const STATIC_MAP_TOPIC: &str = "/map";
 /// The default of [`AnnotationOptions::drive_map_every`].
@@ -215,49 +179,18 @@ fn grid_map_message(
     let size_m = side as f64 * layout.cell_size_m;
     let [min_x, min_y] = layout.min_corner_in_world();
     let pose_z = result.sensor_in_world[2] + height_m;
-    let nan = f32::NAN;
-    let predictable = |cell: usize| result.features.predictable[cell];
-    let range_column = travmap_method::features::FEATURE_NAMES
-        .iter()
-        .position(|n| *n == "zeta_difference");
-    let value = |layer: Layer, cell: usize| -> f32 {
-        match layer {
-            Layer::Traversability => (result.probabilities.as_ref()).map_or(nan, |p| p[cell]),
-            Layer::Elevation => {
-                let lowest = (result.cells.newest(cell).iter())
-                    .map(|p| p[2])
-                    .min_by(f32::total_cmp);
-                lowest.map_or(nan, |z| {
-                    (layout.grid_point_in_world([0.0, 0.0, z])[2] - pose_z) as f32
-                })
-            }
-            Layer::ElevationRange => match range_column {
-                Some(column) if predictable(cell) => result.features.cell(cell)[column],
-                _ => nan,
-            },
-            Layer::Unsure => (result.margins.as_ref())
-                .map(|m| m[cell])
-                .filter(|m| !m.is_nan())
-                .map_or(nan, |m| f32::from(u8::from(m.abs() < UNSURE_MARGIN))),
-            Layer::GroundTruth => match result.ground_truth.as_ref().map(|t| t[cell]) {
-                Some(CellClass::Traversable) => 1.0,
-                Some(CellClass::NonTraversable) => 0.0,
-                _ => nan,
-            },
-        }
-    };
-    let layers: Vec<Layer> = (layers.iter().copied())
-        .filter(|&l| l != Layer::GroundTruth || result.ground_truth.is_some())
+    let layers: Vec<(Layer, Vec<f32>)> = (layers.iter())
+        .filter_map(|&layer| Some((layer, layer_values(result, layer, pose_z)?)))
         .collect();
     // grid_map's index (i, j): i along -x, j along -y; stored column-major, j outer.
     let data = layers
         .iter()
-        .map(|&layer| {
+        .map(|(_, by_cell)| {
             let mut values = Vec::with_capacity(side * side);
             for j in 0..side {
                 for i in 0..side {
                     let (col, row) = (side - 1 - i, side - 1 - j);
-                    values.push(value(layer, row * side + col));
+                    values.push(by_cell[row * side + col]);
                 }
             }
             Float32MultiArray {
@@ -298,7 +231,7 @@ fn grid_map_message(
                 orientation: Quaternion::default(),
             },
         },
-        layers: layers.iter().map(|l| l.name().to_string()).collect(),
+        layers: layers.iter().map(|(l, _)| l.name().to_string()).collect(),
         basic_layers: vec![Layer::Traversability.name().to_string()],
         data,
         outer_start_index: 0,

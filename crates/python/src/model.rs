@@ -13,6 +13,7 @@ use travmap_core::error::Error;
 use travmap_method::classifier::SvmModel;
 use travmap_method::features::feature_names;
 use travmap_method::grid::CellClass;
+use travmap_method::layers::{Layer, layer_values};
 use travmap_method::pipeline::{FrameResult, StageTimings};
 use travmap_run::scoring::evaluation::Evaluation;
 use travmap_run::scoring::remarks::{FitRemedies, drive_notices};
@@ -219,6 +220,15 @@ impl GridValues {
             let grid = Array2::from_shape_vec((side, side), values).map_err(shape_error)?;
             Ok(PyArray2::from_owned_array(py, grid).into_any().unbind())
         };
+        let layer = |layer: Layer| -> PyResult<Py<PyAny>> {
+            let values = layer_values(&result, layer, 0.0).unwrap_or_default();
+            let grid = Array2::from_shape_vec((side, side), values).map_err(shape_error)?;
+            Ok(PyArray2::from_owned_array(py, grid).into_any().unbind())
+        };
+        let probability = layer(Layer::Traversability)?;
+        let elevation = layer(Layer::Elevation)?;
+        let elevation_range = layer(Layer::ElevationRange)?;
+        let unsure = layer(Layer::Unsure)?;
         let features = result.features;
         let dimension = features.dimension;
         let names = feature_names(&features.groups);
@@ -239,6 +249,10 @@ impl GridValues {
             traversable: square(classes)?,
             predicted: square(predicted)?,
             decision: PyArray2::from_owned_array(py, decision).into_any().unbind(),
+            probability,
+            elevation,
+            elevation_range,
+            unsure,
             predictable: PyArray2::from_owned_array(py, predictable)
                 .into_any()
                 .unbind(),
@@ -297,6 +311,22 @@ pub struct Grid {
     /// unpredictable.
     #[pyo3(get)]
     decision: Py<PyAny>,
+    /// float32 P(traversable) by the model's calibration, before the filter; NaN
+    /// where unpredictable.
+    #[pyo3(get)]
+    probability: Py<PyAny>,
+    /// float32 world z of the ground under the cell (its lowest point of the
+    /// frame's scan), metres; NaN where the scan has no point in it.
+    #[pyo3(get)]
+    elevation: Py<PyAny>,
+    /// float32 highest minus lowest point of the cell over the window, metres; NaN
+    /// where unpredictable.
+    #[pyo3(get)]
+    elevation_range: Py<PyAny>,
+    /// float32 1 where the margin lies within 1 of the boundary (the fit report's
+    /// unsure cells), 0 elsewhere, NaN where unpredictable.
+    #[pyo3(get)]
+    unsure: Py<PyAny>,
     /// bool: the cell had points enough for features.
     #[pyo3(get)]
     predictable: Py<PyAny>,

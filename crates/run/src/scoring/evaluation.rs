@@ -71,8 +71,7 @@ impl TimingReport {
     }
 }
 
-/// A margin this close to the decision boundary is a cell the model is unsure of.
-pub const UNSURE_MARGIN: f32 = 1.0;
+pub use travmap_method::layers::UNSURE_MARGIN;
 /// A drive whose share of unsure cells exceeds this fits the model poorly: unlike the
 /// drives it learnt from (docs/method.md, "Knowing when it is not sure": no
 /// held-out pair of the cross-dataset study below 60 mIoU stayed under it, none
