@@ -290,6 +290,28 @@ fn check_client_summary(client: &str, entries: &[Value], seq: &Path, runs: &[Val
             }
         }
     }
+    // The same layers for Foxglove: row-major from the OccupancyGrid's corner.
+    let foxglove = on("/travmap/grid");
+    assert_eq!(foxglove.len(), runs.len(), "{client}");
+    for (frame, grid) in foxglove.iter().enumerate() {
+        let occupancy = &on("/travmap/prediction")[frame];
+        assert_eq!(grid["column_count"], 30, "{client}");
+        assert_eq!(grid["origin"], occupancy["origin"], "{client}");
+        let layer = &layers[frame]["layers"];
+        for (name, values) in grid["layers"].as_object().unwrap() {
+            let by_grid_map = layer[name]["values"].as_array().unwrap();
+            for j in 0..30 {
+                for i in 0..30 {
+                    let (col, row) = (29 - i, 29 - j);
+                    assert_eq!(
+                        values[row * 30 + col].as_f64().map(|v| v as f32),
+                        by_grid_map[j * 30 + i].as_f64().map(|v| v as f32),
+                        "{client}: {name} cell ({col}, {row})"
+                    );
+                }
+            }
+        }
+    }
     let grids = on("/travmap/prediction");
     assert_eq!(grids.len(), runs.len(), "{client}");
     for (grid, run) in grids.iter().zip(runs) {
@@ -401,11 +423,11 @@ fn decode_with_every_client(
     }
     for (client, entries) in &summaries {
         check_client_summary(client, entries, seq, runs);
-        // 6 clouds, 6 /tf, 1 /tf_static, 6 + 3 grids, 6 grid maps, 6 classified
-        // clouds, 6 metrics, 1 drive map.
+        // 6 clouds, 6 /tf, 1 /tf_static, 6 + 3 grids, 6 grid maps, 6 Foxglove
+        // grids, 6 classified clouds, 6 metrics, 1 drive map.
         assert_eq!(
             entries.len(),
-            41,
+            47,
             "{client}: every message decoded in {out:?}"
         );
     }

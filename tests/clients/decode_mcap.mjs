@@ -59,6 +59,17 @@ function summarise(topic, schema, msg, logTime) {
       dims: msg.data[i].layout.dim.map((d) => [d.label, d.size, d.stride]),
       values: Array.from(msg.data[i].data, (v) => (Number.isNaN(v) ? null : v)),
     }]));
+  } else if (schema === "foxglove_msgs/msg/Grid") {
+    const view = new DataView(msg.data.buffer, msg.data.byteOffset, msg.data.byteLength);
+    const cells = msg.data.byteLength / msg.cell_stride;
+    entry.column_count = msg.column_count;
+    entry.cell_size = [msg.cell_size.x, msg.cell_size.y];
+    entry.row_stride = msg.row_stride;
+    entry.origin = [msg.pose.position.x, msg.pose.position.y];
+    entry.layers = Object.fromEntries(msg.fields.map((f) => [f.name, Array.from({ length: cells }, (_, i) => {
+      const v = view.getFloat32(i * msg.cell_stride + f.offset, true);
+      return Number.isNaN(v) ? null : v;
+    })]));
   } else if (schema === "tf2_msgs/msg/TFMessage") {
     entry.transforms = msg.transforms.map((t) => [
       t.header.frame_id, t.child_frame_id,

@@ -63,16 +63,38 @@ def grid_map_summary(msg):
     }
 
 
+def foxglove_grid_summary(msg):
+    """The foxglove Grid's geometry, and each float32 field as numbers (NaN as null)."""
+    data = bytes(msg.data)
+    cells = len(data) // msg.cell_stride
+    layers = {}
+    for field in msg.fields:
+        assert field.type == 7, field
+        values = [struct.unpack_from("<f", data, i * msg.cell_stride + field.offset)[0] for i in range(cells)]
+        layers[field.name] = [None if math.isnan(v) else float(v) for v in values]
+    return {
+        "column_count": int(msg.column_count),
+        "cell_size": [float(msg.cell_size.x), float(msg.cell_size.y)],
+        "row_stride": int(msg.row_stride),
+        "origin": [float(msg.pose.position.x), float(msg.pose.position.y)],
+        "layers": layers,
+    }
+
+
 def summarise(topic, schema, msg, stamp_ns):
     entry = {"topic": topic, "schema": schema, "log_time": int(stamp_ns),
              "stamp": int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
-             if hasattr(msg, "header") else None}
+             if hasattr(msg, "header") else
+             int(msg.timestamp.sec) * 1_000_000_000 + int(msg.timestamp.nanosec)
+             if hasattr(msg, "timestamp") else None}
     if schema == "sensor_msgs/msg/PointCloud2":
         entry.update(cloud_summary(msg))
     elif schema == "nav_msgs/msg/OccupancyGrid":
         entry.update(grid_summary(msg))
     elif schema == "grid_map_msgs/msg/GridMap":
         entry.update(grid_map_summary(msg))
+    elif schema == "foxglove_msgs/msg/Grid":
+        entry.update(foxglove_grid_summary(msg))
     elif schema == "tf2_msgs/msg/TFMessage":
         entry["transforms"] = [[t.header.frame_id, t.child_frame_id, float(t.transform.translation.x),
                                 float(t.transform.translation.y), float(t.transform.translation.z)]
@@ -101,7 +123,7 @@ def with_rosbags(path):
         # the file.
         extra = {}
         for conn in reader.connections:
-            if conn.msgtype.startswith(("travmap_msgs/", "grid_map_msgs/")):
+            if conn.msgtype.startswith(("travmap_msgs/", "grid_map_msgs/", "foxglove_msgs/")):
                 extra.update(get_types_from_msg(conn.msgdef.data, conn.msgtype))
         if extra:
             store.register(extra)

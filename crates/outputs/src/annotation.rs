@@ -11,7 +11,8 @@
 //! OccupancyGrid: 100 x P(not traversable), -1 unseen). Per frame too, the same grid
 //! as a `grid_map_msgs/msg/GridMap` of float layers on `/travmap/grid_map`
 //! (`travmap_method::layers`: the calibrated P(traversable), the ground's elevation and its range,
-//! the cells the model is unsure of, the ground truth). With poses from registration,
+//! the cells the model is unsure of, the ground truth), and the same layers as
+//! `foxglove_msgs/msg/Grid` on `/travmap/grid`. With poses from registration,
 //! `/tf` carries them. By default the input's own messages are
 //! copied through (for KITTI input: what `convert` writes), so the file stands alone.
 //! A metadata record `travmap` holds the version, the effective config and the
@@ -33,9 +34,10 @@ use travmap_core::frame::Frame;
 use travmap_core::posing::Posing;
 use travmap_formats::mcap::writer::Compression;
 use travmap_formats::ros::{
-    Float32MultiArray, FrameMetrics, GridMap, GridMapInfo, Header, MapMetaData,
-    MultiArrayDimension, MultiArrayLayout, OccupancyGrid, PointCloud2, PointField, Pose,
-    Quaternion, TfMessage, Time, TransformStamped, Vector3, datatype,
+    Float32MultiArray, FoxgloveGrid, FoxgloveVector2, FrameMetrics, GridMap, GridMapInfo, Header,
+    MapMetaData, MultiArrayDimension, MultiArrayLayout, OccupancyGrid, PackedElementField,
+    PointCloud2, PointField, Pose, Quaternion, TfMessage, Time, TransformStamped, Vector3,
+    datatype,
 };
 use travmap_io::Recorded;
 use travmap_method::classifier::SvmModel;
@@ -54,6 +56,12 @@ pub const METRICS_TOPIC: &str = "/travmap/metrics";
 pub const DRIVE_MAP_TOPIC: &str = "/travmap/drive_map";
 /// Each frame's float layers, as grid_map publishes them.
 pub const GRID_MAP_TOPIC: &str = "/travmap/grid_map";
+/// The same layers as `foxglove_msgs/msg/Grid`, which Foxglove's 3D panel colours
+/// with no extension (ROS 2 CDR like every other channel, so that rosbags and
+/// ROS-only readers open the file too).
+pub const FOXGLOVE_GRID_TOPIC: &str = "/travmap/grid";
+/// foxglove's NumericType FLOAT32.
+const FOXGLOVE_FLOAT32: u8 = 7;
 /// With [`AnnotationOptions::static_map`]: the final map once, as map_server serves it.
 pub const STATIC_MAP_TOPIC: &str = "/map";
 /// The default of [`AnnotationOptions::drive_map_every`].
@@ -236,6 +244,57 @@ fn grid_map_message(
         data,
         outer_start_index: 0,
         inner_start_index: 0,
+    }
+}
+
+/// A frame's layers as a `foxglove_msgs/msg/Grid`: row-major from the grid's min
+/// corner (its pose), each cell the layers' float32 values side by side.
+fn foxglove_grid_message(
+    result: &FrameResult,
+    layers: &[Layer],
+    world_frame: &str,
+    height_m: f64,
+) -> FoxgloveGrid {
+    let layout = &result.layout;
+    let side = layout.cells_per_side;
+    let [min_x, min_y] = layout.min_corner_in_world();
+    let pose_z = result.sensor_in_world[2] + height_m;
+    let layers: Vec<(Layer, Vec<f32>)> = (layers.iter())
+        .filter_map(|&layer| Some((layer, layer_values(result, layer, pose_z)?)))
+        .collect();
+    let cell_stride = 4 * layers.len();
+    let mut data = Vec::with_capacity(cell_stride * side * side);
+    for cell in 0..side * side {
+        for (_, values) in &layers {
+            data.extend_from_slice(&values[cell].to_le_bytes());
+        }
+    }
+    FoxgloveGrid {
+        timestamp: Time::from_ns(result.stamp_ns),
+        frame_id: world_frame.into(),
+        pose: Pose {
+            position: Vector3 {
+                x: min_x,
+                y: min_y,
+                z: pose_z,
+            },
+            orientation: Quaternion::default(),
+        },
+        column_count: side as u32,
+        cell_size: FoxgloveVector2 {
+            x: layout.cell_size_m,
+            y: layout.cell_size_m,
+        },
+        row_stride: (cell_stride * side) as u32,
+        cell_stride: cell_stride as u32,
+        fields: (layers.iter().enumerate())
+            .map(|(k, (layer, _))| PackedElementField {
+                name: layer.name().into(),
+                offset: 4 * k as u32,
+                r#type: FOXGLOVE_FLOAT32,
+            })
+            .collect(),
+        data,
     }
 }
 
@@ -447,6 +506,13 @@ pub fn annotate(
                 options.grid_height_m,
             );
             sink.write(GRID_MAP_TOPIC, stamp, &layers)?;
+            let grid = foxglove_grid_message(
+                &result,
+                &options.layers,
+                &world_frame,
+                options.grid_height_m,
+            );
+            sink.write(FOXGLOVE_GRID_TOPIC, stamp, &grid)?;
         }
         if let Some(cloud) = cloud_message(&result, classes, &world_frame, options.cloud) {
             sink.write(CLOUD_TOPIC, stamp, &cloud)?;

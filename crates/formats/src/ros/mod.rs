@@ -269,6 +269,39 @@ pub struct GridMapInfo {
     pub pose: Pose,
 }
 
+/// `foxglove_msgs/msg/Grid`: Foxglove's grid of packed fields, which its 3D panel
+/// colours with no extension. Row-major from `pose` (the grid's corner), x along a
+/// row.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FoxgloveGrid {
+    pub timestamp: Time,
+    pub frame_id: String,
+    pub pose: Pose,
+    pub column_count: u32,
+    pub cell_size: FoxgloveVector2,
+    pub row_stride: u32,
+    pub cell_stride: u32,
+    pub fields: Vec<PackedElementField>,
+    #[serde(with = "serde_bytes")]
+    pub data: Vec<u8>,
+}
+
+/// `foxglove_msgs/msg/Vector2`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FoxgloveVector2 {
+    pub x: f64,
+    pub y: f64,
+}
+
+/// `foxglove_msgs/msg/PackedElementField`: a field of a packed cell; `type` 7 is
+/// FLOAT32.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PackedElementField {
+    pub name: String,
+    pub offset: u32,
+    pub r#type: u8,
+}
+
 /// `std_msgs/msg/Float32MultiArray`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Float32MultiArray {
@@ -445,6 +478,7 @@ pub fn known_schema(ros2_name: &str) -> Option<&'static str> {
         entry::<TfMessage>(),
         entry::<OccupancyGrid>(),
         entry::<GridMap>(),
+        entry::<FoxgloveGrid>(),
         entry::<VelodyneScan>(),
         entry::<PandarScan>(),
         entry::<RobosenseScan>(),
@@ -496,6 +530,11 @@ ros_message!(
     OccupancyGrid,
     "nav_msgs/msg/OccupancyGrid",
     "nav_msgs__OccupancyGrid.msg"
+);
+ros_message!(
+    FoxgloveGrid,
+    "foxglove_msgs/msg/Grid",
+    "foxglove_msgs__Grid.msg"
 );
 ros_message!(
     GridMap,
