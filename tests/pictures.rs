@@ -84,6 +84,13 @@ fn ocr_reads_each_panels_title_and_the_scales_unit() {
         squeezed.contains("2m"),
         "the scale's unit not read in {text:?}"
     );
+    let layers = dir.path().join("layers.png");
+    write_output("render", &seq, &layers, &["--frame", "2", "--layers"]);
+    let text = read(&layers);
+    let squeezed: String = text.chars().filter(|c| !c.is_whitespace()).collect();
+    for title in ["p(traversable)", "elevation", "elevationrange", "unsure"] {
+        assert!(squeezed.contains(title), "{title:?} not read in {text:?}");
+    }
     let text = read(&map);
     let squeezed: String = text.chars().filter(|c| !c.is_whitespace()).collect();
     for title in ["fusedmap", "fusedgroundtruth", "errors", "trajectory", "5m"] {

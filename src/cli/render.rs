@@ -42,6 +42,11 @@ pub struct RenderArgs {
     cell_pixels: Option<u32>,
     #[command(flatten)]
     palette: PaletteArg,
+    /// Draw the float layers a planner reads (P(traversable), elevation, its range,
+    /// the unsure cells: annotate's /travmap/grid_map) instead of ground truth,
+    /// prediction and errors.
+    #[arg(long)]
+    layers: bool,
 }
 
 pub fn render(mut args: RenderArgs) -> Result<Outcome> {
@@ -91,12 +96,14 @@ pub fn render(mut args: RenderArgs) -> Result<Outcome> {
         };
         staged.write(
             &path,
-            &rendering::encode_png(&rendering::render(
-                &result,
-                (args.cell_pixels)
-                    .unwrap_or_else(|| rendering::default_cell_px(result.layout.cells_per_side)),
-                &palette,
-            )),
+            &rendering::encode_png(&{
+                let cell_px = (args.cell_pixels)
+                    .unwrap_or_else(|| rendering::default_cell_px(result.layout.cells_per_side));
+                match args.layers {
+                    true => rendering::render_layers(&result, cell_px, &palette),
+                    false => rendering::render(&result, cell_px, &palette),
+                }
+            }),
         )?;
         written.push(path);
         bar.inc(1);

@@ -87,9 +87,55 @@ impl Palette {
     }
 }
 
+/// A colour for continuous values (P, heights) along a dark-blue to yellow ramp (viridis' ends and middle), `t` in 0..1:
+/// ordered in lightness, so that it reads in grey and to every common colour vision.
+pub fn ramp(t: f32) -> [u8; 3] {
+    const STOPS: [[f32; 3]; 5] = [
+        [68.0, 1.0, 84.0],
+        [59.0, 82.0, 139.0],
+        [33.0, 145.0, 140.0],
+        [94.0, 201.0, 98.0],
+        [253.0, 231.0, 37.0],
+    ];
+    let t = t.clamp(0.0, 1.0) * (STOPS.len() - 1) as f32;
+    let i = (t.floor() as usize).min(STOPS.len() - 2);
+    let f = t - i as f32;
+    std::array::from_fn(|k| (STOPS[i][k] + f * (STOPS[i + 1][k] - STOPS[i][k])) as u8)
+}
+
+/// The 2nd and 98th percentiles of `values` (a sorted copy): a scale that one stray
+/// point does not stretch.
+pub fn robust_range(mut values: Vec<f32>) -> (f32, f32) {
+    if values.is_empty() {
+        return (0.0, 1.0);
+    }
+    values.sort_unstable_by(f32::total_cmp);
+    let at = |q: f64| values[((values.len() - 1) as f64 * q) as usize];
+    let (low, high) = (at(0.02), at(0.98));
+    (low, if high > low { high } else { low + 1.0 })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_ramp_grows_lighter_from_end_to_end() {
+        let lightness =
+            |c: [u8; 3]| 0.299 * c[0] as f32 + 0.587 * c[1] as f32 + 0.114 * c[2] as f32;
+        let steps: Vec<f32> = (0..=10).map(|i| lightness(ramp(i as f32 / 10.0))).collect();
+        assert!(steps.windows(2).all(|w| w[1] > w[0]), "{steps:?}");
+        assert_eq!(ramp(-1.0), ramp(0.0));
+        assert_eq!(ramp(2.0), ramp(1.0));
+    }
+
+    #[test]
+    fn a_stray_value_does_not_stretch_the_scale() {
+        let mut values: Vec<f32> = (0..100).map(|i| i as f32 / 100.0).collect();
+        values.push(1e6);
+        let (low, high) = robust_range(values);
+        assert!(low < 0.05 && high < 1.0, "{low} {high}");
+    }
 
     /// Machado, Oliveira and Fernandes (2009), severity 1: linear-RGB matrices that
     /// simulate each dichromacy.

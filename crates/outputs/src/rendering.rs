@@ -8,7 +8,8 @@ use travmap_method::grid::CellClass;
 use travmap_method::pipeline::FrameResult;
 
 use crate::figure::{Panel, Swatch, blank, compose, draw_sensor};
-use crate::palette::Palette;
+use crate::palette::{Palette, ramp, robust_range};
+use travmap_method::layers::{Layer, layer_values};
 
 /// The fewest pixels a panel of a frame is wide by default: a person reads it
 /// without zooming.
@@ -89,6 +90,77 @@ pub fn render(result: &FrameResult, cell_px: u32, palette: &Palette) -> RgbImage
         .map(|(colour, words)| (Swatch::Fill(colour), words))
         .collect();
     legend.push((Swatch::Sensor, "sensor, facing its x axis"));
+    compose(&panels, &legend, 1.0 / pixels_per_m, palette)
+}
+
+/// The frame's float layers a planner reads (`travmap_method::layers`), a panel
+/// each, coloured dark (low) to light (high) along [`ramp`]: P(traversable) from 0 to
+/// 1, the ground's elevation and its range over the frame's own span (each title
+/// says it), the cells the model is unsure of; cells without a value in `palette`'s
+/// unknown.
+pub fn render_layers(result: &FrameResult, cell_px: u32, palette: &Palette) -> RgbImage {
+    let l = result.layout.cells_per_side;
+    let side = l as u32 * cell_px;
+    let pixels_per_m = cell_px as f64 / result.layout.cell_size_m;
+    let sensor_z = result.sensor_in_world[2];
+    let panel = |title: String, values: &[f32], low: f32, high: f32| {
+        let mut image = blank(side, side, palette.unknown);
+        for (cell, &v) in values.iter().enumerate() {
+            if v.is_nan() {
+                continue;
+            }
+            let (col, row) = result.layout.col_row(cell);
+            let (x, y) = cell_origin_px(col, row, l, cell_px);
+            let t = (v - low) / (high - low).max(f32::EPSILON);
+            crate::figure::fill_rect(&mut image, x as i64, y as i64, cell_px, cell_px, ramp(t));
+        }
+        Panel { title, image }
+    };
+    let values = |layer: Layer, reference_z: f64| {
+        layer_values(result, layer, reference_z).unwrap_or_else(|| vec![f32::NAN; l * l])
+    };
+    let finite = |v: &[f32]| {
+        v.iter()
+            .copied()
+            .filter(|x| x.is_finite())
+            .collect::<Vec<_>>()
+    };
+    let elevation = values(Layer::Elevation, sensor_z);
+    let (low, high) = robust_range(finite(&elevation));
+    let range = values(Layer::ElevationRange, 0.0);
+    let (_, range_high) = robust_range(finite(&range));
+    let panels = vec![
+        panel(
+            "P(traversable), 0 to 1".into(),
+            &values(Layer::Traversability, 0.0),
+            0.0,
+            1.0,
+        ),
+        panel(
+            format!("elevation, {low:.1} to {high:.1} m from the sensor"),
+            &elevation,
+            low,
+            high,
+        ),
+        panel(
+            format!("elevation range, 0 to {range_high:.1} m"),
+            &range,
+            0.0,
+            range_high,
+        ),
+        panel(
+            "unsure: |margin| < 1".into(),
+            &values(Layer::Unsure, 0.0),
+            0.0,
+            1.0,
+        ),
+    ];
+    let legend = [
+        (Swatch::Fill(ramp(0.0)), "lowest of the panel's scale"),
+        (Swatch::Fill(ramp(0.5)), "middle"),
+        (Swatch::Fill(ramp(1.0)), "highest (unsure: yes)"),
+        (Swatch::Fill(palette.unknown), "no value"),
+    ];
     compose(&panels, &legend, 1.0 / pixels_per_m, palette)
 }
 
