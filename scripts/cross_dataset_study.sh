@@ -23,18 +23,8 @@ read -ra settings <<<"${SETTINGS:-}"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
-# name path dataset scene
-SETS="kitti-00 $D/semantickitti-00/sequences/00 semantickitti 00
-kitti-00-more $D/semantickitti-00-more/sequences/00 semantickitti 00
-kitti-07-0000 $D/semantickitti-07-000000/sequences/07 semantickitti 07
-kitti-07-0964 $D/semantickitti-07-000964/sequences/07 semantickitti 07
-kitti-unknown $D/semantickitti-unknown-000850/sequences/00 semantickitti unknown
-rellis-000001 $D/rellis3d-000001/sequences/00 rellis3d rellis
-rellis-000104 $D/rellis3d-000104/sequences/00 rellis3d rellis
-nuscenes-1072 $D/nuscenes-lidarseg-scene-1072 nuscenes 1072
-nuscenes-0002 $D/nuscenes-lidarseg-scene-0002 nuscenes 0002"
-
-labels() { echo "ground_truth.labels=\"$1\""; }
+# shellcheck source=labelled_sets.sh
+source scripts/labelled_sets.sh
 
 # Trains on every set whose scene and dataset differ from $1 and $2 (a blank
 # matches nothing), one cell table per dataset, into $3.
