@@ -262,3 +262,17 @@ def test_the_fleet_runs_as_a_module_with_the_packages_command(tmp_path, converte
     )
     assert ran.returncode == 0, ran.stderr
     assert "1 files: 1 done" in ran.stdout
+
+
+def test_mistaken_arguments_name_themselves():
+    with pytest.raises(TypeError, match="set=5"):
+        travmap.open(SAMPLE, set=5)
+    with pytest.raises(TypeError, match="model=5"):
+        travmap.run(SAMPLE, model=5)
+    with pytest.raises(travmap.TravmapError, match="start at 0"):
+        travmap.open(SAMPLE, frames=-1)
+    with pytest.raises(TypeError, match="frames=3.5"):
+        travmap.eval(SAMPLE, frames=3.5)
+    with pytest.raises(travmap.TravmapError, match="road.*offroad"):
+        travmap.Model("nope")
+    assert travmap.__version__ and travmap.__version__ != "0+unknown"

@@ -7,7 +7,7 @@ The same library as the `travmap` command (which this package also installs):
     for frame in drive:                              # frame.points: N x 4 float32
         ...
     for grid in travmap.run("drive.mcap", model="road"):
-        grid.classes, grid.decision, grid.features  # [row, col] NumPy arrays
+        grid.traversable, grid.probability, grid.features  # [row, col] NumPy arrays
     table = travmap.dataset(["sequences/00"])       # labelled cells, a pyarrow.Table
     scores = travmap.eval("sequences/00")           # `travmap eval --json`'s summary
 
@@ -19,6 +19,13 @@ TravmapWarning.
 from ._travmap import Drive, Frame, Frames, Grid, Grids, Model, TravmapError, TravmapWarning, open, run
 from ._commands import binary, dataset, eval
 
+try:
+    from importlib.metadata import PackageNotFoundError, version as _version
+
+    __version__ = _version("travmap")
+except PackageNotFoundError:  # run from a source tree, not installed
+    __version__ = "0+unknown"
+
 __all__ = [
     "Drive",
     "Frame",
@@ -28,6 +35,7 @@ __all__ = [
     "Model",
     "TravmapError",
     "TravmapWarning",
+    "__version__",
     "binary",
     "dataset",
     "eval",

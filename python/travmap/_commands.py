@@ -14,7 +14,7 @@ import warnings
 from pathlib import Path
 from typing import Any, Iterable, Union
 
-from ._travmap import TravmapError
+from ._travmap import TravmapError, TravmapWarning
 
 Paths = Union[str, os.PathLike, Iterable[Union[str, os.PathLike]]]
 
@@ -64,6 +64,12 @@ def _arguments(paths: Paths, frames: Any, settings: dict) -> list[str]:
         paths = [paths]
     arguments = [os.fspath(p) for p in paths]
     if frames is not None:
+        if isinstance(frames, bool) or not isinstance(frames, (int, str, range)):
+            raise TypeError(
+                f"frames={frames!r}: None, a frame number, a range, or text as on the command line (\"A..B\", \"A..=B\", \"A..\")"
+            )
+        if isinstance(frames, int) and frames < 0:
+            raise _error(f"frames={frames}: frame numbers start at 0", 2)
         if isinstance(frames, range):
             if frames.step != 1:
                 raise _error(f"frames={frames}: give a range of consecutive frames, step 1", 2)
@@ -87,6 +93,15 @@ def _arguments(paths: Paths, frames: Any, settings: dict) -> list[str]:
     return arguments
 
 
+def _model_flag(model: Any) -> list[str]:
+    """`--model` of a model keyword: a name or a path."""
+    if model is None:
+        return []
+    if not isinstance(model, (str, os.PathLike)):
+        raise TypeError(f"model={model!r}: \"road\", \"offroad\" or a model file's path")
+    return ["--model", os.fspath(model)]
+
+
 def _command(arguments: list[str]) -> dict:
     """Runs travmap with `--json`; returns its summary, raises its error."""
     process = subprocess.run([binary(), *arguments, "--json", "--quiet"], capture_output=True, text=True)
@@ -101,7 +116,11 @@ def _command(arguments: list[str]) -> dict:
     lines = [json.loads(line) for line in process.stdout.splitlines() if line.strip()]
     summary = lines[-1] if lines else {}
     if process.returncode == 3:
-        warnings.warn(f"travmap {arguments[0]} completed with frames skipped or lost: {process.stderr.strip()}", stacklevel=3)
+        warnings.warn(
+            f"travmap {arguments[0]} completed with frames skipped or lost: {process.stderr.strip()}",
+            TravmapWarning,
+            stacklevel=3,
+        )
     return summary
 
 
@@ -112,7 +131,7 @@ def dataset(paths: Paths, output: str | os.PathLike | None = None, frames: Any =
     removed. Keywords are `travmap.open`'s."""
     import pyarrow.parquet as pq
 
-    extra = ["--model", model] if model else []
+    extra = _model_flag(model)
     with tempfile.TemporaryDirectory(prefix="travmap-dataset-") as scratch:
         target = os.fspath(output) if output is not None else os.path.join(scratch, "cells.parquet")
         _command(["dataset", *_arguments(paths, frames, settings), *extra, "-o", target])
@@ -122,5 +141,5 @@ def dataset(paths: Paths, output: str | os.PathLike | None = None, frames: Any =
 def eval(paths: Paths, model: str | None = None, frames: Any = None, **settings) -> dict:
     """Scores the model on labelled drives: the summary `travmap eval --json`
     prints, as a dict (IoU per class, mIoU, timings). Keywords are `travmap.open`'s."""
-    extra = ["--model", model] if model else []
+    extra = _model_flag(model)
     return _command(["eval", *_arguments(paths, frames, settings), *extra])

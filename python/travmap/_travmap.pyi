@@ -5,7 +5,12 @@ from typing import Iterator, Mapping, Optional, Sequence, Union
 
 import numpy as np
 import numpy.typing as npt
-from typing_extensions import TypedDict, Unpack
+import sys
+
+if sys.version_info >= (3, 11):
+    from typing import TypedDict, Unpack
+else:
+    from typing_extensions import TypedDict, Unpack
 
 FrameSelection = Union[None, int, range, str]
 Texts = Union[str, Sequence[str]]
@@ -117,6 +122,9 @@ class Grid:
         """(x_min, x_max, y_min, y_max) in world metres, for imshow(extent=...)."""
 
 class Grids(Iterator[Grid]):
+    """The grids as they are computed: an iterator, each grid handed out once (a second
+    loop over the same Grids is empty; list(...) keeps them, or run again)."""
+
     def __iter__(self) -> "Grids": ...
     def __next__(self) -> Grid: ...
 
@@ -127,7 +135,7 @@ class Model:
     support_vectors: int
     feature_names: list[str]
     uses_appearance: bool
-    def __init__(self, model: str = "road") -> None: ...
+    def __init__(self, model: Union[str, os.PathLike] = "road") -> None: ...
     def run(self, drive: Drive) -> Grids:
         """The grids of every frame of `drive`, in order, as they are computed."""
 

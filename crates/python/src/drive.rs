@@ -209,7 +209,12 @@ fn assignments(settings: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<String>> {
     if let Ok(one) = set.extract::<String>() {
         return Ok(vec![one]);
     }
-    set.extract()
+    set.extract().map_err(|_| {
+        pyo3::exceptions::PyTypeError::new_err(format!(
+            "set={}: a dict ({{\"grid.size_m\": 24}}) or a list of \"section.key=value\" texts",
+            set.repr().map(|r| r.to_string()).unwrap_or_default()
+        ))
+    })
 }
 
 /// `frames=`: None (every frame), a frame number, a `range` (step 1) or the
@@ -218,8 +223,11 @@ fn frame_range(frames: &Bound<'_, PyAny>) -> PyResult<Option<Range<usize>>> {
     if frames.is_none() {
         return Ok(None);
     }
-    if let Ok(n) = frames.extract::<usize>() {
-        return Ok(Some(n..n + 1));
+    if let Ok(n) = frames.extract::<i64>() {
+        return match usize::try_from(n) {
+            Ok(n) => Ok(Some(n..n + 1)),
+            Err(_) => Err(Failure::usage(format!("frames={n}: frame numbers start at 0")).into()),
+        };
     }
     if let Ok(text) = frames.extract::<String>() {
         return parse_frame_range(&text)
@@ -236,9 +244,10 @@ fn frame_range(frames: &Bound<'_, PyAny>) -> PyResult<Option<Range<usize>>> {
         ))
         .into());
     }
-    Err(pyo3::exceptions::PyTypeError::new_err(
-        "frames: None, a frame number, a range, or text as on the command line (\"A..B\", \"A..=B\", \"A..\")",
-    ))
+    Err(pyo3::exceptions::PyTypeError::new_err(format!(
+        "frames={}: None, a frame number, a range, or text as on the command line (\"A..B\", \"A..=B\", \"A..\")",
+        frames.repr()?
+    )))
 }
 
 /// Opens a drive: a KITTI / SemanticKITTI sequence directory, a recorded log (MCAP,

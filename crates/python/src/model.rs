@@ -36,9 +36,15 @@ pub struct Model {
 #[pymethods]
 impl Model {
     #[new]
-    #[pyo3(signature = (model="road"))]
-    fn new(py: Python<'_>, model: &str) -> PyResult<Self> {
-        Self::chosen(py, &ModelChoice::parse(model))
+    #[pyo3(signature = (model=None))]
+    fn new(py: Python<'_>, model: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+        match model {
+            Some(model) => Self::named(py, model),
+            None => Self::chosen(
+                py,
+                &ModelChoice::Embedded(travmap_core::config::LabelRule::Road),
+            ),
+        }
     }
 
     /// The model's grids of every frame of `drive` (a `travmap.open`ed drive), in
@@ -132,7 +138,7 @@ pub(crate) fn run(
     let opening = Opening::of(frames, settings)?;
     let model = match model {
         Some(model) if model.is_instance_of::<Model>() => model.cast::<Model>()?.get().clone(),
-        Some(model) => Model::new(py, &model.extract::<String>()?)?,
+        Some(model) => Model::named(py, model)?,
         None => Model::chosen(py, &opening.config.classifier.model)?,
     };
     let images = model.model.reads_images(&opening.config);
@@ -141,6 +147,30 @@ pub(crate) fn run(
 }
 
 impl Model {
+    /// The model `model` names: `road`, `offroad` or a model file's path; a
+    /// TypeError names the argument when it is neither text nor a path.
+    fn named(py: Python<'_>, model: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let named = match model.extract::<PathBuf>() {
+            Ok(path) => path.to_string_lossy().into_owned(),
+            Err(_) => {
+                return Err(pyo3::exceptions::PyTypeError::new_err(format!(
+                    "model={}: \"road\", \"offroad\" (compiled in) or a model file's path",
+                    model.repr()?
+                )));
+            }
+        };
+        let choice = ModelChoice::named(&named).map_err(Failure::usage)?;
+        if let ModelChoice::File(path) = &choice
+            && !path.exists()
+        {
+            return Err(Failure::usage(format!(
+                "model {named:?}: no such file; the compiled-in models are \"road\" and \"offroad\""
+            ))
+            .into());
+        }
+        Self::chosen(py, &choice)
+    }
+
     fn chosen(py: Python<'_>, choice: &ModelChoice) -> PyResult<Self> {
         let (model, name) = py.detach(|| SvmModel::read(choice).map_err(Failure::from))?;
         Ok(Self {
@@ -159,7 +189,9 @@ impl Clone for Model {
     }
 }
 
-/// The grids of a run, frame by frame.
+/// The grids of a run, frame by frame, as they are computed: an iterator, each grid
+/// handed out once (a second loop over the same Grids is empty; `list(...)` keeps
+/// them).
 #[pyclass(module = "travmap", frozen)]
 pub struct Grids(Stream<GridValues>);
 
